@@ -1,0 +1,53 @@
+"""Lateral references in the lane frame: quintic (minimum-jerk) lane changes, and lane keeping."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class QuinticProfile:
+    """d(t) from (d0, v0, a0) at t0 to (d1, 0, 0) at t0 + duration; constant d1 afterwards.
+
+    With v0 = a0 = 0 this is the minimum-jerk lane change d0 + (d1 - d0)(10u^3 - 15u^4 + 6u^5).
+    Starting from the current lateral velocity and acceleration gives a smooth abort or re-target.
+    Units: m, m/s, m/s^2, s.
+    """
+
+    d0: float
+    d1: float
+    t0: float
+    duration: float
+    v0: float = 0.0
+    a0: float = 0.0
+
+    @cached_property
+    def coefficients(self) -> np.ndarray:
+        T = self.duration
+        c0, c1, c2 = self.d0, self.v0, self.a0 / 2.0
+        A = np.array([[T**3, T**4, T**5], [3 * T**2, 4 * T**3, 5 * T**4], [6 * T, 12 * T**2, 20 * T**3]])
+        b = np.array([self.d1 - (c0 + c1 * T + c2 * T**2), -(c1 + 2 * c2 * T), -2 * c2])
+        return np.concatenate([[c0, c1, c2], np.linalg.solve(A, b)])
+
+    def sample(self, t: float) -> tuple[float, float, float]:
+        """(d, d_dot, d_ddot) at absolute time t [s]."""
+        if self.finished(t):
+            return self.d1, 0.0, 0.0
+        tau = max(t - self.t0, 0.0)
+        c = self.coefficients
+        powers = tau ** np.arange(6)
+        d = float(c @ powers)
+        d_dot = float(sum(k * c[k] * tau ** (k - 1) for k in range(1, 6)))
+        d_ddot = float(sum(k * (k - 1) * c[k] * tau ** (k - 2) for k in range(2, 6)))
+        return d, d_dot, d_ddot
+
+    def finished(self, t: float) -> bool:
+        return t - self.t0 >= self.duration
+
+
+def lane_keeping(d_centre: float, t: float) -> QuinticProfile:
+    """Hold the lane centre: the degenerate profile that is already at its end."""
+    return QuinticProfile(d0=d_centre, d1=d_centre, t0=t, duration=1e-9)

@@ -1,0 +1,97 @@
+"""The agent protocol (SB3's `predict`) and the hand-written agents.
+
+An agent maps an observation (the perception encoding it was built for) to an action index of
+`Command`. Trained SB3 models satisfy the same protocol, so the loop never knows which it has.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from perception.grid import GridConfig, lane_code_bits
+from planner.command import Command
+
+
+@runtime_checkable
+class Agent(Protocol):
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]: ...
+
+
+def decide(agent: Agent, observation: np.ndarray) -> Command:
+    """One greedy decision."""
+    action, _ = agent.predict(observation, deterministic=True)
+    return Command(int(np.asarray(action).reshape(-1)[0]))
+
+
+class KeepLaneAgent:
+    """Never changes lane: the lower bound every other agent should beat on speed."""
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        return np.array(Command.STAY), state
+
+
+class RandomAgent:
+    """Uniformly random commands from its own seeded generator."""
+
+    def __init__(self, seed: int = 0) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        return np.array(self.rng.integers(0, 3)), state
+
+
+class FreeGapAgent:
+    """Rule baseline on the paper state: when a car is in sight in the own lane, move to the
+    adjacent lane with the most free cells ahead, only if it is strictly freer and its gap around
+    the ego (from `safe_cells_behind` behind to `safe_cells_ahead` ahead) is empty."""
+
+    def __init__(
+        self, lanes: int, grid: GridConfig, safe_cells_behind: int = 3, safe_cells_ahead: int = 2
+    ) -> None:
+        self.lanes = lanes
+        self.grid = grid
+        self.safe_cells_behind = min(safe_cells_behind, grid.cells_behind)
+        self.safe_cells_ahead = safe_cells_ahead
+
+    def _decode(self, observation: np.ndarray) -> tuple[np.ndarray, int]:
+        size = self.lanes * self.grid.cells
+        expected = size + lane_code_bits(self.lanes)
+        observation = np.asarray(observation).reshape(-1)
+        if observation.size != expected:
+            raise ValueError(
+                f"rule agent expected a paper state of {expected} values "
+                f"({self.lanes} lanes x {self.grid.cells} cells + lane code), got {observation.size}"
+            )
+        bits = observation[size:].astype(int)
+        ego_lane = int(sum(bit << (len(bits) - 1 - i) for i, bit in enumerate(bits)))
+        return observation[:size].reshape(self.lanes, self.grid.cells), ego_lane
+
+    def free_cells(self, cells: np.ndarray) -> np.ndarray:
+        """Per lane, free cells ahead of the ego's column (cells_ahead when all clear)."""
+        ahead = cells[:, self.grid.ego_column + 1 :] > 0
+        return np.where(ahead.any(axis=1), np.argmax(ahead, axis=1), self.grid.cells_ahead)
+
+    def gap_is_safe(self, cells: np.ndarray, lane: int) -> bool:
+        low = self.grid.ego_column - self.safe_cells_behind
+        high = self.grid.ego_column + self.safe_cells_ahead
+        return 0 <= lane < self.lanes and not cells[lane, low : high + 1].any()
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        cells, ego_lane = self._decode(observation)
+        free = self.free_cells(cells)
+        if free[ego_lane] >= self.grid.cells_ahead - 1:
+            return np.array(Command.STAY), state
+        best, best_free = Command.STAY, free[ego_lane]
+        for command in (Command.LEFT, Command.RIGHT):
+            lane = ego_lane + command.lane_shift
+            if self.gap_is_safe(cells, lane) and free[lane] > best_free:
+                best, best_free = command, free[lane]
+        return np.array(best), state

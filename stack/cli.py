@@ -1,0 +1,63 @@
+"""`drivestack`: the command line."""
+
+from __future__ import annotations
+
+import sys
+from datetime import datetime
+from pathlib import Path
+
+import typer
+from rich.console import Console
+
+from stack.config import ConfigError, load_config
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, help="A hierarchical highway driving stack.")
+DEFAULT_CONFIG = Path("configs/highway.yaml")
+
+
+def fail(message: str) -> None:
+    Console(stderr=True).print(f"[red]error:[/red] {message}", highlight=False, soft_wrap=True)
+    raise typer.Exit(code=2)
+
+
+def fresh_run_dir(prefix: str) -> Path:
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
+    return Path("runs") / f"{prefix}-{stamp}"
+
+
+@app.callback()
+def main() -> None:
+    """Perception grid -> decision agent -> lane-change controllers, closed-loop on highway-env."""
+
+
+@app.command()
+def run(
+    config: Path = typer.Option(DEFAULT_CONFIG, "--config", "-c", help="YAML run config."),
+    agent: str | None = typer.Option(None, help="Decision agent (overrides planner.agent)."),
+    controller: str | None = typer.Option(None, help="Controller (overrides controller.type)."),
+    episodes: int | None = typer.Option(None, help="Number of seeded episodes."),
+    seed: int | None = typer.Option(None, help="Seed of the first episode."),
+    out: Path | None = typer.Option(None, help="Results folder (default: runs/run-<time>)."),
+    video: bool = typer.Option(False, "--video", help="Save a GIF of the first episode."),
+    progress: bool = typer.Option(True, help="Show a progress bar."),
+) -> None:
+    """Run seeded closed-loop episodes and write a results folder."""
+    try:
+        cfg = load_config(
+            config, planner__agent=agent, controller__type=controller, episodes=episodes, seed=seed
+        )
+    except ConfigError as error:
+        fail(str(error))
+    from stack.loop import run as run_loop
+    from stack.report import print_tables, write_results
+
+    out = out or fresh_run_dir("run")
+    try:
+        results = run_loop(cfg, video=video, progress=progress)
+    except KeyboardInterrupt:
+        fail("interrupted before the first episode finished; nothing to write")
+    write_results(out, results.summary, results.episodes, results.frames)
+    print_tables(results.summary, results.episodes)
+    Console().print(f"results: {out}")
+    if results.summary["interrupted"]:
+        sys.exit(130)

@@ -1,0 +1,161 @@
+"""Run configuration: YAML -> validated pydantic models, before any work starts.
+
+Every error is one line naming the file and the dotted key, e.g.
+`configs/x.yaml: highway.lanes_count: must be >= 1 (got 0)`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from planner.factory import AGENT_NAMES as AGENTS
+
+CONTROLLERS = ("pid",)
+
+
+class ConfigError(ValueError):
+    """A configuration that cannot run; the message is one line for the user."""
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+class HighwayConfig(Strict):
+    """The section handed to `gym.make("highway-v0", config=...)`."""
+
+    lanes_count: int = Field(4, ge=1, le=10)
+    vehicles_count: int = Field(50, ge=0, le=500)
+    vehicles_density: float = Field(1.0, gt=0)
+    duration: float = Field(40.0, gt=0, description="episode length [s]")
+    simulation_frequency: int = Field(15, ge=1, le=1000, description="physics rate [Hz]")
+
+
+class PerceptionConfig(Strict):
+    """Occupancy-grid extent: cells of `cell_length_m` from `cells_behind` to `cells_ahead`."""
+
+    cell_length_m: float = Field(5.0, gt=0)
+    cells_ahead: int = Field(9, ge=1)
+    cells_behind: int = Field(4, ge=0)
+
+
+class PlannerConfig(Strict):
+    agent: str = "rule"
+    model: Path | None = None
+
+    @field_validator("agent")
+    @classmethod
+    def _known_agent(cls, agent: str) -> str:
+        if agent not in AGENTS:
+            raise ValueError(f"unknown agent {agent!r}; available: {', '.join(AGENTS)}")
+        return agent
+
+
+class ControllerConfig(Strict):
+    type: str = "pid"
+    lane_change_duration_s: float = Field(4.0, gt=0)
+    set_speed_mps: float = Field(30.0, gt=0, le=40)
+    time_gap_s: float = Field(1.5, ge=0)
+    standstill_gap_m: float = Field(8.0, ge=0)
+    comfort_decel_mps2: float = Field(3.0, gt=0, le=5)
+
+    @field_validator("type")
+    @classmethod
+    def _known_controller(cls, name: str) -> str:
+        if name not in CONTROLLERS:
+            raise ValueError(f"unknown controller {name!r}; available: {', '.join(CONTROLLERS)}")
+        return name
+
+
+class RunConfig(Strict):
+    seed: int = Field(0, ge=0)
+    episodes: int = Field(5, ge=1)
+    highway: HighwayConfig = HighwayConfig()
+    control_rate_hz: float = Field(15.0, gt=0)
+    decision_period_s: float = Field(1.0, gt=0)
+    perception: PerceptionConfig = PerceptionConfig()
+    planner: PlannerConfig = PlannerConfig()
+    controller: ControllerConfig = ControllerConfig()
+
+    @model_validator(mode="after")
+    def _consistent_timing(self) -> RunConfig:
+        if self.control_rate_hz != self.highway.simulation_frequency:
+            raise ValueError(
+                f"control_rate_hz: must equal highway.simulation_frequency "
+                f"({self.highway.simulation_frequency} Hz), got {self.control_rate_hz}"
+            )
+        if self.decision_period_s < 1.0 / self.control_rate_hz - 1e-12:
+            raise ValueError(
+                f"decision_period_s: must be at least one control tick "
+                f"({1.0 / self.control_rate_hz:.4f} s), got {self.decision_period_s}"
+            )
+        return self
+
+    @property
+    def dt(self) -> float:
+        """One control tick = one physics frame [s]."""
+        return 1.0 / self.control_rate_hz
+
+    @property
+    def decision_ticks(self) -> int:
+        """Control ticks between two decisions."""
+        return max(1, round(self.decision_period_s * self.control_rate_hz))
+
+
+def _one_line(error: ValidationError, source: str) -> str:
+    first = error.errors()[0]
+    key = ".".join(str(part) for part in first["loc"])
+    message = first["msg"].removeprefix("Value error, ")
+    if first["type"] == "extra_forbidden":
+        message = "unknown key"
+    elif first["type"] != "value_error" and not isinstance(first.get("input"), dict):
+        message = f"{message} (got {first.get('input')!r})"
+    return f"{source}: {key}: {message}" if key else f"{source}: {message}"
+
+
+def _set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
+    node = data
+    *parents, leaf = dotted.split(".")
+    for part in parents:
+        node = node.setdefault(part, {})
+    node[leaf] = value
+
+
+def build_config(data: dict[str, Any], source: str = "config", **overrides: Any) -> RunConfig:
+    """Validate `data` with dotted-key `overrides` applied (None values are ignored)."""
+    data = dict(data)
+    for dotted, value in overrides.items():
+        if value is not None:
+            _set_dotted(data, dotted.replace("__", "."), value)
+    try:
+        return RunConfig.model_validate(data)
+    except ValidationError as error:
+        raise ConfigError(_one_line(error, source)) from None
+
+
+def load_config(path: Path | str, **overrides: Any) -> RunConfig:
+    """Read a YAML run config, apply CLI overrides, validate; raise ConfigError on any problem."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: no such config file")
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark else ""
+        raise ConfigError(f"{path}: not valid YAML{where}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping of keys at the top level")
+    return build_config(data, str(path), **overrides)
+

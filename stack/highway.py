@@ -1,0 +1,145 @@
+"""The highway-env adapter: the only module that reaches into `env.unwrapped`.
+
+It creates highway-v0 with `ContinuousAction` and `policy_frequency == simulation_frequency`, so one
+`step` is one physics frame and one control tick, and turns the road into a `WorldState` snapshot.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")  # "dummy" makes highway-env skip drawing
+os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+
+import gymnasium as gym
+import highway_env  # noqa: F401  (registers highway-v0)
+import numpy as np
+from highway_env.envs.common.action import ContinuousAction
+from highway_env.road.lane import StraightLane
+
+from controllers.types import Actuation
+from perception.types import WorldState
+from stack.config import HighwayConfig
+
+MAX_ACCELERATION = ContinuousAction.ACCELERATION_RANGE[1]
+"""Acceleration that ContinuousAction maps to +1 [m/s^2]."""
+MAX_STEERING = ContinuousAction.STEERING_RANGE[1]
+"""Steering angle that ContinuousAction maps to +1 [rad]."""
+
+
+def env_config(highway: HighwayConfig) -> dict:
+    """The highway-env config for a closed-loop run: continuous action, one frame per step."""
+    return {
+        **highway.model_dump(),
+        "policy_frequency": highway.simulation_frequency,
+        "action": {"type": "ContinuousAction"},
+        # The stack reads the road itself; the cheapest observation keeps highway-env's work minimal.
+        "observation": {"type": "AttributesObservation", "attributes": ["time"]},
+    }
+
+
+def to_env_action(actuation: Actuation) -> np.ndarray:
+    """Physical [acceleration m/s^2, steering rad] -> ContinuousAction's normalised [-1, 1]^2."""
+    return np.clip(
+        [actuation.acceleration / MAX_ACCELERATION, actuation.steering / MAX_STEERING], -1.0, 1.0
+    )
+
+
+class HighwayAdapter:
+    """Owns one highway-v0 env; `reset(seed)` and `step(actuation)` return `WorldState` snapshots."""
+
+    def __init__(self, highway: HighwayConfig, render: bool = False) -> None:
+        self.config = highway
+        self.dt = 1.0 / highway.simulation_frequency
+        self.env = gym.make(
+            "highway-v0",
+            config=env_config(highway),
+            render_mode="rgb_array" if render else None,
+            disable_env_checker=True,
+        )
+        self.terminated = False
+        self.truncated = False
+
+    @property
+    def _road(self):
+        return self.env.unwrapped.road
+
+    @property
+    def _ego(self):
+        return self.env.unwrapped.vehicle
+
+    def reset(self, seed: int) -> WorldState:
+        self.env.reset(seed=seed)
+        self.terminated = self.truncated = False
+        return self.snapshot()
+
+    def step(self, actuation: Actuation) -> WorldState:
+        """Apply one actuation for one physics frame."""
+        _, _, self.terminated, self.truncated, _ = self.env.step(to_env_action(actuation))
+        return self.snapshot()
+
+    @property
+    def done(self) -> bool:
+        return self.terminated or self.truncated
+
+    def render(self) -> np.ndarray:
+        """The current frame as an RGB array (the env must be created with `render=True`)."""
+        return self.env.render()
+
+    @property
+    def rendering(self) -> bool:
+        return self.env.unwrapped.render_mode == "rgb_array"
+
+    def close(self) -> None:
+        self.env.close()
+
+    def __enter__(self) -> HighwayAdapter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def snapshot(self) -> WorldState:
+        """Copy the road into a `WorldState` (row 0 = ego, others in road order)."""
+        ego = self._ego
+        road_vehicles = self._road.vehicles
+        ego_index = road_vehicles.index(ego)
+        order = [ego_index] + [i for i in range(len(road_vehicles)) if i != ego_index]
+        vehicles = [road_vehicles[i] for i in order]
+        network = self._road.network
+        start, end, _ = ego.lane_index
+        lanes = tuple(network.graph[start][end])
+        reference = lanes[0]
+        position = np.array([v.position for v in vehicles], dtype=float)
+        heading = np.array([v.heading for v in vehicles], dtype=float)
+        speed = np.array([v.speed for v in vehicles], dtype=float)
+        s, d = self._lane_frame(reference, position)
+        s_ego = float(s[0])
+        lane_offsets = np.array(
+            [reference.local_coordinates(lane.position(s_ego, 0.0))[1] for lane in lanes]
+        )
+        return WorldState(
+            time=float(self.env.unwrapped.time),
+            ids=np.array(order),
+            position=position,
+            heading=heading,
+            speed=speed,
+            velocity=speed[:, None] * np.stack([np.cos(heading), np.sin(heading)], axis=1),
+            lane=np.array([v.lane_index[2] if v.lane_index else -1 for v in vehicles]),
+            length=np.array([v.LENGTH for v in vehicles], dtype=float),
+            width=np.array([v.WIDTH for v in vehicles], dtype=float),
+            s=s,
+            d=d,
+            crashed=np.array([v.crashed for v in vehicles], dtype=bool),
+            lanes=lanes,
+            lane_offsets=lane_offsets,
+        )
+
+    @staticmethod
+    def _lane_frame(lane, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(s, d) of each position in `lane`'s frame; one matrix product on straight lanes."""
+        if isinstance(lane, StraightLane):
+            delta = position - lane.start
+            return delta @ lane.direction, delta @ lane.direction_lateral
+        coordinates = np.array([lane.local_coordinates(p) for p in position], dtype=float)
+        return coordinates[:, 0], coordinates[:, 1]

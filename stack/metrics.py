@@ -1,0 +1,116 @@
+"""Episode metrics, with the definitions of DESIGN.md.
+
+- passed car: a vehicle counts once, the first time it goes from ahead of the ego to behind it;
+- accuracy: passed / (passed + collided) x 100 over all episodes;
+- comfort: peak |lateral acceleration| (a_y = v * yaw rate) and peak lateral jerk, both over a
+  500 ms moving average, as UN R79 measures them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from perception.types import WorldState
+
+COMFORT_WINDOW_S = 0.5
+"""Moving-average window for lateral acceleration and jerk [s] (UN R79)."""
+
+
+def moving_average(values: np.ndarray, window: int) -> np.ndarray:
+    """Trailing moving average over `window` samples (shorter at the start)."""
+    if window <= 1 or len(values) == 0:
+        return values
+    sums = np.cumsum(np.insert(values, 0, 0.0))
+    counts = np.minimum(np.arange(1, len(values) + 1), window)
+    return (sums[1:] - sums[np.maximum(np.arange(1, len(values) + 1) - window, 0)]) / counts
+
+
+def lateral_comfort(heading: np.ndarray, speed: np.ndarray, dt: float) -> tuple[float, float]:
+    """(peak |a_y| [m/s^2], peak |jerk| [m/s^3]) from heading [rad] and speed [m/s] samples."""
+    if len(heading) < 3:
+        return 0.0, 0.0
+    window = max(1, round(COMFORT_WINDOW_S / dt))
+    lateral_acceleration = moving_average(speed[1:] * np.diff(heading) / dt, window)
+    jerk = moving_average(np.diff(lateral_acceleration) / dt, window)
+    return float(np.max(np.abs(lateral_acceleration))), float(np.max(np.abs(jerk)))
+
+
+@dataclass
+class EpisodeResult:
+    """One closed-loop episode; `trace` holds per-tick time [s], speed [m/s] and lateral offset [m]."""
+
+    episode: int
+    seed: int
+    steps: int
+    duration_s: float
+    crashed: bool
+    passed_cars: int
+    lane_changes: int
+    mean_speed: float
+    peak_lat_accel: float
+    peak_lat_jerk: float
+    trace: dict[str, list[float]] = field(default_factory=dict, repr=False)
+
+    def row(self) -> dict:
+        """The flat record written to CSV (no traces)."""
+        return {k: v for k, v in asdict(self).items() if k != "trace"}
+
+
+class EpisodeRecorder:
+    """Collects what the metrics need, one `record(world)` per control tick."""
+
+    def __init__(self, world: WorldState) -> None:
+        self.was_ahead = dict(zip(world.ids.tolist(), (world.s > world.s[0]).tolist()))
+        self.passed: set[int] = set()
+        self.time: list[float] = []
+        self.speed: list[float] = []
+        self.heading: list[float] = []
+        self.d: list[float] = []
+        self.record(world)
+
+    def record(self, world: WorldState) -> None:
+        ahead = (world.s > world.s[0]).tolist()
+        for vehicle_id, is_ahead in zip(world.ids[1:].tolist(), ahead[1:]):
+            if self.was_ahead.get(vehicle_id) and not is_ahead:
+                self.passed.add(vehicle_id)
+            self.was_ahead[vehicle_id] = is_ahead
+        self.time.append(world.time)
+        self.speed.append(float(world.speed[0]))
+        self.heading.append(float(world.heading[0]))
+        self.d.append(float(world.d[0]))
+
+    def result(self, episode: int, seed: int, crashed: bool, lane_changes: int, dt: float) -> EpisodeResult:
+        peak_accel, peak_jerk = lateral_comfort(np.array(self.heading), np.array(self.speed), dt)
+        return EpisodeResult(
+            episode=episode,
+            seed=seed,
+            steps=len(self.time) - 1,
+            duration_s=self.time[-1] - self.time[0],
+            crashed=crashed,
+            passed_cars=len(self.passed),
+            lane_changes=lane_changes,
+            mean_speed=float(np.mean(self.speed)),
+            peak_lat_accel=peak_accel,
+            peak_lat_jerk=peak_jerk,
+            trace={"time": self.time, "speed": self.speed, "d": self.d},
+        )
+
+
+def summarize(results: list[EpisodeResult], **identity) -> dict:
+    """Aggregate episodes (order-independent): rates, accuracy, means; `identity` is copied in."""
+    collisions = sum(r.crashed for r in results)
+    passed = sum(r.passed_cars for r in results)
+    return {
+        **identity,
+        "episodes": len(results),
+        "collisions": collisions,
+        "collision_rate": collisions / len(results),
+        "passed_cars": passed,
+        "accuracy": 100.0 * passed / (passed + collisions) if passed + collisions else None,
+        "mean_speed": float(np.mean([r.mean_speed for r in results])),
+        "lane_changes": float(np.mean([r.lane_changes for r in results])),
+        "peak_lat_accel": float(max(r.peak_lat_accel for r in results)),
+        "peak_lat_jerk": float(max(r.peak_lat_jerk for r in results)),
+    }

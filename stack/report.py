@@ -1,0 +1,77 @@
+"""Results folder: summary.json, episodes.csv, a speed / lateral-position plot, optional video."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import imageio.v2 as imageio
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+from rich.console import Console
+from rich.table import Table
+
+from stack.metrics import EpisodeResult
+
+VIDEO_FPS = 15
+"""Frames per second of the GIF (one frame per control tick at highway-env's default 15 Hz)."""
+
+
+def write_results(out: Path, summary: dict, episodes: list[EpisodeResult], frames=None) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    rows = [episode.row() for episode in episodes]
+    with (out / "episodes.csv").open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    plot_traces(episodes, out / "traces.png")
+    if frames:
+        imageio.mimsave(out / "episode0.gif", frames[::2], duration=2000 / VIDEO_FPS, loop=0)
+
+
+def plot_traces(episodes: list[EpisodeResult], path: Path) -> None:
+    """Ego speed and lateral position over time, one line per episode."""
+    figure, (speed_axis, lateral_axis) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    for episode in episodes:
+        label = f"ep {episode.episode}" + (" (crash)" if episode.crashed else "")
+        speed_axis.plot(episode.trace["time"], episode.trace["speed"], label=label)
+        lateral_axis.plot(episode.trace["time"], episode.trace["d"])
+    speed_axis.set_ylabel("speed [m/s]")
+    lateral_axis.set_ylabel("lateral position d [m]")
+    lateral_axis.invert_yaxis()
+    lateral_axis.set_xlabel("time [s]")
+    speed_axis.legend(loc="lower right", fontsize="small", ncol=4)
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def print_tables(summary: dict, episodes: list[EpisodeResult], console: Console | None = None) -> None:
+    console = console or Console()
+    table = Table(title="episodes")
+    for column in ("episode", "seed", "crashed", "passed", "lane changes", "mean speed [m/s]",
+                   "peak |a_y| [m/s²]", "peak jerk [m/s³]"):
+        table.add_column(column, justify="right")
+    for e in episodes:
+        table.add_row(str(e.episode), str(e.seed), "yes" if e.crashed else "no", str(e.passed_cars),
+                      str(e.lane_changes), f"{e.mean_speed:.2f}", f"{e.peak_lat_accel:.2f}",
+                      f"{e.peak_lat_jerk:.2f}")
+    console.print(table)
+    overview = Table(title=f"summary: {summary['agent']} + {summary['controller']}")
+    overview.add_column("metric")
+    overview.add_column("value", justify="right")
+    accuracy = summary["accuracy"]
+    for name, value in (
+        ("episodes", summary["episodes"]),
+        ("collision rate", f"{summary['collision_rate']:.1%} ({summary['collisions']})"),
+        ("accuracy", "n/a" if accuracy is None else f"{accuracy:.2f} %"),
+        ("passed cars", summary["passed_cars"]),
+        ("mean speed", f"{summary['mean_speed']:.2f} m/s"),
+        ("lane changes / episode", f"{summary['lane_changes']:.2f}"),
+    ):
+        overview.add_row(name, str(value))
+    console.print(overview)
