@@ -46,9 +46,7 @@ class PID:
         self.integral = 0.0
         self.output: float | None = None
 
-    def update(
-        self, error: float, dt: float, error_rate: float = 0.0, feedforward: float = 0.0
-    ) -> float:
+    def update(self, error: float, dt: float, error_rate: float = 0.0, feedforward: float = 0.0) -> float:
         proportional_part = self.kp * error + self.kd * error_rate + feedforward
         candidate = self.integral + self.ki * error * dt
         unclamped = proportional_part + candidate
@@ -80,9 +78,7 @@ class AdaptiveCruise:
     KP_CLOSING = 0.8
     """Relative-speed gain [1/s]."""
 
-    def __init__(
-        self, time_gap: float, standstill_gap: float, comfort_deceleration: float
-    ) -> None:
+    def __init__(self, time_gap: float, standstill_gap: float, comfort_deceleration: float) -> None:
         self.time_gap = time_gap
         self.standstill_gap = standstill_gap
         self.comfort_deceleration = comfort_deceleration

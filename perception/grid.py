@@ -118,6 +118,4 @@ class OccupancyGridBuilder:
         )
 
         cells = np.einsum("vl,vc->lc", across.astype(np.float32), along.astype(np.float32))
-        return OccupancyGrid(
-            cells=(cells > 0).astype(np.float32), ego_lane=int(world.lane[0]), config=config
-        )
+        return OccupancyGrid(cells=(cells > 0).astype(np.float32), ego_lane=int(world.lane[0]), config=config)

@@ -158,4 +158,3 @@ def load_config(path: Path | str, **overrides: Any) -> RunConfig:
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping of keys at the top level")
     return build_config(data, str(path), **overrides)
-

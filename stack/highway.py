@@ -40,9 +40,7 @@ def env_config(highway: HighwayConfig) -> dict:
 
 def to_env_action(actuation: Actuation) -> np.ndarray:
     """Physical [acceleration m/s^2, steering rad] -> ContinuousAction's normalised [-1, 1]^2."""
-    return np.clip(
-        [actuation.acceleration / MAX_ACCELERATION, actuation.steering / MAX_STEERING], -1.0, 1.0
-    )
+    return np.clip([actuation.acceleration / MAX_ACCELERATION, actuation.steering / MAX_STEERING], -1.0, 1.0)
 
 
 class HighwayAdapter:
@@ -115,9 +113,7 @@ class HighwayAdapter:
         speed = np.array([v.speed for v in vehicles], dtype=float)
         s, d = self._lane_frame(reference, position)
         s_ego = float(s[0])
-        lane_offsets = np.array(
-            [reference.local_coordinates(lane.position(s_ego, 0.0))[1] for lane in lanes]
-        )
+        lane_offsets = np.array([reference.local_coordinates(lane.position(s_ego, 0.0))[1] for lane in lanes])
         return WorldState(
             time=float(self.env.unwrapped.time),
             ids=np.array(order),

@@ -32,9 +32,7 @@ def grid_config(config: RunConfig) -> GridConfig:
 
 
 def make_controller(config: ControllerConfig) -> PIDTracker:
-    cruise = AdaptiveCruise(
-        config.time_gap_s, config.standstill_gap_m, config.comfort_decel_mps2
-    )
+    cruise = AdaptiveCruise(config.time_gap_s, config.standstill_gap_m, config.comfort_decel_mps2)
     return PIDTracker(cruise)
 
 
@@ -70,7 +68,9 @@ class Episode:
                 ticks_to_decision = config.decision_ticks
             d, d_dot, d_ddot = maneuver.reference(world.time)
             reference = Reference(
-                d, d_dot, d_ddot,
+                d,
+                d_dot,
+                d_ddot,
                 set_speed=config.controller.set_speed_mps,
                 leaders=tuple(Leader(*lead) for lead in leaders(world, maneuver.occupied_lanes)),
             )
@@ -82,9 +82,7 @@ class Episode:
             ticks_to_decision -= 1
             if on_tick:
                 on_tick()
-        return recorder.result(
-            episode, seed, adapter.terminated, maneuver.lane_changes, adapter.dt
-        )
+        return recorder.result(episode, seed, adapter.terminated, maneuver.lane_changes, adapter.dt)
 
 
 @dataclass
@@ -98,9 +96,7 @@ def run(config: RunConfig, video: bool = False, progress: bool = True) -> RunRes
     """Run `config.episodes` seeded episodes (seed, seed + 1, ...); with `video`, keep the frames
     of the first episode."""
     adapter = HighwayAdapter(config.highway)
-    agent = make_agent(
-        config.planner.agent, config.highway.lanes_count, grid_config(config), config.seed
-    )
+    agent = make_agent(config.planner.agent, config.highway.lanes_count, grid_config(config), config.seed)
     results: list[EpisodeResult] = []
     frames: list[np.ndarray] = []
     interrupted = False

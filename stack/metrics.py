@@ -62,7 +62,7 @@ class EpisodeRecorder:
     """Collects what the metrics need, one `record(world)` per control tick."""
 
     def __init__(self, world: WorldState) -> None:
-        self.was_ahead = dict(zip(world.ids.tolist(), (world.s > world.s[0]).tolist()))
+        self.was_ahead = dict(zip(world.ids.tolist(), (world.s > world.s[0]).tolist(), strict=True))
         self.passed: set[int] = set()
         self.time: list[float] = []
         self.speed: list[float] = []
@@ -72,7 +72,7 @@ class EpisodeRecorder:
 
     def record(self, world: WorldState) -> None:
         ahead = (world.s > world.s[0]).tolist()
-        for vehicle_id, is_ahead in zip(world.ids[1:].tolist(), ahead[1:]):
+        for vehicle_id, is_ahead in zip(world.ids[1:].tolist(), ahead[1:], strict=True):
             if self.was_ahead.get(vehicle_id) and not is_ahead:
                 self.passed.add(vehicle_id)
             self.was_ahead[vehicle_id] = is_ahead

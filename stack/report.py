@@ -53,13 +53,28 @@ def plot_traces(episodes: list[EpisodeResult], path: Path) -> None:
 def print_tables(summary: dict, episodes: list[EpisodeResult], console: Console | None = None) -> None:
     console = console or Console()
     table = Table(title="episodes")
-    for column in ("episode", "seed", "crashed", "passed", "lane changes", "mean speed [m/s]",
-                   "peak |a_y| [m/s²]", "peak jerk [m/s³]"):
+    for column in (
+        "episode",
+        "seed",
+        "crashed",
+        "passed",
+        "lane changes",
+        "mean speed [m/s]",
+        "peak |a_y| [m/s²]",
+        "peak jerk [m/s³]",
+    ):
         table.add_column(column, justify="right")
     for e in episodes:
-        table.add_row(str(e.episode), str(e.seed), "yes" if e.crashed else "no", str(e.passed_cars),
-                      str(e.lane_changes), f"{e.mean_speed:.2f}", f"{e.peak_lat_accel:.2f}",
-                      f"{e.peak_lat_jerk:.2f}")
+        table.add_row(
+            str(e.episode),
+            str(e.seed),
+            "yes" if e.crashed else "no",
+            str(e.passed_cars),
+            str(e.lane_changes),
+            f"{e.mean_speed:.2f}",
+            f"{e.peak_lat_accel:.2f}",
+            f"{e.peak_lat_jerk:.2f}",
+        )
     console.print(table)
     overview = Table(title=f"summary: {summary['agent']} + {summary['controller']}")
     overview.add_column("metric")

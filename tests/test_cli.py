@@ -1,0 +1,97 @@
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import yaml
+from typer.testing import CliRunner
+
+from stack.cli import app
+
+ROOT = Path(__file__).resolve().parents[1]
+SUMMARY_KEYS = {
+    "episodes",
+    "collisions",
+    "collision_rate",
+    "accuracy",
+    "passed_cars",
+    "mean_speed",
+    "lane_changes",
+    "agent",
+    "controller",
+    "seed",
+}
+
+
+def tiny_config_file(tmp_path) -> Path:
+    data = yaml.safe_load((ROOT / "configs/highway.yaml").read_text())
+    data["highway"].update(vehicles_count=10, duration=2)
+    path = tmp_path / "tiny.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_run_writes_the_results_folder(tmp_path):
+    out = tmp_path / "out"
+    result = CliRunner().invoke(
+        app,
+        [
+            "run",
+            "--config",
+            str(tiny_config_file(tmp_path)),
+            "--episodes",
+            "2",
+            "--seed",
+            "4",
+            "--out",
+            str(out),
+            "--video",
+            "--no-progress",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert SUMMARY_KEYS <= set(summary)
+    assert (summary["episodes"], summary["seed"], summary["agent"]) == (2, 4, "rule")
+    rows = (out / "episodes.csv").read_text().strip().splitlines()
+    assert len(rows) == 3 and rows[0].startswith("episode,seed,")
+    assert (out / "traces.png").stat().st_size > 10_000
+    assert (out / "episode0.gif").stat().st_size > 10_000
+    assert "collision rate" in result.output
+
+
+def test_agent_option_swaps_the_agent(tmp_path):
+    out = tmp_path / "out"
+    result = CliRunner().invoke(
+        app,
+        [
+            "run",
+            "-c",
+            str(tiny_config_file(tmp_path)),
+            "--agent",
+            "keep-lane",
+            "--episodes",
+            "1",
+            "--out",
+            str(out),
+            "--no-progress",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    assert json.loads((out / "summary.json").read_text())["agent"] == "keep-lane"
+
+
+def test_bad_input_exits_non_zero_with_one_line(tmp_path):
+    result = CliRunner().invoke(
+        app, ["run", "-c", str(tiny_config_file(tmp_path)), "--agent", "genius", "--out", str(tmp_path / "x")]
+    )
+    assert result.exit_code == 2
+    assert "planner.agent: unknown agent 'genius'" in result.output
+    assert not (tmp_path / "x").exists(), "nothing runs or is written before the config validates"
+
+
+def test_module_entry_point_shows_help():
+    completed = subprocess.run(
+        [sys.executable, "-m", "stack", "run", "--help"], capture_output=True, text=True, check=True
+    )
+    assert "--episodes" in completed.stdout

@@ -1,0 +1,53 @@
+import numpy as np
+
+from planner.factory import make_agent
+from stack.config import build_config
+from stack.highway import HighwayAdapter
+from stack.loop import Episode, grid_config, run
+
+LANE_CHANGE = {"seed": 2, "highway": {"vehicles_count": 20, "duration": 8}, "perception": {"cells_ahead": 9}}
+
+
+def run_one(data: dict):
+    config = build_config(data)
+    with HighwayAdapter(config.highway) as adapter:
+        agent = make_agent(config.planner.agent, config.highway.lanes_count, grid_config(config))
+        return Episode(config, adapter, agent).run(0, config.seed)
+
+
+def test_rule_agent_changes_lane_by_its_own_steering():
+    result = run_one(LANE_CHANGE)
+    d = np.array(result.trace["d"])
+    assert not result.crashed
+    assert result.lane_changes >= 1
+    assert d[0] == 12.0
+    assert abs(d[-1] - 8.0) < 0.05, "ends on the centre of the lane to the left"
+    assert np.max(np.abs(np.diff(d))) < 0.15, "a smooth, steered lateral motion, not a jump"
+    assert result.peak_lat_accel < 3.0
+
+
+def test_lane_change_holds_the_target_lane_centre():
+    result = run_one(LANE_CHANGE)
+    time, d = np.array(result.trace["time"]), np.array(result.trace["d"])
+    settled = d[time > time[-1] - 1.5]
+    assert np.all(np.abs(settled - 8.0) < 0.05)
+
+
+def test_same_seed_gives_identical_summary(tiny_config):
+    first = run(tiny_config, progress=False)
+    second = run(tiny_config, progress=False)
+    assert first.summary == second.summary
+    assert [e.trace for e in first.episodes] == [e.trace for e in second.episodes]
+
+
+def test_different_seeds_give_different_traffic(tiny_config):
+    first = run(tiny_config, progress=False)
+    other = run(tiny_config.model_copy(update={"seed": 5}), progress=False)
+    assert first.episodes[0].trace != other.episodes[0].trace
+
+
+def test_keep_lane_agent_never_leaves_its_lane(tiny_config):
+    result = run_one({**tiny_config.model_dump(), "planner": {"agent": "keep-lane"}})
+    d = np.array(result.trace["d"])
+    assert result.lane_changes == 0
+    assert np.ptp(d) < 1e-6
