@@ -2,9 +2,10 @@
 
     .venv/bin/python benchmarks/loop_rate.py [--episodes 3] [--config configs/highway.yaml]
 
-Bare: `env.step` with a constant action on the adapter's env (ContinuousAction, one frame per
-step, the cheap observation) and on highway-v0 with its default Kinematics observation. Loop: the
-full stack (snapshot, grid, agent, controller, metrics). One process, one core; medians over
+Bare: `env.step` with a constant action on stock highway-v0 set up as the adapter sets it
+(ContinuousAction, one frame per step, the cheap observation) and with highway-env's default
+Kinematics observation. Loop: the full stack (snapshot, grid, agent, controller, metrics) on each
+backend. One process, one core; medians over
 episodes (seeds 0..N-1).
 """
 
@@ -41,7 +42,7 @@ def bare_rate(config: dict, seeds: range) -> float:
 
 def loop_rate(run_config, seeds: range) -> float:
     rates = []
-    with HighwayAdapter(run_config.highway) as adapter:
+    with HighwayAdapter(run_config.highway, run_config.sim.backend) as adapter:
         agent = make_agent(run_config.planner.agent, run_config.highway.lanes_count, grid_config(run_config))
         for seed in seeds:
             start = time.perf_counter()
@@ -62,8 +63,13 @@ def main() -> None:
     print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}")
     print(f"bare highway-env, stack config (cheap observation): {bare_rate(stack_env, seeds):7.1f} frames/s")
     print(f"bare highway-env, Kinematics observation:          {bare_rate(stock_env, seeds):7.1f} frames/s")
-    print(f"closed loop ({config.planner.agent} + {config.controller.type}):                  "
-          f"{loop_rate(config, seeds):7.1f} ticks/s")
+    for backend in ("stock", "fast"):
+        backend_config = config.model_copy(update={"sim": config.sim.model_copy(update={"backend": backend})})
+        rate = loop_rate(backend_config, seeds)
+        print(
+            f"closed loop ({config.planner.agent} + {config.controller.type}), {backend:5} backend:"
+            f"   {rate:7.1f} ticks/s"
+        )
 
 
 if __name__ == "__main__":

@@ -11,7 +11,12 @@ from rich.console import Console
 
 from stack.config import ConfigError, load_config
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, help="A hierarchical highway driving stack.")
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_show_locals=False,
+    help="A hierarchical highway driving stack.",
+)
 DEFAULT_CONFIG = Path("configs/highway.yaml")
 
 
@@ -39,12 +44,19 @@ def run(
     seed: int | None = typer.Option(None, help="Seed of the first episode."),
     out: Path | None = typer.Option(None, help="Results folder (default: runs/run-<time>)."),
     video: bool = typer.Option(False, "--video", help="Save a GIF of the first episode."),
+    backend: str | None = typer.Option(None, help="Simulation backend: fast | stock (sim.backend)."),
+    jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Run seeded closed-loop episodes and write a results folder."""
     try:
         cfg = load_config(
-            config, planner__agent=agent, controller__type=controller, episodes=episodes, seed=seed
+            config,
+            planner__agent=agent,
+            controller__type=controller,
+            sim__backend=backend,
+            episodes=episodes,
+            seed=seed,
         )
     except ConfigError as error:
         fail(str(error))
@@ -53,7 +65,7 @@ def run(
 
     out = out or fresh_run_dir("run")
     try:
-        results = run_loop(cfg, video=video, progress=progress)
+        results = run_loop(cfg, video=video, progress=progress, jobs=jobs)
     except KeyboardInterrupt:
         fail("interrupted before the first episode finished; nothing to write")
     write_results(out, results.summary, results.episodes, results.frames)

@@ -22,6 +22,7 @@ from pydantic import (
 from planner.factory import AGENT_NAMES as AGENTS
 
 CONTROLLERS = ("pid",)
+BACKENDS = ("fast", "stock")
 
 
 class ConfigError(ValueError):
@@ -40,6 +41,19 @@ class HighwayConfig(Strict):
     vehicles_density: float = Field(1.0, gt=0)
     duration: float = Field(40.0, gt=0, description="episode length [s]")
     simulation_frequency: int = Field(15, ge=1, le=1000, description="physics rate [Hz]")
+
+
+class SimConfig(Strict):
+    """Which highway-env road runs the physics: `fast` (indexed, identical trajectories) or `stock`."""
+
+    backend: str = "fast"
+
+    @field_validator("backend")
+    @classmethod
+    def _known_backend(cls, backend: str) -> str:
+        if backend not in BACKENDS:
+            raise ValueError(f"unknown backend {backend!r}; available: {', '.join(BACKENDS)}")
+        return backend
 
 
 class PerceptionConfig(Strict):
@@ -82,6 +96,7 @@ class RunConfig(Strict):
     seed: int = Field(0, ge=0)
     episodes: int = Field(5, ge=1)
     highway: HighwayConfig = HighwayConfig()
+    sim: SimConfig = SimConfig()
     control_rate_hz: float = Field(15.0, gt=0)
     decision_period_s: float = Field(1.0, gt=0)
     perception: PerceptionConfig = PerceptionConfig()

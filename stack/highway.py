@@ -20,6 +20,10 @@ from highway_env.road.lane import StraightLane
 from controllers.types import Actuation
 from perception.types import WorldState
 from stack.config import HighwayConfig
+from stack.envs import FAST_HIGHWAY
+
+ENV_IDS = {"fast": FAST_HIGHWAY, "stock": "highway-v0"}
+"""Simulation backends: the gymnasium id each one runs."""
 
 MAX_ACCELERATION = ContinuousAction.ACCELERATION_RANGE[1]
 """Acceleration that ContinuousAction maps to +1 [m/s^2]."""
@@ -46,11 +50,13 @@ def to_env_action(actuation: Actuation) -> np.ndarray:
 class HighwayAdapter:
     """Owns one highway-v0 env; `reset(seed)` and `step(actuation)` return `WorldState` snapshots."""
 
-    def __init__(self, highway: HighwayConfig, render: bool = False) -> None:
+    def __init__(self, highway: HighwayConfig, backend: str = "fast", render: bool = False) -> None:
+        if backend not in ENV_IDS:
+            raise ValueError(f"unknown simulation backend {backend!r}; available: {', '.join(ENV_IDS)}")
         self.config = highway
         self.dt = 1.0 / highway.simulation_frequency
         self.env = gym.make(
-            "highway-v0",
+            ENV_IDS[backend],
             config=env_config(highway),
             render_mode="rgb_array" if render else None,
             disable_env_checker=True,

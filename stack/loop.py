@@ -7,8 +7,9 @@ Each control tick reads like do-mpc's loop: `grid = perception.build(world)`,
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
+from multiprocessing import get_context
 
 import numpy as np
 from tqdm import tqdm
@@ -51,7 +52,7 @@ class Episode:
     agent: Agent
     frames: list[np.ndarray] = field(default_factory=list)
 
-    def run(self, episode: int, seed: int, on_tick: Callable[[], None] | None = None) -> EpisodeResult:
+    def run(self, episode: int, seed: int) -> EpisodeResult:
         config, adapter = self.config, self.adapter
         builder = OccupancyGridBuilder(grid_config(config))
         controller = make_controller(config.controller)
@@ -80,8 +81,6 @@ class Episode:
             if adapter.rendering:
                 self.frames.append(adapter.render())
             ticks_to_decision -= 1
-            if on_tick:
-                on_tick()
         return recorder.result(episode, seed, adapter.terminated, maneuver.lane_changes, adapter.dt)
 
 
@@ -92,39 +91,60 @@ class RunResults:
     frames: list[np.ndarray]
 
 
-def run(config: RunConfig, video: bool = False, progress: bool = True) -> RunResults:
-    """Run `config.episodes` seeded episodes (seed, seed + 1, ...); with `video`, keep the frames
-    of the first episode."""
-    adapter = HighwayAdapter(config.highway)
-    agent = make_agent(config.planner.agent, config.highway.lanes_count, grid_config(config), config.seed)
-    results: list[EpisodeResult] = []
+def run_episode(config: RunConfig, episode: int, frames: list[np.ndarray] | None = None) -> EpisodeResult:
+    """Episode `episode` of `config` (seed = config.seed + episode), with a fresh env and agent so
+    its result does not depend on which process runs it or what ran before; `frames`, when
+    given, collects the rendered frames."""
+    seed = config.seed + episode
+    agent = make_agent(config.planner.agent, config.highway.lanes_count, grid_config(config), seed)
+    with HighwayAdapter(config.highway, config.sim.backend, render=frames is not None) as adapter:
+        return Episode(config, adapter, agent, frames if frames is not None else []).run(episode, seed)
+
+
+def run(config: RunConfig, video: bool = False, progress: bool = True, jobs: int = 1) -> RunResults:
+    """Run `config.episodes` seeded episodes over `jobs` processes; results are ordered by episode,
+    identical for any `jobs`. With `video`, episode 0 runs here and keeps its frames. Ctrl-C keeps
+    the finished episodes (`summary["interrupted"]`)."""
     frames: list[np.ndarray] = []
+    results: dict[int, EpisodeResult] = {}
+    pending = list(range(config.episodes))
     interrupted = False
-    ticks_per_episode = round(config.highway.duration * config.highway.simulation_frequency)
-    bar = tqdm(total=config.episodes * ticks_per_episode, unit="tick", disable=not progress)
+    bar = tqdm(total=config.episodes, unit="episode", disable=not progress)
+
+    def finished(result: EpisodeResult) -> None:
+        results[result.episode] = result
+        bar.update(1)
+        bar.set_postfix(crashes=sum(r.crashed for r in results.values()))
+
     try:
-        for episode in range(config.episodes):
-            seed = config.seed + episode
-            if video and episode == 0:
-                with HighwayAdapter(config.highway, render=True) as render_adapter:
-                    runner = Episode(config, render_adapter, agent, frames)
-                    results.append(runner.run(episode, seed, on_tick=lambda: bar.update(1)))
-            else:
-                runner = Episode(config, adapter, agent)
-                results.append(runner.run(episode, seed, on_tick=lambda: bar.update(1)))
-            bar.set_postfix(crashes=sum(r.crashed for r in results))
+        if video:
+            finished(run_episode(config, pending.pop(0), frames))
+        if jobs <= 1:
+            for episode in pending:
+                finished(run_episode(config, episode))
+        else:
+            with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as pool:
+                futures = [pool.submit(run_episode, config, episode) for episode in pending]
+                try:
+                    for future in as_completed(futures):
+                        finished(future.result())
+                except KeyboardInterrupt:
+                    for future in futures:
+                        future.cancel()
+                    raise
     except KeyboardInterrupt:
         interrupted = True
     finally:
         bar.close()
-        adapter.close()
     if not results:
         raise KeyboardInterrupt
+    ordered = [results[episode] for episode in sorted(results)]
     summary = summarize(
-        results,
+        ordered,
         agent=config.planner.agent,
         controller=config.controller.type,
+        backend=config.sim.backend,
         seed=config.seed,
         interrupted=interrupted,
     )
-    return RunResults(summary=summary, episodes=results, frames=frames)
+    return RunResults(summary=summary, episodes=ordered, frames=frames)

@@ -10,7 +10,7 @@ LANE_CHANGE = {"seed": 2, "highway": {"vehicles_count": 20, "duration": 8}, "per
 
 def run_one(data: dict):
     config = build_config(data)
-    with HighwayAdapter(config.highway) as adapter:
+    with HighwayAdapter(config.highway, config.sim.backend) as adapter:
         agent = make_agent(config.planner.agent, config.highway.lanes_count, grid_config(config))
         return Episode(config, adapter, agent).run(0, config.seed)
 
@@ -51,3 +51,16 @@ def test_keep_lane_agent_never_leaves_its_lane(tiny_config):
     d = np.array(result.trace["d"])
     assert result.lane_changes == 0
     assert np.ptp(d) < 1e-6
+
+
+def test_parallel_episodes_give_the_same_results_as_serial(tiny_config):
+    config = tiny_config.model_copy(update={"episodes": 3})
+    serial = run(config, progress=False, jobs=1)
+    parallel = run(config, progress=False, jobs=2)
+    assert parallel.summary == serial.summary
+    assert [e.row() for e in parallel.episodes] == [e.row() for e in serial.episodes]
+
+
+def test_fast_and_stock_backends_drive_the_same_episode(tiny_config):
+    stock = tiny_config.model_copy(update={"sim": tiny_config.sim.model_copy(update={"backend": "stock"})})
+    assert run(stock, progress=False).episodes[0].trace == run(tiny_config, progress=False).episodes[0].trace

@@ -1,0 +1,15 @@
+"""Gymnasium registrations of the stack (run on `import stack`)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+
+FAST_HIGHWAY = "drivestack/FastHighway-v0"
+FAST_HIGHWAY_FAST = "drivestack/FastHighwayFast-v0"
+
+
+def register_envs() -> None:
+    if FAST_HIGHWAY in gym.registry:
+        return
+    gym.register(FAST_HIGHWAY, entry_point="stack.fast_road:FastHighwayEnv")
+    gym.register(FAST_HIGHWAY_FAST, entry_point="stack.fast_road:FastHighwayEnvFast")
