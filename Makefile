@@ -23,6 +23,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/loop_rate.py
 	$(BIN)/python benchmarks/sim_speed.py
+	$(BIN)/python benchmarks/grid_speed.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

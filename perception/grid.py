@@ -1,38 +1,51 @@
 """Occupancy grid of the ego's surroundings and the paper's encodings.
 
-Rows are lanes (absolute: row = lane index, as the paper), columns are longitudinal cells of
-`cell_length` metres, ego-relative in x: column `cells_behind` is the ego's own cell
-([-L/2, L/2) around the ego's centre), the `cells_ahead` columns from there on are the paper's
-line of sight (distances 0..cells_ahead-1). A vehicle marks every cell its footprint overlaps.
+Rows are lanes, columns are longitudinal cells of `cell_length` metres, ego-relative in x: column
+`cells_behind` is the ego's own cell ([-L/2, L/2) around the ego's centre), the `cells_ahead`
+columns from there on are the paper's line of sight (distances 0..cells_ahead-1). Coordinates are
+lane-frame (s along the reference lane, d across it), so the grid follows curved roads.
+
+Rows: `lanes="absolute"` gives one row per road lane (row = lane index, as the paper);
+`lanes="ego"` gives 2 * lateral_reach + 1 rows centred on the ego's lane (row 0 = the leftmost
+neighbour considered), lanes that do not exist marked occupied, so an agent trained on one lane
+count works on another. A vehicle marks every cell its footprint (length x width) overlaps, in
+every lane it overlaps (`footprint=False`: only the cell of its centre, as highway-env's own
+`OccupancyGrid` observation).
+
+Optional features (`features`):
+- `relative_speed`: per cell, the longitudinal speed (along the lane heading at the ego) of the
+  nearest occupant minus the ego's, divided by `speed_scale` [m/s], clipped to [-1, 1]; 0 if empty;
+- `ttc`: per row, time-to-collision [s] with the nearest vehicle ahead that the ego closes on,
+  min(ttc, ttc_horizon) / ttc_horizon in [0, 1]: 1 = no threat within the horizon.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from gymnasium import spaces
+from pydantic import BaseModel, ConfigDict, Field
 
 from perception.types import WorldState
 
 
-@dataclass(frozen=True)
-class GridConfig:
-    """Grid extent: cell length [m], cells ahead including the ego's (line of sight), cells behind."""
+class GridConfig(BaseModel):
+    """Grid extent and content. Lengths in m, speeds in m/s, times in s."""
 
-    cell_length: float = 5.0
-    cells_ahead: int = 9
-    cells_behind: int = 4
+    model_config = ConfigDict(extra="forbid", frozen=True)
 
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.cell_length) and self.cell_length > 0):
-            raise ValueError(f"grid cell_length must be > 0 m, got {self.cell_length}")
-        if self.cells_ahead < 1 or self.cells_behind < 0:
-            raise ValueError(
-                f"grid needs cells_ahead >= 1 and cells_behind >= 0, "
-                f"got {self.cells_ahead} and {self.cells_behind}"
-            )
+    cell_length: float = Field(5.0, gt=0, allow_inf_nan=False, description="cell length [m]")
+    cells_ahead: int = Field(9, ge=1, description="line of sight in cells, the ego's own included")
+    cells_behind: int = Field(4, ge=0)
+    lanes: Literal["absolute", "ego"] = "absolute"
+    lateral_reach: int = Field(1, ge=1, description="ego mode: neighbour lanes on each side")
+    footprint: bool = True
+    features: tuple[Literal["relative_speed", "ttc"], ...] = ()
+    speed_scale: float = Field(20.0, gt=0, description="relative speed giving feature 1 [m/s]")
+    ttc_horizon: float = Field(10.0, gt=0, description="time-to-collision giving feature 1 [s]")
 
     @property
     def cells(self) -> int:
@@ -42,80 +55,174 @@ class GridConfig:
     def ego_column(self) -> int:
         return self.cells_behind
 
+    def rows(self, lanes_count: int) -> int:
+        return lanes_count if self.lanes == "absolute" else 2 * self.lateral_reach + 1
+
 
 def lane_code_bits(lanes: int) -> int:
     """Bits of the binary ego-lane code (the paper's encoding)."""
     return max(1, math.ceil(math.log2(lanes)))
 
 
+def lane_code(lane: int, lanes: int) -> np.ndarray:
+    """`lane` as a binary code, most significant bit first."""
+    bits = lane_code_bits(lanes)
+    return np.array([(lane >> (bits - 1 - i)) & 1 for i in range(bits)], dtype=np.float32)
+
+
 @dataclass(frozen=True)
 class OccupancyGrid:
-    """Presence grid (lanes x cells, 0/1 float32) plus where the ego is."""
+    """Presence (rows x cells, 0/1), optional features, and where the ego is."""
 
     cells: np.ndarray
     ego_lane: int
+    lanes_count: int
     config: GridConfig
+    relative_speed: np.ndarray | None = None
+    ttc: np.ndarray | None = None
 
     @property
-    def lanes(self) -> int:
-        return self.cells.shape[0]
+    def ego_row(self) -> int:
+        return self.ego_lane if self.config.lanes == "absolute" else self.config.lateral_reach
 
-    def distances_ahead(self) -> np.ndarray:
-        """Per lane, cells from the ego's column to the closest occupied one ahead (0 = beside the
-        ego), or cells_ahead - 1 when the line of sight is clear (the paper caps at 8)."""
-        ahead = self.cells[:, self.config.ego_column :] > 0
-        first = np.argmax(ahead, axis=1)
-        return np.where(ahead.any(axis=1), first, self.config.cells_ahead - 1)
+    def row_lane(self, row: int) -> int:
+        """Road lane index of grid row `row` (may be off the road in ego mode)."""
+        return row if self.config.lanes == "absolute" else self.ego_lane - self.config.lateral_reach + row
+
+    def distances_ahead(self, line_of_sight: int | None = None) -> np.ndarray:
+        """Per row, cells from the ego's column to the closest occupied one ahead (0 = beside the
+        ego), or line_of_sight - 1 when nothing is in sight (the paper caps at 8)."""
+        line_of_sight = min(line_of_sight or self.config.cells_ahead, self.config.cells_ahead)
+        ahead = self.cells[:, self.config.ego_column : self.config.ego_column + line_of_sight] > 0
+        return np.where(ahead.any(axis=1), np.argmax(ahead, axis=1), line_of_sight - 1)
 
     def to_paper_state(self) -> np.ndarray:
-        """Flattened grid followed by the ego lane as a binary code (most significant bit first)."""
-        bits = lane_code_bits(self.lanes)
-        code = [(self.ego_lane >> (bits - 1 - i)) & 1 for i in range(bits)]
-        return np.concatenate([self.cells.ravel(), np.asarray(code, dtype=np.float32)])
+        """Flattened presence grid followed by the ego lane as a binary code (the paper's DQN state)."""
+        return np.concatenate([self.cells.ravel(), lane_code(self.ego_lane, self.lanes_count)])
 
-    def to_tabular_state(self) -> np.ndarray:
-        """[ego_lane, distance to the closest car ahead in each lane] (the paper's tabular state)."""
-        return np.concatenate([[self.ego_lane], self.distances_ahead()]).astype(np.int64)
+    def to_observation(self) -> np.ndarray:
+        """Presence, then each enabled feature, then the binary ego-lane code, flattened (float32)."""
+        parts = [self.cells.ravel()]
+        if self.relative_speed is not None:
+            parts.append(self.relative_speed.ravel())
+        if self.ttc is not None:
+            parts.append(self.ttc)
+        parts.append(lane_code(self.ego_lane, self.lanes_count))
+        return np.concatenate(parts).astype(np.float32)
 
-
-def paper_state_space(lanes: int, config: GridConfig) -> spaces.Box:
-    return spaces.Box(0.0, 1.0, shape=(lanes * config.cells + lane_code_bits(lanes),), dtype=np.float32)
-
-
-def tabular_state_space(lanes: int, config: GridConfig) -> spaces.Box:
-    high = np.array([lanes - 1] + [config.cells_ahead - 1] * lanes)
-    return spaces.Box(0, high, dtype=np.int64)
+    def to_tabular_state(self, line_of_sight: int | None = None) -> np.ndarray:
+        """[ego_lane, distance in cells to the closest car ahead in each row] (the paper's tabular
+        state), capped at line_of_sight - 1."""
+        return np.concatenate([[self.ego_lane], self.distances_ahead(line_of_sight)]).astype(np.int64)
 
 
 class OccupancyGridBuilder:
-    """`build(world)`: the lane-aligned, ego-relative presence grid, vectorised over vehicles."""
+    """`build(world)`: the lane-aligned, ego-relative grid, vectorised over vehicles."""
 
     def __init__(self, config: GridConfig) -> None:
         self.config = config
 
+    def paper_space(self, lanes_count: int) -> spaces.Box:
+        size = self.config.rows(lanes_count) * self.config.cells + lane_code_bits(lanes_count)
+        return spaces.Box(0.0, 1.0, shape=(size,), dtype=np.float32)
+
+    def observation_space(self, lanes_count: int) -> spaces.Box:
+        rows, cells = self.config.rows(lanes_count), self.config.cells
+        size = rows * cells * (1 + ("relative_speed" in self.config.features))
+        size += rows * ("ttc" in self.config.features) + lane_code_bits(lanes_count)
+        low = np.zeros(size, dtype=np.float32)
+        if "relative_speed" in self.config.features:
+            low[rows * cells : 2 * rows * cells] = -1.0
+        return spaces.Box(low, np.ones(size, dtype=np.float32), dtype=np.float32)
+
+    def tabular_space(self, lanes_count: int) -> spaces.Box:
+        high = np.array([lanes_count - 1] + [self.config.cells_ahead - 1] * self.config.rows(lanes_count))
+        return spaces.Box(0, high, dtype=np.int64)
+
     def build(self, world: WorldState) -> OccupancyGrid:
         config = self.config
-        others = slice(1, None)
-        states = np.stack([world.s[others], world.d[others], world.speed[others]])
-        if not np.all(np.isfinite(states)):
-            bad = int(np.nonzero(~np.all(np.isfinite(states), axis=0))[0][0]) + 1
-            raise ValueError(f"vehicle id {int(world.ids[bad])} has a non-finite state")
+        _reject_non_finite(world)
+        ego_lane = int(world.lane[0])
+        rel_s = world.s[1:] - world.s[0]
+        along = self._columns(rel_s, world.length[1:])
+        across = self._lanes(world)
+        rows = config.rows(world.lanes_count)
+        road_rows = self._road_rows(ego_lane, world.lanes_count)
+        occupancy = np.zeros((rows, config.cells), dtype=np.float32)
+        on_road = road_rows >= 0
+        occupancy[on_road] = (
+            across[:, road_rows[on_road]].T.astype(np.float32) @ along.astype(np.float32)
+        ) > 0
+        occupancy[~on_road] = 1.0
+        relative_speed = ttc = None
+        if "relative_speed" in config.features:
+            relative_speed = self._relative_speed(world, rel_s, along, across, road_rows)
+        if "ttc" in config.features:
+            ttc = self._ttc(world, rel_s, across, road_rows)
+        return OccupancyGrid(occupancy, ego_lane, world.lanes_count, config, relative_speed, ttc)
 
-        rel_s = world.s[others] - world.s[0]
-        half_length = world.length[others] / 2
-        first = np.floor((rel_s - half_length) / config.cell_length + 0.5).astype(int)
-        last = np.ceil((rel_s + half_length) / config.cell_length + 0.5).astype(int) - 1
-        columns = np.arange(config.cells) - config.ego_column
-        along = (columns[None, :] >= first[:, None]) & (columns[None, :] <= last[:, None])
+    def _road_rows(self, ego_lane: int, lanes_count: int) -> np.ndarray:
+        """Road lane index of each grid row, -1 where the lane does not exist."""
+        if self.config.lanes == "absolute":
+            return np.arange(lanes_count)
+        lanes = ego_lane + np.arange(-self.config.lateral_reach, self.config.lateral_reach + 1)
+        return np.where((lanes >= 0) & (lanes < lanes_count), lanes, -1)
 
-        half_width = world.width[others] / 2
+    def _columns(self, rel_s: np.ndarray, length: np.ndarray) -> np.ndarray:
+        """(vehicles, cells) mask of the columns each vehicle covers."""
+        config = self.config
+        offsets = np.arange(config.cells) - config.ego_column
+        if config.footprint:
+            first = np.floor((rel_s - length / 2) / config.cell_length + 0.5)
+            last = np.ceil((rel_s + length / 2) / config.cell_length + 0.5) - 1
+        else:
+            first = last = np.floor(rel_s / config.cell_length + 0.5)
+        return (offsets[None, :] >= first[:, None]) & (offsets[None, :] <= last[:, None])
+
+    def _lanes(self, world: WorldState) -> np.ndarray:
+        """(vehicles, road lanes) mask of the lanes each vehicle covers."""
+        d = world.d[1:]
         half_lane = world.lane_width / 2
-        lane_low = world.lane_offsets - half_lane
-        lane_high = world.lane_offsets + half_lane
-        d = world.d[others]
-        across = ((d - half_width)[:, None] < lane_high[None, :]) & (
-            (d + half_width)[:, None] > lane_low[None, :]
-        )
+        if not self.config.footprint:
+            return np.abs(d[:, None] - world.lane_offsets[None, :]) < half_lane
+        half_width = world.width[1:, None] / 2
+        low, high = world.lane_offsets - half_lane, world.lane_offsets + half_lane
+        return (d[:, None] - half_width < high[None, :]) & (d[:, None] + half_width > low[None, :])
 
-        cells = np.einsum("vl,vc->lc", across.astype(np.float32), along.astype(np.float32))
-        return OccupancyGrid(cells=(cells > 0).astype(np.float32), ego_lane=int(world.lane[0]), config=config)
+    def _relative_speed(self, world, rel_s, along, across, road_rows) -> np.ndarray:
+        config = self.config
+        grid = np.zeros((len(road_rows), config.cells), dtype=np.float32)
+        lane_heading = world.lanes[0].heading_at(float(world.s[0]))
+        longitudinal = world.speed * np.cos(world.heading - lane_heading)
+        value = np.clip((longitudinal[1:] - longitudinal[0]) / config.speed_scale, -1, 1)
+        for vehicle in np.argsort(-np.abs(rel_s)):
+            for row, lane in enumerate(road_rows):
+                if lane >= 0 and across[vehicle, lane]:
+                    grid[row, along[vehicle]] = value[vehicle]
+        return grid
+
+    def _ttc(self, world, rel_s, across, road_rows) -> np.ndarray:
+        config = self.config
+        gap = rel_s - (world.length[1:] + world.length[0]) / 2
+        closing = world.speed[0] - world.speed[1:]
+        ttc = np.ones(len(road_rows), dtype=np.float32)
+        for row, lane in enumerate(road_rows):
+            if lane < 0:
+                ttc[row] = 0.0
+                continue
+            ahead = np.flatnonzero(across[:, lane] & (rel_s > 0))
+            if ahead.size:
+                nearest = ahead[np.argmin(rel_s[ahead])]
+                if closing[nearest] > 0:
+                    seconds = max(gap[nearest], 0.0) / closing[nearest]
+                    ttc[row] = min(seconds, config.ttc_horizon) / config.ttc_horizon
+        return ttc
+
+
+def _reject_non_finite(world: WorldState) -> None:
+    states = np.stack([world.s, world.d, world.speed, world.heading])
+    finite = np.all(np.isfinite(states), axis=0)
+    if not finite.all():
+        row = int(np.flatnonzero(~finite)[0])
+        name = "the ego" if row == 0 else f"vehicle id {int(world.ids[row])}"
+        raise ValueError(f"{name} has a non-finite state (s, d, speed or heading); refusing to grid it")

@@ -62,36 +62,40 @@ class FreeGapAgent:
         self.safe_cells_ahead = safe_cells_ahead
 
     def _decode(self, observation: np.ndarray) -> tuple[np.ndarray, int]:
-        size = self.lanes * self.grid.cells
+        """(presence grid, ego row) from a paper state."""
+        rows = self.grid.rows(self.lanes)
+        size = rows * self.grid.cells
         expected = size + lane_code_bits(self.lanes)
         observation = np.asarray(observation).reshape(-1)
         if observation.size != expected:
             raise ValueError(
                 f"rule agent expected a paper state of {expected} values "
-                f"({self.lanes} lanes x {self.grid.cells} cells + lane code), got {observation.size}"
+                f"({rows} rows x {self.grid.cells} cells + lane code), got {observation.size}"
             )
         bits = observation[size:].astype(int)
         ego_lane = int(sum(bit << (len(bits) - 1 - i) for i, bit in enumerate(bits)))
-        return observation[:size].reshape(self.lanes, self.grid.cells), ego_lane
+        ego_row = ego_lane if self.grid.lanes == "absolute" else self.grid.lateral_reach
+        return observation[:size].reshape(rows, self.grid.cells), ego_row
 
     def free_cells(self, cells: np.ndarray) -> np.ndarray:
         """Per lane, free cells ahead of the ego's column (cells_ahead when all clear)."""
         ahead = cells[:, self.grid.ego_column + 1 :] > 0
         return np.where(ahead.any(axis=1), np.argmax(ahead, axis=1), self.grid.cells_ahead)
 
-    def gap_is_safe(self, cells: np.ndarray, lane: int) -> bool:
+    def gap_is_safe(self, cells: np.ndarray, row: int) -> bool:
+        """Row `row` exists and is empty around the ego (lanes off the road are marked full)."""
         low = self.grid.ego_column - self.safe_cells_behind
         high = self.grid.ego_column + self.safe_cells_ahead
-        return 0 <= lane < self.lanes and not cells[lane, low : high + 1].any()
+        return 0 <= row < cells.shape[0] and not cells[row, low : high + 1].any()
 
     def predict(self, observation, state=None, episode_start=None, deterministic=True):
-        cells, ego_lane = self._decode(observation)
+        cells, ego_row = self._decode(observation)
         free = self.free_cells(cells)
-        if free[ego_lane] >= self.grid.cells_ahead - 1:
+        if free[ego_row] >= self.grid.cells_ahead:
             return np.array(Command.STAY), state
-        best, best_free = Command.STAY, free[ego_lane]
+        best, best_free = Command.STAY, free[ego_row]
         for command in (Command.LEFT, Command.RIGHT):
-            lane = ego_lane + command.lane_shift
-            if self.gap_is_safe(cells, lane) and free[lane] > best_free:
-                best, best_free = command, free[lane]
+            row = ego_row + command.lane_shift
+            if self.gap_is_safe(cells, row) and free[row] > best_free:
+                best, best_free = command, free[row]
         return np.array(best), state

@@ -19,6 +19,8 @@ from pydantic import (
     model_validator,
 )
 
+from perception.grid import GridConfig
+from perception.sensor import SensorConfig
 from planner.factory import AGENT_NAMES as AGENTS
 
 CONTROLLERS = ("pid",)
@@ -56,12 +58,10 @@ class SimConfig(Strict):
         return backend
 
 
-class PerceptionConfig(Strict):
-    """Occupancy-grid extent: cells of `cell_length_m` from `cells_behind` to `cells_ahead`."""
+class PerceptionConfig(GridConfig):
+    """The occupancy grid (perception.grid.GridConfig's keys) plus the sensor model."""
 
-    cell_length_m: float = Field(5.0, gt=0)
-    cells_ahead: int = Field(9, ge=1)
-    cells_behind: int = Field(4, ge=0)
+    sensor: SensorConfig = SensorConfig()
 
 
 class PlannerConfig(Strict):

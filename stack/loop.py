@@ -18,6 +18,8 @@ from controllers.pid import AdaptiveCruise, PIDTracker
 from controllers.types import EgoState, Leader, Reference
 from perception.grid import GridConfig, OccupancyGridBuilder
 from perception.neighbours import leaders
+from perception.plot import grid_panel
+from perception.sensor import SensorModel
 from perception.types import WorldState
 from planner.agents import Agent, decide
 from planner.factory import make_agent
@@ -27,9 +29,12 @@ from stack.maneuver import Maneuver
 from stack.metrics import EpisodeRecorder, EpisodeResult, summarize
 
 
+SNAPSHOT_TIME_S = 10.0
+"""Each episode keeps the (world, grid) of its first decision at or after this time [s]."""
+
+
 def grid_config(config: RunConfig) -> GridConfig:
-    p = config.perception
-    return GridConfig(p.cell_length_m, p.cells_ahead, p.cells_behind)
+    return GridConfig(**config.perception.model_dump(exclude={"sensor"}))
 
 
 def make_controller(config: ControllerConfig) -> PIDTracker:
@@ -55,16 +60,21 @@ class Episode:
     def run(self, episode: int, seed: int) -> EpisodeResult:
         config, adapter = self.config, self.adapter
         builder = OccupancyGridBuilder(grid_config(config))
+        sensor = SensorModel(config.perception.sensor, seed)
         controller = make_controller(config.controller)
         world = adapter.reset(seed)
         maneuver = Maneuver(world, config.controller.lane_change_duration_s)
         recorder = EpisodeRecorder(world)
         ticks_to_decision = 0
+        snapshot = None
         while not adapter.done:
             if maneuver.update(world):
                 ticks_to_decision = 0
             if not maneuver.changing_lane and ticks_to_decision <= 0:
-                command = decide(self.agent, builder.build(world).to_paper_state())
+                self.last_grid = builder.build(sensor.observe(world))
+                if snapshot is None or snapshot[0].time < SNAPSHOT_TIME_S:
+                    snapshot = (world, self.last_grid)
+                command = decide(self.agent, self.last_grid.to_paper_state())
                 maneuver.command(command, world)
                 ticks_to_decision = config.decision_ticks
             d, d_dot, d_ddot = maneuver.reference(world.time)
@@ -79,9 +89,12 @@ class Episode:
             world = adapter.step(actuation)
             recorder.record(world)
             if adapter.rendering:
-                self.frames.append(adapter.render())
+                frame = adapter.render()
+                self.frames.append(np.vstack([frame, grid_panel(self.last_grid, frame.shape[1])]))
             ticks_to_decision -= 1
-        return recorder.result(episode, seed, adapter.terminated, maneuver.lane_changes, adapter.dt)
+        result = recorder.result(episode, seed, adapter.terminated, maneuver.lane_changes, adapter.dt)
+        result.snapshot = snapshot
+        return result
 
 
 @dataclass

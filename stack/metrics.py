@@ -8,7 +8,7 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -52,10 +52,11 @@ class EpisodeResult:
     peak_lat_accel: float
     peak_lat_jerk: float
     trace: dict[str, list[float]] = field(default_factory=dict, repr=False)
+    snapshot: tuple | None = field(default=None, repr=False, compare=False)
 
     def row(self) -> dict:
-        """The flat record written to CSV (no traces)."""
-        return {k: v for k, v in asdict(self).items() if k != "trace"}
+        """The flat record written to CSV (no traces, no snapshot)."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("trace", "snapshot")}
 
 
 class EpisodeRecorder:

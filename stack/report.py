@@ -14,6 +14,7 @@ import matplotlib.pyplot as plt
 from rich.console import Console
 from rich.table import Table
 
+from perception.plot import plot_grid_over_road
 from stack.metrics import EpisodeResult
 
 VIDEO_FPS = 15
@@ -29,6 +30,8 @@ def write_results(out: Path, summary: dict, episodes: list[EpisodeResult], frame
         writer.writeheader()
         writer.writerows(rows)
     plot_traces(episodes, out / "traces.png")
+    if episodes[0].snapshot is not None:
+        plot_grid_over_road(*episodes[0].snapshot, out / "grid.png")
     if frames:
         imageio.mimsave(out / "episode0.gif", frames[::2], duration=2000 / VIDEO_FPS, loop=0)
 

@@ -41,7 +41,7 @@ def test_overrides_replace_file_values(tmp_path):
         ({"control_rate_hz": 10}, "control_rate_hz: must equal highway.simulation_frequency"),
         ({"planner": {"agent": "genius"}}, "planner.agent: unknown agent 'genius'; available: rule"),
         ({"controller": {"type": "lqr"}}, "controller.type: unknown controller 'lqr'"),
-        ({"perception": {"cell_length_m": 0}}, "perception.cell_length_m: Input should be greater than 0"),
+        ({"perception": {"cell_length": 0}}, "perception.cell_length: Input should be greater than 0"),
     ],
 )
 def test_bad_values_fail_with_one_line_naming_the_key(tmp_path, data, expected):

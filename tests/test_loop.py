@@ -64,3 +64,16 @@ def test_parallel_episodes_give_the_same_results_as_serial(tiny_config):
 def test_fast_and_stock_backends_drive_the_same_episode(tiny_config):
     stock = tiny_config.model_copy(update={"sim": tiny_config.sim.model_copy(update={"backend": "stock"})})
     assert run(stock, progress=False).episodes[0].trace == run(tiny_config, progress=False).episodes[0].trace
+
+
+def test_noisy_sensor_runs_are_seeded_and_change_what_the_planner_sees(tiny_config):
+    noisy = build_config(
+        {
+            **tiny_config.model_dump(),
+            "perception": {"sensor": {"position_noise_m": 1.0, "false_positives": 2.0}},
+        }
+    )
+    first, second = run(noisy, progress=False), run(noisy, progress=False)
+    assert first.summary == second.summary
+    grid_truth = run(tiny_config, progress=False).episodes[0].snapshot[1].cells
+    assert not np.array_equal(first.episodes[0].snapshot[1].cells, grid_truth)

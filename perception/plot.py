@@ -1,0 +1,89 @@
+"""Pictures of the grid: a pixel panel for videos and a matplotlib figure over the road."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Rectangle  # noqa: E402
+
+from perception.grid import OccupancyGrid  # noqa: E402
+from perception.types import WorldState  # noqa: E402
+
+EMPTY = (235, 235, 235)
+OCCUPIED = (220, 60, 50)
+EGO = (50, 110, 220)
+GRID_LINE = (160, 160, 160)
+ROW_HEIGHT_PX = 16
+
+
+def grid_panel(grid: OccupancyGrid, width: int) -> np.ndarray:
+    """The grid as an RGB image `width` pixels wide, one row per lane, top row = row 0 (left);
+    occupied cells red, the ego's cell blue. For side-by-side video frames."""
+    rows, cells = grid.cells.shape
+    image = np.empty((rows, cells, 3), dtype=np.uint8)
+    image[:] = EMPTY
+    image[grid.cells > 0] = OCCUPIED
+    image[grid.ego_row, grid.config.ego_column] = EGO
+    column_px = max(1, width // cells)
+    scaled = np.repeat(np.repeat(image, ROW_HEIGHT_PX, axis=0), column_px, axis=1)
+    scaled[::ROW_HEIGHT_PX] = GRID_LINE
+    scaled[:, ::column_px] = GRID_LINE
+    panel = np.full((rows * ROW_HEIGHT_PX, width, 3), 255, dtype=np.uint8)
+    panel[:, : scaled.shape[1]] = scaled[:, :width]
+    return panel
+
+
+def plot_grid_over_road(world: WorldState, grid: OccupancyGrid, path: Path) -> None:
+    """Vehicles (lane frame, relative to the ego) with the grid cells they occupy shaded."""
+    config = grid.config
+    figure, axis = plt.subplots(figsize=(11, 1.0 + 0.6 * world.lanes_count))
+    half_lane = world.lane_width / 2
+    for row in range(grid.cells.shape[0]):
+        lane = grid.row_lane(row)
+        if not 0 <= lane < world.lanes_count:
+            continue
+        centre = world.lane_offsets[lane]
+        for column in range(config.cells):
+            x = (column - config.ego_column - 0.5) * config.cell_length
+            occupied = grid.cells[row, column] > 0
+            axis.add_patch(
+                Rectangle(
+                    (x, centre - half_lane),
+                    config.cell_length,
+                    2 * half_lane,
+                    facecolor="tab:red" if occupied else "none",
+                    alpha=0.25,
+                    edgecolor="0.7",
+                    lw=0.5,
+                )
+            )
+    for lane_edge in np.append(world.lane_offsets - half_lane, world.lane_offsets[-1] + half_lane):
+        axis.axhline(lane_edge, color="0.3", lw=0.8)
+    rel_s = world.s - world.s[0]
+    for row in range(world.count):
+        axis.add_patch(
+            Rectangle(
+                (rel_s[row] - world.length[row] / 2, world.d[row] - world.width[row] / 2),
+                world.length[row],
+                world.width[row],
+                facecolor="tab:blue" if row == 0 else "tab:gray",
+                edgecolor="black",
+                lw=0.6,
+            )
+        )
+    axis.set_xlim(
+        -(config.cells_behind + 1) * config.cell_length, (config.cells_ahead + 1) * config.cell_length
+    )
+    axis.set_ylim(world.lane_offsets[-1] + half_lane + 1, world.lane_offsets[0] - half_lane - 1)
+    axis.set_xlabel("longitudinal distance from the ego [m]")
+    axis.set_ylabel("lateral [m]")
+    axis.set_aspect("equal")
+    axis.set_title(f"occupancy grid at t = {world.time:.1f} s (ego lane {grid.ego_lane})")
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
