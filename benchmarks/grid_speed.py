@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from functools import partial
 
 import numpy as np
 from highway_env.envs.common.observation import OccupancyGridObservation
@@ -58,7 +59,7 @@ def main() -> None:
                 ],
                 grid_step=[L, width],
             )
-            ours = timings(lambda: builder.build(world), args.repeats)
+            ours = timings(partial(builder.build, world), args.repeats)
             observe = timings(theirs.observe, max(20, args.repeats // 10))
             frame = timings(lambda: adapter.step(Actuation(0.0, 0.0)), 100)
         print(

@@ -28,7 +28,6 @@ from stack.highway import HighwayAdapter
 from stack.maneuver import Maneuver
 from stack.metrics import EpisodeRecorder, EpisodeResult, summarize
 
-
 SNAPSHOT_TIME_S = 10.0
 """Each episode keeps the (world, grid) of its first decision at or after this time [s]."""
 
