@@ -38,7 +38,8 @@ def main() -> None:
     config = GridConfig(cells_ahead=9, cells_behind=4)
     builder = OccupancyGridBuilder(config)
     print(
-        "| vehicles | our build µs (median / p95) | highway-env observe() µs | stock frame incl. snapshot µs | build / frame |"
+        "| vehicles | our build µs (median / p95) | highway-env observe() µs"
+        " | stock frame incl. snapshot µs | build / frame |"
     )
     print("|---|---|---|---|---|")
     for vehicles, density in ((10, 1.0), (50, 1.0), (100, 2.0)):
