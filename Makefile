@@ -18,6 +18,7 @@ run: $(STAMP)
 	$(BIN)/drivestack run --config configs/highway.yaml $(ARGS)
 
 test: $(STAMP)
+	$(BIN)/ruff check .
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)

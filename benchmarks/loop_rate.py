@@ -22,7 +22,8 @@ import numpy as np
 from planner.factory import make_agent
 from stack.config import load_config
 from stack.highway import HighwayAdapter, env_config
-from stack.loop import Episode, grid_config
+from stack.closed_loop import ClosedLoop, grid_config
+from stack.loop import run_agent_episode
 
 
 def bare_rate(config: dict, seeds: range) -> float:
@@ -46,7 +47,7 @@ def loop_rate(run_config, seeds: range) -> float:
         agent = make_agent(run_config.planner.agent, run_config.highway.lanes_count, grid_config(run_config))
         for seed in seeds:
             start = time.perf_counter()
-            result = Episode(run_config, adapter, agent).run(0, seed)
+            result = run_agent_episode(ClosedLoop(run_config, adapter), agent, 0, seed)
             rates.append(result.steps / (time.perf_counter() - start))
     return statistics.median(rates)
 

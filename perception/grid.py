@@ -110,6 +110,16 @@ class OccupancyGrid:
         parts.append(lane_code(self.ego_lane, self.lanes_count))
         return np.concatenate(parts).astype(np.float32)
 
+    def encode(self, encoding: str) -> np.ndarray:
+        """The encoding named `encoding`: paper, observation or tabular."""
+        if encoding == "paper":
+            return self.to_paper_state()
+        if encoding == "observation":
+            return self.to_observation()
+        if encoding == "tabular":
+            return self.to_tabular_state()
+        raise ValueError(f"unknown encoding {encoding!r}; available: paper, observation, tabular")
+
     def to_tabular_state(self, line_of_sight: int | None = None) -> np.ndarray:
         """[ego_lane, distance in cells to the closest car ahead in each row] (the paper's tabular
         state), capped at line_of_sight - 1."""

@@ -8,8 +8,9 @@ from planner.agents import Agent, FreeGapAgent, KeepLaneAgent, RandomAgent
 AGENT_NAMES = ("rule", "keep-lane", "random")
 
 
-def make_agent(name: str, lanes: int, grid: GridConfig, seed: int = 0) -> Agent:
-    """Build the agent `name` for a road of `lanes` lanes seen through `grid`."""
+def make_agent(name: str, lanes: int, grid: GridConfig, seed: int = 0, model=None) -> Agent:
+    """Build the agent `name` for a road of `lanes` lanes seen through `grid`; learned agents load
+    `model` (a path)."""
     if name == "rule":
         return FreeGapAgent(lanes, grid)
     if name == "keep-lane":

@@ -22,6 +22,7 @@ from pydantic import (
 from perception.grid import GridConfig
 from perception.sensor import SensorConfig
 from planner.factory import AGENT_NAMES as AGENTS
+from planner.safety import SafetyConfig
 
 CONTROLLERS = ("pid",)
 BACKENDS = ("fast", "stock")
@@ -67,6 +68,7 @@ class PerceptionConfig(GridConfig):
 class PlannerConfig(Strict):
     agent: str = "rule"
     model: Path | None = None
+    safety: SafetyConfig = SafetyConfig()
 
     @field_validator("agent")
     @classmethod

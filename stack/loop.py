@@ -1,99 +1,29 @@
-"""The closed loop: perceive, decide (every decision period or when a maneuver ends), track.
-
-Each control tick reads like do-mpc's loop: `grid = perception.build(world)`,
-`command = decide(agent, observation)`, `actuation = controller.step(state, reference, dt)`,
-`world = plant.step(actuation)`.
-"""
+"""Running seeded episodes: one at a time or spread over processes, results in episode order."""
 
 from __future__ import annotations
 
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from multiprocessing import get_context
 
 import numpy as np
 from tqdm import tqdm
 
-from controllers.pid import AdaptiveCruise, PIDTracker
-from controllers.types import EgoState, Leader, Reference
-from perception.grid import GridConfig, OccupancyGridBuilder
-from perception.neighbours import leaders
-from perception.plot import grid_panel
-from perception.sensor import SensorModel
-from perception.types import WorldState
 from planner.agents import Agent, decide
 from planner.factory import make_agent
-from stack.config import ControllerConfig, RunConfig
+from stack.closed_loop import ClosedLoop, grid_config
+from stack.config import RunConfig
 from stack.highway import HighwayAdapter
-from stack.maneuver import Maneuver
-from stack.metrics import EpisodeRecorder, EpisodeResult, summarize
-
-SNAPSHOT_TIME_S = 10.0
-"""Each episode keeps the (world, grid) of its first decision at or after this time [s]."""
+from stack.metrics import EpisodeResult, summarize
 
 
-def grid_config(config: RunConfig) -> GridConfig:
-    return GridConfig(**config.perception.model_dump(exclude={"sensor"}))
-
-
-def make_controller(config: ControllerConfig) -> PIDTracker:
-    cruise = AdaptiveCruise(config.time_gap_s, config.standstill_gap_m, config.comfort_decel_mps2)
-    return PIDTracker(cruise)
-
-
-def ego_state(world: WorldState, lane: int) -> EgoState:
-    """The ego in the frame of `lane`: lateral offset, heading relative to the lane, speed."""
-    ego = world.ego
-    return EgoState(d=ego.d, heading=ego.heading - world.lanes[lane].heading_at(ego.s), speed=ego.speed)
-
-
-@dataclass
-class Episode:
-    """Everything one closed-loop episode needs; `frames` collects RGB frames when rendering."""
-
-    config: RunConfig
-    adapter: HighwayAdapter
-    agent: Agent
-    frames: list[np.ndarray] = field(default_factory=list)
-
-    def run(self, episode: int, seed: int) -> EpisodeResult:
-        config, adapter = self.config, self.adapter
-        builder = OccupancyGridBuilder(grid_config(config))
-        sensor = SensorModel(config.perception.sensor, seed)
-        controller = make_controller(config.controller)
-        world = adapter.reset(seed)
-        maneuver = Maneuver(world, config.controller.lane_change_duration_s)
-        recorder = EpisodeRecorder(world)
-        ticks_to_decision = 0
-        snapshot = None
-        while not adapter.done:
-            if maneuver.update(world):
-                ticks_to_decision = 0
-            if not maneuver.changing_lane and ticks_to_decision <= 0:
-                self.last_grid = builder.build(sensor.observe(world))
-                if snapshot is None or snapshot[0].time < SNAPSHOT_TIME_S:
-                    snapshot = (world, self.last_grid)
-                command = decide(self.agent, self.last_grid.to_paper_state())
-                maneuver.command(command, world)
-                ticks_to_decision = config.decision_ticks
-            d, d_dot, d_ddot = maneuver.reference(world.time)
-            reference = Reference(
-                d,
-                d_dot,
-                d_ddot,
-                set_speed=config.controller.set_speed_mps,
-                leaders=tuple(Leader(*lead) for lead in leaders(world, maneuver.occupied_lanes)),
-            )
-            actuation = controller.step(ego_state(world, maneuver.lane), reference, adapter.dt)
-            world = adapter.step(actuation)
-            recorder.record(world)
-            if adapter.rendering:
-                frame = adapter.render()
-                self.frames.append(np.vstack([frame, grid_panel(self.last_grid, frame.shape[1])]))
-            ticks_to_decision -= 1
-        result = recorder.result(episode, seed, adapter.terminated, maneuver.lane_changes, adapter.dt)
-        result.snapshot = snapshot
-        return result
+def run_agent_episode(loop: ClosedLoop, agent: Agent, episode: int, seed: int) -> EpisodeResult:
+    """Drive one episode: perceive, decide, act, until the episode ends."""
+    loop.reset(seed)
+    encoding = getattr(agent, "encoding", "paper")
+    while not loop.done:
+        loop.act(decide(agent, loop.perceive().encode(encoding)))
+    return loop.result(episode)
 
 
 @dataclass
@@ -108,9 +38,11 @@ def run_episode(config: RunConfig, episode: int, frames: list[np.ndarray] | None
     its result does not depend on which process runs it or what ran before; `frames`, when
     given, collects the rendered frames."""
     seed = config.seed + episode
-    agent = make_agent(config.planner.agent, config.highway.lanes_count, grid_config(config), seed)
+    agent = make_agent(
+        config.planner.agent, config.highway.lanes_count, grid_config(config), seed, config.planner.model
+    )
     with HighwayAdapter(config.highway, config.sim.backend, render=frames is not None) as adapter:
-        return Episode(config, adapter, agent, frames if frames is not None else []).run(episode, seed)
+        return run_agent_episode(ClosedLoop(config, adapter, frames), agent, episode, seed)
 
 
 def run(config: RunConfig, video: bool = False, progress: bool = True, jobs: int = 1) -> RunResults:

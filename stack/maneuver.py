@@ -42,6 +42,25 @@ class Maneuver:
         self.lane_changes += 1
         return True
 
+    def abort(self, world: WorldState) -> None:
+        """Give up the lane change: a new quintic from the current lateral state back to the
+        origin lane's centre, over half the lane-change duration."""
+        ego = world.ego
+        d, d_dot, d_ddot = self.profile.sample(world.time)
+        self.target = self.lane
+        self.profile = QuinticProfile(
+            d0=ego.d,
+            d1=float(world.lane_offsets[self.lane]),
+            t0=world.time,
+            duration=self.duration / 2,
+            v0=d_dot,
+            a0=d_ddot,
+        )
+
+    def crossed(self, world: WorldState) -> bool:
+        """The ego's centre has left the origin lane."""
+        return abs(world.ego.d - world.lane_offsets[self.lane]) > world.lane_width / 2
+
     def update(self, world: WorldState) -> bool:
         """Advance the state machine; True on the tick a lane change completes."""
         if self.changing_lane and self.profile.finished(world.time):

@@ -51,6 +51,8 @@ class EpisodeResult:
     mean_speed: float
     peak_lat_accel: float
     peak_lat_jerk: float
+    masked_commands: int = 0
+    aborted_changes: int = 0
     trace: dict[str, list[float]] = field(default_factory=dict, repr=False)
     snapshot: tuple | None = field(default=None, repr=False, compare=False)
 
@@ -82,7 +84,16 @@ class EpisodeRecorder:
         self.heading.append(float(world.heading[0]))
         self.d.append(float(world.d[0]))
 
-    def result(self, episode: int, seed: int, crashed: bool, lane_changes: int, dt: float) -> EpisodeResult:
+    def result(
+        self,
+        episode: int,
+        seed: int,
+        crashed: bool,
+        lane_changes: int,
+        dt: float,
+        masked: int = 0,
+        aborted: int = 0,
+    ) -> EpisodeResult:
         peak_accel, peak_jerk = lateral_comfort(np.array(self.heading), np.array(self.speed), dt)
         return EpisodeResult(
             episode=episode,
@@ -95,6 +106,8 @@ class EpisodeRecorder:
             mean_speed=float(np.mean(self.speed)),
             peak_lat_accel=peak_accel,
             peak_lat_jerk=peak_jerk,
+            masked_commands=masked,
+            aborted_changes=aborted,
             trace={"time": self.time, "speed": self.speed, "d": self.d},
         )
 
@@ -112,6 +125,8 @@ def summarize(results: list[EpisodeResult], **identity) -> dict:
         "accuracy": 100.0 * passed / (passed + collisions) if passed + collisions else None,
         "mean_speed": float(np.mean([r.mean_speed for r in results])),
         "lane_changes": float(np.mean([r.lane_changes for r in results])),
+        "masked_commands": float(np.mean([r.masked_commands for r in results])),
+        "aborted_changes": float(np.mean([r.aborted_changes for r in results])),
         "peak_lat_accel": float(max(r.peak_lat_accel for r in results)),
         "peak_lat_jerk": float(max(r.peak_lat_jerk for r in results)),
     }

@@ -3,7 +3,8 @@ import numpy as np
 from planner.factory import make_agent
 from stack.config import build_config
 from stack.highway import HighwayAdapter
-from stack.loop import Episode, grid_config, run
+from stack.closed_loop import ClosedLoop, grid_config
+from stack.loop import run, run_agent_episode
 
 LANE_CHANGE = {"seed": 2, "highway": {"vehicles_count": 20, "duration": 8}, "perception": {"cells_ahead": 9}}
 
@@ -12,7 +13,7 @@ def run_one(data: dict):
     config = build_config(data)
     with HighwayAdapter(config.highway, config.sim.backend) as adapter:
         agent = make_agent(config.planner.agent, config.highway.lanes_count, grid_config(config))
-        return Episode(config, adapter, agent).run(0, config.seed)
+        return run_agent_episode(ClosedLoop(config, adapter), agent, 0, config.seed)
 
 
 def test_rule_agent_changes_lane_by_its_own_steering():

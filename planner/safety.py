@@ -1,0 +1,87 @@
+"""The safety layer (beyond the paper, standard in ADAS): no lane change into a lane that does
+not exist or into an unsafe gap, and abort a lane change whose gap closes.
+
+A gap is safe when, in the target lane, the vehicle ahead is at least
+max(min_gap, front_time_gap * v_ego) away and the ego would not reach it within min_ttc, and the
+vehicle behind is at least max(min_gap, rear_time_gap * v_rear) away and would not reach the ego
+within min_ttc. An abort uses the looser abort_gap / abort_ttc, so a change is not abandoned for
+the margin that made it start.
+"""
+
+from __future__ import annotations
+
+import math
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from perception.neighbours import Neighbour, neighbours
+from perception.types import WorldState
+from planner.command import Command
+
+
+class SafetyConfig(BaseModel):
+    """Gaps in m, time gaps and TTCs in s."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    enabled: bool = True
+    min_gap_m: float = Field(6.0, ge=0)
+    front_time_gap_s: float = Field(0.8, ge=0)
+    rear_time_gap_s: float = Field(0.8, ge=0)
+    min_ttc_s: float = Field(4.0, ge=0)
+    abort_gap_m: float = Field(2.0, ge=0)
+    abort_ttc_s: float = Field(1.5, ge=0)
+
+
+def _ttc(gap: float, closing: float) -> float:
+    return math.inf if closing <= 0 else max(gap, 0.0) / closing
+
+
+class SafetyLayer:
+    """Masks unsafe commands and flags lane changes to abort; counts both."""
+
+    def __init__(self, config: SafetyConfig) -> None:
+        self.config = config
+        self.masked = 0
+        self.aborted = 0
+
+    def gap_is_safe(self, world: WorldState, lane: int, min_gap: float, min_ttc: float, strict: bool) -> bool:
+        config = self.config
+        v = float(world.speed[0])
+        ahead, behind = neighbours(world, lane)
+        if ahead is not None and not self._clear(
+            ahead, max(min_gap, config.front_time_gap_s * v * strict), v - ahead.speed, min_ttc
+        ):
+            return False
+        if behind is not None and not self._clear(
+            behind, max(min_gap, config.rear_time_gap_s * behind.speed * strict), behind.speed - v, min_ttc
+        ):
+            return False
+        return True
+
+    @staticmethod
+    def _clear(other: Neighbour, min_gap: float, closing: float, min_ttc: float) -> bool:
+        return other.gap >= min_gap and _ttc(other.gap, closing) >= min_ttc
+
+    def filter(self, command: Command, world: WorldState, lane: int) -> Command:
+        """`command`, or STAY when it leads off the road or into an unsafe gap."""
+        if command is Command.STAY or not self.config.enabled:
+            return command
+        target = lane + command.lane_shift
+        config = self.config
+        if not 0 <= target < world.lanes_count or not self.gap_is_safe(
+            world, target, config.min_gap_m, config.min_ttc_s, strict=True
+        ):
+            self.masked += 1
+            return Command.STAY
+        return command
+
+    def should_abort(self, world: WorldState, target: int) -> bool:
+        """True when the gap in `target` has closed below the abort margins."""
+        if not self.config.enabled:
+            return False
+        unsafe = not self.gap_is_safe(
+            world, target, self.config.abort_gap_m, self.config.abort_ttc_s, strict=False
+        )
+        self.aborted += unsafe
+        return unsafe

@@ -1,0 +1,134 @@
+"""One closed-loop episode as a steppable object, shared by `drivestack run` and the gym env.
+
+Each decision point: `grid = loop.perceive()`, the agent picks a command, `loop.act(command)` runs
+the control ticks up to the next decision point (one decision period, or until a lane change ends).
+Each tick reads like do-mpc's loop: reference from the maneuver, `controller.step(state, reference,
+dt)`, `plant.step(actuation)`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from controllers.pid import AdaptiveCruise, PIDTracker
+from controllers.types import EgoState, Leader, Reference
+from perception.grid import GridConfig, OccupancyGrid, OccupancyGridBuilder
+from perception.neighbours import leaders
+from perception.plot import grid_panel
+from perception.sensor import SensorModel
+from perception.types import WorldState
+from planner.command import Command
+from planner.safety import SafetyLayer
+from stack.config import ControllerConfig, RunConfig
+from stack.highway import HighwayAdapter
+from stack.maneuver import Maneuver
+from stack.metrics import EpisodeRecorder, EpisodeResult
+
+SNAPSHOT_TIME_S = 10.0
+"""Each episode keeps the (world, grid) of its first decision at or after this time [s]."""
+
+
+def grid_config(config: RunConfig) -> GridConfig:
+    return GridConfig(**config.perception.model_dump(exclude={"sensor"}))
+
+
+def make_controller(config: ControllerConfig) -> PIDTracker:
+    cruise = AdaptiveCruise(config.time_gap_s, config.standstill_gap_m, config.comfort_decel_mps2)
+    return PIDTracker(cruise)
+
+
+def ego_state(world: WorldState, lane: int) -> EgoState:
+    """The ego in the frame of `lane`: lateral offset, heading relative to the lane, speed."""
+    ego = world.ego
+    return EgoState(d=ego.d, heading=ego.heading - world.lanes[lane].heading_at(ego.s), speed=ego.speed)
+
+
+class ClosedLoop:
+    """Plant, perception, safety layer, maneuver, controller and metrics of one episode."""
+
+    def __init__(
+        self, config: RunConfig, adapter: HighwayAdapter, frames: list[np.ndarray] | None = None
+    ) -> None:
+        self.config = config
+        self.adapter = adapter
+        self.frames = frames
+        self.builder = OccupancyGridBuilder(grid_config(config))
+
+    def reset(self, seed: int) -> WorldState:
+        config = self.config
+        self.seed = seed
+        self.world = self.adapter.reset(seed)
+        self.sensor = SensorModel(config.perception.sensor, seed)
+        self.safety = SafetyLayer(config.planner.safety)
+        self.controller = make_controller(config.controller)
+        self.maneuver = Maneuver(self.world, config.controller.lane_change_duration_s)
+        self.recorder = EpisodeRecorder(self.world)
+        self.grid: OccupancyGrid | None = None
+        self.snapshot: tuple[WorldState, OccupancyGrid] | None = None
+        return self.world
+
+    @property
+    def done(self) -> bool:
+        return self.adapter.done
+
+    @property
+    def crashed(self) -> bool:
+        return self.adapter.terminated
+
+    def perceive(self) -> OccupancyGrid:
+        """The grid the planner decides on now (through the sensor model)."""
+        self.grid = self.builder.build(self.sensor.observe(self.world))
+        if self.snapshot is None or self.snapshot[0].time < SNAPSHOT_TIME_S:
+            self.snapshot = (self.world, self.grid)
+        return self.grid
+
+    def act(self, command: Command) -> int:
+        """Apply `command` (through the safety layer) and run control ticks until the next decision
+        point or the end of the episode; returns the ticks run."""
+        command = self.safety.filter(command, self.world, self.maneuver.lane)
+        self.maneuver.command(command, self.world)
+        ticks = 0
+        while not self.done:
+            self.tick()
+            ticks += 1
+            if self.maneuver.update(self.world) or (
+                not self.maneuver.changing_lane and ticks >= self.config.decision_ticks
+            ):
+                break
+        return ticks
+
+    def tick(self) -> None:
+        world, maneuver = self.world, self.maneuver
+        if (
+            maneuver.changing_lane
+            and not maneuver.crossed(world)
+            and self.safety.should_abort(world, maneuver.target)
+        ):
+            maneuver.abort(world)
+        d, d_dot, d_ddot = maneuver.reference(world.time)
+        reference = Reference(
+            d,
+            d_dot,
+            d_ddot,
+            set_speed=self.config.controller.set_speed_mps,
+            leaders=tuple(Leader(*lead) for lead in leaders(world, maneuver.occupied_lanes)),
+        )
+        actuation = self.controller.step(ego_state(world, maneuver.lane), reference, self.adapter.dt)
+        self.world = self.adapter.step(actuation)
+        self.recorder.record(self.world)
+        if self.frames is not None and self.adapter.rendering:
+            frame = self.adapter.render()
+            self.frames.append(np.vstack([frame, grid_panel(self.grid, frame.shape[1])]))
+
+    def result(self, episode: int) -> EpisodeResult:
+        result = self.recorder.result(
+            episode,
+            self.seed,
+            self.crashed,
+            self.maneuver.lane_changes,
+            self.adapter.dt,
+            masked=self.safety.masked,
+            aborted=self.safety.aborted,
+        )
+        result.snapshot = self.snapshot
+        return result
