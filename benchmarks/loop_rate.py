@@ -20,9 +20,9 @@ import gymnasium as gym
 import numpy as np
 
 from planner.factory import make_agent
+from stack.closed_loop import ClosedLoop, grid_config
 from stack.config import load_config
 from stack.highway import HighwayAdapter, env_config
-from stack.closed_loop import ClosedLoop, grid_config
 from stack.loop import run_agent_episode
 
 

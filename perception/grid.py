@@ -16,7 +16,8 @@ Optional features (`features`):
 - `relative_speed`: per cell, the longitudinal speed (along the lane heading at the ego) of the
   nearest occupant minus the ego's, divided by `speed_scale` [m/s], clipped to [-1, 1]; 0 if empty;
 - `ttc`: per row, time-to-collision [s] with the nearest vehicle ahead that the ego closes on,
-  min(ttc, ttc_horizon) / ttc_horizon in [0, 1]: 1 = no threat within the horizon.
+  min(ttc, ttc_horizon) / ttc_horizon in [0, 1]: 1 = no threat within the horizon;
+- `ego_speed`: one value, the ego's speed / MAX_SPEED in [0, 1].
 """
 
 from __future__ import annotations
@@ -31,6 +32,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from perception.types import WorldState
 
+MAX_SPEED = 40.0
+"""Speed that the `ego_speed` feature maps to 1 [m/s] (highway-env's Vehicle.MAX_SPEED)."""
+
 
 class GridConfig(BaseModel):
     """Grid extent and content. Lengths in m, speeds in m/s, times in s."""
@@ -43,7 +47,7 @@ class GridConfig(BaseModel):
     lanes: Literal["absolute", "ego"] = "absolute"
     lateral_reach: int = Field(1, ge=1, description="ego mode: neighbour lanes on each side")
     footprint: bool = True
-    features: tuple[Literal["relative_speed", "ttc"], ...] = ()
+    features: tuple[Literal["relative_speed", "ttc", "ego_speed"], ...] = ()
     speed_scale: float = Field(20.0, gt=0, description="relative speed giving feature 1 [m/s]")
     ttc_horizon: float = Field(10.0, gt=0, description="time-to-collision giving feature 1 [s]")
 
@@ -80,6 +84,7 @@ class OccupancyGrid:
     config: GridConfig
     relative_speed: np.ndarray | None = None
     ttc: np.ndarray | None = None
+    ego_speed: float | None = None
 
     @property
     def ego_row(self) -> int:
@@ -107,6 +112,8 @@ class OccupancyGrid:
             parts.append(self.relative_speed.ravel())
         if self.ttc is not None:
             parts.append(self.ttc)
+        if self.ego_speed is not None:
+            parts.append(np.array([self.ego_speed], dtype=np.float32))
         parts.append(lane_code(self.ego_lane, self.lanes_count))
         return np.concatenate(parts).astype(np.float32)
 
@@ -139,7 +146,8 @@ class OccupancyGridBuilder:
     def observation_space(self, lanes_count: int) -> spaces.Box:
         rows, cells = self.config.rows(lanes_count), self.config.cells
         size = rows * cells * (1 + ("relative_speed" in self.config.features))
-        size += rows * ("ttc" in self.config.features) + lane_code_bits(lanes_count)
+        size += rows * ("ttc" in self.config.features) + ("ego_speed" in self.config.features)
+        size += lane_code_bits(lanes_count)
         low = np.zeros(size, dtype=np.float32)
         if "relative_speed" in self.config.features:
             low[rows * cells : 2 * rows * cells] = -1.0
@@ -169,7 +177,10 @@ class OccupancyGridBuilder:
             relative_speed = self._relative_speed(world, rel_s, along, across, road_rows)
         if "ttc" in config.features:
             ttc = self._ttc(world, rel_s, across, road_rows)
-        return OccupancyGrid(occupancy, ego_lane, world.lanes_count, config, relative_speed, ttc)
+        ego_speed = (
+            float(np.clip(world.speed[0] / MAX_SPEED, 0, 1)) if "ego_speed" in config.features else None
+        )
+        return OccupancyGrid(occupancy, ego_lane, world.lanes_count, config, relative_speed, ttc, ego_speed)
 
     def _road_rows(self, ego_lane: int, lanes_count: int) -> np.ndarray:
         """Road lane index of each grid row, -1 where the lane does not exist."""

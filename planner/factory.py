@@ -1,18 +1,34 @@
-"""Agents by name."""
+"""Agents by name: hand-written baselines and learned models behind one protocol."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from perception.grid import GridConfig
 from planner.agents import Agent, FreeGapAgent, KeepLaneAgent, RandomAgent
+from planner.mobil import MobilAgent
 
-AGENT_NAMES = ("rule", "keep-lane", "random")
+AGENT_NAMES = ("ddqn", "dqn", "tabular", "rule", "mobil", "keep-lane", "random")
+LEARNED = ("ddqn", "dqn", "tabular")
+DEFAULT_MODEL = Path(__file__).parent / "models" / "ddqn_highway.npz"
+"""The shipped Double DQN, trained by `drivestack train --config configs/train/ddqn.yaml`."""
 
 
-def make_agent(name: str, lanes: int, grid: GridConfig, seed: int = 0, model=None) -> Agent:
+def make_agent(
+    name: str, lanes: int, grid: GridConfig, seed: int = 0, model: Path | str | None = None
+) -> Agent:
     """Build the agent `name` for a road of `lanes` lanes seen through `grid`; learned agents load
-    `model` (a path)."""
+    `model` (the shipped DDQN by default for `ddqn`)."""
+    if name in LEARNED:
+        from planner.learned import load_agent
+
+        if model is None and name != "ddqn":
+            raise ValueError(f"agent {name!r} needs a model file (--model PATH, written by drivestack train)")
+        return load_agent(model or DEFAULT_MODEL, expected_algorithms=(name,))
     if name == "rule":
         return FreeGapAgent(lanes, grid)
+    if name == "mobil":
+        return MobilAgent(grid)
     if name == "keep-lane":
         return KeepLaneAgent()
     if name == "random":

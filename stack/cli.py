@@ -39,6 +39,7 @@ def main() -> None:
 def run(
     config: Path = typer.Option(DEFAULT_CONFIG, "--config", "-c", help="YAML run config."),
     agent: str | None = typer.Option(None, help="Decision agent (overrides planner.agent)."),
+    model: Path | None = typer.Option(None, help="Model file of a learned agent (planner.model)."),
     controller: str | None = typer.Option(None, help="Controller (overrides controller.type)."),
     episodes: int | None = typer.Option(None, help="Number of seeded episodes."),
     seed: int | None = typer.Option(None, help="Seed of the first episode."),
@@ -53,6 +54,7 @@ def run(
         cfg = load_config(
             config,
             planner__agent=agent,
+            planner__model=model,
             controller__type=controller,
             sim__backend=backend,
             episodes=episodes,
@@ -72,4 +74,49 @@ def run(
     print_tables(results.summary, results.episodes)
     Console().print(f"results: {out}")
     if results.summary["interrupted"]:
+        sys.exit(130)
+
+
+@app.command()
+def train(
+    agent: str | None = typer.Option(None, help="ddqn | dqn | tabular (overrides train.algorithm)."),
+    config: Path = typer.Option(
+        Path("configs/train/ddqn.yaml"), "--config", "-c", help="YAML training config."
+    ),
+    steps: int | None = typer.Option(None, help="Total environment steps (train.steps)."),
+    seed: int | None = typer.Option(None, help="Training seed."),
+    out: Path | None = typer.Option(None, help="Run folder (default: runs/train-<time>)."),
+    resume: Path | None = typer.Option(
+        None, help="Continue the run in this folder from its last checkpoint."
+    ),
+    progress: bool = typer.Option(True, help="Show a progress bar."),
+) -> None:
+    """Train a decision agent inside the closed loop, keeping the best model by real-time validation."""
+    try:
+        if resume is not None:
+            if not (resume / "config.yaml").is_file():
+                fail(f"{resume}: not a training run folder (no config.yaml)")
+            cfg = load_config(resume / "config.yaml", train__steps=steps)
+        else:
+            cfg = load_config(config, train__algorithm=agent, train__steps=steps, seed=seed)
+    except ConfigError as error:
+        fail(str(error))
+    from stack.train import Trainer
+
+    folder = resume or out or fresh_run_dir(f"train-{cfg.train.algorithm}")
+    summary = Trainer(cfg, folder, progress=progress).run()
+    best = summary["best_validation"]
+    Console().print(
+        f"{summary['algorithm']}: {summary['steps']} steps in {summary['wall_time_s']:.0f} s; "
+        + (
+            f"best validation at step {best['step']}: collision rate {best['collision_rate']:.1%}, "
+            f"mean return {best['mean_return']:.2f}, mean speed {best['mean_speed']:.2f} m/s"
+            if best
+            else "no validation yet"
+        )
+    )
+    Console().print(
+        f"run folder: {folder}" + (" (interrupted: resume with --resume)" if summary["interrupted"] else "")
+    )
+    if summary["interrupted"]:
         sys.exit(130)

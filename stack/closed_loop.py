@@ -47,12 +47,17 @@ class ClosedLoop:
     """Plant, perception, safety layer, maneuver, controller and metrics of one episode."""
 
     def __init__(
-        self, config: RunConfig, adapter: HighwayAdapter, frames: list[np.ndarray] | None = None
+        self,
+        config: RunConfig,
+        adapter: HighwayAdapter,
+        frames: list[np.ndarray] | None = None,
+        grid: GridConfig | None = None,
     ) -> None:
+        """`grid` overrides the config's perception grid (an agent that needs its own view)."""
         self.config = config
         self.adapter = adapter
         self.frames = frames
-        self.builder = OccupancyGridBuilder(grid_config(config))
+        self.builder = OccupancyGridBuilder(grid or grid_config(config))
 
     def reset(self, seed: int) -> WorldState:
         config = self.config

@@ -22,10 +22,13 @@ from pydantic import (
 from perception.grid import GridConfig
 from perception.sensor import SensorConfig
 from planner.factory import AGENT_NAMES as AGENTS
+from planner.networks import NET_ARCHS
 from planner.safety import SafetyConfig
 
 CONTROLLERS = ("pid",)
 BACKENDS = ("fast", "stock")
+TRAINABLE = ("ddqn", "dqn", "tabular")
+ENCODINGS = ("observation", "paper", "tabular")
 
 
 class ConfigError(ValueError):
@@ -94,6 +97,78 @@ class ControllerConfig(Strict):
         return name
 
 
+class RewardConfig(Strict):
+    """Per decision step: alive x (seconds elapsed / decision period), plus speed_weight x that
+    fraction x the ego's speed mapped from speed_range [m/s] to [0, 1]; a crash gives `collision`
+    instead. The paper's reward is alive = 1, collision = -1, speed_weight = 0."""
+
+    alive: float = 1.0
+    collision: float = -1.0
+    speed_weight: float = Field(0.0, ge=0)
+    speed_range: tuple[float, float] = (20.0, 30.0)
+
+    @field_validator("speed_range")
+    @classmethod
+    def _ordered(cls, bounds: tuple[float, float]) -> tuple[float, float]:
+        if not bounds[0] < bounds[1]:
+            raise ValueError(f"must be (low, high) with low < high, got {list(bounds)}")
+        return bounds
+
+
+class ValidationConfig(Strict):
+    """The paper's real-time validation: short and long periods in environment steps."""
+
+    short_every: int = Field(2_000, ge=1)
+    short_episodes: int = Field(3, ge=1)
+    long_every: int = Field(10_000, ge=1)
+    long_episodes: int = Field(10, ge=1)
+    seed: int = Field(100_000, ge=0)
+
+
+class TrainConfig(Strict):
+    """`drivestack train`: algorithm, budget, network, SB3 hyper-parameters, reward, validation."""
+
+    algorithm: str = "ddqn"
+    steps: int = Field(50_000, ge=1)
+    encoding: str = "observation"
+    network: str = "shallow"
+    learning_rate: float = Field(5e-4, gt=0)
+    buffer_size: int = Field(50_000, ge=1)
+    learning_starts: int = Field(1_000, ge=0)
+    batch_size: int = Field(64, ge=1)
+    gamma: float = Field(0.95, gt=0, le=1)
+    train_freq: int = Field(1, ge=1)
+    target_update_interval: int = Field(500, ge=1)
+    exploration_fraction: float = Field(0.3, gt=0, le=1)
+    exploration_final_eps: float = Field(0.05, ge=0, le=1)
+    tabular_alpha: float = Field(0.1, gt=0, le=1)
+    tabular_epsilon: float = Field(0.2, ge=0, le=1)
+    checkpoint_every: int = Field(5_000, ge=1)
+    reward: RewardConfig = RewardConfig()
+    validation: ValidationConfig = ValidationConfig()
+
+    @field_validator("algorithm")
+    @classmethod
+    def _known_algorithm(cls, name: str) -> str:
+        if name not in TRAINABLE:
+            raise ValueError(f"unknown algorithm {name!r}; available: {', '.join(TRAINABLE)}")
+        return name
+
+    @field_validator("encoding")
+    @classmethod
+    def _known_encoding(cls, name: str) -> str:
+        if name not in ENCODINGS:
+            raise ValueError(f"unknown encoding {name!r}; available: {', '.join(ENCODINGS)}")
+        return name
+
+    @field_validator("network")
+    @classmethod
+    def _known_network(cls, name: str) -> str:
+        if name not in NET_ARCHS:
+            raise ValueError(f"unknown network {name!r}; available: {', '.join(NET_ARCHS)}")
+        return name
+
+
 class RunConfig(Strict):
     seed: int = Field(0, ge=0)
     episodes: int = Field(5, ge=1)
@@ -104,6 +179,7 @@ class RunConfig(Strict):
     perception: PerceptionConfig = PerceptionConfig()
     planner: PlannerConfig = PlannerConfig()
     controller: ControllerConfig = ControllerConfig()
+    train: TrainConfig = TrainConfig()
 
     @model_validator(mode="after")
     def _consistent_timing(self) -> RunConfig:

@@ -42,7 +42,8 @@ def run_episode(config: RunConfig, episode: int, frames: list[np.ndarray] | None
         config.planner.agent, config.highway.lanes_count, grid_config(config), seed, config.planner.model
     )
     with HighwayAdapter(config.highway, config.sim.backend, render=frames is not None) as adapter:
-        return run_agent_episode(ClosedLoop(config, adapter, frames), agent, episode, seed)
+        loop = ClosedLoop(config, adapter, frames, grid=getattr(agent, "grid_config", None))
+        return run_agent_episode(loop, agent, episode, seed)
 
 
 def run(config: RunConfig, video: bool = False, progress: bool = True, jobs: int = 1) -> RunResults:

@@ -39,7 +39,10 @@ def test_overrides_replace_file_values(tmp_path):
         ({"episodes": "many"}, "episodes: Input should be a valid integer"),
         ({"decision_period_s": 0.01}, "decision_period_s: must be at least one control tick"),
         ({"control_rate_hz": 10}, "control_rate_hz: must equal highway.simulation_frequency"),
-        ({"planner": {"agent": "genius"}}, "planner.agent: unknown agent 'genius'; available: rule"),
+        (
+            {"planner": {"agent": "genius"}},
+            "planner.agent: unknown agent 'genius'; available: ddqn, dqn, tabular, rule",
+        ),
         ({"controller": {"type": "lqr"}}, "controller.type: unknown controller 'lqr'"),
         ({"perception": {"cell_length": 0}}, "perception.cell_length: Input should be greater than 0"),
     ],

@@ -1,0 +1,101 @@
+"""Learned agents at inference: a Q-network (DQN / Double DQN) or a Q-table, loaded from a safe
+model file, behind the same `predict` as every other agent."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.torch_layers import create_mlp
+from torch import nn
+
+from perception.grid import GridConfig
+from planner.model_file import ModelFileError, load_model, save_model
+
+
+def q_network(observation_size: int, actions: int, hidden: list[int]) -> nn.Sequential:
+    """The MLP of SB3's `QNetwork` (ReLU between linear layers), so weights move between them."""
+    return nn.Sequential(*create_mlp(observation_size, actions, hidden))
+
+
+class LearnedAgent:
+    """Greedy agent over a Q-network; `grid_config` and `encoding` say what it must be shown."""
+
+    def __init__(self, network: nn.Sequential, metadata: dict, source: str = "model") -> None:
+        self.network = network.eval()
+        self.metadata = metadata
+        self.source = source
+        self.observation_size = int(metadata["observation_size"])
+        self.encoding = metadata["encoding"]
+        self.grid_config = GridConfig(**metadata["grid"])
+
+    def q_values(self, observation: np.ndarray) -> np.ndarray:
+        batch = np.asarray(observation, dtype=np.float32).reshape(-1, self.observation_size)
+        with th.no_grad():
+            return self.network(th.as_tensor(batch)).numpy()
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        size = np.asarray(observation).size
+        if size % self.observation_size:
+            raise ValueError(
+                f"{self.source} expects observations of {self.observation_size} values "
+                f"({self.encoding} encoding of grid {self.metadata['grid']}), got {size}"
+            )
+        actions = self.q_values(observation).argmax(axis=1)
+        return (actions[0] if np.asarray(observation).ndim == 1 else actions), state
+
+
+class TabularAgent:
+    """Greedy agent over a Q-table indexed by the tabular state [ego_lane, distances...]."""
+
+    encoding = "tabular"
+
+    def __init__(self, table: np.ndarray, metadata: dict, source: str = "model") -> None:
+        self.table = table
+        self.metadata = metadata
+        self.source = source
+        self.grid_config = GridConfig(**metadata["grid"])
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        index = tuple(np.asarray(observation, dtype=np.int64).reshape(-1))
+        if len(index) != self.table.ndim - 1 or any(
+            not 0 <= i < n for i, n in zip(index, self.table.shape[:-1], strict=True)
+        ):
+            raise ValueError(
+                f"{self.source} expects a tabular state of {self.table.ndim - 1} values within "
+                f"{list(self.table.shape[:-1])}, got {list(index)}"
+            )
+        return np.int64(np.argmax(self.table[index])), state
+
+
+def export_q_network(model, path: Path | str, metadata: dict) -> Path:
+    """Save an SB3 (Double) DQN's online Q-network weights with `metadata`."""
+    state = model.policy.q_net.q_net.state_dict()
+    return save_model(
+        path, {k: v.detach().cpu().numpy() for k, v in state.items()}, {"kind": "mlp", **metadata}
+    )
+
+
+def load_agent(
+    path: Path | str, expected_algorithms: tuple[str, ...] | None = None
+) -> LearnedAgent | TabularAgent:
+    """The agent stored in `path`; refuses files whose arrays do not match their metadata."""
+    arrays, metadata = load_model(path)
+    source = str(path)
+    algorithm = metadata.get("algorithm")
+    if expected_algorithms and algorithm not in expected_algorithms:
+        raise ModelFileError(
+            f"{path}: holds a {algorithm!r} model; expected {' or '.join(expected_algorithms)}"
+        )
+    try:
+        if metadata["kind"] == "qtable":
+            return TabularAgent(arrays["q_table"].astype(np.float64), metadata, source)
+        network = q_network(
+            int(metadata["observation_size"]), int(metadata["actions"]), list(metadata["hidden"])
+        )
+        network.load_state_dict({k: th.as_tensor(v) for k, v in arrays.items()}, strict=True)
+        return LearnedAgent(network, metadata, source)
+    except (KeyError, RuntimeError, TypeError, ValueError) as error:
+        message = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise ModelFileError(f"{path}: model arrays do not match its metadata ({message})") from None

@@ -1,0 +1,99 @@
+"""MOBIL (Kesting, Treiber & Helbing, 2007) computed from perception, as a classical baseline.
+
+The agent sees what the learned agents see: an ego-relative grid with relative speeds and the ego's
+speed. Per adjacent lane it estimates, with IDM, the ego's acceleration behind the new leader and
+the new follower's acceleration behind the ego; it changes lane when the follower need not brake
+harder than `SAFE_DECELERATION` and the ego gains more than `THRESHOLD` (politeness 0, as
+highway-env's IDMVehicle). IDM constants are highway-env's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from perception.grid import MAX_SPEED, GridConfig
+from planner.command import Command
+
+ACCELERATION = 3.0
+"""IDM maximum acceleration [m/s^2]."""
+COMFORT_DECELERATION = 5.0
+"""IDM desired deceleration [m/s^2]."""
+STANDSTILL_GAP = 5.0
+"""IDM jam distance s0 [m] (bumper to bumper)."""
+TIME_GAP = 1.5
+"""IDM desired time gap T [s]."""
+DESIRED_SPEED = 30.0
+"""IDM desired speed v0 [m/s] (the highway's speed limit)."""
+SAFE_DECELERATION = 2.0
+"""MOBIL safety: the new follower must not need to brake harder [m/s^2]."""
+THRESHOLD = 0.2
+"""MOBIL incentive threshold [m/s^2]."""
+FREE_GAP = 1e3
+"""Gap used when nobody is in sight [m]."""
+
+
+def idm(speed: float, leader_speed: float, gap: float) -> float:
+    """IDM acceleration [m/s^2] behind a leader `gap` metres ahead (bumper to bumper)."""
+    desired = STANDSTILL_GAP + max(
+        0.0,
+        speed * TIME_GAP
+        + speed * (speed - leader_speed) / (2 * np.sqrt(ACCELERATION * COMFORT_DECELERATION)),
+    )
+    return ACCELERATION * (1 - (max(speed, 0.0) / DESIRED_SPEED) ** 4 - (desired / max(gap, 0.1)) ** 2)
+
+
+class MobilAgent:
+    """MOBIL on an ego-relative grid (one lane each side) with relative speeds and the ego speed."""
+
+    encoding = "observation"
+
+    def __init__(self, grid: GridConfig) -> None:
+        self.grid_config = grid.model_copy(
+            update={"lanes": "ego", "lateral_reach": 1, "features": ("relative_speed", "ego_speed")}
+        )
+
+    def _decode(self, observation: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        g = self.grid_config
+        size = 3 * g.cells
+        observation = np.asarray(observation, dtype=np.float64).reshape(-1)
+        bits = observation.size - 2 * size - 1
+        if bits < 1:
+            raise ValueError(
+                f"mobil agent expected 2 x 3 x {g.cells} grid values, the ego speed and a lane code; "
+                f"got {observation.size} values"
+            )
+        presence = observation[:size].reshape(3, g.cells)
+        relative = observation[size : 2 * size].reshape(3, g.cells) * g.speed_scale
+        return presence, relative, float(observation[2 * size]) * MAX_SPEED
+
+    def _neighbour(self, presence, relative, row: int, ahead: bool) -> tuple[float, float] | None:
+        """(bumper gap [m], relative speed [m/s]) of the nearest vehicle ahead/behind in `row`."""
+        g = self.grid_config
+        columns = range(g.ego_column + 1, g.cells) if ahead else range(g.ego_column - 1, -1, -1)
+        for column in columns:
+            if presence[row, column] > 0:
+                distance = abs(column - g.ego_column) * g.cell_length
+                return distance - g.cell_length, relative[row, column]
+        return None
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        presence, relative, speed = self._decode(observation)
+        ego_column = self.grid_config.ego_column
+        current = self._neighbour(presence, relative, 1, ahead=True)
+        gain_now = idm(speed, speed + current[1], current[0]) if current else idm(speed, speed, FREE_GAP)
+        best, best_gain = Command.STAY, THRESHOLD
+        for command, row in ((Command.LEFT, 0), (Command.RIGHT, 2)):
+            if presence[row, ego_column] > 0:
+                continue
+            leader = self._neighbour(presence, relative, row, ahead=True)
+            follower = self._neighbour(presence, relative, row, ahead=False)
+            if follower is not None:
+                follower_speed = speed + follower[1]
+                if idm(follower_speed, speed, follower[0]) < -SAFE_DECELERATION:
+                    continue
+            gain = (
+                idm(speed, speed + leader[1], leader[0]) if leader else idm(speed, speed, FREE_GAP)
+            ) - gain_now
+            if gain > best_gain:
+                best, best_gain = command, gain
+        return np.array(best), state

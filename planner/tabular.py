@@ -1,0 +1,72 @@
+"""Tabular Q-learning (epsilon-greedy), on any env whose observation is a small integer vector.
+
+The table has one axis per state component (sizes from the `Box` space's high + 1) and one for
+the action; Q(s, a) += alpha (r + gamma max_a' Q(s', a') (1 - terminal) - Q(s, a)).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import gymnasium as gym
+import numpy as np
+
+
+class QLearning:
+    """The paper's tabular agent; `predict` is greedy unless `deterministic=False`."""
+
+    encoding = "tabular"
+
+    def __init__(
+        self,
+        state_sizes: tuple[int, ...],
+        actions: int = 3,
+        alpha: float = 0.1,
+        gamma: float = 0.9,
+        epsilon: float = 0.2,
+        seed: int = 0,
+    ) -> None:
+        self.table = np.zeros((*state_sizes, actions))
+        self.alpha, self.gamma, self.epsilon = alpha, gamma, epsilon
+        self.rng = np.random.default_rng(seed)
+        self.steps = 0
+
+    @classmethod
+    def for_space(cls, space: gym.spaces.Box, **kwargs) -> QLearning:
+        return cls(tuple(int(h) + 1 for h in np.asarray(space.high).reshape(-1)), **kwargs)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        if not deterministic and self.rng.random() < self.epsilon:
+            return np.int64(self.rng.integers(self.table.shape[-1])), state
+        values = self.table[tuple(np.asarray(observation, dtype=np.int64))]
+        return np.int64(np.argmax(values)), state
+
+    def update(self, observation, action: int, reward: float, next_observation, terminal: bool) -> None:
+        index = (*np.asarray(observation, dtype=np.int64), int(action))
+        future = (
+            0.0
+            if terminal
+            else self.gamma * self.table[tuple(np.asarray(next_observation, dtype=np.int64))].max()
+        )
+        self.table[index] += self.alpha * (reward + future - self.table[index])
+
+    def learn(
+        self,
+        env: gym.Env,
+        steps: int,
+        seed: int = 0,
+        on_step: Callable[[QLearning, dict], bool] | None = None,
+    ) -> QLearning:
+        """Train for `steps` env steps; `on_step(self, info)` may return False to stop early."""
+        observation, _ = env.reset(seed=seed)
+        for _ in range(steps):
+            action, _ = self.predict(observation, deterministic=False)
+            next_observation, reward, terminated, truncated, info = env.step(action)
+            self.update(observation, action, reward, next_observation, terminated)
+            self.steps += 1
+            observation = next_observation
+            if terminated or truncated:
+                observation, _ = env.reset()
+            if on_step is not None and on_step(self, info) is False:
+                break
+        return self

@@ -1,0 +1,78 @@
+"""`drivestack/HierarchicalHighway-v0`: the decision layer's MDP on the full stack.
+
+Action: `Discrete(3)` (LEFT, STAY, RIGHT). Observation: the perception encoding named by
+`config.train.encoding`. One step is one decision point of the closed loop: the safety layer,
+maneuver and controllers run inside at the control rate until the next decision (one decision
+period, or the end of a lane change). Reward: see `RewardConfig` (the paper's +1 / -1 by default).
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from planner.command import Command
+from stack.closed_loop import ClosedLoop
+from stack.config import RunConfig, build_config
+from stack.highway import HighwayAdapter
+
+
+class HierarchicalHighwayEnv(gym.Env):
+    metadata = {"render_modes": ["rgb_array"]}
+
+    def __init__(self, config: RunConfig | dict | None = None, render_mode: str | None = None) -> None:
+        super().__init__()
+        if not isinstance(config, RunConfig):
+            config = build_config(config or {}, "HierarchicalHighway-v0 config")
+        self.config = config
+        self.render_mode = render_mode
+        self.adapter = HighwayAdapter(config.highway, config.sim.backend, render=render_mode == "rgb_array")
+        self.loop = ClosedLoop(config, self.adapter)
+        self.encoding = config.train.encoding
+        builder, lanes = self.loop.builder, config.highway.lanes_count
+        self.observation_space = {
+            "observation": builder.observation_space,
+            "paper": builder.paper_space,
+            "tabular": builder.tabular_space,
+        }[self.encoding](lanes)
+        self.action_space = spaces.Discrete(3)
+
+    def _observe(self) -> np.ndarray:
+        return self.loop.perceive().encode(self.encoding)
+
+    def _info(self) -> dict:
+        loop = self.loop
+        return {
+            "crashed": loop.crashed,
+            "speed": float(loop.world.speed[0]),
+            "passed_cars": len(loop.recorder.passed),
+            "lane_changes": loop.maneuver.lane_changes,
+            "masked": loop.safety.masked,
+            "aborted": loop.safety.aborted,
+        }
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        self.loop.reset(int(self.np_random.integers(0, 2**31 - 1)))
+        return self._observe(), self._info()
+
+    def step(self, action):
+        ticks = self.loop.act(Command(int(action)))
+        reward_config = self.config.train.reward
+        if self.loop.crashed:
+            reward = reward_config.collision
+        else:
+            fraction = ticks / self.config.decision_ticks
+            low, high = reward_config.speed_range
+            speed_score = float(np.clip((self.loop.world.speed[0] - low) / (high - low), 0.0, 1.0))
+            reward = fraction * (reward_config.alive + reward_config.speed_weight * speed_score)
+        terminated = self.loop.crashed
+        truncated = self.loop.done and not terminated
+        return self._observe(), float(reward), terminated, truncated, self._info()
+
+    def render(self):
+        return self.adapter.render() if self.render_mode == "rgb_array" else None
+
+    def close(self) -> None:
+        self.adapter.close()

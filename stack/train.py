@@ -1,0 +1,327 @@
+"""`drivestack train`: the decision layer trained inside the full closed loop.
+
+DDQN / DQN run on stable-baselines3 with the paper's real-time validation (the best model is kept),
+TensorBoard logs and periodic checkpoints; tabular Q-learning runs on the tabular state. Every
+file written is a safe model file (`planner.model_file`): weights, optimizer moments, the replay
+buffer and counters, so `--resume DIR` continues where the last checkpoint left off.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import time
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import torch as th
+import yaml
+from stable_baselines3 import DQN
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ProgressBarCallback
+from stable_baselines3.common.monitor import Monitor
+
+from planner.ddqn import DoubleDQN
+from planner.learned import export_q_network
+from planner.model_file import load_model, save_model
+from planner.networks import net_arch
+from planner.tabular import QLearning
+from planner.validation import RealTimeValidation, Validation
+from stack.closed_loop import grid_config
+from stack.config import RunConfig, load_config
+from stack.gym_env import HierarchicalHighwayEnv
+
+ALGORITHMS = {"ddqn": DoubleDQN, "dqn": DQN}
+CHECKPOINT = "checkpoint.npz"
+BEST = "best.npz"
+FINAL = "final.npz"
+
+
+def model_metadata(config: RunConfig, env: HierarchicalHighwayEnv, trained_steps: int) -> dict:
+    train = config.train
+    return {
+        "algorithm": train.algorithm,
+        "encoding": train.encoding,
+        "observation_size": int(np.prod(env.observation_space.shape)),
+        "actions": 3,
+        "hidden": net_arch(train.network) if train.algorithm != "tabular" else [],
+        "network": train.network,
+        "grid": grid_config(config).model_dump(mode="json"),
+        "lanes_count": config.highway.lanes_count,
+        "trained_steps": trained_steps,
+        "seed": config.seed,
+    }
+
+
+class EveryNSteps(BaseCallback):
+    """Call `action()` every `every` environment steps."""
+
+    def __init__(self, every: int, action) -> None:
+        super().__init__()
+        self.every, self.action = every, action
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps % self.every == 0:
+            self.action()
+        return True
+
+
+def _terminate_as_interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
+class Trainer:
+    """One training run in `out`: fresh, or resumed from `out/checkpoint.npz`."""
+
+    def __init__(self, config: RunConfig, out: Path, progress: bool = True) -> None:
+        self.config, self.out, self.progress = config, Path(out), progress
+        self.env = Monitor(HierarchicalHighwayEnv(config))
+        self.validation_env = HierarchicalHighwayEnv(config)
+        self.history: list[Validation] = []
+        self.best: tuple[float, float] | None = None
+        self.started = time.perf_counter()
+        self.elapsed_before = 0.0
+
+    @classmethod
+    def resume(cls, out: Path, steps: int | None, progress: bool = True) -> Trainer:
+        config = load_config(Path(out) / "config.yaml", train__steps=steps)
+        return cls(config, out, progress)
+
+    def metadata(self, steps: int) -> dict:
+        return model_metadata(self.config, self.env.unwrapped, steps)
+
+    def run(self) -> dict:
+        self.out.mkdir(parents=True, exist_ok=True)
+        (self.out / "config.yaml").write_text(
+            yaml.safe_dump(self.config.model_dump(mode="json"), sort_keys=False)
+        )
+        previous = signal.signal(signal.SIGTERM, _terminate_as_interrupt)
+        interrupted = False
+        try:
+            steps = self._train_tabular() if self.config.train.algorithm == "tabular" else self._train_dqn()
+        except KeyboardInterrupt:
+            interrupted = True
+            steps = self._save_checkpoint()
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+        return self._finish(steps, interrupted)
+
+    def _improved(self, save) -> callable:
+        def on_improvement(model, validation: Validation) -> None:
+            save(
+                model, self.out / BEST, {**self.metadata(validation.step), "validation": validation.__dict__}
+            )
+
+        return on_improvement
+
+    def _validation_callback(self, save) -> RealTimeValidation:
+        v = self.config.train.validation
+        return RealTimeValidation(
+            self.validation_env,
+            v.short_every,
+            v.short_episodes,
+            v.long_every,
+            v.long_episodes,
+            v.seed,
+            self._improved(save),
+            self.history,
+            self.best,
+        )
+
+    # --- DDQN / DQN -------------------------------------------------------------------------
+    def _build_dqn(self):
+        train = self.config.train
+        algorithm = ALGORITHMS[train.algorithm]
+        return algorithm(
+            "MlpPolicy",
+            self.env,
+            learning_rate=train.learning_rate,
+            buffer_size=train.buffer_size,
+            learning_starts=train.learning_starts,
+            batch_size=train.batch_size,
+            gamma=train.gamma,
+            train_freq=train.train_freq,
+            target_update_interval=train.target_update_interval,
+            exploration_fraction=train.exploration_fraction,
+            exploration_final_eps=train.exploration_final_eps,
+            policy_kwargs={"net_arch": net_arch(train.network)},
+            tensorboard_log=str(self.out / "tensorboard"),
+            seed=self.config.seed,
+            verbose=0,
+            device="cpu",
+        )
+
+    def _train_dqn(self) -> int:
+        self.model = self._build_dqn()
+        resumed = (self.out / CHECKPOINT).is_file()
+        if resumed:
+            self._load_dqn_checkpoint()
+        self.validation = self._validation_callback(export_q_network)
+        callbacks = [self.validation, EveryNSteps(self.config.train.checkpoint_every, self._save_checkpoint)]
+        if self.progress:
+            callbacks.append(ProgressBarCallback())
+        remaining = self.config.train.steps - self.model.num_timesteps
+        if remaining > 0:
+            self.model.learn(
+                remaining,
+                callback=CallbackList(callbacks),
+                reset_num_timesteps=not resumed,
+                tb_log_name=self.config.train.algorithm,
+            )
+        return self._save_checkpoint()
+
+    def _dqn_arrays(self) -> tuple[dict, dict]:
+        model = self.model
+        arrays = {f"q/{k}": v.cpu().numpy() for k, v in model.policy.q_net.state_dict().items()}
+        arrays |= {f"target/{k}": v.cpu().numpy() for k, v in model.policy.q_net_target.state_dict().items()}
+        optimizer = model.policy.optimizer.state_dict()
+        for index, state in optimizer["state"].items():
+            for name, value in state.items():
+                arrays[f"optimizer/{index}/{name}"] = th.as_tensor(value).cpu().numpy()
+        buffer = model.replay_buffer
+        for name in ("observations", "next_observations", "actions", "rewards", "dones", "timeouts"):
+            arrays[f"buffer/{name}"] = getattr(buffer, name)
+        counters = {
+            "num_timesteps": int(model.num_timesteps),
+            "n_updates": int(model._n_updates),
+            "episode_num": int(model._episode_num),
+            "buffer_pos": int(buffer.pos),
+            "buffer_full": bool(buffer.full),
+            "param_groups": optimizer["param_groups"],
+        }
+        return arrays, counters
+
+    def _load_dqn_checkpoint(self) -> None:
+        arrays, metadata = load_model(self.out / CHECKPOINT)
+        model, counters = self.model, metadata["counters"]
+        model.policy.q_net.load_state_dict(_prefixed(arrays, "q/"))
+        model.policy.q_net_target.load_state_dict(_prefixed(arrays, "target/"))
+        state: dict[int, dict] = {}
+        for key, value in _prefixed(arrays, "optimizer/").items():
+            index, name = key.split("/")
+            state.setdefault(int(index), {})[name] = value
+        model.policy.optimizer.load_state_dict({"state": state, "param_groups": counters["param_groups"]})
+        buffer = model.replay_buffer
+        for name, value in _prefixed(arrays, "buffer/").items():
+            getattr(buffer, name)[...] = value.numpy()
+        buffer.pos, buffer.full = counters["buffer_pos"], counters["buffer_full"]
+        model.num_timesteps, model._n_updates = counters["num_timesteps"], counters["n_updates"]
+        model._episode_num = counters["episode_num"]
+        self._restore_common(metadata)
+
+    # --- tabular Q-learning -----------------------------------------------------------------
+    def _train_tabular(self) -> int:
+        train = self.config.train
+        self.model = QLearning.for_space(
+            self.env.observation_space,
+            alpha=train.tabular_alpha,
+            gamma=train.gamma,
+            epsilon=train.tabular_epsilon,
+            seed=self.config.seed,
+        )
+        if (self.out / CHECKPOINT).is_file():
+            arrays, metadata = load_model(self.out / CHECKPOINT)
+            self.model.table[...] = arrays["q_table"]
+            self.model.steps = metadata["counters"]["num_timesteps"]
+            self._restore_common(metadata)
+        v = train.validation
+        validation = self._validation_callback(save_q_table)
+        validation.model = self.model
+
+        def on_step(agent: QLearning, info: dict) -> bool:
+            validation.num_timesteps = step = agent.steps
+            if step % v.long_every == 0:
+                validation.run_validation("long", v.long_episodes)
+            elif step % v.short_every == 0:
+                validation.run_validation("short", v.short_episodes)
+            if step % train.checkpoint_every == 0:
+                self._save_checkpoint()
+            return True
+
+        self.validation = validation
+        remaining = train.steps - self.model.steps
+        if remaining > 0:
+            self.model.learn(self.env, remaining, seed=self.config.seed + self.model.steps, on_step=on_step)
+        return self._save_checkpoint()
+
+    # --- shared -------------------------------------------------------------------------------
+    def _restore_common(self, metadata: dict) -> None:
+        self.history, self.best = RealTimeValidation.restore(metadata["validation"])
+        self.elapsed_before = metadata.get("elapsed_s", 0.0)
+
+    def _elapsed(self) -> float:
+        return self.elapsed_before + time.perf_counter() - self.started
+
+    def _save_checkpoint(self) -> int:
+        """Write everything needed to resume; returns the steps done."""
+        if not hasattr(self, "model"):
+            return 0
+        if isinstance(self.model, QLearning):
+            arrays, counters = {"q_table": self.model.table}, {"num_timesteps": self.model.steps}
+        else:
+            arrays, counters = self._dqn_arrays()
+        validation = getattr(self, "validation", None)
+        state = validation.state() if validation else {"best": None, "history": []}
+        save_model(
+            self.out / CHECKPOINT,
+            arrays,
+            {"kind": "checkpoint", "counters": counters, "validation": state, "elapsed_s": self._elapsed()},
+        )
+        return counters["num_timesteps"]
+
+    def _finish(self, steps: int, interrupted: bool) -> dict:
+        if steps and not interrupted:
+            if isinstance(self.model, QLearning):
+                save_q_table(self.model, self.out / FINAL, self.metadata(steps))
+            else:
+                export_q_network(self.model, self.out / FINAL, self.metadata(steps))
+        history = self.validation.history if hasattr(self, "validation") else self.history
+        plot_training_curve(history, self.out / "training_curve.png")
+        best = max(history, key=lambda v: v.score, default=None)
+        summary = {
+            "algorithm": self.config.train.algorithm,
+            "network": self.config.train.network,
+            "steps": steps,
+            "target_steps": self.config.train.steps,
+            "wall_time_s": round(self._elapsed(), 1),
+            "interrupted": interrupted,
+            "best_validation": best.__dict__ if best else None,
+            "validations": len(history),
+            "best_model": str(self.out / BEST) if (self.out / BEST).is_file() else None,
+        }
+        (self.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        (self.out / "validation.json").write_text(json.dumps([v.__dict__ for v in history], indent=2) + "\n")
+        return summary
+
+
+def _prefixed(arrays: dict, prefix: str) -> dict:
+    return {k.removeprefix(prefix): th.as_tensor(v) for k, v in arrays.items() if k.startswith(prefix)}
+
+
+def save_q_table(agent: QLearning, path: Path, metadata: dict) -> Path:
+    return save_model(path, {"q_table": agent.table}, {"kind": "qtable", **metadata})
+
+
+def plot_training_curve(history: list[Validation], path: Path) -> None:
+    """Mean validation return and collision rate against training steps."""
+    figure, (returns, collisions) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
+    for period, marker in (("short", "o"), ("long", "s")):
+        points = [v for v in history if v.period == period]
+        returns.plot(
+            [v.step for v in points], [v.mean_return for v in points], marker, label=f"{period} validation"
+        )
+        collisions.plot([v.step for v in points], [100 * v.collision_rate for v in points], marker)
+    best = [v for v in history if v.improved]
+    returns.plot(
+        [v.step for v in best], [v.mean_return for v in best], "k*", markersize=10, label="kept (best)"
+    )
+    returns.set_ylabel("mean return")
+    collisions.set_ylabel("collision rate [%]")
+    collisions.set_xlabel("training steps")
+    returns.legend(fontsize="small")
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
