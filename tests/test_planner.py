@@ -1,0 +1,194 @@
+"""Agents behind one protocol, Double DQN's target, the safe model file."""
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from stable_baselines3 import DQN
+
+from perception.grid import GridConfig, OccupancyGridBuilder
+from planner.agents import decide
+from planner.command import Command
+from planner.ddqn import DoubleDQN, double_q_target
+from planner.factory import AGENT_NAMES, DEFAULT_MODEL, make_agent
+from planner.learned import export_q_network, load_agent
+from planner.mobil import MobilAgent
+from planner.model_file import ModelFileError, save_model
+from tests.helpers import scene
+
+GRID = GridConfig(cells_ahead=9, cells_behind=4)
+
+
+def observation_for(agent, world):
+    grid = getattr(agent, "grid_config", GRID)
+    return OccupancyGridBuilder(grid).build(world).encode(getattr(agent, "encoding", "paper"))
+
+
+def tiny_dqn(observation_size: int, algorithm=DoubleDQN):
+    space = gym.spaces.Box(-1.0, 1.0, (observation_size,), np.float32)
+
+    class Dummy(gym.Env):
+        observation_space, action_space = space, gym.spaces.Discrete(3)
+
+        def reset(self, *, seed=None, options=None):
+            return np.zeros(observation_size, np.float32), {}
+
+        def step(self, action):
+            return np.zeros(observation_size, np.float32), 0.0, True, False, {}
+
+    return algorithm("MlpPolicy", Dummy(), policy_kwargs={"net_arch": [16]}, seed=0, device="cpu")
+
+
+@pytest.fixture
+def model_files(tmp_path):
+    """A tiny DDQN, DQN and tabular model file for the learned agents."""
+    grid = GRID.model_copy(update={"lanes": "ego", "features": ("relative_speed",)})
+    size = OccupancyGridBuilder(grid).observation_space(3).shape[0]
+    metadata = {
+        "encoding": "observation",
+        "observation_size": size,
+        "actions": 3,
+        "hidden": [16],
+        "grid": grid.model_dump(mode="json"),
+    }
+    files = {}
+    for name, algorithm in (("ddqn", DoubleDQN), ("dqn", DQN)):
+        files[name] = export_q_network(
+            tiny_dqn(size, algorithm), tmp_path / f"{name}.npz", {**metadata, "algorithm": name}
+        )
+    table = np.random.default_rng(0).random((3, 9, 9, 9, 3))
+    files["tabular"] = save_model(
+        tmp_path / "tabular.npz",
+        {"q_table": table},
+        {"kind": "qtable", "algorithm": "tabular", "grid": GRID.model_dump(mode="json")},
+    )
+    return files
+
+
+@pytest.mark.parametrize("name", AGENT_NAMES)
+def test_every_agent_answers_the_protocol(name, model_files):
+    world = scene(3, (0.0, 1), [(15.0, 4.0), (30.0, 0.0), (-20.0, 8.0)], speed=25.0, other_speed=20.0)
+    agent = make_agent(name, 3, GRID, seed=0, model=model_files.get(name))
+    action, state = agent.predict(observation_for(agent, world), deterministic=True)
+    assert int(action) in (0, 1, 2)
+    assert state is None
+    assert decide(agent, observation_for(agent, world)) in tuple(Command)
+
+
+def test_unknown_agent_lists_what_is_available():
+    with pytest.raises(
+        ValueError, match="unknown agent 'genius'; available: ddqn, dqn, tabular, rule, mobil"
+    ):
+        make_agent("genius", 3, GRID)
+    with pytest.raises(ValueError, match="agent 'dqn' needs a model file"):
+        make_agent("dqn", 3, GRID)
+
+
+def test_a_model_for_another_algorithm_or_shape_is_refused(model_files):
+    with pytest.raises(ModelFileError, match="holds a 'dqn' model; expected ddqn"):
+        make_agent("ddqn", 3, GRID, model=model_files["dqn"])
+    agent = make_agent("ddqn", 3, GRID, model=model_files["ddqn"])
+    with pytest.raises(
+        ValueError, match=r"expects observations of \d+ values \(observation encoding of grid"
+    ):
+        agent.predict(np.zeros(7, np.float32))
+
+
+def test_rule_agent_overtakes_into_the_freer_lane_only_when_safe():
+    agent = make_agent("rule", 3, GRID)
+    blocked = scene(3, (0.0, 1), [(15.0, 4.0), (40.0, 8.0)])
+    assert decide(agent, observation_for(agent, blocked)) is Command.LEFT
+    unsafe_left = scene(3, (0.0, 1), [(15.0, 4.0), (-5.0, 0.0), (40.0, 8.0)])
+    assert decide(agent, observation_for(agent, unsafe_left)) is Command.RIGHT
+    clear = scene(3, (0.0, 1), [(-15.0, 4.0)])
+    assert decide(agent, observation_for(agent, clear)) is Command.STAY
+
+
+def test_mobil_changes_lane_for_a_gain_and_respects_the_new_follower():
+    agent = MobilAgent(GRID)
+    slow_leader = scene(3, (0.0, 1), [(15.0, 4.0)], speed=25.0, other_speed=15.0)
+    assert decide(agent, observation_for(agent, slow_leader)) in (Command.LEFT, Command.RIGHT)
+    fast_follower = scene(
+        3, (0.0, 1), [(15.0, 4.0), (-10.0, 0.0), (-10.0, 8.0)], speed=25.0, other_speed=15.0
+    )
+    world = fast_follower
+    world.speed[2:] = 35.0
+    assert decide(agent, observation_for(agent, world)) is Command.STAY
+
+
+def test_double_q_target_uses_the_online_argmax_and_the_target_value():
+    rewards, dones = th.tensor([[1.0], [0.0]]), th.tensor([[0.0], [1.0]])
+    online = th.tensor([[0.0, 5.0, 1.0], [3.0, 0.0, 0.0]])
+    target = th.tensor([[9.0, 2.0, 4.0], [1.0, 1.0, 1.0]])
+    double = double_q_target(rewards, dones, 0.5, online, target)
+    vanilla = rewards + (1 - dones) * 0.5 * target.max(dim=1, keepdim=True).values
+    assert double.tolist() == [[2.0], [0.0]]  # online picks action 1, target values it 2
+    assert vanilla.tolist() == [[5.5], [0.0]]  # max over the target net: over-estimates
+
+
+def test_double_dqn_trains_and_its_weights_round_trip(tmp_path):
+    model = tiny_dqn(6)
+    model.learning_starts = 0
+    model.learn(64)
+    path = export_q_network(
+        model,
+        tmp_path / "m.npz",
+        {
+            "algorithm": "ddqn",
+            "encoding": "observation",
+            "observation_size": 6,
+            "actions": 3,
+            "hidden": [16],
+            "grid": GRID.model_dump(mode="json"),
+        },
+    )
+    agent = load_agent(path)
+    observations = np.random.default_rng(1).uniform(-1, 1, (20, 6)).astype(np.float32)
+    with th.no_grad():
+        expected = model.policy.q_net(th.as_tensor(observations)).numpy()
+    np.testing.assert_allclose(agent.q_values(observations), expected, rtol=1e-6)
+
+
+def test_crafted_and_truncated_model_files_are_refused(tmp_path, model_files):
+    data = model_files["ddqn"].read_bytes()
+    truncated = tmp_path / "truncated.npz"
+    truncated.write_bytes(data[: len(data) // 2])
+    with pytest.raises(ModelFileError, match="not a drivestack model file"):
+        load_agent(truncated)
+    pickled = tmp_path / "pickled.npz"
+    np.savez(pickled, metadata=np.frombuffer(b"{}", np.uint8), payload=np.array([object()], dtype=object))
+    with pytest.raises(ModelFileError, match="not a drivestack model file"):
+        load_agent(pickled)
+    wrong = tmp_path / "wrong.npz"
+    save_model(
+        wrong,
+        {"0.weight": np.zeros((2, 2))},
+        {
+            "kind": "mlp",
+            "algorithm": "ddqn",
+            "observation_size": 9,
+            "actions": 3,
+            "hidden": [4],
+            "encoding": "observation",
+            "grid": GRID.model_dump(mode="json"),
+        },
+    )
+    with pytest.raises(ModelFileError, match="model arrays do not match its metadata"):
+        load_agent(wrong)
+    not_json = tmp_path / "not_json.npz"
+    np.savez(not_json, metadata=np.frombuffer(b"\xff\xfe", np.uint8))
+    with pytest.raises(ModelFileError, match="not valid JSON"):
+        load_agent(not_json)
+    with pytest.raises(ModelFileError, match="no such model file"):
+        load_agent(tmp_path / "absent.npz")
+
+
+def test_shipped_default_model_loads_safely():
+    if not DEFAULT_MODEL.is_file():
+        pytest.skip("no shipped model yet")
+    agent = load_agent(DEFAULT_MODEL, expected_algorithms=("ddqn",))
+    assert agent.metadata["algorithm"] == "ddqn"
+    assert DEFAULT_MODEL.stat().st_size < 500_000
+    assert json.dumps(agent.metadata)

@@ -1,0 +1,46 @@
+from planner.command import Command
+from planner.safety import SafetyConfig, SafetyLayer
+from tests.helpers import scene
+
+
+def layer(**overrides) -> SafetyLayer:
+    return SafetyLayer(SafetyConfig(**overrides))
+
+
+def test_lane_change_off_the_road_is_masked():
+    safety = layer()
+    world = scene(3, (0.0, 0))
+    assert safety.filter(Command.LEFT, world, lane=0) is Command.STAY
+    assert safety.filter(Command.RIGHT, world, lane=0) is Command.RIGHT
+    assert safety.masked == 1
+
+
+def test_a_car_alongside_in_the_target_lane_masks_the_change():
+    world = scene(3, (0.0, 1), [(2.0, 0.0)], speed=25.0, other_speed=25.0)
+    safety = layer()
+    assert safety.filter(Command.LEFT, world, lane=1) is Command.STAY
+    assert safety.filter(Command.RIGHT, world, lane=1) is Command.RIGHT
+
+
+def test_time_gap_and_ttc_to_the_vehicles_ahead_and_behind():
+    # ahead in the target lane 15 m (gap 10 m) at 25 m/s: time gap 0.8 s x 25 = 20 m > 10 m -> unsafe
+    assert layer().filter(Command.LEFT, scene(2, (0.0, 1), [(15.0, 0.0)], 25.0, 25.0), 1) is Command.STAY
+    # far ahead but much slower: gap 55 m closing at 20 m/s, TTC 2.75 s < 4 s -> unsafe
+    assert layer().filter(Command.LEFT, scene(2, (0.0, 1), [(60.0, 0.0)], 30.0, 10.0), 1) is Command.STAY
+    # the same but slower ego: closing 5 m/s, TTC 11 s, gap 55 m > 12 m -> safe
+    assert layer().filter(Command.LEFT, scene(2, (0.0, 1), [(60.0, 0.0)], 15.0, 10.0), 1) is Command.LEFT
+    # a fast car coming from behind: gap 35 m closing at 10 m/s (3.5 s) -> unsafe
+    assert layer().filter(Command.LEFT, scene(2, (0.0, 1), [(-40.0, 0.0)], 20.0, 30.0), 1) is Command.STAY
+    # the same car slower than the ego -> safe
+    assert layer().filter(Command.LEFT, scene(2, (0.0, 1), [(-40.0, 0.0)], 25.0, 20.0), 1) is Command.LEFT
+
+
+def test_abort_when_the_gap_closes_and_switch_off_for_ablation():
+    closing = scene(2, (0.0, 1), [(-8.0, 0.0)], speed=20.0, other_speed=30.0)
+    safety = layer()
+    assert safety.should_abort(closing, target=0)
+    assert safety.aborted == 1
+    off = layer(enabled=False)
+    assert not off.should_abort(closing, target=0)
+    assert off.filter(Command.LEFT, closing, 1) is Command.LEFT
+    assert off.masked == 0

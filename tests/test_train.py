@@ -1,0 +1,164 @@
+"""Training: the validation callback, checkpoints and resume, the env, the CLI smoke run."""
+
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import yaml
+from stable_baselines3.common.env_checker import check_env
+from typer.testing import CliRunner
+
+from planner.learned import load_agent
+from planner.model_file import load_model
+from planner.validation import RealTimeValidation
+from stack.cli import app
+from stack.config import build_config
+from stack.envs import HIERARCHICAL_HIGHWAY
+from stack.train import Trainer
+
+TINY = {
+    "seed": 1,
+    "highway": {"vehicles_count": 12, "duration": 5},
+    "perception": {"lanes": "ego", "features": ["relative_speed", "ttc", "ego_speed"]},
+    "train": {
+        "steps": 40,
+        "learning_starts": 5,
+        "batch_size": 8,
+        "buffer_size": 200,
+        "checkpoint_every": 10,
+        "network": "16",
+        "validation": {"short_every": 10, "short_episodes": 1, "long_every": 20, "long_episodes": 2},
+    },
+}
+
+
+class Scripted(gym.Env):
+    """One-step episodes whose outcome is set by the test: crash or not, and the return."""
+
+    observation_space, action_space = gym.spaces.Box(0, 1, (1,)), gym.spaces.Discrete(3)
+    outcome = (False, 1.0)
+
+    def reset(self, *, seed=None, options=None):
+        return np.zeros(1, np.float32), {}
+
+    def step(self, action):
+        crashed, reward = self.outcome
+        return np.zeros(1, np.float32), reward, crashed, not crashed, {"crashed": crashed, "speed": 20.0}
+
+
+class FakeModel:
+    num_timesteps = 0
+
+    def predict(self, observation, deterministic=True):
+        return 1, None
+
+
+def test_validation_keeps_a_model_only_when_it_improves():
+    env, saved = Scripted(), []
+    callback = RealTimeValidation(env, 10, 1, 50, 3, 0, lambda model, v: saved.append(v.step))
+    callback.model = FakeModel()
+    for step, outcome in [
+        (10, (False, 1.0)),
+        (20, (False, 0.5)),
+        (30, (True, 9.0)),
+        (40, (False, 2.0)),
+        (50, (False, 2.0)),
+    ]:
+        env.outcome = outcome
+        callback.num_timesteps = step
+        callback._on_step()
+    assert saved == [10, 40], "a lower return, a crash, or an equal score is not an improvement"
+    assert [v.period for v in callback.history] == ["short", "short", "short", "short", "long"]
+    assert callback.history[2].collision_rate == 1.0
+
+
+def test_hierarchical_env_passes_sb3_check_and_reports_info():
+    env = gym.make(HIERARCHICAL_HIGHWAY, config=TINY)
+    check_env(env.unwrapped)
+    observation, info = env.reset(seed=3)
+    assert env.observation_space.contains(observation)
+    _, reward, _, _, info = env.step(1)
+    assert {"crashed", "speed", "passed_cars", "masked"} <= set(info)
+    assert reward == pytest.approx(1.0)
+
+
+def test_training_resumes_after_an_interruption(tmp_path, monkeypatch):
+    config = build_config(TINY)
+    out = tmp_path / "run"
+    trainer = Trainer(config, out, progress=False)
+    real_step = type(trainer.env.unwrapped).step
+    calls = {"n": 0}
+
+    def step_then_interrupt(self, action):
+        calls["n"] += 1
+        if calls["n"] == 25:
+            raise KeyboardInterrupt
+        return real_step(self, action)
+
+    monkeypatch.setattr(type(trainer.env.unwrapped), "step", step_then_interrupt)
+    summary = trainer.run()
+    assert summary["interrupted"]
+    _, checkpoint = load_model(out / "checkpoint.npz")
+    done = checkpoint["counters"]["num_timesteps"]
+    assert 10 <= done < 40
+    monkeypatch.setattr(type(trainer.env.unwrapped), "step", real_step)
+    resumed = Trainer.resume(out, steps=None, progress=False).run()
+    assert not resumed["interrupted"] and resumed["steps"] == 40
+    history = json.loads((out / "validation.json").read_text())
+    assert [v["step"] for v in history] == [10, 20, 30, 40], "validations before the interruption are kept"
+    assert load_agent(out / "final.npz").metadata["trained_steps"] == 40
+
+
+def test_train_cli_smoke_writes_best_model_and_curve(tmp_path):
+    config = tmp_path / "tiny.yaml"
+    config.write_text(yaml.safe_dump(TINY))
+    out = tmp_path / "out"
+    result = CliRunner().invoke(app, ["train", "--config", str(config), "--out", str(out), "--no-progress"])
+    assert result.exit_code == 0, result.output
+    for name in (
+        "best.npz",
+        "final.npz",
+        "checkpoint.npz",
+        "training_curve.png",
+        "summary.json",
+        "config.yaml",
+    ):
+        assert (out / name).is_file(), name
+    assert any(Path(out / "tensorboard").rglob("events.out.tfevents.*"))
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["steps"] == 40 and summary["validations"] == 4
+    run = CliRunner().invoke(
+        app,
+        [
+            "run",
+            "--agent",
+            "ddqn",
+            "--model",
+            str(out / "best.npz"),
+            "--episodes",
+            "1",
+            "--out",
+            str(tmp_path / "drive"),
+            "--no-progress",
+            "-c",
+            str(config),
+        ],
+    )
+    assert run.exit_code == 0, run.output
+
+
+@pytest.mark.parametrize("algorithm", ["dqn", "tabular"])
+def test_other_algorithms_train_too(tmp_path, algorithm):
+    data = {
+        **TINY,
+        "train": {
+            **TINY["train"],
+            "algorithm": algorithm,
+            "encoding": "tabular" if algorithm == "tabular" else "observation",
+        },
+    }
+    summary = Trainer(build_config(data), tmp_path / algorithm, progress=False).run()
+    assert summary["steps"] == 40
+    assert load_agent(tmp_path / algorithm / "best.npz").metadata["algorithm"] == algorithm
