@@ -23,11 +23,13 @@ class Leader:
 
 @dataclass(frozen=True)
 class EgoState:
-    """The ego in the lane frame: lateral offset d [m], heading relative to the lane [rad], speed [m/s]."""
+    """The ego in the lane frame: lateral offset d [m], heading relative to the lane [rad], speed
+    [m/s], and the lane's curvature at the ego [1/m] (positive turning left)."""
 
     d: float
     heading: float
     speed: float
+    curvature: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -40,3 +42,5 @@ class Reference:
     d_ddot: float
     set_speed: float
     leaders: tuple[Leader, ...] = ()
+    preview: tuple[tuple[float, float], ...] = ()
+    """(d [m], d_dot [m/s]) at the next control ticks, for controllers that look ahead."""

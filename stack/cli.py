@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 from datetime import datetime
+from functools import partial
 from pathlib import Path
 
 import typer
@@ -75,6 +76,98 @@ def run(
     Console().print(f"results: {out}")
     if results.summary["interrupted"]:
         sys.exit(130)
+
+
+@app.command()
+def track(
+    controller: str = typer.Option("all", help="pid | mpc | builtin | all"),
+    speeds: str = typer.Option("15,20,25,30", help="Comma-separated speeds [m/s]."),
+    duration: float | None = typer.Option(None, help="Lane-change duration T [s] (controller config)."),
+    config: Path = typer.Option(DEFAULT_CONFIG, "--config", "-c", help="YAML config (controller section)."),
+    out: Path | None = typer.Option(None, help="Results folder (default: runs/track-<time>)."),
+    progress: bool = typer.Option(True, help="Show a progress bar."),
+) -> None:
+    """Single lane changes on empty straight and curved roads: tracking metrics and plots."""
+    from stack.track import PLANTS, ROADS, TRACK_CONTROLLERS
+
+    names = list(TRACK_CONTROLLERS) if controller == "all" else controller.split(",")
+    unknown = [name for name in names if name not in TRACK_CONTROLLERS]
+    if unknown:
+        fail(f"--controller: unknown {unknown[0]!r}; available: {', '.join(TRACK_CONTROLLERS)}, all")
+    try:
+        speed_list = [float(value) for value in speeds.split(",")]
+    except ValueError:
+        fail(f"--speeds: expected comma-separated numbers in m/s, got {speeds!r}")
+    if not all(0 < v <= 40 for v in speed_list):
+        fail(f"--speeds: every speed must be in (0, 40] m/s, got {speeds}")
+    try:
+        cfg = load_config(config, controller__lane_change_duration_s=duration)
+    except ConfigError as error:
+        fail(str(error))
+    from tqdm import tqdm
+
+    from stack.track import track as run_track
+
+    out = out or fresh_run_dir("track")
+    total = len(ROADS) * len(speed_list) * 2 * sum(1 if n == "builtin" else len(PLANTS) for n in names)
+    with tqdm(total=total, unit="maneuver", disable=not progress) as bar:
+        maneuvers = run_track(
+            names,
+            speed_list,
+            cfg.controller.lane_change_duration_s,
+            cfg.controller,
+            out,
+            cfg.dt,
+            progress=lambda: bar.update(1),
+        )
+    print_tracking(maneuvers)
+    Console().print(f"results: {out}")
+
+
+def _mean(group: list, field: str) -> float:
+    values = [getattr(m, field) for m in group if getattr(m, field) is not None]
+    return sum(values) / len(values) if values else float("nan")
+
+
+def print_tracking(maneuvers) -> None:
+    from rich.table import Table
+
+    table = Table(title="lane changes (left / right averaged)")
+    for column in (
+        "controller",
+        "road",
+        "plant",
+        "speed",
+        "duration s",
+        "overshoot cm",
+        "RMS cm",
+        "max cm",
+        "peak a_y",
+        "peak jerk",
+        "solve p95 ms",
+        "fallbacks",
+    ):
+        table.add_column(column, justify="right")
+    groups: dict = {}
+    for m in maneuvers:
+        groups.setdefault((m.controller, m.road, m.plant, m.speed), []).append(m)
+    for (name, road, plant, speed), group in groups.items():
+        mean = partial(_mean, group)
+        table.add_row(
+            name,
+            road,
+            plant,
+            f"{speed:g}",
+            f"{mean('duration_s'):.2f}",
+            f"{100 * mean('overshoot_m'):.1f}",
+            f"{100 * mean('rms_error_m'):.2f}",
+            f"{100 * mean('max_error_m'):.1f}",
+            f"{mean('peak_lat_accel'):.2f}",
+            f"{mean('peak_lat_jerk'):.2f}",
+            f"{max(m.solve_ms_p95 for m in group):.2f}",
+            str(sum(m.fallbacks for m in group)),
+        )
+    Console(width=160).print(table)
 
 
 @app.command()

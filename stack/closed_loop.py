@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from controllers.pid import AdaptiveCruise, PIDTracker
+from controllers.cruise import AdaptiveCruise
+from controllers.tracker import make_tracker
 from controllers.types import EgoState, Leader, Reference
 from perception.grid import GridConfig, OccupancyGrid, OccupancyGridBuilder
 from perception.neighbours import leaders
@@ -32,15 +33,28 @@ def grid_config(config: RunConfig) -> GridConfig:
     return GridConfig(**config.perception.model_dump(exclude={"sensor"}))
 
 
-def make_controller(config: ControllerConfig) -> PIDTracker:
-    cruise = AdaptiveCruise(config.time_gap_s, config.standstill_gap_m, config.comfort_decel_mps2)
-    return PIDTracker(cruise)
+def make_controller(config: ControllerConfig, dt: float):
+    gains = config.pid
+    cruise = AdaptiveCruise(
+        config.time_gap_s,
+        config.standstill_gap_m,
+        config.comfort_decel_mps2,
+        gains.kp_speed,
+        gains.ki_speed,
+        gains.max_acceleration,
+    )
+    return make_tracker(config.type, gains, config.mpc, cruise, dt)
 
 
 def ego_state(world: WorldState, lane: int) -> EgoState:
-    """The ego in the frame of `lane`: lateral offset, heading relative to the lane, speed."""
+    """The ego in the frame of `lane`: lateral offset, heading relative to the lane, speed, and
+    the lane's curvature (central difference of its heading over +-1 m)."""
     ego = world.ego
-    return EgoState(d=ego.d, heading=ego.heading - world.lanes[lane].heading_at(ego.s), speed=ego.speed)
+    geometry = world.lanes[lane]
+    curvature = (geometry.heading_at(ego.s + 1.0) - geometry.heading_at(ego.s - 1.0)) / 2.0
+    return EgoState(
+        d=ego.d, heading=ego.heading - geometry.heading_at(ego.s), speed=ego.speed, curvature=curvature
+    )
 
 
 class ClosedLoop:
@@ -65,7 +79,7 @@ class ClosedLoop:
         self.world = self.adapter.reset(seed)
         self.sensor = SensorModel(config.perception.sensor, seed)
         self.safety = SafetyLayer(config.planner.safety)
-        self.controller = make_controller(config.controller)
+        self.controller = make_controller(config.controller, self.adapter.dt)
         self.maneuver = Maneuver(self.world, config.controller.lane_change_duration_s)
         self.recorder = EpisodeRecorder(self.world)
         self.grid: OccupancyGrid | None = None
@@ -111,12 +125,17 @@ class ClosedLoop:
         ):
             maneuver.abort(world)
         d, d_dot, d_ddot = maneuver.reference(world.time)
+        dt = self.adapter.dt
         reference = Reference(
             d,
             d_dot,
             d_ddot,
             set_speed=self.config.controller.set_speed_mps,
             leaders=tuple(Leader(*lead) for lead in leaders(world, maneuver.occupied_lanes)),
+            preview=tuple(
+                maneuver.reference(world.time + k * dt)[:2]
+                for k in range(1, self.controller.preview_steps + 1)
+            ),
         )
         actuation = self.controller.step(ego_state(world, maneuver.lane), reference, self.adapter.dt)
         self.world = self.adapter.step(actuation)

@@ -19,13 +19,14 @@ from pydantic import (
     model_validator,
 )
 
+from controllers.config import MPCSettings, PIDGains
+from controllers.tracker import CONTROLLER_NAMES as CONTROLLERS
 from perception.grid import GridConfig
 from perception.sensor import SensorConfig
 from planner.factory import AGENT_NAMES as AGENTS
 from planner.networks import NET_ARCHS
 from planner.safety import SafetyConfig
 
-CONTROLLERS = ("pid",)
 BACKENDS = ("fast", "stock")
 TRAINABLE = ("ddqn", "dqn", "tabular")
 ENCODINGS = ("observation", "paper", "tabular")
@@ -83,7 +84,9 @@ class PlannerConfig(Strict):
 
 class ControllerConfig(Strict):
     type: str = "pid"
-    lane_change_duration_s: float = Field(4.0, gt=0)
+    pid: PIDGains = PIDGains()
+    mpc: MPCSettings = MPCSettings()
+    lane_change_duration_s: float = Field(5.0, gt=0)
     set_speed_mps: float = Field(30.0, gt=0, le=40)
     time_gap_s: float = Field(1.5, ge=0)
     standstill_gap_m: float = Field(8.0, ge=0)

@@ -2,7 +2,8 @@ import math
 
 import pytest
 
-from controllers.pid import PID, AdaptiveCruise
+from controllers.cruise import AdaptiveCruise
+from controllers.pid import PID
 from controllers.reference import QuinticProfile, lane_keeping
 from controllers.types import Leader
 
@@ -58,4 +59,4 @@ def test_cruise_holds_comfort_braking_unless_a_collision_is_imminent():
     hard = cruise.update(30.0, 30.0, (Leader(gap=12.0, speed=10.0),), 1 / 15)
     assert hard == -5.0
     cruise.reset()
-    assert cruise.update(20.0, 30.0, (), 1 / 15) == AdaptiveCruise.MAX_ACCELERATION
+    assert cruise.update(20.0, 30.0, (), 1 / 15) == cruise.max_acceleration == 2.0

@@ -1,0 +1,66 @@
+"""The kinematic bicycle of highway-env 1.12 (`vehicle/kinematics.py`), as a pure function and as
+a CasADi symbolic function: one model shared by the MPC, the tests and offline tracking.
+
+CoG at mid-length: beta = atan(tan(delta) / 2); x' = v cos(psi + beta), y' = v sin(psi + beta),
+psi' = v sin(beta) / (L / 2), v' = a; integrated with forward Euler, position first with the old
+heading, as highway-env does.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+
+LENGTH = 5.0
+"""Vehicle length = wheelbase of highway-env's bicycle [m]."""
+
+
+@dataclass(frozen=True)
+class BicycleState:
+    """Position x, y [m], heading psi [rad], speed v [m/s]."""
+
+    x: float
+    y: float
+    psi: float
+    v: float
+
+
+def slip_angle(steering: float) -> float:
+    """beta [rad] of the CoG for a front steering angle [rad]."""
+    return math.atan(0.5 * math.tan(steering))
+
+
+def step(state: BicycleState, acceleration: float, steering: float, dt: float) -> BicycleState:
+    """One forward-Euler step of `dt` seconds, bit-for-bit highway-env's `Vehicle.step` (without
+    its speed clipping at +-40 m/s)."""
+    beta = slip_angle(steering)
+    return BicycleState(
+        x=state.x + state.v * math.cos(state.psi + beta) * dt,
+        y=state.y + state.v * math.sin(state.psi + beta) * dt,
+        psi=state.psi + state.v * math.sin(beta) / (LENGTH / 2) * dt,
+        v=state.v + acceleration * dt,
+    )
+
+
+def lateral_acceleration(speed: float, steering: float) -> float:
+    """Centripetal acceleration v * psi' [m/s^2] for a steady steering angle."""
+    return speed**2 * math.sin(slip_angle(steering)) / (LENGTH / 2)
+
+
+def symbolic_lane_model() -> ca.Function:
+    """CasADi `f(state, input, curvature, dt) -> next state` in a lane frame: state (d, psi, v)
+    with d the lateral offset and psi the heading relative to the lane, input (a, delta);
+    curvature [1/m] turns the frame (psi' loses kappa * s'). Forward Euler, as the plant."""
+    state, control = ca.SX.sym("state", 3), ca.SX.sym("input", 2)
+    curvature, dt = ca.SX.sym("curvature"), ca.SX.sym("dt")
+    d, psi, v = state[0], state[1], state[2]
+    beta = ca.atan(0.5 * ca.tan(control[1]))
+    s_dot = v * ca.cos(psi + beta) / (1 - curvature * d)
+    derivative = ca.vertcat(
+        v * ca.sin(psi + beta),
+        v * ca.sin(beta) / (LENGTH / 2) - curvature * s_dot,
+        control[0],
+    )
+    return ca.Function("bicycle", [state, control, curvature, dt], [state + dt * derivative])

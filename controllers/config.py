@@ -1,0 +1,44 @@
+"""Controller gains and limits, validated when the config loads (negative or NaN values refused)."""
+
+from __future__ import annotations
+
+import math
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class _Settings(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+class PIDGains(_Settings):
+    """Cascaded lateral PID and longitudinal speed PI (see controllers.lateral for the design)."""
+
+    kp_lateral: float = Field(2.0, gt=0, description="lateral position gain [1/s]")
+    ki_lateral: float = Field(0.05, ge=0, description="lateral integral gain [1/s^2]")
+    kp_heading: float = Field(6.0, gt=0, description="heading gain [1/s]")
+    steering_rate: float = Field(0.5, gt=0, description="steering rate limit [rad/s]")
+    max_steering: float = Field(math.pi / 4, gt=0, le=math.pi / 4, description="steering limit [rad]")
+    kp_speed: float = Field(0.6, gt=0, description="speed gain [1/s]")
+    ki_speed: float = Field(0.05, ge=0, description="speed integral gain [1/s^2]")
+    max_acceleration: float = Field(2.0, gt=0, le=5, description="largest commanded acceleration [m/s^2]")
+
+
+class MPCSettings(_Settings):
+    """Joint steering + acceleration MPC on the bicycle model (controllers.mpc)."""
+
+    horizon: int = Field(20, ge=1, le=200, description="steps at the control rate")
+    weight_lateral: float = Field(200.0, ge=0)
+    weight_heading: float = Field(20.0, ge=0)
+    weight_speed: float = Field(1.0, ge=0)
+    weight_acceleration: float = Field(0.1, ge=0)
+    weight_steering: float = Field(1.0, ge=0)
+    weight_steering_rate: float = Field(2000.0, ge=0)
+    weight_jerk: float = Field(1.0, ge=0)
+    max_steering: float = Field(math.pi / 4, gt=0, le=math.pi / 4, description="[rad]")
+    max_steering_rate: float = Field(0.5, gt=0, description="[rad/s]")
+    max_lateral_acceleration: float = Field(2.0, gt=0, description="comfort bound [m/s^2]")
+    max_acceleration: float = Field(2.0, gt=0, le=5, description="[m/s^2]")
+    max_deceleration: float = Field(5.0, gt=0, le=5, description="[m/s^2]")
+    max_solve_ms: float = Field(50.0, gt=0, description="slower solves fall back [ms]")
+    max_iterations: int = Field(50, ge=1)

@@ -1,0 +1,54 @@
+"""Adaptive cruise (longitudinal): a speed PI capped by a constant-time-gap law for every leader."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from controllers.pid import PID
+from controllers.types import Leader
+
+
+class AdaptiveCruise:
+    """Hold a set speed; keep standstill_gap + time_gap * v to each leader (the ego lane's and,
+    during a lane change, the target lane's). Braking is limited to the comfort deceleration unless
+    the kinematic stopping need (closing^2 / 2 gap) exceeds it: then up to full braking."""
+
+    EMERGENCY_DECELERATION = 5.0
+    """Full braking, used only when a collision is imminent [m/s^2]."""
+    KP_GAP = 0.25
+    """Gap-error gain [1/s^2]."""
+    KP_CLOSING = 0.8
+    """Relative-speed gain [1/s]."""
+
+    def __init__(
+        self,
+        time_gap: float,
+        standstill_gap: float,
+        comfort_deceleration: float,
+        kp_speed: float = 0.6,
+        ki_speed: float = 0.05,
+        max_acceleration: float = 2.0,
+    ) -> None:
+        self.time_gap = time_gap
+        self.standstill_gap = standstill_gap
+        self.comfort_deceleration = comfort_deceleration
+        self.max_acceleration = max_acceleration
+        self.speed_pid = PID(kp=kp_speed, ki=ki_speed, limits=(-comfort_deceleration, max_acceleration))
+
+    def reset(self) -> None:
+        self.speed_pid.reset()
+
+    def update(self, speed: float, set_speed: float, leaders: tuple[Leader, ...], dt: float) -> float:
+        """Acceleration command [m/s^2]."""
+        command = self.speed_pid.update(set_speed - speed, dt)
+        floor = -self.comfort_deceleration
+        for leader in leaders:
+            desired_gap = self.standstill_gap + self.time_gap * speed
+            closing = speed - leader.speed
+            command = min(command, self.KP_GAP * (leader.gap - desired_gap) - self.KP_CLOSING * closing)
+            if closing > 0:
+                stopping_need = closing**2 / (2.0 * max(leader.gap - 1.0, 0.1))
+                if stopping_need > self.comfort_deceleration:
+                    floor = -self.EMERGENCY_DECELERATION
+                    command = min(command, -stopping_need)
+        return float(np.clip(command, floor, self.max_acceleration))
