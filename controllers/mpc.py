@@ -151,16 +151,14 @@ class MPCTracker:
             and np.all(np.isfinite(states))
             and self.solve_time * 1e3 <= self.settings.max_solve_ms
         )
-        if not usable:
+        if usable:
+            self.inputs, self.states = inputs, states
+            command = Actuation(acceleration=float(inputs[0, 0]), steering=float(inputs[1, 0]))
+        else:
             self.fallbacks += 1
             self.states = None
             command = backup
-        else:
-            self.inputs, self.states = inputs, states
-            command = Actuation(acceleration=float(inputs[0, 0]), steering=float(inputs[1, 0]))
+            if not (math.isfinite(command.acceleration) and math.isfinite(command.steering)):
+                command = Actuation(0.0, 0.0)
         self.last_input = np.array([command.acceleration, command.steering])
-        if not all(math.isfinite(v) for v in self.last_input):
-            self.fallbacks += 1
-            command = Actuation(0.0, 0.0)
-            self.last_input = np.zeros(2)
         return command

@@ -48,6 +48,21 @@ class QuinticProfile:
         return t - self.t0 >= self.duration
 
 
+def lane_change(
+    lane_offsets, origin: int, target: int, d0: float, t0: float, duration: float, v0: float = 0.0
+) -> QuinticProfile:
+    """The quintic from the current lateral state (d0 [m], v0 [m/s]) to the centre of `target`, an
+    adjacent lane of the road whose lane centres are `lane_offsets` [m]."""
+    if not 0 <= target < len(lane_offsets) or abs(target - origin) != 1:
+        raise ValueError(
+            f"target lane {target} is not reachable from lane {origin} "
+            f"(road lanes 0..{len(lane_offsets) - 1}, one lane at a time)"
+        )
+    if not duration > 0:
+        raise ValueError(f"lane-change duration must be > 0 s, got {duration}")
+    return QuinticProfile(d0=d0, d1=float(lane_offsets[target]), t0=t0, duration=duration, v0=v0)
+
+
 def lane_keeping(d_centre: float, t: float) -> QuinticProfile:
     """Hold the lane centre: the degenerate profile that is already at its end."""
     return QuinticProfile(d0=d_centre, d1=d_centre, t0=t, duration=1e-9)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from controllers.reference import QuinticProfile, lane_keeping
+from controllers.reference import QuinticProfile, lane_change, lane_keeping
 from perception.types import WorldState
 from planner.command import Command
 
@@ -31,14 +31,16 @@ class Maneuver:
             return False
         ego = world.ego
         lane_heading = world.lanes[self.lane].heading_at(ego.s)
-        self.target = target
-        self.profile = QuinticProfile(
-            d0=ego.d,
-            d1=float(world.lane_offsets[target]),
-            t0=world.time,
-            duration=self.duration,
+        self.profile = lane_change(
+            world.lane_offsets,
+            self.lane,
+            target,
+            ego.d,
+            world.time,
+            self.duration,
             v0=ego.speed * math.sin(ego.heading - lane_heading),
         )
+        self.target = target
         self.lane_changes += 1
         return True
 
