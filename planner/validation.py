@@ -43,11 +43,12 @@ def validate(predict: Callable, env: gym.Env, episodes: int, seed: int) -> tuple
             action, _ = predict(observation, deterministic=True)
             observation, reward, terminated, truncated, info = env.step(action)
             total += float(reward)
-            speeds.append(info.get("speed", np.nan))
+            if "speed" in info:
+                speeds.append(info["speed"])
             done = terminated or truncated
         crashes += bool(info.get("crashed", False))
         returns.append(total)
-    return crashes / episodes, float(np.mean(returns)), float(np.nanmean(speeds))
+    return crashes / episodes, float(np.mean(returns)), float(np.mean(speeds)) if speeds else float("nan")
 
 
 class RealTimeValidation(BaseCallback):

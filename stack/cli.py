@@ -170,6 +170,27 @@ def print_tracking(maneuvers) -> None:
     Console(width=160).print(table)
 
 
+reproduce_app = typer.Typer(no_args_is_help=True, help="Reproduce the paper's experiments.")
+app.add_typer(reproduce_app, name="reproduce")
+
+
+@reproduce_app.command("deepcars")
+def reproduce_deepcars(
+    quick: bool = typer.Option(False, "--quick", help="Small budgets: every row in under 2 minutes."),
+    seed: int = typer.Option(0, help="Seed of training and evaluation."),
+    out: Path | None = typer.Option(None, help="Results folder (default: runs/deepcars-<time>)."),
+) -> None:
+    """The paper's DeepCars table: tabular Q-learning, DQN and DDQN per network size, baselines."""
+    from stack.reproduce import reproduce
+
+    out = out or fresh_run_dir("deepcars")
+    console = Console()
+    with console.status("reproducing DeepCars") as status:
+        reproduce(out, quick=quick, seed=seed, progress=lambda name: status.update(f"done: {name}"))
+    console.print((out / "results.md").read_text(), highlight=False)
+    console.print(f"results: {out}")
+
+
 @app.command()
 def train(
     agent: str | None = typer.Option(None, help="ddqn | dqn | tabular (overrides train.algorithm)."),

@@ -7,6 +7,7 @@ import gymnasium as gym
 FAST_HIGHWAY = "drivestack/FastHighway-v0"
 FAST_HIGHWAY_FAST = "drivestack/FastHighwayFast-v0"
 HIERARCHICAL_HIGHWAY = "drivestack/HierarchicalHighway-v0"
+DEEPCARS = "drivestack/DeepCars-v0"
 
 
 def register_envs() -> None:
@@ -15,3 +16,4 @@ def register_envs() -> None:
     gym.register(FAST_HIGHWAY, entry_point="stack.fast_road:FastHighwayEnv")
     gym.register(FAST_HIGHWAY_FAST, entry_point="stack.fast_road:FastHighwayEnvFast")
     gym.register(HIERARCHICAL_HIGHWAY, entry_point="stack.gym_env:HierarchicalHighwayEnv")
+    gym.register(DEEPCARS, entry_point="stack.deepcars:DeepCarsEnv")
