@@ -170,6 +170,46 @@ def print_tracking(maneuvers) -> None:
     Console(width=160).print(table)
 
 
+@app.command()
+def compare(
+    agents: str = typer.Option("ddqn,rule,mobil,keep-lane", help="Comma-separated agent names."),
+    models: str = typer.Option("", help="Model files for learned agents: name=path,name=path."),
+    config: Path = typer.Option(DEFAULT_CONFIG, "--config", "-c", help="YAML run config."),
+    episodes: int | None = typer.Option(None, help="Seeded episodes per agent."),
+    seed: int | None = typer.Option(None, help="Seed of the first episode."),
+    jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
+    out: Path | None = typer.Option(None, help="Results folder (default: runs/compare-<time>)."),
+    progress: bool = typer.Option(True, help="Show progress bars."),
+) -> None:
+    """Every agent on the same seeded episodes: one table, one bar plot."""
+    try:
+        model_paths = dict(entry.split("=", 1) for entry in models.split(",") if entry)
+    except ValueError:
+        fail(f"--models: expected name=path[,name=path], got {models!r}")
+    names = [name for name in agents.split(",") if name]
+    try:
+        configs = [
+            load_config(
+                config,
+                planner__agent=name,
+                planner__model=model_paths.get(name),
+                episodes=episodes,
+                seed=seed,
+            )
+            for name in names
+        ]
+    except ConfigError as error:
+        fail(str(error))
+    from stack.compare import compare as run_compare
+    from stack.compare import markdown, write_comparison
+
+    out = out or fresh_run_dir("compare")
+    summaries = run_compare(configs, jobs=jobs, progress=progress)
+    write_comparison(summaries, out)
+    Console().print(markdown(summaries), highlight=False)
+    Console().print(f"results: {out}")
+
+
 reproduce_app = typer.Typer(no_args_is_help=True, help="Reproduce the paper's experiments.")
 app.add_typer(reproduce_app, name="reproduce")
 

@@ -95,3 +95,79 @@ def test_module_entry_point_shows_help():
         [sys.executable, "-m", "stack", "run", "--help"], capture_output=True, text=True, check=True
     )
     assert "--episodes" in completed.stdout
+
+
+def test_compare_runs_every_agent_on_the_same_episodes(tmp_path):
+    out = tmp_path / "cmp"
+    result = CliRunner().invoke(
+        app,
+        [
+            "compare",
+            "-c",
+            str(tiny_config_file(tmp_path)),
+            "--agents",
+            "rule,keep-lane,random",
+            "--episodes",
+            "2",
+            "--out",
+            str(out),
+            "--no-progress",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    summaries = json.loads((out / "comparison.json").read_text())
+    assert [s["agent"] for s in summaries] == ["rule", "keep-lane", "random"]
+    assert all(s["episodes"] == 2 and s["seed"] == 0 for s in summaries)
+    assert (out / "comparison.png").stat().st_size > 5_000
+    bad = CliRunner().invoke(app, ["compare", "--agents", "rule,genius", "--out", str(tmp_path / "no")])
+    assert bad.exit_code == 2 and "unknown agent 'genius'" in bad.output
+    assert not (tmp_path / "no").exists()
+
+
+def test_track_cli_writes_tracking_json_and_plots(tmp_path):
+    out = tmp_path / "track"
+    result = CliRunner().invoke(
+        app, ["track", "--controller", "pid,builtin", "--speeds", "20", "--out", str(out), "--no-progress"]
+    )
+    assert result.exit_code == 0, result.output
+    records = json.loads((out / "tracking.json").read_text())
+    assert {r["controller"] for r in records} == {"pid", "builtin"}
+    assert {
+        "duration_s",
+        "overshoot_m",
+        "rms_error_m",
+        "max_error_m",
+        "peak_lat_accel",
+        "peak_lat_jerk",
+        "solve_ms_p50",
+        "solve_ms_p95",
+        "fallbacks",
+        "speed",
+        "direction",
+    } <= set(records[0])
+    assert (out / "tracking_20mps.png").is_file()
+    bad = CliRunner().invoke(app, ["track", "--controller", "lqr", "--out", str(tmp_path / "x")])
+    assert bad.exit_code == 2 and "--controller: unknown 'lqr'" in bad.output
+    bad = CliRunner().invoke(app, ["track", "--speeds", "fast", "--out", str(tmp_path / "x")])
+    assert bad.exit_code == 2 and "--speeds" in bad.output
+
+
+def test_run_with_the_mpc_controller(tmp_path):
+    out = tmp_path / "mpc"
+    result = CliRunner().invoke(
+        app,
+        [
+            "run",
+            "-c",
+            str(tiny_config_file(tmp_path)),
+            "--controller",
+            "mpc",
+            "--episodes",
+            "1",
+            "--out",
+            str(out),
+            "--no-progress",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    assert json.loads((out / "summary.json").read_text())["controller"] == "mpc"
