@@ -7,10 +7,11 @@ Every error is one line naming the file and the dotted key, e.g.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import yaml
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
@@ -30,6 +31,17 @@ from planner.safety import SafetyConfig
 BACKENDS = ("fast", "stock")
 TRAINABLE = ("ddqn", "dqn", "tabular")
 ENCODINGS = ("observation", "paper", "tabular")
+
+
+def one_of(options: tuple[str, ...], what: str) -> AfterValidator:
+    """A validator accepting only `options`, whose error lists them."""
+
+    def check(value: str) -> str:
+        if value not in options:
+            raise ValueError(f"unknown {what} {value!r}; available: {', '.join(options)}")
+        return value
+
+    return AfterValidator(check)
 
 
 class ConfigError(ValueError):
@@ -53,14 +65,7 @@ class HighwayConfig(Strict):
 class SimConfig(Strict):
     """Which highway-env road runs the physics: `fast` (indexed, identical trajectories) or `stock`."""
 
-    backend: str = "fast"
-
-    @field_validator("backend")
-    @classmethod
-    def _known_backend(cls, backend: str) -> str:
-        if backend not in BACKENDS:
-            raise ValueError(f"unknown backend {backend!r}; available: {', '.join(BACKENDS)}")
-        return backend
+    backend: Annotated[str, one_of(BACKENDS, "backend")] = "fast"
 
 
 class PerceptionConfig(GridConfig):
@@ -70,20 +75,13 @@ class PerceptionConfig(GridConfig):
 
 
 class PlannerConfig(Strict):
-    agent: str = "rule"
+    agent: Annotated[str, one_of(AGENTS, "agent")] = "rule"
     model: Path | None = None
     safety: SafetyConfig = SafetyConfig()
 
-    @field_validator("agent")
-    @classmethod
-    def _known_agent(cls, agent: str) -> str:
-        if agent not in AGENTS:
-            raise ValueError(f"unknown agent {agent!r}; available: {', '.join(AGENTS)}")
-        return agent
-
 
 class ControllerConfig(Strict):
-    type: str = "pid"
+    type: Annotated[str, one_of(CONTROLLERS, "controller")] = "pid"
     pid: PIDGains = PIDGains()
     mpc: MPCSettings = MPCSettings()
     lane_change_duration_s: float = Field(5.0, gt=0)
@@ -91,13 +89,6 @@ class ControllerConfig(Strict):
     time_gap_s: float = Field(1.5, ge=0)
     standstill_gap_m: float = Field(8.0, ge=0)
     comfort_decel_mps2: float = Field(3.0, gt=0, le=5)
-
-    @field_validator("type")
-    @classmethod
-    def _known_controller(cls, name: str) -> str:
-        if name not in CONTROLLERS:
-            raise ValueError(f"unknown controller {name!r}; available: {', '.join(CONTROLLERS)}")
-        return name
 
 
 class RewardConfig(Strict):
@@ -131,10 +122,10 @@ class ValidationConfig(Strict):
 class TrainConfig(Strict):
     """`drivestack train`: algorithm, budget, network, SB3 hyper-parameters, reward, validation."""
 
-    algorithm: str = "ddqn"
+    algorithm: Annotated[str, one_of(TRAINABLE, "algorithm")] = "ddqn"
     steps: int = Field(50_000, ge=1)
-    encoding: str = "observation"
-    network: str = "shallow"
+    encoding: Annotated[str, one_of(ENCODINGS, "encoding")] = "observation"
+    network: Annotated[str, one_of(tuple(NET_ARCHS), "network")] = "shallow"
     learning_rate: float = Field(5e-4, gt=0)
     buffer_size: int = Field(50_000, ge=1)
     learning_starts: int = Field(1_000, ge=0)
@@ -149,27 +140,6 @@ class TrainConfig(Strict):
     checkpoint_every: int = Field(5_000, ge=1)
     reward: RewardConfig = RewardConfig()
     validation: ValidationConfig = ValidationConfig()
-
-    @field_validator("algorithm")
-    @classmethod
-    def _known_algorithm(cls, name: str) -> str:
-        if name not in TRAINABLE:
-            raise ValueError(f"unknown algorithm {name!r}; available: {', '.join(TRAINABLE)}")
-        return name
-
-    @field_validator("encoding")
-    @classmethod
-    def _known_encoding(cls, name: str) -> str:
-        if name not in ENCODINGS:
-            raise ValueError(f"unknown encoding {name!r}; available: {', '.join(ENCODINGS)}")
-        return name
-
-    @field_validator("network")
-    @classmethod
-    def _known_network(cls, name: str) -> str:
-        if name not in NET_ARCHS:
-            raise ValueError(f"unknown network {name!r}; available: {', '.join(NET_ARCHS)}")
-        return name
 
 
 class RunConfig(Strict):
