@@ -26,6 +26,17 @@ def fail(message: str) -> None:
     raise typer.Exit(code=2)
 
 
+def check_agent(cfg) -> None:
+    """Build the configured agent once, so a missing or unsafe model file fails before any work."""
+    from planner.factory import make_agent
+    from stack.closed_loop import grid_config
+
+    try:
+        make_agent(cfg.planner.agent, cfg.highway.lanes_count, grid_config(cfg), cfg.seed, cfg.planner.model)
+    except ValueError as error:
+        fail(str(error))
+
+
 def fresh_run_dir(prefix: str) -> Path:
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
     return Path("runs") / f"{prefix}-{stamp}"
@@ -63,6 +74,7 @@ def run(
         )
     except ConfigError as error:
         fail(str(error))
+    check_agent(cfg)
     from stack.loop import run as run_loop
     from stack.report import print_tables, write_results
 
@@ -200,6 +212,8 @@ def compare(
         ]
     except ConfigError as error:
         fail(str(error))
+    for cfg in configs:
+        check_agent(cfg)
     from stack.compare import compare as run_compare
     from stack.compare import markdown, write_comparison
 

@@ -171,3 +171,28 @@ def test_run_with_the_mpc_controller(tmp_path):
     )
     assert result.exit_code == 0, result.output
     assert json.loads((out / "summary.json").read_text())["controller"] == "mpc"
+
+
+def test_a_bad_model_file_fails_before_any_work(tmp_path):
+    crafted = tmp_path / "crafted.npz"
+    crafted.write_bytes(b"PK\x03\x04 not really a zip")
+    out = tmp_path / "never"
+    result = CliRunner().invoke(
+        app,
+        [
+            "run",
+            "-c",
+            str(tiny_config_file(tmp_path)),
+            "--agent",
+            "ddqn",
+            "--model",
+            str(crafted),
+            "--out",
+            str(out),
+        ],
+    )
+    assert result.exit_code == 2
+    assert f"{crafted}: not a drivestack model file" in result.output.replace("\n", "")
+    assert not out.exists()
+    missing = CliRunner().invoke(app, ["run", "--agent", "dqn", "--out", str(out)])
+    assert missing.exit_code == 2 and "needs a model file" in missing.output
