@@ -52,7 +52,7 @@ def test_run_writes_the_results_folder(tmp_path):
     assert result.exit_code == 0, result.output
     summary = json.loads((out / "summary.json").read_text())
     assert SUMMARY_KEYS <= set(summary)
-    assert (summary["episodes"], summary["seed"], summary["agent"]) == (2, 4, "rule")
+    assert (summary["episodes"], summary["seed"], summary["agent"]) == (2, 4, "ddqn")
     rows = (out / "episodes.csv").read_text().strip().splitlines()
     assert len(rows) == 3 and rows[0].startswith("episode,seed,")
     assert (out / "traces.png").stat().st_size > 10_000

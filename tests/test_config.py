@@ -21,7 +21,7 @@ def test_default_config_loads():
     assert config.highway.duration == 40
     assert config.control_rate_hz == config.highway.simulation_frequency == 15
     assert config.decision_ticks == 15
-    assert config.planner.agent == "rule"
+    assert config.planner.agent == "ddqn"
     assert config.perception.cells_ahead == 12
 
 

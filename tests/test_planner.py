@@ -186,8 +186,6 @@ def test_crafted_and_truncated_model_files_are_refused(tmp_path, model_files):
 
 
 def test_shipped_default_model_loads_safely():
-    if not DEFAULT_MODEL.is_file():
-        pytest.skip("no shipped model yet")
     agent = load_agent(DEFAULT_MODEL, expected_algorithms=("ddqn",))
     assert agent.metadata["algorithm"] == "ddqn"
     assert DEFAULT_MODEL.stat().st_size < 500_000
