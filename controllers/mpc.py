@@ -100,13 +100,8 @@ class MPCTracker:
 
     def _references(self, state: EgoState, reference: Reference, acceleration: float):
         n = self.settings.horizon
-        preview = list(reference.preview[:n])
-        if len(preview) < n:
-            preview += (
-                [(reference.d, 0.0)] * (n - len(preview))
-                if not preview
-                else [preview[-1]] * (n - len(preview))
-            )
+        preview = list(reference.preview[:n]) or [(reference.d, 0.0)]
+        preview += [preview[-1]] * (n - len(preview))
         d = np.array([reference.d] + [p[0] for p in preview])
         speed = max(state.speed, 1.0)
         d_dot = np.array([reference.d_dot] + [p[1] for p in preview])

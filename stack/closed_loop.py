@@ -46,14 +46,21 @@ def make_controller(config: ControllerConfig, dt: float):
     return make_tracker(config.type, gains, config.mpc, cruise, dt)
 
 
+def lane_curvature(lane, s: float) -> float:
+    """Curvature [1/m] of `lane` at `s`: central difference of its heading over +-1 m."""
+    return (lane.heading_at(s + 1.0) - lane.heading_at(s - 1.0)) / 2.0
+
+
 def ego_state(world: WorldState, lane: int) -> EgoState:
     """The ego in the frame of `lane`: lateral offset, heading relative to the lane, speed, and
-    the lane's curvature (central difference of its heading over +-1 m)."""
+    the lane's curvature."""
     ego = world.ego
     geometry = world.lanes[lane]
-    curvature = (geometry.heading_at(ego.s + 1.0) - geometry.heading_at(ego.s - 1.0)) / 2.0
     return EgoState(
-        d=ego.d, heading=ego.heading - geometry.heading_at(ego.s), speed=ego.speed, curvature=curvature
+        d=ego.d,
+        heading=ego.heading - geometry.heading_at(ego.s),
+        speed=ego.speed,
+        curvature=lane_curvature(geometry, ego.s),
     )
 
 

@@ -31,7 +31,7 @@ from highway_env.vehicle.kinematics import Vehicle
 
 from controllers.reference import QuinticProfile
 from controllers.types import EgoState, Reference
-from stack.closed_loop import make_controller
+from stack.closed_loop import lane_curvature, make_controller
 from stack.config import ControllerConfig
 from stack.metrics import lateral_comfort, moving_average
 
@@ -103,7 +103,6 @@ def run_maneuver(
 ) -> Maneuver:
     network = road_network(road_kind)
     road = Road(network=network)
-    (start_node, end_node), lanes = ("0", "1"), None
     start_node = next(iter(network.graph))
     end_node = next(iter(network.graph[start_node]))
     lanes = network.graph[start_node][end_node]
@@ -145,7 +144,7 @@ def run_maneuver(
             else:
                 vehicle.act()
         else:
-            curvature = (reference_lane.heading_at(s + 1.0) - reference_lane.heading_at(s - 1.0)) / 2.0
+            curvature = lane_curvature(reference_lane, s)
             value, rate, accel = profile.sample(t)
             reference = Reference(
                 value,
