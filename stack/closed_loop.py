@@ -111,8 +111,7 @@ class ClosedLoop:
     def act(self, command: Command) -> int:
         """Apply `command` (through the safety layer) and run control ticks until the next decision
         point or the end of the episode; returns the ticks run."""
-        command = self.safety.filter(command, self.world, self.maneuver.lane)
-        self.maneuver.command(command, self.world)
+        self._start(command)
         ticks = 0
         while not self.done:
             self.tick()
@@ -123,7 +122,24 @@ class ClosedLoop:
                 break
         return ticks
 
+    def advance(self, command: Command, ticks: int) -> int:
+        """Apply `command` unless a lane change is still running (then it is ignored) and run
+        exactly `ticks` control ticks, or to the episode end: the fixed-period step of the training
+        MDP, so every transition spans the same time and one discount factor fits all."""
+        if not self.maneuver.changing_lane:
+            self._start(command)
+        run = 0
+        while run < ticks and not self.done:
+            self.tick()
+            self.maneuver.update(self.world)
+            run += 1
+        return run
+
+    def _start(self, command: Command) -> None:
+        self.maneuver.command(self.safety.filter(command, self.world, self.maneuver.lane), self.world)
+
     def tick(self) -> None:
+
         world, maneuver = self.world, self.maneuver
         if (
             maneuver.changing_lane

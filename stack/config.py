@@ -93,8 +93,9 @@ class ControllerConfig(Strict):
 
 class RewardConfig(Strict):
     """Per decision step: alive x (seconds elapsed / decision period), plus speed_weight x that
-    fraction x the ego's speed mapped from speed_range [m/s] to [0, 1]; a crash gives `collision`
-    instead. The paper's reward is alive = 1, collision = -1, speed_weight = 0."""
+    fraction x the ego's mean speed over the step mapped from speed_range [m/s] to [0, 1]; a crash
+    gives `collision` instead. The paper's reward is alive = 1, collision = -1, speed_weight = 0."""
+
 
     alive: float = 1.0
     collision: float = -1.0

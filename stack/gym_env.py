@@ -1,9 +1,12 @@
 """`drivestack/HierarchicalHighway-v0`: the decision layer's MDP on the full stack.
 
 Action: `Discrete(3)` (LEFT, STAY, RIGHT). Observation: the perception encoding named by
-`config.train.encoding`. One step is one decision point of the closed loop: the safety layer,
-maneuver and controllers run inside at the control rate until the next decision (one decision
-period, or the end of a lane change). Reward: see `RewardConfig` (the paper's +1 / -1 by default).
+`config.train.encoding`. One step is one decision period of the closed loop: the safety layer,
+maneuver and controllers run inside at the control rate. A lane change spans several steps, and
+actions taken while it runs are ignored, so every transition lasts the same time (one discount
+factor per step is then right; a whole lane change in one step would earn several periods of reward
+for one discount and bias the agent towards changing lane). Reward: see `RewardConfig` (the
+paper's +1 / -1 by default).
 """
 
 from __future__ import annotations
@@ -58,14 +61,16 @@ class HierarchicalHighwayEnv(gym.Env):
         return self._observe(), self._info()
 
     def step(self, action):
-        ticks = self.loop.act(Command(int(action)))
+        ticks = self.loop.advance(Command(int(action)), self.config.decision_ticks)
         reward_config = self.config.train.reward
         if self.loop.crashed:
             reward = reward_config.collision
         else:
             fraction = ticks / self.config.decision_ticks
             low, high = reward_config.speed_range
-            speed_score = float(np.clip((self.loop.world.speed[0] - low) / (high - low), 0.0, 1.0))
+            mean_speed = float(np.mean(self.loop.recorder.speed[-ticks:]))
+            speed_score = float(np.clip((mean_speed - low) / (high - low), 0.0, 1.0))
+
             reward = fraction * (reward_config.alive + reward_config.speed_weight * speed_score)
         terminated = self.loop.crashed
         truncated = self.loop.done and not terminated

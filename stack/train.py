@@ -133,7 +133,11 @@ class Trainer:
 
     # --- DDQN / DQN -------------------------------------------------------------------------
     def _build_dqn(self):
+        """The SB3 model. Torch gets one thread: the Q-networks hold a few thousand weights, where
+        more threads only add overhead and steal cores from the simulator."""
+        th.set_num_threads(1)
         train = self.config.train
+
         algorithm = ALGORITHMS[train.algorithm]
         return algorithm(
             "MlpPolicy",
