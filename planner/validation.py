@@ -1,9 +1,11 @@
 """The paper's real-time validation (Algorithm 1) as an SB3 callback.
 
-Two validation periods: a short one, run often on few episodes, and a long one, run rarely on many.
-Both replay the same seeded validation episodes (episode k uses seed + k) with greedy actions on a
-separate env, so every validation is comparable. A model is kept whenever it improves on the best
-so far: lower collision rate first, then higher mean return.
+Two validation periods: a short one, run often on few episodes, and a long one, run rarely on many,
+with greedy actions on a separate env; episode k of every validation uses seed + k, so validations of
+one period see the same episodes. Scores (lower collision rate first, then higher mean return) are
+compared within a period only: a mean over 4 episodes says nothing against a mean over 16 other
+ones. A short validation that beats the best short score promotes the model to a long validation at
+once; the model is kept whenever a long validation beats the best long score.
 """
 
 from __future__ import annotations
@@ -28,10 +30,6 @@ class Validation:
     mean_speed: float
     improved: bool
 
-    @property
-    def score(self) -> tuple[float, float]:
-        return (-self.collision_rate, self.mean_return)
-
 
 def validate(predict: Callable, env: gym.Env, episodes: int, seed: int) -> tuple[float, float, float]:
     """(collision rate, mean return, mean speed [m/s]) of greedy `predict` over seeded episodes."""
@@ -53,7 +51,8 @@ def validate(predict: Callable, env: gym.Env, episodes: int, seed: int) -> tuple
 
 class RealTimeValidation(BaseCallback):
     """Validate every `short_every` steps on `short_episodes` episodes and every `long_every` steps
-    on `long_episodes`; call `on_improvement(model, validation)` when the best score improves."""
+    (and on promotion) on `long_episodes`; call `on_improvement(model, validation)` when the best long
+    score improves."""
 
     def __init__(
         self,
@@ -65,7 +64,7 @@ class RealTimeValidation(BaseCallback):
         seed: int,
         on_improvement: Callable[[object, Validation], None],
         history: list[Validation] | None = None,
-        best: tuple[float, float] | None = None,
+        best: dict[str, tuple[float, float] | None] | None = None,
     ) -> None:
         super().__init__()
         self.env = env
@@ -74,20 +73,25 @@ class RealTimeValidation(BaseCallback):
         self.seed = seed
         self.on_improvement = on_improvement
         self.history = history if history is not None else []
-        self.best = best
+        self.best = best or {"short": None, "long": None}
 
     def _on_step(self) -> bool:
-        step = self.num_timesteps
-        if step % self.long_every == 0:
-            self.run_validation("long", self.long_episodes)
-        elif step % self.short_every == 0:
-            self.run_validation("short", self.short_episodes)
+        self.at_step(self.num_timesteps)
         return True
 
+    def at_step(self, step: int) -> None:
+        """Run the validations due at environment step `step`."""
+        self.num_timesteps = step
+        if step % self.long_every == 0:
+            self.run_validation("long", self.long_episodes)
+        elif step % self.short_every == 0 and self.run_validation("short", self.short_episodes).improved:
+            self.run_validation("long", self.long_episodes)
+
     def run_validation(self, period: str, episodes: int) -> Validation:
+        """Validate now; `improved` in the result means it beat the best score of its period."""
         collision_rate, mean_return, mean_speed = validate(self.model.predict, self.env, episodes, self.seed)
         score = (-collision_rate, mean_return)
-        improved = self.best is None or score > self.best
+        improved = self.best[period] is None or score > self.best[period]
         result = Validation(
             self.num_timesteps, period, episodes, collision_rate, mean_return, mean_speed, improved
         )
@@ -98,16 +102,25 @@ class RealTimeValidation(BaseCallback):
             logger.record("validation/mean_return", mean_return)
             logger.record("validation/mean_speed", mean_speed)
         if improved:
-            self.best = score
-            self.on_improvement(self.model, result)
+            self.best[period] = score
+            if period == "long":
+                self.on_improvement(self.model, result)
         return result
 
     def state(self) -> dict:
         """JSON-ready state for checkpoints."""
-        return {"best": list(self.best) if self.best else None, "history": [asdict(v) for v in self.history]}
+        best = {period: list(score) if score else None for period, score in self.best.items()}
+        return {"best": best, "history": [asdict(v) for v in self.history]}
 
     @staticmethod
-    def restore(state: dict) -> tuple[list[Validation], tuple[float, float] | None]:
+    def restore(state: dict) -> tuple[list[Validation], dict[str, tuple[float, float] | None]]:
         history = [Validation(**entry) for entry in state.get("history", [])]
-        best = tuple(state["best"]) if state.get("best") else None
-        return history, best
+        best = state.get("best") or {}
+        return history, {
+            period: tuple(best[period]) if best.get(period) else None for period in ("short", "long")
+        }
+
+
+def kept_models(history: list[Validation]) -> list[Validation]:
+    """The validations of `history` whose model was kept (long ones that improved), in order."""
+    return [v for v in history if v.period == "long" and v.improved]

@@ -29,7 +29,7 @@ from planner.learned import export_q_network
 from planner.model_file import load_model, save_model
 from planner.networks import net_arch
 from planner.tabular import QLearning
-from planner.validation import RealTimeValidation, Validation
+from planner.validation import RealTimeValidation, Validation, kept_models
 from stack.closed_loop import grid_config
 from stack.config import RunConfig, load_config
 from stack.gym_env import HierarchicalHighwayEnv
@@ -81,7 +81,7 @@ class Trainer:
         self.env = Monitor(HierarchicalHighwayEnv(config))
         self.validation_env = HierarchicalHighwayEnv(config)
         self.history: list[Validation] = []
-        self.best: tuple[float, float] | None = None
+        self.best: dict[str, tuple[float, float] | None] | None = None
         self.started = time.perf_counter()
         self.elapsed_before = 0.0
 
@@ -231,17 +231,12 @@ class Trainer:
             self.model.table[...] = arrays["q_table"]
             self.model.steps = metadata["counters"]["num_timesteps"]
             self._restore_common(metadata)
-        v = train.validation
         validation = self._validation_callback(save_q_table)
         validation.model = self.model
 
         def on_step(agent: QLearning, info: dict) -> bool:
-            validation.num_timesteps = step = agent.steps
-            if step % v.long_every == 0:
-                validation.run_validation("long", v.long_episodes)
-            elif step % v.short_every == 0:
-                validation.run_validation("short", v.short_episodes)
-            if step % train.checkpoint_every == 0:
+            validation.at_step(agent.steps)
+            if agent.steps % train.checkpoint_every == 0:
                 self._save_checkpoint()
             return True
 
@@ -284,7 +279,7 @@ class Trainer:
                 export_q_network(self.model, self.out / FINAL, self.metadata(steps))
         history = self.validation.history if hasattr(self, "validation") else self.history
         plot_training_curve(history, self.out / "training_curve.png")
-        best = max(history, key=lambda v: v.score, default=None)
+        best = (kept_models(history) or [None])[-1]
         summary = {
             "algorithm": self.config.train.algorithm,
             "network": self.config.train.network,
@@ -318,7 +313,7 @@ def plot_training_curve(history: list[Validation], path: Path) -> None:
             [v.step for v in points], [v.mean_return for v in points], marker, label=f"{period} validation"
         )
         collisions.plot([v.step for v in points], [100 * v.collision_rate for v in points], marker)
-    best = [v for v in history if v.improved]
+    best = kept_models(history)
     returns.plot(
         [v.step for v in best], [v.mean_return for v in best], "k*", markersize=10, label="kept (best)"
     )

@@ -35,16 +35,18 @@ TINY = {
 
 
 class Scripted(gym.Env):
-    """One-step episodes whose outcome is set by the test: crash or not, and the return."""
+    """One-step episodes whose outcome (crash or not, return) the test sets: `outcome` for the
+    episode of seed 0, `later` (default: the same) for the others."""
 
     observation_space, action_space = gym.spaces.Box(0, 1, (1,)), gym.spaces.Discrete(3)
-    outcome = (False, 1.0)
+    outcome, later = (False, 1.0), None
 
     def reset(self, *, seed=None, options=None):
+        self.seed_ = seed
         return np.zeros(1, np.float32), {}
 
     def step(self, action):
-        crashed, reward = self.outcome
+        crashed, reward = self.outcome if self.seed_ == 0 or self.later is None else self.later
         return np.zeros(1, np.float32), reward, crashed, not crashed, {"crashed": crashed, "speed": 20.0}
 
 
@@ -55,23 +57,36 @@ class FakeModel:
         return 1, None
 
 
-def test_validation_keeps_a_model_only_when_it_improves():
+def test_validation_keeps_a_model_only_when_its_long_validation_improves():
     env, saved = Scripted(), []
     callback = RealTimeValidation(env, 10, 1, 50, 3, 0, lambda model, v: saved.append(v.step))
     callback.model = FakeModel()
-    for step, outcome in [
-        (10, (False, 1.0)),
-        (20, (False, 0.5)),
-        (30, (True, 9.0)),
-        (40, (False, 2.0)),
-        (50, (False, 2.0)),
+    for step, outcome, later in [
+        (10, (False, 1.0), None),
+        (20, (False, 0.5), None),
+        (30, (True, 9.0), None),
+        (40, (False, 2.0), None),
+        (50, (False, 2.0), None),
+        (60, (False, 5.0), (True, 0.0)),
     ]:
-        env.outcome = outcome
+        env.outcome, env.later = outcome, later
         callback.num_timesteps = step
         callback._on_step()
-    assert saved == [10, 40], "a lower return, a crash, or an equal score is not an improvement"
-    assert [v.period for v in callback.history] == ["short", "short", "short", "short", "long"]
-    assert callback.history[2].collision_rate == 1.0
+    assert saved == [10, 40], "a lower return, a crash, an equal score or a bad long run is not kept"
+    periods = [(v.step, v.period) for v in callback.history]
+    assert periods == [
+        (10, "short"),
+        (10, "long"),
+        (20, "short"),
+        (30, "short"),
+        (40, "short"),
+        (40, "long"),
+        (50, "long"),
+        (60, "short"),
+        (60, "long"),
+    ], "a short improvement promotes the model to a long validation at once"
+    assert callback.history[-1].collision_rate == pytest.approx(2 / 3)
+    assert callback.history[3].collision_rate == 1.0
 
 
 def test_hierarchical_env_passes_sb3_check_and_reports_info():
@@ -145,7 +160,11 @@ def test_train_cli_smoke_writes_best_model_and_curve(tmp_path):
         assert (out / name).is_file(), name
     assert any(Path(out / "tensorboard").rglob("events.out.tfevents.*"))
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["steps"] == 40 and summary["validations"] == 4
+    assert summary["steps"] == 40 and summary["validations"] == 5, (
+        "short 10 (promoted: long 10), long 20, short 30, long 40"
+    )
+    assert summary["best_validation"]["period"] == "long"
+
     run = CliRunner().invoke(
         app,
         [
