@@ -94,13 +94,17 @@ class ControllerConfig(Strict):
 class RewardConfig(Strict):
     """Per decision step: alive x (seconds elapsed / decision period), plus speed_weight x that
     fraction x the ego's mean speed over the step mapped from speed_range [m/s] to [0, 1]; a crash
-    gives `collision` instead. The paper's reward is alive = 1, collision = -1, speed_weight = 0."""
+    gives `collision` instead; `lane_change` is subtracted whenever the agent asks for a lane change
+    (granted or masked), a margin like MOBIL's threshold so it asks only when the change pays. The
+    paper's reward is alive = 1, collision = -1, speed_weight = 0, lane_change = 0."""
 
 
     alive: float = 1.0
     collision: float = -1.0
     speed_weight: float = Field(0.0, ge=0)
     speed_range: tuple[float, float] = (20.0, 30.0)
+    lane_change: float = Field(0.0, ge=0)
+
 
     @field_validator("speed_range")
     @classmethod

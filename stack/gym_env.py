@@ -61,7 +61,9 @@ class HierarchicalHighwayEnv(gym.Env):
         return self._observe(), self._info()
 
     def step(self, action):
-        ticks = self.loop.advance(Command(int(action)), self.config.decision_ticks)
+        command = Command(int(action))
+        asked_to_change = command is not Command.STAY and not self.loop.maneuver.changing_lane
+        ticks = self.loop.advance(command, self.config.decision_ticks)
         reward_config = self.config.train.reward
         if self.loop.crashed:
             reward = reward_config.collision
@@ -70,8 +72,9 @@ class HierarchicalHighwayEnv(gym.Env):
             low, high = reward_config.speed_range
             mean_speed = float(np.mean(self.loop.recorder.speed[-ticks:]))
             speed_score = float(np.clip((mean_speed - low) / (high - low), 0.0, 1.0))
-
             reward = fraction * (reward_config.alive + reward_config.speed_weight * speed_score)
+        reward -= reward_config.lane_change * asked_to_change
+
         terminated = self.loop.crashed
         truncated = self.loop.done and not terminated
         return self._observe(), float(reward), terminated, truncated, self._info()

@@ -100,15 +100,24 @@ def test_hierarchical_env_passes_sb3_check_and_reports_info():
 
 
 def test_every_step_spans_one_decision_period_and_a_lane_change_ignores_new_actions():
-    env = gym.make(HIERARCHICAL_HIGHWAY, config={**TINY, "highway": {"vehicles_count": 1, "duration": 10}})
+    env = gym.make(
+        HIERARCHICAL_HIGHWAY,
+        config={
+            **TINY,
+            "highway": {"vehicles_count": 1, "duration": 10},
+            "train": {**TINY["train"], "reward": {"lane_change": 0.25}},
+        },
+    )
     env.reset(seed=0)
     loop = env.unwrapped.loop
     towards_centre = 0 if loop.maneuver.lane > 0 else 2
-    times = [loop.world.time]
+    times, rewards = [loop.world.time], []
     for action in (towards_centre, 2 - towards_centre, 2 - towards_centre, 2 - towards_centre):
-        env.step(action)
+        rewards.append(env.step(action)[1])
         times.append(loop.world.time)
     assert np.diff(times) == pytest.approx([1.0] * 4)
+    assert rewards == pytest.approx([0.75, 1.0, 1.0, 1.0]), "only the request that counts pays the cost"
+
     assert loop.maneuver.changing_lane and loop.maneuver.lane_changes == 1
     while loop.maneuver.changing_lane:
         env.step(1)
