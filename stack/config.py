@@ -98,13 +98,11 @@ class RewardConfig(Strict):
     (granted or masked), a margin like MOBIL's threshold so it asks only when the change pays. The
     paper's reward is alive = 1, collision = -1, speed_weight = 0, lane_change = 0."""
 
-
     alive: float = 1.0
     collision: float = -1.0
     speed_weight: float = Field(0.0, ge=0)
     speed_range: tuple[float, float] = (20.0, 30.0)
     lane_change: float = Field(0.0, ge=0)
-
 
     @field_validator("speed_range")
     @classmethod
