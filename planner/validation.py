@@ -115,7 +115,9 @@ class RealTimeValidation(BaseCallback):
     @staticmethod
     def restore(state: dict) -> tuple[list[Validation], dict[str, tuple[float, float] | None]]:
         history = [Validation(**entry) for entry in state.get("history", [])]
-        best = state.get("best") or {}
+        best = state.get("best")
+        best = best if isinstance(best, dict) else {}  # checkpoints before per-period bests: restart them
+
         return history, {
             period: tuple(best[period]) if best.get(period) else None for period in ("short", "long")
         }

@@ -137,8 +137,8 @@ class Trainer:
         more threads only add overhead and steal cores from the simulator."""
         th.set_num_threads(1)
         train = self.config.train
-
         algorithm = ALGORITHMS[train.algorithm]
+
         return algorithm(
             "MlpPolicy",
             self.env,
