@@ -299,7 +299,7 @@ def reproduce(out: Path, quick: bool = False, seed: int = 0, progress=None) -> l
                 progress(f"{algorithm} {network}")
     rows += baselines(budget, seed)
     plot_curves(curves, out / "training_curves.png")
-    (out / "results.json").write_text(
+    (out / "summary.json").write_text(
         json.dumps(
             {"quick": quick, "seed": seed, "budget": asdict(budget), "rows": [asdict(r) for r in rows]},
             indent=2,

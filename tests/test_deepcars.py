@@ -121,7 +121,7 @@ def test_quick_reproduction_reports_every_row(tmp_path):
         for network in ("shallow", "medium", "deep", "16", "16x16"):
             assert (algorithm, network) in agents
     assert agents[-3:] == [("random", "-"), ("always-stay", "-"), ("lookahead-rule", "-")]
-    results = json.loads((tmp_path / "results.json").read_text())
+    results = json.loads((tmp_path / "summary.json").read_text())
     assert len(results["rows"]) == 15 and results["quick"]
     table = (tmp_path / "results.md").read_text()
     assert table.count("\n| ") == 16 and "98.28 %" in table and "99.14 %" in table
