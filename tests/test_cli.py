@@ -31,24 +31,15 @@ def tiny_config_file(tmp_path) -> Path:
     return path
 
 
-def test_run_writes_the_results_folder(tmp_path):
+def run_tiny(tmp_path, *options: str):
+    """`drivestack run` on the tiny config into `tmp_path/out` with `options`: (result, out)."""
     out = tmp_path / "out"
-    result = CliRunner().invoke(
-        app,
-        [
-            "run",
-            "--config",
-            str(tiny_config_file(tmp_path)),
-            "--episodes",
-            "2",
-            "--seed",
-            "4",
-            "--out",
-            str(out),
-            "--video",
-            "--no-progress",
-        ],
-    )
+    arguments = ["run", "-c", str(tiny_config_file(tmp_path)), *options, "--out", str(out), "--no-progress"]
+    return CliRunner().invoke(app, arguments), out
+
+
+def test_run_writes_the_results_folder(tmp_path):
+    result, out = run_tiny(tmp_path, "--episodes", "2", "--seed", "4", "--video")
     assert result.exit_code == 0, result.output
     summary = json.loads((out / "summary.json").read_text())
     assert SUMMARY_KEYS <= set(summary)
@@ -61,33 +52,16 @@ def test_run_writes_the_results_folder(tmp_path):
 
 
 def test_agent_option_swaps_the_agent(tmp_path):
-    out = tmp_path / "out"
-    result = CliRunner().invoke(
-        app,
-        [
-            "run",
-            "-c",
-            str(tiny_config_file(tmp_path)),
-            "--agent",
-            "keep-lane",
-            "--episodes",
-            "1",
-            "--out",
-            str(out),
-            "--no-progress",
-        ],
-    )
+    result, out = run_tiny(tmp_path, "--agent", "keep-lane", "--episodes", "1")
     assert result.exit_code == 0, result.output
     assert json.loads((out / "summary.json").read_text())["agent"] == "keep-lane"
 
 
 def test_bad_input_exits_non_zero_with_one_line(tmp_path):
-    result = CliRunner().invoke(
-        app, ["run", "-c", str(tiny_config_file(tmp_path)), "--agent", "genius", "--out", str(tmp_path / "x")]
-    )
+    result, out = run_tiny(tmp_path, "--agent", "genius")
     assert result.exit_code == 2
     assert "planner.agent: unknown agent 'genius'" in result.output
-    assert not (tmp_path / "x").exists(), "nothing runs or is written before the config validates"
+    assert not out.exists(), "nothing runs or is written before the config validates"
 
 
 def test_module_entry_point_shows_help():
@@ -153,22 +127,8 @@ def test_track_cli_writes_tracking_json_and_plots(tmp_path):
 
 
 def test_run_with_the_mpc_controller(tmp_path):
-    out = tmp_path / "mpc"
-    result = CliRunner().invoke(
-        app,
-        [
-            "run",
-            "-c",
-            str(tiny_config_file(tmp_path)),
-            "--controller",
-            "mpc",
-            "--episodes",
-            "1",
-            "--out",
-            str(out),
-            "--no-progress",
-        ],
-    )
+    result, out = run_tiny(tmp_path, "--controller", "mpc", "--episodes", "1")
+
     assert result.exit_code == 0, result.output
     assert json.loads((out / "summary.json").read_text())["controller"] == "mpc"
 
@@ -176,21 +136,7 @@ def test_run_with_the_mpc_controller(tmp_path):
 def test_a_bad_model_file_fails_before_any_work(tmp_path):
     crafted = tmp_path / "crafted.npz"
     crafted.write_bytes(b"PK\x03\x04 not really a zip")
-    out = tmp_path / "never"
-    result = CliRunner().invoke(
-        app,
-        [
-            "run",
-            "-c",
-            str(tiny_config_file(tmp_path)),
-            "--agent",
-            "ddqn",
-            "--model",
-            str(crafted),
-            "--out",
-            str(out),
-        ],
-    )
+    result, out = run_tiny(tmp_path, "--agent", "ddqn", "--model", str(crafted))
     assert result.exit_code == 2
     assert f"{crafted}: not a drivestack model file" in result.output.replace("\n", "")
     assert not out.exists()
