@@ -24,12 +24,12 @@ from multiprocessing import get_context
 
 import numpy as np
 
-from planner.agents import decide
 from planner.command import Command
 from planner.factory import make_agent
 from stack.closed_loop import ClosedLoop, grid_config
 from stack.config import RunConfig, load_config
 from stack.highway import HighwayAdapter
+from stack.loop import agent_step
 
 COMMANDS = (Command.STAY, Command.LEFT, Command.RIGHT)
 LANE_CHANGE_MARGIN_M = 1.0
@@ -45,7 +45,7 @@ def progress_after(loop: ClosedLoop, command: Command, base, horizon_s: float) -
     if future.safety.masked != masked:
         return -np.inf
     while not future.done and future.world.time - start_t < horizon_s:
-        future.act(decide(base, future.perceive().encode(getattr(base, "encoding", "paper"))))
+        agent_step(future, base)
     return -np.inf if future.crashed else float(future.world.s[0] - start_s)
 
 

@@ -17,12 +17,16 @@ from stack.highway import HighwayAdapter
 from stack.metrics import EpisodeResult, summarize
 
 
+def agent_step(loop: ClosedLoop, agent: Agent) -> int:
+    """Perceive, let `agent` decide on its own encoding, act until the next decision; ticks run."""
+    return loop.act(decide(agent, loop.perceive().encode(getattr(agent, "encoding", "paper"))))
+
+
 def run_agent_episode(loop: ClosedLoop, agent: Agent, episode: int, seed: int) -> EpisodeResult:
     """Drive one episode: perceive, decide, act, until the episode ends."""
     loop.reset(seed)
-    encoding = getattr(agent, "encoding", "paper")
     while not loop.done:
-        loop.act(decide(agent, loop.perceive().encode(encoding)))
+        agent_step(loop, agent)
     return loop.result(episode)
 
 
