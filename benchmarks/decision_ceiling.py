@@ -26,10 +26,10 @@ import numpy as np
 
 from planner.command import Command
 from planner.factory import make_agent
-from stack.closed_loop import ClosedLoop, grid_config
-from stack.config import RunConfig, load_config
-from stack.highway import HighwayAdapter
-from stack.loop import agent_step
+from stack.core.closed_loop import ClosedLoop, grid_config
+from stack.core.config import RunConfig, load_config
+from stack.core.episodes import agent_step
+from stack.sim.highway import HighwayAdapter
 
 COMMANDS = (Command.STAY, Command.LEFT, Command.RIGHT)
 LANE_CHANGE_MARGIN_M = 1.0

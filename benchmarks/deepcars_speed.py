@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from stack.deepcars import DeepCarsBatch
+from stack.deepcars.world import DeepCarsBatch
 
 
 def main() -> None:

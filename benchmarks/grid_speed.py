@@ -18,8 +18,8 @@ from highway_env.envs.common.observation import OccupancyGridObservation
 
 from controllers.types import Actuation
 from perception.grid import GridConfig, OccupancyGridBuilder
-from stack.config import HighwayConfig
-from stack.highway import HighwayAdapter
+from stack.core.config import HighwayConfig
+from stack.sim.highway import HighwayAdapter
 
 
 def timings(function, repeats: int) -> tuple[float, float]:

@@ -20,10 +20,10 @@ import gymnasium as gym
 import numpy as np
 
 from planner.factory import make_agent
-from stack.closed_loop import ClosedLoop, grid_config
-from stack.config import load_config
-from stack.highway import HighwayAdapter, env_config
-from stack.loop import run_agent_episode
+from stack.core.closed_loop import ClosedLoop, grid_config
+from stack.core.config import load_config
+from stack.core.episodes import run_agent_episode
+from stack.sim.highway import HighwayAdapter, env_config
 
 
 def bare_rate(config: dict, seeds: range) -> float:

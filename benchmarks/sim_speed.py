@@ -17,9 +17,9 @@ import gymnasium as gym
 import highway_env  # noqa: F401
 import numpy as np
 
-from stack.config import HighwayConfig
-from stack.envs import FAST_HIGHWAY, FAST_HIGHWAY_FAST
-from stack.highway import env_config
+from stack.core.config import HighwayConfig
+from stack.sim.envs import FAST_HIGHWAY, FAST_HIGHWAY_FAST
+from stack.sim.highway import env_config
 
 SCENES = {
     "highway-v0 defaults (4 lanes, 50 vehicles, 15 Hz)": (

@@ -1,3 +1,3 @@
-from stack.cli import app
+from stack.apps.cli import app
 
 app(prog_name="drivestack")

@@ -1,6 +1,6 @@
 import pytest
 
-from stack.config import build_config
+from stack.core.config import build_config
 
 
 @pytest.fixture

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from controllers.types import Actuation
-from stack.config import HighwayConfig
-from stack.highway import HighwayAdapter, to_env_action
+from stack.core.config import HighwayConfig
+from stack.sim.highway import HighwayAdapter, to_env_action
 
 
 @pytest.fixture

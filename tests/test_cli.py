@@ -6,7 +6,7 @@ from pathlib import Path
 import yaml
 from typer.testing import CliRunner
 
-from stack.cli import app
+from stack.apps.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]
 SUMMARY_KEYS = {

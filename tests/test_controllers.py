@@ -19,8 +19,8 @@ from controllers.mpc import MPCTracker
 from controllers.reference import lane_change
 from controllers.tracker import PIDTracker
 from controllers.types import EgoState, Reference
-from stack.config import ConfigError, ControllerConfig, build_config
-from stack.track import run_maneuver
+from stack.apps.track import run_maneuver
+from stack.core.config import ConfigError, ControllerConfig, build_config
 
 GOLDEN = Path(__file__).parent / "golden" / "lane_change.npz"
 DT = 1 / 15

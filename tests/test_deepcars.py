@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from stable_baselines3.common.env_checker import check_env
 
-from stack.deepcars import LEFT, RIGHT, STAY, DeepCarsBatch
-from stack.envs import DEEPCARS
-from stack.reproduce import lookahead, reproduce
+from stack.deepcars.reproduce import lookahead, reproduce
+from stack.deepcars.world import LEFT, RIGHT, STAY, DeepCarsBatch
+from stack.sim.envs import DEEPCARS
 
 
 def empty(**kwargs) -> DeepCarsBatch:

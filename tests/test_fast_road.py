@@ -4,9 +4,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from stack.config import ConfigError, HighwayConfig, build_config
-from stack.envs import FAST_HIGHWAY
-from stack.highway import HighwayAdapter, env_config
+from stack.core.config import ConfigError, HighwayConfig, build_config
+from stack.sim.envs import FAST_HIGHWAY
+from stack.sim.highway import HighwayAdapter, env_config
 
 
 def ramming(frame: int) -> np.ndarray:

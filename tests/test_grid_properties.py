@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 from controllers.types import Actuation
 from perception.grid import GridConfig, OccupancyGridBuilder
 from perception.types import WorldState
-from stack.config import HighwayConfig
-from stack.highway import HighwayAdapter
+from stack.core.config import HighwayConfig
+from stack.sim.highway import HighwayAdapter
 from tests.helpers import scene
 
 GRID = GridConfig(cell_length=5.0, cells_ahead=9, cells_behind=4)

@@ -1,10 +1,10 @@
 import numpy as np
 
 from planner.factory import make_agent
-from stack.closed_loop import ClosedLoop, grid_config
-from stack.config import build_config
-from stack.highway import HighwayAdapter
-from stack.loop import run, run_agent_episode
+from stack.core.closed_loop import ClosedLoop, grid_config
+from stack.core.config import build_config
+from stack.core.episodes import run, run_agent_episode
+from stack.sim.highway import HighwayAdapter
 
 LANE_CHANGE = {"seed": 2, "highway": {"vehicles_count": 20, "duration": 8}, "perception": {"cells_ahead": 9}}
 

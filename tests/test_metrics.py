@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from stack.metrics import EpisodeRecorder, EpisodeResult, lateral_comfort, moving_average, summarize
+from stack.core.metrics import EpisodeRecorder, EpisodeResult, lateral_comfort, moving_average, summarize
 from tests.helpers import scene
 
 

@@ -13,10 +13,10 @@ from typer.testing import CliRunner
 from planner.learned import load_agent
 from planner.model_file import load_model
 from planner.validation import RealTimeValidation
-from stack.cli import app
-from stack.config import build_config
-from stack.envs import HIERARCHICAL_HIGHWAY
-from stack.train import Trainer
+from stack.apps.cli import app
+from stack.apps.train import Trainer
+from stack.core.config import build_config
+from stack.sim.envs import HIERARCHICAL_HIGHWAY
 
 TINY = {
     "seed": 1,

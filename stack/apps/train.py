@@ -30,9 +30,9 @@ from planner.model_file import load_model, save_model
 from planner.networks import net_arch
 from planner.tabular import QLearning
 from planner.validation import RealTimeValidation, Validation, kept_models
-from stack.closed_loop import grid_config
-from stack.config import RunConfig, load_config
-from stack.gym_env import HierarchicalHighwayEnv
+from stack.core.closed_loop import grid_config
+from stack.core.config import RunConfig, load_config
+from stack.core.decision_env import HierarchicalHighwayEnv
 
 ALGORITHMS = {"ddqn": DoubleDQN, "dqn": DQN}
 CHECKPOINT = "checkpoint.npz"

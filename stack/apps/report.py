@@ -15,7 +15,7 @@ from rich.console import Console
 from rich.table import Table
 
 from perception.plot import plot_grid_over_road
-from stack.metrics import EpisodeResult
+from stack.core.metrics import EpisodeResult
 
 VIDEO_FPS = 15
 """Frames per second of the GIF (one frame per control tick at highway-env's default 15 Hz)."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.cruise import AdaptiveCruise
+from controllers.maneuver import Maneuver
 from controllers.tracker import make_tracker
 from controllers.types import EgoState, Leader, Reference
 from perception.grid import GridConfig, OccupancyGrid, OccupancyGridBuilder
@@ -20,10 +21,9 @@ from perception.sensor import SensorModel
 from perception.types import WorldState
 from planner.command import Command
 from planner.safety import SafetyLayer
-from stack.config import ControllerConfig, RunConfig
-from stack.highway import HighwayAdapter
-from stack.maneuver import Maneuver
-from stack.metrics import EpisodeRecorder, EpisodeResult
+from stack.core.config import ControllerConfig, RunConfig
+from stack.core.metrics import EpisodeRecorder, EpisodeResult
+from stack.sim.highway import HighwayAdapter
 
 SNAPSHOT_TIME_S = 10.0
 """Each episode keeps the (world, grid) of its first decision at or after this time [s]."""

@@ -29,7 +29,7 @@ from planner.ddqn import DoubleDQN
 from planner.networks import NET_ARCHS
 from planner.tabular import QLearning
 from planner.validation import RealTimeValidation
-from stack.deepcars import STAY, DeepCarsBatch, DeepCarsEnv, DeepCarsVecEnv
+from stack.deepcars.world import STAY, DeepCarsBatch, DeepCarsEnv, DeepCarsVecEnv
 
 PAPER = {
     "tabular": {"train": 98.28, "eval": 99.14},

@@ -16,9 +16,9 @@ import numpy as np
 from gymnasium import spaces
 
 from planner.command import Command
-from stack.closed_loop import ClosedLoop
-from stack.config import RunConfig, build_config
-from stack.highway import HighwayAdapter
+from stack.core.closed_loop import ClosedLoop
+from stack.core.config import RunConfig, build_config
+from stack.sim.highway import HighwayAdapter
 
 
 class HierarchicalHighwayEnv(gym.Env):

@@ -13,7 +13,7 @@ DEEPCARS = "drivestack/DeepCars-v0"
 def register_envs() -> None:
     if FAST_HIGHWAY in gym.registry:
         return
-    gym.register(FAST_HIGHWAY, entry_point="stack.fast_road:FastHighwayEnv")
-    gym.register(FAST_HIGHWAY_FAST, entry_point="stack.fast_road:FastHighwayEnvFast")
-    gym.register(HIERARCHICAL_HIGHWAY, entry_point="stack.gym_env:HierarchicalHighwayEnv")
-    gym.register(DEEPCARS, entry_point="stack.deepcars:DeepCarsEnv")
+    gym.register(FAST_HIGHWAY, entry_point="stack.sim.fast_road:FastHighwayEnv")
+    gym.register(FAST_HIGHWAY_FAST, entry_point="stack.sim.fast_road:FastHighwayEnvFast")
+    gym.register(HIERARCHICAL_HIGHWAY, entry_point="stack.core.decision_env:HierarchicalHighwayEnv")
+    gym.register(DEEPCARS, entry_point="stack.deepcars.world:DeepCarsEnv")

@@ -10,7 +10,7 @@ from pathlib import Path
 import typer
 from rich.console import Console
 
-from stack.config import ConfigError, load_config
+from stack.core.config import ConfigError, load_config
 
 app = typer.Typer(
     add_completion=False,
@@ -29,7 +29,7 @@ def fail(message: str) -> None:
 def check_agent(cfg) -> None:
     """Build the configured agent once, so a missing or unsafe model file fails before any work."""
     from planner.factory import make_agent
-    from stack.closed_loop import grid_config
+    from stack.core.closed_loop import grid_config
 
     try:
         make_agent(cfg.planner.agent, cfg.highway.lanes_count, grid_config(cfg), cfg.seed, cfg.planner.model)
@@ -75,8 +75,8 @@ def run(
     except ConfigError as error:
         fail(str(error))
     check_agent(cfg)
-    from stack.loop import run as run_loop
-    from stack.report import print_tables, write_results
+    from stack.apps.report import print_tables, write_results
+    from stack.core.episodes import run as run_loop
 
     out = out or fresh_run_dir("run")
     try:
@@ -100,7 +100,7 @@ def track(
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Single lane changes on empty straight and curved roads: tracking metrics and plots."""
-    from stack.track import PLANTS, ROADS, TRACK_CONTROLLERS
+    from stack.apps.track import PLANTS, ROADS, TRACK_CONTROLLERS
 
     names = list(TRACK_CONTROLLERS) if controller == "all" else controller.split(",")
     unknown = [name for name in names if name not in TRACK_CONTROLLERS]
@@ -118,7 +118,7 @@ def track(
         fail(str(error))
     from tqdm import tqdm
 
-    from stack.track import track as run_track
+    from stack.apps.track import track as run_track
 
     out = out or fresh_run_dir("track")
     total = len(ROADS) * len(speed_list) * 2 * sum(1 if n == "builtin" else len(PLANTS) for n in names)
@@ -214,8 +214,8 @@ def compare(
         fail(str(error))
     for cfg in configs:
         check_agent(cfg)
-    from stack.compare import compare as run_compare
-    from stack.compare import markdown, write_comparison
+    from stack.apps.compare import compare as run_compare
+    from stack.apps.compare import markdown, write_comparison
 
     out = out or fresh_run_dir("compare")
     summaries = run_compare(configs, jobs=jobs, progress=progress)
@@ -235,7 +235,7 @@ def reproduce_deepcars(
     out: Path | None = typer.Option(None, help="Results folder (default: runs/deepcars-<time>)."),
 ) -> None:
     """The paper's DeepCars table: tabular Q-learning, DQN and DDQN per network size, baselines."""
-    from stack.reproduce import reproduce
+    from stack.deepcars.reproduce import reproduce
 
     out = out or fresh_run_dir("deepcars")
     console = Console()
@@ -269,7 +269,7 @@ def train(
             cfg = load_config(config, train__algorithm=agent, train__steps=steps, seed=seed)
     except ConfigError as error:
         fail(str(error))
-    from stack.train import Trainer
+    from stack.apps.train import Trainer
 
     folder = resume or out or fresh_run_dir(f"train-{cfg.train.algorithm}")
     summary = Trainer(cfg, folder, progress=progress).run()

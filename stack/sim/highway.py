@@ -19,8 +19,8 @@ from highway_env.road.lane import StraightLane
 
 from controllers.types import Actuation
 from perception.types import WorldState
-from stack.config import HighwayConfig
-from stack.envs import FAST_HIGHWAY
+from stack.core.config import HighwayConfig
+from stack.sim.envs import FAST_HIGHWAY
 
 ENV_IDS = {"fast": FAST_HIGHWAY, "stock": "highway-v0"}
 """Simulation backends: the gymnasium id each one runs."""

@@ -31,9 +31,9 @@ from highway_env.vehicle.kinematics import Vehicle
 
 from controllers.reference import QuinticProfile
 from controllers.types import EgoState, Reference
-from stack.closed_loop import lane_curvature, make_controller
-from stack.config import ControllerConfig
-from stack.metrics import lateral_comfort, moving_average
+from stack.core.closed_loop import lane_curvature, make_controller
+from stack.core.config import ControllerConfig
+from stack.core.metrics import lateral_comfort, moving_average
 
 TRACK_CONTROLLERS = ("pid", "mpc", "builtin")
 ROADS = ("straight", "curved")

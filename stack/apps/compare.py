@@ -10,8 +10,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from stack.config import RunConfig
-from stack.loop import run
+from stack.core.config import RunConfig
+from stack.core.episodes import run
 
 COLUMNS = (
     ("collision_rate", "collision rate [%]", 100.0),

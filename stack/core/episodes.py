@@ -11,10 +11,10 @@ from tqdm import tqdm
 
 from planner.agents import Agent, decide
 from planner.factory import make_agent
-from stack.closed_loop import ClosedLoop, grid_config
-from stack.config import RunConfig
-from stack.highway import HighwayAdapter
-from stack.metrics import EpisodeResult, summarize
+from stack.core.closed_loop import ClosedLoop, grid_config
+from stack.core.config import RunConfig
+from stack.core.metrics import EpisodeResult, summarize
+from stack.sim.highway import HighwayAdapter
 
 
 def agent_step(loop: ClosedLoop, agent: Agent) -> int:
