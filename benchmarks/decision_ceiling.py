@@ -24,8 +24,8 @@ from multiprocessing import get_context
 
 import numpy as np
 
-from planner.command import Command
 from planner.factory import make_agent
+from records import Command
 from stack.core.closed_loop import ClosedLoop, grid_config
 from stack.core.config import RunConfig, load_config
 from stack.core.episodes import agent_step

@@ -16,8 +16,8 @@ from functools import partial
 import numpy as np
 from highway_env.envs.common.observation import OccupancyGridObservation
 
-from controllers.types import Actuation
 from perception.grid import GridConfig, OccupancyGridBuilder
+from records import Actuation
 from stack.core.config import HighwayConfig
 from stack.sim.highway import HighwayAdapter
 

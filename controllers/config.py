@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import math
+from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field
+
+from records import CONTROLLER_NAMES, ControllerName, one_of
 
 
 class _Settings(BaseModel):
@@ -42,3 +45,17 @@ class MPCSettings(_Settings):
     max_deceleration: float = Field(5.0, gt=0, le=5, description="[m/s^2]")
     max_solve_ms: float = Field(50.0, gt=0, description="slower solves fall back [ms]")
     max_iterations: int = Field(50, ge=1)
+
+
+class ControllerConfig(_Settings):
+    """The control layer: which tracker (`pid` or `mpc`), its gains, the lane-change duration and
+    the adaptive cruise (set speed, time gap, standstill gap, comfort deceleration)."""
+
+    type: Annotated[ControllerName, one_of("controller", CONTROLLER_NAMES)] = "pid"
+    pid: PIDGains = PIDGains()
+    mpc: MPCSettings = MPCSettings()
+    lane_change_duration_s: float = Field(5.0, gt=0, description="[s]")
+    set_speed_mps: float = Field(30.0, gt=0, le=40, description="[m/s]")
+    time_gap_s: float = Field(1.5, ge=0, description="[s]")
+    standstill_gap_m: float = Field(8.0, ge=0, description="[m]")
+    comfort_decel_mps2: float = Field(3.0, gt=0, le=5, description="[m/s^2]")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.pid import PID
-from controllers.types import Leader
+from records import Neighbour
 
 
 class AdaptiveCruise:
@@ -38,7 +38,7 @@ class AdaptiveCruise:
     def reset(self) -> None:
         self.speed_pid.reset()
 
-    def update(self, speed: float, set_speed: float, leaders: tuple[Leader, ...], dt: float) -> float:
+    def update(self, speed: float, set_speed: float, leaders: tuple[Neighbour, ...], dt: float) -> float:
         """Acceleration command [m/s^2]."""
         command = self.speed_pid.update(set_speed - speed, dt)
         floor = -self.comfort_deceleration

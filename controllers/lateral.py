@@ -25,7 +25,7 @@ import numpy as np
 
 from controllers.config import PIDGains
 from controllers.pid import PID
-from controllers.types import EgoState, Reference
+from records import EgoState, Reference
 
 LENGTH = 5.0
 """Wheelbase of highway-env's bicycle [m]."""

@@ -23,7 +23,8 @@ import numpy as np
 
 from controllers.bicycle import LENGTH, symbolic_lane_model
 from controllers.config import MPCSettings
-from controllers.types import Actuation, EgoState, Reference
+from controllers.tracker import Controller
+from records import Actuation, EgoState, Reference
 
 
 def build_problem(settings: MPCSettings, dt: float) -> ca.Function:
@@ -80,10 +81,9 @@ def build_problem(settings: MPCSettings, dt: float) -> ca.Function:
 class MPCTracker:
     """Runtime wrapper: warm start, status, solve time, fallback. Same verb as the PID tracker."""
 
-    def __init__(self, settings: MPCSettings, dt: float, fallback) -> None:
+    def __init__(self, settings: MPCSettings, dt: float, fallback: Controller) -> None:
         self.settings = settings
         self.dt = dt
-        self.preview_steps = settings.horizon
         self.solver = build_problem(settings, dt)
         self.fallback = fallback
         self.fallbacks = 0
@@ -100,8 +100,7 @@ class MPCTracker:
 
     def _references(self, state: EgoState, reference: Reference, acceleration: float):
         n = self.settings.horizon
-        preview = list(reference.preview[:n]) or [(reference.d, 0.0)]
-        preview += [preview[-1]] * (n - len(preview))
+        preview = reference.preview(n, self.dt)
         d = np.array([reference.d] + [p[0] for p in preview])
         speed = max(state.speed, 1.0)
         d_dot = np.array([reference.d_dot] + [p[1] for p in preview])
@@ -120,8 +119,8 @@ class MPCTracker:
         states[:, 0] = x0
         return states, np.hstack([self.inputs[:, 1:], self.inputs[:, -1:]])
 
-    def step(self, state: EgoState, reference: Reference, dt: float) -> Actuation:
-        backup = self.fallback.step(state, reference, dt)
+    def step(self, state: EgoState, reference: Reference) -> Actuation:
+        backup = self.fallback.step(state, reference)
         x0 = np.array([state.d, state.heading, state.speed])
         d_ref, psi_ref, v_ref = self._references(state, reference, backup.acceleration)
         states_guess, inputs_guess = self._guess(x0)

@@ -1,40 +1,65 @@
-"""Controllers behind one verb, `step(state, reference, dt) -> Actuation`, keyed by name."""
+"""Controllers behind one verb, `step(state, reference) -> Actuation`, built by name."""
 
 from __future__ import annotations
 
-from controllers.config import MPCSettings, PIDGains
+import time
+from typing import Protocol
+
+from controllers.config import ControllerConfig, PIDGains
 from controllers.cruise import AdaptiveCruise
 from controllers.lateral import LateralPID
-from controllers.types import Actuation, EgoState, Reference
+from records import Actuation, EgoState, Reference
 
-CONTROLLER_NAMES = ("pid", "mpc")
+
+class Controller(Protocol):
+    """Steering and throttle for one control tick of a fixed period. `solve_times` [s] holds the
+    computing time of every step; `fallbacks` counts steps that fell back to a simpler law."""
+
+    fallbacks: int
+    solve_times: list[float]
+
+    def reset(self) -> None: ...
+
+    def step(self, state: EgoState, reference: Reference) -> Actuation: ...
 
 
 class PIDTracker:
-    """Lateral PID for steering, adaptive cruise for throttle."""
+    """Lateral PID for steering, adaptive cruise for throttle, at a control period of `dt` [s]."""
 
-    preview_steps = 0
-
-    def __init__(self, gains: PIDGains, cruise: AdaptiveCruise) -> None:
+    def __init__(self, gains: PIDGains, cruise: AdaptiveCruise, dt: float) -> None:
         self.lateral = LateralPID(gains)
         self.cruise = cruise
+        self.dt = dt
+        self.fallbacks = 0
+        self.solve_times: list[float] = []
 
     def reset(self) -> None:
         self.lateral.reset()
         self.cruise.reset()
 
-    def step(self, state: EgoState, reference: Reference, dt: float) -> Actuation:
-        steering = self.lateral.update(state, reference, dt)
-        acceleration = self.cruise.update(state.speed, reference.set_speed, reference.leaders, dt)
+    def step(self, state: EgoState, reference: Reference) -> Actuation:
+        start = time.perf_counter()
+        steering = self.lateral.update(state, reference, self.dt)
+        acceleration = self.cruise.update(state.speed, reference.set_speed, reference.leaders, self.dt)
+        self.solve_times.append(time.perf_counter() - start)
         return Actuation(acceleration=acceleration, steering=steering)
 
 
-def make_tracker(name: str, gains: PIDGains, mpc: MPCSettings, cruise: AdaptiveCruise, dt: float):
-    """The controller `name` (pid or mpc); the MPC falls back to a PID tracker of its own."""
-    if name == "pid":
-        return PIDTracker(gains, cruise)
-    if name == "mpc":
+def make_controller(config: ControllerConfig, dt: float) -> Controller:
+    """The controller `config.type` at a control period of `dt` [s]; the MPC falls back to a PID
+    tracker of its own."""
+    gains = config.pid
+    cruise = AdaptiveCruise(
+        config.time_gap_s,
+        config.standstill_gap_m,
+        config.comfort_decel_mps2,
+        gains.kp_speed,
+        gains.ki_speed,
+        gains.max_acceleration,
+    )
+    pid = PIDTracker(gains, cruise, dt)
+    if config.type == "mpc":
         from controllers.mpc import MPCTracker
 
-        return MPCTracker(mpc, dt, fallback=PIDTracker(gains, cruise))
-    raise ValueError(f"unknown controller {name!r}; available: {', '.join(CONTROLLER_NAMES)}")
+        return MPCTracker(config.mpc, dt, fallback=pid)
+    return pid

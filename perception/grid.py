@@ -22,50 +22,12 @@ Optional features (`features`):
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 from gymnasium import spaces
-from pydantic import BaseModel, ConfigDict, Field
 
-from perception.types import WorldState
-
-MAX_SPEED = 40.0
-"""Speed that the `ego_speed` feature maps to 1 [m/s] (highway-env's Vehicle.MAX_SPEED)."""
-
-
-class GridConfig(BaseModel):
-    """Grid extent and content. Lengths in m, speeds in m/s, times in s."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    cell_length: float = Field(5.0, gt=0, allow_inf_nan=False, description="cell length [m]")
-    cells_ahead: int = Field(9, ge=1, description="line of sight in cells, the ego's own included")
-    cells_behind: int = Field(4, ge=0)
-    lanes: Literal["absolute", "ego"] = "absolute"
-    lateral_reach: int = Field(1, ge=1, description="ego mode: neighbour lanes on each side")
-    footprint: bool = True
-    features: tuple[Literal["relative_speed", "ttc", "ego_speed"], ...] = ()
-    speed_scale: float = Field(20.0, gt=0, description="relative speed giving feature 1 [m/s]")
-    ttc_horizon: float = Field(10.0, gt=0, description="time-to-collision giving feature 1 [s]")
-
-    @property
-    def cells(self) -> int:
-        return self.cells_behind + self.cells_ahead
-
-    @property
-    def ego_column(self) -> int:
-        return self.cells_behind
-
-    def rows(self, lanes_count: int) -> int:
-        return lanes_count if self.lanes == "absolute" else 2 * self.lateral_reach + 1
-
-
-def lane_code_bits(lanes: int) -> int:
-    """Bits of the binary ego-lane code (the paper's encoding)."""
-    return max(1, math.ceil(math.log2(lanes)))
+from records import ENCODINGS, MAX_SPEED, Encoding, GridConfig, WorldState, lane_code_bits, unknown_name
 
 
 def lane_code(lane: int, lanes: int) -> np.ndarray:
@@ -117,7 +79,7 @@ class OccupancyGrid:
         parts.append(lane_code(self.ego_lane, self.lanes_count))
         return np.concatenate(parts).astype(np.float32)
 
-    def encode(self, encoding: str) -> np.ndarray:
+    def encode(self, encoding: Encoding) -> np.ndarray:
         """The encoding named `encoding`: paper, observation or tabular."""
         if encoding == "paper":
             return self.to_paper_state()
@@ -125,7 +87,7 @@ class OccupancyGrid:
             return self.to_observation()
         if encoding == "tabular":
             return self.to_tabular_state()
-        raise ValueError(f"unknown encoding {encoding!r}; available: paper, observation, tabular")
+        raise ValueError(unknown_name("encoding", encoding, ENCODINGS))
 
     def to_tabular_state(self, line_of_sight: int | None = None) -> np.ndarray:
         """[ego_lane, distance in cells to the closest car ahead in each row] (the paper's tabular
@@ -156,6 +118,14 @@ class OccupancyGridBuilder:
     def tabular_space(self, lanes_count: int) -> spaces.Box:
         high = np.array([lanes_count - 1] + [self.config.cells_ahead - 1] * self.config.rows(lanes_count))
         return spaces.Box(0, high, dtype=np.int64)
+
+    def space(self, encoding: Encoding, lanes_count: int) -> spaces.Box:
+        """The observation space of `encoding` on a road of `lanes_count` lanes."""
+        return {
+            "paper": self.paper_space,
+            "observation": self.observation_space,
+            "tabular": self.tabular_space,
+        }[encoding](lanes_count)
 
     def build(self, world: WorldState) -> OccupancyGrid:
         config = self.config

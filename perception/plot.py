@@ -12,7 +12,7 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
 from perception.grid import OccupancyGrid  # noqa: E402
-from perception.types import WorldState  # noqa: E402
+from records import WorldState  # noqa: E402
 
 EMPTY = (235, 235, 235)
 OCCUPIED = (220, 60, 50)

@@ -13,7 +13,7 @@ import math
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from perception.types import WorldState
+from records import WorldState
 
 PHANTOM_ID_BASE = 1_000_000
 """Ids of false-positive detections start here, so they never collide with real vehicles."""

@@ -1,7 +1,9 @@
-"""The agent protocol (SB3's `predict`) and the hand-written agents.
+"""The agent protocol (SB3's `predict`, plus what the loop must show the agent) and the
+hand-written agents.
 
-An agent maps an observation (the perception encoding it was built for) to an action index of
-`Command`. Trained SB3 models satisfy the same protocol, so the loop never knows which it has.
+An agent maps an observation, the perception encoding named by its `encoding`, of the grid its
+`grid_config` describes (None: the run's grid), to an action index of `Command`. The loop reads
+those two attributes to build what the agent sees, so it never knows which agent it has.
 """
 
 from __future__ import annotations
@@ -10,12 +12,14 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from perception.grid import GridConfig, lane_code_bits
-from planner.command import Command
+from records import N_ACTIONS, Command, Encoding, GridConfig, lane_code_bits
 
 
 @runtime_checkable
 class Agent(Protocol):
+    encoding: Encoding
+    grid_config: GridConfig | None
+
     def predict(
         self,
         observation: np.ndarray,
@@ -31,24 +35,31 @@ def decide(agent: Agent, observation: np.ndarray) -> Command:
     return Command(int(np.asarray(action).reshape(-1)[0]))
 
 
-class KeepLaneAgent:
+class PaperStateAgent:
+    """Base of the hand-written agents: they read the paper state of the run's grid."""
+
+    encoding: Encoding = "paper"
+    grid_config: GridConfig | None = None
+
+
+class KeepLaneAgent(PaperStateAgent):
     """Never changes lane: the lower bound every other agent should beat on speed."""
 
     def predict(self, observation, state=None, episode_start=None, deterministic=True):
         return np.array(Command.STAY), state
 
 
-class RandomAgent:
+class RandomAgent(PaperStateAgent):
     """Uniformly random commands from its own seeded generator."""
 
     def __init__(self, seed: int = 0) -> None:
         self.rng = np.random.default_rng(seed)
 
     def predict(self, observation, state=None, episode_start=None, deterministic=True):
-        return np.array(self.rng.integers(0, 3)), state
+        return np.array(self.rng.integers(0, N_ACTIONS)), state
 
 
-class FreeGapAgent:
+class FreeGapAgent(PaperStateAgent):
     """Rule baseline on the paper state: when a car is in sight in the own lane, move to the
     adjacent lane with the most free cells ahead, only if it is strictly freer and its gap around
     the ego (from `safe_cells_behind` behind to `safe_cells_ahead` ahead) is empty."""

@@ -4,12 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from perception.grid import GridConfig
 from planner.agents import Agent, FreeGapAgent, KeepLaneAgent, RandomAgent
 from planner.mobil import MobilAgent
+from records import AGENT_NAMES, LEARNED_AGENTS, GridConfig, unknown_name
 
-AGENT_NAMES = ("ddqn", "dqn", "tabular", "rule", "mobil", "keep-lane", "random")
-LEARNED = ("ddqn", "dqn", "tabular")
 DEFAULT_MODEL = Path(__file__).parent / "models" / "ddqn_highway.npz"
 """The shipped Double DQN, trained by `drivestack train --config configs/train/ddqn.yaml`."""
 
@@ -19,7 +17,7 @@ def make_agent(
 ) -> Agent:
     """Build the agent `name` for a road of `lanes` lanes seen through `grid`; learned agents load
     `model` (the shipped DDQN by default for `ddqn`)."""
-    if name in LEARNED:
+    if name in LEARNED_AGENTS:
         from planner.learned import load_agent
 
         if model is None and name != "ddqn":
@@ -33,4 +31,4 @@ def make_agent(
         return KeepLaneAgent()
     if name == "random":
         return RandomAgent(seed)
-    raise ValueError(f"unknown agent {name!r}; available: {', '.join(AGENT_NAMES)}")
+    raise ValueError(unknown_name("agent", name, AGENT_NAMES))

@@ -10,8 +10,8 @@ import torch as th
 from stable_baselines3.common.torch_layers import create_mlp
 from torch import nn
 
-from perception.grid import GridConfig
 from planner.model_file import ModelFileError, load_model, save_model
+from records import Encoding, GridConfig
 
 
 def q_network(observation_size: int, actions: int, hidden: list[int]) -> nn.Sequential:
@@ -49,7 +49,7 @@ class LearnedAgent:
 class TabularAgent:
     """Greedy agent over a Q-table indexed by the tabular state [ego_lane, distances...]."""
 
-    encoding = "tabular"
+    encoding: Encoding = "tabular"
 
     def __init__(self, table: np.ndarray, metadata: dict, source: str = "model") -> None:
         self.table = table

@@ -11,8 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from perception.grid import MAX_SPEED, GridConfig
-from planner.command import Command
+from records import MAX_SPEED, Command, Encoding, GridConfig
 
 ACCELERATION = 3.0
 """IDM maximum acceleration [m/s^2]."""
@@ -45,7 +44,7 @@ def idm(speed: float, leader_speed: float, gap: float) -> float:
 class MobilAgent:
     """MOBIL on an ego-relative grid (one lane each side) with relative speeds and the ego speed."""
 
-    encoding = "observation"
+    encoding: Encoding = "observation"
 
     def __init__(self, grid: GridConfig) -> None:
         self.grid_config = grid.model_copy(

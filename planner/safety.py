@@ -14,9 +14,7 @@ import math
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from perception.neighbours import Neighbour, neighbours
-from perception.types import WorldState
-from planner.command import Command
+from records import Command, Neighbour, WorldState
 
 
 class SafetyConfig(BaseModel):
@@ -48,7 +46,7 @@ class SafetyLayer:
     def gap_is_safe(self, world: WorldState, lane: int, min_gap: float, min_ttc: float, strict: bool) -> bool:
         config = self.config
         v = float(world.speed[0])
-        ahead, behind = neighbours(world, lane)
+        ahead, behind = world.neighbours(lane)
         if ahead is not None and not self._clear(
             ahead, max(min_gap, config.front_time_gap_s * v * strict), v - ahead.speed, min_ttc
         ):

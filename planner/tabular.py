@@ -11,6 +11,8 @@ from collections.abc import Callable
 import gymnasium as gym
 import numpy as np
 
+from records import N_ACTIONS
+
 
 class QLearning:
     """The paper's tabular agent; `predict` is greedy unless `deterministic=False`."""
@@ -20,7 +22,7 @@ class QLearning:
     def __init__(
         self,
         state_sizes: tuple[int, ...],
-        actions: int = 3,
+        actions: int = N_ACTIONS,
         alpha: float = 0.1,
         gamma: float = 0.9,
         epsilon: float = 0.2,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from highway_env.road.road import RoadNetwork
 
-from perception.types import WorldState
+from records import WorldState
 
 LANE_WIDTH = 4.0
 

@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from controllers.types import Actuation
+from records import Actuation
 from stack.core.config import HighwayConfig
 from stack.sim.highway import HighwayAdapter, to_env_action
 
@@ -43,7 +43,7 @@ def test_snapshot_matches_the_env_vehicles(adapter):
         s, d = world.lanes[0].local_coordinates(vehicle.position)
         assert (world.s[row], world.d[row]) == pytest.approx((s, d), abs=1e-9)
     np.testing.assert_allclose(world.lane_offsets, [0, 4, 8, 12])
-    assert world.ego.id == world.ids[0]
+    assert world.ego_lane == ego.lane_index[2]
 
 
 def test_actuation_maps_to_highway_env_action_range():

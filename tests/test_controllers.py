@@ -18,7 +18,7 @@ from controllers.lateral import closed_loop
 from controllers.mpc import MPCTracker
 from controllers.reference import lane_change
 from controllers.tracker import PIDTracker
-from controllers.types import EgoState, Reference
+from records import EgoState, Reference
 from stack.apps.track import run_maneuver
 from stack.core.config import ConfigError, ControllerConfig, build_config
 
@@ -90,26 +90,26 @@ def test_mpc_respects_steering_rate_and_lateral_acceleration_bounds():
 
 
 def make_mpc(settings: MPCSettings) -> MPCTracker:
-    fallback = PIDTracker(PIDGains(), AdaptiveCruise(1.5, 8.0, 3.0))
+    fallback = PIDTracker(PIDGains(), AdaptiveCruise(1.5, 8.0, 3.0), DT)
     return MPCTracker(settings, DT, fallback)
 
 
 def test_failed_or_slow_solves_fall_back_and_never_give_nan():
     state = EgoState(d=0.3, heading=0.01, speed=25.0)
-    reference = Reference(1.0, 0.5, 0.0, set_speed=25.0, preview=tuple((1.0, 0.0) for _ in range(20)))
+    reference = Reference(1.0, 0.5, 0.0, set_speed=25.0)
     starved = make_mpc(MPCSettings(max_iterations=1))
-    actuation = starved.step(state, reference, DT)
+    actuation = starved.step(state, reference)
     assert starved.status != "Solve_Succeeded" and starved.fallbacks == 1
     assert np.isfinite([actuation.acceleration, actuation.steering]).all()
     slow = make_mpc(MPCSettings(max_solve_ms=1e-6))
-    slow.step(state, reference, DT)
+    slow.step(state, reference)
     assert slow.fallbacks == 1
     poisoned = make_mpc(MPCSettings())
     bad = Reference(float("nan"), 0.0, 0.0, set_speed=25.0)
-    actuation = poisoned.step(state, bad, DT)
+    actuation = poisoned.step(state, bad)
     assert poisoned.fallbacks == 1 and np.isfinite([actuation.acceleration, actuation.steering]).all()
     healthy = make_mpc(MPCSettings())
-    healthy.step(state, reference, DT)
+    healthy.step(state, reference)
     assert healthy.status == "Solve_Succeeded" and healthy.fallbacks == 0 and healthy.solve_time > 0
 
 

@@ -7,9 +7,8 @@ from highway_env.road.lane import CircularLane
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from controllers.types import Actuation
 from perception.grid import GridConfig, OccupancyGridBuilder
-from perception.types import WorldState
+from records import Actuation, WorldState
 from stack.core.config import HighwayConfig
 from stack.sim.highway import HighwayAdapter
 from tests.helpers import scene

@@ -5,7 +5,7 @@ import pytest
 from controllers.cruise import AdaptiveCruise
 from controllers.pid import PID
 from controllers.reference import QuinticProfile, lane_keeping
-from controllers.types import Leader
+from records import Neighbour
 
 
 def test_quintic_lane_change_boundary_values_and_midpoint():
@@ -53,10 +53,10 @@ def test_pid_rejects_bad_gains(bad):
 
 def test_cruise_holds_comfort_braking_unless_a_collision_is_imminent():
     cruise = AdaptiveCruise(time_gap=1.5, standstill_gap=8.0, comfort_deceleration=3.0)
-    mild = cruise.update(25.0, 30.0, (Leader(gap=30.0, speed=22.0),), 1 / 15)
+    mild = cruise.update(25.0, 30.0, (Neighbour(gap=30.0, speed=22.0),), 1 / 15)
     assert -3.0 <= mild < 0.0
     cruise.reset()
-    hard = cruise.update(30.0, 30.0, (Leader(gap=12.0, speed=10.0),), 1 / 15)
+    hard = cruise.update(30.0, 30.0, (Neighbour(gap=12.0, speed=10.0),), 1 / 15)
     assert hard == -5.0
     cruise.reset()
     assert cruise.update(20.0, 30.0, (), 1 / 15) == cruise.max_acceleration == 2.0

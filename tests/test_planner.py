@@ -10,20 +10,19 @@ from stable_baselines3 import DQN
 
 from perception.grid import GridConfig, OccupancyGridBuilder
 from planner.agents import decide
-from planner.command import Command
 from planner.ddqn import DoubleDQN, double_q_target
-from planner.factory import AGENT_NAMES, DEFAULT_MODEL, make_agent
+from planner.factory import DEFAULT_MODEL, make_agent
 from planner.learned import export_q_network, load_agent
 from planner.mobil import MobilAgent
 from planner.model_file import ModelFileError, save_model
+from records import AGENT_NAMES, Command
 from tests.helpers import scene
 
 GRID = GridConfig(cells_ahead=9, cells_behind=4)
 
 
 def observation_for(agent, world):
-    grid = getattr(agent, "grid_config", GRID)
-    return OccupancyGridBuilder(grid).build(world).encode(getattr(agent, "encoding", "paper"))
+    return OccupancyGridBuilder(agent.grid_config or GRID).build(world).encode(agent.encoding)
 
 
 def tiny_dqn(observation_size: int, algorithm=DoubleDQN):

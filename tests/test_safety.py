@@ -1,5 +1,5 @@
-from planner.command import Command
 from planner.safety import SafetyConfig, SafetyLayer
+from records import Command
 from tests.helpers import scene
 
 

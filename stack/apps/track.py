@@ -1,70 +1,39 @@
 """`drivestack track`: single lane changes on an empty highway-env road, one record per maneuver.
 
 For every road (straight; a 1000 m radius bend), plant (highway-env's kinematic bicycle; its
-dynamic bicycle with tyre slip, for model mismatch), controller, speed and direction: 1 s of lane
-keeping, then a quintic lane change of `duration` seconds from the middle lane's centre to the
-neighbour's, then 3 s more. `builtin` is highway-env's own ControlledVehicle lane change.
+dynamic bicycle with tyre slip, for model mismatch), controller, speed and direction, the closed
+loop of `drivestack run` drives `stack.sim.empty_road`: 1 s of lane keeping, then a quintic lane
+change of `duration` seconds from the middle lane's centre to the neighbour's, then lane keeping
+to 3 s after its end. `builtin` is highway-env's own ControlledVehicle lane change.
 
-Metrics (DESIGN.md): lateral RMS / max error to the reference, overshoot past the target centre,
-duration (start of lateral motion, |d - d0| > 1 cm, to staying within 0.1 m of the target centre),
-peak |a_y| and lateral jerk over a 500 ms moving average (relative to the lane, so a bend's own
-v^2 / R is not counted), controller time per tick p50 / p95, MPC fallbacks.
+Metrics (`stack.core.metrics.tracking`, defined in docs/architecture.md): lateral RMS / max error to
+the reference, overshoot, duration, peak |a_y| and lateral jerk, controller time per tick p50 / p95,
+MPC fallbacks.
 """
 
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Literal
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from highway_env.road.lane import CircularLane, LineType
-from highway_env.road.road import Road, RoadNetwork
-from highway_env.vehicle.controller import ControlledVehicle
-from highway_env.vehicle.dynamics import BicycleVehicle
-from highway_env.vehicle.kinematics import Vehicle
 
-from controllers.reference import QuinticProfile
-from controllers.types import EgoState, Reference
-from stack.core.closed_loop import lane_curvature, make_controller
-from stack.core.config import ControllerConfig
-from stack.core.metrics import lateral_comfort, moving_average
+from controllers.config import ControllerConfig
+from records import Command
+from stack.core.closed_loop import ClosedLoop
+from stack.core.config import RunConfig
+from stack.core.metrics import Tracking, lateral_series, tracking
+from stack.sim.empty_road import BuiltinDriver, EmptyRoad, PlantKind, RoadKind
 
-TRACK_CONTROLLERS = ("pid", "mpc", "builtin")
-ROADS = ("straight", "curved")
-PLANTS = ("kinematic", "dynamic")
-LANE_WIDTH = 4.0
-CURVE_RADIUS = 1000.0
-"""Radius of lane 0 of the bend [m]."""
+TrackController = Literal["pid", "mpc", "builtin"]
+TRACK_CONTROLLERS: tuple[TrackController, ...] = ("pid", "mpc", "builtin")
+ROADS: tuple[RoadKind, ...] = ("straight", "curved")
+PLANTS: tuple[PlantKind, ...] = ("kinematic", "dynamic")
 LEAD_IN_S = 1.0
 SETTLE_S = 3.0
-
-
-def road_network(kind: str) -> RoadNetwork:
-    """Three lanes, straight or a left-hand bend."""
-    if kind == "straight":
-        return RoadNetwork.straight_road_network(3, length=10000)
-    network = RoadNetwork()
-    for k in range(3):
-        network.add_lane(
-            "a",
-            "b",
-            CircularLane(
-                [0.0, 0.0],
-                CURVE_RADIUS + LANE_WIDTH * k,
-                -np.pi / 2,
-                np.pi / 2,
-                clockwise=True,
-                width=LANE_WIDTH,
-                line_types=(LineType.NONE, LineType.NONE),
-            ),
-        )
-    return network
 
 
 @dataclass
@@ -92,114 +61,57 @@ class Maneuver:
 
 
 def run_maneuver(
-    controller_name: str,
+    controller_name: TrackController,
     config: ControllerConfig,
-    road_kind: str,
-    plant: str,
+    road_kind: RoadKind,
+    plant: PlantKind,
     speed: float,
     direction: str,
     duration: float,
     dt: float,
 ) -> Maneuver:
-    network = road_network(road_kind)
-    road = Road(network=network)
-    start_node = next(iter(network.graph))
-    end_node = next(iter(network.graph[start_node]))
-    lanes = network.graph[start_node][end_node]
-    origin, target = 1, 0 if direction == "left" else 2
-    s0 = 100.0
-    position, heading = lanes[origin].position(s0, 0.0), lanes[origin].heading_at(s0)
-    if controller_name == "builtin":
-        vehicle = ControlledVehicle(
-            road,
-            position,
-            heading,
-            speed,
-            target_lane_index=(start_node, end_node, origin),
-            target_speed=speed,
-        )
-    else:
-        vehicle = (BicycleVehicle if plant == "dynamic" else Vehicle)(road, position, heading, speed)
-        controller = make_controller(config.model_copy(update={"type": controller_name}), dt)
-    road.vehicles.append(vehicle)
-    reference_lane = lanes[0]
-    d_origin = reference_lane.local_coordinates(lanes[origin].position(s0, 0.0))[1]
-    d_target = reference_lane.local_coordinates(lanes[target].position(s0, 0.0))[1]
-    profile = QuinticProfile(d0=d_origin, d1=d_target, t0=LEAD_IN_S, duration=duration)
-    steps = round((LEAD_IN_S + duration + SETTLE_S) / dt)
-    times, d, d_ref, heading_rel, speeds, steering, tick_ms = [], [], [], [], [], [], []
-    for k in range(steps):
-        t = k * dt
-        s, lateral = reference_lane.local_coordinates(vehicle.position)
-        lane_heading = reference_lane.heading_at(s)
-        times.append(t)
-        d.append(lateral)
-        d_ref.append(profile.sample(t)[0])
-        heading_rel.append(vehicle.heading - lane_heading)
-        speeds.append(vehicle.speed)
-        start = time.perf_counter()
-        if controller_name == "builtin":
-            if abs(t - LEAD_IN_S) < dt / 2:
-                vehicle.act("LANE_LEFT" if direction == "left" else "LANE_RIGHT")
-            else:
-                vehicle.act()
-        else:
-            curvature = lane_curvature(reference_lane, s)
-            value, rate, accel = profile.sample(t)
-            reference = Reference(
-                value,
-                rate,
-                accel,
-                set_speed=speed,
-                preview=tuple(profile.sample(t + j * dt)[:2] for j in range(1, controller.preview_steps + 1)),
-            )
-            state = EgoState(
-                d=lateral, heading=vehicle.heading - lane_heading, speed=vehicle.speed, curvature=curvature
-            )
-            actuation = controller.step(state, reference, dt)
-            vehicle.act({"acceleration": actuation.acceleration, "steering": actuation.steering})
-        tick_ms.append((time.perf_counter() - start) * 1e3)
-        steering.append(vehicle.action["steering"])
-        vehicle.step(dt)
-    d, d_ref = np.array(d), np.array(d_ref)
-    sign = np.sign(d_target - d_origin)
-    moving = np.flatnonzero(np.abs(d - d_origin) > 0.01)
-    outside = np.flatnonzero(np.abs(d - d_target) > 0.1)
-    duration_s = None
-    if moving.size and (not outside.size or outside[-1] < len(d) - 1):
-        end = outside[-1] + 1 if outside.size else 0
-        duration_s = float(times[end] - times[moving[0]])
-    peak_accel, peak_jerk = lateral_comfort(np.array(heading_rel), np.array(speeds), dt)
-    error = d - d_ref
-    solve = (
-        np.array(getattr(controller, "solve_times", [])) * 1e3
-        if controller_name == "mpc"
-        else np.array(tick_ms)
+    """One lane change to the `direction` ("left" or "right") at `speed` [m/s], in the closed loop."""
+    builtin = controller_name == "builtin"
+    road = EmptyRoad(road_kind, "builtin" if builtin else plant, speed, dt)
+    controller = config.model_copy(
+        update={"type": "pid" if builtin else controller_name, "set_speed_mps": speed}
     )
-    window = max(1, round(0.5 / dt))
-    lateral_acceleration = moving_average(np.array(speeds)[1:] * np.diff(heading_rel) / dt, window)
+    run_config = RunConfig.model_validate(
+        {
+            "highway": {"simulation_frequency": round(1 / dt)},
+            "control_rate_hz": round(1 / dt),
+            "controller": controller.model_copy(update={"lane_change_duration_s": duration}),
+        }
+    )
+    loop = ClosedLoop(run_config, road, controller=BuiltinDriver(road) if builtin else None)
+    world = loop.reset(seed=0)
+    command = Command.LEFT if direction == "left" else Command.RIGHT
+    loop.maneuver.command(command, world, start_time=LEAD_IN_S)
+    loop.act(Command.STAY, ticks=round((LEAD_IN_S + duration + SETTLE_S) / dt))
+    recorder = loop.recorder
+    time, d = np.array(recorder.time[:-1]), np.array(recorder.d[:-1])
+    heading, speeds = np.array(recorder.heading[:-1]), np.array(recorder.speed[:-1])
+    d_reference = np.array(recorder.d_reference)
+    metrics: Tracking = tracking(time, d, d_reference, heading, speeds, dt)
+    solve_ms = np.array(loop.controller.solve_times) * 1e3
+    lateral_acceleration, jerk = lateral_series(heading, speeds, dt)
     return Maneuver(
         controller=controller_name,
         road=road_kind,
         plant=plant,
         speed=speed,
         direction=direction,
-        duration_s=duration_s,
-        overshoot_m=float(max(0.0, np.max(sign * (d - d_target)))),
-        rms_error_m=float(np.sqrt(np.mean(error**2))),
-        max_error_m=float(np.max(np.abs(error))),
-        peak_lat_accel=peak_accel,
-        peak_lat_jerk=peak_jerk,
-        solve_ms_p50=float(np.percentile(solve, 50)),
-        solve_ms_p95=float(np.percentile(solve, 95)),
-        fallbacks=int(getattr(controller, "fallbacks", 0)) if controller_name != "builtin" else 0,
+        **asdict(metrics),
+        solve_ms_p50=float(np.percentile(solve_ms, 50)),
+        solve_ms_p95=float(np.percentile(solve_ms, 95)),
+        fallbacks=loop.controller.fallbacks,
         trace={
-            "time": times,
-            "d": (d - d_origin).tolist(),
-            "d_ref": (d_ref - d_origin).tolist(),
-            "steering": steering,
+            "time": time.tolist(),
+            "d": (d - d[0]).tolist(),
+            "d_ref": (d_reference - d[0]).tolist(),
+            "steering": recorder.steering,
             "lat_accel": [0.0, *lateral_acceleration.tolist()],
-            "lat_jerk": [0.0, 0.0, *moving_average(np.diff(lateral_acceleration) / dt, window).tolist()],
+            "lat_jerk": [0.0, 0.0, *jerk.tolist()],
         },
     )
 

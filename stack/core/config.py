@@ -11,7 +11,6 @@ from typing import Annotated, Any
 
 import yaml
 from pydantic import (
-    AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
@@ -20,28 +19,21 @@ from pydantic import (
     model_validator,
 )
 
-from controllers.config import MPCSettings, PIDGains
-from controllers.tracker import CONTROLLER_NAMES as CONTROLLERS
-from perception.grid import GridConfig
+from controllers.config import ControllerConfig
 from perception.sensor import SensorConfig
-from planner.factory import AGENT_NAMES as AGENTS
 from planner.networks import NET_ARCHS
 from planner.safety import SafetyConfig
-
-BACKENDS = ("fast", "stock")
-TRAINABLE = ("ddqn", "dqn", "tabular")
-ENCODINGS = ("observation", "paper", "tabular")
-
-
-def one_of(options: tuple[str, ...], what: str) -> AfterValidator:
-    """A validator accepting only `options`, whose error lists them."""
-
-    def check(value: str) -> str:
-        if value not in options:
-            raise ValueError(f"unknown {what} {value!r}; available: {', '.join(options)}")
-        return value
-
-    return AfterValidator(check)
+from records import (
+    AGENT_NAMES,
+    ENCODINGS,
+    LEARNED_AGENTS,
+    AgentName,
+    Encoding,
+    GridConfig,
+    LearnedAgentName,
+    one_of,
+)
+from stack.sim.settings import HighwayConfig, SimConfig
 
 
 class ConfigError(ValueError):
@@ -52,22 +44,6 @@ class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
 
-class HighwayConfig(Strict):
-    """The section handed to `gym.make("highway-v0", config=...)`."""
-
-    lanes_count: int = Field(4, ge=1, le=10)
-    vehicles_count: int = Field(50, ge=0, le=500)
-    vehicles_density: float = Field(1.0, gt=0)
-    duration: float = Field(40.0, gt=0, description="episode length [s]")
-    simulation_frequency: int = Field(15, ge=1, le=1000, description="physics rate [Hz]")
-
-
-class SimConfig(Strict):
-    """Which highway-env road runs the physics: `fast` (indexed, identical trajectories) or `stock`."""
-
-    backend: Annotated[str, one_of(BACKENDS, "backend")] = "fast"
-
-
 class PerceptionConfig(GridConfig):
     """The occupancy grid (perception.grid.GridConfig's keys) plus the sensor model."""
 
@@ -75,20 +51,9 @@ class PerceptionConfig(GridConfig):
 
 
 class PlannerConfig(Strict):
-    agent: Annotated[str, one_of(AGENTS, "agent")] = "rule"
+    agent: Annotated[AgentName, one_of("agent", AGENT_NAMES)] = "rule"
     model: Path | None = None
     safety: SafetyConfig = SafetyConfig()
-
-
-class ControllerConfig(Strict):
-    type: Annotated[str, one_of(CONTROLLERS, "controller")] = "pid"
-    pid: PIDGains = PIDGains()
-    mpc: MPCSettings = MPCSettings()
-    lane_change_duration_s: float = Field(5.0, gt=0)
-    set_speed_mps: float = Field(30.0, gt=0, le=40)
-    time_gap_s: float = Field(1.5, ge=0)
-    standstill_gap_m: float = Field(8.0, ge=0)
-    comfort_decel_mps2: float = Field(3.0, gt=0, le=5)
 
 
 class RewardConfig(Strict):
@@ -125,10 +90,10 @@ class ValidationConfig(Strict):
 class TrainConfig(Strict):
     """`drivestack train`: algorithm, budget, network, SB3 hyper-parameters, reward, validation."""
 
-    algorithm: Annotated[str, one_of(TRAINABLE, "algorithm")] = "ddqn"
+    algorithm: Annotated[LearnedAgentName, one_of("algorithm", LEARNED_AGENTS)] = "ddqn"
     steps: int = Field(50_000, ge=1)
-    encoding: Annotated[str, one_of(ENCODINGS, "encoding")] = "observation"
-    network: Annotated[str, one_of(tuple(NET_ARCHS), "network")] = "shallow"
+    encoding: Annotated[Encoding, one_of("encoding", ENCODINGS)] = "observation"
+    network: Annotated[str, one_of("network", tuple(NET_ARCHS))] = "shallow"
     learning_rate: float = Field(5e-4, gt=0)
     buffer_size: int = Field(50_000, ge=1)
     learning_starts: int = Field(1_000, ge=0)

@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from planner.command import Command
+from records import N_ACTIONS, Command
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import RunConfig, build_config
 from stack.sim.highway import HighwayAdapter
@@ -33,51 +33,33 @@ class HierarchicalHighwayEnv(gym.Env):
         self.adapter = HighwayAdapter(config.highway, config.sim.backend, render=render_mode == "rgb_array")
         self.loop = ClosedLoop(config, self.adapter)
         self.encoding = config.train.encoding
-        builder, lanes = self.loop.builder, config.highway.lanes_count
-        self.observation_space = {
-            "observation": builder.observation_space,
-            "paper": builder.paper_space,
-            "tabular": builder.tabular_space,
-        }[self.encoding](lanes)
-        self.action_space = spaces.Discrete(3)
+        self.observation_space = self.loop.builder.space(self.encoding, config.highway.lanes_count)
+        self.action_space = spaces.Discrete(N_ACTIONS)
 
     def _observe(self) -> np.ndarray:
         return self.loop.perceive().encode(self.encoding)
 
-    def _info(self) -> dict:
-        loop = self.loop
-        return {
-            "crashed": loop.crashed,
-            "speed": float(loop.world.speed[0]),
-            "passed_cars": len(loop.recorder.passed),
-            "lane_changes": loop.maneuver.lane_changes,
-            "masked": loop.safety.masked,
-            "aborted": loop.safety.aborted,
-        }
-
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         self.loop.reset(int(self.np_random.integers(0, 2**31 - 1)))
-        return self._observe(), self._info()
+        return self._observe(), self.loop.status()
 
     def step(self, action):
         command = Command(int(action))
-        asked_to_change = command is not Command.STAY and not self.loop.maneuver.changing_lane
-        ticks = self.loop.advance(command, self.config.decision_ticks)
+        acted = self.loop.act(command, ticks=self.config.decision_ticks)
         reward_config = self.config.train.reward
         if self.loop.crashed:
             reward = reward_config.collision
         else:
-            fraction = ticks / self.config.decision_ticks
+            fraction = acted.ticks / self.config.decision_ticks
             low, high = reward_config.speed_range
-            mean_speed = float(np.mean(self.loop.recorder.speed[-ticks:]))
-            speed_score = float(np.clip((mean_speed - low) / (high - low), 0.0, 1.0))
+            speed_score = float(np.clip((acted.mean_speed - low) / (high - low), 0.0, 1.0))
             reward = fraction * (reward_config.alive + reward_config.speed_weight * speed_score)
-        reward -= reward_config.lane_change * asked_to_change
+        reward -= reward_config.lane_change * (acted.considered and command is not Command.STAY)
 
         terminated = self.loop.crashed
         truncated = self.loop.done and not terminated
-        return self._observe(), float(reward), terminated, truncated, self._info()
+        return self._observe(), float(reward), terminated, truncated, self.loop.status()
 
     def render(self):
         return self.adapter.render() if self.render_mode == "rgb_array" else None

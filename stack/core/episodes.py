@@ -19,7 +19,9 @@ from stack.sim.highway import HighwayAdapter
 
 def agent_step(loop: ClosedLoop, agent: Agent) -> int:
     """Perceive, let `agent` decide on its own encoding, act until the next decision; ticks run."""
-    return loop.act(decide(agent, loop.perceive().encode(getattr(agent, "encoding", "paper"))))
+    grid = loop.perceive()
+    command = decide(agent, grid.encode(agent.encoding))
+    return loop.act(command).ticks
 
 
 def run_agent_episode(loop: ClosedLoop, agent: Agent, episode: int, seed: int) -> EpisodeResult:
@@ -46,7 +48,7 @@ def run_episode(config: RunConfig, episode: int, frames: list[np.ndarray] | None
         config.planner.agent, config.highway.lanes_count, grid_config(config), seed, config.planner.model
     )
     with HighwayAdapter(config.highway, config.sim.backend, render=frames is not None) as adapter:
-        loop = ClosedLoop(config, adapter, frames, grid=getattr(agent, "grid_config", None))
+        loop = ClosedLoop(config, adapter, frames, grid=agent.grid_config)
         return run_agent_episode(loop, agent, episode, seed)
 
 

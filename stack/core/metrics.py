@@ -1,9 +1,10 @@
-"""Episode metrics, with the definitions of DESIGN.md.
+"""Episode and tracking metrics, with the definitions of docs/architecture.md.
 
 - passed car: a vehicle counts once, the first time it goes from ahead of the ego to behind it;
 - accuracy: passed / (passed + collided) x 100 over all episodes;
-- comfort: peak |lateral acceleration| (a_y = v * yaw rate) and peak lateral jerk, both over a
-  500 ms moving average, as UN R79 measures them.
+- comfort: peak |lateral acceleration| (a_y = v * yaw rate relative to the reference lane, so a
+  bend's own v^2 / R is not counted) and peak lateral jerk, both over a 500 ms moving average, as
+  UN R79 measures them.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from perception.types import WorldState
+from records import Actuation, Reference, WorldState
 
 COMFORT_WINDOW_S = 0.5
 """Moving-average window for lateral acceleration and jerk [s] (UN R79)."""
@@ -27,14 +28,62 @@ def moving_average(values: np.ndarray, window: int) -> np.ndarray:
     return (sums[1:] - sums[np.maximum(np.arange(1, len(values) + 1) - window, 0)]) / counts
 
 
+def lateral_series(heading: np.ndarray, speed: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(a_y [m/s^2] from the second sample on, jerk [m/s^3] from the third), each a 500 ms moving
+    average, from heading [rad] and speed [m/s] samples `dt` seconds apart."""
+    window = max(1, round(COMFORT_WINDOW_S / dt))
+    lateral_acceleration = moving_average(speed[1:] * np.diff(heading) / dt, window)
+    return lateral_acceleration, moving_average(np.diff(lateral_acceleration) / dt, window)
+
+
 def lateral_comfort(heading: np.ndarray, speed: np.ndarray, dt: float) -> tuple[float, float]:
     """(peak |a_y| [m/s^2], peak |jerk| [m/s^3]) from heading [rad] and speed [m/s] samples."""
     if len(heading) < 3:
         return 0.0, 0.0
-    window = max(1, round(COMFORT_WINDOW_S / dt))
-    lateral_acceleration = moving_average(speed[1:] * np.diff(heading) / dt, window)
-    jerk = moving_average(np.diff(lateral_acceleration) / dt, window)
+    lateral_acceleration, jerk = lateral_series(heading, speed, dt)
     return float(np.max(np.abs(lateral_acceleration))), float(np.max(np.abs(jerk)))
+
+
+@dataclass(frozen=True)
+class Tracking:
+    """How one lane change tracked its reference (lengths in m, accelerations in m/s^2, jerk in
+    m/s^3): duration from the start of lateral motion (|d - d0| > 1 cm) to staying within 0.1 m of
+    the target centre (None if it never settles), overshoot past that centre, RMS and max error."""
+
+    duration_s: float | None
+    overshoot_m: float
+    rms_error_m: float
+    max_error_m: float
+    peak_lat_accel: float
+    peak_lat_jerk: float
+
+
+def tracking(
+    time: np.ndarray,
+    d: np.ndarray,
+    d_reference: np.ndarray,
+    heading: np.ndarray,
+    speed: np.ndarray,
+    dt: float,
+) -> Tracking:
+    """Tracking metrics of a lane change from `d[0]` to `d_reference[-1]`, sampled every tick."""
+    d_origin, d_target = d[0], d_reference[-1]
+    moving = np.flatnonzero(np.abs(d - d_origin) > 0.01)
+    outside = np.flatnonzero(np.abs(d - d_target) > 0.1)
+    duration_s = None
+    if moving.size and (not outside.size or outside[-1] < len(d) - 1):
+        end = outside[-1] + 1 if outside.size else 0
+        duration_s = float(time[end] - time[moving[0]])
+    peak_accel, peak_jerk = lateral_comfort(heading, speed, dt)
+    error = d - d_reference
+    return Tracking(
+        duration_s=duration_s,
+        overshoot_m=float(max(0.0, np.max(np.sign(d_target - d_origin) * (d - d_target)))),
+        rms_error_m=float(np.sqrt(np.mean(error**2))),
+        max_error_m=float(np.max(np.abs(error))),
+        peak_lat_accel=peak_accel,
+        peak_lat_jerk=peak_jerk,
+    )
 
 
 @dataclass
@@ -62,7 +111,8 @@ class EpisodeResult:
 
 
 class EpisodeRecorder:
-    """Collects what the metrics need, one `record(world)` per control tick."""
+    """Collects what the metrics need: the world after every control tick (and at the start),
+    and the reference and actuation of every tick."""
 
     def __init__(self, world: WorldState) -> None:
         self.was_ahead = dict(zip(world.ids.tolist(), (world.s > world.s[0]).tolist(), strict=True))
@@ -71,9 +121,17 @@ class EpisodeRecorder:
         self.speed: list[float] = []
         self.heading: list[float] = []
         self.d: list[float] = []
-        self.record(world)
+        self.d_reference: list[float] = []
+        self.steering: list[float] = []
+        self._record_world(world)
 
-    def record(self, world: WorldState) -> None:
+    def record(self, world: WorldState, reference: Reference, actuation: Actuation) -> None:
+        """One tick: what it tracked, what it commanded, and the world it led to."""
+        self.d_reference.append(reference.d)
+        self.steering.append(actuation.steering)
+        self._record_world(world)
+
+    def _record_world(self, world: WorldState) -> None:
         ahead = (world.s > world.s[0]).tolist()
         for vehicle_id, is_ahead in zip(world.ids[1:].tolist(), ahead[1:], strict=True):
             if self.was_ahead.get(vehicle_id) and not is_ahead:
@@ -81,7 +139,7 @@ class EpisodeRecorder:
             self.was_ahead[vehicle_id] = is_ahead
         self.time.append(world.time)
         self.speed.append(float(world.speed[0]))
-        self.heading.append(float(world.heading[0]))
+        self.heading.append(float(world.heading[0]) - world.lanes[0].heading_at(float(world.s[0])))
         self.d.append(float(world.d[0]))
 
     def result(

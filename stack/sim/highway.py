@@ -15,14 +15,15 @@ import gymnasium as gym
 import highway_env  # noqa: F401  (registers highway-v0)
 import numpy as np
 from highway_env.envs.common.action import ContinuousAction
-from highway_env.road.lane import StraightLane
+from highway_env.road.lane import AbstractLane, StraightLane
+from highway_env.road.road import Road
+from highway_env.vehicle.kinematics import Vehicle
 
-from controllers.types import Actuation
-from perception.types import WorldState
-from stack.core.config import HighwayConfig
+from records import BACKENDS, Actuation, Backend, WorldState, unknown_name
 from stack.sim.envs import FAST_HIGHWAY
+from stack.sim.settings import HighwayConfig
 
-ENV_IDS = {"fast": FAST_HIGHWAY, "stock": "highway-v0"}
+ENV_IDS: dict[Backend, str] = {"fast": FAST_HIGHWAY, "stock": "highway-v0"}
 """Simulation backends: the gymnasium id each one runs."""
 
 MAX_ACCELERATION = ContinuousAction.ACCELERATION_RANGE[1]
@@ -50,9 +51,9 @@ def to_env_action(actuation: Actuation) -> np.ndarray:
 class HighwayAdapter:
     """Owns one highway-v0 env; `reset(seed)` and `step(actuation)` return `WorldState` snapshots."""
 
-    def __init__(self, highway: HighwayConfig, backend: str = "fast", render: bool = False) -> None:
+    def __init__(self, highway: HighwayConfig, backend: Backend = "fast", render: bool = False) -> None:
         if backend not in ENV_IDS:
-            raise ValueError(f"unknown simulation backend {backend!r}; available: {', '.join(ENV_IDS)}")
+            raise ValueError(unknown_name("simulation backend", backend, BACKENDS))
         self.config = highway
         self.dt = 1.0 / highway.simulation_frequency
         self.env = gym.make(
@@ -63,14 +64,6 @@ class HighwayAdapter:
         )
         self.terminated = False
         self.truncated = False
-
-    @property
-    def _road(self):
-        return self.env.unwrapped.road
-
-    @property
-    def _ego(self):
-        return self.env.unwrapped.vehicle
 
     def reset(self, seed: int) -> WorldState:
         self.env.reset(seed=seed)
@@ -105,43 +98,47 @@ class HighwayAdapter:
 
     def snapshot(self) -> WorldState:
         """Copy the road into a `WorldState` (row 0 = ego, others in road order)."""
-        ego = self._ego
-        road_vehicles = self._road.vehicles
-        ego_index = road_vehicles.index(ego)
-        order = [ego_index] + [i for i in range(len(road_vehicles)) if i != ego_index]
-        vehicles = [road_vehicles[i] for i in order]
-        network = self._road.network
-        start, end, _ = ego.lane_index
-        lanes = tuple(network.graph[start][end])
-        reference = lanes[0]
-        position = np.array([v.position for v in vehicles], dtype=float)
-        heading = np.array([v.heading for v in vehicles], dtype=float)
-        speed = np.array([v.speed for v in vehicles], dtype=float)
-        s, d = self._lane_frame(reference, position)
-        s_ego = float(s[0])
-        lane_offsets = np.array([reference.local_coordinates(lane.position(s_ego, 0.0))[1] for lane in lanes])
-        return WorldState(
-            time=float(self.env.unwrapped.time),
-            ids=np.array(order),
-            position=position,
-            heading=heading,
-            speed=speed,
-            velocity=speed[:, None] * np.stack([np.cos(heading), np.sin(heading)], axis=1),
-            lane=np.array([v.lane_index[2] if v.lane_index else -1 for v in vehicles]),
-            length=np.array([v.LENGTH for v in vehicles], dtype=float),
-            width=np.array([v.WIDTH for v in vehicles], dtype=float),
-            s=s,
-            d=d,
-            crashed=np.array([v.crashed for v in vehicles], dtype=bool),
-            lanes=lanes,
-            lane_offsets=lane_offsets,
-        )
+        return snapshot(self.env.unwrapped.road, self.env.unwrapped.vehicle, float(self.env.unwrapped.time))
 
-    @staticmethod
-    def _lane_frame(lane, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(s, d) of each position in `lane`'s frame; one matrix product on straight lanes."""
-        if isinstance(lane, StraightLane):
-            delta = position - lane.start
-            return delta @ lane.direction, delta @ lane.direction_lateral
-        coordinates = np.array([lane.local_coordinates(p) for p in position], dtype=float)
-        return coordinates[:, 0], coordinates[:, 1]
+
+def snapshot(road: Road, ego: Vehicle, time: float) -> WorldState:
+    """The road at `time` [s] as a `WorldState`: row 0 = `ego`, the others in road order, in the
+    frame of lane 0 of the ego's road segment."""
+    road_vehicles = road.vehicles
+    ego_index = road_vehicles.index(ego)
+    order = [ego_index] + [i for i in range(len(road_vehicles)) if i != ego_index]
+    vehicles = [road_vehicles[i] for i in order]
+    start, end, _ = ego.lane_index
+    lanes = tuple(road.network.graph[start][end])
+    reference = lanes[0]
+    position = np.array([v.position for v in vehicles], dtype=float)
+    heading = np.array([v.heading for v in vehicles], dtype=float)
+    speed = np.array([v.speed for v in vehicles], dtype=float)
+    s, d = _lane_frame(reference, position)
+    s_ego = float(s[0])
+    lane_offsets = np.array([reference.local_coordinates(lane.position(s_ego, 0.0))[1] for lane in lanes])
+    return WorldState(
+        time=time,
+        ids=np.array(order),
+        position=position,
+        heading=heading,
+        speed=speed,
+        velocity=speed[:, None] * np.stack([np.cos(heading), np.sin(heading)], axis=1),
+        lane=np.array([v.lane_index[2] if v.lane_index else -1 for v in vehicles]),
+        length=np.array([v.LENGTH for v in vehicles], dtype=float),
+        width=np.array([v.WIDTH for v in vehicles], dtype=float),
+        s=s,
+        d=d,
+        crashed=np.array([v.crashed for v in vehicles], dtype=bool),
+        lanes=lanes,
+        lane_offsets=lane_offsets,
+    )
+
+
+def _lane_frame(lane: AbstractLane, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(s, d) of each position in `lane`'s frame; one matrix product on straight lanes."""
+    if isinstance(lane, StraightLane):
+        delta = position - lane.start
+        return delta @ lane.direction, delta @ lane.direction_lateral
+    coordinates = np.array([lane.local_coordinates(p) for p in position], dtype=float)
+    return coordinates[:, 0], coordinates[:, 1]
