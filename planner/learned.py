@@ -11,6 +11,7 @@ from stable_baselines3.common.torch_layers import create_mlp
 from torch import nn
 
 from planner.model_file import ModelFileError, load_model, save_model
+from planner.tabular import QLearning
 from records import Encoding, GridConfig
 
 
@@ -75,6 +76,11 @@ def export_q_network(model, path: Path | str, metadata: dict) -> Path:
     return save_model(
         path, {k: v.detach().cpu().numpy() for k, v in state.items()}, {"kind": "mlp", **metadata}
     )
+
+
+def save_q_table(agent: QLearning, path: Path | str, metadata: dict) -> Path:
+    """Save a tabular Q-learner's table with `metadata`."""
+    return save_model(path, {"q_table": agent.table}, {"kind": "qtable", **metadata})
 
 
 def load_agent(

@@ -1,16 +1,17 @@
-"""`drivestack`: the command line."""
+"""`drivestack`: the command line. Parsing and one-line errors only; each sub-command's work lives in
+its own module of `stack.apps` (or `stack.deepcars`), imported when the command runs."""
 
 from __future__ import annotations
 
 import sys
 from datetime import datetime
-from functools import partial
 from pathlib import Path
+from typing import NoReturn
 
 import typer
 from rich.console import Console
 
-from stack.core.config import ConfigError, load_config
+from stack.core.config import ConfigError, RunConfig, load_config
 
 app = typer.Typer(
     add_completion=False,
@@ -21,18 +22,25 @@ app = typer.Typer(
 DEFAULT_CONFIG = Path("configs/highway.yaml")
 
 
-def fail(message: str) -> None:
+def fail(message: str) -> NoReturn:
     Console(stderr=True).print(f"[red]error:[/red] {message}", highlight=False, soft_wrap=True)
     raise typer.Exit(code=2)
 
 
-def check_agent(cfg) -> None:
+def configured(path: Path, **overrides: object) -> RunConfig:
+    """The validated config at `path` with CLI `overrides`, or a one-line error (exit 2)."""
+    try:
+        return load_config(path, **overrides)
+    except ConfigError as error:
+        fail(str(error))
+
+
+def check_agent(config: RunConfig) -> None:
     """Build the configured agent once, so a missing or unsafe model file fails before any work."""
-    from planner.factory import make_agent
-    from stack.core.closed_loop import grid_config
+    from stack.core.episodes import build_agent
 
     try:
-        make_agent(cfg.planner.agent, cfg.highway.lanes_count, grid_config(cfg), cfg.seed, cfg.planner.model)
+        build_agent(config, config.seed)
     except ValueError as error:
         fail(str(error))
 
@@ -62,31 +70,23 @@ def run(
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Run seeded closed-loop episodes and write a results folder."""
-    try:
-        cfg = load_config(
-            config,
-            planner__agent=agent,
-            planner__model=model,
-            controller__type=controller,
-            sim__backend=backend,
-            episodes=episodes,
-            seed=seed,
-        )
-    except ConfigError as error:
-        fail(str(error))
+    cfg = configured(
+        config,
+        planner__agent=agent,
+        planner__model=model,
+        controller__type=controller,
+        sim__backend=backend,
+        episodes=episodes,
+        seed=seed,
+    )
     check_agent(cfg)
-    from stack.apps.report import print_tables, write_results
-    from stack.core.episodes import run as run_loop
+    from stack.apps.run import run_and_report
 
-    out = out or fresh_run_dir("run")
     try:
-        results = run_loop(cfg, video=video, progress=progress, jobs=jobs)
+        interrupted = run_and_report(cfg, out or fresh_run_dir("run"), video, jobs, progress)
     except KeyboardInterrupt:
         fail("interrupted before the first episode finished; nothing to write")
-    write_results(out, results.summary, results.episodes, results.frames)
-    print_tables(results.summary, results.episodes)
-    Console().print(f"results: {out}")
-    if results.summary["interrupted"]:
+    if interrupted:
         sys.exit(130)
 
 
@@ -100,7 +100,7 @@ def track(
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Single lane changes on empty straight and curved roads: tracking metrics and plots."""
-    from stack.apps.track import PLANTS, ROADS, TRACK_CONTROLLERS
+    from stack.apps.track import TRACK_CONTROLLERS, track_and_report
 
     names = list(TRACK_CONTROLLERS) if controller == "all" else controller.split(",")
     unknown = [name for name in names if name not in TRACK_CONTROLLERS]
@@ -112,74 +112,8 @@ def track(
         fail(f"--speeds: expected comma-separated numbers in m/s, got {speeds!r}")
     if not all(0 < v <= 40 for v in speed_list):
         fail(f"--speeds: every speed must be in (0, 40] m/s, got {speeds}")
-    try:
-        cfg = load_config(config, controller__lane_change_duration_s=duration)
-    except ConfigError as error:
-        fail(str(error))
-    from tqdm import tqdm
-
-    from stack.apps.track import track as run_track
-
-    out = out or fresh_run_dir("track")
-    total = len(ROADS) * len(speed_list) * 2 * sum(1 if n == "builtin" else len(PLANTS) for n in names)
-    with tqdm(total=total, unit="maneuver", disable=not progress) as bar:
-        maneuvers = run_track(
-            names,
-            speed_list,
-            cfg.controller.lane_change_duration_s,
-            cfg.controller,
-            out,
-            cfg.dt,
-            progress=lambda: bar.update(1),
-        )
-    print_tracking(maneuvers)
-    Console().print(f"results: {out}")
-
-
-def _mean(group: list, field: str) -> float:
-    values = [getattr(m, field) for m in group if getattr(m, field) is not None]
-    return sum(values) / len(values) if values else float("nan")
-
-
-def print_tracking(maneuvers) -> None:
-    from rich.table import Table
-
-    table = Table(title="lane changes (left / right averaged)")
-    for column in (
-        "controller",
-        "road",
-        "plant",
-        "speed",
-        "duration s",
-        "overshoot cm",
-        "RMS cm",
-        "max cm",
-        "peak a_y",
-        "peak jerk",
-        "solve p95 ms",
-        "fallbacks",
-    ):
-        table.add_column(column, justify="right")
-    groups: dict = {}
-    for m in maneuvers:
-        groups.setdefault((m.controller, m.road, m.plant, m.speed), []).append(m)
-    for (name, road, plant, speed), group in groups.items():
-        mean = partial(_mean, group)
-        table.add_row(
-            name,
-            road,
-            plant,
-            f"{speed:g}",
-            f"{mean('duration_s'):.2f}",
-            f"{100 * mean('overshoot_m'):.1f}",
-            f"{100 * mean('rms_error_m'):.2f}",
-            f"{100 * mean('max_error_m'):.1f}",
-            f"{mean('peak_lat_accel'):.2f}",
-            f"{mean('peak_lat_jerk'):.2f}",
-            f"{max(m.solve_ms_p95 for m in group):.2f}",
-            str(sum(m.fallbacks for m in group)),
-        )
-    Console(width=160).print(table)
+    cfg = configured(config, controller__lane_change_duration_s=duration)
+    track_and_report(names, speed_list, cfg, out or fresh_run_dir("track"), progress)
 
 
 @app.command()
@@ -199,29 +133,17 @@ def compare(
     except ValueError:
         fail(f"--models: expected name=path[,name=path], got {models!r}")
     names = [name for name in agents.split(",") if name]
-    try:
-        configs = [
-            load_config(
-                config,
-                planner__agent=name,
-                planner__model=model_paths.get(name),
-                episodes=episodes,
-                seed=seed,
-            )
-            for name in names
-        ]
-    except ConfigError as error:
-        fail(str(error))
+    configs = [
+        configured(
+            config, planner__agent=name, planner__model=model_paths.get(name), episodes=episodes, seed=seed
+        )
+        for name in names
+    ]
     for cfg in configs:
         check_agent(cfg)
-    from stack.apps.compare import compare as run_compare
-    from stack.apps.compare import markdown, write_comparison
+    from stack.apps.compare import compare_and_report
 
-    out = out or fresh_run_dir("compare")
-    summaries = run_compare(configs, jobs=jobs, progress=progress)
-    write_comparison(summaries, out)
-    Console().print(markdown(summaries), highlight=False)
-    Console().print(f"results: {out}")
+    compare_and_report(configs, out or fresh_run_dir("compare"), jobs, progress)
 
 
 reproduce_app = typer.Typer(no_args_is_help=True, help="Reproduce the paper's experiments.")
@@ -260,31 +182,14 @@ def train(
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Train a decision agent inside the closed loop, keeping the best model by real-time validation."""
-    try:
-        if resume is not None:
-            if not (resume / "config.yaml").is_file():
-                fail(f"{resume}: not a training run folder (no config.yaml)")
-            cfg = load_config(resume / "config.yaml", train__steps=steps)
-        else:
-            cfg = load_config(config, train__algorithm=agent, train__steps=steps, seed=seed)
-    except ConfigError as error:
-        fail(str(error))
-    from stack.apps.train import Trainer
+    if resume is not None:
+        if not (resume / "config.yaml").is_file():
+            fail(f"{resume}: not a training run folder (no config.yaml)")
+        cfg = configured(resume / "config.yaml", train__steps=steps)
+    else:
+        cfg = configured(config, train__algorithm=agent, train__steps=steps, seed=seed)
+    from stack.apps.train import train_and_report
 
     folder = resume or out or fresh_run_dir(f"train-{cfg.train.algorithm}")
-    summary = Trainer(cfg, folder, progress=progress).run()
-    best = summary["best_validation"]
-    Console().print(
-        f"{summary['algorithm']}: {summary['steps']} steps in {summary['wall_time_s']:.0f} s; "
-        + (
-            f"best validation at step {best['step']}: collision rate {best['collision_rate']:.1%}, "
-            f"mean return {best['mean_return']:.2f}, mean speed {best['mean_speed']:.2f} m/s"
-            if best
-            else "no validation yet"
-        )
-    )
-    Console().print(
-        f"run folder: {folder}" + (" (interrupted: resume with --resume)" if summary["interrupted"] else "")
-    )
-    if summary["interrupted"]:
+    if train_and_report(cfg, folder, progress):
         sys.exit(130)

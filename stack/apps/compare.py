@@ -5,10 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+from rich.console import Console
 
 from stack.core.config import RunConfig
 from stack.core.episodes import run
@@ -23,6 +21,14 @@ COLUMNS = (
 def compare(configs: list[RunConfig], jobs: int = 1, progress: bool = True) -> list[dict]:
     """One summary per config (one config per agent, same episodes and seeds)."""
     return [run(config, progress=progress, jobs=jobs).summary for config in configs]
+
+
+def compare_and_report(configs: list[RunConfig], out: Path, jobs: int, progress: bool) -> None:
+    """Run every config, write `out` (comparison.json, comparison.png), print the table."""
+    summaries = compare(configs, jobs=jobs, progress=progress)
+    write_comparison(summaries, out)
+    Console().print(markdown(summaries), highlight=False)
+    Console().print(f"results: {out}")
 
 
 def write_comparison(summaries: list[dict], out: Path) -> None:

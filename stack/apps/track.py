@@ -14,12 +14,16 @@ MPC fallbacks.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Literal
 
 import matplotlib.pyplot as plt
 import numpy as np
+from rich.console import Console
+from rich.table import Table
+from tqdm import tqdm
 
 from controllers.config import ControllerConfig
 from records import Command
@@ -116,6 +120,26 @@ def run_maneuver(
     )
 
 
+def track_and_report(
+    controllers: list[str], speeds: list[float], config: RunConfig, out: Path, progress: bool
+) -> list[Maneuver]:
+    """Every maneuver with a progress bar, then the table and where the results are."""
+    total = len(ROADS) * len(speeds) * 2 * sum(1 if n == "builtin" else len(PLANTS) for n in controllers)
+    with tqdm(total=total, unit="maneuver", disable=not progress) as bar:
+        maneuvers = track(
+            controllers,
+            speeds,
+            config.controller.lane_change_duration_s,
+            config.controller,
+            out,
+            config.dt,
+            progress=lambda: bar.update(1),
+        )
+    print_tracking(maneuvers)
+    Console().print(f"results: {out}")
+    return maneuvers
+
+
 def track(
     controllers: list[str],
     speeds: list[float],
@@ -123,9 +147,9 @@ def track(
     config: ControllerConfig,
     out: Path,
     dt: float = 1 / 15,
-    roads=ROADS,
-    plants=PLANTS,
-    progress=None,
+    roads: tuple[RoadKind, ...] = ROADS,
+    plants: tuple[PlantKind, ...] = PLANTS,
+    progress: Callable[[], object] | None = None,
 ) -> list[Maneuver]:
     """All maneuvers; writes out/tracking.json and one figure per speed (straight road, kinematic
     plant, left change, all controllers overlaid)."""
@@ -158,6 +182,50 @@ def track(
             speed,
         )
     return maneuvers
+
+
+def print_tracking(maneuvers: list[Maneuver]) -> None:
+    """One row per controller, road, plant and speed: left and right changes averaged."""
+    table = Table(title="lane changes (left / right averaged)")
+    for column in (
+        "controller",
+        "road",
+        "plant",
+        "speed",
+        "duration s",
+        "overshoot cm",
+        "RMS cm",
+        "max cm",
+        "peak a_y",
+        "peak jerk",
+        "solve p95 ms",
+        "fallbacks",
+    ):
+        table.add_column(column, justify="right")
+    groups: dict[tuple[str, str, str, float], list[Maneuver]] = {}
+    for m in maneuvers:
+        groups.setdefault((m.controller, m.road, m.plant, m.speed), []).append(m)
+    for (name, road, plant, speed), group in groups.items():
+
+        def mean(field: str, group: list[Maneuver] = group) -> float:
+            values = [getattr(m, field) for m in group if getattr(m, field) is not None]
+            return sum(values) / len(values) if values else float("nan")
+
+        table.add_row(
+            name,
+            road,
+            plant,
+            f"{speed:g}",
+            f"{mean('duration_s'):.2f}",
+            f"{100 * mean('overshoot_m'):.1f}",
+            f"{100 * mean('rms_error_m'):.2f}",
+            f"{100 * mean('max_error_m'):.1f}",
+            f"{mean('peak_lat_accel'):.2f}",
+            f"{mean('peak_lat_jerk'):.2f}",
+            f"{max(m.solve_ms_p95 for m in group):.2f}",
+            str(sum(m.fallbacks for m in group)),
+        )
+    Console(width=160).print(table)
 
 
 def plot_speed(maneuvers: list[Maneuver], path: Path, speed: float) -> None:

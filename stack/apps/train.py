@@ -13,28 +13,27 @@ import signal
 import time
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 import torch as th
 import yaml
+from rich.console import Console
 from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ProgressBarCallback
 from stable_baselines3.common.monitor import Monitor
 
 from planner.ddqn import DoubleDQN
-from planner.learned import export_q_network
+from planner.learned import export_q_network, save_q_table
 from planner.model_file import load_model, save_model
 from planner.networks import net_arch
 from planner.tabular import QLearning
 from planner.validation import RealTimeValidation, Validation, kept_models
+from records import N_ACTIONS
+from stack.apps.train_files import dqn_state, plot_training_curve, restore_dqn_state
 from stack.core.closed_loop import grid_config
 from stack.core.config import RunConfig, load_config
 from stack.core.decision_env import HierarchicalHighwayEnv
 
-ALGORITHMS = {"ddqn": DoubleDQN, "dqn": DQN}
+ALGORITHMS: dict[str, type[DQN]] = {"ddqn": DoubleDQN, "dqn": DQN}
 CHECKPOINT = "checkpoint.npz"
 BEST = "best.npz"
 FINAL = "final.npz"
@@ -46,7 +45,7 @@ def model_metadata(config: RunConfig, env: HierarchicalHighwayEnv, trained_steps
         "algorithm": train.algorithm,
         "encoding": train.encoding,
         "observation_size": int(np.prod(env.observation_space.shape)),
-        "actions": 3,
+        "actions": N_ACTIONS,
         "hidden": net_arch(train.network) if train.algorithm != "tabular" else [],
         "network": train.network,
         "grid": grid_config(config).model_dump(mode="json"),
@@ -162,7 +161,9 @@ class Trainer:
         self.model = self._build_dqn()
         resumed = (self.out / CHECKPOINT).is_file()
         if resumed:
-            self._load_dqn_checkpoint()
+            arrays, metadata = load_model(self.out / CHECKPOINT)
+            restore_dqn_state(self.model, arrays, metadata["counters"])
+            self._restore_common(metadata)
         self.validation = self._validation_callback(export_q_network)
         callbacks = [self.validation, EveryNSteps(self.config.train.checkpoint_every, self._save_checkpoint)]
         if self.progress:
@@ -176,45 +177,6 @@ class Trainer:
                 tb_log_name=self.config.train.algorithm,
             )
         return self._save_checkpoint()
-
-    def _dqn_arrays(self) -> tuple[dict, dict]:
-        model = self.model
-        arrays = {f"q/{k}": v.cpu().numpy() for k, v in model.policy.q_net.state_dict().items()}
-        arrays |= {f"target/{k}": v.cpu().numpy() for k, v in model.policy.q_net_target.state_dict().items()}
-        optimizer = model.policy.optimizer.state_dict()
-        for index, state in optimizer["state"].items():
-            for name, value in state.items():
-                arrays[f"optimizer/{index}/{name}"] = th.as_tensor(value).cpu().numpy()
-        buffer = model.replay_buffer
-        for name in ("observations", "next_observations", "actions", "rewards", "dones", "timeouts"):
-            arrays[f"buffer/{name}"] = getattr(buffer, name)
-        counters = {
-            "num_timesteps": int(model.num_timesteps),
-            "n_updates": int(model._n_updates),
-            "episode_num": int(model._episode_num),
-            "buffer_pos": int(buffer.pos),
-            "buffer_full": bool(buffer.full),
-            "param_groups": optimizer["param_groups"],
-        }
-        return arrays, counters
-
-    def _load_dqn_checkpoint(self) -> None:
-        arrays, metadata = load_model(self.out / CHECKPOINT)
-        model, counters = self.model, metadata["counters"]
-        model.policy.q_net.load_state_dict(_prefixed(arrays, "q/"))
-        model.policy.q_net_target.load_state_dict(_prefixed(arrays, "target/"))
-        state: dict[int, dict] = {}
-        for key, value in _prefixed(arrays, "optimizer/").items():
-            index, name = key.split("/")
-            state.setdefault(int(index), {})[name] = value
-        model.policy.optimizer.load_state_dict({"state": state, "param_groups": counters["param_groups"]})
-        buffer = model.replay_buffer
-        for name, value in _prefixed(arrays, "buffer/").items():
-            getattr(buffer, name)[...] = value.numpy()
-        buffer.pos, buffer.full = counters["buffer_pos"], counters["buffer_full"]
-        model.num_timesteps, model._n_updates = counters["num_timesteps"], counters["n_updates"]
-        model._episode_num = counters["episode_num"]
-        self._restore_common(metadata)
 
     # --- tabular Q-learning -----------------------------------------------------------------
     def _train_tabular(self) -> int:
@@ -261,7 +223,7 @@ class Trainer:
         if isinstance(self.model, QLearning):
             arrays, counters = {"q_table": self.model.table}, {"num_timesteps": self.model.steps}
         else:
-            arrays, counters = self._dqn_arrays()
+            arrays, counters = dqn_state(self.model)
         validation = getattr(self, "validation", None)
         state = validation.state() if validation else {"best": None, "history": []}
         save_model(
@@ -296,31 +258,21 @@ class Trainer:
         return summary
 
 
-def _prefixed(arrays: dict, prefix: str) -> dict:
-    return {k.removeprefix(prefix): th.as_tensor(v) for k, v in arrays.items() if k.startswith(prefix)}
-
-
-def save_q_table(agent: QLearning, path: Path, metadata: dict) -> Path:
-    return save_model(path, {"q_table": agent.table}, {"kind": "qtable", **metadata})
-
-
-def plot_training_curve(history: list[Validation], path: Path) -> None:
-    """Mean validation return and collision rate against training steps."""
-    figure, (returns, collisions) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
-    for period, marker in (("short", "o"), ("long", "s")):
-        points = [v for v in history if v.period == period]
-        returns.plot(
-            [v.step for v in points], [v.mean_return for v in points], marker, label=f"{period} validation"
+def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:
+    """Train (or resume) in `folder` and print the outcome; True when interrupted (resumable)."""
+    summary = Trainer(config, folder, progress=progress).run()
+    best = summary["best_validation"]
+    console = Console()
+    console.print(
+        f"{summary['algorithm']}: {summary['steps']} steps in {summary['wall_time_s']:.0f} s; "
+        + (
+            f"best validation at step {best['step']}: collision rate {best['collision_rate']:.1%}, "
+            f"mean return {best['mean_return']:.2f}, mean speed {best['mean_speed']:.2f} m/s"
+            if best
+            else "no validation yet"
         )
-        collisions.plot([v.step for v in points], [100 * v.collision_rate for v in points], marker)
-    best = kept_models(history)
-    returns.plot(
-        [v.step for v in best], [v.mean_return for v in best], "k*", markersize=10, label="kept (best)"
     )
-    returns.set_ylabel("mean return")
-    collisions.set_ylabel("collision rate [%]")
-    collisions.set_xlabel("training steps")
-    returns.legend(fontsize="small")
-    figure.tight_layout()
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    console.print(
+        f"run folder: {folder}" + (" (interrupted: resume with --resume)" if summary["interrupted"] else "")
+    )
+    return bool(summary["interrupted"])

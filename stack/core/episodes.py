@@ -17,6 +17,14 @@ from stack.core.metrics import EpisodeResult, summarize
 from stack.sim.highway import HighwayAdapter
 
 
+def build_agent(config: RunConfig, seed: int) -> Agent:
+    """The agent `config.planner` names, for the run's road and grid; raises ValueError (one line)
+    for a missing, unsafe or mismatched model file."""
+    return make_agent(
+        config.planner.agent, config.highway.lanes_count, grid_config(config), seed, config.planner.model
+    )
+
+
 def agent_step(loop: ClosedLoop, agent: Agent) -> int:
     """Perceive, let `agent` decide on its own encoding, act until the next decision; ticks run."""
     grid = loop.perceive()
@@ -44,9 +52,7 @@ def run_episode(config: RunConfig, episode: int, frames: list[np.ndarray] | None
     its result does not depend on which process runs it or what ran before; `frames`, when
     given, collects the rendered frames."""
     seed = config.seed + episode
-    agent = make_agent(
-        config.planner.agent, config.highway.lanes_count, grid_config(config), seed, config.planner.model
-    )
+    agent = build_agent(config, seed)
     with HighwayAdapter(config.highway, config.sim.backend, render=frames is not None) as adapter:
         loop = ClosedLoop(config, adapter, frames, grid=agent.grid_config)
         return run_agent_episode(loop, agent, episode, seed)

@@ -1,4 +1,5 @@
-"""Results folder: summary.json, episodes.csv, a speed / lateral-position plot, optional video."""
+"""`drivestack run`: seeded closed-loop episodes, and their results folder (summary.json,
+episodes.csv, a speed / lateral-position plot, the grid over the road, optional video)."""
 
 from __future__ import annotations
 
@@ -7,18 +8,27 @@ import json
 from pathlib import Path
 
 import imageio.v2 as imageio
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 from rich.console import Console
 from rich.table import Table
 
 from perception.plot import plot_grid_over_road
+from stack.core.config import RunConfig
+from stack.core.episodes import run
 from stack.core.metrics import EpisodeResult
 
 VIDEO_FPS = 15
 """Frames per second of the GIF (one frame per control tick at highway-env's default 15 Hz)."""
+
+
+def run_and_report(config: RunConfig, out: Path, video: bool, jobs: int, progress: bool) -> bool:
+    """Run `config`'s episodes, write `out`, print the tables; True when Ctrl-C cut the run short
+    (the finished episodes are written). Raises KeyboardInterrupt if none finished."""
+    results = run(config, video=video, progress=progress, jobs=jobs)
+    write_results(out, results.summary, results.episodes, results.frames)
+    print_tables(results.summary, results.episodes)
+    Console().print(f"results: {out}")
+    return bool(results.summary["interrupted"])
 
 
 def write_results(out: Path, summary: dict, episodes: list[EpisodeResult], frames=None) -> None:
