@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 
+from records import N_ACTIONS
 from stack.deepcars.world import DeepCarsBatch
 
 
@@ -20,7 +21,7 @@ def main() -> None:
     print("|---|---|")
     for n in (1, 64, 1024):
         batch = DeepCarsBatch(n, seed=0)
-        actions = rng.integers(0, 3, (256, n))
+        actions = rng.integers(0, N_ACTIONS, (256, n))
         steps, start = 0, time.perf_counter()
         while time.perf_counter() - start < 2.0:
             for a in actions:

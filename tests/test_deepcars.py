@@ -1,14 +1,17 @@
-"""DeepCars: dynamics on hand-built grids, encodings, seeding, the quick reproduction."""
+"""DeepCars: dynamics on hand-built grids, encodings, seeding, the reproduction (a tiny smoke run by
+default, the quick one with -m slow)."""
 
 import json
 
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch
 from stable_baselines3.common.env_checker import check_env
 
-from stack.deepcars.reproduce import lookahead, reproduce
-from stack.deepcars.world import LEFT, RIGHT, STAY, DeepCarsBatch
+from records import N_ACTIONS, Command
+from stack.deepcars.reproduce import Budget, lookahead, reproduce
+from stack.deepcars.world import DeepCarsBatch
 from stack.sim.envs import DEEPCARS
 
 
@@ -21,7 +24,7 @@ def empty(**kwargs) -> DeepCarsBatch:
 def test_cars_move_down_and_are_passed_when_they_leave_row_zero():
     batch = empty()
     batch.cars[0, 0, 0] = batch.cars[0, 3, 4] = True
-    _, rewards, crashed, _, counts = batch.step(np.array([STAY]))
+    _, rewards, crashed, _, counts = batch.step(np.array([Command.STAY]))
     assert rewards[0] == 1.0 and not crashed[0]
     assert counts["passed"][0] == 1 and batch.passed == 1
     assert batch.cars[0].nonzero() == (np.array([2]), np.array([4]))
@@ -31,7 +34,7 @@ def test_a_car_reaching_the_egos_cell_is_a_collision_that_ends_the_episode():
     batch = empty()
     batch.ego[0] = 2
     batch.cars[0, 1, 2] = True
-    _, rewards, crashed, truncated, counts = batch.step(np.array([STAY]))
+    _, rewards, crashed, truncated, counts = batch.step(np.array([Command.STAY]))
     assert rewards[0] == -1.0 and crashed[0] and not truncated[0]
     assert batch.collisions == 1 and batch.passed == 0
     assert counts["final_observation"][0][:10].tolist() == [0, 0, 1, 0, 0, 0, 0, 0, 0, 0]
@@ -42,27 +45,27 @@ def test_dodging_and_moving_into_a_car():
     batch = empty()
     batch.ego[0] = 2
     batch.cars[0, 1, 2] = True
-    _, _, crashed, _, _ = batch.step(np.array([LEFT]))
+    _, _, crashed, _, _ = batch.step(np.array([Command.LEFT]))
     assert not crashed[0] and batch.ego[0] == 1
     batch.cars[0, 1, 0] = True
-    _, _, crashed, _, _ = batch.step(np.array([LEFT]))
+    _, _, crashed, _, _ = batch.step(np.array([Command.LEFT]))
     assert crashed[0]
 
 
 def test_moves_off_the_road_are_no_ops():
     batch = empty(lanes=3)
     batch.ego[0] = 0
-    batch.step(np.array([LEFT]))
+    batch.step(np.array([Command.LEFT]))
     assert batch.ego[0] == 0
     batch.ego[0] = 2
-    batch.step(np.array([RIGHT]))
+    batch.step(np.array([Command.RIGHT]))
     assert batch.ego[0] == 2
 
 
 def test_spawn_puts_one_car_in_the_top_row_each_step():
     batch = DeepCarsBatch(200, seed=3)
     batch.cars[:] = False
-    batch.step(np.full(200, STAY))
+    batch.step(np.full(200, Command.STAY))
     assert (batch.cars[:, -1].sum(axis=1) == 1).all()
     assert not batch.cars[:, :-1].any()
     lanes = batch.cars[:, -1].argmax(axis=1)
@@ -88,13 +91,13 @@ def test_same_seed_same_episode_and_the_gym_env():
     runs = []
     for _ in range(2):
         batch = DeepCarsBatch(4, seed=11)
-        actions = np.random.default_rng(0).integers(0, 3, (50, 4))
+        actions = np.random.default_rng(0).integers(0, N_ACTIONS, (50, 4))
         runs.append([batch.step(a)[0].copy() for a in actions])
     assert all(np.array_equal(a, b) for a, b in zip(*runs, strict=True))
     env = gym.make(DEEPCARS)
     check_env(env.unwrapped)
-    first = [env.reset(seed=5)[0]] + [env.step(1)[0] for _ in range(5)]
-    second = [env.reset(seed=5)[0]] + [env.step(1)[0] for _ in range(5)]
+    first = [env.reset(seed=5)[0]] + [env.step(Command.STAY)[0] for _ in range(5)]
+    second = [env.reset(seed=5)[0]] + [env.step(Command.STAY)[0] for _ in range(5)]
     assert all(np.array_equal(a, b) for a, b in zip(first, second, strict=True))
 
 
@@ -113,7 +116,59 @@ def test_lookahead_rule_never_crashes():
     assert batch.collisions == 0 and batch.passed > 25_000
 
 
-def test_quick_reproduction_reports_every_row(tmp_path):
+@pytest.fixture
+def one_torch_thread():
+    """Torch's default two threads make the tiny networks' steps several times slower on a loaded
+    2-core machine (threads waiting on each other); the rows do not depend on it."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+TINY = Budget(
+    tabular_steps=300,
+    tabular_long_steps=600,
+    dqn_max_steps=1_200,
+    eval_steps=2_000,
+    short_every=400,
+    long_every=800,
+    short_episodes=1,
+    long_episodes=1,
+)
+"""Enough for a few gradient steps (DQN learns from step 1000) and both validation periods."""
+
+
+def test_tiny_reproduction_runs_every_kind_of_row_end_to_end(tmp_path, one_torch_thread):
+    rows = reproduce(tmp_path, budget=TINY, networks=("16",))
+    agents = [(r.agent, r.network, r.training_steps) for r in rows]
+    assert agents == [
+        ("tabular", "-", 300),
+        ("tabular", "-", 600),
+        ("dqn", "16", 1_200),
+        ("ddqn", "16", 1_200),
+        ("random", "-", 0),
+        ("always-stay", "-", 0),
+        ("lookahead-rule", "-", 0),
+    ]
+    for row in rows:
+        assert row.eval_passed + row.eval_collisions > 0 and 0 <= row.eval_accuracy <= 100
+        assert row.eval_accuracy == pytest.approx(
+            100 * row.eval_passed / (row.eval_passed + row.eval_collisions)
+        )
+        assert row.train_accuracy is None or 0 <= row.train_accuracy <= 100
+    assert rows[-1].eval_accuracy == 100.0 and rows[-2].eval_collisions > 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["budget"]["dqn_max_steps"] == 1_200 and not summary["quick"]
+    assert [entry["eval_passed"] for entry in summary["rows"]] == [r.eval_passed for r in rows]
+    table = (tmp_path / "results.md").read_text()
+    assert table.count("\n| ") == 8 and "| dqn | 16 | 1200 |" in table and "98.28 %" in table
+    for figure in ("training_curves.png", "tabular_q_table.png"):
+        assert (tmp_path / figure).read_bytes().startswith(b"\x89PNG")
+
+
+@pytest.mark.slow
+def test_quick_reproduction_reports_every_row(tmp_path, one_torch_thread):
     rows = reproduce(tmp_path, quick=True)
     agents = [(r.agent, r.network) for r in rows]
     assert agents[:2] == [("tabular", "-"), ("tabular", "-")]

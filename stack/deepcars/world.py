@@ -2,7 +2,7 @@
 
 The road has `lanes` lanes and `line_of_sight` rows; row 0 is the ego's row, row line_of_sight-1
 the top. One step:
-1. the ego moves one lane (LEFT = towards lane 0); a move off the road is a no-op;
+1. the ego moves one lane (`records.Command`: LEFT = towards lane 0); a move off the road is a no-op;
 2. every car moves one row down; cars leaving row 0 are passed;
 3. a car now in the ego's cell is a collision: reward -1, the episode ends; otherwise +1;
 4. with probability `spawn_probability` one car appears in a random lane of the top row.
@@ -22,7 +22,8 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv
 
-LEFT, STAY, RIGHT = 0, 1, 2
+from records import N_ACTIONS, Command
+
 ENCODINGS = ("binary", "one-hot", "tabular")
 
 
@@ -102,7 +103,8 @@ class DeepCarsBatch:
         their observation is the first of the next episode (`counts["final_observation"]` holds
         the last one)."""
         actions = np.asarray(actions).reshape(self.n)
-        self.ego = np.clip(self.ego + (actions - 1), 0, self.lanes - 1)
+        lane_shifts = actions - Command.STAY  # Command.lane_shift, for a whole array of actions
+        self.ego = np.clip(self.ego + lane_shifts, 0, self.lanes - 1)
         passed = self.cars[:, 0, :].sum(axis=1)
         self.cars[:, :-1] = self.cars[:, 1:]
         self.cars[:, -1] = False
@@ -150,7 +152,7 @@ class DeepCarsEnv(gym.Env):
         )
         self.batch = DeepCarsBatch(1, **self.settings)
         self.observation_space = self.batch.observation_space()
-        self.action_space = spaces.Discrete(3)
+        self.action_space = spaces.Discrete(N_ACTIONS)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
@@ -170,7 +172,7 @@ class DeepCarsVecEnv(VecEnv):
 
     def __init__(self, batch: DeepCarsBatch) -> None:
         self.batch = batch
-        super().__init__(batch.n, batch.observation_space(), spaces.Discrete(3))
+        super().__init__(batch.n, batch.observation_space(), spaces.Discrete(N_ACTIONS))
         self.episode_returns = np.zeros(batch.n)
         self.finished_returns: list[float] = []
 

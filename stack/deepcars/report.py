@@ -1,0 +1,89 @@
+"""The DeepCars reproduction's outputs: the two figures, results.md and summary.json.
+
+Kept apart from `rows` (which trains and evaluates) so the table's layout and the figures can be
+read and changed without the training code; nothing here touches an environment or a model.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from records import Command
+
+if TYPE_CHECKING:
+    from stack.deepcars.rows import Budget, Row
+
+
+def plot_q_table(table: np.ndarray, path: Path) -> None:
+    """The paper's sparsity figure: which state-action values training ever touched."""
+    flat = table.reshape(-1, table.shape[-1])
+    visited = np.any(flat != 0, axis=1)
+    crop = flat[: min(len(flat), 400)]
+    figure, axis = plt.subplots(figsize=(4, 7))
+    axis.imshow(crop != 0, aspect="auto", cmap="Greys", interpolation="nearest")
+    axis.set_xticks([int(c) for c in Command], [c.name.lower() for c in Command])
+    axis.set_ylabel("state index (first 400)")
+    axis.set_title(f"Q-table: {visited.mean():.1%} of {len(flat)} states visited")
+    figure.tight_layout()
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+def plot_curves(curves: dict[tuple[str, str], list[float]], path: Path) -> None:
+    """Mean episode reward over the last 100 episodes, per network, DQN vs DDQN."""
+    figure, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
+    for axis, algorithm in zip(axes, ("dqn", "ddqn"), strict=True):
+        for (name, network), returns in curves.items():
+            if name != algorithm or not returns:
+                continue
+            window = (
+                np.convolve(returns, np.ones(100) / 100, mode="valid") if len(returns) >= 100 else returns
+            )
+            axis.plot(window, label=network)
+        axis.set_title(algorithm.upper())
+        axis.set_xlabel("episode")
+        axis.legend(fontsize="small")
+    axes[0].set_ylabel("mean reward (last 100 episodes)")
+    figure.tight_layout()
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+def markdown(rows: list[Row], quick: bool) -> str:
+    """results.md: the table, one line per row, with the paper's numbers alongside."""
+
+    def pct(value):
+        return "-" if value is None else f"{value:.2f} %"
+
+    lines = [
+        f"# DeepCars reproduction{' (quick budgets)' if quick else ''}",
+        "",
+        "| agent | network | training steps | train accuracy | eval accuracy (greedy) | eval collisions "
+        "| eval passed | wall time s | paper train | paper eval |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r.agent} | {r.network} | {r.training_steps} | {pct(r.train_accuracy)} | "
+            f"{pct(r.eval_accuracy)} | {r.eval_collisions} | {r.eval_passed} | {r.wall_time_s:.1f} | "
+            f"{pct(r.paper_train)} | {pct(r.paper_eval)} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def write_tables(out: Path, rows: list[Row], budget: Budget, quick: bool, seed: int) -> None:
+    """summary.json (the run's settings and every row, like every other run) and results.md."""
+    (out / "summary.json").write_text(
+        json.dumps(
+            {"quick": quick, "seed": seed, "budget": asdict(budget), "rows": [asdict(r) for r in rows]},
+            indent=2,
+        )
+        + "\n"
+    )
+    (out / "results.md").write_text(markdown(rows, quick))

@@ -1,0 +1,231 @@
+"""The rows of the DeepCars table: what each one is, and how it is trained and evaluated.
+
+One function per kind of row: `tabular` (Q-learning), `deep` (DQN or Double DQN for one network
+size, with the paper's real-time validation) and `baselines` (random, always-stay and the one-row
+`lookahead` rule). Each returns `Row`s; `evaluate` is the greedy evaluation they all share. The
+step counts come from a `Budget` (`FULL`: the paper's; `QUICK`: a smoke run of the whole table).
+Writing the report lives in `report`, running the whole table in `reproduce`.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch as th
+from stable_baselines3 import DQN
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+from planner.ddqn import DoubleDQN
+from planner.networks import NET_ARCHS
+from planner.tabular import QLearning
+from planner.validation import RealTimeValidation
+from records import N_ACTIONS, Command
+from stack.deepcars.report import plot_q_table
+from stack.deepcars.world import DeepCarsBatch, DeepCarsEnv, DeepCarsVecEnv
+
+PAPER = {
+    "tabular": {"train": 98.28, "eval": 99.14},
+    "dqn": {"eval": 100.0},
+    "ddqn": {"eval": 100.0},
+}
+"""The paper's accuracies [%] (Moghadam & Elkaim 2019, section 4)."""
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Environment steps for training, validation and evaluation of every row."""
+
+    tabular_steps: int = 50_000
+    tabular_long_steps: int = 1_000_000
+    dqn_max_steps: int = 500_000
+    eval_steps: int = 100_000
+    short_every: int = 5_000
+    long_every: int = 25_000
+    short_episodes: int = 3
+    long_episodes: int = 10
+
+
+FULL = Budget()
+QUICK = Budget(
+    tabular_steps=5_000,
+    tabular_long_steps=20_000,
+    dqn_max_steps=2_000,
+    eval_steps=10_000,
+    short_every=1_000,
+    long_every=2_000,
+    short_episodes=1,
+    long_episodes=2,
+)
+
+
+@dataclass
+class Row:
+    """One line of the table; accuracies in %, `paper_*` the paper's numbers where it gives them."""
+
+    agent: str
+    network: str
+    training_steps: int
+    train_accuracy: float | None
+    eval_accuracy: float
+    eval_collisions: int
+    eval_passed: int
+    wall_time_s: float
+    paper_train: float | None
+    paper_eval: float | None
+
+
+def evaluate(policy, steps: int, encoding: str, seed: int, envs: int = 100) -> DeepCarsBatch:
+    """Run `policy(observations) -> actions` greedily for `steps` env steps over `envs` envs."""
+    batch = DeepCarsBatch(envs, encoding=encoding, seed=seed)
+    observations = batch.observe()
+    for _ in range(max(1, steps // envs)):
+        observations, *_ = batch.step(policy(observations))
+    return batch
+
+
+def lookahead(observations: np.ndarray) -> np.ndarray:
+    """One-row lookahead on the tabular state: leave the lane if a car is one row ahead, for an
+    adjacent lane without one."""
+    ego, distances = observations[:, 0], observations[:, 1:]
+    lanes = distances.shape[1]
+    actions = np.full(len(observations), Command.STAY)
+    threatened = distances[np.arange(len(ego)), ego] == 1
+    for shift, action in ((-1, Command.LEFT), (1, Command.RIGHT)):
+        target = np.clip(ego + shift, 0, lanes - 1)
+        free = (target != ego) & (distances[np.arange(len(ego)), target] != 1)
+        move = threatened & free & (actions == Command.STAY)
+        actions[move] = action
+    return actions
+
+
+def baselines(budget: Budget, seed: int) -> list[Row]:
+    """The rows without training: random, always-stay and the lookahead rule."""
+    rng = np.random.default_rng(seed)
+    policies = {
+        "random": ("binary", lambda obs: rng.integers(0, N_ACTIONS, len(obs))),
+        "always-stay": ("binary", lambda obs: np.full(len(obs), Command.STAY)),
+        "lookahead-rule": ("tabular", lookahead),
+    }
+    rows = []
+    for name, (encoding, policy) in policies.items():
+        start = time.perf_counter()
+        batch = evaluate(policy, budget.eval_steps, encoding, seed)
+        rows.append(
+            Row(
+                name,
+                "-",
+                0,
+                None,
+                batch.accuracy,
+                batch.collisions,
+                batch.passed,
+                time.perf_counter() - start,
+                None,
+                None,
+            )
+        )
+    return rows
+
+
+def tabular(budget: Budget, seed: int, out: Path, steps: int | None = None) -> Row:
+    """Q-learning for `steps` (the paper's 50k by default) steps; the Q-table figure for the paper budget."""
+    steps = steps or budget.tabular_steps
+    start = time.perf_counter()
+    train = DeepCarsBatch(1, encoding="tabular", seed=seed)
+    agent = QLearning.for_space(train.observation_space(), alpha=0.1, gamma=0.9, epsilon=0.2, seed=seed)
+    observation = train.observe()[0]
+    for _ in range(steps):
+        action, _ = agent.predict(observation, deterministic=False)
+        next_observations, rewards, crashed, _, counts = train.step(np.array([action]))
+        agent.update(observation, action, float(rewards[0]), counts["final_observation"][0], bool(crashed[0]))
+        observation = next_observations[0]
+    greedy = lambda obs: np.argmax(agent.table[tuple(obs.T)], axis=1)  # noqa: E731
+    batch = evaluate(greedy, budget.eval_steps, "tabular", seed + 1)
+    if steps == budget.tabular_steps:
+        plot_q_table(agent.table, out / "tabular_q_table.png")
+    return Row(
+        "tabular",
+        "-",
+        steps,
+        train.accuracy,
+        batch.accuracy,
+        batch.collisions,
+        batch.passed,
+        time.perf_counter() - start,
+        PAPER["tabular"]["train"],
+        PAPER["tabular"]["eval"],
+    )
+
+
+class StopWhenPerfect(BaseCallback):
+    """Stop once a long validation saw no collision (the paper's best model cannot improve)."""
+
+    def __init__(self, validation: RealTimeValidation) -> None:
+        super().__init__()
+        self.validation = validation
+
+    def _on_step(self) -> bool:
+        last = self.validation.history[-1] if self.validation.history else None
+        return not (
+            last and last.period == "long" and last.step == self.num_timesteps and last.collision_rate == 0
+        )
+
+
+def deep(algorithm: str, network: str, budget: Budget, seed: int) -> tuple[Row, list[float]]:
+    """DQN or Double DQN (`algorithm`) with the `network` of `NET_ARCHS`, the best validated model
+    evaluated; also the training episodes' returns (for the training curves)."""
+    start = time.perf_counter()
+    vec = DeepCarsVecEnv(DeepCarsBatch(8, encoding="binary", seed=seed))
+    model = (DoubleDQN if algorithm == "ddqn" else DQN)(
+        "MlpPolicy",
+        vec,
+        learning_rate=1e-3,
+        buffer_size=50_000,
+        learning_starts=1_000,
+        batch_size=64,
+        gamma=0.9,
+        train_freq=1,
+        gradient_steps=2,
+        target_update_interval=250,
+        exploration_fraction=0.1,
+        exploration_final_eps=0.02,
+        policy_kwargs={"net_arch": NET_ARCHS[network]},
+        seed=seed,
+        device="cpu",
+    )
+    best: dict = {}
+    validation = RealTimeValidation(
+        DeepCarsEnv(encoding="binary"),
+        budget.short_every,
+        budget.short_episodes,
+        budget.long_every,
+        budget.long_episodes,
+        seed + 10_000,
+        on_improvement=lambda m, v: best.update(weights=copy.deepcopy(m.policy.q_net.state_dict())),
+    )
+    model.learn(budget.dqn_max_steps, callback=CallbackList([validation, StopWhenPerfect(validation)]))
+    if "weights" in best:
+        model.policy.q_net.load_state_dict(best["weights"])
+
+    def greedy(observations: np.ndarray) -> np.ndarray:
+        with th.no_grad():
+            return model.policy.q_net(th.as_tensor(observations)).argmax(dim=1).numpy()
+
+    batch = evaluate(greedy, budget.eval_steps, "binary", seed + 1)
+    row = Row(
+        algorithm,
+        network,
+        int(model.num_timesteps),
+        vec.batch.accuracy,
+        batch.accuracy,
+        batch.collisions,
+        batch.passed,
+        time.perf_counter() - start,
+        None,
+        PAPER[algorithm]["eval"],
+    )
+    return row, vec.finished_returns
