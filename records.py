@@ -46,6 +46,23 @@ def one_of(kind: str, options: tuple[str, ...]) -> BeforeValidator:
     return BeforeValidator(check)
 
 
+# --- seeds ------------------------------------------------------------------------------------
+SEED_LIMIT = 2**31 - 1
+"""Seeds drawn from a generator lie in [0, SEED_LIMIT)."""
+
+
+def child_seed(base: int, index: int) -> int:
+    """The seed of the `index`-th member (episode, validation episode, evaluation stream) of
+    something seeded `base`: `base + index`, so a run's episodes are reproducible one by one and
+    do not depend on which process runs them."""
+    return base + index
+
+
+def drawn_seed(rng: np.random.Generator) -> int:
+    """A fresh seed drawn from a seeded generator (a gym env's `np_random`)."""
+    return int(rng.integers(0, SEED_LIMIT))
+
+
 # --- the decision ------------------------------------------------------------------------------
 class Command(IntEnum):
     """The decision layer's output, in highway-env's LANE_LEFT / IDLE / LANE_RIGHT order."""

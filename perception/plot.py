@@ -4,15 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.patches import Rectangle
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.patches import Rectangle  # noqa: E402
-
-from perception.grid import OccupancyGrid  # noqa: E402
-from records import WorldState  # noqa: E402
+from perception.grid import OccupancyGrid
+from records import WorldState
 
 EMPTY = (235, 235, 235)
 OCCUPIED = (220, 60, 50)

@@ -17,6 +17,8 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from records import child_seed
+
 
 @dataclass(frozen=True)
 class Validation:
@@ -35,7 +37,7 @@ def validate(predict: Callable, env: gym.Env, episodes: int, seed: int) -> tuple
     """(collision rate, mean return, mean speed [m/s]) of greedy `predict` over seeded episodes."""
     crashes, returns, speeds = 0, [], []
     for episode in range(episodes):
-        observation, _ = env.reset(seed=seed + episode)
+        observation, _ = env.reset(seed=child_seed(seed, episode))
         total, done, info = 0.0, False, {}
         while not done:
             action, _ = predict(observation, deterministic=True)

@@ -1,5 +1,11 @@
-"""drivestack's top layer: the closed loop, the highway-env adapter, configs, envs and the CLI."""
+"""drivestack's top layer: the simulator (`sim`), the run core (`core`), the applications
+(`apps`, the `drivestack` CLI) and the paper's grid world (`deepcars`), over the layers
+`perception`, `planner` and `controllers`."""
 
-from stack.sim.envs import register_envs
+import os
+
+os.environ.setdefault("MPLBACKEND", "Agg")  # figures are written to files; chosen here, once
+
+from stack.sim.envs import register_envs  # noqa: E402
 
 register_envs()

@@ -1,7 +1,5 @@
 """Agents behind one protocol, Double DQN's target, the safe model file."""
 
-import json
-
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -15,7 +13,7 @@ from planner.factory import DEFAULT_MODEL, make_agent
 from planner.learned import export_q_network, load_agent
 from planner.mobil import MobilAgent
 from planner.model_file import ModelFileError, save_model
-from records import AGENT_NAMES, Command
+from records import AGENT_NAMES, ENCODINGS, N_ACTIONS, Command
 from tests.helpers import scene
 
 GRID = GridConfig(cells_ahead=9, cells_behind=4)
@@ -70,10 +68,13 @@ def model_files(tmp_path):
 def test_every_agent_answers_the_protocol(name, model_files):
     world = scene(3, (0.0, 1), [(15.0, 4.0), (30.0, 0.0), (-20.0, 8.0)], speed=25.0, other_speed=20.0)
     agent = make_agent(name, 3, GRID, seed=0, model=model_files.get(name))
-    action, state = agent.predict(observation_for(agent, world), deterministic=True)
+    observation = observation_for(agent, world)
+    action, state = agent.predict(observation, state="carried", deterministic=True)
     assert int(action) in (0, 1, 2)
-    assert state is None
-    assert decide(agent, observation_for(agent, world)) in tuple(Command)
+    assert state == "carried", "a stateless agent hands the recurrent state back unchanged"
+    assert agent.encoding in ENCODINGS
+    if name != "random":
+        assert decide(agent, observation) == Command(int(action)), "greedy decisions are repeatable"
 
 
 def test_unknown_agent_lists_what_is_available():
@@ -188,4 +189,8 @@ def test_shipped_default_model_loads_safely():
     agent = load_agent(DEFAULT_MODEL, expected_algorithms=("ddqn",))
     assert agent.metadata["algorithm"] == "ddqn"
     assert DEFAULT_MODEL.stat().st_size < 500_000
-    assert json.dumps(agent.metadata)
+    assert agent.metadata["actions"] == N_ACTIONS
+    world = scene(4, (0.0, 1), [(15.0, 4.0), (30.0, 0.0)])
+    observation = OccupancyGridBuilder(agent.grid_config).build(world).encode(agent.encoding)
+    assert observation.size == agent.metadata["observation_size"], "it reads the grid it declares"
+    assert decide(agent, observation) in tuple(Command)

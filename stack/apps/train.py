@@ -27,7 +27,7 @@ from planner.model_file import load_model, save_model
 from planner.networks import net_arch
 from planner.tabular import QLearning
 from planner.validation import RealTimeValidation, Validation, kept_models
-from records import N_ACTIONS
+from records import N_ACTIONS, child_seed
 from stack.apps.train_files import dqn_state, plot_training_curve, restore_dqn_state
 from stack.core.closed_loop import grid_config
 from stack.core.config import RunConfig, load_config
@@ -205,7 +205,9 @@ class Trainer:
         self.validation = validation
         remaining = train.steps - self.model.steps
         if remaining > 0:
-            self.model.learn(self.env, remaining, seed=self.config.seed + self.model.steps, on_step=on_step)
+            self.model.learn(
+                self.env, remaining, seed=child_seed(self.config.seed, self.model.steps), on_step=on_step
+            )
         return self._save_checkpoint()
 
     # --- shared -------------------------------------------------------------------------------

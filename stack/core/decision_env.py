@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from records import N_ACTIONS, Command
+from records import N_ACTIONS, Command, drawn_seed
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import RunConfig, build_config
 from stack.sim.highway import HighwayAdapter
@@ -41,7 +41,7 @@ class HierarchicalHighwayEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        self.loop.reset(int(self.np_random.integers(0, 2**31 - 1)))
+        self.loop.reset(drawn_seed(self.np_random))
         return self._observe(), self.loop.status()
 
     def step(self, action):

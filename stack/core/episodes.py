@@ -11,6 +11,7 @@ from tqdm import tqdm
 
 from planner.agents import Agent, decide
 from planner.factory import make_agent
+from records import child_seed
 from stack.core.closed_loop import ClosedLoop, grid_config
 from stack.core.config import RunConfig
 from stack.core.metrics import EpisodeResult, summarize
@@ -51,7 +52,7 @@ def run_episode(config: RunConfig, episode: int, frames: list[np.ndarray] | None
     """Episode `episode` of `config` (seed = config.seed + episode), with a fresh env and agent so
     its result does not depend on which process runs it or what ran before; `frames`, when
     given, collects the rendered frames."""
-    seed = config.seed + episode
+    seed = child_seed(config.seed, episode)
     agent = build_agent(config, seed)
     with HighwayAdapter(config.highway, config.sim.backend, render=frames is not None) as adapter:
         loop = ClosedLoop(config, adapter, frames, grid=agent.grid_config)
