@@ -13,46 +13,29 @@ import signal
 import time
 from pathlib import Path
 
-import numpy as np
-import torch as th
 import yaml
 from rich.console import Console
-from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ProgressBarCallback
 from stable_baselines3.common.monitor import Monitor
 
-from planner.ddqn import DoubleDQN
 from planner.learned import export_q_network, save_q_table
 from planner.model_file import load_model, save_model
-from planner.networks import net_arch
 from planner.tabular import QLearning
 from planner.validation import RealTimeValidation, Validation, kept_models
-from records import N_ACTIONS, child_seed
-from stack.apps.train_files import dqn_state, plot_training_curve, restore_dqn_state
-from stack.core.closed_loop import grid_config
+from records import child_seed
+from stack.apps.train_model import (
+    build_dqn,
+    dqn_state,
+    model_metadata,
+    plot_training_curve,
+    restore_dqn_state,
+)
 from stack.core.config import RunConfig, load_config
 from stack.core.decision_env import HierarchicalHighwayEnv
 
-ALGORITHMS: dict[str, type[DQN]] = {"ddqn": DoubleDQN, "dqn": DQN}
 CHECKPOINT = "checkpoint.npz"
 BEST = "best.npz"
 FINAL = "final.npz"
-
-
-def model_metadata(config: RunConfig, env: HierarchicalHighwayEnv, trained_steps: int) -> dict:
-    train = config.train
-    return {
-        "algorithm": train.algorithm,
-        "encoding": train.encoding,
-        "observation_size": int(np.prod(env.observation_space.shape)),
-        "actions": N_ACTIONS,
-        "hidden": net_arch(train.network) if train.algorithm != "tabular" else [],
-        "network": train.network,
-        "grid": grid_config(config).model_dump(mode="json"),
-        "lanes_count": config.highway.lanes_count,
-        "trained_steps": trained_steps,
-        "seed": config.seed,
-    }
 
 
 class EveryNSteps(BaseCallback):
@@ -131,34 +114,8 @@ class Trainer:
         )
 
     # --- DDQN / DQN -------------------------------------------------------------------------
-    def _build_dqn(self):
-        """The SB3 model. Torch gets one thread: the Q-networks hold a few thousand weights, where
-        more threads only add overhead and steal cores from the simulator."""
-        th.set_num_threads(1)
-        train = self.config.train
-        algorithm = ALGORITHMS[train.algorithm]
-
-        return algorithm(
-            "MlpPolicy",
-            self.env,
-            learning_rate=train.learning_rate,
-            buffer_size=train.buffer_size,
-            learning_starts=train.learning_starts,
-            batch_size=train.batch_size,
-            gamma=train.gamma,
-            train_freq=train.train_freq,
-            target_update_interval=train.target_update_interval,
-            exploration_fraction=train.exploration_fraction,
-            exploration_final_eps=train.exploration_final_eps,
-            policy_kwargs={"net_arch": net_arch(train.network)},
-            tensorboard_log=str(self.out / "tensorboard"),
-            seed=self.config.seed,
-            verbose=0,
-            device="cpu",
-        )
-
     def _train_dqn(self) -> int:
-        self.model = self._build_dqn()
+        self.model = build_dqn(self.config, self.env, self.out / "tensorboard")
         resumed = (self.out / CHECKPOINT).is_file()
         if resumed:
             arrays, metadata = load_model(self.out / CHECKPOINT)

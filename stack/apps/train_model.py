@@ -1,19 +1,71 @@
-"""What a DQN training run keeps so `--resume` continues exactly: the SB3 model's whole state as
-plain arrays (online and target Q-networks, Adam moments, the replay buffer) plus JSON counters; and
-the training curve."""
+"""The model a training run builds and what it keeps of it: the SB3 (Double) DQN from the config,
+the metadata every model file carries, the model's whole state as plain arrays for checkpoints
+(online and target Q-networks, Adam moments, the replay buffer, plus JSON counters) so `--resume`
+continues exactly, and the training curve."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import gymnasium as gym
 import matplotlib.pyplot as plt
 import numpy as np
 import torch as th
 from stable_baselines3 import DQN
 
+from planner.ddqn import DoubleDQN
+from planner.networks import net_arch
 from planner.validation import Validation, kept_models
+from records import N_ACTIONS
+from stack.core.closed_loop import grid_config
+from stack.core.config import RunConfig
 
+ALGORITHMS: dict[str, type[DQN]] = {"ddqn": DoubleDQN, "dqn": DQN}
 BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
+
+
+def build_dqn(config: RunConfig, env: gym.Env, tensorboard: Path) -> DQN:
+    """The SB3 model. Torch gets one thread: the Q-networks hold a few thousand weights, where
+    more threads only add overhead and steal cores from the simulator."""
+    th.set_num_threads(1)
+    train = config.train
+    algorithm = ALGORITHMS[train.algorithm]
+
+    return algorithm(
+        "MlpPolicy",
+        env,
+        learning_rate=train.learning_rate,
+        buffer_size=train.buffer_size,
+        learning_starts=train.learning_starts,
+        batch_size=train.batch_size,
+        gamma=train.gamma,
+        train_freq=train.train_freq,
+        target_update_interval=train.target_update_interval,
+        exploration_fraction=train.exploration_fraction,
+        exploration_final_eps=train.exploration_final_eps,
+        policy_kwargs={"net_arch": net_arch(train.network)},
+        tensorboard_log=str(tensorboard),
+        seed=config.seed,
+        verbose=0,
+        device="cpu",
+    )
+
+
+def model_metadata(config: RunConfig, env: gym.Env, trained_steps: int) -> dict:
+    """What a model file says about the model: algorithm, encoding, sizes, grid, training."""
+    train = config.train
+    return {
+        "algorithm": train.algorithm,
+        "encoding": train.encoding,
+        "observation_size": int(np.prod(env.observation_space.shape)),
+        "actions": N_ACTIONS,
+        "hidden": net_arch(train.network) if train.algorithm != "tabular" else [],
+        "network": train.network,
+        "grid": grid_config(config).model_dump(mode="json"),
+        "lanes_count": config.highway.lanes_count,
+        "trained_steps": trained_steps,
+        "seed": config.seed,
+    }
 
 
 def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], dict]:

@@ -1,0 +1,60 @@
+"""The record types every layer shares, and the names of every swappable part.
+
+`stack`, `perception`, `planner` and `controllers` import this package and nothing of each other
+below `stack`. It holds plain data: the world snapshot (`WorldState`), the decision (`Command`),
+the grid an agent is shown (`GridConfig`), and what flows through one control tick (`EgoState`,
+`Reference`, `Actuation`). Behaviour stays in the layers; only small derived views live here.
+Import from `records` itself; the submodules only keep each part short.
+"""
+
+from records.grid import MAX_SPEED, GridConfig, lane_code_bits
+from records.names import (
+    AGENT_NAMES,
+    BACKENDS,
+    CONTROLLER_NAMES,
+    ENCODINGS,
+    LEARNED_AGENTS,
+    SEED_LIMIT,
+    AgentName,
+    Backend,
+    ControllerName,
+    Encoding,
+    LearnedAgentName,
+    child_seed,
+    drawn_seed,
+    one_of,
+    unknown_name,
+)
+from records.tick import N_ACTIONS, Actuation, Command, LateralProfile, Reference
+from records.world import EgoState, Lane, Neighbour, WorldState, lane_curvature
+
+__all__ = [
+    "AGENT_NAMES",
+    "BACKENDS",
+    "CONTROLLER_NAMES",
+    "ENCODINGS",
+    "LEARNED_AGENTS",
+    "MAX_SPEED",
+    "N_ACTIONS",
+    "SEED_LIMIT",
+    "Actuation",
+    "AgentName",
+    "Backend",
+    "Command",
+    "ControllerName",
+    "EgoState",
+    "Encoding",
+    "GridConfig",
+    "Lane",
+    "LateralProfile",
+    "LearnedAgentName",
+    "Neighbour",
+    "Reference",
+    "WorldState",
+    "child_seed",
+    "drawn_seed",
+    "lane_code_bits",
+    "lane_curvature",
+    "one_of",
+    "unknown_name",
+]

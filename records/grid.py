@@ -1,0 +1,44 @@
+"""The occupancy grid an agent is shown: perception builds it, the planner decodes it."""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+MAX_SPEED = 40.0
+"""Speed that the grid's `ego_speed` feature maps to 1 [m/s] (highway-env's Vehicle.MAX_SPEED)."""
+
+
+class GridConfig(BaseModel):
+    """The occupancy grid an agent decides on (built by `perception.grid`). Lengths in m, speeds
+    in m/s, times in s."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    cell_length: float = Field(5.0, gt=0, allow_inf_nan=False, description="cell length [m]")
+    cells_ahead: int = Field(9, ge=1, description="line of sight in cells, the ego's own included")
+    cells_behind: int = Field(4, ge=0)
+    lanes: Literal["absolute", "ego"] = "absolute"
+    lateral_reach: int = Field(1, ge=1, description="ego mode: neighbour lanes on each side")
+    footprint: bool = True
+    features: tuple[Literal["relative_speed", "ttc", "ego_speed"], ...] = ()
+    speed_scale: float = Field(20.0, gt=0, description="relative speed giving feature 1 [m/s]")
+    ttc_horizon: float = Field(10.0, gt=0, description="time-to-collision giving feature 1 [s]")
+
+    @property
+    def cells(self) -> int:
+        return self.cells_behind + self.cells_ahead
+
+    @property
+    def ego_column(self) -> int:
+        return self.cells_behind
+
+    def rows(self, lanes_count: int) -> int:
+        return lanes_count if self.lanes == "absolute" else 2 * self.lateral_reach + 1
+
+
+def lane_code_bits(lanes: int) -> int:
+    """Bits of the binary ego-lane code (the paper's encoding)."""
+    return max(1, math.ceil(math.log2(lanes)))

@@ -1,0 +1,53 @@
+"""The names of every swappable part (config keys and CLI options accept exactly these), the
+one-line message for an unknown one, and the seeding convention."""
+
+from __future__ import annotations
+
+from typing import Literal, get_args
+
+import numpy as np
+from pydantic import BeforeValidator
+
+AgentName = Literal["ddqn", "dqn", "tabular", "rule", "mobil", "keep-lane", "random"]
+LearnedAgentName = Literal["ddqn", "dqn", "tabular"]
+Encoding = Literal["observation", "paper", "tabular"]
+ControllerName = Literal["pid", "mpc"]
+Backend = Literal["fast", "stock"]
+AGENT_NAMES: tuple[AgentName, ...] = get_args(AgentName)
+LEARNED_AGENTS: tuple[LearnedAgentName, ...] = get_args(LearnedAgentName)
+ENCODINGS: tuple[Encoding, ...] = get_args(Encoding)
+CONTROLLER_NAMES: tuple[ControllerName, ...] = get_args(ControllerName)
+BACKENDS: tuple[Backend, ...] = get_args(Backend)
+
+
+def unknown_name(kind: str, value: object, options: tuple[str, ...]) -> str:
+    """The one-line message for a name that is not among `options`."""
+    return f"unknown {kind} {value!r}; available: {', '.join(options)}"
+
+
+def one_of(kind: str, options: tuple[str, ...]) -> BeforeValidator:
+    """A pydantic validator for a name field: anything outside `options` is refused with the
+    `unknown_name` message (put before the field's `Literal` check, whose message lists less)."""
+
+    def check(value: object) -> object:
+        if value not in options:
+            raise ValueError(unknown_name(kind, value, options))
+        return value
+
+    return BeforeValidator(check)
+
+
+SEED_LIMIT = 2**31 - 1
+"""Seeds drawn from a generator lie in [0, SEED_LIMIT)."""
+
+
+def child_seed(base: int, index: int) -> int:
+    """The seed of the `index`-th member (episode, validation episode, evaluation stream) of
+    something seeded `base`: `base + index`, so a run's episodes are reproducible one by one and
+    do not depend on which process runs them."""
+    return base + index
+
+
+def drawn_seed(rng: np.random.Generator) -> int:
+    """A fresh seed drawn from a seeded generator (a gym env's `np_random`)."""
+    return int(rng.integers(0, SEED_LIMIT))

@@ -1,0 +1,76 @@
+"""What flows through a decision and one control tick: the command, the reference, the actuation."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Protocol
+
+from records.world import Neighbour
+
+
+class Command(IntEnum):
+    """The decision layer's output, in highway-env's LANE_LEFT / IDLE / LANE_RIGHT order."""
+
+    LEFT = 0
+    STAY = 1
+    RIGHT = 2
+
+    @property
+    def lane_shift(self) -> int:
+        """Change of lane index: LEFT moves towards lane 0."""
+        return self.value - 1
+
+
+N_ACTIONS = len(Command)
+"""Size of every agent's discrete action space."""
+
+
+class LateralProfile(Protocol):
+    """A lateral reference over time (`controllers.reference.QuinticProfile`)."""
+
+    def sample(self, t: float) -> tuple[float, float, float]:
+        """(d [m], d_dot [m/s], d_ddot [m/s^2]) at absolute time `t` [s]."""
+        ...
+
+
+@dataclass(frozen=True)
+class Reference:
+    """What to track this tick: lateral offset and its first two time derivatives (m, m/s, m/s^2)
+    at `time` [s], a set speed [m/s], the leaders to keep a time gap to, and the lane the maneuver
+    heads for. `lateral`, when given, is the whole profile, for controllers that look ahead."""
+
+    d: float
+    d_dot: float
+    d_ddot: float
+    set_speed: float
+    leaders: tuple[Neighbour, ...] = ()
+    time: float = 0.0
+    target_lane: int = 0
+    lateral: LateralProfile | None = None
+
+    @classmethod
+    def sampled(
+        cls,
+        lateral: LateralProfile,
+        time: float,
+        set_speed: float,
+        leaders: tuple[Neighbour, ...] = (),
+        target_lane: int = 0,
+    ) -> Reference:
+        d, d_dot, d_ddot = lateral.sample(time)
+        return cls(d, d_dot, d_ddot, set_speed, leaders, time, target_lane, lateral)
+
+    def preview(self, steps: int, dt: float) -> list[tuple[float, float]]:
+        """(d, d_dot) at the next `steps` ticks of `dt` seconds; holds (d, 0) without a profile."""
+        if self.lateral is None:
+            return [(self.d, 0.0)] * steps
+        return [self.lateral.sample(self.time + k * dt)[:2] for k in range(1, steps + 1)]
+
+
+@dataclass(frozen=True)
+class Actuation:
+    """What the plant receives each tick: acceleration [m/s^2] and front-wheel steering angle [rad]."""
+
+    acceleration: float
+    steering: float

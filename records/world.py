@@ -1,0 +1,117 @@
+"""The world snapshot every layer reads, and the ego and its neighbours as the controllers see them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+
+class Lane(Protocol):
+    """The lane-geometry surface the layers use (highway-env's `AbstractLane` satisfies it)."""
+
+    width: float
+
+    def local_coordinates(self, position: np.ndarray) -> tuple[float, float]: ...
+
+    def position(self, longitudinal: float, lateral: float) -> np.ndarray: ...
+
+    def heading_at(self, longitudinal: float) -> float: ...
+
+
+def lane_curvature(lane: Lane, s: float) -> float:
+    """Curvature [1/m] of `lane` at `s`: central difference of its heading over +-1 m."""
+    return (lane.heading_at(s + 1.0) - lane.heading_at(s - 1.0)) / 2.0
+
+
+@dataclass(frozen=True)
+class Neighbour:
+    """A vehicle ahead of or behind the ego: bumper-to-bumper gap [m] (negative = overlapping) and
+    speed [m/s]. The adaptive cruise keeps a time gap to those ahead (its leaders)."""
+
+    gap: float
+    speed: float
+
+
+@dataclass(frozen=True)
+class EgoState:
+    """The ego in the frame of the reference lane: lateral offset d [m], heading relative to the
+    lane [rad], speed [m/s], and the lane's curvature at the ego [1/m] (positive turning left)."""
+
+    d: float
+    heading: float
+    speed: float
+    curvature: float = 0.0
+
+
+@dataclass(frozen=True)
+class WorldState:
+    """A snapshot of the road at one control tick, as struct-of-arrays; row 0 is the ego.
+
+    `s` and `d` are the longitudinal and lateral coordinates (m) of each vehicle in the frame of
+    the reference lane (lane 0 of the ego's road segment), so lane `k`'s centre lies at
+    `d = lane_offsets[k]`. `lanes` gives the geometry of every lane of that segment.
+    """
+
+    time: float
+    ids: np.ndarray
+    position: np.ndarray
+    heading: np.ndarray
+    speed: np.ndarray
+    velocity: np.ndarray
+    lane: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+    s: np.ndarray
+    d: np.ndarray
+    crashed: np.ndarray
+    lanes: tuple[Lane, ...]
+    lane_offsets: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return len(self.ids)
+
+    @property
+    def lanes_count(self) -> int:
+        return len(self.lanes)
+
+    @property
+    def lane_width(self) -> float:
+        return float(self.lanes[0].width)
+
+    @property
+    def ego_lane(self) -> int:
+        return int(self.lane[0])
+
+    def ego_state(self) -> EgoState:
+        """The ego in the reference lane's frame, where `d` is measured, with that lane's curvature."""
+        s, reference = float(self.s[0]), self.lanes[0]
+        return EgoState(
+            d=float(self.d[0]),
+            heading=float(self.heading[0]) - reference.heading_at(s),
+            speed=float(self.speed[0]),
+            curvature=lane_curvature(reference, s),
+        )
+
+    def neighbours(self, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
+        """(closest vehicle ahead, closest vehicle behind) of the ego among those whose footprint
+        reaches into `lane`; ahead/behind by centre position along the road."""
+        rel_s = self.s[1:] - self.s[0]
+        gap = np.abs(rel_s) - (self.length[1:] + self.length[0]) / 2
+        in_lane = np.abs(self.d[1:] - self.lane_offsets[lane]) < (self.lane_width + self.width[1:]) / 2
+        found: list[Neighbour | None] = []
+        for side in (rel_s > 0, rel_s <= 0):
+            candidates = np.flatnonzero(in_lane & side)
+            if candidates.size:
+                row = candidates[np.argmin(np.abs(rel_s[candidates]))]
+                found.append(Neighbour(float(gap[row]), float(self.speed[row + 1])))
+            else:
+                found.append(None)
+        return found[0], found[1]
+
+    def leaders(self, lanes: tuple[int, ...]) -> tuple[Neighbour, ...]:
+        """For each lane in `lanes`, the closest vehicle ahead reaching into it (none if nobody)."""
+        ahead = (self.neighbours(lane)[0] for lane in lanes)
+        return tuple(leader for leader in ahead if leader is not None)
