@@ -38,7 +38,7 @@ def build_problem(settings: MPCSettings, dt: float) -> ca.Function:
     x0, u_prev, curvature = opti.parameter(3), opti.parameter(2), opti.parameter()
     d_ref, psi_ref, v_ref = opti.parameter(n + 1), opti.parameter(n + 1), opti.parameter(n + 1)
     opti.subject_to(states[:, 0] == x0)
-    cost = 0
+    cost: ca.MX | int = 0
     for k in range(n):
         opti.subject_to(states[:, k + 1] == model(states[:, k], inputs[:, k], curvature, dt))
         previous = u_prev if k == 0 else inputs[:, k - 1]
@@ -98,7 +98,9 @@ class MPCTracker:
         self.status = "idle"
         self.solve_time = 0.0
 
-    def _references(self, state: EgoState, reference: Reference, acceleration: float):
+    def _references(
+        self, state: EgoState, reference: Reference, acceleration: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         n = self.settings.horizon
         preview = reference.preview(n, self.dt)
         d = np.array([reference.d] + [p[0] for p in preview])

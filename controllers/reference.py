@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -49,7 +50,13 @@ class QuinticProfile:
 
 
 def lane_change(
-    lane_offsets, origin: int, target: int, d0: float, t0: float, duration: float, v0: float = 0.0
+    lane_offsets: Sequence[float] | np.ndarray,
+    origin: int,
+    target: int,
+    d0: float,
+    t0: float,
+    duration: float,
+    v0: float = 0.0,
 ) -> QuinticProfile:
     """The quintic from the current lateral state (d0 [m], v0 [m/s]) to the centre of `target`, an
     adjacent lane of the road whose lane centres are `lane_offsets` [m]."""

@@ -180,7 +180,14 @@ class OccupancyGridBuilder:
         low, high = world.lane_offsets - half_lane, world.lane_offsets + half_lane
         return (d[:, None] - half_width < high[None, :]) & (d[:, None] + half_width > low[None, :])
 
-    def _relative_speed(self, world, rel_s, along, across, road_rows) -> np.ndarray:
+    def _relative_speed(
+        self,
+        world: WorldState,
+        rel_s: np.ndarray,
+        along: np.ndarray,
+        across: np.ndarray,
+        road_rows: np.ndarray,
+    ) -> np.ndarray:
         config = self.config
         grid = np.zeros((len(road_rows), config.cells), dtype=np.float32)
         lane_heading = world.lanes[0].heading_at(float(world.s[0]))
@@ -192,7 +199,9 @@ class OccupancyGridBuilder:
                     grid[row, along[vehicle]] = value[vehicle]
         return grid
 
-    def _ttc(self, world, rel_s, across, road_rows) -> np.ndarray:
+    def _ttc(
+        self, world: WorldState, rel_s: np.ndarray, across: np.ndarray, road_rows: np.ndarray
+    ) -> np.ndarray:
         config = self.config
         gap = rel_s - (world.length[1:] + world.length[0]) / 2
         closing = world.speed[0] - world.speed[1:]

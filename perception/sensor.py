@@ -85,7 +85,9 @@ class SensorModel:
         return dataclasses.replace(world, **fields)
 
 
-def _with_phantoms(fields: dict, world: WorldState, count: int, reach: float, rng) -> dict:
+def _with_phantoms(
+    fields: dict[str, np.ndarray], world: WorldState, count: int, reach: float, rng: np.random.Generator
+) -> dict[str, np.ndarray]:
     """Append `count` phantom vehicles at uniform positions on the road, at the ego's speed."""
     s = world.s[0] + rng.uniform(-reach, reach, count)
     lanes = rng.integers(0, world.lanes_count, count)

@@ -14,11 +14,17 @@ import numpy as np
 
 from records import N_ACTIONS, Command, Encoding, GridConfig, lane_code_bits
 
+Prediction = tuple[np.ndarray | np.integer, Any]
+"""What `predict` returns, as SB3's: (action index, or one per row of a batch; recurrent state)."""
+
 
 @runtime_checkable
 class Agent(Protocol):
-    encoding: Encoding
-    grid_config: GridConfig | None
+    @property
+    def encoding(self) -> Encoding: ...
+
+    @property
+    def grid_config(self) -> GridConfig | None: ...
 
     def predict(
         self,
@@ -26,7 +32,7 @@ class Agent(Protocol):
         state: Any = None,
         episode_start: Any = None,
         deterministic: bool = True,
-    ) -> tuple[np.ndarray, Any]: ...
+    ) -> Prediction: ...
 
 
 def decide(agent: Agent, observation: np.ndarray) -> Command:
@@ -45,7 +51,13 @@ class PaperStateAgent:
 class KeepLaneAgent(PaperStateAgent):
     """Never changes lane: the lower bound every other agent should beat on speed."""
 
-    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> Prediction:
         return np.array(Command.STAY), state
 
 
@@ -55,7 +67,13 @@ class RandomAgent(PaperStateAgent):
     def __init__(self, seed: int = 0) -> None:
         self.rng = np.random.default_rng(seed)
 
-    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> Prediction:
         return np.array(self.rng.integers(0, N_ACTIONS)), state
 
 
@@ -99,7 +117,13 @@ class FreeGapAgent(PaperStateAgent):
         high = self.grid.ego_column + self.safe_cells_ahead
         return 0 <= row < cells.shape[0] and not cells[row, low : high + 1].any()
 
-    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> Prediction:
         cells, ego_row = self._decode(observation)
         free = self.free_cells(cells)
         if free[ego_row] >= self.grid.cells_ahead:

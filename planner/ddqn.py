@@ -13,7 +13,11 @@ from torch.nn import functional as F
 
 
 def double_q_target(
-    rewards: th.Tensor, dones: th.Tensor, discounts, next_q_online: th.Tensor, next_q_target: th.Tensor
+    rewards: th.Tensor,
+    dones: th.Tensor,
+    discounts: th.Tensor | float,
+    next_q_online: th.Tensor,
+    next_q_target: th.Tensor,
 ) -> th.Tensor:
     """Double-Q TD target, shape (batch, 1)."""
     next_actions = next_q_online.argmax(dim=1, keepdim=True)

@@ -4,12 +4,15 @@ model file, behind the same `predict` as every other agent."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch as th
+from stable_baselines3 import DQN
 from stable_baselines3.common.torch_layers import create_mlp
 from torch import nn
 
+from planner.agents import Prediction
 from planner.model_file import ModelFileError, load_model, save_model
 from planner.tabular import QLearning
 from records import Encoding, GridConfig
@@ -28,7 +31,7 @@ class LearnedAgent:
         self.metadata = metadata
         self.source = source
         self.observation_size = int(metadata["observation_size"])
-        self.encoding = metadata["encoding"]
+        self.encoding: Encoding = metadata["encoding"]
         self.grid_config = GridConfig(**metadata["grid"])
 
     def q_values(self, observation: np.ndarray) -> np.ndarray:
@@ -36,7 +39,13 @@ class LearnedAgent:
         with th.no_grad():
             return self.network(th.as_tensor(batch)).numpy()
 
-    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> Prediction:
         size = np.asarray(observation).size
         if size % self.observation_size:
             raise ValueError(
@@ -58,7 +67,13 @@ class TabularAgent:
         self.source = source
         self.grid_config = GridConfig(**metadata["grid"])
 
-    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> Prediction:
         index = tuple(np.asarray(observation, dtype=np.int64).reshape(-1))
         if len(index) != self.table.ndim - 1 or any(
             not 0 <= i < n for i, n in zip(index, self.table.shape[:-1], strict=True)
@@ -70,7 +85,7 @@ class TabularAgent:
         return np.int64(np.argmax(self.table[index])), state
 
 
-def export_q_network(model, path: Path | str, metadata: dict) -> Path:
+def export_q_network(model: DQN, path: Path | str, metadata: dict) -> Path:
     """Save an SB3 (Double) DQN's online Q-network weights with `metadata`."""
     state = model.policy.q_net.q_net.state_dict()
     return save_model(

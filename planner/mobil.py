@@ -9,8 +9,11 @@ highway-env's IDMVehicle). IDM constants are highway-env's.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
+from planner.agents import Prediction
 from records import MAX_SPEED, Command, Encoding, GridConfig
 
 ACCELERATION = 3.0
@@ -65,7 +68,9 @@ class MobilAgent:
         relative = observation[size : 2 * size].reshape(3, g.cells) * g.speed_scale
         return presence, relative, float(observation[2 * size]) * MAX_SPEED
 
-    def _neighbour(self, presence, relative, row: int, ahead: bool) -> tuple[float, float] | None:
+    def _neighbour(
+        self, presence: np.ndarray, relative: np.ndarray, row: int, ahead: bool
+    ) -> tuple[float, float] | None:
         """(bumper gap [m], relative speed [m/s]) of the nearest vehicle ahead/behind in `row`."""
         g = self.grid_config
         columns = range(g.ego_column + 1, g.cells) if ahead else range(g.ego_column - 1, -1, -1)
@@ -75,7 +80,13 @@ class MobilAgent:
                 return distance - g.cell_length, relative[row, column]
         return None
 
-    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> Prediction:
         presence, relative, speed = self._decode(observation)
         ego_column = self.grid_config.ego_column
         current = self._neighbour(presence, relative, 1, ahead=True)

@@ -7,6 +7,7 @@ the action; Q(s, a) += alpha (r + gamma max_a' Q(s', a') (1 - terminal) - Q(s, a
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -34,16 +35,29 @@ class QLearning:
         self.steps = 0
 
     @classmethod
-    def for_space(cls, space: gym.spaces.Box, **kwargs) -> QLearning:
+    def for_space(cls, space: gym.spaces.Box, **kwargs: Any) -> QLearning:
         return cls(tuple(int(h) + 1 for h in np.asarray(space.high).reshape(-1)), **kwargs)
 
-    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[np.int64, Any]:
         if not deterministic and self.rng.random() < self.epsilon:
             return np.int64(self.rng.integers(self.table.shape[-1])), state
         values = self.table[tuple(np.asarray(observation, dtype=np.int64))]
         return np.int64(np.argmax(values)), state
 
-    def update(self, observation, action: int, reward: float, next_observation, terminal: bool) -> None:
+    def update(
+        self,
+        observation: np.ndarray,
+        action: int | np.integer,
+        reward: float,
+        next_observation: np.ndarray,
+        terminal: bool,
+    ) -> None:
         index = (*np.asarray(observation, dtype=np.int64), int(action))
         future = (
             0.0
@@ -64,7 +78,7 @@ class QLearning:
         for _ in range(steps):
             action, _ = self.predict(observation, deterministic=False)
             next_observation, reward, terminated, truncated, info = env.step(action)
-            self.update(observation, action, reward, next_observation, terminated)
+            self.update(observation, action, float(reward), next_observation, terminated)
             self.steps += 1
             observation = next_observation
             if terminated or truncated:

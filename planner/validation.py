@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -38,7 +39,8 @@ def validate(predict: Callable, env: gym.Env, episodes: int, seed: int) -> tuple
     crashes, returns, speeds = 0, [], []
     for episode in range(episodes):
         observation, _ = env.reset(seed=child_seed(seed, episode))
-        total, done, info = 0.0, False, {}
+        total, done = 0.0, False
+        info: dict[str, Any] = {}
         while not done:
             action, _ = predict(observation, deterministic=True)
             observation, reward, terminated, truncated, info = env.step(action)
@@ -56,6 +58,9 @@ class RealTimeValidation(BaseCallback):
     (and on promotion) on `long_episodes`; call `on_improvement(model, validation)` when the best long
     score improves."""
 
+    model: Any
+    """What is validated: an SB3 algorithm, or a `QLearning` its trainer sets (only `predict` is used)."""
+
     def __init__(
         self,
         env: gym.Env,
@@ -64,7 +69,7 @@ class RealTimeValidation(BaseCallback):
         long_every: int,
         long_episodes: int,
         seed: int,
-        on_improvement: Callable[[object, Validation], None],
+        on_improvement: Callable[[Any, Validation], None],
         history: list[Validation] | None = None,
         best: dict[str, tuple[float, float] | None] | None = None,
     ) -> None:
@@ -93,7 +98,8 @@ class RealTimeValidation(BaseCallback):
         """Validate now; `improved` in the result means it beat the best score of its period."""
         collision_rate, mean_return, mean_speed = validate(self.model.predict, self.env, episodes, self.seed)
         score = (-collision_rate, mean_return)
-        improved = self.best[period] is None or score > self.best[period]
+        best = self.best[period]
+        improved = best is None or score > best
         result = Validation(
             self.num_timesteps, period, episodes, collision_rate, mean_return, mean_speed, improved
         )

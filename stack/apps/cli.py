@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from datetime import datetime
 from pathlib import Path
-from typing import NoReturn
+from typing import NoReturn, cast
 
 import typer
 from rich.console import Console
@@ -100,7 +100,7 @@ def track(
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Single lane changes on empty straight and curved roads: tracking metrics and plots."""
-    from stack.apps.track import TRACK_CONTROLLERS, track_and_report
+    from stack.apps.track import TRACK_CONTROLLERS, TrackController, track_and_report
 
     names = list(TRACK_CONTROLLERS) if controller == "all" else controller.split(",")
     unknown = [name for name in names if name not in TRACK_CONTROLLERS]
@@ -113,7 +113,10 @@ def track(
     if not all(0 < v <= 40 for v in speed_list):
         fail(f"--speeds: every speed must be in (0, 40] m/s, got {speeds}")
     cfg = configured(config, controller__lane_change_duration_s=duration)
-    track_and_report(names, speed_list, cfg, out or fresh_run_dir("track"), progress)
+    # every name is one of TRACK_CONTROLLERS: checked above
+    track_and_report(
+        cast(list[TrackController], names), speed_list, cfg, out or fresh_run_dir("track"), progress
+    )
 
 
 @app.command()

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import imageio.v2 as imageio
 import matplotlib.pyplot as plt
+import numpy as np
 from rich.console import Console
 from rich.table import Table
 
@@ -31,7 +32,9 @@ def run_and_report(config: RunConfig, out: Path, video: bool, jobs: int, progres
     return bool(results.summary["interrupted"])
 
 
-def write_results(out: Path, summary: dict, episodes: list[EpisodeResult], frames=None) -> None:
+def write_results(
+    out: Path, summary: dict, episodes: list[EpisodeResult], frames: list[np.ndarray] | None = None
+) -> None:
     out.mkdir(parents=True, exist_ok=True)
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     rows = [episode.row() for episode in episodes]
@@ -43,7 +46,8 @@ def write_results(out: Path, summary: dict, episodes: list[EpisodeResult], frame
     if episodes[0].snapshot is not None:
         plot_grid_over_road(*episodes[0].snapshot, out / "grid.png")
     if frames:
-        imageio.mimsave(out / "episode0.gif", frames[::2], duration=2000 / VIDEO_FPS, loop=0)
+        # imageio's stub types the frames as list[ArrayLike], invariant, so list[np.ndarray] is refused
+        imageio.mimsave(out / "episode0.gif", frames[::2], duration=2000 / VIDEO_FPS, loop=0)  # type: ignore[arg-type]
 
 
 def plot_traces(episodes: list[EpisodeResult], path: Path) -> None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Literal
 
@@ -58,7 +58,7 @@ class Maneuver:
     solve_ms_p50: float
     solve_ms_p95: float
     fallbacks: int
-    trace: dict | None = None
+    trace: dict[str, list[float]] = field(default_factory=dict)
 
     def record(self) -> dict:
         return {k: v for k, v in asdict(self).items() if k != "trace"}
@@ -121,7 +121,7 @@ def run_maneuver(
 
 
 def track_and_report(
-    controllers: list[str], speeds: list[float], config: RunConfig, out: Path, progress: bool
+    controllers: list[TrackController], speeds: list[float], config: RunConfig, out: Path, progress: bool
 ) -> list[Maneuver]:
     """Every maneuver with a progress bar, then the table and where the results are."""
     total = len(ROADS) * len(speeds) * 2 * sum(1 if n == "builtin" else len(PLANTS) for n in controllers)
@@ -141,7 +141,7 @@ def track_and_report(
 
 
 def track(
-    controllers: list[str],
+    controllers: list[TrackController],
     speeds: list[float],
     duration: float,
     config: ControllerConfig,

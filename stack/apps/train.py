@@ -11,10 +11,14 @@ from __future__ import annotations
 import json
 import signal
 import time
+from collections.abc import Callable
 from pathlib import Path
+from types import FrameType
+from typing import Any
 
 import yaml
 from rich.console import Console
+from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ProgressBarCallback
 from stable_baselines3.common.monitor import Monitor
 
@@ -37,11 +41,14 @@ CHECKPOINT = "checkpoint.npz"
 BEST = "best.npz"
 FINAL = "final.npz"
 
+SaveModel = Callable[[Any, Path, dict], Path]
+"""`export_q_network` or `save_q_table`: (model, path, metadata) -> the file written."""
+
 
 class EveryNSteps(BaseCallback):
     """Call `action()` every `every` environment steps."""
 
-    def __init__(self, every: int, action) -> None:
+    def __init__(self, every: int, action: Callable[[], object]) -> None:
         super().__init__()
         self.every, self.action = every, action
 
@@ -51,16 +58,19 @@ class EveryNSteps(BaseCallback):
         return True
 
 
-def _terminate_as_interrupt(signum, frame) -> None:
+def _terminate_as_interrupt(signum: int, frame: FrameType | None) -> None:
     raise KeyboardInterrupt
 
 
 class Trainer:
     """One training run in `out`: fresh, or resumed from `out/checkpoint.npz`."""
 
+    model: DQN | QLearning
+
     def __init__(self, config: RunConfig, out: Path, progress: bool = True) -> None:
         self.config, self.out, self.progress = config, Path(out), progress
-        self.env = Monitor(HierarchicalHighwayEnv(config))
+        self.decision_env = HierarchicalHighwayEnv(config)
+        self.env = Monitor(self.decision_env)
         self.validation_env = HierarchicalHighwayEnv(config)
         self.history: list[Validation] = []
         self.best: dict[str, tuple[float, float] | None] | None = None
@@ -73,7 +83,7 @@ class Trainer:
         return cls(config, out, progress)
 
     def metadata(self, steps: int) -> dict:
-        return model_metadata(self.config, self.env.unwrapped, steps)
+        return model_metadata(self.config, self.decision_env, steps)
 
     def run(self) -> dict:
         self.out.mkdir(parents=True, exist_ok=True)
@@ -91,15 +101,15 @@ class Trainer:
             signal.signal(signal.SIGTERM, previous)
         return self._finish(steps, interrupted)
 
-    def _improved(self, save) -> callable:
-        def on_improvement(model, validation: Validation) -> None:
+    def _improved(self, save: SaveModel) -> Callable[[Any, Validation], None]:
+        def on_improvement(model: Any, validation: Validation) -> None:
             save(
                 model, self.out / BEST, {**self.metadata(validation.step), "validation": validation.__dict__}
             )
 
         return on_improvement
 
-    def _validation_callback(self, save) -> RealTimeValidation:
+    def _validation_callback(self, save: SaveModel) -> RealTimeValidation:
         v = self.config.train.validation
         return RealTimeValidation(
             self.validation_env,
@@ -139,7 +149,7 @@ class Trainer:
     def _train_tabular(self) -> int:
         train = self.config.train
         self.model = QLearning.for_space(
-            self.env.observation_space,
+            self.decision_env.observation_space,
             alpha=train.tabular_alpha,
             gamma=train.gamma,
             epsilon=train.tabular_epsilon,
@@ -200,7 +210,8 @@ class Trainer:
                 export_q_network(self.model, self.out / FINAL, self.metadata(steps))
         history = self.validation.history if hasattr(self, "validation") else self.history
         plot_training_curve(history, self.out / "training_curve.png")
-        best = (kept_models(history) or [None])[-1]
+        kept = kept_models(history)
+        best = kept[-1] if kept else None
         summary = {
             "algorithm": self.config.train.algorithm,
             "network": self.config.train.network,

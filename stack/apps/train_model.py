@@ -19,6 +19,7 @@ from planner.validation import Validation, kept_models
 from records import N_ACTIONS
 from stack.core.closed_loop import grid_config
 from stack.core.config import RunConfig
+from stack.core.decision_env import HierarchicalHighwayEnv
 
 ALGORITHMS: dict[str, type[DQN]] = {"ddqn": DoubleDQN, "dqn": DQN}
 BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
@@ -51,7 +52,7 @@ def build_dqn(config: RunConfig, env: gym.Env, tensorboard: Path) -> DQN:
     )
 
 
-def model_metadata(config: RunConfig, env: gym.Env, trained_steps: int) -> dict:
+def model_metadata(config: RunConfig, env: HierarchicalHighwayEnv, trained_steps: int) -> dict:
     """What a model file says about the model: algorithm, encoding, sizes, grid, training."""
     train = config.train
     return {
@@ -77,6 +78,7 @@ def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], dict]:
         for name, value in state.items():
             arrays[f"optimizer/{index}/{name}"] = th.as_tensor(value).cpu().numpy()
     buffer = model.replay_buffer
+    assert buffer is not None, "SB3 builds the replay buffer with the model"
     for name in BUFFER_FIELDS:
         arrays[f"buffer/{name}"] = getattr(buffer, name)
     counters = {
@@ -100,6 +102,7 @@ def restore_dqn_state(model: DQN, arrays: dict[str, np.ndarray], counters: dict)
         state.setdefault(int(index), {})[name] = value
     model.policy.optimizer.load_state_dict({"state": state, "param_groups": counters["param_groups"]})
     buffer = model.replay_buffer
+    assert buffer is not None, "SB3 builds the replay buffer with the model"
     for name, value in _prefixed(arrays, "buffer/").items():
         getattr(buffer, name)[...] = value.numpy()
     buffer.pos, buffer.full = counters["buffer_pos"], counters["buffer_full"]

@@ -32,9 +32,15 @@ class Plant(Protocol):
     one control tick of `dt` seconds later (`stack.sim`)."""
 
     dt: float
-    done: bool
-    terminated: bool
-    rendering: bool
+
+    @property
+    def done(self) -> bool: ...
+
+    @property
+    def terminated(self) -> bool: ...
+
+    @property
+    def rendering(self) -> bool: ...
 
     def reset(self, seed: int) -> WorldState: ...
 
@@ -142,6 +148,7 @@ class ClosedLoop:
         self.recorder.record(self.world, reference, actuation)
         if self.frames is not None and self.plant.rendering:
             frame = self.plant.render()
+            assert self.grid is not None, "frames are drawn after the first perceive()"
             self.frames.append(np.vstack([frame, grid_panel(self.grid, frame.shape[1])]))
 
     def status(self) -> dict[str, float | int | bool]:

@@ -23,6 +23,7 @@ from stack.sim.highway import HighwayAdapter
 
 class HierarchicalHighwayEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"]}
+    observation_space: spaces.Box
 
     def __init__(self, config: RunConfig | dict | None = None, render_mode: str | None = None) -> None:
         super().__init__()
@@ -39,12 +40,16 @@ class HierarchicalHighwayEnv(gym.Env):
     def _observe(self) -> np.ndarray:
         return self.loop.perceive().encode(self.encoding)
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
+    def reset(
+        self, *, seed: int | None = None, options: dict | None = None
+    ) -> tuple[np.ndarray, dict[str, float | int | bool]]:
         super().reset(seed=seed)
         self.loop.reset(drawn_seed(self.np_random))
         return self._observe(), self.loop.status()
 
-    def step(self, action):
+    def step(
+        self, action: int | np.integer | np.ndarray
+    ) -> tuple[np.ndarray, float, bool, bool, dict[str, float | int | bool]]:
         command = Command(int(action))
         acted = self.loop.act(command, ticks=self.config.decision_ticks)
         reward_config = self.config.train.reward
@@ -61,7 +66,7 @@ class HierarchicalHighwayEnv(gym.Env):
         truncated = self.loop.done and not terminated
         return self._observe(), float(reward), terminated, truncated, self.loop.status()
 
-    def render(self):
+    def render(self) -> np.ndarray | None:
         return self.adapter.render() if self.render_mode == "rgb_array" else None
 
     def close(self) -> None:

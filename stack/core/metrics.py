@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from perception.grid import OccupancyGrid
 from records import Actuation, Reference, WorldState
 
 COMFORT_WINDOW_S = 0.5
@@ -103,7 +104,7 @@ class EpisodeResult:
     masked_commands: int = 0
     aborted_changes: int = 0
     trace: dict[str, list[float]] = field(default_factory=dict, repr=False)
-    snapshot: tuple | None = field(default=None, repr=False, compare=False)
+    snapshot: tuple[WorldState, OccupancyGrid] | None = field(default=None, repr=False, compare=False)
 
     def row(self) -> dict:
         """The flat record written to CSV (no traces, no snapshot)."""
@@ -170,7 +171,7 @@ class EpisodeRecorder:
         )
 
 
-def summarize(results: list[EpisodeResult], **identity) -> dict:
+def summarize(results: list[EpisodeResult], **identity: object) -> dict:
     """Aggregate episodes (order-independent): rates, accuracy, means; `identity` is copied in."""
     collisions = sum(r.crashed for r in results)
     passed = sum(r.passed_cars for r in results)

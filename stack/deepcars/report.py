@@ -58,7 +58,7 @@ def plot_curves(curves: dict[tuple[str, str], list[float]], path: Path) -> None:
 def markdown(rows: list[Row], quick: bool) -> str:
     """results.md: the table, one line per row, with the paper's numbers alongside."""
 
-    def pct(value):
+    def pct(value: float | None) -> str:
         return "-" if value is None else f"{value:.2f} %"
 
     lines = [

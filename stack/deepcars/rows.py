@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -78,7 +79,9 @@ class Row:
     paper_eval: float | None
 
 
-def evaluate(policy, steps: int, encoding: str, seed: int, envs: int = 100) -> DeepCarsBatch:
+def evaluate(
+    policy: Callable[[np.ndarray], np.ndarray], steps: int, encoding: str, seed: int, envs: int = 100
+) -> DeepCarsBatch:
     """Run `policy(observations) -> actions` greedily for `steps` env steps over `envs` envs."""
     batch = DeepCarsBatch(envs, encoding=encoding, seed=seed)
     observations = batch.observe()

@@ -16,11 +16,13 @@ it to stable-baselines3; `DeepCarsEnv` (`drivestack/DeepCars-v0`) is the single 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
 from records import N_ACTIONS, Command
 
@@ -143,7 +145,7 @@ class DeepCarsEnv(gym.Env):
         encoding: str = "binary",
         max_steps: int = 1000,
     ) -> None:
-        self.settings = dict(
+        self.settings: dict[str, Any] = dict(
             lanes=lanes,
             line_of_sight=line_of_sight,
             spawn_probability=spawn_probability,
@@ -154,12 +156,16 @@ class DeepCarsEnv(gym.Env):
         self.observation_space = self.batch.observation_space()
         self.action_space = spaces.Discrete(N_ACTIONS)
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
+    def reset(
+        self, *, seed: int | None = None, options: dict | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         self.batch = DeepCarsBatch(1, **self.settings, seed=int(self.np_random.integers(0, 2**31 - 1)))
         return self.batch.observe()[0], {}
 
-    def step(self, action):
+    def step(
+        self, action: int | np.integer | np.ndarray
+    ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         _, rewards, crashed, truncated, counts = self.batch.step(np.array([int(action)]))
         info = {"crashed": bool(crashed[0]), "passed": int(counts["passed"][0])}
         return counts["final_observation"][0], float(rewards[0]), bool(crashed[0]), bool(truncated[0]), info
@@ -184,11 +190,11 @@ class DeepCarsVecEnv(VecEnv):
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = actions
 
-    def step_wait(self):
+    def step_wait(self) -> VecEnvStepReturn:
         observations, rewards, crashed, truncated, counts = self.batch.step(self._actions)
         self.episode_returns += rewards
         done = crashed | truncated
-        infos = [{} for _ in range(self.batch.n)]
+        infos: list[dict[str, Any]] = [{} for _ in range(self.batch.n)]
         for i in np.flatnonzero(done):
             infos[i] = {
                 "terminal_observation": counts["final_observation"][i],
@@ -202,14 +208,16 @@ class DeepCarsVecEnv(VecEnv):
     def close(self) -> None:
         pass
 
-    def get_attr(self, attr_name, indices=None):
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
         return [getattr(self, attr_name)] * self.num_envs
 
-    def set_attr(self, attr_name, value, indices=None) -> None:
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
         setattr(self, attr_name, value)
 
-    def env_method(self, method_name, *args, indices=None, **kwargs):
+    def env_method(
+        self, method_name: str, *args: Any, indices: VecEnvIndices = None, **kwargs: Any
+    ) -> list[Any]:
         return [getattr(self, method_name)(*args, **kwargs)] * self.num_envs
 
-    def env_is_wrapped(self, wrapper_class, indices=None):
+    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
         return [False] * self.num_envs

@@ -21,15 +21,18 @@ from bisect import bisect_left
 
 import numpy as np
 from highway_env.envs.highway_env import HighwayEnv, HighwayEnvFast
-from highway_env.road.lane import StraightLane
+from highway_env.road.lane import AbstractLane, StraightLane
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.utils import wrap_to_pi
-from highway_env.vehicle.objects import Landmark
+from highway_env.vehicle.objects import Landmark, RoadObject
 
 BROAD_PHASE_MARGIN = 1e-6
 """Extra distance [m] the broad phase admits, so float rounding never drops a stock candidate."""
 NEIGHBOUR_MARGIN = 1.0
 """Lateral margin [m] of highway-env's `on_lane` test in `neighbour_vehicles`."""
+
+LaneIndex = tuple[str, str, int]
+"""highway-env's lane index: (from node, to node, lane id)."""
 
 
 class _LaneProjections:
@@ -40,9 +43,9 @@ class _LaneProjections:
         self.objects = [o for o in road.vehicles + road.objects if not isinstance(o, Landmark)]
         self.row = {id(o): i for i, o in enumerate(self.objects)}
         self.position = np.array([o.position for o in self.objects], dtype=float).reshape(-1, 2)
-        self.lanes: dict = {}
+        self.lanes: dict[LaneIndex, tuple[list[float], list[int]]] = {}
 
-    def sorted_on_lane(self, lane_index) -> tuple[list[float], list[int]]:
+    def sorted_on_lane(self, lane_index: LaneIndex) -> tuple[list[float], list[int]]:
         """The objects highway-env counts as on `lane_index`'s lane, sorted by (s, row): their s
         [m] and their rows."""
         cached = self.lanes.get(lane_index)
@@ -53,7 +56,9 @@ class _LaneProjections:
             cached = self.lanes[lane_index] = (s[order].tolist(), order.tolist())
         return cached
 
-    def neighbours(self, lane_index, s: float, row: int) -> tuple[object | None, object | None]:
+    def neighbours(
+        self, lane_index: LaneIndex, s: float, row: int
+    ) -> tuple[RoadObject | None, RoadObject | None]:
         """Stock `neighbour_vehicles` semantics: front = smallest s_v >= s (last row on ties),
         rear = largest s_v < s (first row on ties); the querying object itself excluded."""
         keys, rows = self.sorted_on_lane(lane_index)
@@ -83,7 +88,7 @@ class _LaneProjections:
             None if rear is None else self.objects[rear],
         )
 
-    def _project(self, lane) -> tuple[np.ndarray, np.ndarray]:
+    def _project(self, lane: AbstractLane) -> tuple[np.ndarray, np.ndarray]:
         if type(lane) is StraightLane:
             delta = self.position - lane.start
             s = delta[:, 0] * lane.direction[0] + delta[:, 1] * lane.direction[1]
@@ -108,9 +113,10 @@ class FastRoadNetwork(RoadNetwork):
     """A `RoadNetwork` whose closest-lane search, called by every vehicle every frame, evaluates
     highway-env's `distance_with_heading` for straight lanes in plain floats."""
 
-    _straight_lanes: list | None = None
+    _straight_lanes: list[tuple[LaneIndex, StraightLane]] | None = None
 
-    def get_closest_lane_index(self, position, heading=None):
+    def get_closest_lane_index(self, position: np.ndarray, heading: float | None = None) -> LaneIndex | None:
+        """Stock's closest lane (by position and heading); None only on a network without lanes."""
         lanes = self._straight_lanes
         if heading is None:
             return super().get_closest_lane_index(position, heading)
@@ -156,10 +162,12 @@ class FastRoad(Road):
         finally:
             self._projections = None
 
-    def neighbour_vehicles(self, vehicle, lane_index=None):
+    def neighbour_vehicles(
+        self, vehicle: RoadObject, lane_index: LaneIndex | None = None
+    ) -> tuple[RoadObject | None, RoadObject | None]:
         projections = self._projections
         row = projections.row.get(id(vehicle)) if projections is not None else None
-        if row is None or self.neighbour_vehicles_connected_lanes:
+        if projections is None or row is None or self.neighbour_vehicles_connected_lanes:
             return super().neighbour_vehicles(vehicle, lane_index)
         lane_index = lane_index or vehicle.lane_index
         if not lane_index:

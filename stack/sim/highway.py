@@ -7,6 +7,7 @@ It creates highway-v0 with `ContinuousAction` and `policy_frequency == simulatio
 from __future__ import annotations
 
 import os
+from typing import cast
 
 os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")  # "dummy" makes highway-env skip drawing
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
@@ -14,6 +15,7 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 import gymnasium as gym
 import highway_env  # noqa: F401  (registers highway-v0)
 import numpy as np
+from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.envs.common.action import ContinuousAction
 from highway_env.road.lane import AbstractLane, StraightLane
 from highway_env.road.road import Road
@@ -81,7 +83,8 @@ class HighwayAdapter:
 
     def render(self) -> np.ndarray:
         """The current frame as an RGB array (the env must be created with `render=True`)."""
-        return self.env.render()
+        # gymnasium types render() for every render mode; with rgb_array it is one RGB array
+        return cast(np.ndarray, self.env.render())
 
     @property
     def rendering(self) -> bool:
@@ -93,12 +96,13 @@ class HighwayAdapter:
     def __enter__(self) -> HighwayAdapter:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def snapshot(self) -> WorldState:
         """Copy the road into a `WorldState` (row 0 = ego, others in road order)."""
-        return snapshot(self.env.unwrapped.road, self.env.unwrapped.vehicle, float(self.env.unwrapped.time))
+        env: AbstractEnv = self.env.unwrapped
+        return snapshot(env.road, env.vehicle, float(env.time))
 
 
 def snapshot(road: Road, ego: Vehicle, time: float) -> WorldState:
