@@ -47,7 +47,8 @@ def loop_rate(run_config, seeds: range) -> float:
         agent = make_agent(run_config.planner.agent, run_config.highway.lanes_count, grid_config(run_config))
         for seed in seeds:
             start = time.perf_counter()
-            result = run_agent_episode(ClosedLoop(run_config, adapter), agent, 0, seed)
+            loop = ClosedLoop(run_config, adapter, grid=agent.grid_config)
+            result = run_agent_episode(loop, agent, 0, seed)
             rates.append(result.steps / (time.perf_counter() - start))
     return statistics.median(rates)
 

@@ -40,28 +40,26 @@ LEAD_IN_S = 1.0
 SETTLE_S = 3.0
 
 
-@dataclass
-class Maneuver:
-    """One lane change; `trace` holds the time series used by the plots."""
+@dataclass(frozen=True)
+class Maneuver(Tracking):
+    """One lane change: which, how it tracked (`Tracking`), the controller's time per tick [ms] and
+    fallbacks; `trace` holds the time series used by the plots."""
 
     controller: str
     road: str
     plant: str
     speed: float
     direction: str
-    duration_s: float | None
-    overshoot_m: float
-    rms_error_m: float
-    max_error_m: float
-    peak_lat_accel: float
-    peak_lat_jerk: float
     solve_ms_p50: float
     solve_ms_p95: float
     fallbacks: int
     trace: dict[str, list[float]] = field(default_factory=dict)
 
     def record(self) -> dict:
-        return {k: v for k, v in asdict(self).items() if k != "trace"}
+        """The flat record of tracking.json: which maneuver first, then its figures."""
+        figures = {k: v for k, v in asdict(self).items() if k != "trace"}
+        which = ("controller", "road", "plant", "speed", "direction")
+        return {**{k: figures.pop(k) for k in which}, **figures}
 
 
 def run_maneuver(
