@@ -1,0 +1,41 @@
+"""Regression: short closed-loop runs, tick by tick, against stored results. Any change to the tick
+(perception, safety, maneuver, controllers, metrics) that moves a number shows here. Regenerate with
+`python -c "from tests.test_golden_runs import write_golden; write_golden()"` after an intended
+change, and say why in the commit."""
+
+import hashlib
+import json
+from pathlib import Path
+
+import pytest
+
+from stack.core.config import build_config
+from stack.core.episodes import run
+
+GOLDEN = Path(__file__).parent / "golden" / "runs.json"
+CASES = {
+    "ddqn-pid-masked": {"seed": 1, "planner": {"agent": "ddqn"}},
+    "mobil-mpc-changes": {"seed": 2, "planner": {"agent": "mobil"}, "controller": {"type": "mpc"}},
+    "rule-pid-changes": {"seed": 2, "planner": {"agent": "rule"}},
+    "rule-pid-noisy": {
+        "seed": 2,
+        "planner": {"agent": "rule"},
+        "perception": {"sensor": {"position_noise_m": 1.0, "false_positives": 1.0}},
+    },
+}
+
+
+def outcome(case: str) -> dict:
+    data = {"episodes": 1, "highway": {"vehicles_count": 30, "duration": 12}, **CASES[case]}
+    results = run(build_config(data, case), progress=False)
+    traces = json.dumps([episode.trace for episode in results.episodes])
+    return {"summary": results.summary, "traces": hashlib.sha256(traces.encode()).hexdigest()}
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_run_reproduces_its_golden_result(case):
+    assert outcome(case) == json.loads(GOLDEN.read_text())[case]
+
+
+def write_golden() -> None:
+    GOLDEN.write_text(json.dumps({case: outcome(case) for case in CASES}, indent=1, sort_keys=True) + "\n")
