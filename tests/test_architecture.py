@@ -57,3 +57,22 @@ def test_no_module_is_longer_than_a_sitting():
         for path in modules(package):
             lines = len(path.read_text().splitlines())
             assert lines <= MAX_LINES, f"{path.relative_to(ROOT)} has {lines} lines"
+
+
+def test_every_registered_name_has_an_implementation():
+    from controllers.config import ControllerConfig
+    from controllers.tracker import make_controller
+    from perception.grid import OccupancyGridBuilder
+    from records import BACKENDS, CONTROLLER_NAMES, ENCODINGS, GridConfig
+    from stack.sim.highway import ENV_IDS
+    from tests.helpers import scene
+
+    assert tuple(ENV_IDS) == BACKENDS
+    for name in CONTROLLER_NAMES:
+        assert callable(make_controller(ControllerConfig(type=name), 1 / 15).step)
+    builder = OccupancyGridBuilder(GridConfig())
+    grid = builder.build(scene(3, (0.0, 1), [(15.0, 4.0)]))
+    for encoding in ENCODINGS:
+        assert builder.space(encoding, 3).contains(
+            grid.encode(encoding).astype(builder.space(encoding, 3).dtype)
+        )

@@ -24,10 +24,14 @@ from planner.ddqn import DoubleDQN
 from planner.networks import NET_ARCHS
 from planner.tabular import QLearning
 from planner.validation import RealTimeValidation
-from records import N_ACTIONS, Command
+from records import N_ACTIONS, Command, child_seed
 from stack.deepcars.report import plot_q_table
 from stack.deepcars.world import DeepCarsBatch, DeepCarsEnv, DeepCarsVecEnv
 
+EVALUATION_STREAM = 1
+"""Greedy evaluation runs on seed + this, apart from training's seed."""
+VALIDATION_STREAM = 10_000
+"""Real-time validation runs on seed + this."""
 PAPER = {
     "tabular": {"train": 98.28, "eval": 99.14},
     "dqn": {"eval": 100.0},
@@ -147,7 +151,7 @@ def tabular(budget: Budget, seed: int, out: Path, steps: int | None = None) -> R
         agent.update(observation, action, float(rewards[0]), counts["final_observation"][0], bool(crashed[0]))
         observation = next_observations[0]
     greedy = lambda obs: np.argmax(agent.table[tuple(obs.T)], axis=1)  # noqa: E731
-    batch = evaluate(greedy, budget.eval_steps, "tabular", seed + 1)
+    batch = evaluate(greedy, budget.eval_steps, "tabular", child_seed(seed, EVALUATION_STREAM))
     if steps == budget.tabular_steps:
         plot_q_table(agent.table, out / "tabular_q_table.png")
     return Row(
@@ -207,7 +211,7 @@ def deep(algorithm: str, network: str, budget: Budget, seed: int) -> tuple[Row, 
         budget.short_episodes,
         budget.long_every,
         budget.long_episodes,
-        seed + 10_000,
+        child_seed(seed, VALIDATION_STREAM),
         on_improvement=lambda m, v: best.update(weights=copy.deepcopy(m.policy.q_net.state_dict())),
     )
     model.learn(budget.dqn_max_steps, callback=CallbackList([validation, StopWhenPerfect(validation)]))
@@ -218,7 +222,7 @@ def deep(algorithm: str, network: str, budget: Budget, seed: int) -> tuple[Row, 
         with th.no_grad():
             return model.policy.q_net(th.as_tensor(observations)).argmax(dim=1).numpy()
 
-    batch = evaluate(greedy, budget.eval_steps, "binary", seed + 1)
+    batch = evaluate(greedy, budget.eval_steps, "binary", child_seed(seed, EVALUATION_STREAM))
     row = Row(
         algorithm,
         network,

@@ -24,7 +24,7 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
-from records import N_ACTIONS, Command
+from records import N_ACTIONS, Command, drawn_seed
 
 ENCODINGS = ("binary", "one-hot", "tabular")
 
@@ -160,7 +160,7 @@ class DeepCarsEnv(gym.Env):
         self, *, seed: int | None = None, options: dict | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
-        self.batch = DeepCarsBatch(1, **self.settings, seed=int(self.np_random.integers(0, 2**31 - 1)))
+        self.batch = DeepCarsBatch(1, **self.settings, seed=drawn_seed(self.np_random))
         return self.batch.observe()[0], {}
 
     def step(
