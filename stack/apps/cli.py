@@ -66,12 +66,14 @@ def run(
     out: Path | None = typer.Option(None, help="Results folder (default: runs/run-<time>)."),
     video: bool = typer.Option(False, "--video", help="Save a GIF of the first episode."),
     backend: str | None = typer.Option(None, help="Simulation backend: fast | stock (sim.backend)."),
+    scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Run seeded closed-loop episodes and write a results folder."""
     cfg = configured(
         config,
+        scenario=scenario,
         planner__agent=agent,
         planner__model=model,
         controller__type=controller,
@@ -126,6 +128,7 @@ def compare(
     config: Path = typer.Option(DEFAULT_CONFIG, "--config", "-c", help="YAML run config."),
     episodes: int | None = typer.Option(None, help="Seeded episodes per agent."),
     seed: int | None = typer.Option(None, help="Seed of the first episode."),
+    scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
     out: Path | None = typer.Option(None, help="Results folder (default: runs/compare-<time>)."),
     progress: bool = typer.Option(True, help="Show progress bars."),
@@ -138,7 +141,12 @@ def compare(
     names = [name for name in agents.split(",") if name]
     configs = [
         configured(
-            config, planner__agent=name, planner__model=model_paths.get(name), episodes=episodes, seed=seed
+            config,
+            scenario=scenario,
+            planner__agent=name,
+            planner__model=model_paths.get(name),
+            episodes=episodes,
+            seed=seed,
         )
         for name in names
     ]
@@ -147,6 +155,15 @@ def compare(
     from stack.apps.compare import compare_and_report
 
     compare_and_report(configs, out or fresh_run_dir("compare"), jobs, progress)
+
+
+@app.command()
+def scenarios() -> None:
+    """The named worlds `--scenario` takes, one line each."""
+    from stack.sim import scenarios as named
+
+    for name in named.names():
+        typer.echo(f"{name:12} {named.description(name)}")
 
 
 reproduce_app = typer.Typer(no_args_is_help=True, help="Reproduce the paper's experiments.")
@@ -178,6 +195,7 @@ def train(
     ),
     steps: int | None = typer.Option(None, help="Total environment steps (train.steps)."),
     seed: int | None = typer.Option(None, help="Training seed."),
+    scenario: str | None = typer.Option(None, help="Named world to train in (drivestack scenarios)."),
     out: Path | None = typer.Option(None, help="Run folder (default: runs/train-<time>)."),
     resume: Path | None = typer.Option(
         None, help="Continue the run in this folder from its last checkpoint."
@@ -190,7 +208,7 @@ def train(
             fail(f"{resume}: not a training run folder (no config.yaml)")
         cfg = configured(resume / "config.yaml", train__steps=steps)
     else:
-        cfg = configured(config, train__algorithm=agent, train__steps=steps, seed=seed)
+        cfg = configured(config, scenario=scenario, train__algorithm=agent, train__steps=steps, seed=seed)
     from stack.apps.train import train_and_report
 
     folder = resume or out or fresh_run_dir(f"train-{cfg.train.algorithm}")

@@ -33,6 +33,7 @@ from records import (
     LearnedAgentName,
     one_of,
 )
+from stack.sim import scenarios
 from stack.sim.settings import HighwayConfig, SimConfig
 
 
@@ -111,6 +112,7 @@ class TrainConfig(Strict):
 
 
 class RunConfig(Strict):
+    scenario: str | None = Field(None, description="the named world applied (stack.sim.scenarios)")
     seed: int = Field(0, ge=0)
     episodes: int = Field(5, ge=1)
     highway: HighwayConfig = HighwayConfig()
@@ -167,8 +169,19 @@ def _set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
 
 
 def build_config(data: dict[str, Any], source: str = "config", **overrides: Any) -> RunConfig:
-    """Validate `data` with dotted-key `overrides` applied (None values are ignored)."""
+    """Validate `data` in its scenario (`scenario` in `overrides` or in `data`, see
+    `stack.sim.scenarios`) with dotted-key `overrides` applied (None values are ignored)."""
     data = dict(data)
+    scenario = overrides.pop("scenario", None) or data.get("scenario")
+    if scenario is not None:
+        if not isinstance(scenario, str):
+            raise ConfigError(
+                f"{source}: scenario: expected a scenario name, one of {', '.join(scenarios.names())}"
+            )
+        try:
+            data = scenarios.apply(scenario, data)
+        except ValueError as error:
+            raise ConfigError(f"{source}: scenario: {error}") from None
     for dotted, value in overrides.items():
         if value is not None:
             _set_dotted(data, dotted.replace("__", "."), value)

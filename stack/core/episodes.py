@@ -99,6 +99,7 @@ def run(config: RunConfig, video: bool = False, progress: bool = True, jobs: int
     ordered = [results[episode] for episode in sorted(results)]
     summary = summarize(
         ordered,
+        scenario=config.scenario,
         agent=config.planner.agent,
         controller=config.controller.type,
         backend=config.sim.backend,

@@ -20,11 +20,13 @@ from __future__ import annotations
 from bisect import bisect_left
 
 import numpy as np
-from highway_env.envs.highway_env import HighwayEnv, HighwayEnvFast
+from highway_env.envs.highway_env import HighwayEnvFast
 from highway_env.road.lane import AbstractLane, StraightLane
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.utils import wrap_to_pi
 from highway_env.vehicle.objects import Landmark, RoadObject
+
+from stack.sim.traffic import ScenarioTraffic
 
 BROAD_PHASE_MARGIN = 1e-6
 """Extra distance [m] the broad phase admits, so float rounding never drops a stock candidate."""
@@ -201,8 +203,8 @@ class FastRoad(Road):
         return partners
 
 
-class FastHighwayEnv(HighwayEnv):
-    """highway-v0 on a `FastRoad`."""
+class FastHighwayEnv(ScenarioTraffic):
+    """highway-v0 (with the scenarios' traffic, `stack.sim.traffic`) on a `FastRoad`."""
 
     def _create_road(self) -> None:
         super()._create_road()

@@ -22,10 +22,10 @@ from highway_env.road.road import Road
 from highway_env.vehicle.kinematics import Vehicle
 
 from records import BACKENDS, Actuation, Backend, WorldState, unknown_name
-from stack.sim.envs import FAST_HIGHWAY
+from stack.sim.envs import FAST_HIGHWAY, HIGHWAY
 from stack.sim.settings import HighwayConfig
 
-ENV_IDS: dict[Backend, str] = {"fast": FAST_HIGHWAY, "stock": "highway-v0"}
+ENV_IDS: dict[Backend, str] = {"fast": FAST_HIGHWAY, "stock": HIGHWAY}
 """Simulation backends: the gymnasium id each one runs."""
 
 MAX_ACCELERATION = ContinuousAction.ACCELERATION_RANGE[1]
@@ -37,7 +37,7 @@ MAX_STEERING = ContinuousAction.STEERING_RANGE[1]
 def env_config(highway: HighwayConfig) -> dict:
     """The highway-env config for a closed-loop run: continuous action, one frame per step."""
     return {
-        **highway.model_dump(),
+        **highway.model_dump(mode="json"),
         "policy_frequency": highway.simulation_frequency,
         "action": {"type": "ContinuousAction"},
         # The stack reads the road itself; the cheapest observation keeps highway-env's work minimal.

@@ -5,21 +5,81 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from records import BACKENDS, Backend, one_of
 
+SHARE_TOLERANCE = 1e-6
+"""How far the shares of the traffic classes may sum from 1."""
+
+
+def _ordered_range(bounds: tuple[float, float]) -> tuple[float, float]:
+    if not bounds[0] <= bounds[1]:
+        raise ValueError(f"must be [low, high] with low <= high, got {list(bounds)}")
+    return bounds
+
+
+class VehicleClass(BaseModel):
+    """One kind of traffic vehicle: its share of the traffic, the range its desired (IDM target)
+    speed is drawn from [m/s] and the range its length is drawn from [m]."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    name: str
+    share: float = Field(gt=0, le=1)
+    speed_mps: tuple[float, float] = Field(description="desired speed range [m/s]")
+    length_m: tuple[float, float] = (5.0, 5.0)
+
+    @field_validator("speed_mps", "length_m")
+    @classmethod
+    def _positive_and_ordered(cls, bounds: tuple[float, float]) -> tuple[float, float]:
+        if not (bounds[0] > 0 and bounds[1] > 0):
+            raise ValueError(f"must be positive, got {list(bounds)}")
+        return _ordered_range(bounds)
+
+
+class TrafficConfig(BaseModel):
+    """Heterogeneous traffic (highway-env's IDM / MOBIL vehicles, drawn from the env's seeded
+    generator): the vehicle classes, and where the ego is spawned, as the fraction of the traffic
+    spawned behind it (0: behind everybody, highway-env's own placement)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    classes: tuple[VehicleClass, ...] = Field(min_length=1)
+    ego_position: float = Field(0.0, ge=0, le=1, description="fraction of the traffic behind the ego")
+
+    @field_validator("classes")
+    @classmethod
+    def _shares_sum_to_one(cls, classes: tuple[VehicleClass, ...]) -> tuple[VehicleClass, ...]:
+        total = sum(c.share for c in classes)
+        if abs(total - 1.0) > SHARE_TOLERANCE:
+            raise ValueError(f"the shares must sum to 1, got {total:g}")
+        return classes
+
 
 class HighwayConfig(BaseModel):
-    """The section handed to `gym.make("highway-v0", config=...)`."""
+    """The section handed to `gym.make("highway-v0", config=...)`: highway-env's own keys, plus
+    `traffic` (heterogeneous traffic, `stack.sim.traffic`)."""
 
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
     lanes_count: int = Field(4, ge=1, le=10)
     vehicles_count: int = Field(50, ge=0, le=500)
     vehicles_density: float = Field(1.0, gt=0)
     duration: float = Field(40.0, gt=0, description="episode length [s]")
     simulation_frequency: int = Field(15, ge=1, le=1000, description="physics rate [Hz]")
+    ego_spacing: float = Field(2.0, gt=0, description="ratio of the ego's spawn gap to the default")
+    initial_lane_id: int | None = Field(None, ge=0, description="the ego's lane at spawn (None: random)")
+    traffic: TrafficConfig | None = None
+
+    @model_validator(mode="after")
+    def _lane_on_road(self) -> HighwayConfig:
+        if self.initial_lane_id is not None and self.initial_lane_id >= self.lanes_count:
+            raise ValueError(
+                f"initial_lane_id: must be a lane of the road (0..{self.lanes_count - 1}), "
+                f"got {self.initial_lane_id}"
+            )
+        return self
 
 
 class SimConfig(BaseModel):

@@ -1,0 +1,112 @@
+"""Named scenarios: listing, selection, validation of their keys, and the heterogeneous traffic."""
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from records import Actuation
+from stack.apps.cli import app
+from stack.core.config import ConfigError, build_config
+from stack.sim import scenarios
+from stack.sim.highway import HighwayAdapter
+
+REQUIRED = {"highway-v0", "dense", "lanes-3", "lanes-5", "overtaking", "noisy"}
+
+
+def test_the_suite_is_listed_one_line_each():
+    result = CliRunner().invoke(app, ["scenarios"])
+    assert result.exit_code == 0
+    lines = result.output.strip().splitlines()
+    assert {line.split()[0] for line in lines} >= REQUIRED
+    assert len(lines) == len(scenarios.names())
+    assert all(len(line.split(maxsplit=1)[1]) > 20 for line in lines), "every scenario says what it is"
+
+
+def test_a_scenario_replaces_the_world_and_keeps_the_rest():
+    base = {"planner": {"agent": "mobil"}, "highway": {"lanes_count": 7}, "perception": {"cells_ahead": 12}}
+    config = build_config(base, scenario="noisy")
+    assert config.scenario == "noisy"
+    assert config.highway.lanes_count == 3 and config.highway.traffic is not None
+    assert config.perception.sensor.position_noise_m == 0.5 and config.perception.cells_ahead == 12
+    assert config.planner.agent == "mobil"
+    assert build_config({"scenario": "lanes-5"}).highway.lanes_count == 5
+    overridden = build_config(base, scenario="dense", highway__vehicles_count=20)
+    assert (overridden.highway.vehicles_density, overridden.highway.vehicles_count) == (1.5, 20)
+    assert build_config(base, scenario="overtaking").perception.sensor.position_noise_m == 0.0
+
+
+def test_highway_v0_is_highway_envs_defaults():
+    config = build_config({}, scenario="highway-v0").highway
+    assert (config.lanes_count, config.vehicles_count, config.vehicles_density, config.duration) == (
+        4,
+        50,
+        1.0,
+        40,
+    )
+    assert config.traffic is None and config.ego_spacing == 2 and config.initial_lane_id is None
+
+
+TRAFFIC = {
+    "ego_position": 0.5,
+    "classes": [
+        {"name": "truck", "share": 0.3, "speed_mps": [16, 20], "length_m": [10, 12]},
+        {"name": "car", "share": 0.7, "speed_mps": [21, 29]},
+    ],
+}
+
+
+@pytest.mark.parametrize(
+    ("change", "key", "expected"),
+    [
+        ({"classes": [{**TRAFFIC["classes"][0], "speed_mps": [-16, 20]}]}, "speed_mps", "must be positive"),
+        ({"classes": [{**TRAFFIC["classes"][0], "share": -0.3}]}, "share", "greater than 0"),
+        ({"classes": TRAFFIC["classes"][:1]}, "classes", "the shares must sum to 1, got 0.3"),
+        ({"classes": [{**TRAFFIC["classes"][1], "speed_mps": [29, 21], "share": 1}]}, "speed_mps", "low <="),
+        ({"ego_position": 1.5}, "ego_position", "less than or equal to 1"),
+    ],
+)
+def test_bad_traffic_is_refused_in_one_line_naming_the_key(change, key, expected):
+    with pytest.raises(ConfigError) as error:
+        build_config({"highway": {"traffic": {**TRAFFIC, **change}}}, "x.yaml")
+    message = str(error.value)
+    assert message.startswith("x.yaml: highway.traffic.") and key in message and expected in message
+    assert "\n" not in message
+
+
+def test_unknown_scenario_and_lane_off_the_road_are_refused(tmp_path):
+    with pytest.raises(ConfigError, match="scenario: unknown scenario 'mars'; available: dense, "):
+        build_config({}, scenario="mars")
+    with pytest.raises(ConfigError, match="initial_lane_id: must be a lane of the road"):
+        build_config({"highway": {"lanes_count": 3, "initial_lane_id": 3}})
+    result = CliRunner().invoke(app, ["compare", "--scenario", "mars", "--out", str(tmp_path / "c")])
+    assert result.exit_code == 2 and "unknown scenario 'mars'" in result.output
+    assert not (tmp_path / "c").exists()
+
+
+@pytest.mark.parametrize("backend", ["fast", "stock"])
+def test_overtaking_traffic_is_seeded_heterogeneous_and_around_the_ego(backend):
+    config = build_config({}, scenario="overtaking")
+    with HighwayAdapter(config.highway, backend) as adapter:
+        world = adapter.reset(seed=4)
+        again = adapter.reset(seed=4)
+        road = adapter.env.unwrapped.road
+        vehicles = [road.vehicles[row] for row in world.ids[1:]]
+    np.testing.assert_array_equal(world.position, again.position)
+    others = world.s[1:] - world.s[0]
+    assert (others < 0).sum() == 20 and (others > 0).sum() == 20, "half the traffic starts behind the ego"
+    speeds = np.array([v.target_speed for v in vehicles])
+    lengths = world.length[1:]
+    trucks = lengths >= 10
+    assert 0 < trucks.sum() < len(lengths)
+    assert np.all((speeds[trucks] >= 16) & (speeds[trucks] <= 20))
+    assert np.all((speeds[~trucks] >= 21) & (speeds[~trucks] <= 29))
+
+
+def test_fast_and_stock_backends_drive_the_same_scenario_traffic():
+    config = build_config({"episodes": 1, "highway": {"duration": 6}}, scenario="overtaking")
+    with HighwayAdapter(config.highway, "fast") as fast, HighwayAdapter(config.highway, "stock") as stock:
+        fast.reset(seed=9), stock.reset(seed=9)
+        for _ in range(60):
+            a, b = fast.step(Actuation(0.5, 0.0)), stock.step(Actuation(0.5, 0.0))
+            np.testing.assert_array_equal(a.position, b.position)
+            np.testing.assert_array_equal(a.speed, b.speed)
