@@ -6,7 +6,7 @@ from pathlib import Path
 
 from planner.agents import Agent, FreeGapAgent, KeepLaneAgent, RandomAgent
 from planner.mobil import MobilAgent
-from records import AGENT_NAMES, LEARNED_AGENTS, GridConfig, unknown_name
+from records import LEARNED_AGENTS, POLICY_NAMES, GridConfig, unknown_name
 
 DEFAULT_MODEL = Path(__file__).parent / "models" / "ddqn_highway.npz"
 """The shipped Double DQN, trained by `drivestack train --config configs/train/ddqn.yaml`."""
@@ -31,4 +31,4 @@ def make_agent(
         return KeepLaneAgent()
     if name == "random":
         return RandomAgent(seed)
-    raise ValueError(unknown_name("agent", name, AGENT_NAMES))
+    raise ValueError(unknown_name("agent", name, POLICY_NAMES))

@@ -8,11 +8,15 @@ from typing import Literal, get_args
 import numpy as np
 from pydantic import BeforeValidator
 
-AgentName = Literal["ddqn", "dqn", "tabular", "rule", "mobil", "keep-lane", "random"]
+PolicyName = Literal["ddqn", "dqn", "tabular", "rule", "mobil", "keep-lane", "random"]
+"""Agents that decide on an observation (`planner.factory.make_agent`)."""
+AgentName = Literal[PolicyName, "oracle"]
+"""Every agent a run can use: the policies and the perfect-information oracle (`stack.core.oracle`)."""
 LearnedAgentName = Literal["ddqn", "dqn", "tabular"]
 Encoding = Literal["observation", "paper", "tabular"]
 ControllerName = Literal["pid", "mpc"]
 Backend = Literal["fast", "stock"]
+POLICY_NAMES: tuple[PolicyName, ...] = get_args(PolicyName)
 AGENT_NAMES: tuple[AgentName, ...] = get_args(AgentName)
 LEARNED_AGENTS: tuple[LearnedAgentName, ...] = get_args(LearnedAgentName)
 ENCODINGS: tuple[Encoding, ...] = get_args(Encoding)

@@ -81,6 +81,8 @@ def test_compare_runs_every_agent_on_the_same_episodes(tmp_path):
             str(tiny_config_file(tmp_path)),
             "--agents",
             "rule,keep-lane,random",
+            "--baseline",
+            "keep-lane",
             "--episodes",
             "2",
             "--out",
@@ -92,7 +94,15 @@ def test_compare_runs_every_agent_on_the_same_episodes(tmp_path):
     summaries = json.loads((out / "comparison.json").read_text())
     assert [s["agent"] for s in summaries] == ["rule", "keep-lane", "random"]
     assert all(s["episodes"] == 2 and s["seed"] == 0 for s in summaries)
+    for s in summaries:
+        value, low, high = s["intervals"]["mean_speed"]
+        assert value == s["mean_speed"] and low <= value <= high
+        assert s["baseline"] == "keep-lane"
+    assert summaries[1]["difference"]["mean_speed"] == [0.0, 0.0, 0.0]
+    assert "| speed - keep-lane m/s |" in result.output and " [" in result.output
     assert (out / "comparison.png").stat().st_size > 5_000
+    stray = CliRunner().invoke(app, ["compare", "--agents", "rule", "--baseline", "mobil"])
+    assert stray.exit_code == 2 and "--baseline: 'mobil' is not among --agents" in stray.output
     bad = CliRunner().invoke(app, ["compare", "--agents", "rule,genius", "--out", str(tmp_path / "no")])
     assert bad.exit_code == 2 and "unknown agent 'genius'" in bad.output
     assert not (tmp_path / "no").exists()

@@ -22,7 +22,17 @@ CASES = {
         "planner": {"agent": "rule"},
         "perception": {"sensor": {"position_noise_m": 1.0, "false_positives": 1.0}},
     },
+    "rule-pid-noisy-control-on-ground-truth": {
+        "seed": 2,
+        "planner": {"agent": "rule"},
+        "perception": {
+            "sensor": {"position_noise_m": 1.0, "false_positives": 1.0},
+            "control_on_ground_truth": True,
+        },
+    },
 }
+"""`rule-pid-noisy-control-on-ground-truth` keeps the result of the noisy case from before safety
+and cruise acted on the perceived world (the agent alone saw the noise then)."""
 
 
 def outcome(case: str) -> dict:

@@ -78,3 +78,20 @@ def test_noisy_sensor_runs_are_seeded_and_change_what_the_planner_sees(tiny_conf
     assert first.summary == second.summary
     grid_truth = run(tiny_config, progress=False).episodes[0].snapshot[1].cells
     assert not np.array_equal(first.episodes[0].snapshot[1].cells, grid_truth)
+
+
+def test_safety_and_cruise_act_on_the_perceived_world(tiny_config):
+    sensed = {**tiny_config.model_dump(), "perception": {"sensor": {"false_positives": 4.0}}}
+    perceived = build_config(sensed)
+    truth = build_config(sensed, perception__control_on_ground_truth=True)
+    with HighwayAdapter(perceived.highway, perceived.sim.backend) as adapter:
+        loop = ClosedLoop(perceived, adapter)
+        loop.reset(1)
+        phantoms = loop.perceived.count - loop.world.count
+        reference = loop.maneuver.reference(loop.perceived)
+        assert phantoms > 0 and loop.perceived.ids[-1] >= 1_000_000, "the sensor's phantoms are in it"
+        assert reference.leaders == loop.perceived.leaders((loop.maneuver.lane,))
+        ground = ClosedLoop(truth, adapter)
+        ground.reset(1)
+        assert ground.perceived is ground.world
+    assert run(perceived, progress=False).summary != run(truth, progress=False).summary

@@ -13,7 +13,7 @@ from planner.factory import DEFAULT_MODEL, make_agent
 from planner.learned import export_q_network, load_agent
 from planner.mobil import MobilAgent
 from planner.model_file import ModelFileError, save_model
-from records import AGENT_NAMES, ENCODINGS, N_ACTIONS, Command
+from records import ENCODINGS, N_ACTIONS, POLICY_NAMES, Command
 from tests.helpers import scene
 
 GRID = GridConfig(cells_ahead=9, cells_behind=4)
@@ -64,7 +64,7 @@ def model_files(tmp_path):
     return files
 
 
-@pytest.mark.parametrize("name", AGENT_NAMES)
+@pytest.mark.parametrize("name", POLICY_NAMES)
 def test_every_agent_answers_the_protocol(name, model_files):
     world = scene(3, (0.0, 1), [(15.0, 4.0), (30.0, 0.0), (-20.0, 8.0)], speed=25.0, other_speed=20.0)
     agent = make_agent(name, 3, GRID, seed=0, model=model_files.get(name))

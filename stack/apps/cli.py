@@ -129,6 +129,7 @@ def compare(
     episodes: int | None = typer.Option(None, help="Seeded episodes per agent."),
     seed: int | None = typer.Option(None, help="Seed of the first episode."),
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
+    baseline: str | None = typer.Option(None, help="Agent to report paired differences against."),
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
     out: Path | None = typer.Option(None, help="Results folder (default: runs/compare-<time>)."),
     progress: bool = typer.Option(True, help="Show progress bars."),
@@ -139,6 +140,8 @@ def compare(
     except ValueError:
         fail(f"--models: expected name=path[,name=path], got {models!r}")
     names = [name for name in agents.split(",") if name]
+    if baseline is not None and baseline not in names:
+        fail(f"--baseline: {baseline!r} is not among --agents ({', '.join(names)})")
     configs = [
         configured(
             config,
@@ -154,7 +157,7 @@ def compare(
         check_agent(cfg)
     from stack.apps.compare import compare_and_report
 
-    compare_and_report(configs, out or fresh_run_dir("compare"), jobs, progress)
+    compare_and_report(configs, out or fresh_run_dir("compare"), jobs, progress, baseline)
 
 
 @app.command()

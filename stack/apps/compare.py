@@ -1,62 +1,143 @@
-"""`drivestack compare`: several agents on the same seeded episodes, one table and one bar plot."""
+"""`drivestack compare`: several agents on the same seeded episodes; every metric with its 95 %
+confidence interval and, with a baseline, the paired difference to it (`stack.core.statistics`).
+Writes comparison.json and comparison.png and prints one markdown table."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import matplotlib.pyplot as plt
+from matplotlib.axes import Axes
 from rich.console import Console
 
 from stack.core.config import RunConfig
-from stack.core.episodes import run
+from stack.core.episodes import RunResults, run
+from stack.core.statistics import Interval, mean_interval, paired_difference, rate_interval
 
-COLUMNS = (
+MEANS = ("mean_speed", "lane_changes", "masked_commands", "aborted_changes")
+"""Per-episode metrics reported as means over episodes."""
+PANELS = (
     ("collision_rate", "collision rate [%]", 100.0),
     ("mean_speed", "mean speed [m/s]", 1.0),
     ("lane_changes", "lane changes / episode", 1.0),
 )
 
 
-def compare(configs: list[RunConfig], jobs: int = 1, progress: bool = True) -> list[dict]:
-    """One summary per config (one config per agent, same episodes and seeds)."""
-    return [run(config, progress=progress, jobs=jobs).summary for config in configs]
+def intervals(results: RunResults) -> dict[str, Interval]:
+    """Every reported metric of one agent with its 95 % interval."""
+    episodes = results.episodes
+    found = {"collision_rate": rate_interval(sum(e.crashed for e in episodes), len(episodes))}
+    for metric in MEANS:
+        found[metric] = mean_interval([getattr(e, metric) for e in episodes])
+    return found
 
 
-def compare_and_report(configs: list[RunConfig], out: Path, jobs: int, progress: bool) -> None:
+def differences(results: RunResults, baseline: RunResults) -> dict[str, Interval]:
+    """Agent minus baseline, episode by episode (same seeds), for every reported metric."""
+    pairs = {"collision_rate": "crashed", **{metric: metric for metric in MEANS}}
+    return {
+        metric: paired_difference(
+            [float(getattr(e, field)) for e in results.episodes],
+            [float(getattr(e, field)) for e in baseline.episodes],
+        )
+        for metric, field in pairs.items()
+    }
+
+
+def compare(configs: list[RunConfig], jobs: int = 1, progress: bool = True) -> list[RunResults]:
+    """One run per config (one config per agent, the same episodes and seeds)."""
+    return [run(config, progress=progress, jobs=jobs) for config in configs]
+
+
+def comparison(runs: list[RunResults], baseline: str | None = None) -> list[dict[str, Any]]:
+    """Per agent: its summary, `intervals` {metric: [value, low, high]} and, with a baseline,
+    `baseline` and `difference` {metric: [agent - baseline, low, high]}."""
+    reference = next((r for r in runs if r.summary["agent"] == baseline), None)
+    rows = []
+    for results in runs:
+        row = {**results.summary, "intervals": {k: v.as_list() for k, v in intervals(results).items()}}
+        if reference is not None:
+            row["baseline"] = baseline
+            row["difference"] = {k: v.as_list() for k, v in differences(results, reference).items()}
+        rows.append(row)
+    return rows
+
+
+def compare_and_report(
+    configs: list[RunConfig], out: Path, jobs: int, progress: bool, baseline: str | None = None
+) -> None:
     """Run every config, write `out` (comparison.json, comparison.png), print the table."""
-    summaries = compare(configs, jobs=jobs, progress=progress)
-    write_comparison(summaries, out)
-    Console().print(markdown(summaries), highlight=False)
+    rows = comparison(compare(configs, jobs=jobs, progress=progress), baseline)
+    write_comparison(rows, out)
+    Console().print(markdown(rows), highlight=False)
     Console().print(f"results: {out}")
 
 
-def write_comparison(summaries: list[dict], out: Path) -> None:
+def write_comparison(rows: list[dict[str, Any]], out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    (out / "comparison.json").write_text(json.dumps(summaries, indent=2) + "\n")
-    figure, axes = plt.subplots(1, len(COLUMNS), figsize=(4 * len(COLUMNS), 4))
-    names = [s["agent"] for s in summaries]
-    for axis, (key, label, scale) in zip(axes, COLUMNS, strict=True):
-        axis.bar(names, [scale * s[key] for s in summaries], color="tab:blue")
-        axis.set_title(label)
-        axis.tick_params(axis="x", rotation=30)
-    figure.suptitle(f"{summaries[0]['episodes']} seeded episodes from seed {summaries[0]['seed']}")
+    (out / "comparison.json").write_text(json.dumps(rows, indent=2) + "\n")
+    with_difference = "difference" in rows[0]
+    panels = len(PANELS) + with_difference
+    figure, axes = plt.subplots(1, panels, figsize=(4.2 * panels, 4.2))
+    names = [row["agent"] for row in rows]
+    for axis, (metric, label, scale) in zip(axes, PANELS, strict=False):
+        _bars(axis, names, [[scale * v for v in row["intervals"][metric]] for row in rows], label)
+    if with_difference:
+        values = [row["difference"]["mean_speed"] for row in rows]
+        _bars(axes[-1], names, values, f"mean speed - {rows[0]['baseline']} [m/s], paired")
+        axes[-1].axhline(0.0, color="black", lw=0.8)
+    first = rows[0]
+    figure.suptitle(
+        f"{first['scenario'] or 'config'}: {first['episodes']} seeded episodes from seed {first['seed']}, "
+        f"controller {first['controller']} (bars: 95 % confidence intervals)"
+    )
     figure.tight_layout()
     figure.savefig(out / "comparison.png", dpi=100)
     plt.close(figure)
 
 
-def markdown(summaries: list[dict]) -> str:
-    lines = [
-        "| agent | episodes | collision rate | accuracy | mean speed m/s | lane changes / ep "
-        "| masked / ep | aborted / ep |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for s in summaries:
-        accuracy = "n/a" if s["accuracy"] is None else f"{s['accuracy']:.2f} %"
-        lines.append(
-            f"| {s['agent']} | {s['episodes']} | {100 * s['collision_rate']:.1f} % ({s['collisions']}) | "
-            f"{accuracy} | {s['mean_speed']:.2f} | {s['lane_changes']:.2f} | {s['masked_commands']:.2f} | "
-            f"{s['aborted_changes']:.2f} |"
+def _bars(axis: Axes, names: list[str], intervals: list[list[float]], label: str) -> None:
+    """Bars at the values with their intervals as error bars and the values written on them."""
+    values = [value for value, _, _ in intervals]
+    errors = [[value - low for value, low, _ in intervals], [high - value for value, _, high in intervals]]
+    bars = axis.bar(names, values, yerr=errors, capsize=4, color="tab:blue", alpha=0.8)
+    axis.bar_label(bars, labels=[f"{v:.2f}" for v in values], label_type="center", color="white")
+    low, high = min(lo for _, lo, _ in intervals), max(hi for _, _, hi in intervals)
+    if high - low < 1e-9:
+        axis.set_ylim(low - 1.0, high + 1.0)
+    axis.set_title(label, fontsize="medium")
+    axis.tick_params(axis="x", rotation=30)
+    axis.grid(axis="y", alpha=0.3)
+
+
+def _cell(interval: list[float], scale: float = 1.0, digits: int = 2, sign: str = "") -> str:
+    value, low, high = (scale * v for v in interval)
+    return f"{value:{sign}.{digits}f} [{low:{sign}.{digits}f}, {high:{sign}.{digits}f}]"
+
+
+def markdown(rows: list[dict[str, Any]]) -> str:
+    """The table: every metric as value [95 % interval]; paired differences with a baseline."""
+    header = (
+        "| agent | episodes | collision rate % | accuracy % | mean speed m/s | lane changes / ep "
+        "| masked / ep | aborted / ep |"
+    )
+    baseline = rows[0].get("baseline")
+    if baseline:
+        header += f" speed - {baseline} m/s | collision rate - {baseline} % |"
+    lines = [header, "|" + "---|" * (header.count("|") - 1)]
+    for row in rows:
+        ci = row["intervals"]
+        accuracy = "n/a" if row["accuracy"] is None else f"{row['accuracy']:.2f}"
+        line = (
+            f"| {row['agent']} | {row['episodes']} | {_cell(ci['collision_rate'], 100, 1)} | {accuracy} | "
+            f"{_cell(ci['mean_speed'])} | {_cell(ci['lane_changes'])} | {_cell(ci['masked_commands'])} | "
+            f"{_cell(ci['aborted_changes'])} |"
         )
+        if baseline:
+            difference = row["difference"]
+            line += f" {_cell(difference['mean_speed'], sign='+')} |"
+            line += f" {_cell(difference['collision_rate'], 100, 1, '+')} |"
+        lines.append(line)
     return "\n".join(lines) + "\n"

@@ -60,7 +60,7 @@ class Acted:
 
 
 def grid_config(config: RunConfig) -> GridConfig:
-    return GridConfig(**config.perception.model_dump(exclude={"sensor"}))
+    return GridConfig(**config.perception.model_dump(exclude={"sensor", "control_on_ground_truth"}))
 
 
 class ClosedLoop:
@@ -88,6 +88,7 @@ class ClosedLoop:
         self.seed = seed
         self.world = self.plant.reset(seed)
         self.sensor = SensorModel(config.perception.sensor, seed)
+        self.perceived = self._observe()
         self.safety = SafetyLayer(config.planner.safety)
         self.controller = self.given_controller or make_controller(config.controller, self.plant.dt)
         self.controller.reset()
@@ -110,9 +111,19 @@ class ClosedLoop:
     def crashed(self) -> bool:
         return self.plant.terminated
 
+    def _observe(self) -> WorldState:
+        """What the sensor reports of the world now, for every layer that acts on the world; the
+        simulator's truth when control reads ground truth (then only the grid is sensed)."""
+        if self.config.perception.control_on_ground_truth:
+            return self.world
+        return self.sensor.observe(self.world)
+
     def perceive(self) -> OccupancyGrid:
         """The grid the planner decides on now (through the sensor model)."""
-        self.grid = self.builder.build(self.sensor.observe(self.world))
+        if self.config.perception.control_on_ground_truth:
+            self.grid = self.builder.build(self.sensor.observe(self.world))
+        else:
+            self.grid = self.builder.build(self.perceived)
         if self.snapshot is None or self.snapshot[0].time < SNAPSHOT_TIME_S:
             self.snapshot = (self.world, self.grid)
         return self.grid
@@ -127,7 +138,7 @@ class ClosedLoop:
         considered = not self.maneuver.changing_lane
         if considered:
             lane = self.maneuver.lane
-            self.maneuver.command(self.safety.filter(command, self.world, lane), self.world)
+            self.maneuver.command(self.safety.filter(command, self.perceived, lane), self.world)
         run = 0
         while not self.done:
             self.tick()
@@ -142,9 +153,10 @@ class ClosedLoop:
         return Acted(run, considered, mean_speed)
 
     def tick(self) -> None:
-        reference = self.maneuver.reference(self.world)
+        reference = self.maneuver.reference(self.perceived)
         actuation = self.controller.step(self.world.ego_state(), reference)
         self.world = self.plant.step(actuation)
+        self.perceived = self._observe()
         self.recorder.record(self.world, reference, actuation)
         if self.frames is not None and self.plant.rendering:
             frame = self.plant.render()

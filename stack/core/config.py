@@ -7,7 +7,7 @@ Every error is one line naming the file and the dotted key, e.g.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import (
@@ -46,15 +46,29 @@ class Strict(BaseModel):
 
 
 class PerceptionConfig(GridConfig):
-    """The occupancy grid (perception.grid.GridConfig's keys) plus the sensor model."""
+    """The occupancy grid (perception.grid.GridConfig's keys), the sensor model, and who sees it:
+    by default the agent, the safety layer and the adaptive cruise all act on the perceived world;
+    `control_on_ground_truth` lets safety and cruise read the simulator's truth (an ablation)."""
 
     sensor: SensorConfig = SensorConfig()
+    control_on_ground_truth: bool = False
+
+
+class OracleConfig(Strict):
+    """The tree's depth (decisions), the look-ahead horizon [s], the lane-change margin [m] and the
+    agent that drives after the tree's last decision."""
+
+    depth: int = Field(2, ge=1, le=3)
+    horizon_s: float = Field(10.0, gt=0, le=30)
+    margin_m: float = Field(1.0, ge=0)
+    base: Literal["keep-lane", "mobil", "rule"] = "keep-lane"
 
 
 class PlannerConfig(Strict):
     agent: Annotated[AgentName, one_of("agent", AGENT_NAMES)] = "rule"
     model: Path | None = None
     safety: SafetyConfig = SafetyConfig()
+    oracle: OracleConfig = OracleConfig()
 
 
 class RewardConfig(Strict):

@@ -15,21 +15,26 @@ from records import child_seed
 from stack.core.closed_loop import ClosedLoop, grid_config
 from stack.core.config import RunConfig
 from stack.core.metrics import EpisodeResult, summarize
+from stack.core.oracle import Oracle
 from stack.sim.highway import HighwayAdapter
 
 
 def build_agent(config: RunConfig, seed: int) -> Agent:
     """The agent `config.planner` names, for the run's road and grid; raises ValueError (one line)
     for a missing, unsafe or mismatched model file."""
-    return make_agent(
-        config.planner.agent, config.highway.lanes_count, grid_config(config), seed, config.planner.model
-    )
+    planner, lanes = config.planner, config.highway.lanes_count
+    if planner.agent == "oracle":
+        return Oracle.for_road(planner.oracle, lanes, grid_config(config))
+    return make_agent(planner.agent, lanes, grid_config(config), seed, planner.model)
 
 
 def agent_step(loop: ClosedLoop, agent: Agent) -> int:
     """Perceive, let `agent` decide on its own encoding, act until the next decision; ticks run."""
     grid = loop.perceive()
-    command = decide(agent, grid.encode(agent.encoding))
+    if isinstance(agent, Oracle):
+        command = agent.plan(loop)
+    else:
+        command = decide(agent, grid.encode(agent.encoding))
     return loop.act(command).ticks
 
 

@@ -1,0 +1,80 @@
+"""The `oracle` agent: a perfect-information planner, each scenario's ceiling for the decision layer.
+
+At a decision point it copies the whole closed loop (simulator, traffic, sensor, safety layer,
+maneuver, controllers: the simulator is deterministic once spawned, so a copy foresees the other
+vehicles exactly) and searches a tree of `depth` consecutive decisions: every command the safety
+layer lets through, then every command at the next decision point, and so on; each leaf is
+followed by the `base` agent until `horizon_s` after the root. A branch is worth the distance the
+ego gains along the road by then (minus infinity on a crash); a lane change must gain `margin_m`
+more than staying. No real planner knows the future, so its mean speed is a practical upper bound
+for any agent on the same seeds, controllers and safety layer. It is slow: about 3^depth
+look-ahead rollouts per decision (the cost per episode is in BENCHMARKS.md).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from typing import Any
+
+import numpy as np
+
+from planner.agents import Agent, Prediction, decide
+from planner.factory import make_agent
+from records import Command, Encoding, GridConfig
+from stack.core.closed_loop import ClosedLoop
+from stack.core.config import OracleConfig
+
+COMMANDS = (Command.STAY, Command.LEFT, Command.RIGHT)
+
+
+class Oracle:
+    """`plan(loop)` searches copies of `loop`; `predict` is refused (it needs the simulator)."""
+
+    encoding: Encoding = "paper"
+
+    def __init__(self, config: OracleConfig, base: Agent) -> None:
+        self.config = config
+        self.base = base
+        self.grid_config: GridConfig | None = base.grid_config
+
+    @classmethod
+    def for_road(cls, config: OracleConfig, lanes: int, grid: GridConfig) -> Oracle:
+        return cls(config, make_agent(config.base, lanes, grid))
+
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> Prediction:
+        raise TypeError("the oracle plans on copies of the simulator: call plan(loop), not predict")
+
+    def plan(self, loop: ClosedLoop) -> Command:
+        """The root command whose best branch gets furthest without a crash."""
+        start_s, start_time = float(loop.world.s[0]), loop.world.time
+        values = [self._value(loop, command, self.config.depth, start_s, start_time) for command in COMMANDS]
+        values[1:] = [value - self.config.margin_m for value in values[1:]]
+        return COMMANDS[int(np.argmax(values))]
+
+    def _value(
+        self, loop: ClosedLoop, command: Command, depth: int, start_s: float, start_time: float
+    ) -> float:
+        """Best distance [m] from `start_s` after `command` and `depth - 1` more decisions."""
+        future = copy.deepcopy(loop, {id(loop.frames): None})
+        masked = future.safety.masked
+        future.act(command)
+        if future.safety.masked != masked:
+            return -math.inf
+        if future.crashed:
+            return -math.inf
+        if depth > 1 and not future.done:
+            future.perceive()
+            return max(
+                self._value(future, next_command, depth - 1, start_s, start_time) for next_command in COMMANDS
+            )
+        while not future.done and future.world.time - start_time < self.config.horizon_s:
+            grid = future.perceive()
+            future.act(decide(self.base, grid.encode(self.base.encoding)))
+        return -math.inf if future.crashed else float(future.world.s[0]) - start_s

@@ -1,0 +1,55 @@
+"""The perfect-information oracle: a tree over consecutive decisions on copies of the loop."""
+
+import numpy as np
+import pytest
+
+from records import Command
+from stack.core.closed_loop import ClosedLoop
+from stack.core.config import build_config
+from stack.core.episodes import build_agent, run
+from stack.core.oracle import Oracle
+from stack.sim.highway import HighwayAdapter
+
+SHORT = {"episodes": 1, "seed": 3, "highway": {"duration": 6}, "planner": {"agent": "oracle"}}
+
+
+def test_the_tree_searches_copies_and_leaves_the_loop_untouched(monkeypatch):
+    config = build_config(
+        {**SHORT, "planner": {"agent": "oracle", "oracle": {"horizon_s": 3}}}, scenario="overtaking"
+    )
+    oracle = build_agent(config, 0)
+    assert isinstance(oracle, Oracle)
+    with HighwayAdapter(config.highway, config.sim.backend) as adapter:
+        loop = ClosedLoop(config, adapter)
+        loop.reset(3)
+        loop.perceive()
+        before = loop.world
+        branches: list[int] = []
+        value = Oracle._value
+
+        def counted(self, *args):
+            branches.append(args[2])
+            return value(self, *args)
+
+        monkeypatch.setattr(Oracle, "_value", counted)
+        command = oracle.plan(loop)
+        assert loop.world is before and adapter.env.unwrapped.time == before.time, "only copies moved"
+    assert command in Command
+    assert branches.count(2) == 3, "every root command is tried"
+    assert 3 <= branches.count(1) <= 9, "every command after each root that the safety layer lets through"
+
+
+def test_the_oracle_is_refused_as_an_observation_policy_and_drives_like_any_agent():
+    config = build_config({**SHORT, "planner": {"agent": "oracle", "oracle": {"depth": 1, "horizon_s": 2}}})
+    with pytest.raises(TypeError, match="plans on copies of the simulator"):
+        build_agent(config, 0).predict(np.zeros(3))
+    summary = run(config, progress=False).summary
+    assert summary["agent"] == "oracle" and summary["collisions"] == 0 and summary["mean_speed"] > 15
+
+
+def test_oracle_settings_are_validated():
+    from stack.core.config import ConfigError
+
+    for bad, key in [({"depth": 0}, "depth"), ({"horizon_s": -1}, "horizon_s"), ({"base": "ddqn"}, "base")]:
+        with pytest.raises(ConfigError, match=f"planner.oracle.{key}"):
+            build_config({"planner": {"oracle": bad}})
