@@ -16,12 +16,15 @@ LearnedAgentName = Literal["ddqn", "dqn", "tabular"]
 Encoding = Literal["observation", "paper", "tabular"]
 ControllerName = Literal["pid", "mpc"]
 Backend = Literal["fast", "stock"]
+RoadName = Literal["highway", "exit"]
+"""highway-env roads the loop drives: highway-v0's straight highway, exit-v0's highway with an exit."""
 POLICY_NAMES: tuple[PolicyName, ...] = get_args(PolicyName)
 AGENT_NAMES: tuple[AgentName, ...] = get_args(AgentName)
 LEARNED_AGENTS: tuple[LearnedAgentName, ...] = get_args(LearnedAgentName)
 ENCODINGS: tuple[Encoding, ...] = get_args(Encoding)
 CONTROLLER_NAMES: tuple[ControllerName, ...] = get_args(ControllerName)
 BACKENDS: tuple[Backend, ...] = get_args(Backend)
+ROADS: tuple[RoadName, ...] = get_args(RoadName)
 
 
 def unknown_name(kind: str, value: object, options: tuple[str, ...]) -> str:

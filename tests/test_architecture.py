@@ -63,11 +63,11 @@ def test_every_registered_name_has_an_implementation():
     from controllers.config import ControllerConfig
     from controllers.tracker import make_controller
     from perception.grid import OccupancyGridBuilder
-    from records import BACKENDS, CONTROLLER_NAMES, ENCODINGS, GridConfig
+    from records import BACKENDS, CONTROLLER_NAMES, ENCODINGS, ROADS, GridConfig
     from stack.sim.highway import ENV_IDS
     from tests.helpers import scene
 
-    assert tuple(ENV_IDS) == BACKENDS
+    assert tuple(ENV_IDS) == ROADS and all(tuple(ids) == BACKENDS for ids in ENV_IDS.values())
     for name in CONTROLLER_NAMES:
         assert callable(make_controller(ControllerConfig(type=name), 1 / 15).step)
     builder = OccupancyGridBuilder(GridConfig())

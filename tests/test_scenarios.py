@@ -7,6 +7,7 @@ from typer.testing import CliRunner
 from records import Actuation
 from stack.apps.cli import app
 from stack.core.config import ConfigError, build_config
+from stack.core.episodes import run
 from stack.sim import scenarios
 from stack.sim.highway import HighwayAdapter
 
@@ -110,3 +111,40 @@ def test_fast_and_stock_backends_drive_the_same_scenario_traffic():
             a, b = fast.step(Actuation(0.5, 0.0)), stock.step(Actuation(0.5, 0.0))
             np.testing.assert_array_equal(a.position, b.position)
             np.testing.assert_array_equal(a.speed, b.speed)
+
+
+def test_exit_road_runs_closed_loop_and_its_grid_sees_across_segments():
+    config = build_config({"episodes": 1, "planner": {"agent": "rule"}}, scenario="exit")
+    assert config.highway.road == "exit"
+    with HighwayAdapter(config.highway, "fast") as fast, HighwayAdapter(config.highway, "stock") as stock:
+        worlds = []
+        fast.reset(seed=1), stock.reset(seed=1)
+        for _ in range(120):
+            world, other = fast.step(Actuation(1.0, 0.0)), stock.step(Actuation(1.0, 0.0))
+            np.testing.assert_array_equal(world.position, other.position)
+            worlds.append(world)
+    assert all(w.lanes_count == 6 for w in worlds), "the exit lane is not driven"
+    lanes = {fast_world.lane[0] for fast_world in worlds}
+    assert lanes == {0}
+    segment_end = 400.0
+    near = [w for w in worlds if segment_end - 60 < w.position[0, 0] < segment_end]
+    assert near, "the ego reaches the end of the first segment"
+    world = near[-1]
+    beyond = world.position[1:, 0] > segment_end
+    assert beyond.any(), "vehicles drive on the next segment"
+    np.testing.assert_allclose(
+        world.s[1:][beyond] - world.s[0], world.position[1:, 0][beyond] - world.position[0, 0]
+    )
+    summary = run(config, progress=False).summary
+    assert summary["scenario"] == "exit" and summary["collisions"] == 0
+
+
+def test_keys_the_road_cannot_use_are_refused():
+    with pytest.raises(ConfigError, match="highway: traffic: the exit road spawns its own traffic"):
+        build_config({"highway": {"road": "exit", "traffic": TRAFFIC}})
+    with pytest.raises(ConfigError, match="the exit road always starts the ego in lane 0"):
+        build_config({"highway": {"road": "exit", "initial_lane_id": 2}})
+    with pytest.raises(
+        ConfigError, match="highway.road: unknown road 'roundabout'; available: highway, exit"
+    ):
+        build_config({"highway": {"road": "roundabout"}})

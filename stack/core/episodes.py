@@ -9,8 +9,9 @@ from multiprocessing import get_context
 import numpy as np
 from tqdm import tqdm
 
+from perception.grid import OccupancyGridBuilder
 from planner.agents import Agent, decide
-from planner.factory import make_agent
+from planner.factory import DEFAULT_MODEL, make_agent
 from records import child_seed
 from stack.core.closed_loop import ClosedLoop, grid_config
 from stack.core.config import RunConfig
@@ -25,7 +26,17 @@ def build_agent(config: RunConfig, seed: int) -> Agent:
     planner, lanes = config.planner, config.highway.lanes_count
     if planner.agent == "oracle":
         return Oracle.for_road(planner.oracle, lanes, grid_config(config))
-    return make_agent(planner.agent, lanes, grid_config(config), seed, planner.model)
+    agent = make_agent(planner.agent, lanes, grid_config(config), seed, planner.model)
+    expected = getattr(agent, "observation_size", None)
+    if expected is not None:
+        builder = OccupancyGridBuilder(agent.grid_config or grid_config(config))
+        size = int(builder.space(agent.encoding, lanes).shape[0])
+        if size != expected:
+            raise ValueError(
+                f"{planner.model or DEFAULT_MODEL}: expects observations of {expected} values; its "
+                f"{agent.encoding} grid gives {size} on this {lanes}-lane road"
+            )
+    return agent
 
 
 def agent_step(loop: ClosedLoop, agent: Agent) -> int:

@@ -20,6 +20,7 @@ from __future__ import annotations
 from bisect import bisect_left
 
 import numpy as np
+from highway_env.envs.exit_env import ExitEnv
 from highway_env.envs.highway_env import HighwayEnvFast
 from highway_env.road.lane import AbstractLane, StraightLane
 from highway_env.road.road import Road, RoadNetwork
@@ -216,4 +217,14 @@ class FastHighwayEnvFast(HighwayEnvFast):
 
     def _create_road(self) -> None:
         super()._create_road()
+        FastRoad.adopt(self.road)
+
+
+class FastExitEnv(ExitEnv):
+    """exit-v0 on a `FastRoad`."""
+
+    def _create_road(
+        self, road_length: float = 1000, exit_position: float = 400, exit_length: float = 100
+    ) -> None:
+        super()._create_road(road_length, exit_position, exit_length)
         FastRoad.adopt(self.road)

@@ -21,11 +21,14 @@ from highway_env.road.lane import AbstractLane, StraightLane
 from highway_env.road.road import Road
 from highway_env.vehicle.kinematics import Vehicle
 
-from records import BACKENDS, Actuation, Backend, WorldState, unknown_name
-from stack.sim.envs import FAST_HIGHWAY, HIGHWAY
+from records import BACKENDS, Actuation, Backend, RoadName, WorldState, unknown_name
+from stack.sim.envs import FAST_EXIT, FAST_HIGHWAY, HIGHWAY
 from stack.sim.settings import HighwayConfig
 
-ENV_IDS: dict[Backend, str] = {"fast": FAST_HIGHWAY, "stock": HIGHWAY}
+ENV_IDS: dict[RoadName, dict[Backend, str]] = {
+    "highway": {"fast": FAST_HIGHWAY, "stock": HIGHWAY},
+    "exit": {"fast": FAST_EXIT, "stock": "exit-v0"},
+}
 """Simulation backends: the gymnasium id each one runs."""
 
 MAX_ACCELERATION = ContinuousAction.ACCELERATION_RANGE[1]
@@ -37,7 +40,7 @@ MAX_STEERING = ContinuousAction.STEERING_RANGE[1]
 def env_config(highway: HighwayConfig) -> dict:
     """The highway-env config for a closed-loop run: continuous action, one frame per step."""
     return {
-        **highway.model_dump(mode="json"),
+        **highway.model_dump(mode="json", exclude={"road"}),
         "policy_frequency": highway.simulation_frequency,
         "action": {"type": "ContinuousAction"},
         # The stack reads the road itself; the cheapest observation keeps highway-env's work minimal.
@@ -54,12 +57,12 @@ class HighwayAdapter:
     """Owns one highway-v0 env; `reset(seed)` and `step(actuation)` return `WorldState` snapshots."""
 
     def __init__(self, highway: HighwayConfig, backend: Backend = "fast", render: bool = False) -> None:
-        if backend not in ENV_IDS:
+        if backend not in BACKENDS:
             raise ValueError(unknown_name("simulation backend", backend, BACKENDS))
         self.config = highway
         self.dt = 1.0 / highway.simulation_frequency
         self.env = gym.make(
-            ENV_IDS[backend],
+            ENV_IDS[highway.road][backend],
             config=env_config(highway),
             render_mode="rgb_array" if render else None,
             disable_env_checker=True,
@@ -102,18 +105,20 @@ class HighwayAdapter:
     def snapshot(self) -> WorldState:
         """Copy the road into a `WorldState` (row 0 = ego, others in road order)."""
         env: AbstractEnv = self.env.unwrapped
-        return snapshot(env.road, env.vehicle, float(env.time))
+        return snapshot(env.road, env.vehicle, float(env.time), self.config.lanes_count)
 
 
-def snapshot(road: Road, ego: Vehicle, time: float) -> WorldState:
+def snapshot(road: Road, ego: Vehicle, time: float, lanes_count: int | None = None) -> WorldState:
     """The road at `time` [s] as a `WorldState`: row 0 = `ego`, the others in road order, in the
-    frame of lane 0 of the ego's road segment."""
+    frame of lane 0 of the ego's road segment, which continues across straight segments, so the
+    vehicles of the segments ahead and behind are seen too. Only the segment's first `lanes_count`
+    lanes are driven (an exit lane that opens for a while is not)."""
     road_vehicles = road.vehicles
     ego_index = road_vehicles.index(ego)
     order = [ego_index] + [i for i in range(len(road_vehicles)) if i != ego_index]
     vehicles = [road_vehicles[i] for i in order]
     start, end, _ = ego.lane_index
-    lanes = tuple(road.network.graph[start][end])
+    lanes = tuple(road.network.graph[start][end])[:lanes_count]
     reference = lanes[0]
     position = np.array([v.position for v in vehicles], dtype=float)
     heading = np.array([v.heading for v in vehicles], dtype=float)

@@ -7,7 +7,7 @@ from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from records import BACKENDS, Backend, one_of
+from records import BACKENDS, ROADS, Backend, RoadName, one_of
 
 SHARE_TOLERANCE = 1e-6
 """How far the shares of the traffic classes may sum from 1."""
@@ -58,11 +58,13 @@ class TrafficConfig(BaseModel):
 
 
 class HighwayConfig(BaseModel):
-    """The section handed to `gym.make("highway-v0", config=...)`: highway-env's own keys, plus
-    `traffic` (heterogeneous traffic, `stack.sim.traffic`)."""
+    """The section handed to highway-env (`gym.make("highway-v0" or "exit-v0", config=...)`):
+    which `road`, highway-env's own keys, and `traffic` (heterogeneous traffic, `stack.sim.traffic`,
+    on the straight highway only; exit-v0 spawns its own lane-keeping traffic)."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
+    road: Annotated[RoadName, one_of("road", ROADS)] = "highway"
     lanes_count: int = Field(4, ge=1, le=10)
     vehicles_count: int = Field(50, ge=0, le=500)
     vehicles_density: float = Field(1.0, gt=0)
@@ -71,6 +73,16 @@ class HighwayConfig(BaseModel):
     ego_spacing: float = Field(2.0, gt=0, description="ratio of the ego's spawn gap to the default")
     initial_lane_id: int | None = Field(None, ge=0, description="the ego's lane at spawn (None: random)")
     traffic: TrafficConfig | None = None
+
+    @model_validator(mode="after")
+    def _keys_the_road_uses(self) -> HighwayConfig:
+        if self.road == "exit" and self.traffic is not None:
+            raise ValueError(
+                "traffic: the exit road spawns its own traffic; vehicle classes need road: highway"
+            )
+        if self.road == "exit" and self.initial_lane_id is not None:
+            raise ValueError("initial_lane_id: the exit road always starts the ego in lane 0")
+        return self
 
     @model_validator(mode="after")
     def _lane_on_road(self) -> HighwayConfig:
