@@ -27,7 +27,7 @@ def test_a_scenario_replaces_the_world_and_keeps_the_rest():
     base = {"planner": {"agent": "mobil"}, "highway": {"lanes_count": 7}, "perception": {"cells_ahead": 12}}
     config = build_config(base, scenario="noisy")
     assert config.scenario == "noisy"
-    assert config.highway.lanes_count == 3 and config.highway.traffic is not None
+    assert config.highway.lanes_count == 4 and config.highway.traffic is not None
     assert config.perception.sensor.position_noise_m == 0.5 and config.perception.cells_ahead == 12
     assert config.planner.agent == "mobil"
     assert build_config({"scenario": "lanes-5"}).highway.lanes_count == 5
@@ -94,7 +94,7 @@ def test_overtaking_traffic_is_seeded_heterogeneous_and_around_the_ego(backend):
         vehicles = [road.vehicles[row] for row in world.ids[1:]]
     np.testing.assert_array_equal(world.position, again.position)
     others = world.s[1:] - world.s[0]
-    assert (others < 0).sum() == 20 and (others > 0).sum() == 20, "half the traffic starts behind the ego"
+    assert (others < 0).sum() == 30 and (others > 0).sum() == 30, "half the traffic starts behind the ego"
     speeds = np.array([v.target_speed for v in vehicles])
     lengths = world.length[1:]
     trucks = lengths >= 10

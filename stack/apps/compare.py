@@ -10,7 +10,6 @@ from typing import Any
 
 import matplotlib.pyplot as plt
 from matplotlib.axes import Axes
-from rich.console import Console
 
 from stack.core.config import RunConfig
 from stack.core.episodes import RunResults, run
@@ -71,8 +70,8 @@ def compare_and_report(
     """Run every config, write `out` (comparison.json, comparison.png), print the table."""
     rows = comparison(compare(configs, jobs=jobs, progress=progress), baseline)
     write_comparison(rows, out)
-    Console().print(markdown(rows), highlight=False)
-    Console().print(f"results: {out}")
+    print(markdown(rows), end="")
+    print(f"results: {out}")
 
 
 def write_comparison(rows: list[dict[str, Any]], out: Path) -> None:
