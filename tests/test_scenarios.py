@@ -148,3 +148,31 @@ def test_keys_the_road_cannot_use_are_refused():
         ConfigError, match="highway.road: unknown road 'roundabout'; available: highway, exit"
     ):
         build_config({"highway": {"road": "roundabout"}})
+
+
+def test_run_and_train_take_a_scenario_from_the_cli(tmp_path):
+    import json
+
+    run_out, train_out = tmp_path / "run", tmp_path / "train"
+    ran = CliRunner().invoke(
+        app,
+        [
+            "run",
+            "--scenario",
+            "exit",
+            "--agent",
+            "keep-lane",
+            "--episodes",
+            "1",
+            "--no-progress",
+            "--out",
+            str(run_out),
+        ],
+    )
+    assert ran.exit_code == 0, ran.output
+    assert json.loads((run_out / "summary.json").read_text())["scenario"] == "exit"
+    trained = CliRunner().invoke(
+        app, ["train", "--scenario", "lanes-3", "--steps", "20", "--no-progress", "--out", str(train_out)]
+    )
+    assert trained.exit_code == 0, trained.output
+    assert "scenario: lanes-3" in (train_out / "config.yaml").read_text()
