@@ -179,7 +179,9 @@ def test_run_and_train_take_a_scenario_from_the_cli(tmp_path):
 
 
 def test_a_scenario_gives_the_same_summaries_on_one_or_two_processes():
-    config = build_config({"episodes": 2, "planner": {"agent": "mobil"}}, scenario="noisy", highway__duration=4)
+    config = build_config(
+        {"episodes": 2, "planner": {"agent": "mobil"}}, scenario="noisy", highway__duration=4
+    )
     serial, parallel = run(config, progress=False, jobs=1), run(config, progress=False, jobs=2)
     assert serial.summary == parallel.summary
     assert [e.trace for e in serial.episodes] == [e.trace for e in parallel.episodes]
