@@ -14,8 +14,10 @@ import numpy as np
 
 from records import N_ACTIONS, Command, Encoding, GridConfig, lane_code_bits
 
-Prediction = tuple[np.ndarray | np.integer, Any]
-"""What `predict` returns, as SB3's: (action index, or one per row of a batch; recurrent state)."""
+Action = np.ndarray | np.integer
+"""An action index of `Command`, or one per row of a batch of observations."""
+Prediction = tuple[Action, Any]
+"""What `predict` returns, as SB3's: (action, recurrent state)."""
 
 
 @runtime_checkable
@@ -41,15 +43,13 @@ def decide(agent: Agent, observation: np.ndarray) -> Command:
     return Command(int(np.asarray(action).reshape(-1)[0]))
 
 
-class PaperStateAgent:
-    """Base of the hand-written agents: they read the paper state of the run's grid."""
+class Policy:
+    """Base of the agents that decide on an observation alone: SB3's `predict` over `choose`
+    (greedy; no recurrent state, which is handed back unchanged). By default they read the paper
+    state of the run's grid."""
 
     encoding: Encoding = "paper"
     grid_config: GridConfig | None = None
-
-
-class KeepLaneAgent(PaperStateAgent):
-    """Never changes lane: the lower bound every other agent should beat on speed."""
 
     def predict(
         self,
@@ -58,26 +58,30 @@ class KeepLaneAgent(PaperStateAgent):
         episode_start: Any = None,
         deterministic: bool = True,
     ) -> Prediction:
-        return np.array(Command.STAY), state
+        return self.choose(observation), state
+
+    def choose(self, observation: np.ndarray) -> Action:
+        raise NotImplementedError
 
 
-class RandomAgent(PaperStateAgent):
+class KeepLaneAgent(Policy):
+    """Never changes lane: the lower bound every other agent should beat on speed."""
+
+    def choose(self, observation: np.ndarray) -> Action:
+        return np.array(Command.STAY)
+
+
+class RandomAgent(Policy):
     """Uniformly random commands from its own seeded generator."""
 
     def __init__(self, seed: int = 0) -> None:
         self.rng = np.random.default_rng(seed)
 
-    def predict(
-        self,
-        observation: np.ndarray,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-    ) -> Prediction:
-        return np.array(self.rng.integers(0, N_ACTIONS)), state
+    def choose(self, observation: np.ndarray) -> Action:
+        return np.array(self.rng.integers(0, N_ACTIONS))
 
 
-class FreeGapAgent(PaperStateAgent):
+class FreeGapAgent(Policy):
     """Rule baseline on the paper state: when a car is in sight in the own lane, move to the
     adjacent lane with the most free cells ahead, only if it is strictly freer and its gap around
     the ego (from `safe_cells_behind` behind to `safe_cells_ahead` ahead) is empty."""
@@ -117,20 +121,14 @@ class FreeGapAgent(PaperStateAgent):
         high = self.grid.ego_column + self.safe_cells_ahead
         return 0 <= row < cells.shape[0] and not cells[row, low : high + 1].any()
 
-    def predict(
-        self,
-        observation: np.ndarray,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-    ) -> Prediction:
+    def choose(self, observation: np.ndarray) -> Action:
         cells, ego_row = self._decode(observation)
         free = self.free_cells(cells)
         if free[ego_row] >= self.grid.cells_ahead:
-            return np.array(Command.STAY), state
+            return np.array(Command.STAY)
         best, best_free = Command.STAY, free[ego_row]
         for command in (Command.LEFT, Command.RIGHT):
             row = ego_row + command.lane_shift
             if self.gap_is_safe(cells, row) and free[row] > best_free:
                 best, best_free = command, free[row]
-        return np.array(best), state
+        return np.array(best)

@@ -4,7 +4,6 @@ model file, behind the same `predict` as every other agent."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch as th
@@ -12,7 +11,7 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.torch_layers import create_mlp
 from torch import nn
 
-from planner.agents import Prediction
+from planner.agents import Action, Policy
 from planner.model_file import ModelFileError, load_model, save_model
 from planner.tabular import QLearning
 from records import Encoding, GridConfig
@@ -23,7 +22,7 @@ def q_network(observation_size: int, actions: int, hidden: list[int]) -> nn.Sequ
     return nn.Sequential(*create_mlp(observation_size, actions, hidden))
 
 
-class LearnedAgent:
+class LearnedAgent(Policy):
     """Greedy agent over a Q-network; `grid_config` and `encoding` say what it must be shown."""
 
     def __init__(self, network: nn.Sequential, metadata: dict, source: str = "model") -> None:
@@ -39,13 +38,7 @@ class LearnedAgent:
         with th.no_grad():
             return self.network(th.as_tensor(batch)).numpy()
 
-    def predict(
-        self,
-        observation: np.ndarray,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-    ) -> Prediction:
+    def choose(self, observation: np.ndarray) -> Action:
         size = np.asarray(observation).size
         if size % self.observation_size:
             raise ValueError(
@@ -53,10 +46,10 @@ class LearnedAgent:
                 f"({self.encoding} encoding of grid {self.metadata['grid']}), got {size}"
             )
         actions = self.q_values(observation).argmax(axis=1)
-        return (actions[0] if np.asarray(observation).ndim == 1 else actions), state
+        return actions[0] if np.asarray(observation).ndim == 1 else actions
 
 
-class TabularAgent:
+class TabularAgent(Policy):
     """Greedy agent over a Q-table indexed by the tabular state [ego_lane, distances...]."""
 
     encoding: Encoding = "tabular"
@@ -67,13 +60,7 @@ class TabularAgent:
         self.source = source
         self.grid_config = GridConfig(**metadata["grid"])
 
-    def predict(
-        self,
-        observation: np.ndarray,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-    ) -> Prediction:
+    def choose(self, observation: np.ndarray) -> Action:
         index = tuple(np.asarray(observation, dtype=np.int64).reshape(-1))
         if len(index) != self.table.ndim - 1 or any(
             not 0 <= i < n for i, n in zip(index, self.table.shape[:-1], strict=True)
@@ -82,7 +69,7 @@ class TabularAgent:
                 f"{self.source} expects a tabular state of {self.table.ndim - 1} values within "
                 f"{list(self.table.shape[:-1])}, got {list(index)}"
             )
-        return np.int64(np.argmax(self.table[index])), state
+        return np.int64(np.argmax(self.table[index]))
 
 
 def export_q_network(model: DQN, path: Path | str, metadata: dict) -> Path:

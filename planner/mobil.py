@@ -9,11 +9,9 @@ highway-env's IDMVehicle). IDM constants are highway-env's.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
-from planner.agents import Prediction
+from planner.agents import Action, Policy
 from records import MAX_SPEED, Command, Encoding, GridConfig
 
 ACCELERATION = 3.0
@@ -44,10 +42,11 @@ def idm(speed: float, leader_speed: float, gap: float) -> float:
     return ACCELERATION * (1 - (max(speed, 0.0) / DESIRED_SPEED) ** 4 - (desired / max(gap, 0.1)) ** 2)
 
 
-class MobilAgent:
+class MobilAgent(Policy):
     """MOBIL on an ego-relative grid (one lane each side) with relative speeds and the ego speed."""
 
     encoding: Encoding = "observation"
+    grid_config: GridConfig
 
     def __init__(self, grid: GridConfig) -> None:
         self.grid_config = grid.model_copy(
@@ -80,13 +79,7 @@ class MobilAgent:
                 return distance - g.cell_length, relative[row, column]
         return None
 
-    def predict(
-        self,
-        observation: np.ndarray,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-    ) -> Prediction:
+    def choose(self, observation: np.ndarray) -> Action:
         presence, relative, speed = self._decode(observation)
         ego_column = self.grid_config.ego_column
         current = self._neighbour(presence, relative, 1, ahead=True)
@@ -106,4 +99,4 @@ class MobilAgent:
             ) - gain_now
             if gain > best_gain:
                 best, best_gain = command, gain
-        return np.array(best), state
+        return np.array(best)

@@ -15,11 +15,10 @@ from __future__ import annotations
 
 import copy
 import math
-from typing import Any
 
 import numpy as np
 
-from planner.agents import Agent, Prediction, decide
+from planner.agents import Action, Agent, Policy, decide
 from planner.factory import make_agent
 from records import Command, Encoding, GridConfig
 from stack.core.closed_loop import ClosedLoop
@@ -28,7 +27,7 @@ from stack.core.config import OracleConfig
 COMMANDS = (Command.STAY, Command.LEFT, Command.RIGHT)
 
 
-class Oracle:
+class Oracle(Policy):
     """`plan(loop)` searches copies of `loop`; `predict` is refused (it needs the simulator)."""
 
     encoding: Encoding = "paper"
@@ -42,13 +41,7 @@ class Oracle:
     def for_road(cls, config: OracleConfig, lanes: int, grid: GridConfig) -> Oracle:
         return cls(config, make_agent(config.base, lanes, grid))
 
-    def predict(
-        self,
-        observation: np.ndarray,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-    ) -> Prediction:
+    def choose(self, observation: np.ndarray) -> Action:
         raise TypeError("the oracle plans on copies of the simulator: call plan(loop), not predict")
 
     def plan(self, loop: ClosedLoop) -> Command:
