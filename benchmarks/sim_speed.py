@@ -1,47 +1,38 @@
-"""Simulation backends: stock highway-env vs drivestack's fast road, frames/s on one core.
+"""Simulation backends: stock highway-env, drivestack's `fast` road and its `vector` road, frames/s
+on one core, measured in one sitting.
 
     .venv/bin/python benchmarks/sim_speed.py [--runs 5] [--frames 300]
 
 Each scene is stepped `--frames` physics frames with a constant action (ContinuousAction, one frame
-per step, the stack's cheap observation) for seeds 0..runs-1, alternating stock and fast; the
-figure is the median frames/s, the ratio fast/stock.
+per step, the stack's cheap observation) for seeds 0..runs-1, the three backends alternating seed by
+seed so that machine load hits them alike; the figures are median frames/s and the ratios to stock.
 """
 
 from __future__ import annotations
 
 import argparse
+import platform
 import statistics
 import time
 
 import gymnasium as gym
-import highway_env  # noqa: F401
 import numpy as np
 
-from stack.core.config import HighwayConfig
-from stack.sim.envs import FAST_HIGHWAY, FAST_HIGHWAY_FAST
+from stack.core.config import HighwayConfig, build_config
+from stack.sim.envs import FAST_HIGHWAY, HIGHWAY, VECTOR_HIGHWAY
 from stack.sim.highway import env_config
 
+BACKENDS = {"stock": HIGHWAY, "fast": FAST_HIGHWAY, "vector": VECTOR_HIGHWAY}
 SCENES = {
-    "highway-v0 defaults (4 lanes, 50 vehicles, 15 Hz)": (
-        "highway-v0",
-        FAST_HIGHWAY,
-        env_config(HighwayConfig()),
-    ),
-    "highway-fast-v0 traffic (3 lanes, 20 vehicles, 5 Hz, ego-only collisions)": (
-        "highway-fast-v0",
-        FAST_HIGHWAY_FAST,
-        env_config(HighwayConfig(lanes_count=3, vehicles_count=20, simulation_frequency=5)),
-    ),
-    "100 vehicles, density 2 (4 lanes, 15 Hz)": (
-        "highway-v0",
-        FAST_HIGHWAY,
-        env_config(HighwayConfig(vehicles_count=100, vehicles_density=2)),
-    ),
+    "20 vehicles (4 lanes, 15 Hz)": HighwayConfig(vehicles_count=20),
+    "highway-v0 defaults (4 lanes, 50 vehicles, 15 Hz)": HighwayConfig(),
+    "100 vehicles, density 2 (4 lanes, 15 Hz)": HighwayConfig(vehicles_count=100, vehicles_density=2),
+    "overtaking scenario (60 vehicles, trucks and cars)": build_config({}, scenario="overtaking").highway,
 }
 
 
-def frames_per_second(env_id: str, config: dict, seed: int, frames: int) -> float:
-    env = gym.make(env_id, config={**config, "duration": 1e6}, disable_env_checker=True)
+def frames_per_second(env_id: str, highway: HighwayConfig, seed: int, frames: int) -> float:
+    env = gym.make(env_id, config={**env_config(highway), "duration": 1e6}, disable_env_checker=True)
     env.reset(seed=seed)
     action = np.zeros(2)
     start = time.perf_counter()
@@ -57,15 +48,17 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--frames", type=int, default=300)
     args = parser.parse_args()
-    print("| scene | stock frames/s | fast frames/s | fast / stock |")
-    print("|---|---|---|---|")
-    for name, (stock_id, fast_id, config) in SCENES.items():
-        stock, fast = [], []
+    print(f"{platform.processor() or platform.machine()}, Python {platform.python_version()}")
+    print("| scene | stock frames/s | fast frames/s | vector frames/s | fast / stock | vector / stock |")
+    print("|---|---|---|---|---|---|")
+    for name, highway in SCENES.items():
+        rates: dict[str, list[float]] = {backend: [] for backend in BACKENDS}
         for seed in range(args.runs):
-            stock.append(frames_per_second(stock_id, config, seed, args.frames))
-            fast.append(frames_per_second(fast_id, config, seed, args.frames))
-        s, f = statistics.median(stock), statistics.median(fast)
-        print(f"| {name} | {s:.0f} | {f:.0f} | {f / s:.2f}x |", flush=True)
+            for backend, env_id in BACKENDS.items():
+                rates[backend].append(frames_per_second(env_id, highway, seed, args.frames))
+        stock, fast, vector = (statistics.median(rates[b]) for b in BACKENDS)
+        ratios = f"{fast / stock:.1f}x | {vector / stock:.1f}x"
+        print(f"| {name} | {stock:.0f} | {fast:.0f} | {vector:.0f} | {ratios} |", flush=True)
 
 
 if __name__ == "__main__":

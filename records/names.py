@@ -15,7 +15,7 @@ AgentName = Literal[PolicyName, "oracle"]
 LearnedAgentName = Literal["ddqn", "dqn", "tabular"]
 Encoding = Literal["observation", "paper", "tabular"]
 ControllerName = Literal["pid", "mpc"]
-Backend = Literal["fast", "stock"]
+Backend = Literal["vector", "fast", "stock"]
 RoadName = Literal["highway", "exit"]
 """highway-env roads the loop drives: highway-v0's straight highway, exit-v0's highway with an exit."""
 POLICY_NAMES: tuple[PolicyName, ...] = get_args(PolicyName)

@@ -65,7 +65,7 @@ def run(
     seed: int | None = typer.Option(None, help="Seed of the first episode."),
     out: Path | None = typer.Option(None, help="Results folder (default: runs/run-<time>)."),
     video: bool = typer.Option(False, "--video", help="Save a GIF of the first episode."),
-    backend: str | None = typer.Option(None, help="Simulation backend: fast | stock (sim.backend)."),
+    backend: str | None = typer.Option(None, help="Simulation backend: vector | fast | stock (sim.backend)."),
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
     progress: bool = typer.Option(True, help="Show a progress bar."),

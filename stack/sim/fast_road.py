@@ -38,7 +38,7 @@ LaneIndex = tuple[str, str, int]
 """highway-env's lane index: (from node, to node, lane id)."""
 
 
-class _LaneProjections:
+class LaneProjections:
     """Per-frame cache: every road object projected on each queried lane."""
 
     def __init__(self, road: Road) -> None:
@@ -149,7 +149,7 @@ class FastRoadNetwork(RoadNetwork):
 class FastRoad(Road):
     """A `Road` whose neighbour search and collision broad phase are indexed once per frame."""
 
-    _projections: _LaneProjections | None = None
+    _projections: LaneProjections | None = None
 
     @classmethod
     def adopt(cls, road: Road) -> FastRoad:
@@ -159,7 +159,7 @@ class FastRoad(Road):
         return road
 
     def act(self) -> None:
-        self._projections = _LaneProjections(self)
+        self._projections = LaneProjections(self)
         try:
             super().act()
         finally:
@@ -181,6 +181,10 @@ class FastRoad(Road):
     def step(self, dt: float) -> None:
         for vehicle in self.vehicles:
             vehicle.step(dt)
+        self._collide(dt)
+
+    def _collide(self, dt: float) -> None:
+        """Stock's collision loop, over the broad phase's candidate pairs only."""
         partners = self._collision_candidates(dt)
         for i, vehicle in enumerate(self.vehicles):
             for j in partners.get(i, ()):

@@ -22,14 +22,15 @@ from highway_env.road.road import Road
 from highway_env.vehicle.kinematics import Vehicle
 
 from records import BACKENDS, Actuation, Backend, RoadName, WorldState, unknown_name
-from stack.sim.envs import FAST_EXIT, FAST_HIGHWAY, HIGHWAY
+from stack.sim.envs import FAST_EXIT, FAST_HIGHWAY, HIGHWAY, VECTOR_HIGHWAY
 from stack.sim.settings import HighwayConfig
 
 ENV_IDS: dict[RoadName, dict[Backend, str]] = {
-    "highway": {"fast": FAST_HIGHWAY, "stock": HIGHWAY},
-    "exit": {"fast": FAST_EXIT, "stock": "exit-v0"},
+    "highway": {"vector": VECTOR_HIGHWAY, "fast": FAST_HIGHWAY, "stock": HIGHWAY},
+    "exit": {"vector": FAST_EXIT, "fast": FAST_EXIT, "stock": "exit-v0"},
 }
-"""Simulation backends: the gymnasium id each one runs."""
+"""Simulation backends: the gymnasium id each one runs (exit-v0's curved exit lane is outside what
+`VectorRoad` vectorises, so its `vector` is the fast road)."""
 
 MAX_ACCELERATION = ContinuousAction.ACCELERATION_RANGE[1]
 """Acceleration that ContinuousAction maps to +1 [m/s^2]."""
@@ -56,7 +57,7 @@ def to_env_action(actuation: Actuation) -> np.ndarray:
 class HighwayAdapter:
     """Owns one highway-v0 env; `reset(seed)` and `step(actuation)` return `WorldState` snapshots."""
 
-    def __init__(self, highway: HighwayConfig, backend: Backend = "fast", render: bool = False) -> None:
+    def __init__(self, highway: HighwayConfig, backend: Backend = "vector", render: bool = False) -> None:
         if backend not in BACKENDS:
             raise ValueError(unknown_name("simulation backend", backend, BACKENDS))
         self.config = highway

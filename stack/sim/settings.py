@@ -99,4 +99,4 @@ class SimConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
-    backend: Annotated[Backend, one_of("backend", BACKENDS)] = "fast"
+    backend: Annotated[Backend, one_of("backend", BACKENDS)] = "vector"

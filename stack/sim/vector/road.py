@@ -1,0 +1,203 @@
+"""The `vector` simulation backend: highway-env's traffic behaviours computed for all vehicles of a
+frame at once, with trajectories identical to stock.
+
+A `FastRoad` frame still runs highway-env's per-vehicle Python: `IDMVehicle.act` (IDM, the steering
+controller) and `Vehicle.step` (kinematic integration, closest-lane search). `VectorRoad` keeps
+highway-env's vehicle objects, and computes the continuous parts as array operations over the
+vehicles, in the stock operation order:
+
+- act: each `IDMVehicle`'s discrete decisions (`follow_road` at a lane's end, `change_lane_policy`:
+  the MOBIL evaluation due every 1 s, the abort of a contested change) still run per vehicle in the
+  stock order, since one vehicle's decision is read by the next one's; then the steering controller
+  and the IDM accelerations (own lane and target lane) of all of them at once;
+- step: clipping, the kinematic bicycle, impacts and the closest lane of every vehicle at once.
+
+Identity rests on three facts checked in `tests/test_sim_backends.py`: numpy's transcendental ufuncs
+give the same bits for an array as for each of its elements; `np.vecdot` computes a 2-vector dot
+product exactly as `np.dot` (which, through BLAS, rounds differently from `a0*b0 + a1*b1`); lane
+coordinates on lanes whose direction is axis-aligned are exact in any operation order. Roads with
+other lanes (a curved exit, `neighbour_vehicles_connected_lanes`) run as `FastRoad`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from highway_env.road.lane import StraightLane
+from highway_env.vehicle.behavior import IDMVehicle
+from highway_env.vehicle.kinematics import Vehicle
+from highway_env.vehicle.objects import RoadObject
+
+from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections
+from stack.sim.traffic import ScenarioTraffic
+from stack.sim.vector.frame import TrafficFrame
+from stack.sim.vector.lanes import LaneTable, not_zero, wrap_to_pi
+from stack.sim.vector.motion import move, separated, steps_like_vehicle
+
+
+class VectorRoad(FastRoad):
+    """A `FastRoad` whose IDM/MOBIL traffic and kinematics run as array operations (module docstring)."""
+
+    _lanes: LaneTable | None | bool = False
+
+    def _lane_table(self) -> LaneTable | None:
+        if self._lanes is False:
+            self._lanes = LaneTable.fit(self.network)
+        lanes = self._lanes
+        assert lanes is not True
+        if lanes is None or self.neighbour_vehicles_connected_lanes:
+            return None
+        plain = all(
+            type(o).velocity is Vehicle.velocity or type(o).velocity is RoadObject.velocity
+            for o in self.vehicles
+        )
+        return lanes if plain else None
+
+    def act(self) -> None:
+        lanes = self._lane_table()
+        if lanes is None:
+            super().act()
+            return
+        self._projections = projections = LaneProjections(self)
+        try:
+            frame = TrafficFrame(projections, lanes)
+            drivers = [v for v in self.vehicles if type(v) is IDMVehicle and not v.crashed]
+            at_lane_end = self._at_lane_end(drivers, lanes)
+            decisions = self._mobil(
+                [
+                    v
+                    for v in drivers
+                    if id(v) not in at_lane_end
+                    and v.enable_lane_change
+                    and v.lane_index == v.target_lane_index
+                    and v.LANE_CHANGE_DELAY < v.timer
+                    and not v.route
+                ],
+                frame,
+            )
+            for vehicle in self.vehicles:
+                if type(vehicle) is not IDMVehicle or vehicle.crashed:
+                    vehicle.act()
+                elif id(vehicle) in decisions:
+                    vehicle.timer = 0
+                    vehicle.target_lane_index = decisions[id(vehicle)] or vehicle.target_lane_index
+                else:
+                    if id(vehicle) in at_lane_end:
+                        vehicle.follow_road()
+                    if vehicle.enable_lane_change and (
+                        vehicle.lane_index != vehicle.target_lane_index
+                        or vehicle.LANE_CHANGE_DELAY < vehicle.timer
+                    ):
+                        vehicle.change_lane_policy()
+            if drivers:
+                self._drive(drivers, frame)
+        finally:
+            self._projections = None
+
+    @staticmethod
+    def _at_lane_end(drivers: list[IDMVehicle], lanes: LaneTable) -> set[int]:
+        """ids of the drivers for which `follow_road` moves on to the next lane."""
+        if not drivers:
+            return set()
+        rows = np.array([lanes.row[v.target_lane_index] for v in drivers])
+        s, _ = lanes.coordinates(rows, np.array([v.position for v in drivers], dtype=float))
+        ends = s > lanes.length[rows] - StraightLane.VEHICLE_LENGTH / 2
+        return {id(drivers[i]) for i in np.flatnonzero(ends)}
+
+    def _mobil(self, due: list[IDMVehicle], frame: TrafficFrame) -> dict[int, LaneIndex | None]:
+        """`change_lane_policy`'s outcome for drivers due to decide, keyed by id: the side lane MOBIL
+        picks (the last one that passes, as stock overwrites), or None to keep the lane."""
+        decisions: dict[int, LaneIndex | None] = {id(v): None for v in due}
+        moving = [v for v in due if abs(v.speed) >= 1]
+        candidates = [
+            (v, side)
+            for v in moving
+            for side in self.network.side_lanes(v.lane_index)
+            if self.network.get_lane(side).is_reachable_from(v.position)
+        ]
+        if not candidates:
+            return decisions
+        who = [v for v, _ in candidates]
+        me = np.array([frame.row(v) for v in who])
+        new_front, new_rear = frame.neighbours(who, [side for _, side in candidates])
+        own_front, own_rear = frame.neighbours(who, [v.lane_index for v in who])
+        delta = np.tile(np.array([v.DELTA for v, _ in candidates], dtype=float), 6)
+        egos = np.concatenate([new_rear, new_rear, me, me, own_rear, own_rear])
+        leaders = np.concatenate([new_front, me, new_front, own_front, me, own_front])
+        a = frame.idm(egos, leaders, delta).reshape(6, -1)
+        new_rear_a, new_rear_pred_a, self_pred_a, self_a, own_rear_a, own_rear_pred_a = a
+        gain = (
+            self_pred_a
+            - self_a
+            + IDMVehicle.POLITENESS * (new_rear_pred_a - new_rear_a + own_rear_pred_a - own_rear_a)
+        )
+        accept = (new_rear_pred_a >= -IDMVehicle.LANE_CHANGE_MAX_BRAKING_IMPOSED) & ~(
+            gain < IDMVehicle.LANE_CHANGE_MIN_ACC_GAIN
+        )
+        for (v, side), yes in zip(candidates, accept.tolist(), strict=True):
+            if yes:
+                decisions[id(v)] = side
+        return decisions
+
+    def _drive(self, drivers: list[IDMVehicle], frame: TrafficFrame) -> None:
+        """`IDMVehicle.act`'s steering and IDM acceleration of every driver, after its decisions."""
+        lanes = frame.lanes
+        me = np.array([frame.row(v) for v in drivers])
+        position, heading, speed = frame.position[me], frame.heading[me], frame.speed[me]
+        length = np.array([v.LENGTH for v in drivers], dtype=float)
+        target = np.array([lanes.row[v.target_lane_index] for v in drivers])
+        changing = frame.lane[me] != target
+
+        _, r_target = lanes.coordinates(target, position)
+        heading_command = np.arcsin(np.clip(-IDMVehicle.KP_LATERAL * r_target / not_zero(speed), -1, 1))
+        heading_ref = lanes.heading[target] + np.clip(heading_command, -np.pi / 4, np.pi / 4)
+        heading_rate = IDMVehicle.KP_HEADING * wrap_to_pi(heading_ref - heading)
+        slip = np.arcsin(np.clip(length / 2 / not_zero(speed) * heading_rate, -1, 1))
+        steering = np.clip(
+            np.arctan(2 * np.tan(slip)), -IDMVehicle.MAX_STEERING_ANGLE, IDMVehicle.MAX_STEERING_ANGLE
+        )
+
+        delta = np.array([v.DELTA for v in drivers], dtype=float)
+        own_front, _ = frame.neighbours(drivers, [v.lane_index for v in drivers])
+        acceleration = frame.idm(me, own_front, delta)
+        if changing.any():
+            movers = np.flatnonzero(changing)
+            target_front, _ = frame.neighbours(
+                [drivers[i] for i in movers], [drivers[i].target_lane_index for i in movers]
+            )
+            on_target = frame.idm(me[movers], target_front, delta[movers])
+            acceleration[movers] = np.where(on_target < acceleration[movers], on_target, acceleration[movers])
+        acceleration = np.clip(acceleration, -IDMVehicle.ACC_MAX, IDMVehicle.ACC_MAX)
+        for v, steer, accel in zip(drivers, steering, acceleration, strict=True):
+            v.action = {"steering": steer, "acceleration": accel}
+
+    def step(self, dt: float) -> None:
+        lanes = self._lane_table()
+        if lanes is None:
+            super().step(dt)
+            return
+        for vehicle in self.vehicles:
+            if not steps_like_vehicle(type(vehicle)):
+                vehicle.step(dt)
+        movers = [v for v in self.vehicles if steps_like_vehicle(type(v))]
+        if movers:
+            move(movers, lanes, dt, self.record_history)
+        self._collide(dt)
+
+    def _collision_candidates(self, dt: float) -> dict[int, list[int]]:
+        """The broad phase's pairs less those `separated` proves apart."""
+        pairs = np.array(
+            [(i, j) for i, later in super()._collision_candidates(dt).items() for j in later], dtype=int
+        ).reshape(-1, 2)
+        kept: dict[int, list[int]] = {}
+        if len(pairs):
+            for i, j in pairs[~separated(self.vehicles, pairs, dt)].tolist():
+                kept.setdefault(i, []).append(j)
+        return kept
+
+
+class VectorHighwayEnv(ScenarioTraffic):
+    """highway-v0 (with the scenarios' traffic, `stack.sim.traffic`) on a `VectorRoad`."""
+
+    def _create_road(self) -> None:
+        super()._create_road()
+        VectorRoad.adopt(self.road)
