@@ -25,6 +25,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/loop_rate.py
 	$(BIN)/python benchmarks/sim_speed.py
+	$(BIN)/python benchmarks/oracle_cost.py
 	$(BIN)/python benchmarks/grid_speed.py
 	$(BIN)/python benchmarks/deepcars_speed.py
 

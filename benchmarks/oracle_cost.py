@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import platform
 import time
 
@@ -36,7 +37,8 @@ def main() -> None:
                 scenario=args.scenario,
             )
             start = time.process_time()
-            results[backend] = dataclasses.asdict(run_episode(config, 0))
+            episode = dataclasses.asdict(run_episode(config, 0))
+            results[backend] = json.dumps(episode, default=lambda value: value.tolist())
             cost[backend] += time.process_time() - start
             print(f"seed {seed} {backend}: {time.process_time() - start:.1f} s CPU", flush=True)
         assert results["fast"] == results["vector"], f"seed {seed}: the backends drove different episodes"

@@ -8,13 +8,14 @@ from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import RoadObject
 
-from stack.sim.fast_road import LaneIndex, LaneProjections
+from stack.sim.fast_road import LaneProjections
 from stack.sim.vector.lanes import LaneTable, not_zero
 
 
 class TrafficFrame:
-    """Every road object's state at the start of `Road.act()` as arrays, in `LaneProjections` rows,
-    and highway-env's IDM evaluated on rows of them."""
+    """Every road object's state at the start of `Road.act()` as arrays, in `LaneProjections` rows:
+    s [m] (the same on every lane), r [m] per lane, and per lane the objects highway-env's
+    neighbour search counts as on it, in order of s."""
 
     def __init__(self, projections: LaneProjections, lanes: LaneTable) -> None:
         objects = projections.objects
@@ -27,46 +28,43 @@ class TrafficFrame:
         self.lane = np.array([lanes.row.get(o.lane_index, 0) for o in objects], dtype=int)
         self.direction = np.stack([np.cos(self.heading), np.sin(self.heading)], axis=1)
         self.velocity = self.speed[:, None] * self.direction
-        self._lanes_sorted: dict[LaneIndex, tuple[np.ndarray, np.ndarray]] = {}
+        self.s, self.r = lanes.along(self.position), lanes.across(self.position)
+
+        count = len(objects)
+        self.order = np.lexsort((np.arange(count), self.s))
+        self.sorted_s = self.s[self.order]
+        self.tied = bool(np.any(self.sorted_s[1:] == self.sorted_s[:-1]))
+        on = lanes.on_lane(self.s, self.r)[:, self.order]
+        position = np.arange(count)
+        after = np.where(on, position, count)
+        self.next_on = np.minimum.accumulate(after[:, ::-1], axis=1)[:, ::-1]
+        self.next_on = np.concatenate([self.next_on, np.full((len(on), 1), count)], axis=1)
+        before = np.maximum.accumulate(np.where(on, position, -1), axis=1)
+        self.last_before = np.concatenate([np.full((len(on), 1), -1), before], axis=1)
 
     def row(self, vehicle: RoadObject | None) -> int:
         """The object's row, -1 for none."""
         return -1 if vehicle is None else self.projections.row[id(vehicle)]
 
-    def neighbours(
-        self, vehicles: list[IDMVehicle], lane_indices: list[LaneIndex]
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Rows of each vehicle's (front, rear) on its lane of `lane_indices`, as
-        `Road.neighbour_vehicles` picks them (-1 for none)."""
-        me = np.array([self.row(v) for v in vehicles], dtype=int)
-        s, _ = self.lanes.coordinates(np.array([self.lanes.row[i] for i in lane_indices]), self.position[me])
-        front, rear = np.full(len(me), -1), np.full(len(me), -1)
-        queries: dict[LaneIndex, list[int]] = {}
-        for q, lane_index in enumerate(lane_indices):
-            queries.setdefault(lane_index, []).append(q)
-        for lane_index, ks in queries.items():
-            keys, rows = self._sorted(lane_index)
-            k = np.array(ks)
-            if not len(keys):
-                continue
-            if len(keys) > 1 and np.any(keys[1:] == keys[:-1]):
-                for q in ks:
-                    pair = self.projections.neighbours(lane_index, float(s[q]), int(me[q]))
-                    front[q], rear[q] = self.row(pair[0]), self.row(pair[1])
-                continue
-            start = np.searchsorted(keys, s[k], side="left")
-            own = (start < len(keys)) & (rows[np.minimum(start, len(keys) - 1)] == me[k])
-            ahead = start + own
-            front[k] = np.where(ahead < len(keys), rows[np.minimum(ahead, len(keys) - 1)], -1)
-            rear[k] = np.where(start > 0, rows[np.maximum(start - 1, 0)], -1)
-        return front, rear
-
-    def _sorted(self, lane_index: LaneIndex) -> tuple[np.ndarray, np.ndarray]:
-        cached = self._lanes_sorted.get(lane_index)
-        if cached is None:
-            keys, rows = self.projections.sorted_on_lane(lane_index)
-            cached = self._lanes_sorted[lane_index] = (np.array(keys, dtype=float), np.array(rows, dtype=int))
-        return cached
+    def neighbours(self, me: np.ndarray, lane_rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rows of the (front, rear) of the objects in rows `me`, each on its lane of `lane_rows`,
+        as `Road.neighbour_vehicles` picks them: front the nearest at s_v >= s, rear the nearest at
+        s_v < s, itself excluded (-1 for none)."""
+        if self.tied:
+            pairs = [
+                self.projections.neighbours(self.lanes.indices[lane], float(self.s[row]), row)
+                for row, lane in zip(me.tolist(), lane_rows.tolist(), strict=True)
+            ]
+            return (
+                np.array([self.row(front) for front, _ in pairs], dtype=int),
+                np.array([self.row(rear) for _, rear in pairs], dtype=int),
+            )
+        count = len(self.order)
+        order = np.append(self.order, -1)
+        start = np.searchsorted(self.sorted_s, self.s[me], side="left")
+        ahead = self.next_on[lane_rows, start]
+        ahead = np.where(order[ahead] == me, self.next_on[lane_rows, np.minimum(ahead + 1, count)], ahead)
+        return order[ahead], order[self.last_before[lane_rows, start]]
 
     def idm(self, ego: np.ndarray, front: np.ndarray, delta: np.ndarray) -> np.ndarray:
         """`IDMVehicle.acceleration(ego_vehicle=ego, front_vehicle=front)` [m/s^2] per row, for an
@@ -77,19 +75,15 @@ class TrafficFrame:
         if not valid.any():
             return acceleration
         e, f, delta = ego[valid], front[valid], delta[valid]
-        lane, speed = self.lane[e], self.speed[e]
-        limit = self.lanes.speed_limit[lane]
+        speed = self.speed[e]
+        limit = self.lanes.speed_limit[self.lane[e]]
         desired = np.where(np.isnan(limit), self.target_speed[e], np.clip(self.target_speed[e], 0, limit))
         free = IDMVehicle.COMFORT_ACC_MAX * (
             1 - np.power(np.maximum(speed, 0) / np.abs(not_zero(desired)), delta)
         )
         led = f >= 0
         if led.any():
-            e, f, lane, led_speed = e[led], f[led], lane[led], speed[led]
-            gap = (
-                self.lanes.coordinates(lane, self.position[f])[0]
-                - self.lanes.coordinates(lane, self.position[e])[0]
-            )
+            e, f, led_speed = e[led], f[led], speed[led]
             relative = np.ascontiguousarray(self.velocity[e] - self.velocity[f])
             closing = np.vecdot(relative, np.ascontiguousarray(self.direction[e]))
             ab = -IDMVehicle.COMFORT_ACC_MAX * IDMVehicle.COMFORT_ACC_MIN
@@ -98,6 +92,7 @@ class TrafficFrame:
                 + led_speed * IDMVehicle.TIME_WANTED
                 + led_speed * closing / (2 * np.sqrt(ab))
             )
+            gap = self.s[f] - self.s[e]
             free[led] -= IDMVehicle.COMFORT_ACC_MAX * np.power(desired_gap / not_zero(gap), 2)
         acceleration[valid] = free
         return acceleration

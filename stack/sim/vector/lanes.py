@@ -1,5 +1,7 @@
-"""Lanes as arrays: the `vector` backend's view of a road whose lanes are all axis-aligned straight
-lanes (highway-v0's), where lane coordinates are exact in any operation order."""
+"""Lanes as arrays: the `vector` backend's view of a road made of parallel, axis-aligned straight
+lanes that start level with each other (highway-v0's). On such a road every lane coordinate is exact
+in any operation order (each product is by 0 or +-1), and an object's longitudinal coordinate is the
+same on every lane."""
 
 from __future__ import annotations
 
@@ -7,7 +9,7 @@ import numpy as np
 from highway_env.road.lane import StraightLane
 from highway_env.road.road import RoadNetwork
 
-from stack.sim.fast_road import LaneIndex
+from stack.sim.fast_road import NEIGHBOUR_MARGIN, LaneIndex
 
 NOT_ZERO = 1e-2
 """highway-env's `utils.not_zero` threshold [same unit as the value]."""
@@ -21,9 +23,12 @@ def wrap_to_pi(x: np.ndarray) -> np.ndarray:
     return ((x + np.pi) % (2 * np.pi)) - np.pi
 
 
+def _unit_axis(vector: np.ndarray) -> bool:
+    return bool(sorted(np.abs(vector).tolist()) == [0.0, 1.0])
+
+
 class LaneTable:
-    """Every lane of a network whose lanes are all axis-aligned `StraightLane`s, as arrays, in the
-    order `RoadNetwork.get_closest_lane_index` visits them."""
+    """Every lane of the network, in the order `RoadNetwork.get_closest_lane_index` visits them."""
 
     def __init__(self, network: RoadNetwork) -> None:
         self.indices: list[LaneIndex] = []
@@ -35,38 +40,55 @@ class LaneTable:
                     self.lanes.append(lane)
         self.row = {index: i for i, index in enumerate(self.indices)}
         self.start = np.array([lane.start for lane in self.lanes], dtype=float)
-        self.direction = np.array([lane.direction for lane in self.lanes], dtype=float)
+        self.direction = np.array(self.lanes[0].direction, dtype=float)
         self.lateral = np.array([lane.direction_lateral for lane in self.lanes], dtype=float)
         self.length = np.array([lane.length for lane in self.lanes], dtype=float)
+        self.half_width = np.array([lane.width for lane in self.lanes], dtype=float) / 2
         self.heading = np.array([lane.heading for lane in self.lanes], dtype=float)
+        self.forbidden = np.array([lane.forbidden for lane in self.lanes], dtype=bool)
         self.speed_limit = np.array(
             [np.nan if lane.speed_limit is None else lane.speed_limit for lane in self.lanes], dtype=float
         )
 
     @staticmethod
     def fit(network: RoadNetwork) -> LaneTable | None:
+        """The table of `network`, or None when its lanes are not all parallel, axis-aligned,
+        straight and level at their start."""
         lanes = [lane for to_dict in network.graph.values() for ls in to_dict.values() for lane in ls]
-        axis_aligned = all(
-            type(lane) is StraightLane
-            and set(np.abs(lane.direction)) <= {0.0, 1.0}
-            and set(np.abs(lane.direction_lateral)) <= {0.0, 1.0}
-            for lane in lanes
-        )
-        return LaneTable(network) if lanes and axis_aligned else None
+        if not lanes or any(type(lane) is not StraightLane for lane in lanes):
+            return None
+        direction = lanes[0].direction
+        level = {float(np.dot(lane.start, direction)) for lane in lanes}
+        parallel = all(np.array_equal(lane.direction, direction) for lane in lanes)
+        axes = all(_unit_axis(lane.direction) and _unit_axis(lane.direction_lateral) for lane in lanes)
+        return LaneTable(network) if parallel and axes and len(level) == 1 else None
 
-    def coordinates(self, rows: np.ndarray, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(s, r) [m] of each `position` on lane `rows` (element-wise)."""
-        delta = position - self.start[rows]
-        direction, lateral = self.direction[rows], self.lateral[rows]
-        s = delta[:, 0] * direction[:, 0] + delta[:, 1] * direction[:, 1]
-        r = delta[:, 0] * lateral[:, 0] + delta[:, 1] * lateral[:, 1]
-        return s, r
+    def along(self, position: np.ndarray) -> np.ndarray:
+        """Longitudinal coordinate s [m] of each position, the same on every lane."""
+        delta = position - self.start[0]
+        return delta[:, 0] * self.direction[0] + delta[:, 1] * self.direction[1]
+
+    def across(self, position: np.ndarray) -> np.ndarray:
+        """Lateral coordinate r [m] of each position (columns) on each lane (rows)."""
+        delta = position[None, :, :] - self.start[:, None, :]
+        return delta[..., 0] * self.lateral[:, 0, None] + delta[..., 1] * self.lateral[:, 1, None]
+
+    def on_lane(self, s: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """highway-env's `on_lane(margin=1)` of each object (columns) on each lane (rows), the test
+        `Road.neighbour_vehicles` applies."""
+        vehicle_length = StraightLane.VEHICLE_LENGTH
+        inside = (-vehicle_length <= s) & (s < self.length[:, None] + vehicle_length)
+        return (np.abs(r) <= self.half_width[:, None] + NEIGHBOUR_MARGIN) & inside
+
+    def reachable(self, rows: np.ndarray, s: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """highway-env's `is_reachable_from` of lanes `rows` for objects at (s, r) on them."""
+        near = np.abs(r) <= 2 * (2 * self.half_width[rows])
+        ahead = (0 <= s) & (s < self.length[rows] + StraightLane.VEHICLE_LENGTH)
+        return ~self.forbidden[rows] & near & ahead
 
     def closest(self, position: np.ndarray, heading: np.ndarray) -> np.ndarray:
         """Row of each vehicle's closest lane by highway-env's `distance_with_heading` (first on ties)."""
-        delta = position[:, None, :] - self.start[None, :, :]
-        s = delta[..., 0] * self.direction[:, 0] + delta[..., 1] * self.direction[:, 1]
-        r = delta[..., 0] * self.lateral[:, 0] + delta[..., 1] * self.lateral[:, 1]
-        angle = np.abs(wrap_to_pi(heading[:, None] - self.heading[None, :]))
-        distance = np.abs(r) + np.maximum(s - self.length, 0) + np.maximum(0 - s, 0) + angle
-        return np.argmin(distance, axis=1)
+        s, r = self.along(position), self.across(position)
+        angle = np.abs(wrap_to_pi(heading[None, :] - self.heading[:, None]))
+        distance = np.abs(r) + np.maximum(s - self.length[:, None], 0) + np.maximum(0 - s, 0) + angle
+        return np.argmin(distance, axis=0)

@@ -61,7 +61,7 @@ class VectorRoad(FastRoad):
         try:
             frame = TrafficFrame(projections, lanes)
             drivers = [v for v in self.vehicles if type(v) is IDMVehicle and not v.crashed]
-            at_lane_end = self._at_lane_end(drivers, lanes)
+            at_lane_end = self._at_lane_end(drivers, frame)
             decisions = self._mobil(
                 [
                     v
@@ -94,32 +94,33 @@ class VectorRoad(FastRoad):
             self._projections = None
 
     @staticmethod
-    def _at_lane_end(drivers: list[IDMVehicle], lanes: LaneTable) -> set[int]:
+    def _at_lane_end(drivers: list[IDMVehicle], frame: TrafficFrame) -> set[int]:
         """ids of the drivers for which `follow_road` moves on to the next lane."""
         if not drivers:
             return set()
-        rows = np.array([lanes.row[v.target_lane_index] for v in drivers])
-        s, _ = lanes.coordinates(rows, np.array([v.position for v in drivers], dtype=float))
-        ends = s > lanes.length[rows] - StraightLane.VEHICLE_LENGTH / 2
+        me = np.array([frame.row(v) for v in drivers])
+        target = np.array([frame.lanes.row[v.target_lane_index] for v in drivers])
+        ends = frame.s[me] > frame.lanes.length[target] - StraightLane.VEHICLE_LENGTH / 2
         return {id(drivers[i]) for i in np.flatnonzero(ends)}
 
     def _mobil(self, due: list[IDMVehicle], frame: TrafficFrame) -> dict[int, LaneIndex | None]:
         """`change_lane_policy`'s outcome for drivers due to decide, keyed by id: the side lane MOBIL
         picks (the last one that passes, as stock overwrites), or None to keep the lane."""
         decisions: dict[int, LaneIndex | None] = {id(v): None for v in due}
-        moving = [v for v in due if abs(v.speed) >= 1]
-        candidates = [
-            (v, side)
-            for v in moving
-            for side in self.network.side_lanes(v.lane_index)
-            if self.network.get_lane(side).is_reachable_from(v.position)
+        pairs = [
+            (v, side) for v in due if abs(v.speed) >= 1 for side in self.network.side_lanes(v.lane_index)
         ]
-        if not candidates:
+        if not pairs:
             return decisions
-        who = [v for v, _ in candidates]
-        me = np.array([frame.row(v) for v in who])
-        new_front, new_rear = frame.neighbours(who, [side for _, side in candidates])
-        own_front, own_rear = frame.neighbours(who, [v.lane_index for v in who])
+        me = np.array([frame.row(v) for v, _ in pairs])
+        sides = np.array([frame.lanes.row[side] for _, side in pairs])
+        reachable = frame.lanes.reachable(sides, frame.s[me], frame.r[sides, me])
+        if not reachable.any():
+            return decisions
+        candidates = [pair for pair, keep in zip(pairs, reachable.tolist(), strict=True) if keep]
+        me, sides = me[reachable], sides[reachable]
+        new_front, new_rear = frame.neighbours(me, sides)
+        own_front, own_rear = frame.neighbours(me, frame.lane[me])
         delta = np.tile(np.array([v.DELTA for v, _ in candidates], dtype=float), 6)
         egos = np.concatenate([new_rear, new_rear, me, me, own_rear, own_rear])
         leaders = np.concatenate([new_front, me, new_front, own_front, me, own_front])
@@ -130,9 +131,8 @@ class VectorRoad(FastRoad):
             - self_a
             + IDMVehicle.POLITENESS * (new_rear_pred_a - new_rear_a + own_rear_pred_a - own_rear_a)
         )
-        accept = (new_rear_pred_a >= -IDMVehicle.LANE_CHANGE_MAX_BRAKING_IMPOSED) & ~(
-            gain < IDMVehicle.LANE_CHANGE_MIN_ACC_GAIN
-        )
+        unsafe = new_rear_pred_a < -IDMVehicle.LANE_CHANGE_MAX_BRAKING_IMPOSED
+        accept = ~unsafe & ~(gain < IDMVehicle.LANE_CHANGE_MIN_ACC_GAIN)
         for (v, side), yes in zip(candidates, accept.tolist(), strict=True):
             if yes:
                 decisions[id(v)] = side
@@ -142,12 +142,12 @@ class VectorRoad(FastRoad):
         """`IDMVehicle.act`'s steering and IDM acceleration of every driver, after its decisions."""
         lanes = frame.lanes
         me = np.array([frame.row(v) for v in drivers])
-        position, heading, speed = frame.position[me], frame.heading[me], frame.speed[me]
+        heading, speed = frame.heading[me], frame.speed[me]
         length = np.array([v.LENGTH for v in drivers], dtype=float)
         target = np.array([lanes.row[v.target_lane_index] for v in drivers])
         changing = frame.lane[me] != target
 
-        _, r_target = lanes.coordinates(target, position)
+        r_target = frame.r[target, me]
         heading_command = np.arcsin(np.clip(-IDMVehicle.KP_LATERAL * r_target / not_zero(speed), -1, 1))
         heading_ref = lanes.heading[target] + np.clip(heading_command, -np.pi / 4, np.pi / 4)
         heading_rate = IDMVehicle.KP_HEADING * wrap_to_pi(heading_ref - heading)
@@ -157,13 +157,11 @@ class VectorRoad(FastRoad):
         )
 
         delta = np.array([v.DELTA for v in drivers], dtype=float)
-        own_front, _ = frame.neighbours(drivers, [v.lane_index for v in drivers])
+        own_front, _ = frame.neighbours(me, frame.lane[me])
         acceleration = frame.idm(me, own_front, delta)
         if changing.any():
             movers = np.flatnonzero(changing)
-            target_front, _ = frame.neighbours(
-                [drivers[i] for i in movers], [drivers[i].target_lane_index for i in movers]
-            )
+            target_front, _ = frame.neighbours(me[movers], target[movers])
             on_target = frame.idm(me[movers], target_front, delta[movers])
             acceleration[movers] = np.where(on_target < acceleration[movers], on_target, acceleration[movers])
         acceleration = np.clip(acceleration, -IDMVehicle.ACC_MAX, IDMVehicle.ACC_MAX)
