@@ -27,13 +27,28 @@ from dataclasses import dataclass
 import numpy as np
 from gymnasium import spaces
 
-from records import ENCODINGS, MAX_SPEED, Encoding, GridConfig, WorldState, lane_code_bits, unknown_name
+from records import (
+    ENCODINGS,
+    MAX_SPEED,
+    SIDE_LANES_SEEN,
+    Encoding,
+    GridConfig,
+    WorldState,
+    lane_code_bits,
+    unknown_name,
+)
 
 
 def lane_code(lane: int, lanes: int) -> np.ndarray:
     """`lane` as a binary code, most significant bit first."""
     bits = lane_code_bits(lanes)
     return np.array([(lane >> (bits - 1 - i)) & 1 for i in range(bits)], dtype=np.float32)
+
+
+def side_lanes_code(lane: int, lanes: int) -> np.ndarray:
+    """[lanes left of `lane`, lanes right of it], each capped at SIDE_LANES_SEEN and scaled to [0, 1]."""
+    sides = np.array([lane, lanes - 1 - lane], dtype=np.float32)
+    return np.minimum(sides, SIDE_LANES_SEEN) / SIDE_LANES_SEEN
 
 
 @dataclass(frozen=True)
@@ -63,12 +78,18 @@ class OccupancyGrid:
         ahead = self.cells[:, self.config.ego_column : self.config.ego_column + line_of_sight] > 0
         return np.where(ahead.any(axis=1), np.argmax(ahead, axis=1), line_of_sight - 1)
 
+    def lane_part(self) -> np.ndarray:
+        """Where the ego is, as `config.lane_code` says: its lane in binary, or its side lanes."""
+        if self.config.lane_code == "sides":
+            return side_lanes_code(self.ego_lane, self.lanes_count)
+        return lane_code(self.ego_lane, self.lanes_count)
+
     def to_paper_state(self) -> np.ndarray:
         """Flattened presence grid followed by the ego lane as a binary code (the paper's DQN state)."""
-        return np.concatenate([self.cells.ravel(), lane_code(self.ego_lane, self.lanes_count)])
+        return np.concatenate([self.cells.ravel(), self.lane_part()])
 
     def to_observation(self) -> np.ndarray:
-        """Presence, then each enabled feature, then the binary ego-lane code, flattened (float32)."""
+        """Presence, then each enabled feature, then the lane part, flattened (float32)."""
         parts = [self.cells.ravel()]
         if self.relative_speed is not None:
             parts.append(self.relative_speed.ravel())
@@ -76,7 +97,7 @@ class OccupancyGrid:
             parts.append(self.ttc)
         if self.ego_speed is not None:
             parts.append(np.array([self.ego_speed], dtype=np.float32))
-        parts.append(lane_code(self.ego_lane, self.lanes_count))
+        parts.append(self.lane_part())
         return np.concatenate(parts).astype(np.float32)
 
     def encode(self, encoding: Encoding) -> np.ndarray:
@@ -102,14 +123,14 @@ class OccupancyGridBuilder:
         self.config = config
 
     def paper_space(self, lanes_count: int) -> spaces.Box:
-        size = self.config.rows(lanes_count) * self.config.cells + lane_code_bits(lanes_count)
+        size = self.config.rows(lanes_count) * self.config.cells + self.config.lane_code_size(lanes_count)
         return spaces.Box(0.0, 1.0, shape=(size,), dtype=np.float32)
 
     def observation_space(self, lanes_count: int) -> spaces.Box:
         rows, cells = self.config.rows(lanes_count), self.config.cells
         size = rows * cells * (1 + ("relative_speed" in self.config.features))
         size += rows * ("ttc" in self.config.features) + ("ego_speed" in self.config.features)
-        size += lane_code_bits(lanes_count)
+        size += self.config.lane_code_size(lanes_count)
         low = np.zeros(size, dtype=np.float32)
         if "relative_speed" in self.config.features:
             low[rows * cells : 2 * rows * cells] = -1.0

@@ -12,7 +12,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from records import N_ACTIONS, Command, Encoding, GridConfig, lane_code_bits
+from records import N_ACTIONS, Command, Encoding, GridConfig
 
 Action = np.ndarray | np.integer
 """An action index of `Command`, or one per row of a batch of observations."""
@@ -98,16 +98,18 @@ class FreeGapAgent(Policy):
         """(presence grid, ego row) from a paper state."""
         rows = self.grid.rows(self.lanes)
         size = rows * self.grid.cells
-        expected = size + lane_code_bits(self.lanes)
+        expected = size + self.grid.lane_code_size(self.lanes)
         observation = np.asarray(observation).reshape(-1)
         if observation.size != expected:
             raise ValueError(
                 f"rule agent expected a paper state of {expected} values "
                 f"({rows} rows x {self.grid.cells} cells + lane code), got {observation.size}"
             )
-        bits = observation[size:].astype(int)
-        ego_lane = int(sum(bit << (len(bits) - 1 - i) for i, bit in enumerate(bits)))
-        ego_row = ego_lane if self.grid.lanes == "absolute" else self.grid.lateral_reach
+        if self.grid.lanes == "absolute":
+            bits = observation[size:].astype(int)
+            ego_row = int(sum(bit << (len(bits) - 1 - i) for i, bit in enumerate(bits)))
+        else:
+            ego_row = self.grid.lateral_reach
         return observation[:size].reshape(rows, self.grid.cells), ego_row
 
     def free_cells(self, cells: np.ndarray) -> np.ndarray:

@@ -81,17 +81,27 @@ class RealTimeValidation(BaseCallback):
         self.on_improvement = on_improvement
         self.history = history if history is not None else []
         self.best = best or {"short": None, "long": None}
+        self.last_step: int | None = None
+
+    def _on_training_start(self) -> None:
+        self.last_step = self.model.num_timesteps
 
     def _on_step(self) -> bool:
         self.at_step(self.num_timesteps)
         return True
 
     def at_step(self, step: int) -> None:
-        """Run the validations due at environment step `step`."""
-        self.num_timesteps = step
-        if step % self.long_every == 0:
+        """Run the validations due when the environment steps reach `step` (with N environments
+        they advance N at a time: a period is due when a multiple of it was passed)."""
+        last = step - 1 if self.last_step is None else self.last_step
+        self.last_step = self.num_timesteps = step
+
+        def due(every: int) -> bool:
+            return step // every > last // every
+
+        if due(self.long_every):
             self.run_validation("long", self.long_episodes)
-        elif step % self.short_every == 0 and self.run_validation("short", self.short_episodes).improved:
+        elif due(self.short_every) and self.run_validation("short", self.short_episodes).improved:
             self.run_validation("long", self.long_episodes)
 
     def run_validation(self, period: str, episodes: int) -> Validation:

@@ -7,7 +7,7 @@ the grid an agent is shown (`GridConfig`), and what flows through one control ti
 Import from `records` itself; the submodules only keep each part short.
 """
 
-from records.grid import MAX_SPEED, GridConfig, lane_code_bits
+from records.grid import MAX_SPEED, SIDE_LANES_SEEN, GridConfig, lane_code_bits
 from records.names import (
     AGENT_NAMES,
     BACKENDS,
@@ -62,6 +62,7 @@ __all__ = [
     "child_seed",
     "drawn_seed",
     "lane_code_bits",
+    "SIDE_LANES_SEEN",
     "lane_curvature",
     "one_of",
     "unknown_name",

@@ -5,10 +5,12 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 MAX_SPEED = 40.0
 """Speed that the grid's `ego_speed` feature maps to 1 [m/s] (highway-env's Vehicle.MAX_SPEED)."""
+SIDE_LANES_SEEN = 2
+"""`lane_code: sides` counts the lanes on each side of the ego up to this many."""
 
 
 class GridConfig(BaseModel):
@@ -26,6 +28,17 @@ class GridConfig(BaseModel):
     features: tuple[Literal["relative_speed", "ttc", "ego_speed"], ...] = ()
     speed_scale: float = Field(20.0, gt=0, description="relative speed giving feature 1 [m/s]")
     ttc_horizon: float = Field(10.0, gt=0, description="time-to-collision giving feature 1 [s]")
+    lane_code: Literal["binary", "sides"] = Field(
+        "binary",
+        description="where the ego is: its lane index in binary (the paper's; its size grows with the "
+        "lane count) or, ego mode only, the lanes to its left and right (any lane count)",
+    )
+
+    @model_validator(mode="after")
+    def _sides_need_ego_rows(self) -> GridConfig:
+        if self.lane_code == "sides" and self.lanes != "ego":
+            raise ValueError("lane_code: sides needs lanes: ego (absolute rows grow with the lane count)")
+        return self
 
     @property
     def cells(self) -> int:
@@ -37,6 +50,10 @@ class GridConfig(BaseModel):
 
     def rows(self, lanes_count: int) -> int:
         return lanes_count if self.lanes == "absolute" else 2 * self.lateral_reach + 1
+
+    def lane_code_size(self, lanes_count: int) -> int:
+        """Values of the ego-lane part of the paper and observation encodings."""
+        return lane_code_bits(lanes_count) if self.lane_code == "binary" else 2
 
 
 def lane_code_bits(lanes: int) -> int:

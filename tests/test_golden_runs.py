@@ -31,9 +31,10 @@ CASES = {
         },
     },
 }
-"""The summary's `backend` is left out: every backend gives stock's trajectories, so the results were
-written on `fast` and hold on `vector`. `rule-pid-noisy-control-on-ground-truth` keeps the result of the noisy case from before safety
-and cruise acted on the perceived world (the agent alone saw the noise then)."""
+"""The summary's `backend` is left out: every backend gives stock's trajectories, so the results
+were written on `fast` and hold on `vector`. `rule-pid-noisy-control-on-ground-truth` keeps the
+result of the noisy case from before safety and cruise acted on the perceived world (the agent
+alone saw the noise then)."""
 
 
 def outcome(case: str) -> dict:

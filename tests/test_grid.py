@@ -95,6 +95,31 @@ def test_the_same_ego_relative_grid_on_any_lane_count():
     np.testing.assert_array_equal(small.cells, large.cells)
 
 
+@pytest.mark.parametrize("encoding", ["observation", "paper"])
+def test_side_lanes_code_makes_the_encodings_independent_of_the_lane_count(encoding):
+    config = GRID.model_copy(
+        update={"lanes": "ego", "lane_code": "sides", "features": ("relative_speed", "ttc", "ego_speed")}
+    )
+    builder = OccupancyGridBuilder(config)
+    sizes = {builder.space(encoding, lanes).shape[0] for lanes in (2, 3, 4, 5, 6, 8)}
+    assert len(sizes) == 1
+    for lanes, ego_lane, sides in [
+        (3, 1, [0.5, 0.5]),
+        (5, 0, [0.0, 1.0]),
+        (6, 4, [1.0, 0.5]),
+        (2, 1, [0.5, 0]),
+    ]:
+        grid = builder.build(scene(lanes, (0.0, ego_lane), [(20.0, 4.0 * ego_lane)]))
+        encoded = grid.encode(encoding)
+        assert encoded.shape[0] in sizes and builder.space(encoding, lanes).contains(encoded)
+        np.testing.assert_array_equal(encoded[-2:], sides), "lanes left, lanes right, capped at 2, over 2"
+
+
+def test_side_lanes_code_needs_ego_relative_rows():
+    with pytest.raises(ValidationError, match="lane_code: sides needs lanes: ego"):
+        GridConfig(lane_code="sides")
+
+
 def test_tabular_state_caps_at_the_line_of_sight():
     grid = build(scene(2, (0.0, 0), [(40.0, 0.0), (20.0, 4.0)]))
     assert grid.to_tabular_state().tolist() == [0, 8, 4]

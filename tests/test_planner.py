@@ -106,6 +106,15 @@ def test_rule_agent_overtakes_into_the_freer_lane_only_when_safe():
     assert decide(agent, observation_for(agent, clear)) is Command.STAY
 
 
+def test_rule_agent_reads_the_side_lanes_code():
+    grid = GRID.model_copy(update={"lanes": "ego", "lane_code": "sides"})
+    for lanes in (3, 5):
+        agent = make_agent("rule", lanes, grid)
+        blocked = scene(lanes, (0.0, 1), [(15.0, 4.0), (40.0, 8.0)])
+        observation = OccupancyGridBuilder(grid).build(blocked).encode(agent.encoding)
+        assert decide(agent, observation) is Command.LEFT
+
+
 def test_mobil_changes_lane_for_a_gain_and_respects_the_new_follower():
     agent = MobilAgent(GRID)
     slow_leader = scene(3, (0.0, 1), [(15.0, 4.0)], speed=25.0, other_speed=15.0)

@@ -207,3 +207,35 @@ def test_other_algorithms_train_too(tmp_path, algorithm):
     summary = Trainer(build_config(data), tmp_path / algorithm, progress=False).run()
     assert summary["steps"] == 40
     assert load_agent(tmp_path / algorithm / "best.npz").metadata["algorithm"] == algorithm
+
+
+def test_parallel_environments_give_the_same_model_for_the_same_config(tmp_path):
+    """`--envs 2`: two processes step the env; the same config, seed and N give the same weights,
+    and checkpoints and validations still come at every multiple of their period."""
+    data = {**TINY, "train": {**TINY["train"], "envs": 2}}
+    runs = []
+    for name in ("a", "b"):
+        summary = Trainer(build_config(data), tmp_path / name, progress=False).run()
+        assert summary["steps"] == 40 and summary["validations"] == 5
+        runs.append(load_model(tmp_path / name / "final.npz")[0])
+    assert runs[0].keys() == runs[1].keys()
+    for key in runs[0]:
+        np.testing.assert_array_equal(runs[0][key], runs[1][key], err_msg=key)
+
+
+def test_envs_must_be_at_least_one_and_one_for_tables(tmp_path):
+    config = tmp_path / "tiny.yaml"
+    config.write_text(yaml.safe_dump(TINY))
+    result = CliRunner().invoke(
+        app, ["train", "-c", str(config), "--envs", "0", "--out", str(tmp_path / "o")]
+    )
+    assert (
+        result.exit_code == 2
+        and "train.envs" in result.output
+        and "greater than or equal to 1" in result.output
+    )
+    result = CliRunner().invoke(
+        app, ["train", "-c", str(config), "--envs", "2", "--agent", "tabular", "--out", str(tmp_path / "o")]
+    )
+    assert result.exit_code == 2 and "envs: tabular Q-learning steps one environment" in result.output
+    assert not (tmp_path / "o").exists()

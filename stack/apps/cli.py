@@ -197,6 +197,7 @@ def train(
         Path("configs/train/ddqn.yaml"), "--config", "-c", help="YAML training config."
     ),
     steps: int | None = typer.Option(None, help="Total environment steps (train.steps)."),
+    envs: int | None = typer.Option(None, help="Environments in parallel processes (train.envs)."),
     seed: int | None = typer.Option(None, help="Training seed."),
     scenario: str | None = typer.Option(None, help="Named world to train in (drivestack scenarios)."),
     out: Path | None = typer.Option(None, help="Run folder (default: runs/train-<time>)."),
@@ -211,7 +212,14 @@ def train(
             fail(f"{resume}: not a training run folder (no config.yaml)")
         cfg = configured(resume / "config.yaml", train__steps=steps)
     else:
-        cfg = configured(config, scenario=scenario, train__algorithm=agent, train__steps=steps, seed=seed)
+        cfg = configured(
+            config,
+            scenario=scenario,
+            train__algorithm=agent,
+            train__steps=steps,
+            train__envs=envs,
+            seed=seed,
+        )
     from stack.apps.train import train_and_report
 
     folder = resume or out or fresh_run_dir(f"train-{cfg.train.algorithm}")

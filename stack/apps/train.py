@@ -12,6 +12,7 @@ import json
 import signal
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from types import FrameType
 from typing import Any
@@ -19,8 +20,9 @@ from typing import Any
 import yaml
 from rich.console import Console
 from stable_baselines3 import DQN
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ProgressBarCallback
+from stable_baselines3.common.callbacks import CallbackList, ProgressBarCallback
 from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import SubprocVecEnv
 
 from planner.learned import export_q_network, save_q_table
 from planner.model_file import load_model, save_model
@@ -28,9 +30,11 @@ from planner.tabular import QLearning
 from planner.validation import RealTimeValidation, Validation, kept_models
 from records import child_seed
 from stack.apps.train_model import (
+    EveryNSteps,
     build_dqn,
     dqn_state,
     model_metadata,
+    monitored_env,
     plot_training_curve,
     restore_dqn_state,
 )
@@ -45,19 +49,6 @@ SaveModel = Callable[[Any, Path, dict], Path]
 """`export_q_network` or `save_q_table`: (model, path, metadata) -> the file written."""
 
 
-class EveryNSteps(BaseCallback):
-    """Call `action()` every `every` environment steps."""
-
-    def __init__(self, every: int, action: Callable[[], object]) -> None:
-        super().__init__()
-        self.every, self.action = every, action
-
-    def _on_step(self) -> bool:
-        if self.num_timesteps % self.every == 0:
-            self.action()
-        return True
-
-
 def _terminate_as_interrupt(signum: int, frame: FrameType | None) -> None:
     raise KeyboardInterrupt
 
@@ -69,8 +60,10 @@ class Trainer:
 
     def __init__(self, config: RunConfig, out: Path, progress: bool = True) -> None:
         self.config, self.out, self.progress = config, Path(out), progress
-        self.decision_env = HierarchicalHighwayEnv(config)
-        self.env = Monitor(self.decision_env)
+        envs = config.train.envs
+        self.env: Monitor | SubprocVecEnv = (
+            monitored_env(config) if envs == 1 else SubprocVecEnv([partial(monitored_env, config)] * envs)
+        )
         self.validation_env = HierarchicalHighwayEnv(config)
         self.history: list[Validation] = []
         self.best: dict[str, tuple[float, float] | None] | None = None
@@ -83,7 +76,7 @@ class Trainer:
         return cls(config, out, progress)
 
     def metadata(self, steps: int) -> dict:
-        return model_metadata(self.config, self.decision_env, steps)
+        return model_metadata(self.config, self.validation_env, steps)
 
     def run(self) -> dict:
         self.out.mkdir(parents=True, exist_ok=True)
@@ -99,6 +92,7 @@ class Trainer:
             steps = self._save_checkpoint()
         finally:
             signal.signal(signal.SIGTERM, previous)
+            self.env.close()
         return self._finish(steps, interrupted)
 
     def _improved(self, save: SaveModel) -> Callable[[Any, Validation], None]:
@@ -149,7 +143,7 @@ class Trainer:
     def _train_tabular(self) -> int:
         train = self.config.train
         self.model = QLearning.for_space(
-            self.decision_env.observation_space,
+            self.validation_env.observation_space,
             alpha=train.tabular_alpha,
             gamma=train.gamma,
             epsilon=train.tabular_epsilon,
@@ -172,6 +166,7 @@ class Trainer:
         self.validation = validation
         remaining = train.steps - self.model.steps
         if remaining > 0:
+            assert isinstance(self.env, Monitor), "tabular training steps one env"
             self.model.learn(
                 self.env, remaining, seed=child_seed(self.config.seed, self.model.steps), on_step=on_step
             )

@@ -1,10 +1,11 @@
-"""The model a training run builds and what it keeps of it: the SB3 (Double) DQN from the config,
-the metadata every model file carries, the model's whole state as plain arrays for checkpoints
-(online and target Q-networks, Adam moments, the replay buffer, plus JSON counters) so `--resume`
-continues exactly, and the training curve."""
+"""The model a training run builds and what it keeps of it: the env and the SB3 (Double) DQN from
+the config, a callback for periodic work, the metadata every model file carries, the model's whole
+state as plain arrays for checkpoints (online and target Q-networks, Adam moments, the replay
+buffer, plus JSON counters) so `--resume` continues exactly, and the training curve."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import gymnasium as gym
@@ -12,6 +13,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 import torch as th
 from stable_baselines3 import DQN
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import VecEnv
 
 from planner.ddqn import DoubleDQN
 from planner.networks import net_arch
@@ -25,9 +29,35 @@ ALGORITHMS: dict[str, type[DQN]] = {"ddqn": DoubleDQN, "dqn": DQN}
 BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
 
 
-def build_dqn(config: RunConfig, env: gym.Env, tensorboard: Path) -> DQN:
+class EveryNSteps(BaseCallback):
+    """Call `action()` whenever the environment steps pass a multiple of `every` (with N
+    environments they advance N at a time)."""
+
+    def __init__(self, every: int, action: Callable[[], object]) -> None:
+        super().__init__()
+        self.every, self.action = every, action
+        self.done = 0
+
+    def _on_training_start(self) -> None:
+        self.done = self.num_timesteps // self.every
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps // self.every > self.done:
+            self.done = self.num_timesteps // self.every
+            self.action()
+        return True
+
+
+def monitored_env(config: RunConfig) -> Monitor:
+    """The training env (SB3's `Monitor` keeps episode returns for the logs)."""
+    return Monitor(HierarchicalHighwayEnv(config))
+
+
+def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQN:
     """The SB3 model. Torch gets one thread: the Q-networks hold a few thousand weights, where
-    more threads only add overhead and steal cores from the simulator."""
+    more threads only add overhead and steal cores from the simulator (and one thread makes the
+    result independent of the machine). With N environments each step of the vectorised env
+    brings N transitions, so N gradient steps follow it: the replay ratio stays that of one env."""
     th.set_num_threads(1)
     train = config.train
     algorithm = ALGORITHMS[train.algorithm]
@@ -41,6 +71,7 @@ def build_dqn(config: RunConfig, env: gym.Env, tensorboard: Path) -> DQN:
         batch_size=train.batch_size,
         gamma=train.gamma,
         train_freq=train.train_freq,
+        gradient_steps=train.envs,
         target_update_interval=train.target_update_interval,
         exploration_fraction=train.exploration_fraction,
         exploration_final_eps=train.exploration_final_eps,

@@ -107,6 +107,7 @@ class TrainConfig(Strict):
 
     algorithm: Annotated[LearnedAgentName, one_of("algorithm", LEARNED_AGENTS)] = "ddqn"
     steps: int = Field(50_000, ge=1)
+    envs: int = Field(1, ge=1, le=64, description="environments stepped in parallel processes (DDQN / DQN)")
     encoding: Annotated[Encoding, one_of("encoding", ENCODINGS)] = "observation"
     network: Annotated[str, one_of("network", tuple(NET_ARCHS))] = "shallow"
     learning_rate: float = Field(5e-4, gt=0)
@@ -123,6 +124,12 @@ class TrainConfig(Strict):
     checkpoint_every: int = Field(5_000, ge=1)
     reward: RewardConfig = RewardConfig()
     validation: ValidationConfig = ValidationConfig()
+
+    @model_validator(mode="after")
+    def _one_env_for_tables(self) -> TrainConfig:
+        if self.algorithm == "tabular" and self.envs > 1:
+            raise ValueError("envs: tabular Q-learning steps one environment; use 1")
+        return self
 
 
 class RunConfig(Strict):
