@@ -17,7 +17,10 @@ Optional features (`features`):
   nearest occupant minus the ego's, divided by `speed_scale` [m/s], clipped to [-1, 1]; 0 if empty;
 - `ttc`: per row, time-to-collision [s] with the nearest vehicle ahead that the ego closes on,
   min(ttc, ttc_horizon) / ttc_horizon in [0, 1]: 1 = no threat within the horizon;
-- `ego_speed`: one value, the ego's speed / MAX_SPEED in [0, 1].
+- `ego_speed`: one value, the ego's speed / MAX_SPEED in [0, 1];
+- `ego_lateral`: two values, the ego's offset from its lane's centre / lane width in [-1, 1] and
+  its heading relative to the lane / EGO_HEADING_SCALE clipped to [-1, 1]: a lane change under way
+  shows in both (positive towards the higher lane indices, the right).
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ import numpy as np
 from gymnasium import spaces
 
 from records import (
+    EGO_HEADING_SCALE,
     ENCODINGS,
     MAX_SPEED,
     SIDE_LANES_SEEN,
@@ -62,6 +66,7 @@ class OccupancyGrid:
     relative_speed: np.ndarray | None = None
     ttc: np.ndarray | None = None
     ego_speed: float | None = None
+    ego_lateral: np.ndarray | None = None
 
     @property
     def ego_row(self) -> int:
@@ -97,6 +102,8 @@ class OccupancyGrid:
             parts.append(self.ttc)
         if self.ego_speed is not None:
             parts.append(np.array([self.ego_speed], dtype=np.float32))
+        if self.ego_lateral is not None:
+            parts.append(self.ego_lateral)
         parts.append(self.lane_part())
         return np.concatenate(parts).astype(np.float32)
 
@@ -130,10 +137,14 @@ class OccupancyGridBuilder:
         rows, cells = self.config.rows(lanes_count), self.config.cells
         size = rows * cells * (1 + ("relative_speed" in self.config.features))
         size += rows * ("ttc" in self.config.features) + ("ego_speed" in self.config.features)
+        size += 2 * ("ego_lateral" in self.config.features)
+        lateral = size - 2 - self.config.lane_code_size(lanes_count)
         size += self.config.lane_code_size(lanes_count)
         low = np.zeros(size, dtype=np.float32)
         if "relative_speed" in self.config.features:
             low[rows * cells : 2 * rows * cells] = -1.0
+        if "ego_lateral" in self.config.features:
+            low[lateral : lateral + 2] = -1.0
         return spaces.Box(low, np.ones(size, dtype=np.float32), dtype=np.float32)
 
     def tabular_space(self, lanes_count: int) -> spaces.Box:
@@ -171,7 +182,18 @@ class OccupancyGridBuilder:
         ego_speed = (
             float(np.clip(world.speed[0] / MAX_SPEED, 0, 1)) if "ego_speed" in config.features else None
         )
-        return OccupancyGrid(occupancy, ego_lane, world.lanes_count, config, relative_speed, ttc, ego_speed)
+        ego_lateral = self._ego_lateral(world) if "ego_lateral" in config.features else None
+        return OccupancyGrid(
+            occupancy, ego_lane, world.lanes_count, config, relative_speed, ttc, ego_speed, ego_lateral
+        )
+
+    @staticmethod
+    def _ego_lateral(world: WorldState) -> np.ndarray:
+        ego_lane = int(world.lane[0])
+        offset = (world.d[0] - world.lane_offsets[ego_lane]) / world.lane_width
+        lane_heading = world.lanes[ego_lane].heading_at(float(world.s[0]))
+        heading = np.arctan2(np.sin(world.heading[0] - lane_heading), np.cos(world.heading[0] - lane_heading))
+        return np.clip([offset, heading / EGO_HEADING_SCALE], -1, 1).astype(np.float32)
 
     def _road_rows(self, ego_lane: int, lanes_count: int) -> np.ndarray:
         """Road lane index of each grid row, -1 where the lane does not exist."""

@@ -7,7 +7,7 @@ the grid an agent is shown (`GridConfig`), and what flows through one control ti
 Import from `records` itself; the submodules only keep each part short.
 """
 
-from records.grid import MAX_SPEED, SIDE_LANES_SEEN, GridConfig, lane_code_bits
+from records.grid import EGO_HEADING_SCALE, MAX_SPEED, SIDE_LANES_SEEN, GridConfig, lane_code_bits
 from records.names import (
     AGENT_NAMES,
     BACKENDS,
@@ -17,6 +17,7 @@ from records.names import (
     POLICY_NAMES,
     ROADS,
     SEED_LIMIT,
+    TRAINING_SEED_FLOOR,
     AgentName,
     Backend,
     ControllerName,
@@ -43,6 +44,7 @@ __all__ = [
     "POLICY_NAMES",
     "ROADS",
     "SEED_LIMIT",
+    "TRAINING_SEED_FLOOR",
     "Actuation",
     "AgentName",
     "Backend",
@@ -63,6 +65,7 @@ __all__ = [
     "drawn_seed",
     "lane_code_bits",
     "SIDE_LANES_SEEN",
+    "EGO_HEADING_SCALE",
     "lane_curvature",
     "one_of",
     "unknown_name",

@@ -9,6 +9,8 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 MAX_SPEED = 40.0
 """Speed that the grid's `ego_speed` feature maps to 1 [m/s] (highway-env's Vehicle.MAX_SPEED)."""
+EGO_HEADING_SCALE = 0.2
+"""Heading error to the lane [rad] that the grid's `ego_lateral` feature maps to 1."""
 SIDE_LANES_SEEN = 2
 """`lane_code: sides` counts the lanes on each side of the ego up to this many."""
 
@@ -25,7 +27,7 @@ class GridConfig(BaseModel):
     lanes: Literal["absolute", "ego"] = "absolute"
     lateral_reach: int = Field(1, ge=1, description="ego mode: neighbour lanes on each side")
     footprint: bool = True
-    features: tuple[Literal["relative_speed", "ttc", "ego_speed"], ...] = ()
+    features: tuple[Literal["relative_speed", "ttc", "ego_speed", "ego_lateral"], ...] = ()
     speed_scale: float = Field(20.0, gt=0, description="relative speed giving feature 1 [m/s]")
     ttc_horizon: float = Field(10.0, gt=0, description="time-to-collision giving feature 1 [s]")
     lane_code: Literal["binary", "sides"] = Field(

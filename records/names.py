@@ -55,6 +55,11 @@ def child_seed(base: int, index: int) -> int:
     return base + index
 
 
-def drawn_seed(rng: np.random.Generator) -> int:
-    """A fresh seed drawn from a seeded generator (a gym env's `np_random`)."""
-    return int(rng.integers(0, SEED_LIMIT))
+TRAINING_SEED_FLOOR = 10_000_000
+"""The decision MDP's episodes (training and validation) draw their seeds from [this, SEED_LIMIT),
+so no seed a run, a comparison or a report uses (below it) is ever trained or selected on."""
+
+
+def drawn_seed(rng: np.random.Generator, low: int = 0) -> int:
+    """A fresh seed in [low, SEED_LIMIT) drawn from a seeded generator (a gym env's `np_random`)."""
+    return int(rng.integers(low, SEED_LIMIT))

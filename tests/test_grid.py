@@ -1,5 +1,7 @@
 """Perception: hand-placed scenes with exact grids, encodings, modes, features, bad input."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from pydantic import ValidationError
@@ -113,6 +115,18 @@ def test_side_lanes_code_makes_the_encodings_independent_of_the_lane_count(encod
         encoded = grid.encode(encoding)
         assert encoded.shape[0] in sizes and builder.space(encoding, lanes).contains(encoded)
         np.testing.assert_array_equal(encoded[-2:], sides), "lanes left, lanes right, capped at 2, over 2"
+
+
+def test_ego_lateral_feature_shows_a_lane_change_under_way():
+    config = GRID.model_copy(update={"features": ("ego_lateral",)})
+    builder = OccupancyGridBuilder(config)
+    world = scene(3, (0.0, 1), [(30.0, 0.0)])
+    assert build(world, config).ego_lateral.tolist() == [0.0, 0.0]
+    changing = dataclasses.replace(world, d=world.d + np.array([1.0, 0.0]), heading=np.array([0.05, 0.0]))
+    grid = build(changing, config)
+    np.testing.assert_allclose(grid.ego_lateral, [0.25, 0.25])
+    assert builder.observation_space(3).contains(grid.to_observation())
+    assert grid.to_observation().shape == builder.observation_space(3).shape
 
 
 def test_side_lanes_code_needs_ego_relative_rows():

@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from records import N_ACTIONS, Command, drawn_seed
+from records import N_ACTIONS, TRAINING_SEED_FLOOR, Command, drawn_seed
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import RunConfig, build_config
 from stack.sim.highway import HighwayAdapter
@@ -44,7 +44,7 @@ class HierarchicalHighwayEnv(gym.Env):
         self, *, seed: int | None = None, options: dict | None = None
     ) -> tuple[np.ndarray, dict[str, float | int | bool]]:
         super().reset(seed=seed)
-        self.loop.reset(drawn_seed(self.np_random))
+        self.loop.reset(drawn_seed(self.np_random, TRAINING_SEED_FLOOR))
         return self._observe(), self.loop.status()
 
     def step(
