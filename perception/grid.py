@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 from gymnasium import spaces
 
+from perception import features
 from records import (
-    EGO_HEADING_SCALE,
     ENCODINGS,
     MAX_SPEED,
     SIDE_LANES_SEEN,
@@ -176,24 +176,16 @@ class OccupancyGridBuilder:
         occupancy[~on_road] = 1.0
         relative_speed = ttc = None
         if "relative_speed" in config.features:
-            relative_speed = self._relative_speed(world, rel_s, along, across, road_rows)
+            relative_speed = features.relative_speed(config, world, rel_s, along, across, road_rows)
         if "ttc" in config.features:
-            ttc = self._ttc(world, rel_s, across, road_rows)
+            ttc = features.time_to_collision(config, world, rel_s, across, road_rows)
         ego_speed = (
             float(np.clip(world.speed[0] / MAX_SPEED, 0, 1)) if "ego_speed" in config.features else None
         )
-        ego_lateral = self._ego_lateral(world) if "ego_lateral" in config.features else None
+        ego_lateral = features.ego_lateral(world) if "ego_lateral" in config.features else None
         return OccupancyGrid(
             occupancy, ego_lane, world.lanes_count, config, relative_speed, ttc, ego_speed, ego_lateral
         )
-
-    @staticmethod
-    def _ego_lateral(world: WorldState) -> np.ndarray:
-        ego_lane = int(world.lane[0])
-        offset = (world.d[0] - world.lane_offsets[ego_lane]) / world.lane_width
-        lane_heading = world.lanes[ego_lane].heading_at(float(world.s[0]))
-        heading = np.arctan2(np.sin(world.heading[0] - lane_heading), np.cos(world.heading[0] - lane_heading))
-        return np.clip([offset, heading / EGO_HEADING_SCALE], -1, 1).astype(np.float32)
 
     def _road_rows(self, ego_lane: int, lanes_count: int) -> np.ndarray:
         """Road lane index of each grid row, -1 where the lane does not exist."""
@@ -222,44 +214,6 @@ class OccupancyGridBuilder:
         half_width = world.width[1:, None] / 2
         low, high = world.lane_offsets - half_lane, world.lane_offsets + half_lane
         return (d[:, None] - half_width < high[None, :]) & (d[:, None] + half_width > low[None, :])
-
-    def _relative_speed(
-        self,
-        world: WorldState,
-        rel_s: np.ndarray,
-        along: np.ndarray,
-        across: np.ndarray,
-        road_rows: np.ndarray,
-    ) -> np.ndarray:
-        config = self.config
-        grid = np.zeros((len(road_rows), config.cells), dtype=np.float32)
-        lane_heading = world.lanes[0].heading_at(float(world.s[0]))
-        longitudinal = world.speed * np.cos(world.heading - lane_heading)
-        value = np.clip((longitudinal[1:] - longitudinal[0]) / config.speed_scale, -1, 1)
-        for vehicle in np.argsort(-np.abs(rel_s)):
-            for row, lane in enumerate(road_rows):
-                if lane >= 0 and across[vehicle, lane]:
-                    grid[row, along[vehicle]] = value[vehicle]
-        return grid
-
-    def _ttc(
-        self, world: WorldState, rel_s: np.ndarray, across: np.ndarray, road_rows: np.ndarray
-    ) -> np.ndarray:
-        config = self.config
-        gap = rel_s - (world.length[1:] + world.length[0]) / 2
-        closing = world.speed[0] - world.speed[1:]
-        ttc = np.ones(len(road_rows), dtype=np.float32)
-        for row, lane in enumerate(road_rows):
-            if lane < 0:
-                ttc[row] = 0.0
-                continue
-            ahead = np.flatnonzero(across[:, lane] & (rel_s > 0))
-            if ahead.size:
-                nearest = ahead[np.argmin(rel_s[ahead])]
-                if closing[nearest] > 0:
-                    seconds = max(gap[nearest], 0.0) / closing[nearest]
-                    ttc[row] = min(seconds, config.ttc_horizon) / config.ttc_horizon
-        return ttc
 
 
 def _reject_non_finite(world: WorldState) -> None:

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 import torch as th
 from stable_baselines3 import DQN
+from typer.testing import CliRunner
 
 from perception.grid import GridConfig, OccupancyGridBuilder
 from planner.agents import decide
@@ -14,6 +15,7 @@ from planner.learned import export_q_network, load_agent
 from planner.mobil import MobilAgent
 from planner.model_file import ModelFileError, save_model
 from records import ENCODINGS, N_ACTIONS, POLICY_NAMES, Command
+from stack.apps.cli import app
 from tests.helpers import scene
 
 GRID = GridConfig(cells_ahead=9, cells_behind=4)
@@ -203,3 +205,21 @@ def test_shipped_default_model_loads_safely():
     observation = OccupancyGridBuilder(agent.grid_config).build(world).encode(agent.encoding)
     assert observation.size == agent.metadata["observation_size"], "it reads the grid it declares"
     assert decide(agent, observation) in tuple(Command)
+
+
+def test_export_writes_an_sb3_zip_that_dqn_load_opens_and_drives_alike(tmp_path):
+    out = tmp_path / "ddqn.zip"
+    result = CliRunner().invoke(app, ["export", str(DEFAULT_MODEL), "--sb3", str(out)])
+    assert result.exit_code == 0, result.output
+    sb3 = DQN.load(out, device="cpu")
+    agent = load_agent(DEFAULT_MODEL)
+    observations = np.random.default_rng(0).uniform(0, 1, (64, agent.observation_size)).astype(np.float32)
+    np.testing.assert_array_equal(
+        sb3.predict(observations, deterministic=True)[0], agent.predict(observations)[0]
+    )
+    again = CliRunner().invoke(app, ["export", str(DEFAULT_MODEL), "--sb3", str(out)])
+    assert again.exit_code == 2 and "exists" in again.output
+    missing = CliRunner().invoke(
+        app, ["export", str(tmp_path / "none.npz"), "--sb3", str(tmp_path / "x.zip")]
+    )
+    assert missing.exit_code == 2 and "no such model file" in missing.output

@@ -239,3 +239,34 @@ def test_envs_must_be_at_least_one_and_one_for_tables(tmp_path):
     )
     assert result.exit_code == 2 and "envs: tabular Q-learning steps one environment" in result.output
     assert not (tmp_path / "o").exists()
+
+
+def test_a_scenario_mix_draws_each_episode_s_world_from_its_shares():
+    data = {
+        **TINY,
+        "perception": {**TINY["perception"], "lane_code": "sides"},
+        "train": {**TINY["train"], "scenarios": {"lanes-3": 1.0, "lanes-5": 1.0}},
+    }
+    env = gym.make(HIERARCHICAL_HIGHWAY, config=data)
+    drawn = []
+    for seed in range(8):
+        observation, _ = env.reset(seed=seed)
+        assert env.observation_space.contains(observation)
+        drawn.append(env.unwrapped.loop.config.scenario)
+        env.step(1)
+    assert set(drawn) == {"lanes-3", "lanes-5"}
+    again = gym.make(HIERARCHICAL_HIGHWAY, config=data)
+    assert [again.reset(seed=seed) and again.unwrapped.loop.config.scenario for seed in range(8)] == drawn
+
+
+def test_a_mix_of_roads_needs_an_encoding_of_one_size(tmp_path):
+    config = tmp_path / "mix.yaml"
+    config.write_text(
+        yaml.safe_dump({**TINY, "train": {**TINY["train"], "scenarios": {"lanes-3": 1, "lanes-5": 1}}})
+    )
+    result = CliRunner().invoke(app, ["train", "-c", str(config), "--out", str(tmp_path / "o")])
+    assert (
+        result.exit_code == 2
+        and "train.scenarios: the observation encoding has a different size" in result.output
+    )
+    assert not (tmp_path / "o").exists()

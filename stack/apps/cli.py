@@ -191,6 +191,28 @@ def reproduce_deepcars(
 
 
 @app.command()
+def export(
+    model: Path = typer.Argument(..., help="A DDQN or DQN model file (.npz, from drivestack train)."),
+    sb3: Path = typer.Option(..., "--sb3", help="The stable-baselines3 zip to write."),
+) -> None:
+    """Write a model file as a stable-baselines3 zip that `DQN.load` opens."""
+    if not model.is_file():
+        fail(f"{model}: no such model file")
+    if sb3.exists():
+        fail(f"--sb3: {sb3} exists; choose a new file")
+    if not sb3.parent.is_dir():
+        fail(f"--sb3: no folder {sb3.parent}")
+    from planner.model_file import ModelFileError
+    from stack.apps.export import export_sb3
+
+    try:
+        written = export_sb3(model, sb3)
+    except ModelFileError as error:
+        fail(str(error))
+    Console().print(f"wrote {written}: stable_baselines3.DQN.load({str(written)!r})", highlight=False)
+
+
+@app.command()
 def train(
     agent: str | None = typer.Option(None, help="ddqn | dqn | tabular (overrides train.algorithm)."),
     config: Path = typer.Option(

@@ -11,38 +11,28 @@ from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import (
-    BaseModel,
-    ConfigDict,
     Field,
     ValidationError,
-    field_validator,
     model_validator,
 )
 
 from controllers.config import ControllerConfig
+from perception.grid import OccupancyGridBuilder
 from perception.sensor import SensorConfig
-from planner.networks import NET_ARCHS
 from planner.safety import SafetyConfig
 from records import (
     AGENT_NAMES,
-    ENCODINGS,
-    LEARNED_AGENTS,
     AgentName,
-    Encoding,
     GridConfig,
-    LearnedAgentName,
     one_of,
 )
+from stack.core.train_config import Strict, TrainConfig
 from stack.sim import scenarios
 from stack.sim.settings import HighwayConfig, SimConfig
 
 
 class ConfigError(ValueError):
     """A configuration that cannot run; the message is one line for the user."""
-
-
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
 
 class PerceptionConfig(GridConfig):
@@ -71,67 +61,6 @@ class PlannerConfig(Strict):
     oracle: OracleConfig = OracleConfig()
 
 
-class RewardConfig(Strict):
-    """Per decision step: alive x (seconds elapsed / decision period), plus speed_weight x that
-    fraction x the ego's mean speed over the step mapped from speed_range [m/s] to [0, 1]; a crash
-    gives `collision` instead; `lane_change` is subtracted whenever the agent asks for a lane change
-    (granted or masked), a margin like MOBIL's threshold so it asks only when the change pays. The
-    paper's reward is alive = 1, collision = -1, speed_weight = 0, lane_change = 0."""
-
-    alive: float = 1.0
-    collision: float = -1.0
-    speed_weight: float = Field(0.0, ge=0)
-    speed_range: tuple[float, float] = (20.0, 30.0)
-    lane_change: float = Field(0.0, ge=0)
-
-    @field_validator("speed_range")
-    @classmethod
-    def _ordered(cls, bounds: tuple[float, float]) -> tuple[float, float]:
-        if not bounds[0] < bounds[1]:
-            raise ValueError(f"must be (low, high) with low < high, got {list(bounds)}")
-        return bounds
-
-
-class ValidationConfig(Strict):
-    """The paper's real-time validation: short and long periods in environment steps."""
-
-    short_every: int = Field(2_000, ge=1)
-    short_episodes: int = Field(3, ge=1)
-    long_every: int = Field(10_000, ge=1)
-    long_episodes: int = Field(10, ge=1)
-    seed: int = Field(100_000, ge=0)
-
-
-class TrainConfig(Strict):
-    """`drivestack train`: algorithm, budget, network, SB3 hyper-parameters, reward, validation."""
-
-    algorithm: Annotated[LearnedAgentName, one_of("algorithm", LEARNED_AGENTS)] = "ddqn"
-    steps: int = Field(50_000, ge=1)
-    envs: int = Field(1, ge=1, le=64, description="environments stepped in parallel processes (DDQN / DQN)")
-    encoding: Annotated[Encoding, one_of("encoding", ENCODINGS)] = "observation"
-    network: Annotated[str, one_of("network", tuple(NET_ARCHS))] = "shallow"
-    learning_rate: float = Field(5e-4, gt=0)
-    buffer_size: int = Field(50_000, ge=1)
-    learning_starts: int = Field(1_000, ge=0)
-    batch_size: int = Field(64, ge=1)
-    gamma: float = Field(0.95, gt=0, le=1)
-    train_freq: int = Field(1, ge=1)
-    target_update_interval: int = Field(500, ge=1)
-    exploration_fraction: float = Field(0.3, gt=0, le=1)
-    exploration_final_eps: float = Field(0.05, ge=0, le=1)
-    tabular_alpha: float = Field(0.1, gt=0, le=1)
-    tabular_epsilon: float = Field(0.2, ge=0, le=1)
-    checkpoint_every: int = Field(5_000, ge=1)
-    reward: RewardConfig = RewardConfig()
-    validation: ValidationConfig = ValidationConfig()
-
-    @model_validator(mode="after")
-    def _one_env_for_tables(self) -> TrainConfig:
-        if self.algorithm == "tabular" and self.envs > 1:
-            raise ValueError("envs: tabular Q-learning steps one environment; use 1")
-        return self
-
-
 class RunConfig(Strict):
     scenario: str | None = Field(None, description="the named world applied (stack.sim.scenarios)")
     seed: int = Field(0, ge=0)
@@ -156,6 +85,24 @@ class RunConfig(Strict):
             raise ValueError(
                 f"decision_period_s: must be at least one control tick "
                 f"({1.0 / self.control_rate_hz:.4f} s), got {self.decision_period_s}"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _one_encoding_for_the_mix(self) -> RunConfig:
+        if len(self.train.scenarios) < 2:
+            return self
+        grid = OccupancyGridBuilder(
+            GridConfig(**self.perception.model_dump(exclude={"sensor", "control_on_ground_truth"}))
+        )
+        default = HighwayConfig().lanes_count
+        lanes = {name: int(scenarios.road(name).get("lanes_count", default)) for name in self.train.scenarios}
+        sizes = {name: grid.space(self.train.encoding, count).shape for name, count in lanes.items()}
+        if len(set(sizes.values())) > 1:
+            raise ValueError(
+                f"train.scenarios: the {self.train.encoding} encoding has a different size on "
+                f"{' and '.join(sorted(sizes))} (lane counts {sorted(set(lanes.values()))}); use "
+                "perception lanes: ego with lane_code: sides"
             )
         return self
 
@@ -187,6 +134,11 @@ def _set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
     for part in parents:
         node = node.setdefault(part, {})
     node[leaf] = value
+
+
+def in_scenario(config: RunConfig, name: str) -> RunConfig:
+    """`config` moved to scenario `name` (its world replaced, everything else kept)."""
+    return RunConfig.model_validate(scenarios.apply(name, config.model_dump(mode="json")))
 
 
 def build_config(data: dict[str, Any], source: str = "config", **overrides: Any) -> RunConfig:

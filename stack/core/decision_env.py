@@ -6,7 +6,8 @@ maneuver and controllers run inside at the control rate. A lane change spans sev
 actions taken while it runs are ignored, so every transition lasts the same time (one discount
 factor per step is then right; a whole lane change in one step would earn several periods of reward
 for one discount and bias the agent towards changing lane). Reward: see `RewardConfig` (the
-paper's +1 / -1 by default).
+paper's +1 / -1 by default). With `train.scenarios`, each episode draws its world from the mix (one
+closed loop per scenario, all shown the same encoding, which must then have one size on every road).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from gymnasium import spaces
 
 from records import N_ACTIONS, TRAINING_SEED_FLOOR, Command, drawn_seed
 from stack.core.closed_loop import ClosedLoop
-from stack.core.config import RunConfig, build_config
+from stack.core.config import RunConfig, build_config, in_scenario
 from stack.sim.highway import HighwayAdapter
 
 
@@ -31,8 +32,17 @@ class HierarchicalHighwayEnv(gym.Env):
             config = build_config(config or {}, "HierarchicalHighway-v0 config")
         self.config = config
         self.render_mode = render_mode
-        self.adapter = HighwayAdapter(config.highway, config.sim.backend, render=render_mode == "rgb_array")
-        self.loop = ClosedLoop(config, self.adapter)
+        mix = config.train.scenarios
+        self.worlds = [in_scenario(config, name) for name in mix] if mix else [config]
+        self.shares = np.array(list(mix.values()) if mix else [1.0]) / sum(mix.values() or [1.0])
+        self.adapters = [
+            HighwayAdapter(world.highway, world.sim.backend, render=render_mode == "rgb_array")
+            for world in self.worlds
+        ]
+        self.loops = [
+            ClosedLoop(world, adapter) for world, adapter in zip(self.worlds, self.adapters, strict=True)
+        ]
+        self.adapter, self.loop = self.adapters[0], self.loops[0]
         self.encoding = config.train.encoding
         self.observation_space = self.loop.builder.space(self.encoding, config.highway.lanes_count)
         self.action_space = spaces.Discrete(N_ACTIONS)
@@ -44,6 +54,8 @@ class HierarchicalHighwayEnv(gym.Env):
         self, *, seed: int | None = None, options: dict | None = None
     ) -> tuple[np.ndarray, dict[str, float | int | bool]]:
         super().reset(seed=seed)
+        world = int(self.np_random.choice(len(self.loops), p=self.shares)) if len(self.loops) > 1 else 0
+        self.adapter, self.loop = self.adapters[world], self.loops[world]
         self.loop.reset(drawn_seed(self.np_random, TRAINING_SEED_FLOOR))
         return self._observe(), self.loop.status()
 
@@ -70,4 +82,5 @@ class HierarchicalHighwayEnv(gym.Env):
         return self.adapter.render() if self.render_mode == "rgb_array" else None
 
     def close(self) -> None:
-        self.adapter.close()
+        for adapter in self.adapters:
+            adapter.close()

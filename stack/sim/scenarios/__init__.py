@@ -45,6 +45,11 @@ def description(name: str) -> str:
     return str(_read(name)["description"])
 
 
+def road(name: str) -> dict[str, Any]:
+    """Scenario `name`'s `highway:` section (road and traffic), as data."""
+    return copy.deepcopy(_read(name)["highway"])
+
+
 def apply(name: str, config: dict[str, Any]) -> dict[str, Any]:
     """`config` (a run config as data) in scenario `name`; ValueError for an unknown name."""
     scenario = copy.deepcopy(_read(name))

@@ -1,0 +1,58 @@
+"""The grid's optional features (`GridConfig.features`), computed from the same world and masks as
+the presence grid: per-cell relative speed, per-row time-to-collision, the ego's lateral state."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from records import EGO_HEADING_SCALE, GridConfig, WorldState
+
+
+def relative_speed(
+    config: GridConfig,
+    world: WorldState,
+    rel_s: np.ndarray,
+    along: np.ndarray,
+    across: np.ndarray,
+    road_rows: np.ndarray,
+) -> np.ndarray:
+    """Per cell, the nearest occupant's longitudinal speed minus the ego's / speed_scale, in [-1, 1]."""
+    grid = np.zeros((len(road_rows), config.cells), dtype=np.float32)
+    lane_heading = world.lanes[0].heading_at(float(world.s[0]))
+    longitudinal = world.speed * np.cos(world.heading - lane_heading)
+    value = np.clip((longitudinal[1:] - longitudinal[0]) / config.speed_scale, -1, 1)
+    for vehicle in np.argsort(-np.abs(rel_s)):
+        for row, lane in enumerate(road_rows):
+            if lane >= 0 and across[vehicle, lane]:
+                grid[row, along[vehicle]] = value[vehicle]
+    return grid
+
+
+def time_to_collision(
+    config: GridConfig, world: WorldState, rel_s: np.ndarray, across: np.ndarray, road_rows: np.ndarray
+) -> np.ndarray:
+    """Per row, min(TTC with the nearest vehicle ahead the ego closes on, horizon) / horizon; 0 off
+    the road."""
+    gap = rel_s - (world.length[1:] + world.length[0]) / 2
+    closing = world.speed[0] - world.speed[1:]
+    ttc = np.ones(len(road_rows), dtype=np.float32)
+    for row, lane in enumerate(road_rows):
+        if lane < 0:
+            ttc[row] = 0.0
+            continue
+        ahead = np.flatnonzero(across[:, lane] & (rel_s > 0))
+        if ahead.size:
+            nearest = ahead[np.argmin(rel_s[ahead])]
+            if closing[nearest] > 0:
+                seconds = max(gap[nearest], 0.0) / closing[nearest]
+                ttc[row] = min(seconds, config.ttc_horizon) / config.ttc_horizon
+    return ttc
+
+
+def ego_lateral(world: WorldState) -> np.ndarray:
+    """[offset from the ego lane's centre / lane width, heading error / EGO_HEADING_SCALE], in [-1, 1]."""
+    ego_lane = int(world.lane[0])
+    offset = (world.d[0] - world.lane_offsets[ego_lane]) / world.lane_width
+    lane_heading = world.lanes[ego_lane].heading_at(float(world.s[0]))
+    heading = np.arctan2(np.sin(world.heading[0] - lane_heading), np.cos(world.heading[0] - lane_heading))
+    return np.clip([offset, heading / EGO_HEADING_SCALE], -1, 1).astype(np.float32)

@@ -1,0 +1,54 @@
+"""`drivestack export MODEL --sb3 OUT.zip`: a drivestack model file as a stable-baselines3 zip.
+
+The Q-network's weights go into SB3's own `DQN` (its `MlpPolicy` with the same hidden layers), with
+the observation space of the model's encoding and `Discrete(3)` actions, so `DQN.load(OUT)` opens it
+for evaluation or fine-tuning with SB3 or rl-zoo3. The zip is SB3's format (it pickles SB3's own
+classes); drivestack itself never loads it: its model files stay data-only.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import gymnasium as gym
+import torch as th
+from stable_baselines3 import DQN
+
+from perception.grid import OccupancyGridBuilder
+from planner.learned import LearnedAgent, load_agent
+from planner.model_file import ModelFileError
+from records import N_ACTIONS, GridConfig
+
+
+class _Spaces(gym.Env):
+    """Just the spaces SB3 needs to build a model; never stepped."""
+
+    def __init__(self, observation_space: gym.spaces.Box) -> None:
+        self.observation_space, self.action_space = observation_space, gym.spaces.Discrete(N_ACTIONS)
+
+
+def export_sb3(model: Path, out: Path) -> Path:
+    """Write `model` (a DDQN or DQN model file) as an SB3 `DQN` zip at `out`; returns the path."""
+    agent = load_agent(model, expected_algorithms=("ddqn", "dqn"))
+    if not isinstance(agent, LearnedAgent):
+        raise ModelFileError(f"{model}: a Q-table has no SB3 counterpart; export a DDQN or DQN model")
+    lanes = int(agent.metadata.get("lanes_count", 4))
+    space = OccupancyGridBuilder(GridConfig(**agent.metadata["grid"])).space(agent.encoding, lanes)
+    if space.shape != (agent.observation_size,):
+        raise ModelFileError(
+            f"{model}: its {agent.encoding} encoding has {space.shape[0]} values on {lanes} lanes, "
+            f"its network takes {agent.observation_size}"
+        )
+    sb3 = DQN(
+        "MlpPolicy",
+        _Spaces(space),
+        policy_kwargs={"net_arch": list(agent.metadata["hidden"])},
+        device="cpu",
+        verbose=0,
+    )
+    weights = agent.network.state_dict()
+    with th.no_grad():
+        sb3.policy.q_net.q_net.load_state_dict(weights)
+        sb3.policy.q_net_target.q_net.load_state_dict(weights)
+    sb3.save(out)
+    return out if out.suffix == ".zip" else out.with_suffix(out.suffix + ".zip")

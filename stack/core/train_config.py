@@ -1,0 +1,94 @@
+"""`train:` settings: algorithm, budget, parallel environments, scenario mix, SB3 hyper-parameters,
+reward and the real-time validation."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from planner.networks import NET_ARCHS
+from records import ENCODINGS, LEARNED_AGENTS, Encoding, LearnedAgentName, one_of, unknown_name
+from stack.sim import scenarios
+
+
+class Strict(BaseModel):
+    """A config section: unknown keys are errors, assignments are validated."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+class RewardConfig(Strict):
+    """Per decision step: alive x (seconds elapsed / decision period), plus speed_weight x that
+    fraction x the ego's mean speed over the step mapped from speed_range [m/s] to [0, 1]; a crash
+    gives `collision` instead; `lane_change` is subtracted whenever the agent asks for a lane change
+    (granted or masked), a margin like MOBIL's threshold so it asks only when the change pays. The
+    paper's reward is alive = 1, collision = -1, speed_weight = 0, lane_change = 0."""
+
+    alive: float = 1.0
+    collision: float = -1.0
+    speed_weight: float = Field(0.0, ge=0)
+    speed_range: tuple[float, float] = (20.0, 30.0)
+    lane_change: float = Field(0.0, ge=0)
+
+    @field_validator("speed_range")
+    @classmethod
+    def _ordered(cls, bounds: tuple[float, float]) -> tuple[float, float]:
+        if not bounds[0] < bounds[1]:
+            raise ValueError(f"must be (low, high) with low < high, got {list(bounds)}")
+        return bounds
+
+
+class ValidationConfig(Strict):
+    """The paper's real-time validation: short and long periods in environment steps."""
+
+    short_every: int = Field(2_000, ge=1)
+    short_episodes: int = Field(3, ge=1)
+    long_every: int = Field(10_000, ge=1)
+    long_episodes: int = Field(10, ge=1)
+    seed: int = Field(100_000, ge=0)
+
+
+class TrainConfig(Strict):
+    """`drivestack train`: algorithm, budget, network, SB3 hyper-parameters, reward, validation."""
+
+    algorithm: Annotated[LearnedAgentName, one_of("algorithm", LEARNED_AGENTS)] = "ddqn"
+    steps: int = Field(50_000, ge=1)
+    envs: int = Field(1, ge=1, le=64, description="environments stepped in parallel processes (DDQN / DQN)")
+    scenarios: dict[str, float] = Field(
+        default_factory=dict,
+        description="a mix of named scenarios with their shares: each training and validation "
+        "episode draws its world from it (empty: the run's own world)",
+    )
+    encoding: Annotated[Encoding, one_of("encoding", ENCODINGS)] = "observation"
+    network: Annotated[str, one_of("network", tuple(NET_ARCHS))] = "shallow"
+    learning_rate: float = Field(5e-4, gt=0)
+    buffer_size: int = Field(50_000, ge=1)
+    learning_starts: int = Field(1_000, ge=0)
+    batch_size: int = Field(64, ge=1)
+    gamma: float = Field(0.95, gt=0, le=1)
+    train_freq: int = Field(1, ge=1)
+    target_update_interval: int = Field(500, ge=1)
+    exploration_fraction: float = Field(0.3, gt=0, le=1)
+    exploration_final_eps: float = Field(0.05, ge=0, le=1)
+    tabular_alpha: float = Field(0.1, gt=0, le=1)
+    tabular_epsilon: float = Field(0.2, ge=0, le=1)
+    checkpoint_every: int = Field(5_000, ge=1)
+    reward: RewardConfig = RewardConfig()
+    validation: ValidationConfig = ValidationConfig()
+
+    @field_validator("scenarios")
+    @classmethod
+    def _known_scenarios(cls, mix: dict[str, float]) -> dict[str, float]:
+        for name, share in mix.items():
+            if name not in scenarios.names():
+                raise ValueError(unknown_name("scenario", name, scenarios.names()))
+            if not share > 0 or share == float("inf"):
+                raise ValueError(f"scenario {name!r}: the share must be a positive number, got {share}")
+        return mix
+
+    @model_validator(mode="after")
+    def _one_env_for_tables(self) -> TrainConfig:
+        if self.algorithm == "tabular" and self.envs > 1:
+            raise ValueError("envs: tabular Q-learning steps one environment; use 1")
+        return self
