@@ -9,7 +9,7 @@ from planner.mobil import MobilAgent
 from records import LEARNED_AGENTS, POLICY_NAMES, GridConfig, unknown_name
 
 DEFAULT_MODEL = Path(__file__).parent / "models" / "ddqn_highway.npz"
-"""The shipped Double DQN, trained by `drivestack train --config configs/train/ddqn.yaml`."""
+"""The shipped Double DQN, trained by `drivestack train --config configs/train/ddqn_highway.yaml`."""
 
 
 def make_agent(
