@@ -43,8 +43,14 @@ class MPCSettings(_Settings):
     max_lateral_acceleration: float = Field(2.0, gt=0, description="comfort bound [m/s^2]")
     max_acceleration: float = Field(2.0, gt=0, le=5, description="[m/s^2]")
     max_deceleration: float = Field(5.0, gt=0, le=5, description="[m/s^2]")
-    max_solve_ms: float = Field(50.0, gt=0, description="slower solves fall back [ms]")
-    max_iterations: int = Field(50, ge=1)
+    max_solve_ms: float = Field(
+        50.0,
+        gt=0,
+        description="solves slower than this are counted as slow (reported, never a fallback) [ms]",
+    )
+    max_iterations: int = Field(
+        50, ge=1, description="a solve that has not converged in this many iterations falls back"
+    )
 
 
 class ControllerConfig(_Settings):

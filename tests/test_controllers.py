@@ -1,6 +1,7 @@
 """Control layer: the plant model, lane changes against the targets, MPC bounds and fallback,
 golden trajectories, the python-control check of the lateral design."""
 
+import time
 from pathlib import Path
 
 import casadi as ca
@@ -94,23 +95,39 @@ def make_mpc(settings: MPCSettings) -> MPCTracker:
     return MPCTracker(settings, DT, fallback)
 
 
-def test_failed_or_slow_solves_fall_back_and_never_give_nan():
+def test_failed_solves_fall_back_and_never_give_nan():
     state = EgoState(d=0.3, heading=0.01, speed=25.0)
     reference = Reference(1.0, 0.5, 0.0, set_speed=25.0)
     starved = make_mpc(MPCSettings(max_iterations=1))
     actuation = starved.step(state, reference)
     assert starved.status != "Solve_Succeeded" and starved.fallbacks == 1
     assert np.isfinite([actuation.acceleration, actuation.steering]).all()
-    slow = make_mpc(MPCSettings(max_solve_ms=1e-6))
-    slow.step(state, reference)
-    assert slow.fallbacks == 1
     poisoned = make_mpc(MPCSettings())
     bad = Reference(float("nan"), 0.0, 0.0, set_speed=25.0)
     actuation = poisoned.step(state, bad)
     assert poisoned.fallbacks == 1 and np.isfinite([actuation.acceleration, actuation.steering]).all()
-    healthy = make_mpc(MPCSettings(max_solve_ms=60_000))  # a loaded machine must not make it "slow"
+    healthy = make_mpc(MPCSettings())
     healthy.step(state, reference)
     assert healthy.status == "Solve_Succeeded" and healthy.fallbacks == 0 and healthy.solve_time > 0
+
+
+def test_a_slow_machine_changes_no_decision_only_the_reported_time(monkeypatch):
+    """Fallbacks come from the solver's outcome, not the clock: an artificially slowed solve (every
+    call 60 ms, beyond `max_solve_ms`) drives exactly as a fast one and is reported as slow."""
+    state, reference = EgoState(d=0.3, heading=0.01, speed=25.0), Reference(1.0, 0.5, 0.0, set_speed=25.0)
+    fast, slow = make_mpc(MPCSettings()), make_mpc(MPCSettings())
+    solver = slow.solver
+
+    def sluggish(*args):
+        time.sleep(0.06)
+        return solver(*args)
+
+    monkeypatch.setattr(slow, "solver", sluggish)
+    monkeypatch.setattr(sluggish, "stats", solver.stats, raising=False)
+    for _ in range(3):
+        assert fast.step(state, reference) == slow.step(state, reference)
+    assert slow.fallbacks == fast.fallbacks == 0
+    assert slow.slow_solves == 3 and min(slow.solve_times) >= 0.06
 
 
 def golden_traces() -> dict[str, np.ndarray]:
