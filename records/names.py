@@ -16,6 +16,8 @@ LearnedAgentName = Literal["ddqn", "dqn", "tabular"]
 Encoding = Literal["observation", "paper", "tabular"]
 ControllerName = Literal["pid", "mpc"]
 Backend = Literal["vector", "fast", "stock"]
+PlantName = Literal["kinematic", "dynamic"]
+"""The ego's vehicle model: highway-env's kinematic bicycle, or its dynamic bicycle with tyre slip."""
 RoadName = Literal["highway", "exit"]
 """highway-env roads the loop drives: highway-v0's straight highway, exit-v0's highway with an exit."""
 POLICY_NAMES: tuple[PolicyName, ...] = get_args(PolicyName)
@@ -24,6 +26,7 @@ LEARNED_AGENTS: tuple[LearnedAgentName, ...] = get_args(LearnedAgentName)
 ENCODINGS: tuple[Encoding, ...] = get_args(Encoding)
 CONTROLLER_NAMES: tuple[ControllerName, ...] = get_args(ControllerName)
 BACKENDS: tuple[Backend, ...] = get_args(Backend)
+PLANTS: tuple[PlantName, ...] = get_args(PlantName)
 ROADS: tuple[RoadName, ...] = get_args(RoadName)
 
 

@@ -37,12 +37,15 @@ class Neighbour:
 @dataclass(frozen=True)
 class EgoState:
     """The ego in the frame of the reference lane: lateral offset d [m], heading relative to the
-    lane [rad], speed [m/s], and the lane's curvature at the ego [1/m] (positive turning left)."""
+    lane [rad], speed [m/s], the lane's curvature at the ego [1/m] (positive turning left), and,
+    in the body frame, lateral speed [m/s] and yaw rate [rad/s]."""
 
     d: float
     heading: float
     speed: float
     curvature: float = 0.0
+    lateral_speed: float = 0.0
+    yaw_rate: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -68,6 +71,10 @@ class WorldState:
     crashed: np.ndarray
     lanes: tuple[Lane, ...]
     lane_offsets: np.ndarray
+    ego_lateral_speed: float = 0.0
+    """The ego's body-frame lateral speed [m/s] (the dynamic plant's slip; v sin(beta) kinematic)."""
+    ego_yaw_rate: float = 0.0
+    """The ego's yaw rate [rad/s]."""
 
     @property
     def count(self) -> int:
@@ -93,6 +100,8 @@ class WorldState:
             heading=float(self.heading[0]) - reference.heading_at(s),
             speed=float(self.speed[0]),
             curvature=lane_curvature(reference, s),
+            lateral_speed=self.ego_lateral_speed,
+            yaw_rate=self.ego_yaw_rate,
         )
 
     def neighbours(self, lane: int) -> tuple[Neighbour | None, Neighbour | None]:

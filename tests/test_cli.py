@@ -152,3 +152,47 @@ def test_a_bad_model_file_fails_before_any_work(tmp_path):
     assert not out.exists()
     missing = CliRunner().invoke(app, ["run", "--agent", "dqn", "--out", str(out)])
     assert missing.exit_code == 2 and "needs a model file" in missing.output
+
+
+def test_the_dynamic_plant_drives_every_command(tmp_path):
+    """`--plant dynamic`: the ego is highway-env's dynamic bicycle; its lateral speed and yaw rate
+    reach the controllers through the snapshot."""
+    result, out = run_tiny(tmp_path, "--plant", "dynamic", "--agent", "keep-lane", "--episodes", "1")
+    assert result.exit_code == 0, result.output
+    assert json.loads((out / "summary.json").read_text())["plant"] == "dynamic"
+    compared = CliRunner().invoke(
+        app,
+        ["compare", "-c", str(tiny_config_file(tmp_path)), "--agents", "keep-lane", "--plant", "dynamic"]
+        + ["--episodes", "1", "--out", str(tmp_path / "cmp"), "--no-progress"],
+    )
+    assert compared.exit_code == 0, compared.output
+    tracked = CliRunner().invoke(
+        app,
+        ["track", "--controller", "pid,builtin", "--plant", "dynamic", "--speeds", "20"]
+        + ["--out", str(tmp_path / "trk"), "--no-progress"],
+    )
+    assert tracked.exit_code == 0, tracked.output
+    records = json.loads((tmp_path / "trk" / "tracking.json").read_text())
+    assert {(r["controller"], r["plant"]) for r in records} == {("pid", "dynamic")}
+    bad = CliRunner().invoke(app, ["track", "--plant", "rigid", "--out", str(tmp_path / "x")])
+    assert bad.exit_code == 2 and "--plant: unknown 'rigid'" in bad.output
+    bad, _ = run_tiny(tmp_path, "--plant", "rigid")
+    assert (
+        bad.exit_code == 2 and "sim.plant: unknown plant 'rigid'; available: kinematic, dynamic" in bad.output
+    )
+
+
+def test_the_snapshot_carries_the_ego_s_body_rates():
+    from records import Actuation
+    from stack.core.config import HighwayConfig
+    from stack.sim.highway import HighwayAdapter
+
+    for plant in ("kinematic", "dynamic"):
+        with HighwayAdapter(HighwayConfig(vehicles_count=5, duration=5), plant=plant) as adapter:
+            adapter.reset(seed=0)
+            for _ in range(10):
+                world = adapter.step(Actuation(acceleration=0.0, steering=0.05))
+            ego = world.ego_state()
+            assert ego.yaw_rate > 0.1 and ego.lateral_speed != 0.0, plant
+            if plant == "kinematic":
+                assert abs(ego.yaw_rate - ego.lateral_speed / 2.5) < 1e-12

@@ -6,11 +6,12 @@ from __future__ import annotations
 import sys
 from datetime import datetime
 from pathlib import Path
-from typing import NoReturn, cast
+from typing import Any, NoReturn, cast
 
 import typer
 from rich.console import Console
 
+from records import PLANTS
 from stack.core.config import ConfigError, RunConfig, load_config
 
 app = typer.Typer(
@@ -20,6 +21,7 @@ app = typer.Typer(
     help="A hierarchical highway driving stack.",
 )
 DEFAULT_CONFIG = Path("configs/highway.yaml")
+PLANT_HELP = "The ego's vehicle model: kinematic | dynamic (sim.plant)."
 
 
 def fail(message: str) -> NoReturn:
@@ -45,6 +47,14 @@ def check_agent(config: RunConfig) -> None:
         fail(str(error))
 
 
+def chosen(option: str, value: str, options: tuple[str, ...]) -> tuple[str, ...]:
+    """The comma-separated names of `value` (`all`: every option), or a one-line error."""
+    names = options if value == "all" else tuple(value.split(","))
+    if unknown := [name for name in names if name not in options]:
+        fail(f"{option}: unknown {unknown[0]!r}; available: {', '.join(options)}, all")
+    return names
+
+
 def fresh_run_dir(prefix: str) -> Path:
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
     return Path("runs") / f"{prefix}-{stamp}"
@@ -66,6 +76,7 @@ def run(
     out: Path | None = typer.Option(None, help="Results folder (default: runs/run-<time>)."),
     video: bool = typer.Option(False, "--video", help="Save a GIF of the first episode."),
     backend: str | None = typer.Option(None, help="Simulation backend: vector | fast | stock (sim.backend)."),
+    plant: str | None = typer.Option(None, help=PLANT_HELP),
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
     progress: bool = typer.Option(True, help="Show a progress bar."),
@@ -78,6 +89,7 @@ def run(
         planner__model=model,
         controller__type=controller,
         sim__backend=backend,
+        sim__plant=plant,
         episodes=episodes,
         seed=seed,
     )
@@ -95,6 +107,7 @@ def run(
 @app.command()
 def track(
     controller: str = typer.Option("all", help="pid | mpc | builtin | all"),
+    plant: str = typer.Option("all", help="kinematic | dynamic | all (the built-in change runs kinematic)."),
     speeds: str = typer.Option("15,20,25,30", help="Comma-separated speeds [m/s]."),
     duration: float | None = typer.Option(None, help="Lane-change duration T [s] (controller config)."),
     config: Path = typer.Option(DEFAULT_CONFIG, "--config", "-c", help="YAML config (controller section)."),
@@ -104,10 +117,8 @@ def track(
     """Single lane changes on empty straight and curved roads: tracking metrics and plots."""
     from stack.apps.track import TRACK_CONTROLLERS, TrackController, track_and_report
 
-    names = list(TRACK_CONTROLLERS) if controller == "all" else controller.split(",")
-    unknown = [name for name in names if name not in TRACK_CONTROLLERS]
-    if unknown:
-        fail(f"--controller: unknown {unknown[0]!r}; available: {', '.join(TRACK_CONTROLLERS)}, all")
+    names = chosen("--controller", controller, TRACK_CONTROLLERS)
+    plants = chosen("--plant", plant, PLANTS)
     try:
         speed_list = [float(value) for value in speeds.split(",")]
     except ValueError:
@@ -115,10 +126,8 @@ def track(
     if not all(0 < v <= 40 for v in speed_list):
         fail(f"--speeds: every speed must be in (0, 40] m/s, got {speeds}")
     cfg = configured(config, controller__lane_change_duration_s=duration)
-    # every name is one of TRACK_CONTROLLERS: checked above
-    track_and_report(
-        cast(list[TrackController], names), speed_list, cfg, out or fresh_run_dir("track"), progress
-    )
+    folder = out or fresh_run_dir("track")
+    track_and_report(cast(list[TrackController], names), speed_list, cfg, folder, progress, cast(Any, plants))
 
 
 @app.command()
@@ -130,6 +139,7 @@ def compare(
     seed: int | None = typer.Option(None, help="Seed of the first episode."),
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
     baseline: str | None = typer.Option(None, help="Agent to report paired differences against."),
+    plant: str | None = typer.Option(None, help=PLANT_HELP),
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
     out: Path | None = typer.Option(None, help="Results folder (default: runs/compare-<time>)."),
     progress: bool = typer.Option(True, help="Show progress bars."),
@@ -148,6 +158,7 @@ def compare(
             scenario=scenario,
             planner__agent=name,
             planner__model=model_paths.get(name),
+            sim__plant=plant,
             episodes=episodes,
             seed=seed,
         )
@@ -196,18 +207,11 @@ def export(
     sb3: Path = typer.Option(..., "--sb3", help="The stable-baselines3 zip to write."),
 ) -> None:
     """Write a model file as a stable-baselines3 zip that `DQN.load` opens."""
-    if not model.is_file():
-        fail(f"{model}: no such model file")
-    if sb3.exists():
-        fail(f"--sb3: {sb3} exists; choose a new file")
-    if not sb3.parent.is_dir():
-        fail(f"--sb3: no folder {sb3.parent}")
-    from planner.model_file import ModelFileError
     from stack.apps.export import export_sb3
 
     try:
         written = export_sb3(model, sb3)
-    except ModelFileError as error:
+    except ValueError as error:
         fail(str(error))
     Console().print(f"wrote {written}: stable_baselines3.DQN.load({str(written)!r})", highlight=False)
 
@@ -220,6 +224,7 @@ def train(
     ),
     steps: int | None = typer.Option(None, help="Total environment steps (train.steps)."),
     envs: int | None = typer.Option(None, help="Environments in parallel processes (train.envs)."),
+    plant: str | None = typer.Option(None, help=PLANT_HELP),
     seed: int | None = typer.Option(None, help="Training seed."),
     scenario: str | None = typer.Option(None, help="Named world to train in (drivestack scenarios)."),
     out: Path | None = typer.Option(None, help="Run folder (default: runs/train-<time>)."),
@@ -240,6 +245,7 @@ def train(
             train__algorithm=agent,
             train__steps=steps,
             train__envs=envs,
+            sim__plant=plant,
             seed=seed,
         )
     from stack.apps.train import train_and_report

@@ -28,7 +28,15 @@ class _Spaces(gym.Env):
 
 
 def export_sb3(model: Path, out: Path) -> Path:
-    """Write `model` (a DDQN or DQN model file) as an SB3 `DQN` zip at `out`; returns the path."""
+    """Write `model` (a DDQN or DQN model file) as an SB3 `DQN` zip at `out`; returns the path.
+    A missing model, an existing or unwritable `out`, or a model that is not a Q-network raise
+    ValueError (ModelFileError) with a one-line message, before anything is written."""
+    if not model.is_file():
+        raise ValueError(f"{model}: no such model file")
+    if out.exists() or out.with_suffix(".zip").exists():
+        raise ValueError(f"--sb3: {out} exists; choose a new file")
+    if not out.parent.is_dir():
+        raise ValueError(f"--sb3: no folder {out.parent}")
     agent = load_agent(model, expected_algorithms=("ddqn", "dqn"))
     if not isinstance(agent, LearnedAgent):
         raise ModelFileError(f"{model}: a Q-table has no SB3 counterpart; export a DDQN or DQN model")

@@ -19,14 +19,13 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Literal
 
-import matplotlib.pyplot as plt
 import numpy as np
 from rich.console import Console
-from rich.table import Table
 from tqdm import tqdm
 
 from controllers.config import ControllerConfig
-from records import Command
+from records import PLANTS, Command, PlantName
+from stack.apps.track_report import plot_speed, print_tracking
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import RunConfig
 from stack.core.metrics import Tracking, lateral_series, tracking
@@ -35,7 +34,6 @@ from stack.sim.empty_road import BuiltinDriver, EmptyRoad, PlantKind, RoadKind
 TrackController = Literal["pid", "mpc", "builtin"]
 TRACK_CONTROLLERS: tuple[TrackController, ...] = ("pid", "mpc", "builtin")
 ROADS: tuple[RoadKind, ...] = ("straight", "curved")
-PLANTS: tuple[PlantKind, ...] = ("kinematic", "dynamic")
 LEAD_IN_S = 1.0
 SETTLE_S = 3.0
 
@@ -119,10 +117,21 @@ def run_maneuver(
 
 
 def track_and_report(
-    controllers: list[TrackController], speeds: list[float], config: RunConfig, out: Path, progress: bool
+    controllers: list[TrackController],
+    speeds: list[float],
+    config: RunConfig,
+    out: Path,
+    progress: bool,
+    plants: tuple[PlantName, ...] = PLANTS,
 ) -> list[Maneuver]:
     """Every maneuver with a progress bar, then the table and where the results are."""
-    total = len(ROADS) * len(speeds) * 2 * sum(1 if n == "builtin" else len(PLANTS) for n in controllers)
+    builtin_runs = 1 if "kinematic" in plants else 0
+    total = (
+        len(ROADS)
+        * len(speeds)
+        * 2
+        * sum(builtin_runs if n == "builtin" else len(plants) for n in controllers)
+    )
     with tqdm(total=total, unit="maneuver", disable=not progress) as bar:
         maneuvers = track(
             controllers,
@@ -131,6 +140,7 @@ def track_and_report(
             config.controller,
             out,
             config.dt,
+            plants=plants,
             progress=lambda: bar.update(1),
         )
     print_tracking(maneuvers)
@@ -146,7 +156,7 @@ def track(
     out: Path,
     dt: float = 1 / 15,
     roads: tuple[RoadKind, ...] = ROADS,
-    plants: tuple[PlantKind, ...] = PLANTS,
+    plants: tuple[PlantName, ...] = PLANTS,
     progress: Callable[[], object] | None = None,
 ) -> list[Maneuver]:
     """All maneuvers; writes out/tracking.json and one figure per speed (straight road, kinematic
@@ -180,72 +190,3 @@ def track(
             speed,
         )
     return maneuvers
-
-
-def print_tracking(maneuvers: list[Maneuver]) -> None:
-    """One row per controller, road, plant and speed: left and right changes averaged."""
-    table = Table(title="lane changes (left / right averaged)")
-    for column in (
-        "controller",
-        "road",
-        "plant",
-        "speed",
-        "duration s",
-        "overshoot cm",
-        "RMS cm",
-        "max cm",
-        "peak a_y",
-        "peak jerk",
-        "solve p95 ms",
-        "fallbacks",
-    ):
-        table.add_column(column, justify="right")
-    groups: dict[tuple[str, str, str, float], list[Maneuver]] = {}
-    for m in maneuvers:
-        groups.setdefault((m.controller, m.road, m.plant, m.speed), []).append(m)
-    for (name, road, plant, speed), group in groups.items():
-
-        def mean(field: str, group: list[Maneuver] = group) -> float:
-            values = [getattr(m, field) for m in group if getattr(m, field) is not None]
-            return sum(values) / len(values) if values else float("nan")
-
-        table.add_row(
-            name,
-            road,
-            plant,
-            f"{speed:g}",
-            f"{mean('duration_s'):.2f}",
-            f"{100 * mean('overshoot_m'):.1f}",
-            f"{100 * mean('rms_error_m'):.2f}",
-            f"{100 * mean('max_error_m'):.1f}",
-            f"{mean('peak_lat_accel'):.2f}",
-            f"{mean('peak_lat_jerk'):.2f}",
-            f"{max(m.solve_ms_p95 for m in group):.2f}",
-            str(sum(m.fallbacks for m in group)),
-        )
-    Console(width=160).print(table)
-
-
-def plot_speed(maneuvers: list[Maneuver], path: Path, speed: float) -> None:
-    figure, axes = plt.subplots(4, 1, figsize=(9, 9), sharex=True)
-    for m in maneuvers:
-        t = m.trace["time"]
-        axes[0].plot(t, m.trace["d"], label=m.controller)
-        axes[1].plot(t, np.degrees(m.trace["steering"]))
-        axes[2].plot(t, m.trace["lat_accel"])
-        axes[3].plot(t, m.trace["lat_jerk"])
-    if maneuvers:
-        axes[0].plot(maneuvers[0].trace["time"], maneuvers[0].trace["d_ref"], "k--", lw=1, label="reference")
-    for axis, label in zip(
-        axes,
-        ("lateral offset [m]", "steering [deg]", "a_y, 500 ms avg [m/s²]", "jerk, 500 ms avg [m/s³]"),
-        strict=True,
-    ):
-        axis.set_ylabel(label)
-        axis.grid(alpha=0.3)
-    axes[0].legend(fontsize="small")
-    axes[0].set_title(f"lane change at {speed:g} m/s (straight road, kinematic plant)")
-    axes[-1].set_xlabel("time [s]")
-    figure.tight_layout()
-    figure.savefig(path, dpi=100)
-    plt.close(figure)

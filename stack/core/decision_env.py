@@ -36,7 +36,9 @@ class HierarchicalHighwayEnv(gym.Env):
         self.worlds = [in_scenario(config, name) for name in mix] if mix else [config]
         self.shares = np.array(list(mix.values()) if mix else [1.0]) / sum(mix.values() or [1.0])
         self.adapters = [
-            HighwayAdapter(world.highway, world.sim.backend, render=render_mode == "rgb_array")
+            HighwayAdapter(
+                world.highway, world.sim.backend, render=render_mode == "rgb_array", plant=world.sim.plant
+            )
             for world in self.worlds
         ]
         self.loops = [

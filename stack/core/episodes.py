@@ -70,7 +70,9 @@ def run_episode(config: RunConfig, episode: int, frames: list[np.ndarray] | None
     given, collects the rendered frames."""
     seed = child_seed(config.seed, episode)
     agent = build_agent(config, seed)
-    with HighwayAdapter(config.highway, config.sim.backend, render=frames is not None) as adapter:
+    with HighwayAdapter(
+        config.highway, config.sim.backend, render=frames is not None, plant=config.sim.plant
+    ) as adapter:
         loop = ClosedLoop(config, adapter, frames, grid=agent.grid_config)
         return run_agent_episode(loop, agent, episode, seed)
 
@@ -119,6 +121,7 @@ def run(config: RunConfig, video: bool = False, progress: bool = True, jobs: int
         agent=config.planner.agent,
         controller=config.controller.type,
         backend=config.sim.backend,
+        plant=config.sim.plant,
         seed=config.seed,
         interrupted=interrupted,
     )

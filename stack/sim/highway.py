@@ -19,9 +19,10 @@ from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.envs.common.action import ContinuousAction
 from highway_env.road.lane import AbstractLane, StraightLane
 from highway_env.road.road import Road
+from highway_env.vehicle.dynamics import BicycleVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
-from records import BACKENDS, Actuation, Backend, RoadName, WorldState, unknown_name
+from records import BACKENDS, Actuation, Backend, PlantName, RoadName, WorldState, unknown_name
 from stack.sim.envs import FAST_EXIT, FAST_HIGHWAY, HIGHWAY, VECTOR_HIGHWAY
 from stack.sim.settings import HighwayConfig
 
@@ -38,12 +39,13 @@ MAX_STEERING = ContinuousAction.STEERING_RANGE[1]
 """Steering angle that ContinuousAction maps to +1 [rad]."""
 
 
-def env_config(highway: HighwayConfig) -> dict:
-    """The highway-env config for a closed-loop run: continuous action, one frame per step."""
+def env_config(highway: HighwayConfig, plant: PlantName = "kinematic") -> dict:
+    """The highway-env config for a closed-loop run: continuous action (on highway-env's dynamic
+    bicycle for the `dynamic` plant), one frame per step."""
     return {
         **highway.model_dump(mode="json", exclude={"road"}),
         "policy_frequency": highway.simulation_frequency,
-        "action": {"type": "ContinuousAction"},
+        "action": {"type": "ContinuousAction", "dynamical": plant == "dynamic"},
         # The stack reads the road itself; the cheapest observation keeps highway-env's work minimal.
         "observation": {"type": "AttributesObservation", "attributes": ["time"]},
     }
@@ -57,14 +59,20 @@ def to_env_action(actuation: Actuation) -> np.ndarray:
 class HighwayAdapter:
     """Owns one highway-v0 env; `reset(seed)` and `step(actuation)` return `WorldState` snapshots."""
 
-    def __init__(self, highway: HighwayConfig, backend: Backend = "vector", render: bool = False) -> None:
+    def __init__(
+        self,
+        highway: HighwayConfig,
+        backend: Backend = "vector",
+        render: bool = False,
+        plant: PlantName = "kinematic",
+    ) -> None:
         if backend not in BACKENDS:
             raise ValueError(unknown_name("simulation backend", backend, BACKENDS))
         self.config = highway
         self.dt = 1.0 / highway.simulation_frequency
         self.env = gym.make(
             ENV_IDS[highway.road][backend],
-            config=env_config(highway),
+            config=env_config(highway, plant),
             render_mode="rgb_array" if render else None,
             disable_env_checker=True,
         )
@@ -126,6 +134,7 @@ def snapshot(road: Road, ego: Vehicle, time: float, lanes_count: int | None = No
     speed = np.array([v.speed for v in vehicles], dtype=float)
     s, d = _lane_frame(reference, position)
     s_ego = float(s[0])
+    lateral_speed, yaw_rate = _body_rates(ego)
     lane_offsets = np.array([reference.local_coordinates(lane.position(s_ego, 0.0))[1] for lane in lanes])
     return WorldState(
         time=time,
@@ -142,7 +151,19 @@ def snapshot(road: Road, ego: Vehicle, time: float, lanes_count: int | None = No
         crashed=np.array([v.crashed for v in vehicles], dtype=bool),
         lanes=lanes,
         lane_offsets=lane_offsets,
+        ego_lateral_speed=lateral_speed,
+        ego_yaw_rate=yaw_rate,
     )
+
+
+def _body_rates(vehicle: Vehicle) -> tuple[float, float]:
+    """(lateral speed [m/s], yaw rate [rad/s]) in the body frame: the dynamic bicycle's states, or
+    the kinematic bicycle's v sin(beta) and v sin(beta) / (L/2) for its last steering."""
+    if isinstance(vehicle, BicycleVehicle):
+        return float(vehicle.lateral_speed), float(vehicle.yaw_rate)
+    beta = np.arctan(0.5 * np.tan(float(vehicle.action.get("steering", 0.0))))
+    lateral = float(vehicle.speed * np.sin(beta))
+    return lateral, lateral / (vehicle.LENGTH / 2)
 
 
 def _lane_frame(lane: AbstractLane, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -7,7 +7,7 @@ from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from records import BACKENDS, ROADS, Backend, RoadName, one_of
+from records import BACKENDS, PLANTS, ROADS, Backend, PlantName, RoadName, one_of
 
 SHARE_TOLERANCE = 1e-6
 """How far the shares of the traffic classes may sum from 1."""
@@ -95,8 +95,11 @@ class HighwayConfig(BaseModel):
 
 
 class SimConfig(BaseModel):
-    """Which highway-env road runs the physics: `fast` (indexed, identical trajectories) or `stock`."""
+    """How the physics runs: the backend (`vector`, `fast` or `stock`: identical trajectories) and
+    the ego's plant (`kinematic` bicycle, or `dynamic`: highway-env's `BicycleVehicle` with linear
+    tyres, the controllers' model mismatch)."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
     backend: Annotated[Backend, one_of("backend", BACKENDS)] = "vector"
+    plant: Annotated[PlantName, one_of("plant", PLANTS)] = "kinematic"
