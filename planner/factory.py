@@ -12,6 +12,19 @@ DEFAULT_MODEL = Path(__file__).parent / "models" / "ddqn_highway.npz"
 """The shipped Double DQN, trained by `drivestack train --config configs/train/ddqn_highway.yaml`."""
 
 
+AGENT_DESCRIPTIONS: dict[str, str] = {
+    "ddqn": "Double DQN (the paper's best); the shipped model (planner/models/) unless --model",
+    "dqn": "DQN; needs --model (a file written by drivestack train --agent dqn)",
+    "tabular": "tabular Q-learning on the paper's tabular state; needs --model",
+    "rule": "hand-written: into the adjacent lane with the most free cells ahead when it is clearly freer",
+    "mobil": "MOBIL (Kesting et al.): a change when the incentive beats the threshold and it is safe",
+    "keep-lane": "never changes lane (adaptive cruise only): the baseline of every comparison",
+    "random": "a uniformly random command each decision (seeded)",
+    "oracle": "perfect information: searches copies of the simulator (slow; each scenario's ceiling)",
+}
+"""One line per agent name (`drivestack agents`)."""
+
+
 def make_agent(
     name: str, lanes: int, grid: GridConfig, seed: int = 0, model: Path | str | None = None
 ) -> Agent:

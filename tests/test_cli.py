@@ -196,3 +196,57 @@ def test_the_snapshot_carries_the_ego_s_body_rates():
             assert ego.yaw_rate > 0.1 and ego.lateral_speed != 0.0, plant
             if plant == "kinematic":
                 assert abs(ego.yaw_rate - ego.lateral_speed / 2.5) < 1e-12
+
+
+def test_set_overrides_any_key_and_is_validated_like_the_file(tmp_path):
+    result, out = run_tiny(
+        tmp_path,
+        "--agent",
+        "keep-lane",
+        "--set",
+        "episodes=1",
+        "--set",
+        "highway.lanes_count=3",
+        "--set",
+        "seed=9",
+    )
+    assert result.exit_code == 0, result.output
+    written = yaml.safe_load((out / "config.yaml").read_text())
+    assert (written["episodes"], written["highway"]["lanes_count"], written["seed"]) == (1, 3, 9)
+    for bad, message in [
+        ("highway.lanes_count=0", "highway.lanes_count: Input should be greater than or equal to 1"),
+        ("highway.wings=2", "highway.wings"),
+        ("lanes_count", "--set: expected KEY=VALUE"),
+        ("seed=[&a 1, *a]", "--set seed: expected a plain YAML value"),
+    ]:
+        result, _ = run_tiny(tmp_path, "--set", bad)
+        assert result.exit_code == 2 and message in result.output, (bad, result.output)
+        assert len(result.output.strip().splitlines()) == 1
+
+
+def test_version_agents_and_the_packaged_defaults_from_any_directory(tmp_path, monkeypatch):
+    version = CliRunner().invoke(app, ["--version"])
+    assert version.exit_code == 0 and version.output.startswith("drivestack ")
+    listing = CliRunner().invoke(app, ["agents"])
+    from records import AGENT_NAMES
+
+    assert listing.exit_code == 0 and [line.split()[0] for line in listing.output.splitlines()] == list(
+        AGENT_NAMES
+    )
+    monkeypatch.chdir(tmp_path)  # no configs/ here: the packaged default config runs
+    result = CliRunner().invoke(
+        app,
+        [
+            "run",
+            "--agent",
+            "keep-lane",
+            "--set",
+            "episodes=1",
+            "--set",
+            "highway.duration=2",
+            "--no-progress",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    folder = next((tmp_path / "runs").iterdir())
+    assert {"summary.json", "config.yaml", "episodes.csv"} <= {p.name for p in folder.iterdir()}

@@ -4,15 +4,24 @@ its own module of `stack.apps` (or `stack.deepcars`), imported when the command 
 from __future__ import annotations
 
 import sys
-from datetime import datetime
 from pathlib import Path
-from typing import Any, NoReturn, cast
+from typing import Any, cast
 
 import typer
 from rich.console import Console
 
 from records import PLANTS
-from stack.core.config import ConfigError, RunConfig, load_config
+from stack.apps.options import (
+    PLANT_HELP,
+    SET_HELP,
+    TRAIN_CONFIG,
+    check_agent,
+    chosen,
+    configured,
+    fail,
+    fresh_run_dir,
+    print_version,
+)
 
 app = typer.Typer(
     add_completion=False,
@@ -20,54 +29,23 @@ app = typer.Typer(
     pretty_exceptions_show_locals=False,
     help="A hierarchical highway driving stack.",
 )
-DEFAULT_CONFIG = Path("configs/highway.yaml")
-PLANT_HELP = "The ego's vehicle model: kinematic | dynamic (sim.plant)."
-
-
-def fail(message: str) -> NoReturn:
-    Console(stderr=True).print(f"[red]error:[/red] {message}", highlight=False, soft_wrap=True)
-    raise typer.Exit(code=2)
-
-
-def configured(path: Path, **overrides: object) -> RunConfig:
-    """The validated config at `path` with CLI `overrides`, or a one-line error (exit 2)."""
-    try:
-        return load_config(path, **overrides)
-    except ConfigError as error:
-        fail(str(error))
-
-
-def check_agent(config: RunConfig) -> None:
-    """Build the configured agent once, so a missing or unsafe model file fails before any work."""
-    from stack.core.episodes import build_agent
-
-    try:
-        build_agent(config, config.seed)
-    except ValueError as error:
-        fail(str(error))
-
-
-def chosen(option: str, value: str, options: tuple[str, ...]) -> tuple[str, ...]:
-    """The comma-separated names of `value` (`all`: every option), or a one-line error."""
-    names = options if value == "all" else tuple(value.split(","))
-    if unknown := [name for name in names if name not in options]:
-        fail(f"{option}: unknown {unknown[0]!r}; available: {', '.join(options)}, all")
-    return names
-
-
-def fresh_run_dir(prefix: str) -> Path:
-    stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
-    return Path("runs") / f"{prefix}-{stamp}"
 
 
 @app.callback()
-def main() -> None:
+def main(
+    version: bool = typer.Option(
+        False, "--version", callback=print_version, is_eager=True, help="Print the version and exit."
+    ),
+) -> None:
     """Perception grid -> decision agent -> lane-change controllers, closed-loop on highway-env."""
 
 
 @app.command()
 def run(
-    config: Path = typer.Option(DEFAULT_CONFIG, "--config", "-c", help="YAML run config."),
+    config: Path | None = typer.Option(
+        None, "--config", "-c", help="YAML run config (default: configs/highway.yaml)."
+    ),
+    sets: list[str] = typer.Option([], "--set", help=SET_HELP),
     agent: str | None = typer.Option(None, help="Decision agent (overrides planner.agent)."),
     model: Path | None = typer.Option(None, help="Model file of a learned agent (planner.model)."),
     controller: str | None = typer.Option(None, help="Controller (overrides controller.type)."),
@@ -84,6 +62,7 @@ def run(
     """Run seeded closed-loop episodes and write a results folder."""
     cfg = configured(
         config,
+        sets,
         scenario=scenario,
         planner__agent=agent,
         planner__model=model,
@@ -110,7 +89,8 @@ def track(
     plant: str = typer.Option("all", help="kinematic | dynamic | all (the built-in change runs kinematic)."),
     speeds: str = typer.Option("15,20,25,30", help="Comma-separated speeds [m/s]."),
     duration: float | None = typer.Option(None, help="Lane-change duration T [s] (controller config)."),
-    config: Path = typer.Option(DEFAULT_CONFIG, "--config", "-c", help="YAML config (controller section)."),
+    config: Path | None = typer.Option(None, "--config", "-c", help="YAML config (controller section)."),
+    sets: list[str] = typer.Option([], "--set", help=SET_HELP),
     out: Path | None = typer.Option(None, help="Results folder (default: runs/track-<time>)."),
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
@@ -125,7 +105,7 @@ def track(
         fail(f"--speeds: expected comma-separated numbers in m/s, got {speeds!r}")
     if not all(0 < v <= 40 for v in speed_list):
         fail(f"--speeds: every speed must be in (0, 40] m/s, got {speeds}")
-    cfg = configured(config, controller__lane_change_duration_s=duration)
+    cfg = configured(config, sets, controller__lane_change_duration_s=duration)
     folder = out or fresh_run_dir("track")
     track_and_report(cast(list[TrackController], names), speed_list, cfg, folder, progress, cast(Any, plants))
 
@@ -134,7 +114,10 @@ def track(
 def compare(
     agents: str = typer.Option("ddqn,rule,mobil,keep-lane", help="Comma-separated agent names."),
     models: str = typer.Option("", help="Model files for learned agents: name=path,name=path."),
-    config: Path = typer.Option(DEFAULT_CONFIG, "--config", "-c", help="YAML run config."),
+    config: Path | None = typer.Option(
+        None, "--config", "-c", help="YAML run config (default: configs/highway.yaml)."
+    ),
+    sets: list[str] = typer.Option([], "--set", help=SET_HELP),
     episodes: int | None = typer.Option(None, help="Seeded episodes per agent."),
     seed: int | None = typer.Option(None, help="Seed of the first episode."),
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
@@ -155,6 +138,7 @@ def compare(
     configs = [
         configured(
             config,
+            sets,
             scenario=scenario,
             planner__agent=name,
             planner__model=model_paths.get(name),
@@ -178,6 +162,15 @@ def scenarios() -> None:
 
     for name in named.names():
         typer.echo(f"{name:12} {named.description(name)}")
+
+
+@app.command()
+def agents() -> None:
+    """The decision agents `--agent` takes, one line each."""
+    from planner.factory import AGENT_DESCRIPTIONS
+
+    for name, text in AGENT_DESCRIPTIONS.items():
+        typer.echo(f"{name:10} {text}")
 
 
 reproduce_app = typer.Typer(no_args_is_help=True, help="Reproduce the paper's experiments.")
@@ -219,9 +212,10 @@ def export(
 @app.command()
 def train(
     agent: str | None = typer.Option(None, help="ddqn | dqn | tabular (overrides train.algorithm)."),
-    config: Path = typer.Option(
-        Path("configs/train/ddqn.yaml"), "--config", "-c", help="YAML training config."
+    config: Path | None = typer.Option(
+        None, "--config", "-c", help="YAML training config (default: configs/train/ddqn.yaml)."
     ),
+    sets: list[str] = typer.Option([], "--set", help=SET_HELP),
     steps: int | None = typer.Option(None, help="Total environment steps (train.steps)."),
     envs: int | None = typer.Option(None, help="Environments in parallel processes (train.envs)."),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
@@ -237,10 +231,11 @@ def train(
     if resume is not None:
         if not (resume / "config.yaml").is_file():
             fail(f"{resume}: not a training run folder (no config.yaml)")
-        cfg = configured(resume / "config.yaml", train__steps=steps)
+        cfg = configured(resume / "config.yaml", sets, train__steps=steps)
     else:
         cfg = configured(
-            config,
+            config or TRAIN_CONFIG,
+            sets,
             scenario=scenario,
             train__algorithm=agent,
             train__steps=steps,

@@ -11,7 +11,7 @@ from typing import Any
 import matplotlib.pyplot as plt
 from matplotlib.axes import Axes
 
-from stack.core.config import RunConfig
+from stack.core.config import RunConfig, write_config
 from stack.core.episodes import RunResults, run
 from stack.core.statistics import Interval, mean_interval, paired_difference, rate_interval
 
@@ -70,6 +70,8 @@ def compare_and_report(
     """Run every config, write `out` (comparison.json, comparison.png), print the table."""
     rows = comparison(compare(configs, jobs=jobs, progress=progress), baseline)
     write_comparison(rows, out)
+    agents = ", ".join(config.planner.agent for config in configs)
+    write_config(configs[0], out / "config.yaml", f"the resolved config; agents compared: {agents}")
     print(markdown(rows), end="")
     print(f"results: {out}")
 

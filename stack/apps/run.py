@@ -14,7 +14,7 @@ from rich.console import Console
 from rich.table import Table
 
 from perception.plot import plot_grid_over_road
-from stack.core.config import RunConfig
+from stack.core.config import RunConfig, write_config
 from stack.core.episodes import run
 from stack.core.metrics import EpisodeResult
 
@@ -27,6 +27,7 @@ def run_and_report(config: RunConfig, out: Path, video: bool, jobs: int, progres
     (the finished episodes are written). Raises KeyboardInterrupt if none finished."""
     results = run(config, video=video, progress=progress, jobs=jobs)
     write_results(out, results.summary, results.episodes, results.frames)
+    write_config(config, out / "config.yaml", "the resolved config of this run")
     print_tables(results.summary, results.episodes)
     Console().print(f"results: {out}")
     return bool(results.summary["interrupted"])

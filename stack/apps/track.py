@@ -27,7 +27,7 @@ from controllers.config import ControllerConfig
 from records import PLANTS, Command, PlantName
 from stack.apps.track_report import plot_speed, print_tracking
 from stack.core.closed_loop import ClosedLoop
-from stack.core.config import RunConfig
+from stack.core.config import RunConfig, write_config
 from stack.core.metrics import Tracking, lateral_series, tracking
 from stack.sim.empty_road import BuiltinDriver, EmptyRoad, PlantKind, RoadKind
 
@@ -143,6 +143,7 @@ def track_and_report(
             plants=plants,
             progress=lambda: bar.update(1),
         )
+    write_config(config, out / "config.yaml", "the resolved config of this run (its controller section)")
     print_tracking(maneuvers)
     Console().print(f"results: {out}")
     return maneuvers

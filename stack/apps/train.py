@@ -17,7 +17,6 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-import yaml
 from rich.console import Console
 from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import CallbackList, ProgressBarCallback
@@ -38,7 +37,7 @@ from stack.apps.train_model import (
     plot_training_curve,
     restore_dqn_state,
 )
-from stack.core.config import RunConfig, load_config
+from stack.core.config import RunConfig, load_config, write_config
 from stack.core.decision_env import HierarchicalHighwayEnv
 
 CHECKPOINT = "checkpoint.npz"
@@ -80,9 +79,7 @@ class Trainer:
 
     def run(self) -> dict:
         self.out.mkdir(parents=True, exist_ok=True)
-        (self.out / "config.yaml").write_text(
-            yaml.safe_dump(self.config.model_dump(mode="json"), sort_keys=False)
-        )
+        write_config(self.config, self.out / "config.yaml", "the resolved config; --resume reads it")
         previous = signal.signal(signal.SIGTERM, _terminate_as_interrupt)
         interrupted = False
         try:

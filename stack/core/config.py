@@ -136,6 +136,12 @@ def _set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
     node[leaf] = value
 
 
+def write_config(config: RunConfig, path: Path, comment: str = "") -> None:
+    """The resolved `config` as YAML at `path`, loadable with `--config` (a `# comment` first)."""
+    header = "".join(f"# {line}\n" for line in comment.splitlines())
+    path.write_text(header + yaml.safe_dump(config.model_dump(mode="json"), sort_keys=False))
+
+
 def in_scenario(config: RunConfig, name: str) -> RunConfig:
     """`config` moved to scenario `name` (its world replaced, everything else kept)."""
     return RunConfig.model_validate(scenarios.apply(name, config.model_dump(mode="json")))

@@ -1,0 +1,88 @@
+"""What every `drivestack` sub-command shares: the packaged default configs, `--set` overrides, the
+one-line error (exit 2), and checks done before any work."""
+
+from __future__ import annotations
+
+import re
+from datetime import datetime
+from pathlib import Path
+from typing import NoReturn
+
+import typer
+import yaml
+from rich.console import Console
+
+from stack.core.config import ConfigError, RunConfig, load_config
+
+CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+"""The default configs, shipped in the package (the checkout's configs/ links to them)."""
+RUN_CONFIG, TRAIN_CONFIG = CONFIGS / "highway.yaml", CONFIGS / "train" / "ddqn.yaml"
+PLANT_HELP = "The ego's vehicle model: kinematic | dynamic (sim.plant)."
+SET_HELP = "KEY=VALUE: a dotted config key and a YAML value (repeatable); overrides the config file."
+SET_KEY = re.compile(r"[A-Za-z_][\w-]*(\.[A-Za-z_][\w-]*)*")
+MAX_SET_LENGTH = 1000
+"""Longest --set value [characters]."""
+
+
+def fail(message: str) -> NoReturn:
+    Console(stderr=True).print(f"[red]error:[/red] {message}", highlight=False, soft_wrap=True)
+    raise typer.Exit(code=2)
+
+
+def configured(path: Path | None, sets: list[str], **overrides: object) -> RunConfig:
+    """The validated config at `path` (the packaged run config when None) with the `--set` entries
+    and then the CLI `overrides` applied, or a one-line error (exit 2)."""
+    values = {**parsed_sets(sets), **{key: value for key, value in overrides.items() if value is not None}}
+    try:
+        return load_config(path or RUN_CONFIG, **values)
+    except ConfigError as error:
+        fail(str(error))
+
+
+def parsed_sets(sets: list[str]) -> dict[str, object]:
+    """`--set` entries as config overrides (dotted keys as `a__b`); YAML values without anchors or
+    aliases, so a short value cannot expand into a huge one."""
+    values: dict[str, object] = {}
+    for entry in sets:
+        key, separator, raw = entry.partition("=")
+        if not separator or not SET_KEY.fullmatch(key):
+            fail(f"--set: expected KEY=VALUE with a dotted key (e.g. seed=3), got {entry[:80]!r}")
+        if len(raw) > MAX_SET_LENGTH or "&" in raw or "*" in raw:
+            fail(f"--set {key}: expected a plain YAML value of at most {MAX_SET_LENGTH} characters")
+        try:
+            values[key.replace(".", "__")] = yaml.safe_load(raw)
+        except yaml.YAMLError:
+            fail(f"--set {key}: not a YAML value: {raw[:80]!r}")
+    return values
+
+
+def check_agent(config: RunConfig) -> None:
+    """Build the configured agent once, so a missing or unsafe model file fails before any work."""
+    from stack.core.episodes import build_agent
+
+    try:
+        build_agent(config, config.seed)
+    except ValueError as error:
+        fail(str(error))
+
+
+def chosen(option: str, value: str, options: tuple[str, ...]) -> tuple[str, ...]:
+    """The comma-separated names of `value` (`all`: every option), or a one-line error."""
+    names = options if value == "all" else tuple(value.split(","))
+    if unknown := [name for name in names if name not in options]:
+        fail(f"{option}: unknown {unknown[0]!r}; available: {', '.join(options)}, all")
+    return names
+
+
+def fresh_run_dir(prefix: str) -> Path:
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
+    return Path("runs") / f"{prefix}-{stamp}"
+
+
+def print_version(value: bool) -> None:
+    """`--version`: the installed distribution's version, then exit."""
+    if value:
+        from importlib.metadata import version
+
+        typer.echo(f"drivestack {version('drivestack')}")
+        raise typer.Exit()
