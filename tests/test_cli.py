@@ -250,3 +250,13 @@ def test_version_agents_and_the_packaged_defaults_from_any_directory(tmp_path, m
     assert result.exit_code == 0, result.output
     folder = next((tmp_path / "runs").iterdir())
     assert {"summary.json", "config.yaml", "episodes.csv"} <= {p.name for p in folder.iterdir()}
+
+
+def test_an_error_from_an_option_names_the_option_not_the_file(tmp_path):
+    for arguments, message in [
+        (["--controller", "lqr"], "error: --controller: controller.type: unknown controller 'lqr'"),
+        (["--scenario", "nope"], "error: --scenario: scenario: unknown scenario 'nope'"),
+        (["--set", "seed.x=1"], "error: --set seed.x: seed: not a section"),
+    ]:
+        result, _ = run_tiny(tmp_path, *arguments)
+        assert result.exit_code == 2 and result.output.startswith(message), result.output

@@ -190,7 +190,7 @@ def reproduce_deepcars(
     console = Console()
     with console.status("reproducing DeepCars") as status:
         reproduce(out, quick=quick, seed=seed, progress=lambda name: status.update(f"done: {name}"))
-    console.print((out / "results.md").read_text(), highlight=False)
+    print((out / "results.md").read_text(), end="")
     console.print(f"results: {out}")
 
 

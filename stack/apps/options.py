@@ -20,6 +20,18 @@ RUN_CONFIG, TRAIN_CONFIG = CONFIGS / "highway.yaml", CONFIGS / "train" / "ddqn.y
 PLANT_HELP = "The ego's vehicle model: kinematic | dynamic (sim.plant)."
 SET_HELP = "KEY=VALUE: a dotted config key and a YAML value (repeatable); overrides the config file."
 SET_KEY = re.compile(r"[A-Za-z_][\w-]*(\.[A-Za-z_][\w-]*)*")
+OPTIONS = {
+    "planner__agent": "--agent",
+    "planner__model": "--model",
+    "controller__type": "--controller",
+    "controller__lane_change_duration_s": "--duration",
+    "sim__backend": "--backend",
+    "sim__plant": "--plant",
+    "train__algorithm": "--agent",
+    "train__steps": "--steps",
+    "train__envs": "--envs",
+}
+"""The CLI option behind each override (the others are named as their key: --seed, --scenario)."""
 MAX_SET_LENGTH = 1000
 """Longest --set value [characters]."""
 
@@ -32,9 +44,13 @@ def fail(message: str) -> NoReturn:
 def configured(path: Path | None, sets: list[str], **overrides: object) -> RunConfig:
     """The validated config at `path` (the packaged run config when None) with the `--set` entries
     and then the CLI `overrides` applied, or a one-line error (exit 2)."""
-    values = {**parsed_sets(sets), **{key: value for key, value in overrides.items() if value is not None}}
+    given = {key: value for key, value in overrides.items() if value is not None}
+    set_values = parsed_sets(sets)
+    values = {**set_values, **given}
+    labels = {key.replace("__", "."): f"--set {key.replace('__', '.')}" for key in set_values}
+    labels |= {key.replace("__", "."): OPTIONS.get(key, f"--{key}") for key in given}
     try:
-        return load_config(path or RUN_CONFIG, **values)
+        return load_config(path or RUN_CONFIG, labels, **values)
     except ConfigError as error:
         fail(str(error))
 

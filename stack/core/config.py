@@ -117,9 +117,10 @@ class RunConfig(Strict):
         return max(1, round(self.decision_period_s * self.control_rate_hz))
 
 
-def _one_line(error: ValidationError, source: str) -> str:
+def _one_line(error: ValidationError, source: str, labels: dict[str, str]) -> str:
     first = error.errors()[0]
     key = ".".join(str(part) for part in first["loc"])
+    source = labels.get(key, source)
     message = first["msg"].removeprefix("Value error, ")
     if first["type"] == "extra_forbidden":
         message = "unknown key"
@@ -128,11 +129,15 @@ def _one_line(error: ValidationError, source: str) -> str:
     return f"{source}: {key}: {message}" if key else f"{source}: {message}"
 
 
-def _set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
+def _set_dotted(data: dict[str, Any], dotted: str, value: Any, source: str) -> None:
     node = data
     *parents, leaf = dotted.split(".")
-    for part in parents:
+    for depth, part in enumerate(parents):
         node = node.setdefault(part, {})
+        if not isinstance(node, dict):
+            raise ConfigError(
+                f"{source}: {'.'.join(parents[: depth + 1])}: not a section, cannot set {dotted}"
+            )
     node[leaf] = value
 
 
@@ -147,30 +152,37 @@ def in_scenario(config: RunConfig, name: str) -> RunConfig:
     return RunConfig.model_validate(scenarios.apply(name, config.model_dump(mode="json")))
 
 
-def build_config(data: dict[str, Any], source: str = "config", **overrides: Any) -> RunConfig:
+def build_config(
+    data: dict[str, Any], source: str = "config", labels: dict[str, str] | None = None, **overrides: Any
+) -> RunConfig:
     """Validate `data` in its scenario (`scenario` in `overrides` or in `data`, see
-    `stack.sim.scenarios`) with dotted-key `overrides` applied (None values are ignored)."""
+    `stack.sim.scenarios`) with dotted-key `overrides` applied (None values are ignored). An error
+    in a key that `labels` names (dotted key -> e.g. the CLI option that set it) blames that label
+    instead of `source`."""
+    labels = labels or {}
     data = dict(data)
     scenario = overrides.pop("scenario", None) or data.get("scenario")
     if scenario is not None:
+        blamed = labels.get("scenario", source)
         if not isinstance(scenario, str):
             raise ConfigError(
-                f"{source}: scenario: expected a scenario name, one of {', '.join(scenarios.names())}"
+                f"{blamed}: scenario: expected a scenario name, one of {', '.join(scenarios.names())}"
             )
         try:
             data = scenarios.apply(scenario, data)
         except ValueError as error:
-            raise ConfigError(f"{source}: scenario: {error}") from None
+            raise ConfigError(f"{blamed}: scenario: {error}") from None
     for dotted, value in overrides.items():
         if value is not None:
-            _set_dotted(data, dotted.replace("__", "."), value)
+            key = dotted.replace("__", ".")
+            _set_dotted(data, key, value, labels.get(key, source))
     try:
         return RunConfig.model_validate(data)
     except ValidationError as error:
-        raise ConfigError(_one_line(error, source)) from None
+        raise ConfigError(_one_line(error, source, labels)) from None
 
 
-def load_config(path: Path | str, **overrides: Any) -> RunConfig:
+def load_config(path: Path | str, labels: dict[str, str] | None = None, **overrides: Any) -> RunConfig:
     """Read a YAML run config, apply CLI overrides, validate; raise ConfigError on any problem."""
     path = Path(path)
     if not path.is_file():
@@ -183,4 +195,4 @@ def load_config(path: Path | str, **overrides: Any) -> RunConfig:
         raise ConfigError(f"{path}: not valid YAML{where}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping of keys at the top level")
-    return build_config(data, str(path), **overrides)
+    return build_config(data, str(path), labels, **overrides)
