@@ -1,11 +1,38 @@
 """drivestack's top layer: the simulator (`sim`), the run core (`core`), the applications
 (`apps`, the `drivestack` CLI) and the paper's grid world (`deepcars`), over the layers
-`perception`, `planner` and `controllers`."""
+`perception`, `planner` and `controllers`.
+
+The public API, imported on first use so `import stack` stays light:
+
+- `load_config(path, **overrides)` / `build_config(data, **overrides)` -> `RunConfig`;
+- `run(config)` -> `RunResults` (every episode of a config) and `run_episode(config, episode)`;
+- `world_state(env)` -> `WorldState` of any highway-env env, for `perception.OccupancyGridBuilder`.
+
+Importing `stack` registers its gymnasium envs (`drivestack/VectorHighway-v0`, ...).
+"""
 
 import os
+from importlib import import_module
+from typing import Any
 
 os.environ.setdefault("MPLBACKEND", "Agg")  # figures are written to files; chosen here, once
 
 from stack.sim.envs import register_envs  # noqa: E402
 
 register_envs()
+
+_PUBLIC = {
+    "load_config": "stack.core.config",
+    "build_config": "stack.core.config",
+    "RunConfig": "stack.core.config",
+    "run": "stack.core.episodes",
+    "run_episode": "stack.core.episodes",
+    "world_state": "stack.sim.highway",
+}
+__all__ = list(_PUBLIC)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _PUBLIC:
+        return getattr(import_module(_PUBLIC[name]), name)
+    raise AttributeError(f"module 'stack' has no attribute {name!r}")

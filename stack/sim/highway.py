@@ -117,6 +117,13 @@ class HighwayAdapter:
         return snapshot(env.road, env.vehicle, float(env.time), self.config.lanes_count)
 
 
+def world_state(env: gym.Env) -> WorldState:
+    """The `WorldState` of any highway-env env (yours, made with `gym.make`): its controlled vehicle
+    as the ego, every other vehicle of its road."""
+    road_env: AbstractEnv = env.unwrapped
+    return snapshot(road_env.road, road_env.vehicle, float(road_env.time))
+
+
 def snapshot(road: Road, ego: Vehicle, time: float, lanes_count: int | None = None) -> WorldState:
     """The road at `time` [s] as a `WorldState`: row 0 = `ego`, the others in road order, in the
     frame of lane 0 of the ego's road segment, which continues across straight segments, so the

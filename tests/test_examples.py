@@ -1,0 +1,32 @@
+"""The examples run as a user would run them, from outside the checkout."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "examples").glob("*.py"))
+
+
+@pytest.mark.parametrize("example", EXAMPLES, ids=lambda path: path.name)
+def test_example_runs(example, tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(example)], cwd=tmp_path, capture_output=True, text=True, timeout=300
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert "mean speed" in result.stdout
+
+
+def test_the_public_api_is_exported():
+    import controllers
+    import perception
+    import planner
+    import stack
+
+    assert {"OccupancyGridBuilder", "GridConfig", "WorldState"} <= set(perception.__all__)
+    assert {"make_agent", "load_agent", "decide"} <= set(planner.__all__)
+    assert {"make_controller", "ControllerConfig"} <= set(controllers.__all__)
+    assert callable(stack.run_episode) and callable(stack.world_state) and callable(stack.load_config)
+    with pytest.raises(AttributeError):
+        stack.nothing_here  # noqa: B018
