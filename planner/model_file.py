@@ -1,20 +1,34 @@
-"""A model file format that cannot execute code: one `.npz` (numpy, `allow_pickle=False`) holding
-float arrays (network weights or a Q-table) and a JSON metadata string.
+"""A model file format that cannot execute code: one `.npz` (a zip of `.npy` members, read with
+`allow_pickle=False`) holding numeric arrays (network weights or a Q-table) and a JSON metadata
+member.
 
 Metadata says what the arrays mean: `kind` (`mlp` or `qtable`), the algorithm, the observation
-size and encoding, the grid the observation came from, the network sizes. A file that is not a
-valid npz, lacks metadata, or whose arrays do not match the metadata is refused with one line.
+size and encoding, the grid the observation came from, the network sizes. Reading is bounded before
+anything is inflated or allocated: the zip directory must list only `.npy` members, stored or
+deflated, unencrypted, whose declared sizes fit `max_bytes`; each member's `.npy` header must
+declare a numeric dtype and a shape whose bytes fit its member; metadata must be a JSON object of at
+most `MAX_METADATA_BYTES`. Anything else is refused with one line naming the file.
 """
 
 from __future__ import annotations
 
 import json
 import zipfile
+import zlib
 from pathlib import Path
+from typing import IO
 
 import numpy as np
 
 FORMAT = "drivestack-model/1"
+MODEL_BYTES = 64 * 2**20
+"""Largest model file drivestack loads as an agent, inflated [bytes] (the shipped ones: < 2 MB)."""
+CHECKPOINT_BYTES = 4 * 2**30
+"""Largest training checkpoint (weights, optimizer, replay buffer), inflated [bytes]."""
+MAX_METADATA_BYTES = 2**20
+"""[bytes]"""
+MAX_MESSAGE = 200
+"""Longest quote of a file's content in an error message [characters]."""
 
 
 class ModelFileError(ValueError):
@@ -35,30 +49,89 @@ def save_model(path: Path | str, arrays: dict[str, np.ndarray], metadata: dict) 
     return path
 
 
-def load_model(path: Path | str) -> tuple[dict[str, np.ndarray], dict]:
-    """(arrays, metadata) of a model file; never unpickles."""
+def load_model(path: Path | str, max_bytes: int = MODEL_BYTES) -> tuple[dict[str, np.ndarray], dict]:
+    """(arrays, metadata) of a model file of at most `max_bytes` inflated; never unpickles."""
     path = Path(path)
     if not path.is_file():
         raise ModelFileError(f"{path}: no such model file")
     try:
-        with np.load(path, allow_pickle=False) as content:
-            data = {name: content[name] for name in content.files}
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as error:
+        with zipfile.ZipFile(path) as archive:
+            members = _checked_members(path, archive, max_bytes)
+            data = {
+                name.removesuffix(".npy"): _read_array(path, archive, info) for name, info in members.items()
+            }
+    except ModelFileError:
+        raise
+    except (
+        zipfile.BadZipFile,
+        zlib.error,
+        NotImplementedError,
+        RuntimeError,
+        OSError,
+        EOFError,
+        ValueError,
+    ) as error:
+        reason = str(error).splitlines()[0][:MAX_MESSAGE] if str(error) else ""
         raise ModelFileError(
-            f"{path}: not a drivestack model file ({type(error).__name__}: {error})"
+            f"{path}: not a drivestack model file ({type(error).__name__}: {reason})"
         ) from None
     if "metadata" not in data:
         raise ModelFileError(f"{path}: not a drivestack model file (no metadata)")
+    metadata = _metadata(path, data.pop("metadata"))
+    return {name.removeprefix("array/"): value for name, value in data.items()}, metadata
+
+
+def _checked_members(path: Path, archive: zipfile.ZipFile, max_bytes: int) -> dict[str, zipfile.ZipInfo]:
+    """The zip's members by name, after checking the directory alone (nothing inflated yet)."""
+    members = {info.filename: info for info in archive.infolist()}
+    total = 0
+    for name, info in members.items():
+        if not name.endswith(".npy") or not (name == "metadata.npy" or name.startswith("array/")):
+            raise ModelFileError(
+                f"{path}: unexpected member {name[:MAX_MESSAGE]!r}; expected metadata and arrays"
+            )
+        if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED) or info.flag_bits & 0x1:
+            raise ModelFileError(f"{path}: member {name!r} is encrypted or compressed in an unknown way")
+        total += info.file_size
+    if total > max_bytes:
+        raise ModelFileError(
+            f"{path}: {total / 2**20:.0f} MB when unpacked; at most {max_bytes / 2**20:.0f} MB"
+        )
+    return members
+
+
+def _read_array(path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> np.ndarray:
+    """One member: its `.npy` header checked (numeric dtype, a shape that fits the member) before
+    the array is allocated and read."""
+    with archive.open(info) as stream:
+        shape, dtype = _header(stream)
+    if dtype.hasobject or dtype.kind not in "fiub":
+        raise ModelFileError(f"{path}: {info.filename!r} holds {dtype} values; only numbers are allowed")
+    if float(np.prod(shape, dtype=np.float64)) * dtype.itemsize > info.file_size:
+        raise ModelFileError(f"{path}: {info.filename!r} declares {shape} values, more than it holds")
+    with archive.open(info) as stream:
+        return np.lib.format.read_array(stream, allow_pickle=False)
+
+
+def _header(stream: IO[bytes]) -> tuple[tuple[int, ...], np.dtype]:
+    """(shape, dtype) from a `.npy` header, read without touching the data."""
+    version = np.lib.format.read_magic(stream)
+    read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+    shape, _, dtype = read(stream)
+    return shape, dtype
+
+
+def _metadata(path: Path, raw: np.ndarray) -> dict:
+    if raw.nbytes > MAX_METADATA_BYTES:
+        raise ModelFileError(f"{path}: metadata of {raw.nbytes} bytes; at most {MAX_METADATA_BYTES}")
     try:
-        metadata = json.loads(data.pop("metadata").tobytes().decode())
-    except (UnicodeDecodeError, json.JSONDecodeError):
+        metadata = json.loads(raw.tobytes().decode())
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
         raise ModelFileError(f"{path}: model metadata is not valid JSON") from None
+    if not isinstance(metadata, dict):
+        raise ModelFileError(f"{path}: model metadata must be a JSON object, got {type(metadata).__name__}")
     if metadata.get("format") != FORMAT:
         raise ModelFileError(
-            f"{path}: unsupported model format {metadata.get('format')!r}; expected {FORMAT}"
+            f"{path}: unsupported model format {str(metadata.get('format'))[:80]!r}; expected {FORMAT}"
         )
-    arrays = {name.removeprefix("array/"): value for name, value in data.items()}
-    for name, value in arrays.items():
-        if value.dtype.kind not in "fiub":
-            raise ModelFileError(f"{path}: array {name!r} has dtype {value.dtype}; only numbers are allowed")
-    return arrays, metadata
+    return metadata

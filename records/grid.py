@@ -22,10 +22,10 @@ class GridConfig(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     cell_length: float = Field(5.0, gt=0, allow_inf_nan=False, description="cell length [m]")
-    cells_ahead: int = Field(9, ge=1, description="line of sight in cells, the ego's own included")
-    cells_behind: int = Field(4, ge=0)
+    cells_ahead: int = Field(9, ge=1, le=200, description="line of sight in cells, the ego's own included")
+    cells_behind: int = Field(4, ge=0, le=200)
     lanes: Literal["absolute", "ego"] = "absolute"
-    lateral_reach: int = Field(1, ge=1, description="ego mode: neighbour lanes on each side")
+    lateral_reach: int = Field(1, ge=1, le=8, description="ego mode: neighbour lanes on each side")
     footprint: bool = True
     features: tuple[Literal["relative_speed", "ttc", "ego_speed", "ego_lateral"], ...] = ()
     speed_scale: float = Field(20.0, gt=0, description="relative speed giving feature 1 [m/s]")

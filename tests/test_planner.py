@@ -170,7 +170,12 @@ def test_crafted_and_truncated_model_files_are_refused(tmp_path, model_files):
         load_agent(truncated)
     pickled = tmp_path / "pickled.npz"
     np.savez(pickled, metadata=np.frombuffer(b"{}", np.uint8), payload=np.array([object()], dtype=object))
-    with pytest.raises(ModelFileError, match="not a drivestack model file"):
+    with pytest.raises(ModelFileError, match="unexpected member 'payload.npy'"):
+        load_agent(pickled)
+    np.savez(
+        pickled, **{"metadata": np.frombuffer(b"{}", np.uint8), "array/q": np.array([object()], dtype=object)}
+    )
+    with pytest.raises(ModelFileError, match="holds object values; only numbers are allowed"):
         load_agent(pickled)
     wrong = tmp_path / "wrong.npz"
     save_model(

@@ -24,7 +24,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import SubprocVecEnv
 
 from planner.learned import export_q_network, save_q_table
-from planner.model_file import load_model, save_model
+from planner.model_file import CHECKPOINT_BYTES, load_model, save_model
 from planner.tabular import QLearning
 from planner.validation import RealTimeValidation, Validation, kept_models
 from records import child_seed
@@ -119,7 +119,7 @@ class Trainer:
         self.model = build_dqn(self.config, self.env, self.out / "tensorboard")
         resumed = (self.out / CHECKPOINT).is_file()
         if resumed:
-            arrays, metadata = load_model(self.out / CHECKPOINT)
+            arrays, metadata = load_model(self.out / CHECKPOINT, CHECKPOINT_BYTES)
             restore_dqn_state(self.model, arrays, metadata["counters"])
             self._restore_common(metadata)
         self.validation = self._validation_callback(export_q_network)
@@ -147,7 +147,7 @@ class Trainer:
             seed=self.config.seed,
         )
         if (self.out / CHECKPOINT).is_file():
-            arrays, metadata = load_model(self.out / CHECKPOINT)
+            arrays, metadata = load_model(self.out / CHECKPOINT, CHECKPOINT_BYTES)
             self.model.table[...] = arrays["q_table"]
             self.model.steps = metadata["counters"]["num_timesteps"]
             self._restore_common(metadata)

@@ -1,0 +1,139 @@
+"""Hostile model files: every one is refused in one line, before anything large is inflated or
+built (issue: hardening)."""
+
+import io
+import json
+import resource
+import zipfile
+
+import numpy as np
+import pytest
+
+from planner.factory import DEFAULT_MODEL
+from planner.learned import load_agent
+from planner.model_file import FORMAT, ModelFileError, load_model
+
+
+def npy(array: np.ndarray) -> bytes:
+    buffer = io.BytesIO()
+    np.lib.format.write_array(buffer, array, allow_pickle=False)
+    return buffer.getvalue()
+
+
+def metadata_bytes(metadata: object) -> bytes:
+    return npy(np.frombuffer(json.dumps(metadata).encode(), dtype=np.uint8))
+
+
+def shipped() -> tuple[dict[str, np.ndarray], dict]:
+    return load_model(DEFAULT_MODEL)
+
+
+def write(path, members: dict[str, bytes], compression=zipfile.ZIP_DEFLATED) -> None:
+    with zipfile.ZipFile(path, "w", compression) as archive:
+        for name, data in members.items():
+            archive.writestr(name, data)
+
+
+def with_metadata(path, **changes) -> None:
+    arrays, metadata = shipped()
+    members = {f"array/{name}.npy": npy(value) for name, value in arrays.items()}
+    write(path, {"metadata.npy": metadata_bytes({**metadata, **changes}), **members})
+
+
+def peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def test_a_member_that_inflates_beyond_the_limit_is_refused_before_inflating(tmp_path):
+    bomb = tmp_path / "bomb.npz"
+    write(
+        bomb, {"metadata.npy": metadata_bytes({"format": FORMAT}), "array/q.npy": npy(np.zeros(12_000_000))}
+    )
+    assert bomb.stat().st_size < 1_000_000
+    before = peak_rss_mb()
+    with pytest.raises(ModelFileError, match="MB when unpacked; at most 64 MB"):
+        load_agent(bomb)
+    assert peak_rss_mb() - before < 50
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"hidden": [4_000_000]}, "hidden: expected at most 8 layer widths in 1..4096"),
+        ({"actions": 5}, r"actions: the loop commands LEFT, STAY, RIGHT \(3\), not 5"),
+        ({"encoding": "telepathy"}, "encoding: expected one of"),
+        ({"kind": "forest"}, "kind: expected 'mlp' or 'qtable'"),
+        ({"observation_size": 10**9}, "observation_size: expected an integer"),
+        ({"grid": {"cells_ahead": 10**8}}, "grid.cells_ahead: Input should be less than or equal to 200"),
+        ({"observation_size": 50}, "model arrays do not match its metadata"),
+    ],
+)
+def test_metadata_the_loop_cannot_use_is_refused_before_building(tmp_path, changes, message):
+    path = tmp_path / "crafted.npz"
+    with_metadata(path, **changes)
+    with pytest.raises(ModelFileError, match=message) as error:
+        load_agent(path)
+    assert "\n" not in str(error.value) and len(str(error.value)) <= 300
+
+
+@pytest.mark.parametrize("metadata", [[1, 2], None, "text", 3.5])
+def test_metadata_that_is_not_an_object_is_refused(tmp_path, metadata):
+    path = tmp_path / "odd.npz"
+    write(path, {"metadata.npy": metadata_bytes(metadata)})
+    with pytest.raises(ModelFileError, match="metadata must be a JSON object|unsupported model format"):
+        load_agent(path)
+
+
+def test_deeply_nested_metadata_and_corrupt_members_end_in_one_line(tmp_path):
+    nested = tmp_path / "nested.npz"
+    deep = b"[" * 100_000 + b"]" * 100_000
+    write(nested, {"metadata.npy": npy(np.frombuffer(deep, dtype=np.uint8))})
+    with pytest.raises(ModelFileError, match="not valid JSON"):
+        load_agent(nested)
+    corrupt = tmp_path / "corrupt.npz"
+    write(corrupt, {"metadata.npy": metadata_bytes({"format": FORMAT}) * 50})
+    raw = bytearray(corrupt.read_bytes())
+    raw[60:90] = b"\x00" * 30
+    corrupt.write_bytes(bytes(raw))
+    with pytest.raises(ModelFileError, match="not a drivestack model file"):
+        load_agent(corrupt)
+    bare = tmp_path / "bare.npz"
+    bare.write_bytes(npy(np.zeros(3)))
+    with pytest.raises(ModelFileError, match="not a drivestack model file"):
+        load_agent(bare)
+
+
+def test_a_header_claiming_more_than_the_member_holds_is_refused(tmp_path):
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (10**12,)})
+    path = tmp_path / "liar.npz"
+    write(
+        path,
+        {"metadata.npy": metadata_bytes({"format": FORMAT}), "array/q.npy": header.getvalue() + b"\0" * 64},
+    )
+    with pytest.raises(ModelFileError, match="declares"):
+        load_agent(path)
+
+
+def test_nan_weights_are_refused(tmp_path):
+    arrays, metadata = shipped()
+    arrays["0.weight"] = arrays["0.weight"].copy()
+    arrays["0.weight"][0, 0] = np.nan
+    path = tmp_path / "nan.npz"
+    members = {f"array/{name}.npy": npy(value) for name, value in arrays.items()}
+    write(path, {"metadata.npy": metadata_bytes(metadata), **members})
+    with pytest.raises(ModelFileError, match="array '0.weight' holds NaN or infinite values"):
+        load_agent(path)
+
+
+def test_encrypted_or_oddly_compressed_members_are_refused(tmp_path):
+    path = tmp_path / "encrypted.npz"
+    with_metadata(path)
+    raw = bytearray(path.read_bytes())
+    local = raw.find(b"PK\x03\x04")
+    central = raw.find(b"PK\x01\x02")
+    raw[local + 6] |= 0x1
+    raw[central + 8] |= 0x1
+    path.write_bytes(bytes(raw))
+    with pytest.raises(ModelFileError, match="encrypted or compressed in an unknown way"):
+        load_agent(path)
