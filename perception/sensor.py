@@ -25,11 +25,13 @@ class SensorConfig(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     range_m: float = Field(math.inf, gt=0, description="vehicles farther than this (|ds|) are not seen [m]")
-    position_noise_m: float = Field(0.0, ge=0, description="std of Gaussian noise on s and d [m]")
+    position_noise_m: float = Field(0.0, ge=0, le=100, description="std of Gaussian noise on s and d [m]")
     miss_probability: float = Field(0.0, ge=0, le=1, description="chance a vehicle is not detected")
-    false_positives: float = Field(0.0, ge=0, description="mean phantom vehicles per observation (Poisson)")
+    false_positives: float = Field(
+        0.0, ge=0, le=100, description="mean phantom vehicles per observation (Poisson)"
+    )
     false_positive_range_m: float = Field(
-        60.0, gt=0, description="phantoms appear within +-this of the ego [m]"
+        60.0, gt=0, le=1000, description="phantoms appear within +-this of the ego [m]"
     )
 
     @property

@@ -27,7 +27,9 @@ class GridConfig(BaseModel):
     lanes: Literal["absolute", "ego"] = "absolute"
     lateral_reach: int = Field(1, ge=1, le=8, description="ego mode: neighbour lanes on each side")
     footprint: bool = True
-    features: tuple[Literal["relative_speed", "ttc", "ego_speed", "ego_lateral"], ...] = ()
+    features: tuple[Literal["relative_speed", "ttc", "ego_speed", "ego_lateral"], ...] = Field(
+        (), max_length=4, description="optional features, each at most once"
+    )
     speed_scale: float = Field(20.0, gt=0, description="relative speed giving feature 1 [m/s]")
     ttc_horizon: float = Field(10.0, gt=0, description="time-to-collision giving feature 1 [s]")
     lane_code: Literal["binary", "sides"] = Field(
@@ -35,6 +37,12 @@ class GridConfig(BaseModel):
         description="where the ego is: its lane index in binary (the paper's; its size grows with the "
         "lane count) or, ego mode only, the lanes to its left and right (any lane count)",
     )
+
+    @model_validator(mode="after")
+    def _features_once(self) -> GridConfig:
+        if len(set(self.features)) != len(self.features):
+            raise ValueError("features: each feature at most once")
+        return self
 
     @model_validator(mode="after")
     def _sides_need_ego_rows(self) -> GridConfig:

@@ -16,10 +16,11 @@ from stack.apps.options import (
     SET_HELP,
     TRAIN_CONFIG,
     check_agent,
+    check_memory,
     chosen,
     configured,
     fail,
-    fresh_run_dir,
+    output_folder,
     print_version,
 )
 
@@ -76,7 +77,7 @@ def run(
     from stack.apps.run import run_and_report
 
     try:
-        interrupted = run_and_report(cfg, out or fresh_run_dir("run"), video, jobs, progress)
+        interrupted = run_and_report(cfg, output_folder(out, "run"), video, jobs, progress)
     except KeyboardInterrupt:
         fail("interrupted before the first episode finished; nothing to write")
     if interrupted:
@@ -106,7 +107,7 @@ def track(
     if not all(0 < v <= 40 for v in speed_list):
         fail(f"--speeds: every speed must be in (0, 40] m/s, got {speeds}")
     cfg = configured(config, sets, controller__lane_change_duration_s=duration)
-    folder = out or fresh_run_dir("track")
+    folder = output_folder(out, "track")
     track_and_report(cast(list[TrackController], names), speed_list, cfg, folder, progress, cast(Any, plants))
 
 
@@ -152,7 +153,7 @@ def compare(
         check_agent(cfg)
     from stack.apps.compare import compare_and_report
 
-    compare_and_report(configs, out or fresh_run_dir("compare"), jobs, progress, baseline)
+    compare_and_report(configs, output_folder(out, "compare"), jobs, progress, baseline)
 
 
 @app.command()
@@ -186,7 +187,7 @@ def reproduce_deepcars(
     """The paper's DeepCars table: tabular Q-learning, DQN and DDQN per network size, baselines."""
     from stack.deepcars.reproduce import reproduce
 
-    out = out or fresh_run_dir("deepcars")
+    out = output_folder(out, "deepcars")
     console = Console()
     with console.status("reproducing DeepCars") as status:
         reproduce(out, quick=quick, seed=seed, progress=lambda name: status.update(f"done: {name}"))
@@ -245,6 +246,8 @@ def train(
         )
     from stack.apps.train import train_and_report
 
-    folder = resume or out or fresh_run_dir(f"train-{cfg.train.algorithm}")
+    check_memory(cfg)
+
+    folder = resume or output_folder(out, f"train-{cfg.train.algorithm}")
     if train_and_report(cfg, folder, progress):
         sys.exit(130)

@@ -3,6 +3,7 @@ one-line error (exit 2), and checks done before any work."""
 
 from __future__ import annotations
 
+import os
 import re
 from datetime import datetime
 from pathlib import Path
@@ -90,6 +91,21 @@ def chosen(option: str, value: str, options: tuple[str, ...]) -> tuple[str, ...]
     return names
 
 
+def output_folder(out: Path | None, prefix: str) -> Path:
+    """`out` (or a fresh `runs/<prefix>-<time>`), created now and checked writable, so a bad
+    location fails in one line before any work."""
+    folder = out or fresh_run_dir(prefix)
+    if folder.exists() and not folder.is_dir():
+        fail(f"--out: {folder} is a file; expected a folder for the results")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        fail(f"--out: cannot create {folder} ({error.strerror})")
+    if not os.access(folder, os.W_OK):
+        fail(f"--out: {folder} is not writable")
+    return folder
+
+
 def fresh_run_dir(prefix: str) -> Path:
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
     return Path("runs") / f"{prefix}-{stamp}"
@@ -102,3 +118,15 @@ def print_version(value: bool) -> None:
 
         typer.echo(f"drivestack {version('drivestack')}")
         raise typer.Exit()
+
+
+def check_memory(config: RunConfig) -> None:
+    """Refuse, before anything is allocated, a replay buffer that does not fit in memory."""
+    from stack.apps.train_model import available_memory_bytes, replay_buffer_bytes
+
+    needed, available = replay_buffer_bytes(config), available_memory_bytes()
+    if config.train.algorithm != "tabular" and available is not None and needed > 0.8 * available:
+        fail(
+            f"train.buffer_size: {config.train.buffer_size} transitions need {needed / 2**30:.1f} GB; "
+            f"{available / 2**30:.1f} GB of memory is available"
+        )

@@ -22,6 +22,7 @@ from perception.sensor import SensorConfig
 from planner.safety import SafetyConfig
 from records import (
     AGENT_NAMES,
+    SEED_LIMIT,
     AgentName,
     GridConfig,
     one_of,
@@ -63,12 +64,12 @@ class PlannerConfig(Strict):
 
 class RunConfig(Strict):
     scenario: str | None = Field(None, description="the named world applied (stack.sim.scenarios)")
-    seed: int = Field(0, ge=0)
-    episodes: int = Field(5, ge=1)
+    seed: int = Field(0, ge=0, le=SEED_LIMIT - 1_000_000, description="seed of the first episode")
+    episodes: int = Field(5, ge=1, le=1_000_000)
     highway: HighwayConfig = HighwayConfig()
     sim: SimConfig = SimConfig()
-    control_rate_hz: float = Field(15.0, gt=0)
-    decision_period_s: float = Field(1.0, gt=0)
+    control_rate_hz: float = Field(15.0, gt=0, le=1000)
+    decision_period_s: float = Field(1.0, gt=0, le=60, description="[s]")
     perception: PerceptionConfig = PerceptionConfig()
     planner: PlannerConfig = PlannerConfig()
     controller: ControllerConfig = ControllerConfig()
@@ -117,6 +118,25 @@ class RunConfig(Strict):
         return max(1, round(self.decision_period_s * self.control_rate_hz))
 
 
+MAX_CONFIG_BYTES = 1_000_000
+"""Largest config file read [bytes]."""
+MAX_QUOTE = 80
+"""Longest quote of an offending value in an error message [characters]."""
+
+
+class _NoAliasLoader(yaml.SafeLoader):
+    """PyYAML's safe loader without anchors and aliases, so a small file cannot expand into a huge
+    document (a "billion laughs")."""
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        if self.check_event(yaml.AliasEvent) or getattr(self.peek_event(), "anchor", None):
+            event = self.peek_event()
+            raise yaml.composer.ComposerError(
+                None, None, "anchors and aliases (&, *) are not accepted", event.start_mark
+            )
+        return super().compose_node(parent, index)
+
+
 def _one_line(error: ValidationError, source: str, labels: dict[str, str]) -> str:
     first = error.errors()[0]
     key = ".".join(str(part) for part in first["loc"])
@@ -125,7 +145,7 @@ def _one_line(error: ValidationError, source: str, labels: dict[str, str]) -> st
     if first["type"] == "extra_forbidden":
         message = "unknown key"
     elif first["type"] != "value_error" and not isinstance(first.get("input"), dict):
-        message = f"{message} (got {first.get('input')!r})"
+        message = f"{message} (got {repr(first.get('input'))[:MAX_QUOTE]})"
     return f"{source}: {key}: {message}" if key else f"{source}: {message}"
 
 
@@ -187,12 +207,18 @@ def load_config(path: Path | str, labels: dict[str, str] | None = None, **overri
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"{path}: no such config file")
+    if path.stat().st_size > MAX_CONFIG_BYTES:
+        raise ConfigError(f"{path}: {path.stat().st_size} bytes; a config is at most {MAX_CONFIG_BYTES}")
     try:
-        data = yaml.safe_load(path.read_text()) or {}
+        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_NoAliasLoader) or {}
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not UTF-8 text") from None
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark else ""
-        raise ConfigError(f"{path}: not valid YAML{where}") from None
+        problem = getattr(error, "problem", None)
+        reason = f" ({str(problem)[:MAX_QUOTE]})" if problem else ""
+        raise ConfigError(f"{path}: not valid YAML{where}{reason}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping of keys at the top level")
     return build_config(data, str(path), labels, **overrides)

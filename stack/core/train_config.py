@@ -15,7 +15,7 @@ from stack.sim import scenarios
 class Strict(BaseModel):
     """A config section: unknown keys are errors, assignments are validated."""
 
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
 
 class RewardConfig(Strict):
@@ -53,7 +53,7 @@ class TrainConfig(Strict):
     """`drivestack train`: algorithm, budget, network, SB3 hyper-parameters, reward, validation."""
 
     algorithm: Annotated[LearnedAgentName, one_of("algorithm", LEARNED_AGENTS)] = "ddqn"
-    steps: int = Field(50_000, ge=1)
+    steps: int = Field(50_000, ge=1, le=1_000_000_000)
     envs: int = Field(1, ge=1, le=64, description="environments stepped in parallel processes (DDQN / DQN)")
     scenarios: dict[str, float] = Field(
         default_factory=dict,
@@ -63,7 +63,7 @@ class TrainConfig(Strict):
     encoding: Annotated[Encoding, one_of("encoding", ENCODINGS)] = "observation"
     network: Annotated[str, one_of("network", tuple(NET_ARCHS))] = "shallow"
     learning_rate: float = Field(5e-4, gt=0)
-    buffer_size: int = Field(50_000, ge=1)
+    buffer_size: int = Field(50_000, ge=1, le=50_000_000)
     learning_starts: int = Field(1_000, ge=0)
     batch_size: int = Field(64, ge=1)
     gamma: float = Field(0.95, gt=0, le=1)

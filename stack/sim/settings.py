@@ -67,8 +67,8 @@ class HighwayConfig(BaseModel):
     road: Annotated[RoadName, one_of("road", ROADS)] = "highway"
     lanes_count: int = Field(4, ge=1, le=10)
     vehicles_count: int = Field(50, ge=0, le=500)
-    vehicles_density: float = Field(1.0, gt=0)
-    duration: float = Field(40.0, gt=0, description="episode length [s]")
+    vehicles_density: float = Field(1.0, gt=0, le=10)
+    duration: float = Field(40.0, gt=0, le=3600, description="episode length [s]")
     simulation_frequency: int = Field(15, ge=1, le=1000, description="physics rate [Hz]")
     ego_spacing: float = Field(2.0, gt=0, description="ratio of the ego's spawn gap to the default")
     initial_lane_id: int | None = Field(None, ge=0, description="the ego's lane at spawn (None: random)")

@@ -1,0 +1,82 @@
+"""Hostile configs and locations: one line, exit 2, before any work (issue: hardening)."""
+
+import time
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from stack.apps.cli import app
+from tests.test_cli import tiny_config_file
+
+BOMB = "a: &a [x, x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a]\n" + "".join(
+    f"{chr(99 + i)}: &{chr(99 + i)} [{', '.join([f'*{chr(98 + i)}'] * 9)}]\n" for i in range(7)
+)
+
+
+def one_line_refusal(arguments: list[str], expected: str) -> None:
+    start = time.perf_counter()
+    result = CliRunner().invoke(app, arguments)
+    assert result.exit_code == 2, result.output
+    assert expected in result.output, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and len(lines[0]) <= 300, result.output[:500]
+    assert time.perf_counter() - start < 5
+
+
+@pytest.mark.parametrize(
+    ("content", "expected"),
+    [
+        (BOMB + "seed: *i\n", "anchors and aliases (&, *) are not accepted"),
+        (BOMB + "perception: {features: *i}\n", "anchors and aliases (&, *) are not accepted"),
+        ("decision_period_s: .inf\n", "decision_period_s"),
+        ("seed: 1180591620717411303424\n", "seed: Input should be less than or equal to"),
+        (
+            "perception: {cells_ahead: 100000000}\n",
+            "perception.cells_ahead: Input should be less than or equal to 200",
+        ),
+        ("highway: {duration: .inf}\n", "highway.duration"),
+        ("perception: {sensor: {false_positives: 1.0e+12}}\n", "false_positives: Input should be less than"),
+        (
+            "perception: {features: [" + "ttc, " * 20_000 + "]}\n",
+            "perception.features: Tuple should have at most 4",
+        ),
+    ],
+)
+def test_hostile_configs_are_refused_in_one_line(tmp_path, content, expected):
+    path = tmp_path / "hostile.yaml"
+    path.write_text(content)
+    one_line_refusal(["run", "-c", str(path), "--out", str(tmp_path / "out")], expected)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_config_that_is_not_utf8_or_too_large_is_refused(tmp_path):
+    binary = tmp_path / "latin.yaml"
+    binary.write_bytes(b"seed: 1 # caf\xe9\n")
+    one_line_refusal(["run", "-c", str(binary)], "not UTF-8 text")
+    large = tmp_path / "large.yaml"
+    large.write_text("# " + "x" * 2_000_000 + "\n")
+    one_line_refusal(["run", "-c", str(large)], "a config is at most")
+
+
+def test_output_locations_are_checked_before_any_work(tmp_path):
+    config = str(tiny_config_file(tmp_path))
+    existing = tmp_path / "results.txt"
+    existing.write_text("keep me")
+    for command in (["run"], ["compare", "--agents", "keep-lane"], ["track", "--controller", "pid"]):
+        one_line_refusal([*command, "-c", config, "--out", str(existing)], "is a file; expected a folder")
+    assert existing.read_text() == "keep me"
+    one_line_refusal(
+        ["run", "-c", config, "--out", str(existing / "below" / "a file")], "--out: cannot create"
+    )
+
+
+def test_a_replay_buffer_larger_than_memory_is_refused_before_allocation(tmp_path):
+    config = tmp_path / "train.yaml"
+    config.write_text(
+        yaml.safe_dump({"train": {"buffer_size": 50_000_000}, "perception": {"cells_ahead": 200}})
+    )
+    one_line_refusal(
+        ["train", "-c", str(config), "--out", str(tmp_path / "t")], "train.buffer_size: 50000000"
+    )
+    assert not (tmp_path / "t").exists()
