@@ -22,6 +22,7 @@ from stack.apps.options import (
     fail,
     output_folder,
     print_version,
+    train_or_fail,
 )
 
 app = typer.Typer(
@@ -244,10 +245,8 @@ def train(
             sim__plant=plant,
             seed=seed,
         )
-    from stack.apps.train import train_and_report
-
     check_memory(cfg)
 
     folder = resume or output_folder(out, f"train-{cfg.train.algorithm}")
-    if train_and_report(cfg, folder, progress):
+    if train_or_fail(cfg, folder, progress):
         sys.exit(130)

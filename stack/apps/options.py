@@ -130,3 +130,15 @@ def check_memory(config: RunConfig) -> None:
             f"train.buffer_size: {config.train.buffer_size} transitions need {needed / 2**30:.1f} GB; "
             f"{available / 2**30:.1f} GB of memory is available"
         )
+
+
+def train_or_fail(config: RunConfig, folder: Path, progress: bool) -> bool:
+    """`drivestack train` in `folder`; a checkpoint that cannot be resumed is a one-line error.
+    True when interrupted (resumable)."""
+    from planner.model_file import ModelFileError
+    from stack.apps.train import train_and_report
+
+    try:
+        return train_and_report(config, folder, progress)
+    except ModelFileError as error:
+        fail(str(error))

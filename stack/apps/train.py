@@ -10,21 +10,21 @@ from __future__ import annotations
 
 import json
 import signal
+import sys
 import time
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
-from rich.console import Console
+import numpy as np
 from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import CallbackList, ProgressBarCallback
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import SubprocVecEnv
 
 from planner.learned import export_q_network, save_q_table
-from planner.model_file import CHECKPOINT_BYTES, load_model, save_model
+from planner.model_file import CHECKPOINT_BYTES, ModelFileError, load_model, save_model
 from planner.tabular import QLearning
 from planner.validation import RealTimeValidation, Validation, kept_models
 from records import child_seed
@@ -36,6 +36,7 @@ from stack.apps.train_model import (
     monitored_env,
     plot_training_curve,
     restore_dqn_state,
+    terminate_as_interrupt,
 )
 from stack.core.config import RunConfig, load_config, write_config
 from stack.core.decision_env import HierarchicalHighwayEnv
@@ -46,10 +47,6 @@ FINAL = "final.npz"
 
 SaveModel = Callable[[Any, Path, dict], Path]
 """`export_q_network` or `save_q_table`: (model, path, metadata) -> the file written."""
-
-
-def _terminate_as_interrupt(signum: int, frame: FrameType | None) -> None:
-    raise KeyboardInterrupt
 
 
 class Trainer:
@@ -80,13 +77,19 @@ class Trainer:
     def run(self) -> dict:
         self.out.mkdir(parents=True, exist_ok=True)
         write_config(self.config, self.out / "config.yaml", "the resolved config; --resume reads it")
-        previous = signal.signal(signal.SIGTERM, _terminate_as_interrupt)
+        previous = signal.signal(signal.SIGTERM, terminate_as_interrupt)
         interrupted = False
         try:
             steps = self._train_tabular() if self.config.train.algorithm == "tabular" else self._train_dqn()
         except KeyboardInterrupt:
             interrupted = True
-            steps = self._save_checkpoint()
+            held = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, signal.SIGTERM)}
+            print("interrupted: writing the checkpoint (further signals wait for it)", file=sys.stderr)
+            try:
+                steps = self._save_checkpoint()
+            finally:
+                for sig, handler in held.items():
+                    signal.signal(sig, handler)
         finally:
             signal.signal(signal.SIGTERM, previous)
             self.env.close()
@@ -119,8 +122,14 @@ class Trainer:
         self.model = build_dqn(self.config, self.env, self.out / "tensorboard")
         resumed = (self.out / CHECKPOINT).is_file()
         if resumed:
-            arrays, metadata = load_model(self.out / CHECKPOINT, CHECKPOINT_BYTES)
-            restore_dqn_state(self.model, arrays, metadata["counters"])
+            arrays, metadata = self._checkpoint()
+            try:
+                restore_dqn_state(self.model, arrays, metadata["counters"])
+            except (KeyError, RuntimeError, ValueError) as error:
+                message = str(error).splitlines()[0][:120] if str(error) else type(error).__name__
+                raise ModelFileError(
+                    f"{self.out / CHECKPOINT}: does not fit this run's model ({message})"
+                ) from None
             self._restore_common(metadata)
         self.validation = self._validation_callback(export_q_network)
         callbacks = [self.validation, EveryNSteps(self.config.train.checkpoint_every, self._save_checkpoint)]
@@ -147,7 +156,9 @@ class Trainer:
             seed=self.config.seed,
         )
         if (self.out / CHECKPOINT).is_file():
-            arrays, metadata = load_model(self.out / CHECKPOINT, CHECKPOINT_BYTES)
+            arrays, metadata = self._checkpoint()
+            if arrays.get("q_table", np.empty(0)).shape != self.model.table.shape:
+                raise ModelFileError(f"{self.out / CHECKPOINT}: its q_table does not fit this run's table")
             self.model.table[...] = arrays["q_table"]
             self.model.steps = metadata["counters"]["num_timesteps"]
             self._restore_common(metadata)
@@ -170,6 +181,13 @@ class Trainer:
         return self._save_checkpoint()
 
     # --- shared -------------------------------------------------------------------------------
+    def _checkpoint(self) -> tuple[dict, dict]:
+        """The run's checkpoint, refused in one line (ModelFileError) unless it is one."""
+        arrays, metadata = load_model(self.out / CHECKPOINT, CHECKPOINT_BYTES)
+        if metadata.get("kind") != "checkpoint" or not isinstance(metadata.get("counters"), dict):
+            raise ModelFileError(f"{self.out / CHECKPOINT}: not a training checkpoint")
+        return arrays, metadata
+
     def _restore_common(self, metadata: dict) -> None:
         self.history, self.best = RealTimeValidation.restore(metadata["validation"])
         self.elapsed_before = metadata.get("elapsed_s", 0.0)
@@ -223,18 +241,15 @@ class Trainer:
 def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:
     """Train (or resume) in `folder` and print the outcome; True when interrupted (resumable)."""
     summary = Trainer(config, folder, progress=progress).run()
-    best = summary["best_validation"]
-    console = Console()
-    console.print(
-        f"{summary['algorithm']}: {summary['steps']} steps in {summary['wall_time_s']:.0f} s; "
-        + (
+    best, interrupted = summary["best_validation"], bool(summary["interrupted"])
+    found = (
+        "no validation yet"
+        if not best
+        else (
             f"best validation at step {best['step']}: collision rate {best['collision_rate']:.1%}, "
             f"mean return {best['mean_return']:.2f}, mean speed {best['mean_speed']:.2f} m/s"
-            if best
-            else "no validation yet"
         )
     )
-    console.print(
-        f"run folder: {folder}" + (" (interrupted: resume with --resume)" if summary["interrupted"] else "")
-    )
-    return bool(summary["interrupted"])
+    print(f"{summary['algorithm']}: {summary['steps']} steps in {summary['wall_time_s']:.0f} s; {found}")
+    print(f"run folder: {folder}" + (" (interrupted: resume with --resume)" if interrupted else ""))
+    return interrupted

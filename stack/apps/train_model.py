@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from types import FrameType
 
 import gymnasium as gym
 import matplotlib.pyplot as plt
@@ -71,6 +72,11 @@ def available_memory_bytes() -> int | None:
     except (OSError, ValueError, IndexError):
         return None
     return None
+
+
+def terminate_as_interrupt(signum: int, frame: FrameType | None) -> None:
+    """A SIGTERM handler that stops training as Ctrl-C does: with a checkpoint."""
+    raise KeyboardInterrupt
 
 
 def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQN:
