@@ -28,6 +28,9 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/oracle_cost.py
 	$(BIN)/python benchmarks/grid_speed.py
 	$(BIN)/python benchmarks/deepcars_speed.py
+	$(BIN)/python benchmarks/train_rate.py
+	$(BIN)/python benchmarks/tracking_table.py
+	$(BIN)/python benchmarks/decision_ceiling.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

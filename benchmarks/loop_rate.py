@@ -65,7 +65,7 @@ def main() -> None:
     print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}")
     print(f"bare highway-env, stack config (cheap observation): {bare_rate(stack_env, seeds):7.1f} frames/s")
     print(f"bare highway-env, Kinematics observation:          {bare_rate(stock_env, seeds):7.1f} frames/s")
-    for backend in ("stock", "fast"):
+    for backend in ("stock", "fast", "vector"):
         backend_config = config.model_copy(update={"sim": config.sim.model_copy(update={"backend": backend})})
         rate = loop_rate(backend_config, seeds)
         print(
