@@ -18,6 +18,8 @@ from stack.core.config import RunConfig, write_config
 from stack.core.episodes import run
 from stack.core.metrics import EpisodeResult
 
+LANE_CHANGE_SPEED = 0.3
+"""Lateral speed [m/s] above which an episode counts as changing lane in the traces plot."""
 VIDEO_FPS = 15
 """Frames per second of the GIF (one frame per control tick at highway-env's default 15 Hz)."""
 
@@ -43,7 +45,7 @@ def write_results(
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    plot_traces(episodes, out / "traces.png")
+    plot_traces(episodes, out / "traces.png", summary)
     if episodes[0].snapshot is not None:
         plot_grid_over_road(*episodes[0].snapshot, out / "grid.png")
     if frames:
@@ -51,18 +53,44 @@ def write_results(
         imageio.mimsave(out / "episode0.gif", frames[::2], duration=2000 / VIDEO_FPS, loop=0)  # type: ignore[arg-type]
 
 
-def plot_traces(episodes: list[EpisodeResult], path: Path) -> None:
-    """Ego speed and lateral position over time, one line per episode."""
+FEW_EPISODES = 8
+"""Up to this many episodes, traces are drawn one line each; beyond, as median and band."""
+
+
+def plot_traces(episodes: list[EpisodeResult], path: Path, summary: dict) -> None:
+    """Ego speed and lateral motion over time: one line per episode for a few episodes; for many,
+    the median speed with its 10-90 % band and how many episodes are changing lane at each time."""
     figure, (speed_axis, lateral_axis) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
-    for episode in episodes:
-        label = f"ep {episode.episode}" + (" (crash)" if episode.crashed else "")
-        speed_axis.plot(episode.trace["time"], episode.trace["speed"], label=label)
-        lateral_axis.plot(episode.trace["time"], episode.trace["d"])
+    first, last = episodes[0].seed, episodes[-1].seed
+    figure.suptitle(
+        f"{summary['agent']} + {summary['controller']}, {summary.get('scenario') or 'configured world'}, "
+        f"{summary.get('plant', 'kinematic')} plant: {len(episodes)} episodes, seeds {first}-{last}"
+    )
+    if len(episodes) <= FEW_EPISODES:
+        for episode in episodes:
+            label = f"seed {episode.seed}" + (" (crash)" if episode.crashed else "")
+            speed_axis.plot(episode.trace["time"], episode.trace["speed"], label=label)
+            lateral_axis.plot(episode.trace["time"], episode.trace["d"])
+        lateral_axis.set_ylabel("lateral position d [m]")
+        lateral_axis.invert_yaxis()
+        speed_axis.legend(loc="lower right", fontsize="small", ncol=4)
+    else:
+        longest = max(episodes, key=lambda e: len(e.trace["time"]))
+        time = np.asarray(longest.trace["time"])
+        speed = np.full((len(episodes), len(time)), np.nan)
+        lateral_speed = np.full_like(speed, np.nan)
+        for row, episode in enumerate(episodes):
+            ticks = len(episode.trace["time"])
+            speed[row, :ticks] = episode.trace["speed"]
+            lateral_speed[row, 1:ticks] = np.abs(np.diff(episode.trace["d"])) / np.diff(time[:ticks])
+        low, median, high = np.nanpercentile(speed, [10, 50, 90], axis=0)
+        speed_axis.fill_between(time, low, high, alpha=0.3, label="10-90 % of episodes")
+        speed_axis.plot(time, median, label="median")
+        speed_axis.legend(loc="lower right", fontsize="small")
+        lateral_axis.plot(time, np.sum(lateral_speed > LANE_CHANGE_SPEED, axis=0))
+        lateral_axis.set_ylabel("episodes changing lane")
     speed_axis.set_ylabel("speed [m/s]")
-    lateral_axis.set_ylabel("lateral position d [m]")
-    lateral_axis.invert_yaxis()
     lateral_axis.set_xlabel("time [s]")
-    speed_axis.legend(loc="lower right", fontsize="small", ncol=4)
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
