@@ -270,3 +270,33 @@ def test_a_mix_of_roads_needs_an_encoding_of_one_size(tmp_path):
         and "train.scenarios: the observation encoding has a different size" in result.output
     )
     assert not (tmp_path / "o").exists()
+
+
+def test_a_stopped_and_resumed_run_has_the_counts_of_an_uninterrupted_one(tmp_path, monkeypatch):
+    """SIGTERM (here: the handler, called at the 25th step of the env class, validation included)
+    stops at the next consistent point:
+    the checkpoint holds every transition collected and every gradient step taken, so the resumed
+    run ends with the transitions and updates of a run never stopped."""
+    config = build_config(TINY)
+    Trainer(config, tmp_path / "whole", progress=False).run()
+    whole = load_model(tmp_path / "whole" / "checkpoint.npz", 2**31)[1]["counters"]
+    trainer = Trainer(config, tmp_path / "cut", progress=False)
+    real_step = type(trainer.env.unwrapped).step
+    calls = {"n": 0}
+
+    def step_then_signal(self, action):
+        calls["n"] += 1
+        if calls["n"] == 25:
+            trainer._request_stop(15, None)
+            trainer._request_stop(15, None)  # a second signal waits too
+        return real_step(self, action)
+
+    monkeypatch.setattr(type(trainer.env.unwrapped), "step", step_then_signal)
+    assert trainer.run()["interrupted"]
+    stopped = load_model(tmp_path / "cut" / "checkpoint.npz", 2**31)[1]["counters"]
+    assert 0 < stopped["num_timesteps"] < 40 and stopped["buffer_pos"] == stopped["num_timesteps"]
+    monkeypatch.setattr(type(trainer.env.unwrapped), "step", real_step)
+    Trainer.resume(tmp_path / "cut", steps=None, progress=False).run()
+    resumed = load_model(tmp_path / "cut" / "checkpoint.npz", 2**31)[1]["counters"]
+    for counter in ("num_timesteps", "n_updates", "buffer_pos"):
+        assert resumed[counter] == whole[counter], counter

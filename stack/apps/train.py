@@ -8,7 +8,6 @@ buffer and counters, so `--resume DIR` continues where the last checkpoint left 
 
 from __future__ import annotations
 
-import json
 import signal
 import sys
 import time
@@ -26,17 +25,18 @@ from stable_baselines3.common.vec_env import SubprocVecEnv
 from planner.learned import export_q_network, save_q_table
 from planner.model_file import CHECKPOINT_BYTES, ModelFileError, load_model, save_model
 from planner.tabular import QLearning
-from planner.validation import RealTimeValidation, Validation, kept_models
+from planner.validation import RealTimeValidation, Validation
 from records import child_seed
 from stack.apps.train_model import (
-    EveryNSteps,
+    Checkpoints,
+    StopTraining,
     build_dqn,
     dqn_state,
     model_metadata,
     monitored_env,
-    plot_training_curve,
     restore_dqn_state,
-    terminate_as_interrupt,
+    worker_env,
+    write_training_summary,
 )
 from stack.core.config import RunConfig, load_config, write_config
 from stack.core.decision_env import HierarchicalHighwayEnv
@@ -58,7 +58,7 @@ class Trainer:
         self.config, self.out, self.progress = config, Path(out), progress
         envs = config.train.envs
         self.env: Monitor | SubprocVecEnv = (
-            monitored_env(config) if envs == 1 else SubprocVecEnv([partial(monitored_env, config)] * envs)
+            monitored_env(config) if envs == 1 else SubprocVecEnv([partial(worker_env, config)] * envs)
         )
         self.validation_env = HierarchicalHighwayEnv(config)
         self.history: list[Validation] = []
@@ -77,23 +77,33 @@ class Trainer:
     def run(self) -> dict:
         self.out.mkdir(parents=True, exist_ok=True)
         write_config(self.config, self.out / "config.yaml", "the resolved config; --resume reads it")
-        previous = signal.signal(signal.SIGTERM, terminate_as_interrupt)
+        self.stop_requested = False
+        previous = {sig: signal.signal(sig, self._request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
         interrupted = False
         try:
             steps = self._train_tabular() if self.config.train.algorithm == "tabular" else self._train_dqn()
+        except StopTraining:
+            interrupted, steps = True, self._steps_done()
         except KeyboardInterrupt:
-            interrupted = True
-            held = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, signal.SIGTERM)}
-            print("interrupted: writing the checkpoint (further signals wait for it)", file=sys.stderr)
-            try:
-                steps = self._save_checkpoint()
-            finally:
-                for sig, handler in held.items():
-                    signal.signal(sig, handler)
+            self.stop_requested = interrupted = True
+            steps = self._save_checkpoint()
         finally:
-            signal.signal(signal.SIGTERM, previous)
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
             self.env.close()
         return self._finish(steps, interrupted)
+
+    def _request_stop(self, signum: int, frame: object) -> None:
+        """SIGINT / SIGTERM: stop at the next consistent point, with a checkpoint; a second
+        signal only says so again (it never cuts the checkpoint short)."""
+        print(
+            "stopping: the checkpoint is written after the current step (further signals wait for it)",
+            file=sys.stderr,
+        )
+        self.stop_requested = True
+
+    def _steps_done(self) -> int:
+        return int(self.model.steps if isinstance(self.model, QLearning) else self.model.num_timesteps)
 
     def _improved(self, save: SaveModel) -> Callable[[Any, Validation], None]:
         def on_improvement(model: Any, validation: Validation) -> None:
@@ -132,7 +142,10 @@ class Trainer:
                 ) from None
             self._restore_common(metadata)
         self.validation = self._validation_callback(export_q_network)
-        callbacks = [self.validation, EveryNSteps(self.config.train.checkpoint_every, self._save_checkpoint)]
+        checkpoints = Checkpoints(
+            self.config.train.checkpoint_every, self._save_checkpoint, lambda: self.stop_requested
+        )
+        callbacks = [self.validation, checkpoints]
         if self.progress:
             callbacks.append(ProgressBarCallback())
         remaining = self.config.train.steps - self.model.num_timesteps
@@ -167,8 +180,10 @@ class Trainer:
 
         def on_step(agent: QLearning, info: dict) -> bool:
             validation.at_step(agent.steps)
-            if agent.steps % train.checkpoint_every == 0:
+            if agent.steps % train.checkpoint_every == 0 or self.stop_requested:
                 self._save_checkpoint()
+            if self.stop_requested:
+                raise StopTraining
             return True
 
         self.validation = validation
@@ -219,23 +234,8 @@ class Trainer:
             else:
                 export_q_network(self.model, self.out / FINAL, self.metadata(steps))
         history = self.validation.history if hasattr(self, "validation") else self.history
-        plot_training_curve(history, self.out / "training_curve.png")
-        kept = kept_models(history)
-        best = kept[-1] if kept else None
-        summary = {
-            "algorithm": self.config.train.algorithm,
-            "network": self.config.train.network,
-            "steps": steps,
-            "target_steps": self.config.train.steps,
-            "wall_time_s": round(self._elapsed(), 1),
-            "interrupted": interrupted,
-            "best_validation": best.__dict__ if best else None,
-            "validations": len(history),
-            "best_model": str(self.out / BEST) if (self.out / BEST).is_file() else None,
-        }
-        (self.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-        (self.out / "validation.json").write_text(json.dumps([v.__dict__ for v in history], indent=2) + "\n")
-        return summary
+        run = {"steps": steps, "wall_time_s": round(self._elapsed(), 1), "interrupted": interrupted}
+        return write_training_summary(self.config, self.out, history, run, self.out / BEST)
 
 
 def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:

@@ -5,9 +5,10 @@ buffer, plus JSON counters) so `--resume` continues exactly, and the training cu
 
 from __future__ import annotations
 
+import json
+import signal
 from collections.abc import Callable
 from pathlib import Path
-from types import FrameType
 
 import gymnasium as gym
 import matplotlib.pyplot as plt
@@ -31,28 +32,48 @@ ALGORITHMS: dict[str, type[DQN]] = {"ddqn": DoubleDQN, "dqn": DQN}
 BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
 
 
-class EveryNSteps(BaseCallback):
-    """Call `action()` whenever the environment steps pass a multiple of `every` (with N
-    environments they advance N at a time)."""
+class StopTraining(Exception):
+    """Raised once a requested stop has its checkpoint written."""
 
-    def __init__(self, every: int, action: Callable[[], object]) -> None:
+
+class Checkpoints(BaseCallback):
+    """Checkpoints at a consistent point, the start of a rollout: every transition collected so
+    far is in the buffer and every gradient step due is done, so a resumed run continues with the
+    same counts as an uninterrupted one. `save()` whenever the steps pass a multiple of `every`
+    (N environments advance N at a time), and when `stop_requested()` turns true: then the
+    checkpoint is written and `StopTraining` raised."""
+
+    def __init__(self, every: int, save: Callable[[], object], stop_requested: Callable[[], bool]) -> None:
         super().__init__()
-        self.every, self.action = every, action
+        self.every, self.save, self.stop_requested = every, save, stop_requested
         self.done = 0
 
     def _on_training_start(self) -> None:
         self.done = self.num_timesteps // self.every
 
-    def _on_step(self) -> bool:
-        if self.num_timesteps // self.every > self.done:
+    def _on_rollout_start(self) -> None:
+        self.num_timesteps = self.model.num_timesteps
+        due = self.num_timesteps // self.every > self.done
+        if due or self.stop_requested():
             self.done = self.num_timesteps // self.every
-            self.action()
+            self.save()
+        if self.stop_requested():
+            raise StopTraining
+
+    def _on_step(self) -> bool:
         return True
 
 
 def monitored_env(config: RunConfig) -> Monitor:
     """The training env (SB3's `Monitor` keeps episode returns for the logs)."""
     return Monitor(HierarchicalHighwayEnv(config))
+
+
+def worker_env(config: RunConfig) -> Monitor:
+    """The training env in a worker process, deaf to Ctrl-C: the learner stops the run (with a
+    checkpoint) and closes the workers itself."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return monitored_env(config)
 
 
 def replay_buffer_bytes(config: RunConfig) -> int:
@@ -72,11 +93,6 @@ def available_memory_bytes() -> int | None:
     except (OSError, ValueError, IndexError):
         return None
     return None
-
-
-def terminate_as_interrupt(signum: int, frame: FrameType | None) -> None:
-    """A SIGTERM handler that stops training as Ctrl-C does: with a checkpoint."""
-    raise KeyboardInterrupt
 
 
 def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQN:
@@ -191,3 +207,24 @@ def plot_training_curve(history: list[Validation], path: Path) -> None:
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
+
+
+def write_training_summary(
+    config: RunConfig, out: Path, history: list[Validation], run: dict, best: Path
+) -> dict:
+    """`summary.json` (the run's `steps`, `wall_time_s`, `interrupted`, the best validation and
+    model), `validation.json` and `training_curve.png` in `out`; returns the summary."""
+    plot_training_curve(history, out / "training_curve.png")
+    kept = kept_models(history)
+    summary = {
+        "algorithm": config.train.algorithm,
+        "network": config.train.network,
+        "target_steps": config.train.steps,
+        **run,
+        "best_validation": kept[-1].__dict__ if kept else None,
+        "validations": len(history),
+        "best_model": str(best) if best.is_file() else None,
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (out / "validation.json").write_text(json.dumps([v.__dict__ for v in history], indent=2) + "\n")
+    return summary
