@@ -1,3 +1,3 @@
-from stack.apps.cli import app
+from stack.apps.cli import main
 
-app(prog_name="drivestack")
+main()

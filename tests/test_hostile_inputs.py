@@ -92,3 +92,24 @@ def test_resume_from_a_broken_or_foreign_checkpoint_is_one_line(tmp_path):
     one_line_refusal(["train", "--resume", str(folder), "--no-progress"], "not a training checkpoint")
     (folder / "checkpoint.npz").write_bytes(DEFAULT_MODEL.read_bytes()[:5000])
     one_line_refusal(["train", "--resume", str(folder), "--no-progress"], "not a drivestack model file")
+
+
+def test_an_unforeseen_failure_is_one_line_pointing_at_debug(capsys):
+    import typer
+
+    from stack.apps.options import guarded
+
+    broken = typer.Typer()
+
+    @broken.command()
+    def explode() -> None:
+        raise RuntimeError("the flux capacitor\nis empty")
+
+    with pytest.raises(SystemExit) as stopped:
+        guarded(broken, [])
+    assert stopped.value.code == 1
+    assert capsys.readouterr().err == (
+        "internal error: RuntimeError: the flux capacitor (run with --debug for the traceback)\n"
+    )
+    with pytest.raises(RuntimeError):
+        guarded(broken, ["--debug"])

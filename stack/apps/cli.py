@@ -15,30 +15,32 @@ from stack.apps.options import (
     PLANT_HELP,
     SET_HELP,
     TRAIN_CONFIG,
+    VERSION_OPTION,
     check_agent,
     check_memory,
     chosen,
     configured,
     fail,
+    guarded,
     output_folder,
-    print_version,
     train_or_fail,
 )
 
 app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,
-    pretty_exceptions_show_locals=False,
+    pretty_exceptions_enable=False,
     help="A hierarchical highway driving stack.",
 )
 
 
+def main() -> None:
+    """The `drivestack` entry point (see `guarded`)."""
+    guarded(app)
+
+
 @app.callback()
-def main(
-    version: bool = typer.Option(
-        False, "--version", callback=print_version, is_eager=True, help="Print the version and exit."
-    ),
-) -> None:
+def root(version: bool = VERSION_OPTION) -> None:
     """Perception grid -> decision agent -> lane-change controllers, closed-loop on highway-env."""
 
 

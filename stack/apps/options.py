@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 from datetime import datetime
 from pathlib import Path
 from typing import NoReturn
@@ -111,7 +112,7 @@ def fresh_run_dir(prefix: str) -> Path:
     return Path("runs") / f"{prefix}-{stamp}"
 
 
-def print_version(value: bool) -> None:
+def _print_version(value: bool) -> None:
     """`--version`: the installed distribution's version, then exit."""
     if value:
         from importlib.metadata import version
@@ -142,3 +143,28 @@ def train_or_fail(config: RunConfig, folder: Path, progress: bool) -> bool:
         return train_and_report(config, folder, progress)
     except ModelFileError as error:
         fail(str(error))
+
+
+def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
+    """Run the CLI `app`; a failure nobody foresaw is one line pointing at `--debug` (which shows
+    the traceback) instead of a traceback."""
+    arguments = list(sys.argv[1:] if arguments is None else arguments)
+    debug = "--debug" in arguments
+    if debug:
+        arguments.remove("--debug")
+    try:
+        app(arguments, prog_name="drivestack")
+    except Exception as error:  # noqa: BLE001 - the last line of defence, deliberately broad
+        if debug:
+            raise
+        message = str(error).splitlines()[0][:200] if str(error) else ""
+        print(
+            f"internal error: {type(error).__name__}: {message} (run with --debug for the traceback)",
+            file=sys.stderr,
+        )
+        sys.exit(1)
+
+
+VERSION_OPTION = typer.Option(
+    False, "--version", callback=_print_version, is_eager=True, help="Print the version and exit."
+)
