@@ -38,8 +38,27 @@ def grid_panel(grid: OccupancyGrid, width: int) -> np.ndarray:
 def plot_grid_over_road(world: WorldState, grid: OccupancyGrid, path: Path) -> None:
     """Vehicles (lane frame, relative to the ego) with the grid cells they occupy shaded."""
     config = grid.config
-    figure, axis = plt.subplots(figsize=(11, 1.0 + 0.6 * world.lanes_count))
+    figure, axis = plt.subplots(figsize=(11, 1.6 + 0.6 * world.lanes_count))
     half_lane = world.lane_width / 2
+    seen = {grid.row_lane(row) for row in range(grid.cells.shape[0])}
+    left, right = (
+        -(config.cells_behind + 0.5) * config.cell_length,
+        (config.cells_ahead - 0.5) * config.cell_length,
+    )
+    for lane in range(world.lanes_count):
+        if lane not in seen:
+            centre = world.lane_offsets[lane]
+            axis.add_patch(
+                Rectangle(
+                    (left, centre - half_lane),
+                    right - left,
+                    2 * half_lane,
+                    facecolor="0.85",
+                    hatch="//",
+                    edgecolor="0.6",
+                    lw=0,
+                )
+            )
     for row in range(grid.cells.shape[0]):
         lane = grid.row_lane(row)
         if not 0 <= lane < world.lanes_count:
@@ -77,10 +96,35 @@ def plot_grid_over_road(world: WorldState, grid: OccupancyGrid, path: Path) -> N
         -(config.cells_behind + 1) * config.cell_length, (config.cells_ahead + 1) * config.cell_length
     )
     axis.set_ylim(world.lane_offsets[-1] + half_lane + 1, world.lane_offsets[0] - half_lane - 1)
+    axis.add_patch(
+        Rectangle(
+            (left, world.lane_offsets[0] - half_lane),
+            right - left,
+            world.lane_offsets[-1] - world.lane_offsets[0] + 2 * half_lane,
+            fill=False,
+            edgecolor="black",
+            lw=1.2,
+            linestyle="--",
+        )
+    )
+    axis.set_yticks(world.lane_offsets, [f"lane {lane}" for lane in range(world.lanes_count)])
     axis.set_xlabel("longitudinal distance from the ego [m]")
-    axis.set_ylabel("lateral [m]")
     axis.set_aspect("equal")
-    axis.set_title(f"occupancy grid at t = {world.time:.1f} s (ego lane {grid.ego_lane})")
+    axis.set_title(
+        f"occupancy grid the agent sees at t = {world.time:.1f} s (ego in lane {grid.ego_lane}; "
+        f"{config.cell_length:g} m cells, {config.lanes} rows)"
+    )
+    key = [
+        Rectangle((0, 0), 1, 1, facecolor="tab:red", alpha=0.25, edgecolor="0.7"),
+        Rectangle((0, 0), 1, 1, facecolor="none", edgecolor="0.7"),
+        Rectangle((0, 0), 1, 1, facecolor="0.85", hatch="//", edgecolor="0.6"),
+        Rectangle((0, 0), 1, 1, facecolor="tab:blue", edgecolor="black"),
+        Rectangle((0, 0), 1, 1, facecolor="tab:gray", edgecolor="black"),
+    ]
+    names = ["occupied cell", "free cell", "lane outside the agent's grid", "ego", "other vehicle"]
+    axis.legend(
+        key, names, loc="upper center", bbox_to_anchor=(0.5, -0.35), ncol=5, fontsize="small", frameon=False
+    )
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
