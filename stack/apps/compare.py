@@ -104,10 +104,21 @@ def _bars(axis: Axes, names: list[str], intervals: list[list[float]], label: str
     values = [value for value, _, _ in intervals]
     errors = [[value - low for value, low, _ in intervals], [high - value for value, _, high in intervals]]
     bars = axis.bar(names, values, yerr=errors, capsize=4, color="tab:blue", alpha=0.8)
-    axis.bar_label(bars, labels=[f"{v:.2f}" for v in values], label_type="center", color="white")
     low, high = min(lo for _, lo, _ in intervals), max(hi for _, _, hi in intervals)
     if high - low < 1e-9:
         axis.set_ylim(low - 1.0, high + 1.0)
+    span = max(abs(high), abs(low), 1e-9)
+    for bar, value in zip(bars, values, strict=True):
+        inside = abs(value) > 0.2 * span
+        axis.annotate(
+            f"{value:.2f}",
+            (bar.get_x() + bar.get_width() / 2, value / 2 if inside else value),
+            xytext=(0, 0 if inside else 3),
+            textcoords="offset points",
+            ha="center",
+            va="center" if inside else "bottom",
+            color="white" if inside else "black",
+        )
     axis.set_title(label, fontsize="medium")
     axis.tick_params(axis="x", rotation=30)
     axis.grid(axis="y", alpha=0.3)
