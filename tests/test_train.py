@@ -300,3 +300,13 @@ def test_a_stopped_and_resumed_run_has_the_counts_of_an_uninterrupted_one(tmp_pa
     resumed = load_model(tmp_path / "cut" / "checkpoint.npz", 2**31)[1]["counters"]
     for counter in ("num_timesteps", "n_updates", "buffer_pos"):
         assert resumed[counter] == whole[counter], counter
+
+
+def test_no_empty_training_curve_is_drawn(tmp_path):
+    data = {
+        **TINY,
+        "train": {**TINY["train"], "steps": 5, "validation": {"short_every": 100, "long_every": 200}},
+    }
+    summary = Trainer(build_config(data), tmp_path / "short", progress=False).run()
+    assert summary["validations"] == 0 and summary["training_curve"] == "not drawn: no validation ran yet"
+    assert not (tmp_path / "short" / "training_curve.png").exists()

@@ -214,7 +214,8 @@ def write_training_summary(
 ) -> dict:
     """`summary.json` (the run's `steps`, `wall_time_s`, `interrupted`, the best validation and
     model), `validation.json` and `training_curve.png` in `out`; returns the summary."""
-    plot_training_curve(history, out / "training_curve.png")
+    if history:
+        plot_training_curve(history, out / "training_curve.png")
     kept = kept_models(history)
     summary = {
         "algorithm": config.train.algorithm,
@@ -224,6 +225,7 @@ def write_training_summary(
         "best_validation": kept[-1].__dict__ if kept else None,
         "validations": len(history),
         "best_model": str(best) if best.is_file() else None,
+        "training_curve": "training_curve.png" if history else "not drawn: no validation ran yet",
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "validation.json").write_text(json.dumps([v.__dict__ for v in history], indent=2) + "\n")
