@@ -23,6 +23,7 @@ test: $(STAMP)
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)
+	$(BIN)/python benchmarks/cli_startup.py
 	$(BIN)/python benchmarks/loop_rate.py
 	$(BIN)/python benchmarks/sim_speed.py
 	$(BIN)/python benchmarks/oracle_cost.py

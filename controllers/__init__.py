@@ -1,8 +1,20 @@
 """The control layer: the lane-change maneuver (a reference to follow) and the controllers that
-track it with steering and throttle (`make_controller`: PID + adaptive cruise, or MPC)."""
+track it with steering and throttle (`make_controller`: PID + adaptive cruise, or MPC). Imported on
+first use: python-control and CasADi are heavy, and the configs only need `controllers.config`."""
 
-from controllers.config import ControllerConfig
-from controllers.maneuver import Maneuver
-from controllers.tracker import Controller, make_controller
+from importlib import import_module
+from typing import Any
 
-__all__ = ["Controller", "ControllerConfig", "Maneuver", "make_controller"]
+_PUBLIC = {
+    "ControllerConfig": "controllers.config",
+    "Maneuver": "controllers.maneuver",
+    "Controller": "controllers.tracker",
+    "make_controller": "controllers.tracker",
+}
+__all__ = list(_PUBLIC)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _PUBLIC:
+        return getattr(import_module(_PUBLIC[name]), name)
+    raise AttributeError(f"module 'controllers' has no attribute {name!r}")

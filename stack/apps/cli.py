@@ -10,7 +10,6 @@ from typing import Any, cast
 import typer
 from rich.console import Console
 
-from records import PLANTS
 from stack.apps.options import (
     PLANT_HELP,
     SET_HELP,
@@ -99,6 +98,7 @@ def track(
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Single lane changes on empty straight and curved roads: tracking metrics and plots."""
+    from records import PLANTS
     from stack.apps.track import TRACK_CONTROLLERS, TrackController, track_and_report
 
     names = chosen("--controller", controller, TRACK_CONTROLLERS)

@@ -8,13 +8,15 @@ import re
 import sys
 from datetime import datetime
 from pathlib import Path
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 import typer
 import yaml
 from rich.console import Console
 
-from stack.core.config import ConfigError, RunConfig, load_config
+if TYPE_CHECKING:
+    from stack.core.config import RunConfig
+
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 """The default configs, shipped in the package (the checkout's configs/ links to them)."""
@@ -51,6 +53,8 @@ def configured(path: Path | None, sets: list[str], **overrides: object) -> RunCo
     values = {**set_values, **given}
     labels = {key.replace("__", "."): f"--set {key.replace('__', '.')}" for key in set_values}
     labels |= {key.replace("__", "."): OPTIONS.get(key, f"--{key}") for key in given}
+    from stack.core.config import ConfigError, load_config
+
     try:
         return load_config(path or RUN_CONFIG, labels, **values)
     except ConfigError as error:
