@@ -32,7 +32,7 @@ ROADS: tuple[RoadName, ...] = get_args(RoadName)
 
 def unknown_name(kind: str, value: object, options: tuple[str, ...]) -> str:
     """The one-line message for a name that is not among `options`."""
-    return f"unknown {kind} {value!r}; available: {', '.join(options)}"
+    return f"unknown {kind} {repr(value)[:60]}; available: {', '.join(options)}"
 
 
 def one_of(kind: str, options: tuple[str, ...]) -> BeforeValidator:

@@ -1,0 +1,76 @@
+"""Property-based hostile input (hypothesis): whatever a config or a CLI override holds, loading it
+either gives a valid config or one line naming the key, never another exception."""
+
+import json
+import string
+
+import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from stack.core.config import ConfigError, RunConfig, build_config, load_config
+
+SECTIONS = {
+    "highway": ["lanes_count", "vehicles_count", "vehicles_density", "duration", "traffic", "road"],
+    "perception": ["cells_ahead", "cells_behind", "lanes", "features", "lateral_reach", "sensor"],
+    "planner": ["agent", "model", "safety", "oracle"],
+    "controller": ["type", "pid", "mpc", "lane_change_duration_s"],
+    "train": ["steps", "envs", "scenarios", "buffer_size", "reward", "validation"],
+    "sim": ["backend", "plant"],
+}
+KEYS = ["seed", "episodes", "decision_period_s", "control_rate_hz", "scenario", *SECTIONS]
+scalars = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(min_value=-(2**80), max_value=2**80),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(alphabet=string.printable, max_size=50),
+)
+values = st.recursive(
+    scalars,
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=12), inner, max_size=4),
+    max_leaves=12,
+)
+section = st.sampled_from(list(SECTIONS)).flatmap(
+    lambda name: st.tuples(
+        st.just(name), st.dictionaries(st.sampled_from(SECTIONS[name]), values, max_size=3)
+    )
+)
+configs = st.dictionaries(st.sampled_from(KEYS), values, max_size=4) | st.builds(
+    dict, st.lists(section, max_size=3)
+)
+
+
+def one_line_or_valid(load) -> None:
+    try:
+        config = load()
+    except ConfigError as error:
+        message = str(error)
+        assert "\n" not in message and len(message) <= 300, message[:400]
+        return
+    assert isinstance(config, RunConfig)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(configs)
+def test_any_config_data_loads_or_is_one_line(data):
+    one_line_or_valid(lambda: build_config(data, "hostile.yaml"))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(configs)
+def test_any_config_file_loads_or_is_one_line(tmp_path_factory, data):
+    path = tmp_path_factory.mktemp("hostile") / "config.yaml"
+    try:
+        path.write_text(yaml.safe_dump(data))
+    except yaml.YAMLError:
+        path.write_text(json.dumps(data, default=str))
+    one_line_or_valid(lambda: load_config(path))
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.sampled_from(KEYS + [f"{s}.{k}" for s, keys in SECTIONS.items() for k in keys]), values)
+def test_any_override_loads_or_is_one_line(key, value):
+    one_line_or_valid(
+        lambda: build_config({}, "config", {key: f"--set {key}"}, **{key.replace(".", "__"): value})
+    )
