@@ -18,6 +18,7 @@ SECTIONS = {
     "train": ["steps", "envs", "scenarios", "buffer_size", "reward", "validation"],
     "sim": ["backend", "plant"],
 }
+METADATA_KEYS = ["kind", "algorithm", "encoding", "observation_size", "actions", "hidden", "grid", "format"]
 KEYS = ["seed", "episodes", "decision_period_s", "control_rate_hz", "scenario", *SECTIONS]
 scalars = st.one_of(
     st.none(),
@@ -74,3 +75,18 @@ def test_any_override_loads_or_is_one_line(key, value):
     one_line_or_valid(
         lambda: build_config({}, "config", {key: f"--set {key}"}, **{key.replace(".", "__"): value})
     )
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.dictionaries(st.sampled_from(METADATA_KEYS), values, max_size=4))
+def test_any_model_metadata_loads_or_is_one_line(tmp_path_factory, changes):
+    from planner.learned import load_agent
+    from planner.model_file import ModelFileError
+    from tests.test_model_files import with_metadata
+
+    path = tmp_path_factory.mktemp("model") / "crafted.npz"
+    with_metadata(path, **changes)
+    try:
+        load_agent(path)
+    except ModelFileError as error:
+        assert "\n" not in str(error) and len(str(error)) <= 400, str(error)[:500]
