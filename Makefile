@@ -30,7 +30,8 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/grid_speed.py
 	$(BIN)/python benchmarks/deepcars_speed.py
 	$(BIN)/python benchmarks/train_rate.py
-	$(BIN)/python benchmarks/tracking_table.py
+	$(BIN)/drivestack track --out runs/bench-track --no-progress
+	$(BIN)/python benchmarks/tracking_table.py runs/bench-track
 	$(BIN)/python benchmarks/decision_ceiling.py
 
 lint: $(STAMP)

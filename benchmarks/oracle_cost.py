@@ -23,6 +23,7 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--seeds", default="0,1")
     parser.add_argument("--scenario", default="overtaking")
+    parser.add_argument("--duration", type=float, default=40.0, help="episode length [s]")
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     print(
@@ -35,6 +36,7 @@ def main() -> None:
             config = build_config(
                 {"planner": {"agent": "oracle"}, "sim": {"backend": backend}, "seed": seed},
                 scenario=args.scenario,
+                highway__duration=args.duration,
             )
             start = time.process_time()
             episode = run_episode(config, 0)

@@ -1,0 +1,62 @@
+"""`make bench` keeps working: every benchmark script runs to the end on tiny budgets (slow: about
+two minutes; `pytest -m slow tests/test_benchmarks.py`)."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCHMARKS = ROOT / "benchmarks"
+
+
+def run(script: str, *arguments: str, cwd: Path = ROOT) -> str:
+    result = subprocess.run(
+        [sys.executable, str(BENCHMARKS / script), *arguments],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    return result.stdout
+
+
+@pytest.mark.slow
+def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
+    tiny = tmp_path / "tiny.yaml"
+    data = yaml.safe_load((ROOT / "configs" / "highway.yaml").read_text())
+    data["highway"].update(vehicles_count=10, duration=2)
+    tiny.write_text(yaml.safe_dump(data))
+    assert "frames/s" in run("sim_speed.py", "--runs", "1", "--frames", "5")
+    assert "--help" in run("cli_startup.py", "--runs", "1")
+    assert run("grid_speed.py", "--repeats", "3")
+    assert "ticks/s" in run("loop_rate.py", "--episodes", "1", "--config", str(tiny))
+    assert "cheaper" in run("oracle_cost.py", "--seeds", "0", "--duration", "2")
+    assert "env steps/s" in run("train_rate.py", "--steps", "510")
+    assert "env steps/s" in run("deepcars_speed.py")
+    ceiling = run(
+        "decision_ceiling.py", "--episodes", "1", "--horizon", "2", "--jobs", "1", "--config", str(tiny)
+    )
+    assert "mean speed" in ceiling
+    track = tmp_path / "track"
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "stack",
+            "track",
+            "--controller",
+            "pid",
+            "--speeds",
+            "20",
+            "--out",
+            str(track),
+            "--no-progress",
+        ],
+        check=True,
+        capture_output=True,
+    )
+    assert "| straight |" in run("tracking_table.py", str(track))
