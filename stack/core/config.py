@@ -146,7 +146,12 @@ def _one_line(error: ValidationError, source: str, labels: dict[str, str]) -> st
         message = "unknown key"
     elif first["type"] != "value_error" and not isinstance(first.get("input"), dict):
         message = f"{message} (got {repr(first.get('input'))[:MAX_QUOTE]})"
-    return f"{source}: {key}: {message}" if key else f"{source}: {message}"
+    return printable(f"{source}: {key}: {message}" if key else f"{source}: {message}")
+
+
+def printable(message: str, limit: int = 300) -> str:
+    """`message` on one line: control characters escaped, at most `limit` characters."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)[:limit]
 
 
 def _set_dotted(data: dict[str, Any], dotted: str, value: Any, source: str) -> None:
