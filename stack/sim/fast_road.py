@@ -47,25 +47,16 @@ class LaneProjections:
         self.row = {id(o): i for i, o in enumerate(self.objects)}
         self.position = np.array([o.position for o in self.objects], dtype=float).reshape(-1, 2)
         self.lanes: dict[LaneIndex, tuple[list[float], list[int]]] = {}
-        self.lane_arrays: dict[LaneIndex, tuple[np.ndarray, np.ndarray]] = {}
 
     def sorted_on_lane(self, lane_index: LaneIndex) -> tuple[list[float], list[int]]:
         """The objects highway-env counts as on `lane_index`'s lane, sorted by (s, row): their s
         [m] and their rows."""
         cached = self.lanes.get(lane_index)
         if cached is None:
-            s, rows = self.sorted_arrays(lane_index)
-            cached = self.lanes[lane_index] = (s.tolist(), rows.tolist())
-        return cached
-
-    def sorted_arrays(self, lane_index: LaneIndex) -> tuple[np.ndarray, np.ndarray]:
-        """`sorted_on_lane` as arrays."""
-        cached = self.lane_arrays.get(lane_index)
-        if cached is None:
             s, on = self._project(self.road.network.get_lane(lane_index))
             rows = np.flatnonzero(on)
             order = rows[np.lexsort((rows, s[rows]))]
-            cached = self.lane_arrays[lane_index] = (s[order], order)
+            cached = self.lanes[lane_index] = (s[order].tolist(), order.tolist())
         return cached
 
     def neighbours(

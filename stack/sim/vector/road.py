@@ -173,10 +173,12 @@ class VectorRoad(FastRoad):
         if lanes is None:
             super().step(dt)
             return
+        movers = []
         for vehicle in self.vehicles:
-            if not steps_like_vehicle(type(vehicle)):
+            if steps_like_vehicle(type(vehicle)):
+                movers.append(vehicle)
+            else:
                 vehicle.step(dt)
-        movers = [v for v in self.vehicles if steps_like_vehicle(type(v))]
         if movers:
             move(movers, lanes, dt, self.record_history)
         self._collide(dt)
