@@ -72,9 +72,12 @@ class QLearning:
         steps: int,
         seed: int = 0,
         on_step: Callable[[QLearning, dict], bool] | None = None,
+        observation: np.ndarray | None = None,
     ) -> QLearning:
-        """Train for `steps` env steps; `on_step(self, info)` may return False to stop early."""
-        observation, _ = env.reset(seed=seed)
+        """Train for `steps` env steps from a reset with `seed`, or from `observation` of an episode
+        under way (a resumed run); `on_step(self, info)` may return False to stop early."""
+        if observation is None:
+            observation, _ = env.reset(seed=seed)
         for _ in range(steps):
             action, _ = self.predict(observation, deterministic=False)
             next_observation, reward, terminated, truncated, info = env.step(action)

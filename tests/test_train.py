@@ -1,6 +1,7 @@
 """Training: the validation callback, checkpoints and resume, the env, the CLI smoke run."""
 
 import json
+import types
 from pathlib import Path
 
 import gymnasium as gym
@@ -16,6 +17,7 @@ from planner.validation import RealTimeValidation
 from stack.apps.cli import app
 from stack.apps.train import Trainer
 from stack.core.config import build_config
+from stack.core.decision_env import HierarchicalHighwayEnv
 from stack.sim.envs import HIERARCHICAL_HIGHWAY
 
 TINY = {
@@ -272,34 +274,53 @@ def test_a_mix_of_roads_needs_an_encoding_of_one_size(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
-def test_a_stopped_and_resumed_run_has_the_counts_of_an_uninterrupted_one(tmp_path, monkeypatch):
-    """SIGTERM (here: the handler, called at the 25th step of the env class, validation included)
-    stops at the next consistent point:
-    the checkpoint holds every transition collected and every gradient step taken, so the resumed
-    run ends with the transitions and updates of a run never stopped."""
-    config = build_config(TINY)
+RESUMABLE = [
+    pytest.param("ddqn", 1, id="ddqn"),
+    pytest.param("tabular", 1, id="tabular"),
+    pytest.param("ddqn", 2, id="ddqn-2-envs", marks=pytest.mark.slow),
+]
+
+
+@pytest.mark.parametrize(("algorithm", "envs"), RESUMABLE)
+def test_a_stopped_and_resumed_run_ends_as_an_uninterrupted_one(tmp_path, monkeypatch, algorithm, envs):
+    """SIGTERM twice (here: the handler, called at a step of the env class or, for the workers, of
+    the validation) stops at the next consistent point, mid-episode: the checkpoint holds every
+    transition collected, every gradient step taken, the generators and the episodes under way, so
+    the resumed run ends with the counts and the very weights of a run never stopped."""
+    encoding = "tabular" if algorithm == "tabular" else "observation"
+    train = {**TINY["train"], "algorithm": algorithm, "encoding": encoding, "envs": envs}
+    train |= {"target_update_interval": 8}
+    highway = {**TINY["highway"], "duration": 5 if envs == 1 else 7}
+    config = build_config({**TINY, "highway": highway, "train": train})
     Trainer(config, tmp_path / "whole", progress=False).run()
-    whole = load_model(tmp_path / "whole" / "checkpoint.npz", 2**31)[1]["counters"]
+    whole_arrays, whole = load_model(tmp_path / "whole" / "checkpoint.npz", 2**31)
     trainer = Trainer(config, tmp_path / "cut", progress=False)
-    real_step = type(trainer.env.unwrapped).step
+    real_step = HierarchicalHighwayEnv.step
     calls = {"n": 0}
 
     def step_then_signal(self, action):
         calls["n"] += 1
-        if calls["n"] == 25:
+        if calls["n"] == (27 if envs == 1 else 3):
             trainer._request_stop(15, None)
             trainer._request_stop(15, None)  # a second signal waits too
         return real_step(self, action)
 
-    monkeypatch.setattr(type(trainer.env.unwrapped), "step", step_then_signal)
+    if envs == 1:
+        monkeypatch.setattr(HierarchicalHighwayEnv, "step", step_then_signal)
+    else:
+        trainer.validation_env.step = types.MethodType(step_then_signal, trainer.validation_env)
     assert trainer.run()["interrupted"]
     stopped = load_model(tmp_path / "cut" / "checkpoint.npz", 2**31)[1]["counters"]
-    assert 0 < stopped["num_timesteps"] < 40 and stopped["buffer_pos"] == stopped["num_timesteps"]
-    monkeypatch.setattr(type(trainer.env.unwrapped), "step", real_step)
+    assert 0 < stopped["num_timesteps"] < 40
+    assert any(episode["actions"] for episode in stopped["episodes"]), "stopped mid-episode"
+    monkeypatch.setattr(HierarchicalHighwayEnv, "step", real_step)
     Trainer.resume(tmp_path / "cut", steps=None, progress=False).run()
-    resumed = load_model(tmp_path / "cut" / "checkpoint.npz", 2**31)[1]["counters"]
-    for counter in ("num_timesteps", "n_updates", "buffer_pos"):
-        assert resumed[counter] == whole[counter], counter
+    resumed_arrays, resumed = load_model(tmp_path / "cut" / "checkpoint.npz", 2**31)
+    for counter in ("num_timesteps", "n_updates", "buffer_pos", "episodes"):
+        assert resumed.get(counter) == whole.get(counter), counter
+    assert resumed_arrays.keys() == whole_arrays.keys()
+    for name, weights in whole_arrays.items():
+        np.testing.assert_array_equal(resumed_arrays[name], weights, err_msg=name)
 
 
 def test_no_empty_training_curve_is_drawn(tmp_path):

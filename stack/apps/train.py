@@ -16,9 +16,8 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from stable_baselines3 import DQN
-from stable_baselines3.common.callbacks import CallbackList, ProgressBarCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ProgressBarCallback
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import SubprocVecEnv
 
@@ -31,13 +30,12 @@ from stack.apps.train_model import (
     Checkpoints,
     StopTraining,
     build_dqn,
-    dqn_state,
     model_metadata,
     monitored_env,
-    restore_dqn_state,
     worker_env,
-    write_training_summary,
 )
+from stack.apps.train_report import write_training_summary
+from stack.apps.train_state import dqn_state, restore_dqn_state, restore_tabular_state, tabular_state
 from stack.core.config import RunConfig, load_config, write_config
 from stack.core.decision_env import HierarchicalHighwayEnv
 
@@ -131,11 +129,12 @@ class Trainer:
     def _train_dqn(self) -> int:
         self.model = build_dqn(self.config, self.env, self.out / "tensorboard")
         resumed = (self.out / CHECKPOINT).is_file()
+        callbacks: list[BaseCallback] = []
         if resumed:
             arrays, metadata = self._checkpoint()
             try:
-                restore_dqn_state(self.model, arrays, metadata["counters"])
-            except (KeyError, RuntimeError, ValueError) as error:
+                callbacks.append(restore_dqn_state(self.model, arrays, metadata["counters"]))
+            except (KeyError, RuntimeError, ValueError, TypeError) as error:
                 message = str(error).splitlines()[0][:120] if str(error) else type(error).__name__
                 raise ModelFileError(
                     f"{self.out / CHECKPOINT}: does not fit this run's model ({message})"
@@ -145,7 +144,7 @@ class Trainer:
         checkpoints = Checkpoints(
             self.config.train.checkpoint_every, self._save_checkpoint, lambda: self.stop_requested
         )
-        callbacks = [self.validation, checkpoints]
+        callbacks += [self.validation, checkpoints]
         if self.progress:
             callbacks.append(ProgressBarCallback())
         remaining = self.config.train.steps - self.model.num_timesteps
@@ -168,12 +167,14 @@ class Trainer:
             epsilon=train.tabular_epsilon,
             seed=self.config.seed,
         )
+        assert isinstance(self.env, Monitor), "tabular training steps one env"
+        observation = None
         if (self.out / CHECKPOINT).is_file():
             arrays, metadata = self._checkpoint()
-            if arrays.get("q_table", np.empty(0)).shape != self.model.table.shape:
-                raise ModelFileError(f"{self.out / CHECKPOINT}: its q_table does not fit this run's table")
-            self.model.table[...] = arrays["q_table"]
-            self.model.steps = metadata["counters"]["num_timesteps"]
+            try:
+                observation = restore_tabular_state(self.model, self.env, arrays, metadata["counters"])
+            except (KeyError, ValueError, TypeError) as error:
+                raise ModelFileError(f"{self.out / CHECKPOINT}: does not fit this run ({error})") from None
             self._restore_common(metadata)
         validation = self._validation_callback(save_q_table)
         validation.model = self.model
@@ -189,10 +190,8 @@ class Trainer:
         self.validation = validation
         remaining = train.steps - self.model.steps
         if remaining > 0:
-            assert isinstance(self.env, Monitor), "tabular training steps one env"
-            self.model.learn(
-                self.env, remaining, seed=child_seed(self.config.seed, self.model.steps), on_step=on_step
-            )
+            seed = child_seed(self.config.seed, 0)
+            self.model.learn(self.env, remaining, seed, on_step, observation)
         return self._save_checkpoint()
 
     # --- shared -------------------------------------------------------------------------------
@@ -215,7 +214,8 @@ class Trainer:
         if not hasattr(self, "model"):
             return 0
         if isinstance(self.model, QLearning):
-            arrays, counters = {"q_table": self.model.table}, {"num_timesteps": self.model.steps}
+            assert isinstance(self.env, Monitor), "tabular training steps one env"
+            arrays, counters = tabular_state(self.model, self.env)
         else:
             arrays, counters = dqn_state(self.model)
         validation = getattr(self, "validation", None)

@@ -1,17 +1,13 @@
 """The model a training run builds and what it keeps of it: the env and the SB3 (Double) DQN from
-the config, a callback for periodic work, the metadata every model file carries, the model's whole
-state as plain arrays for checkpoints (online and target Q-networks, Adam moments, the replay
-buffer, plus JSON counters) so `--resume` continues exactly, and the training curve."""
+the config, the callback that checkpoints it, the metadata every model file carries."""
 
 from __future__ import annotations
 
-import json
 import signal
 from collections.abc import Callable
 from pathlib import Path
 
 import gymnasium as gym
-import matplotlib.pyplot as plt
 import numpy as np
 import torch as th
 from stable_baselines3 import DQN
@@ -22,14 +18,12 @@ from stable_baselines3.common.vec_env import VecEnv
 from perception.grid import OccupancyGridBuilder
 from planner.ddqn import DoubleDQN
 from planner.networks import net_arch
-from planner.validation import Validation, kept_models
 from records import N_ACTIONS
 from stack.core.closed_loop import grid_config
 from stack.core.config import RunConfig
 from stack.core.decision_env import HierarchicalHighwayEnv
 
 ALGORITHMS: dict[str, type[DQN]] = {"ddqn": DoubleDQN, "dqn": DQN}
-BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
 
 
 class StopTraining(Exception):
@@ -140,93 +134,3 @@ def model_metadata(config: RunConfig, env: HierarchicalHighwayEnv, trained_steps
         "trained_steps": trained_steps,
         "seed": config.seed,
     }
-
-
-def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], dict]:
-    """(arrays, counters) of `model`, for a safe model file."""
-    arrays = {f"q/{k}": v.cpu().numpy() for k, v in model.policy.q_net.state_dict().items()}
-    arrays |= {f"target/{k}": v.cpu().numpy() for k, v in model.policy.q_net_target.state_dict().items()}
-    optimizer = model.policy.optimizer.state_dict()
-    for index, state in optimizer["state"].items():
-        for name, value in state.items():
-            arrays[f"optimizer/{index}/{name}"] = th.as_tensor(value).cpu().numpy()
-    buffer = model.replay_buffer
-    assert buffer is not None, "SB3 builds the replay buffer with the model"
-    for name in BUFFER_FIELDS:
-        arrays[f"buffer/{name}"] = getattr(buffer, name)
-    counters = {
-        "num_timesteps": int(model.num_timesteps),
-        "n_updates": int(model._n_updates),
-        "episode_num": int(model._episode_num),
-        "buffer_pos": int(buffer.pos),
-        "buffer_full": bool(buffer.full),
-        "param_groups": optimizer["param_groups"],
-    }
-    return arrays, counters
-
-
-def restore_dqn_state(model: DQN, arrays: dict[str, np.ndarray], counters: dict) -> None:
-    """Put the state `dqn_state` saved back into `model`."""
-    model.policy.q_net.load_state_dict(_prefixed(arrays, "q/"))
-    model.policy.q_net_target.load_state_dict(_prefixed(arrays, "target/"))
-    state: dict[int, dict] = {}
-    for key, value in _prefixed(arrays, "optimizer/").items():
-        index, name = key.split("/")
-        state.setdefault(int(index), {})[name] = value
-    model.policy.optimizer.load_state_dict({"state": state, "param_groups": counters["param_groups"]})
-    buffer = model.replay_buffer
-    assert buffer is not None, "SB3 builds the replay buffer with the model"
-    for name, value in _prefixed(arrays, "buffer/").items():
-        getattr(buffer, name)[...] = value.numpy()
-    buffer.pos, buffer.full = counters["buffer_pos"], counters["buffer_full"]
-    model.num_timesteps, model._n_updates = counters["num_timesteps"], counters["n_updates"]
-    model._episode_num = counters["episode_num"]
-
-
-def _prefixed(arrays: dict[str, np.ndarray], prefix: str) -> dict[str, th.Tensor]:
-    return {k.removeprefix(prefix): th.as_tensor(v) for k, v in arrays.items() if k.startswith(prefix)}
-
-
-def plot_training_curve(history: list[Validation], path: Path) -> None:
-    """Mean validation return and collision rate against training steps."""
-    figure, (returns, collisions) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
-    for period, marker in (("short", "o"), ("long", "s")):
-        points = [v for v in history if v.period == period]
-        returns.plot(
-            [v.step for v in points], [v.mean_return for v in points], marker, label=f"{period} validation"
-        )
-        collisions.plot([v.step for v in points], [100 * v.collision_rate for v in points], marker)
-    best = kept_models(history)
-    returns.plot(
-        [v.step for v in best], [v.mean_return for v in best], "k*", markersize=10, label="kept (best)"
-    )
-    returns.set_ylabel("mean return")
-    collisions.set_ylabel("collision rate [%]")
-    collisions.set_xlabel("training steps")
-    returns.legend(fontsize="small")
-    figure.tight_layout()
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
-
-
-def write_training_summary(
-    config: RunConfig, out: Path, history: list[Validation], run: dict, best: Path
-) -> dict:
-    """`summary.json` (the run's `steps`, `wall_time_s`, `interrupted`, the best validation and
-    model), `validation.json` and `training_curve.png` in `out`; returns the summary."""
-    if history:
-        plot_training_curve(history, out / "training_curve.png")
-    kept = kept_models(history)
-    summary = {
-        "algorithm": config.train.algorithm,
-        "network": config.train.network,
-        "target_steps": config.train.steps,
-        **run,
-        "best_validation": kept[-1].__dict__ if kept else None,
-        "validations": len(history),
-        "best_model": str(best) if best.is_file() else None,
-        "training_curve": "training_curve.png" if history else "not drawn: no validation ran yet",
-    }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    (out / "validation.json").write_text(json.dumps([v.__dict__ for v in history], indent=2) + "\n")
-    return summary

@@ -12,6 +12,8 @@ closed loop per scenario, all shown the same encoding, which must then have one 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
@@ -20,6 +22,15 @@ from records import N_ACTIONS, TRAINING_SEED_FLOOR, Command, drawn_seed
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import RunConfig, build_config, in_scenario
 from stack.sim.highway import HighwayAdapter
+
+
+@dataclass
+class EpisodeRecord:
+    """An episode of the decision MDP as plain data: the env generator's state when it began (it
+    draws the world and the traffic seed) and the actions taken since (`Command` values)."""
+
+    generator_state: dict
+    actions: list[int]
 
 
 class HierarchicalHighwayEnv(gym.Env):
@@ -56,15 +67,36 @@ class HierarchicalHighwayEnv(gym.Env):
         self, *, seed: int | None = None, options: dict | None = None
     ) -> tuple[np.ndarray, dict[str, float | int | bool]]:
         super().reset(seed=seed)
+        self._begin_episode(dict(self.np_random.bit_generator.state))
+        return self._observe(), self.loop.status()
+
+    def _begin_episode(self, generator_state: dict) -> None:
+        self.episode = EpisodeRecord(generator_state, [])
         world = int(self.np_random.choice(len(self.loops), p=self.shares)) if len(self.loops) > 1 else 0
         self.adapter, self.loop = self.adapters[world], self.loops[world]
         self.loop.reset(drawn_seed(self.np_random, TRAINING_SEED_FLOOR))
-        return self._observe(), self.loop.status()
+
+    def episode_record(self) -> EpisodeRecord:
+        """The episode under way as data (for a checkpoint)."""
+        return EpisodeRecord(dict(self.episode.generator_state), list(self.episode.actions))
+
+    def replay_episode(self, record: EpisodeRecord) -> np.ndarray:
+        """Rebuild the episode `record` describes and return its current observation: the
+        generator is put back where the episode began, which draws the same world and seed, and the
+        same actions drive the deterministic loop to the same state."""
+        self.np_random.bit_generator.state = record.generator_state
+        self._begin_episode(record.generator_state)
+        for action in record.actions:
+            if self.loop.done:
+                break
+            self.step(action)
+        return self._observe()
 
     def step(
         self, action: int | np.integer | np.ndarray
     ) -> tuple[np.ndarray, float, bool, bool, dict[str, float | int | bool]]:
         command = Command(int(action))
+        self.episode.actions.append(command.value)
         acted = self.loop.act(command, ticks=self.config.decision_ticks)
         reward_config = self.config.train.reward
         if self.loop.crashed:

@@ -1,0 +1,56 @@
+"""What a training run reports: `summary.json`, `validation.json` and the training curve."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+
+from planner.validation import Validation, kept_models
+from stack.core.config import RunConfig
+
+
+def plot_training_curve(history: list[Validation], path: Path) -> None:
+    """Mean validation return and collision rate against training steps."""
+    figure, (returns, collisions) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
+    for period, marker in (("short", "o"), ("long", "s")):
+        points = [v for v in history if v.period == period]
+        returns.plot(
+            [v.step for v in points], [v.mean_return for v in points], marker, label=f"{period} validation"
+        )
+        collisions.plot([v.step for v in points], [100 * v.collision_rate for v in points], marker)
+    best = kept_models(history)
+    returns.plot(
+        [v.step for v in best], [v.mean_return for v in best], "k*", markersize=10, label="kept (best)"
+    )
+    returns.set_ylabel("mean return")
+    collisions.set_ylabel("collision rate [%]")
+    collisions.set_xlabel("training steps")
+    returns.legend(fontsize="small")
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def write_training_summary(
+    config: RunConfig, out: Path, history: list[Validation], run: dict, best: Path
+) -> dict:
+    """`summary.json` (the run's `steps`, `wall_time_s`, `interrupted`, the best validation and
+    model), `validation.json` and `training_curve.png` in `out`; returns the summary."""
+    if history:
+        plot_training_curve(history, out / "training_curve.png")
+    kept = kept_models(history)
+    summary = {
+        "algorithm": config.train.algorithm,
+        "network": config.train.network,
+        "target_steps": config.train.steps,
+        **run,
+        "best_validation": kept[-1].__dict__ if kept else None,
+        "validations": len(history),
+        "best_model": str(best) if best.is_file() else None,
+        "training_curve": "training_curve.png" if history else "not drawn: no validation ran yet",
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (out / "validation.json").write_text(json.dumps([v.__dict__ for v in history], indent=2) + "\n")
+    return summary

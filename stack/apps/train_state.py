@@ -1,0 +1,164 @@
+"""A training run's whole state as plain arrays and JSON counters, for checkpoints a resumed run
+continues from exactly as if never stopped: online and target Q-networks, Adam moments, the replay
+buffer, SB3's counters, the random generators and each env's episode under way (replayed on
+resume: the simulator is deterministic)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+
+import numpy as np
+import torch as th
+from stable_baselines3 import DQN
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.monitor import Monitor
+
+from planner.tabular import QLearning
+from records import N_ACTIONS
+from stack.core.decision_env import EpisodeRecord
+
+MAX_EPISODE_DECISIONS = 100_000
+"""Most actions an episode record of a checkpoint may hold (an hour of driving at 25 per second)."""
+BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
+
+
+def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], dict]:
+    """(arrays, counters) of `model`, for a safe model file: networks, optimizer, replay buffer,
+    the counters SB3 schedules by, numpy's global generator (exploration and replay sampling draw
+    from it), the action space's generator (random actions before learning starts) and each env's
+    episode under way."""
+    arrays = {f"q/{k}": v.cpu().numpy() for k, v in model.policy.q_net.state_dict().items()}
+    arrays |= {f"target/{k}": v.cpu().numpy() for k, v in model.policy.q_net_target.state_dict().items()}
+    optimizer = model.policy.optimizer.state_dict()
+    for index, state in optimizer["state"].items():
+        for name, value in state.items():
+            arrays[f"optimizer/{index}/{name}"] = th.as_tensor(value).cpu().numpy()
+    buffer = model.replay_buffer
+    assert buffer is not None, "SB3 builds the replay buffer with the model"
+    for name in BUFFER_FIELDS:
+        arrays[f"buffer/{name}"] = getattr(buffer, name)
+    _, arrays["random/numpy_keys"], *numpy_random = np.random.get_state()
+    env = model.get_env()
+    assert env is not None, "a model in training has its env"
+    counters = {
+        "num_timesteps": int(model.num_timesteps),
+        "n_updates": int(model._n_updates),
+        "n_calls": int(model._n_calls),
+        "episode_num": int(model._episode_num),
+        "exploration_rate": float(model.exploration_rate),
+        "buffer_pos": int(buffer.pos),
+        "buffer_full": bool(buffer.full),
+        "param_groups": optimizer["param_groups"],
+        "numpy_random": [int(numpy_random[0]), int(numpy_random[1]), float(numpy_random[2])],
+        "action_space_random": model.action_space.np_random.bit_generator.state,
+        "episodes": [asdict(record) for record in env.env_method("episode_record")],
+    }
+    return arrays, counters
+
+
+def restore_dqn_state(model: DQN, arrays: dict[str, np.ndarray], counters: dict) -> BaseCallback:
+    """Put the state `dqn_state` saved back into `model`. What SB3 resets when training starts (the
+    episodes under way, the generators) is put back by the returned callback's training start.
+    Raises KeyError / ValueError / TypeError / RuntimeError when the state does not fit `model`."""
+    model.policy.q_net.load_state_dict(_prefixed(arrays, "q/"))
+    model.policy.q_net_target.load_state_dict(_prefixed(arrays, "target/"))
+    state: dict[int, dict] = {}
+    for key, value in _prefixed(arrays, "optimizer/").items():
+        index, name = key.split("/")
+        state.setdefault(int(index), {})[name] = value
+    model.policy.optimizer.load_state_dict({"state": state, "param_groups": counters["param_groups"]})
+    buffer = model.replay_buffer
+    assert buffer is not None, "SB3 builds the replay buffer with the model"
+    for name, value in _prefixed(arrays, "buffer/").items():
+        getattr(buffer, name)[...] = value.numpy()
+    buffer.pos, buffer.full = counters["buffer_pos"], counters["buffer_full"]
+    model.num_timesteps, model._n_updates = counters["num_timesteps"], counters["n_updates"]
+    model._episode_num = counters["episode_num"]
+    model._n_calls = counters.get("n_calls", 0)
+    model.exploration_rate = counters.get("exploration_rate", model.exploration_rate)
+    return ContinueEpisodes(arrays, counters, model.n_envs)
+
+
+class ContinueEpisodes(BaseCallback):
+    """At training start, after SB3 has reset the envs: replays each env's episode under way and
+    puts the generators back, so the resumed run continues the interrupted one transition for
+    transition. A checkpoint without them (written by an older drivestack) resumes with fresh
+    episodes."""
+
+    def __init__(self, arrays: dict[str, np.ndarray], counters: dict, n_envs: int) -> None:
+        super().__init__()
+        self.exact = "episodes" in counters
+        if not self.exact:
+            return
+        self.episodes = [episode_record(data) for data in counters["episodes"]]
+        if len(self.episodes) != n_envs:
+            raise ValueError(f"{len(self.episodes)} episodes under way for {n_envs} envs")
+        self.numpy_random = ("MT19937", arrays["random/numpy_keys"], *counters["numpy_random"])
+        np.random.RandomState().set_state(self.numpy_random)
+        self.action_space_random = counters["action_space_random"]
+        np.random.PCG64().state = self.action_space_random
+
+    def _on_training_start(self) -> None:
+        if not self.exact:
+            return
+        env = self.model.get_env()
+        assert env is not None, "a model in training has its env"
+        observations = [
+            env.env_method("replay_episode", record, indices=[index])[0]
+            for index, record in enumerate(self.episodes)
+        ]
+        self.model._last_obs = np.stack(observations)
+        self.model._last_episode_starts = np.array([not record.actions for record in self.episodes])
+        np.random.set_state(self.numpy_random)
+        self.model.action_space.np_random.bit_generator.state = self.action_space_random
+
+    def _on_step(self) -> bool:
+        return True
+
+
+def episode_record(data: object) -> EpisodeRecord:
+    """An `EpisodeRecord` from a checkpoint's JSON, checked (ValueError / TypeError otherwise)."""
+    if not isinstance(data, dict) or set(data) != {"generator_state", "actions"}:
+        raise ValueError("an episode record is not {generator_state, actions}")
+    actions = data["actions"]
+    if (
+        not isinstance(actions, list)
+        or len(actions) > MAX_EPISODE_DECISIONS
+        or not all(type(a) is int and 0 <= a < N_ACTIONS for a in actions)
+    ):
+        raise ValueError(f"episode actions are not a list of integers in [0, {N_ACTIONS})")
+    np.random.Generator(np.random.PCG64()).bit_generator.state = data["generator_state"]
+    return EpisodeRecord(data["generator_state"], actions)
+
+
+def tabular_state(model: QLearning, env: Monitor) -> tuple[dict[str, np.ndarray], dict]:
+    """(arrays, counters) of a tabular learner: its table, steps, generator and episode under way."""
+    episode = env.unwrapped.episode_record()  # type: ignore[attr-defined]
+    counters = {
+        "num_timesteps": model.steps,
+        "tabular_random": model.rng.bit_generator.state,
+        "episodes": [asdict(episode)],
+    }
+    return {"q_table": model.table}, counters
+
+
+def restore_tabular_state(
+    model: QLearning, env: Monitor, arrays: dict[str, np.ndarray], counters: dict
+) -> np.ndarray | None:
+    """Put `tabular_state` back into `model` and `env`; the observation to continue from (None for
+    a checkpoint of an older drivestack, which continues with a fresh episode). Raises KeyError /
+    ValueError / TypeError when the checkpoint does not fit."""
+    if arrays.get("q_table", np.empty(0)).shape != model.table.shape:
+        raise ValueError("its q_table does not fit this run's table")
+    model.table[...] = arrays["q_table"]
+    model.steps = counters["num_timesteps"]
+    if "episodes" not in counters:
+        return None
+    (episode,) = [episode_record(data) for data in counters["episodes"]]
+    model.rng.bit_generator.state = counters["tabular_random"]
+    env.reset()
+    return env.unwrapped.replay_episode(episode)  # type: ignore[attr-defined]
+
+
+def _prefixed(arrays: dict[str, np.ndarray], prefix: str) -> dict[str, th.Tensor]:
+    return {k.removeprefix(prefix): th.as_tensor(v) for k, v in arrays.items() if k.startswith(prefix)}
