@@ -23,6 +23,7 @@ from stack.apps.options import (
     guarded,
     output_folder,
     train_or_fail,
+    until_interrupted,
 )
 
 app = typer.Typer(
@@ -78,12 +79,8 @@ def run(
     check_agent(cfg)
     from stack.apps.run import run_and_report
 
-    try:
-        interrupted = run_and_report(cfg, output_folder(out, "run"), video, jobs, progress)
-    except KeyboardInterrupt:
-        fail("interrupted before the first episode finished; nothing to write")
-    if interrupted:
-        sys.exit(130)
+    folder = output_folder(out, "run")
+    until_interrupted(lambda: run_and_report(cfg, folder, video, jobs, progress))
 
 
 @app.command()
@@ -156,7 +153,8 @@ def compare(
         check_agent(cfg)
     from stack.apps.compare import compare_and_report
 
-    compare_and_report(configs, output_folder(out, "compare"), jobs, progress, baseline)
+    folder = output_folder(out, "compare")
+    until_interrupted(lambda: compare_and_report(configs, folder, jobs, progress, baseline))
 
 
 @app.command()

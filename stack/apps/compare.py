@@ -4,15 +4,18 @@ Writes comparison.json and comparison.png and prints one markdown table."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import matplotlib.pyplot as plt
 from matplotlib.axes import Axes
 
+from stack.apps.interrupts import deferred
+from stack.apps.run import JOURNAL
 from stack.core.config import RunConfig, write_config
 from stack.core.episodes import RunResults, run
+from stack.core.files import EpisodeJournal, save_figure, write_json
+from stack.core.metrics import EpisodeResult
 from stack.core.statistics import Interval, mean_interval, paired_difference, rate_interval
 
 MEANS = ("mean_speed", "lane_changes", "masked_commands", "aborted_changes")
@@ -34,20 +37,41 @@ def intervals(results: RunResults) -> dict[str, Interval]:
 
 
 def differences(results: RunResults, baseline: RunResults) -> dict[str, Interval]:
-    """Agent minus baseline, episode by episode (same seeds), for every reported metric."""
+    """Agent minus baseline, episode by episode (same seeds), for every reported metric, over the
+    episodes both finished (all of them unless the comparison was interrupted)."""
     pairs = {"collision_rate": "crashed", **{metric: metric for metric in MEANS}}
+    theirs = {e.episode: e for e in baseline.episodes}
+    shared = [(e, theirs[e.episode]) for e in results.episodes if e.episode in theirs]
     return {
         metric: paired_difference(
-            [float(getattr(e, field)) for e in results.episodes],
-            [float(getattr(e, field)) for e in baseline.episodes],
+            [float(getattr(mine, field)) for mine, _ in shared],
+            [float(getattr(other, field)) for _, other in shared],
         )
         for metric, field in pairs.items()
     }
 
 
-def compare(configs: list[RunConfig], jobs: int = 1, progress: bool = True) -> list[RunResults]:
-    """One run per config (one config per agent, the same episodes and seeds)."""
-    return [run(config, progress=progress, jobs=jobs) for config in configs]
+def compare(configs: list[RunConfig], out: Path, jobs: int = 1, progress: bool = True) -> list[RunResults]:
+    """One run per config (one config per agent, the same episodes and seeds), each finished
+    episode journaled in `out` as it finishes. Ctrl-C stops the comparison: the agents run so far
+    are returned (the last one with the episodes it finished); none raises KeyboardInterrupt."""
+    runs: list[RunResults] = []
+    for config in configs:
+        journal = EpisodeJournal(out / f"{config.planner.agent}.{JOURNAL}")
+
+        def keep(result: EpisodeResult, journal: EpisodeJournal = journal) -> None:
+            with deferred():
+                journal.record(result.row())
+
+        try:
+            runs.append(run(config, progress=progress, jobs=jobs, on_finished=keep))
+        except KeyboardInterrupt:
+            if not runs:
+                raise
+            break
+        if runs[-1].summary["interrupted"]:
+            break
+    return runs
 
 
 def comparison(runs: list[RunResults], baseline: str | None = None) -> list[dict[str, Any]]:
@@ -66,19 +90,26 @@ def comparison(runs: list[RunResults], baseline: str | None = None) -> list[dict
 
 def compare_and_report(
     configs: list[RunConfig], out: Path, jobs: int, progress: bool, baseline: str | None = None
-) -> None:
-    """Run every config, write `out` (comparison.json, comparison.png), print the table."""
-    rows = comparison(compare(configs, jobs=jobs, progress=progress), baseline)
-    write_comparison(rows, out)
-    agents = ", ".join(config.planner.agent for config in configs)
-    write_config(configs[0], out / "config.yaml", f"the resolved config; agents compared: {agents}")
+) -> bool:
+    """Run every config, write `out` (comparison.json, comparison.png), print the table; True
+    when Ctrl-C cut the comparison short (the agents run so far are written)."""
+    runs = compare(configs, out, jobs=jobs, progress=progress)
+    interrupted = len(runs) < len(configs) or bool(runs[-1].summary["interrupted"])
+    rows = comparison(runs, baseline)
+    with deferred(interrupt_after=False):
+        write_comparison(rows, out)
+        agents = ", ".join(config.planner.agent for config in configs)
+        write_config(configs[0], out / "config.yaml", f"the resolved config; agents compared: {agents}")
+        for config in configs:
+            (out / f"{config.planner.agent}.{JOURNAL}").unlink(missing_ok=True)
     print(markdown(rows), end="")
-    print(f"results: {out}")
+    print(f"results: {out}" + (" (interrupted: the agents run so far)" if interrupted else ""))
+    return interrupted
 
 
 def write_comparison(rows: list[dict[str, Any]], out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    (out / "comparison.json").write_text(json.dumps(rows, indent=2) + "\n")
+    write_json(out / "comparison.json", rows)
     with_difference = "difference" in rows[0]
     panels = len(PANELS) + with_difference
     figure, axes = plt.subplots(1, panels, figsize=(4.2 * panels, 4.2))
@@ -95,7 +126,7 @@ def write_comparison(rows: list[dict[str, Any]], out: Path) -> None:
         f"controller {first['controller']} (bars: 95 % confidence intervals)"
     )
     figure.tight_layout()
-    figure.savefig(out / "comparison.png", dpi=100)
+    save_figure(figure, out / "comparison.png", dpi=100)
     plt.close(figure)
 
 

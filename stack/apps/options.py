@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import re
 import sys
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
@@ -13,6 +14,8 @@ from typing import TYPE_CHECKING, NoReturn
 import typer
 import yaml
 from rich.console import Console
+
+from stack.apps.interrupts import catch_signals, received
 
 if TYPE_CHECKING:
     from stack.core.config import RunConfig
@@ -149,6 +152,17 @@ def train_or_fail(config: RunConfig, folder: Path, progress: bool) -> bool:
         fail(str(error))
 
 
+def until_interrupted(work: Callable[[], bool]) -> None:
+    """Run `work`, which returns True when Ctrl-C cut it short with its finished part written, and
+    exit 130 then; one line when it was cut before anything finished."""
+    try:
+        interrupted = work()
+    except KeyboardInterrupt:
+        fail("interrupted before the first episode finished; nothing to write")
+    if interrupted:
+        sys.exit(130)
+
+
 def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
     """Run the CLI `app`; a failure nobody foresaw is one line pointing at `--debug` (which shows
     the traceback) instead of a traceback."""
@@ -156,8 +170,13 @@ def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
     debug = "--debug" in arguments
     if debug:
         arguments.remove("--debug")
+    catch_signals()
     try:
         app(arguments, prog_name="drivestack")
+    except SystemExit as done:
+        if received() and not done.code:
+            sys.exit(130)
+        raise
     except Exception as error:  # noqa: BLE001 - the last line of defence, deliberately broad
         if debug:
             raise

@@ -4,7 +4,6 @@ episodes.csv, a speed / lateral-position plot, the grid over the road, optional 
 from __future__ import annotations
 
 import csv
-import json
 from pathlib import Path
 
 import imageio.v2 as imageio
@@ -14,12 +13,16 @@ from rich.console import Console
 from rich.table import Table
 
 from perception.plot import plot_grid_over_road
+from stack.apps.interrupts import deferred
 from stack.core.config import RunConfig, write_config
 from stack.core.episodes import run
+from stack.core.files import EpisodeJournal, replacing, write_json
 from stack.core.metrics import EpisodeResult
 
 LANE_CHANGE_SPEED = 0.3
 """Lateral speed [m/s] above which an episode counts as changing lane in the traces plot."""
+JOURNAL = "episodes.partial.jsonl"
+"""Finished episodes, one JSON line each, as they finish; replaced by the results at the end."""
 VIDEO_FPS = 15
 """Frames per second of the GIF (one frame per control tick at highway-env's default 15 Hz)."""
 
@@ -27,9 +30,17 @@ VIDEO_FPS = 15
 def run_and_report(config: RunConfig, out: Path, video: bool, jobs: int, progress: bool) -> bool:
     """Run `config`'s episodes, write `out`, print the tables; True when Ctrl-C cut the run short
     (the finished episodes are written). Raises KeyboardInterrupt if none finished."""
-    results = run(config, video=video, progress=progress, jobs=jobs)
-    write_results(out, results.summary, results.episodes, results.frames)
-    write_config(config, out / "config.yaml", "the resolved config of this run")
+    journal = EpisodeJournal(out / JOURNAL)
+
+    def keep(result: EpisodeResult) -> None:
+        with deferred():
+            journal.record(result.row())
+
+    results = run(config, video=video, progress=progress, jobs=jobs, on_finished=keep)
+    with deferred(interrupt_after=False):
+        write_results(out, results.summary, results.episodes, results.frames)
+        write_config(config, out / "config.yaml", "the resolved config of this run")
+        journal.close(remove=True)
     print_tables(results.summary, results.episodes)
     Console().print(f"results: {out}")
     return bool(results.summary["interrupted"])
@@ -38,19 +49,23 @@ def run_and_report(config: RunConfig, out: Path, video: bool, jobs: int, progres
 def write_results(
     out: Path, summary: dict, episodes: list[EpisodeResult], frames: list[np.ndarray] | None = None
 ) -> None:
+    """The results folder, each file written whole (`stack.core.files`)."""
     out.mkdir(parents=True, exist_ok=True)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    write_json(out / "summary.json", summary)
     rows = [episode.row() for episode in episodes]
-    with (out / "episodes.csv").open("w", newline="") as handle:
+    with replacing(out / "episodes.csv") as path, path.open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    plot_traces(episodes, out / "traces.png", summary)
+    with replacing(out / "traces.png") as path:
+        plot_traces(episodes, path, summary)
     if episodes[0].snapshot is not None:
-        plot_grid_over_road(*episodes[0].snapshot, out / "grid.png")
+        with replacing(out / "grid.png") as path:
+            plot_grid_over_road(*episodes[0].snapshot, path)
     if frames:
-        # imageio's stub types the frames as list[ArrayLike], invariant, so list[np.ndarray] is refused
-        imageio.mimsave(out / "episode0.gif", frames[::2], duration=2000 / VIDEO_FPS, loop=0)  # type: ignore[arg-type]
+        with replacing(out / "episode0.gif") as path:
+            # imageio's stub types the frames as list[ArrayLike], invariant: list[np.ndarray] is refused
+            imageio.mimsave(path, frames[::2], duration=2000 / VIDEO_FPS, loop=0)  # type: ignore[arg-type]
 
 
 FEW_EPISODES = 8

@@ -27,6 +27,7 @@ from records import (
     GridConfig,
     one_of,
 )
+from stack.core.files import write_text
 from stack.core.train_config import Strict, TrainConfig
 from stack.sim import scenarios
 from stack.sim.settings import HighwayConfig, SimConfig
@@ -169,7 +170,7 @@ def _set_dotted(data: dict[str, Any], dotted: str, value: Any, source: str) -> N
 def write_config(config: RunConfig, path: Path, comment: str = "") -> None:
     """The resolved `config` as YAML at `path`, loadable with `--config` (a `# comment` first)."""
     header = "".join(f"# {line}\n" for line in comment.splitlines())
-    path.write_text(header + yaml.safe_dump(config.model_dump(mode="json"), sort_keys=False))
+    write_text(path, header + yaml.safe_dump(config.model_dump(mode="json"), sort_keys=False))
 
 
 def in_scenario(config: RunConfig, name: str) -> RunConfig:

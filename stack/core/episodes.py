@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from multiprocessing import get_context
@@ -77,10 +78,16 @@ def run_episode(config: RunConfig, episode: int, frames: list[np.ndarray] | None
         return run_agent_episode(loop, agent, episode, seed)
 
 
-def run(config: RunConfig, video: bool = False, progress: bool = True, jobs: int = 1) -> RunResults:
+def run(
+    config: RunConfig,
+    video: bool = False,
+    progress: bool = True,
+    jobs: int = 1,
+    on_finished: Callable[[EpisodeResult], None] | None = None,
+) -> RunResults:
     """Run `config.episodes` seeded episodes over `jobs` processes; results are ordered by episode,
     identical for any `jobs`. With `video`, episode 0 runs here and keeps its frames. Ctrl-C keeps
-    the finished episodes (`summary["interrupted"]`)."""
+    the finished episodes (`summary["interrupted"]`); `on_finished` sees each as it finishes."""
     frames: list[np.ndarray] = []
     results: dict[int, EpisodeResult] = {}
     pending = list(range(config.episodes))
@@ -91,6 +98,8 @@ def run(config: RunConfig, video: bool = False, progress: bool = True, jobs: int
         results[result.episode] = result
         bar.update(1)
         bar.set_postfix(crashes=sum(r.crashed for r in results.values()))
+        if on_finished is not None:
+            on_finished(result)
 
     try:
         if video:

@@ -1,0 +1,58 @@
+"""Ctrl-C and SIGTERM mean one thing: stop, and keep what is finished.
+
+The first signal raises KeyboardInterrupt where the work is (the episode loops catch it and keep
+the finished episodes). While results are being written, and after the first signal, signals are
+only noted: a second Ctrl-C never cuts a results file or an episode record in half. Training has
+its own handlers (a stop at the next checkpoint) and puts these back when it ends."""
+
+from __future__ import annotations
+
+import signal
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from types import FrameType
+
+_received = 0
+_deferring = 0
+_pending = False
+
+
+def catch_signals() -> None:
+    """Install the handler for SIGINT and SIGTERM (the CLI does, once, before any command)."""
+    global _received, _pending
+    _received, _pending = 0, False
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _handler)
+
+
+def received() -> bool:
+    """Whether a stop was asked for (the command then ends with exit code 130)."""
+    return _received > 0
+
+
+def _handler(signum: int, frame: FrameType | None) -> None:
+    global _received, _pending
+    _received += 1
+    if _received == 1 and not _deferring:
+        raise KeyboardInterrupt
+    if _received == 1:
+        _pending = True
+    print("stopping: writing what is finished first", file=sys.stderr)
+
+
+@contextmanager
+def deferred(interrupt_after: bool = True) -> Iterator[None]:
+    """Signals wait until the block is done. A first signal that arrived meanwhile is raised as
+    KeyboardInterrupt when it ends, if `interrupt_after` (a step inside the work), else only noted
+    (the last write of a command, which then exits 130)."""
+    global _deferring, _pending
+    _deferring += 1
+    try:
+        yield
+    finally:
+        _deferring -= 1
+    if _pending and not _deferring:
+        _pending = False
+        if interrupt_after:
+            raise KeyboardInterrupt
