@@ -30,12 +30,10 @@ def make_agent(
 ) -> Agent:
     """Build the agent `name` for a road of `lanes` lanes seen through `grid`; learned agents load
     `model` (the shipped DDQN by default for `ddqn`)."""
-    if name in LEARNED_AGENTS:
+    if (path := model_path(name, model)) is not None:
         from planner.learned import load_agent
 
-        if model is None and name != "ddqn":
-            raise ValueError(f"agent {name!r} needs a model file (--model PATH, written by drivestack train)")
-        return load_agent(model or DEFAULT_MODEL, expected_algorithms=(name,))
+        return load_agent(path, expected_algorithms=(name,))
     if name == "rule":
         return FreeGapAgent(lanes, grid)
     if name == "mobil":
@@ -45,3 +43,13 @@ def make_agent(
     if name == "random":
         return RandomAgent(seed)
     raise ValueError(unknown_name("agent", name, POLICY_NAMES))
+
+
+def model_path(name: str, model: Path | str | None) -> Path | None:
+    """The model file the agent `name` loads (None for agents without one); ValueError when a
+    learned agent has none."""
+    if name not in LEARNED_AGENTS:
+        return None
+    if model is None and name != "ddqn":
+        raise ValueError(f"agent {name!r} needs a model file (--model PATH, written by drivestack train)")
+    return Path(model or DEFAULT_MODEL)

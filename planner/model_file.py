@@ -49,8 +49,11 @@ def save_model(path: Path | str, arrays: dict[str, np.ndarray], metadata: dict) 
     return path
 
 
-def load_model(path: Path | str, max_bytes: int = MODEL_BYTES) -> tuple[dict[str, np.ndarray], dict]:
-    """(arrays, metadata) of a model file of at most `max_bytes` inflated; never unpickles."""
+def load_model(
+    path: Path | str, max_bytes: int = MODEL_BYTES, arrays: bool = True
+) -> tuple[dict[str, np.ndarray], dict]:
+    """(arrays, metadata) of a model file of at most `max_bytes` inflated; never unpickles. With
+    `arrays=False` only the metadata is read (the whole directory is checked all the same)."""
     path = Path(path)
     if not path.is_file():
         raise ModelFileError(f"{path}: no such model file")
@@ -58,7 +61,9 @@ def load_model(path: Path | str, max_bytes: int = MODEL_BYTES) -> tuple[dict[str
         with zipfile.ZipFile(path) as archive:
             members = _checked_members(path, archive, max_bytes)
             data = {
-                name.removesuffix(".npy"): _read_array(path, archive, info) for name, info in members.items()
+                name.removesuffix(".npy"): _read_array(path, archive, info)
+                for name, info in members.items()
+                if arrays or name == "metadata.npy"
             }
     except ModelFileError:
         raise
@@ -79,6 +84,15 @@ def load_model(path: Path | str, max_bytes: int = MODEL_BYTES) -> tuple[dict[str
         raise ModelFileError(f"{path}: not a drivestack model file (no metadata)")
     metadata = _metadata(path, data.pop("metadata"))
     return {name.removeprefix("array/"): value for name, value in data.items()}, metadata
+
+
+def load_checkpoint(path: Path | str, arrays: bool = True) -> tuple[dict[str, np.ndarray], dict]:
+    """A training checkpoint (`load_model` of at most CHECKPOINT_BYTES), refused in one line
+    unless it is one; `arrays=False` reads its metadata only."""
+    found, metadata = load_model(path, CHECKPOINT_BYTES, arrays)
+    if metadata.get("kind") != "checkpoint" or not isinstance(metadata.get("counters"), dict):
+        raise ModelFileError(f"{path}: not a training checkpoint")
+    return found, metadata
 
 
 def _checked_members(path: Path, archive: zipfile.ZipFile, max_bytes: int) -> dict[str, zipfile.ZipInfo]:

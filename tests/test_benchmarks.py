@@ -32,6 +32,7 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
     tiny.write_text(yaml.safe_dump(data))
     assert "frames/s" in run("sim_speed.py", "--runs", "1", "--frames", "5")
     assert "--help" in run("cli_startup.py", "--runs", "1")
+    assert "\n0 of the cases miss a target" in run("hostile_inputs.py")
     assert run("grid_speed.py", "--repeats", "3")
     assert "ticks/s" in run("loop_rate.py", "--episodes", "1", "--config", str(tiny))
     assert "cheaper" in run("oracle_cost.py", "--seeds", "0", "--duration", "2")

@@ -15,8 +15,8 @@ from stack.apps.options import (
     SET_HELP,
     TRAIN_CONFIG,
     VERSION_OPTION,
-    check_agent,
     check_memory,
+    checked_run,
     chosen,
     configured,
     fail,
@@ -76,10 +76,9 @@ def run(
         episodes=episodes,
         seed=seed,
     )
-    check_agent(cfg)
+    folder = checked_run([cfg], out, "run")
     from stack.apps.run import run_and_report
 
-    folder = output_folder(out, "run")
     until_interrupted(lambda: run_and_report(cfg, folder, video, jobs, progress))
 
 
@@ -149,11 +148,9 @@ def compare(
         )
         for name in names
     ]
-    for cfg in configs:
-        check_agent(cfg)
+    folder = checked_run(configs, out, "compare")
     from stack.apps.compare import compare_and_report
 
-    folder = output_folder(out, "compare")
     until_interrupted(lambda: compare_and_report(configs, folder, jobs, progress, baseline))
 
 

@@ -3,6 +3,7 @@ one-line error (exit 2), and checks done before any work."""
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import sys
@@ -81,14 +82,40 @@ def parsed_sets(sets: list[str]) -> dict[str, object]:
     return values
 
 
-def check_agent(config: RunConfig) -> None:
-    """Build the configured agent once, so a missing or unsafe model file fails before any work."""
+def checked_run(configs: list[RunConfig], out: Path | None, prefix: str) -> Path:
+    """The results folder of a run of `configs`, after checking (one line, exit 2, before any
+    work) each agent's model file with numpy alone, then the folder (`output_folder`), then each
+    agent as built for its road (this imports torch)."""
+    from planner.factory import model_path
+    from planner.model_check import checked_model
+    from records import GridConfig
+    from stack.core.config import road_mismatch
+
+    for config in configs:
+        try:
+            if (path := model_path(config.planner.agent, config.planner.model)) is not None:
+                _, metadata = checked_model(path, (config.planner.agent,))
+                if metadata["kind"] == "mlp" and (
+                    why := road_mismatch(
+                        path,
+                        GridConfig(**metadata["grid"]),
+                        metadata["encoding"],
+                        metadata["observation_size"],
+                        config.highway.lanes_count,
+                    )
+                ):
+                    fail(why)
+        except ValueError as error:
+            fail(str(error))
+    folder = output_folder(out, prefix)
     from stack.core.episodes import build_agent
 
-    try:
-        build_agent(config, config.seed)
-    except ValueError as error:
-        fail(str(error))
+    for config in configs:
+        try:
+            build_agent(config, config.seed)
+        except ValueError as error:
+            fail(str(error))
+    return folder
 
 
 def chosen(option: str, value: str, options: tuple[str, ...]) -> tuple[str, ...]:
@@ -128,10 +155,30 @@ def _print_version(value: bool) -> None:
         raise typer.Exit()
 
 
+def replay_buffer_bytes(config: RunConfig) -> int:
+    """Memory SB3's replay buffer takes for `config` [bytes]: observations and next observations
+    (float32) plus action, reward, done and timeout per transition."""
+    from perception.grid import OccupancyGridBuilder
+    from stack.core.config import grid_config
+
+    grid = OccupancyGridBuilder(grid_config(config))
+    size = math.prod(grid.space(config.train.encoding, config.highway.lanes_count).shape)
+    return config.train.buffer_size * (2 * 4 * size + 8 + 4 + 4 + 4)
+
+
+def available_memory_bytes() -> int | None:
+    """MemAvailable of /proc/meminfo [bytes]; None where it cannot be read."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
 def check_memory(config: RunConfig) -> None:
     """Refuse, before anything is allocated, a replay buffer that does not fit in memory."""
-    from stack.apps.train_model import available_memory_bytes, replay_buffer_bytes
-
     needed, available = replay_buffer_bytes(config), available_memory_bytes()
     if config.train.algorithm != "tabular" and available is not None and needed > 0.8 * available:
         fail(
@@ -143,10 +190,13 @@ def check_memory(config: RunConfig) -> None:
 def train_or_fail(config: RunConfig, folder: Path, progress: bool) -> bool:
     """`drivestack train` in `folder`; a checkpoint that cannot be resumed is a one-line error.
     True when interrupted (resumable)."""
-    from planner.model_file import ModelFileError
-    from stack.apps.train import train_and_report
+    from planner.model_file import ModelFileError, load_checkpoint
 
     try:
+        if (checkpoint := folder / "checkpoint.npz").is_file():
+            load_checkpoint(checkpoint, arrays=False)
+        from stack.apps.train import train_and_report
+
         return train_and_report(config, folder, progress)
     except ModelFileError as error:
         fail(str(error))

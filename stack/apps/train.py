@@ -22,7 +22,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import SubprocVecEnv
 
 from planner.learned import export_q_network, save_q_table
-from planner.model_file import CHECKPOINT_BYTES, ModelFileError, load_model, save_model
+from planner.model_file import ModelFileError, load_checkpoint, save_model
 from planner.tabular import QLearning
 from planner.validation import RealTimeValidation, Validation
 from records import child_seed
@@ -197,10 +197,7 @@ class Trainer:
     # --- shared -------------------------------------------------------------------------------
     def _checkpoint(self) -> tuple[dict, dict]:
         """The run's checkpoint, refused in one line (ModelFileError) unless it is one."""
-        arrays, metadata = load_model(self.out / CHECKPOINT, CHECKPOINT_BYTES)
-        if metadata.get("kind") != "checkpoint" or not isinstance(metadata.get("counters"), dict):
-            raise ModelFileError(f"{self.out / CHECKPOINT}: not a training checkpoint")
-        return arrays, metadata
+        return load_checkpoint(self.out / CHECKPOINT)
 
     def _restore_common(self, metadata: dict) -> None:
         self.history, self.best = RealTimeValidation.restore(metadata["validation"])

@@ -15,7 +15,6 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecEnv
 
-from perception.grid import OccupancyGridBuilder
 from planner.ddqn import DoubleDQN
 from planner.networks import net_arch
 from records import N_ACTIONS
@@ -68,25 +67,6 @@ def worker_env(config: RunConfig) -> Monitor:
     checkpoint) and closes the workers itself."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     return monitored_env(config)
-
-
-def replay_buffer_bytes(config: RunConfig) -> int:
-    """Memory SB3's replay buffer takes for `config` [bytes]: observations and next observations
-    (float32) plus action, reward, done and timeout per transition."""
-    grid = OccupancyGridBuilder(grid_config(config))
-    size = int(np.prod(grid.space(config.train.encoding, config.highway.lanes_count).shape))
-    return config.train.buffer_size * (2 * 4 * size + 8 + 4 + 4 + 4)
-
-
-def available_memory_bytes() -> int | None:
-    """MemAvailable of /proc/meminfo [bytes]; None where it cannot be read."""
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
 
 
 def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQN:

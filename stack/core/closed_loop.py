@@ -20,7 +20,7 @@ from perception.plot import grid_panel
 from perception.sensor import SensorModel
 from planner.safety import SafetyLayer
 from records import Actuation, Command, GridConfig, WorldState
-from stack.core.config import RunConfig
+from stack.core.config import RunConfig, grid_config
 from stack.core.metrics import EpisodeRecorder, EpisodeResult
 
 SNAPSHOT_TIME_S = 10.0
@@ -57,10 +57,6 @@ class Acted:
     ticks: int
     considered: bool
     mean_speed: float
-
-
-def grid_config(config: RunConfig) -> GridConfig:
-    return GridConfig(**config.perception.model_dump(exclude={"sensor", "control_on_ground_truth"}))
 
 
 class ClosedLoop:

@@ -24,6 +24,7 @@ from records import (
     AGENT_NAMES,
     SEED_LIMIT,
     AgentName,
+    Encoding,
     GridConfig,
     one_of,
 )
@@ -228,3 +229,22 @@ def load_config(path: Path | str, labels: dict[str, str] | None = None, **overri
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping of keys at the top level")
     return build_config(data, str(path), labels, **overrides)
+
+
+def grid_config(config: RunConfig) -> GridConfig:
+    """The perception grid `config` asks for (its `perception` section without the sensor)."""
+    return GridConfig(**config.perception.model_dump(exclude={"sensor", "control_on_ground_truth"}))
+
+
+def road_mismatch(
+    model: Path | str, grid: GridConfig, encoding: Encoding, size: int, lanes: int
+) -> str | None:
+    """Why a model that expects `size` observation values, seen through `grid` with `encoding`,
+    cannot drive a road of `lanes` lanes (None when it can)."""
+    given = int(OccupancyGridBuilder(grid).space(encoding, lanes).shape[0])
+    if given == size:
+        return None
+    return (
+        f"{model}: expects observations of {size} values; "
+        f"its {encoding} grid gives {given} on this {lanes}-lane road"
+    )

@@ -10,12 +10,11 @@ from multiprocessing import get_context
 import numpy as np
 from tqdm import tqdm
 
-from perception.grid import OccupancyGridBuilder
 from planner.agents import Agent, decide
-from planner.factory import DEFAULT_MODEL, make_agent
+from planner.factory import make_agent, model_path
 from records import child_seed
 from stack.core.closed_loop import ClosedLoop, grid_config
-from stack.core.config import RunConfig
+from stack.core.config import RunConfig, road_mismatch
 from stack.core.metrics import EpisodeResult, summarize
 from stack.core.oracle import Oracle
 from stack.sim.highway import HighwayAdapter
@@ -29,14 +28,13 @@ def build_agent(config: RunConfig, seed: int) -> Agent:
         return Oracle.for_road(planner.oracle, lanes, grid_config(config))
     agent = make_agent(planner.agent, lanes, grid_config(config), seed, planner.model)
     expected = getattr(agent, "observation_size", None)
-    if expected is not None:
-        builder = OccupancyGridBuilder(agent.grid_config or grid_config(config))
-        size = int(builder.space(agent.encoding, lanes).shape[0])
-        if size != expected:
-            raise ValueError(
-                f"{planner.model or DEFAULT_MODEL}: expects observations of {expected} values; its "
-                f"{agent.encoding} grid gives {size} on this {lanes}-lane road"
-            )
+    grid = agent.grid_config or grid_config(config)
+    if expected is not None and (
+        why := road_mismatch(
+            model_path(planner.agent, planner.model) or "", grid, agent.encoding, expected, lanes
+        )
+    ):
+        raise ValueError(why)
     return agent
 
 

@@ -1,0 +1,189 @@
+"""Every hostile input of the hardening issue, run as a user would (a fresh `drivestack` process):
+exit code, lines printed, wall time and the process's peak RSS, against the targets (exit 2, one
+line <= 300 characters, <= 5 s, <= 400 MB).
+
+    .venv/bin/python benchmarks/hostile_inputs.py
+
+Prints a markdown table and exits 1 if any case misses a target.
+"""
+
+from __future__ import annotations
+
+import io
+import subprocess
+import sys
+import tempfile
+import zipfile
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from planner.factory import DEFAULT_MODEL  # noqa: E402
+from planner.model_file import FORMAT  # noqa: E402
+from tests.test_hostile_inputs import BOMB  # noqa: E402
+from tests.test_model_files import metadata_bytes, npy, shipped, with_metadata, write  # noqa: E402
+
+LIMIT_S, LIMIT_MB, LIMIT_CHARS = 5.0, 400.0, 300
+
+
+def text(content: str) -> Callable[[Path], None]:
+    return lambda path: path.write_text(content)
+
+
+def nan_weights(path: Path) -> None:
+    arrays, metadata = shipped()
+    arrays["0.weight"] = arrays["0.weight"].copy()
+    arrays["0.weight"][0, 0] = np.nan
+    write(
+        path,
+        {"metadata.npy": metadata_bytes(metadata), **{f"array/{k}.npy": npy(v) for k, v in arrays.items()}},
+    )
+
+
+def header_liar(path: Path) -> None:
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (10**12,)})
+    write(
+        path,
+        {"metadata.npy": metadata_bytes({"format": FORMAT}), "array/q.npy": header.getvalue() + b"\0" * 64},
+    )
+
+
+def corrupt_deflate(path: Path) -> None:
+    write(path, {"metadata.npy": metadata_bytes({"format": FORMAT}) * 50})
+    raw = bytearray(path.read_bytes())
+    raw[60:90] = b"\x00" * 30
+    path.write_bytes(bytes(raw))
+
+
+def encrypted(path: Path) -> None:
+    with_metadata(path)
+    raw = bytearray(path.read_bytes())
+    raw[raw.find(b"PK\x03\x04") + 6] |= 0x1
+    raw[raw.find(b"PK\x01\x02") + 8] |= 0x1
+    path.write_bytes(bytes(raw))
+
+
+def checkpoint_folder(content: bytes) -> Callable[[Path], None]:
+    def build(folder: Path) -> None:
+        folder.mkdir()
+        (folder / "config.yaml").write_text(yaml.safe_dump({"train": {"steps": 10}}))
+        (folder / "checkpoint.npz").write_bytes(content)
+
+    return build
+
+
+MODEL_FILES: dict[str, Callable[[Path], None]] = {
+    "npz member inflating to 96 MB": lambda p: write(
+        p, {"metadata.npy": metadata_bytes({"format": FORMAT}), "array/q.npy": npy(np.zeros(12_000_000))}
+    ),
+    "metadata hidden: [4000000]": lambda p: with_metadata(p, hidden=[4_000_000]),
+    "header claiming 8 TB": header_liar,
+    "grid with 10^8 cells": lambda p: with_metadata(p, grid={"cells_ahead": 10**8}),
+    "metadata a list": lambda p: write(p, {"metadata.npy": metadata_bytes([1, 2])}),
+    "metadata null": lambda p: write(p, {"metadata.npy": metadata_bytes(None)}),
+    "metadata nested 100k deep": lambda p: write(
+        p, {"metadata.npy": npy(np.frombuffer(b"[" * 100_000 + b"]" * 100_000, dtype=np.uint8))}
+    ),
+    "bare .npy": lambda p: p.write_bytes(npy(np.zeros(3))),
+    "zip without members": lambda p: write(p, {"other.txt": b"x"}),
+    "corrupt deflate": corrupt_deflate,
+    "unknown compression": lambda p: write(p, {"metadata.npy": b"x"}, zipfile.ZIP_BZIP2),
+    "encrypted member": encrypted,
+    "another observation size": lambda p: with_metadata(p, observation_size=50),
+    "unknown encoding": lambda p: with_metadata(p, encoding="telepathy"),
+    "5 actions": lambda p: with_metadata(p, actions=5),
+    "NaN weights": nan_weights,
+    "pickled member": lambda p: write(
+        p, {"metadata.npy": metadata_bytes({"format": FORMAT}), "array/q.npy": npy_pickled()}
+    ),
+}
+
+CONFIGS: dict[str, str] = {
+    "billion laughs as seed": BOMB + "seed: *i\n",
+    "billion laughs as features": BOMB + "perception: {features: *i}\n",
+    "decision_period_s: .inf": "decision_period_s: .inf\n",
+    "cells_ahead: 10^8": "perception: {cells_ahead: 100000000}\n",
+    "false_positives: 1e12": "perception: {sensor: {false_positives: 1.0e+12}}\n",
+    "position noise .inf": "perception: {sensor: {position_noise: .inf}}\n",
+    "duration .inf, no traffic": "highway: {duration: .inf, vehicles_count: 0}\n",
+    "seed 2^70": "seed: 1180591620717411303424\n",
+}
+
+
+def npy_pickled() -> bytes:
+    buffer = io.BytesIO()
+    np.lib.format.write_array(buffer, np.array([{"a": 1}], dtype=object), allow_pickle=True)
+    return buffer.getvalue()
+
+
+def cases(folder: Path) -> dict[str, list[str]]:
+    """Case name -> the CLI arguments (files built in `folder`)."""
+    found: dict[str, list[str]] = {}
+    for index, (name, build) in enumerate(MODEL_FILES.items()):
+        build(path := folder / f"model{index}.npz")
+        found[f"model: {name}"] = ["run", "--agent", "ddqn", "--model", str(path), "--episodes", "1"]
+    for index, (name, content) in enumerate(CONFIGS.items()):
+        (path := folder / f"config{index}.yaml").write_text(content)
+        found[f"config: {name}"] = ["run", "-c", str(path), "--out", str(folder / f"out{index}")]
+    (latin := folder / "latin.yaml").write_bytes(b"seed: 1 # caf\xe9\n")
+    found["config: not UTF-8"] = ["run", "-c", str(latin)]
+    (buffer := folder / "buffer.yaml").write_text("train: {buffer_size: 100000000}\n")
+    found["train.buffer_size: 10^8"] = ["train", "-c", str(buffer), "--out", str(folder / "t")]
+    found["train --seed 2^70"] = ["train", "--seed", str(2**70), "--out", str(folder / "t2")]
+    found["train --envs 0"] = ["train", "--envs", "0", "--out", str(folder / "t3")]
+    (existing := folder / "results.txt").write_text("keep")
+    found["run --out an existing file"] = ["run", "--out", str(existing)]
+    found["train --out an existing file"] = ["train", "--out", str(existing)]
+    for name, content in (
+        ("a truncated checkpoint", DEFAULT_MODEL.read_bytes()[:5000]),
+        ("a model file as checkpoint", DEFAULT_MODEL.read_bytes()),
+    ):
+        checkpoint_folder(content)(run := folder / name.replace(" ", "-"))
+        found[f"train --resume from {name}"] = ["train", "--resume", str(run), "--no-progress"]
+    found["unknown scenario"] = ["run", "--scenario", "moon"]
+    found["the shipped model on a 2-lane road"] = ["run", "--set", "highway.lanes_count=2"]
+    return found
+
+
+def measure(arguments: list[str], scratch: Path) -> tuple[int, str, float, float]:
+    """(exit code, output, wall s, peak RSS MB) of one fresh CLI process, measured by GNU time."""
+    report = scratch / "time.txt"
+    result = subprocess.run(
+        ["/usr/bin/time", "-o", str(report), "-f", "%e %M", sys.executable, "-m", "stack", *arguments],
+        capture_output=True,
+        text=True,
+    )
+    wall, kilobytes = report.read_text().split()[-2:]
+    return result.returncode, result.stdout + result.stderr, float(wall), float(kilobytes) / 1024
+
+
+def main() -> None:
+    print("| case | exit | lines | longest line | wall s | peak RSS MB | ok |\n|---|---|---|---|---|---|---|")
+    failures = 0
+    with tempfile.TemporaryDirectory() as scratch:
+        for name, arguments in cases(Path(scratch)).items():
+            code, output, wall, rss = measure(arguments, Path(scratch))
+            lines = output.strip().splitlines()
+            longest = max((len(line) for line in lines), default=0)
+            ok = (
+                code == 2
+                and len(lines) == 1
+                and longest <= LIMIT_CHARS
+                and wall <= LIMIT_S
+                and rss <= LIMIT_MB
+            )
+            failures += not ok
+            verdict = "yes" if ok else "NO: " + output.strip()[:120]
+            print(f"| {name} | {code} | {len(lines)} | {longest} | {wall:.2f} | {rss:.0f} | {verdict} |")
+    print(f"\n{failures} of the cases miss a target")
+    sys.exit(1 if failures else 0)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,82 @@
+"""What a model file must hold before an agent is built from it, checked with numpy alone (no
+torch import, so a bad file is refused in a fraction of a second): the kind, algorithm, encoding,
+grid and action count the loop can use, network sizes within bounds, the arrays' shapes equal to
+the ones those sizes give, every weight finite."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from pydantic import ValidationError
+
+from planner.model_file import ModelFileError, load_model
+from records import ENCODINGS, N_ACTIONS, GridConfig
+
+MAX_INPUTS = 100_000
+"""Largest observation a Q-network model may declare [values]."""
+MAX_WIDTH, MAX_LAYERS = 4096, 8
+"""Largest hidden layer [units] and number of hidden layers a model may declare."""
+
+
+
+def checked_model(
+    path: Path | str, expected_algorithms: tuple[str, ...] | None = None
+) -> tuple[dict[str, np.ndarray], dict]:
+    """(arrays, metadata) of `path`, refused with one line (ModelFileError) unless an agent can be
+    built from them."""
+    arrays, metadata = load_model(path)
+    algorithm = metadata.get("algorithm")
+    if expected_algorithms and algorithm not in expected_algorithms:
+        raise ModelFileError(
+            f"{path}: holds a {str(algorithm)[:40]!r} model; expected {' or '.join(expected_algorithms)}"
+        )
+    _check_metadata(path, metadata)
+    for name, value in arrays.items():
+        if not np.all(np.isfinite(value)):
+            raise ModelFileError(f"{path}: array {name!r} holds NaN or infinite values")
+    if metadata["kind"] == "qtable":
+        table = arrays.get("q_table")
+        if table is None or table.ndim < 2 or table.shape[-1] != N_ACTIONS or len(arrays) != 1:
+            raise ModelFileError(
+                f"{path}: expected one q_table array whose last axis has {N_ACTIONS} actions"
+            )
+        return arrays, metadata
+    sizes = [int(metadata["observation_size"]), *map(int, metadata["hidden"]), N_ACTIONS]
+    expected: dict[str, tuple[int, ...]] = {}
+    for layer, (inputs, outputs) in enumerate(zip(sizes[:-1], sizes[1:], strict=True)):
+        expected[f"{2 * layer}.weight"], expected[f"{2 * layer}.bias"] = (outputs, inputs), (outputs,)
+    actual = {name: value.shape for name, value in arrays.items()}
+    if actual != expected:
+        raise ModelFileError(f"{path}: model arrays do not match its metadata (expected {expected})"[:300])
+    return arrays, metadata
+
+
+def _check_metadata(path: Path | str, metadata: dict) -> None:
+    """One line for the first metadata field the loop cannot use."""
+    kind, encoding = metadata.get("kind"), metadata.get("encoding", "tabular")
+    problem = None
+    if kind not in ("mlp", "qtable"):
+        problem = "kind: expected 'mlp' or 'qtable'"
+    elif encoding not in ENCODINGS:
+        problem = f"encoding: expected one of {', '.join(ENCODINGS)}"
+    elif kind == "mlp":
+        size, hidden, actions = (metadata.get(k) for k in ("observation_size", "hidden", "actions"))
+        if not isinstance(size, int) or not 1 <= size <= MAX_INPUTS:
+            problem = f"observation_size: expected an integer in 1..{MAX_INPUTS}"
+        elif (
+            not isinstance(hidden, list)
+            or len(hidden) > MAX_LAYERS
+            or not all(isinstance(width, int) and 1 <= width <= MAX_WIDTH for width in hidden)
+        ):
+            problem = f"hidden: expected at most {MAX_LAYERS} layer widths in 1..{MAX_WIDTH}"
+        elif actions != N_ACTIONS:
+            problem = f"actions: the loop commands LEFT, STAY, RIGHT ({N_ACTIONS}), not {str(actions)[:20]}"
+    if problem is None:
+        try:
+            GridConfig.model_validate(metadata.get("grid"))
+        except ValidationError as error:
+            first = error.errors()[0]
+            problem = f"grid.{'.'.join(map(str, first['loc']))}: {first['msg']}"[:200]
+    if problem:
+        raise ModelFileError(f"{path}: model metadata {problem}")
