@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from stack.core import metrics
 from stack.core.config import build_config
 from stack.core.episodes import run
 
@@ -41,7 +42,7 @@ def outcome(case: str) -> dict:
     data = {"episodes": 1, "highway": {"vehicles_count": 30, "duration": 12}, **CASES[case]}
     results = run(build_config(data, case), progress=False)
     traces = json.dumps([episode.trace for episode in results.episodes])
-    summary = {key: value for key, value in results.summary.items() if key != "backend"}
+    summary = {key: value for key, value in metrics.outcome(results.summary).items() if key != "backend"}
     return {"summary": summary, "traces": hashlib.sha256(traces.encode()).hexdigest()}
 
 

@@ -148,6 +148,8 @@ def print_tables(summary: dict, episodes: list[EpisodeResult], console: Console 
         ("passed cars", summary["passed_cars"]),
         ("mean speed", f"{summary['mean_speed']:.2f} m/s"),
         ("lane changes / episode", f"{summary['lane_changes']:.2f}"),
+        ("MPC fallbacks", summary["mpc_fallbacks"]),
+        ("control compute p50 / p95", f"{summary['solve_ms_p50']:.2f} / {summary['solve_ms_p95']:.2f} ms"),
     ):
         overview.add_row(name, str(value))
     console.print(overview)

@@ -88,6 +88,8 @@ class ClosedLoop:
         self.safety = SafetyLayer(config.planner.safety)
         self.controller = self.given_controller or make_controller(config.controller, self.plant.dt)
         self.controller.reset()
+        self.fallbacks_before = self.controller.fallbacks
+        self.solves_before = len(self.controller.solve_times)
         self.maneuver = Maneuver(
             self.world,
             config.controller.lane_change_duration_s,
@@ -182,4 +184,8 @@ class ClosedLoop:
             aborted=self.safety.aborted,
         )
         result.snapshot = self.snapshot
+        result.mpc_fallbacks = self.controller.fallbacks - self.fallbacks_before
+        solve_ms = 1e3 * np.array(self.controller.solve_times[self.solves_before :])
+        if solve_ms.size:
+            result.solve_ms_p50, result.solve_ms_p95 = (float(t) for t in np.percentile(solve_ms, [50, 95]))
         return result

@@ -103,6 +103,9 @@ class EpisodeResult:
     peak_lat_jerk: float
     masked_commands: int = 0
     aborted_changes: int = 0
+    mpc_fallbacks: int = 0
+    solve_ms_p50: float = field(default=0.0, compare=False)
+    solve_ms_p95: float = field(default=0.0, compare=False)
     trace: dict[str, list[float]] = field(default_factory=dict, repr=False)
     snapshot: tuple[WorldState, OccupancyGrid] | None = field(default=None, repr=False, compare=False)
 
@@ -171,8 +174,20 @@ class EpisodeRecorder:
         )
 
 
+TIMING_FIELDS = ("solve_ms_p50", "solve_ms_p95")
+"""Summary and episode fields measured in wall-clock time: never part of a result's identity."""
+
+
+def outcome(summary: dict) -> dict:
+    """`summary` without its timing fields: what two runs of one seed must agree on."""
+    return {key: value for key, value in summary.items() if key not in TIMING_FIELDS}
+
+
 def summarize(results: list[EpisodeResult], **identity: object) -> dict:
-    """Aggregate episodes (order-independent): rates, accuracy, means; `identity` is copied in."""
+    """Aggregate episodes (order-independent): rates, accuracy, means; `identity` is copied in.
+    The controller's compute time per tick [ms] is the median of the episodes' medians
+    (`solve_ms_p50`) and the worst episode's 95th percentile (`solve_ms_p95`): measured, so the
+    only fields that differ between two runs of one seed (see `TIMING_FIELDS`)."""
     collisions = sum(r.crashed for r in results)
     passed = sum(r.passed_cars for r in results)
     return {
@@ -188,4 +203,7 @@ def summarize(results: list[EpisodeResult], **identity: object) -> dict:
         "aborted_changes": float(np.mean([r.aborted_changes for r in results])),
         "peak_lat_accel": float(max(r.peak_lat_accel for r in results)),
         "peak_lat_jerk": float(max(r.peak_lat_jerk for r in results)),
+        "mpc_fallbacks": sum(r.mpc_fallbacks for r in results),
+        "solve_ms_p50": float(np.median([r.solve_ms_p50 for r in results])),
+        "solve_ms_p95": float(max(r.solve_ms_p95 for r in results)),
     }
