@@ -15,6 +15,20 @@ import casadi as ca
 
 LENGTH = 5.0
 """Vehicle length = wheelbase of highway-env's bicycle [m]."""
+WIDTH = 2.0
+"""[m]"""
+MASS = 1.0
+"""highway-env's `BicycleVehicle.MASS` [kg] (its tyre forces are scaled to it)."""
+CORNERING_STIFFNESS = 30.0
+"""Per axle, front and rear: 2 x `BicycleVehicle.FRICTION_FRONT` (15 N/rad) [N/rad]."""
+INERTIA_Z = MASS * (LENGTH**2 + WIDTH**2) / 12
+"""Yaw inertia of `BicycleVehicle`, a uniform L x W rectangle [kg m^2] (2.417)."""
+YAW_POLE_SPEED = 2 * CORNERING_STIFFNESS * (LENGTH / 2) ** 2 / INERTIA_Z
+"""The dynamic bicycle's yaw-rate pole is -YAW_POLE_SPEED / v [1/s]: (a^2 C_f + b^2 C_r) / I_z
+with a = b = L / 2 [m/s] (155.2)."""
+SLIP_GRADIENT = MASS * (LENGTH / 2) / (CORNERING_STIFFNESS * LENGTH)
+"""Steady sideslip of the dynamic bicycle below the kinematic one per lateral acceleration:
+beta_dynamic - beta_kinematic = -SLIP_GRADIENT v r (m a / (C_r L), Rajamani 2.21-2.22) [s^2/m]."""
 
 
 @dataclass(frozen=True)

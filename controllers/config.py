@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -18,8 +18,11 @@ class PIDGains(_Settings):
     """Cascaded lateral PID and longitudinal speed PI (see controllers.lateral for the design)."""
 
     kp_lateral: float = Field(2.0, gt=0, description="lateral position gain [1/s]")
-    ki_lateral: float = Field(0.05, ge=0, description="lateral integral gain [1/s^2]")
+    ki_lateral: float = Field(0.6, ge=0, description="lateral integral gain [1/s^2]")
     kp_heading: float = Field(6.0, gt=0, description="heading gain [1/s]")
+    model: Literal["plant", "kinematic", "dynamic"] = Field(
+        "plant", description="the bicycle the feedforward inverts; plant: the one simulated (sim.plant)"
+    )
     steering_rate: float = Field(0.5, gt=0, description="steering rate limit [rad/s]")
     max_steering: float = Field(math.pi / 4, gt=0, le=math.pi / 4, description="steering limit [rad]")
     kp_speed: float = Field(0.6, gt=0, description="speed gain [1/s]")

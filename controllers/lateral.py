@@ -1,19 +1,28 @@
-"""Cascaded lateral PID on the kinematic bicycle, with feedforward from the reference.
+"""Cascaded lateral PID on the bicycle, with feedforward from the reference and the road.
 
 Design. The steering is computed from a commanded yaw rate r through beta = asin(L/2 r / v), so
-psi' = r exactly: the heading loop r = r_ff + kp_heading (psi_cmd - psi) is first order with time
-constant 1 / kp_heading. The outer loop commands the course: chi_cmd = asin((d_dot_ref + kp e +
-ki int e) / v) with e = d_ref - d, fed forward by chi_ff' = d_ddot_ref / v and by the road's
-curvature (r_ff += kappa v). The plant's course is psi + beta, so the heading command subtracts the
-slip of the feedforward yaw rate. Linearised (small angles) in error coordinates the loop is
+psi' = r exactly on the kinematic bicycle: the heading loop r = r_ff + kp_heading (psi_cmd - psi)
+is first order with time constant 1 / kp_heading. The outer loop commands the course: chi_cmd =
+asin((d_dot_ref + kp e + ki int e) / v) with e = d_ref - d, fed forward by chi_ff' = d_ddot_ref / v
+and by the road's curvature at the car's offset (r_ff += v kappa / (1 - kappa d)). The plant's
+course is psi + beta, so the heading command subtracts the sideslip of the feedforward yaw rate.
+Linearised (small angles) in error coordinates the loop is
 
     e' = -v psi_e,  psi_e' = kp_h (kp e + ki z) / v - kp_h psi_e,  z' = e,
 
 whose characteristic polynomial s^3 + kp_h s^2 + kp_h kp s + kp_h ki does not depend on the speed:
-the defaults (kp_h 6, kp 2, ki 0.05) put the poles at -2.99 +- 1.71j and -0.025 (python-control,
-`closed_loop`; checked in the tests): a step in d_ref rises in 0.76 s, settles (2 %) in 1.2 s with
-1.7 % overshoot, at any speed; the slow integrator pole only trims steady offsets. Tuned with
-`drivestack track`: with the feedforward, the lane change itself needs little feedback.
+the defaults (kp_h 6, kp 2, ki 0.6) put the poles at -2.82 +- 1.42j and -0.36 (python-control,
+`closed_loop`, checked in the tests). A step in d_ref without feedforward rises in 0.64 s with 13 %
+overshoot and a slow tail: the integrator pole at -0.36 1/s, placed to remove a bend's residual
+bias within the lane change; a lane change is fed forward and settles within 5 s (`track`).
+
+The dynamic bicycle (tyre slip, `model="dynamic"`) differs in two ways, both speed-scheduled
+model inversions rather than higher gains: (1) its steady sideslip is smaller by SLIP_GRADIENT v r
+(-0.72 deg instead of +0.14 deg at 30 m/s on a 1000 m bend), which the heading command subtracts
+too; (2) its yaw rate lags the steering by a first-order pole at -YAW_POLE_SPEED / v (0.23 s at
+35 m/s, slower than the heading loop above ~26 m/s), which a lead on the commanded yaw rate, time
+constant v / YAW_POLE_SPEED, cancels: r_cmd + tau r_cmd'. `dynamic_loop` is the linearised
+loop on that plant (poles and margins at 10, 22, 35 m/s in the tests and docs/architecture.md).
 """
 
 from __future__ import annotations
@@ -23,12 +32,11 @@ import math
 import control
 import numpy as np
 
+from controllers.bicycle import CORNERING_STIFFNESS, LENGTH, MASS, SLIP_GRADIENT, YAW_POLE_SPEED
 from controllers.config import PIDGains
 from controllers.pid import PID
-from records import EgoState, Reference
+from records import EgoState, PlantName, Reference
 
-LENGTH = 5.0
-"""Wheelbase of highway-env's bicycle [m]."""
 MIN_SPEED = 1.0
 """Below this speed [m/s] the lateral law is evaluated at MIN_SPEED, avoiding division by ~0."""
 
@@ -42,26 +50,49 @@ def closed_loop(gains: PIDGains, speed: float = 25.0) -> control.StateSpace:
     return control.ss(a, b, np.array([[1.0, 0.0, 0.0]]), np.zeros((1, 1)))
 
 
-class LateralPID:
-    """Steering command [rad] from lateral and heading errors; stateful (integrator, last steering)."""
+def dynamic_loop(gains: PIDGains, speed: float) -> control.TransferFunction:
+    """The loop transfer function e -> d of the PID on the linearised dynamic bicycle (broken at
+    the lateral error), for poles of 1 + L and margins. With the lead the yaw rate follows its
+    command exactly; the lateral speed keeps its own pole at -2 C / (m v):
+    v_y' = -2C/(m v) v_y - v r + C/m delta, delta = L/v (1 + tau s) r_cmd, d' = v psi + v_y."""
+    s, v = control.tf("s"), speed
+    kp, ki, kh = gains.kp_lateral, gains.ki_lateral, gains.kp_heading
+    lead = (LENGTH / v) * (1 + v / YAW_POLE_SPEED * s)
+    lateral_speed = (CORNERING_STIFFNESS / MASS * lead - v) / (s + 2 * CORNERING_STIFFNESS / (MASS * v))
+    offset = (v / s + lateral_speed) / s
+    heading_loop = kh * s / (s + kh)
+    return control.minreal((kp + ki / s) / v * heading_loop * offset, verbose=False)
 
-    def __init__(self, gains: PIDGains) -> None:
-        self.gains = gains
+
+class LateralPID:
+    """Steering command [rad] from lateral and heading errors for the bicycle `model` (kinematic
+    or dynamic); stateful (integrator, last steering and yaw-rate command)."""
+
+    def __init__(self, gains: PIDGains, model: PlantName = "kinematic") -> None:
+        self.gains, self.model = gains, model
         self.lateral = PID(kp=gains.kp_lateral, ki=gains.ki_lateral, limits=(-10.0, 10.0))
-        self.last_steering = 0.0
+        self.reset()
 
     def reset(self) -> None:
         self.lateral.reset()
         self.last_steering = 0.0
+        self.last_yaw_rate: float | None = None
 
     def update(self, state: EgoState, reference: Reference, dt: float) -> float:
         gains = self.gains
         v = max(state.speed, MIN_SPEED)
         lateral_speed = self.lateral.update(reference.d - state.d, dt, feedforward=reference.d_dot)
         course = math.asin(float(np.clip(lateral_speed / v, -0.5, 0.5)))
-        feedforward_rate = reference.d_ddot / v + state.curvature * v
+        road_rate = state.curvature * v / (1 - state.curvature * state.d)
+        feedforward_rate = reference.d_ddot / v + road_rate
         slip = math.asin(float(np.clip(LENGTH / 2 * feedforward_rate / v, -0.5, 0.5)))
+        if self.model == "dynamic":
+            slip -= SLIP_GRADIENT * v * feedforward_rate
         yaw_rate = feedforward_rate + gains.kp_heading * (course - slip - state.heading)
+        if self.model == "dynamic":
+            previous = yaw_rate if self.last_yaw_rate is None else self.last_yaw_rate
+            self.last_yaw_rate = yaw_rate
+            yaw_rate += v / YAW_POLE_SPEED * (yaw_rate - previous) / dt
         beta = math.asin(float(np.clip(LENGTH / 2 * yaw_rate / v, -0.7, 0.7)))
         step = gains.steering_rate * dt
         steering = float(

@@ -3,7 +3,6 @@ reference it hands the controller every tick."""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 
 from controllers.reference import QuinticProfile, lane_change, lane_keeping
@@ -52,7 +51,7 @@ class Maneuver:
             ego.d,
             world.time if start_time is None else start_time,
             self.duration,
-            v0=ego.speed * math.sin(ego.heading),
+            v0=ego.d_dot,
         )
         self.target = target
         self.lane_changes += 1

@@ -8,7 +8,7 @@ from typing import Protocol
 from controllers.config import ControllerConfig, PIDGains
 from controllers.cruise import AdaptiveCruise
 from controllers.lateral import LateralPID
-from records import Actuation, EgoState, Reference
+from records import Actuation, EgoState, PlantName, Reference
 
 
 class Controller(Protocol):
@@ -26,8 +26,8 @@ class Controller(Protocol):
 class PIDTracker:
     """Lateral PID for steering, adaptive cruise for throttle, at a control period of `dt` [s]."""
 
-    def __init__(self, gains: PIDGains, cruise: AdaptiveCruise, dt: float) -> None:
-        self.lateral = LateralPID(gains)
+    def __init__(self, gains: PIDGains, cruise: AdaptiveCruise, dt: float, model: PlantName) -> None:
+        self.lateral = LateralPID(gains, model)
         self.cruise = cruise
         self.dt = dt
         self.fallbacks = 0
@@ -45,9 +45,10 @@ class PIDTracker:
         return Actuation(acceleration=acceleration, steering=steering)
 
 
-def make_controller(config: ControllerConfig, dt: float) -> Controller:
-    """The controller `config.type` at a control period of `dt` [s]; the MPC falls back to a PID
-    tracker of its own."""
+def make_controller(config: ControllerConfig, dt: float, plant: PlantName = "kinematic") -> Controller:
+    """The controller `config.type` at a control period of `dt` [s] for a vehicle simulated as
+    `plant` (the model a controller set to `plant` inverts); the MPC falls back to a PID tracker
+    of its own."""
     gains = config.pid
     cruise = AdaptiveCruise(
         config.time_gap_s,
@@ -57,7 +58,7 @@ def make_controller(config: ControllerConfig, dt: float) -> Controller:
         gains.ki_speed,
         gains.max_acceleration,
     )
-    pid = PIDTracker(gains, cruise, dt)
+    pid = PIDTracker(gains, cruise, dt, plant if gains.model == "plant" else gains.model)
     if config.type == "mpc":
         from controllers.mpc import MPCTracker
 

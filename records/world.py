@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -46,6 +47,12 @@ class EgoState:
     curvature: float = 0.0
     lateral_speed: float = 0.0
     yaw_rate: float = 0.0
+
+    @property
+    def d_dot(self) -> float:
+        """Lateral speed in the lane frame [m/s]: the body velocity (speed, lateral_speed) turned by
+        the heading, so a sideslipping car's course counts, not only where it points."""
+        return self.speed * math.sin(self.heading) + self.lateral_speed * math.cos(self.heading)
 
 
 @dataclass(frozen=True)

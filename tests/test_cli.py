@@ -129,7 +129,7 @@ def test_track_cli_writes_tracking_json_and_plots(tmp_path):
         "speed",
         "direction",
     } <= set(records[0])
-    assert (out / "tracking_20mps.png").is_file()
+    assert (out / "tracking_straight_kinematic_20mps.png").is_file()
     bad = CliRunner().invoke(app, ["track", "--controller", "lqr", "--out", str(tmp_path / "x")])
     assert bad.exit_code == 2 and "--controller: unknown 'lqr'" in bad.output
     bad = CliRunner().invoke(app, ["track", "--speeds", "fast", "--out", str(tmp_path / "x")])

@@ -1,7 +1,7 @@
 """`drivestack track`: single lane changes on an empty highway-env road, one record per maneuver.
 
-For every road (straight; a 1000 m radius bend), plant (highway-env's kinematic bicycle; its
-dynamic bicycle with tyre slip, for model mismatch), controller, speed and direction, the closed
+For every road (straight; bends of 1000 m and, up to 25 m/s, 500 m radius), plant (highway-env's
+kinematic bicycle; its dynamic bicycle with tyre slip), controller, speed and direction, the closed
 loop of `drivestack run` drives `stack.sim.empty_road`: 1 s of lane keeping, then a quintic lane
 change of `duration` seconds from the middle lane's centre to the neighbour's, then lane keeping
 to 3 s after its end. `builtin` is highway-env's own ControlledVehicle lane change.
@@ -25,7 +25,7 @@ from tqdm import tqdm
 
 from controllers.config import ControllerConfig
 from records import PLANTS, Command, PlantName
-from stack.apps.track_report import plot_speed, print_tracking
+from stack.apps.track_report import plot_maneuvers, print_tracking
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import RunConfig, write_config
 from stack.core.metrics import Tracking, lateral_series, tracking
@@ -33,7 +33,10 @@ from stack.sim.empty_road import BuiltinDriver, EmptyRoad, PlantKind, RoadKind
 
 TrackController = Literal["pid", "mpc", "builtin"]
 TRACK_CONTROLLERS: tuple[TrackController, ...] = ("pid", "mpc", "builtin")
-ROADS: tuple[RoadKind, ...] = ("straight", "curved")
+ROADS: tuple[RoadKind, ...] = ("straight", "bend-1000", "bend-500")
+TOP_SPEED: dict[RoadKind, float] = {"bend-500": 25.0}
+"""Fastest maneuver on a road [m/s]: the 500 m bend's lateral acceleration is 1.25 m/s² at 25 m/s
+before any lane change (and 2.45 at 35, beyond the comfort bound)."""
 LEAD_IN_S = 1.0
 SETTLE_S = 3.0
 
@@ -79,6 +82,7 @@ def run_maneuver(
     run_config = RunConfig.model_validate(
         {
             "highway": {"simulation_frequency": round(1 / dt)},
+            "sim": {"plant": "kinematic" if builtin else plant},
             "control_rate_hz": round(1 / dt),
             "controller": controller.model_copy(update={"lane_change_duration_s": duration}),
         }
@@ -127,8 +131,7 @@ def track_and_report(
     """Every maneuver with a progress bar, then the table and where the results are."""
     builtin_runs = 1 if "kinematic" in plants else 0
     total = (
-        len(ROADS)
-        * len(speeds)
+        sum(len(speeds_on(road, speeds)) for road in ROADS)
         * 2
         * sum(builtin_runs if n == "builtin" else len(plants) for n in controllers)
     )
@@ -169,7 +172,7 @@ def track(
             for name in controllers:
                 if name == "builtin" and plant == "dynamic":
                     continue
-                for speed in speeds:
+                for speed in speeds_on(road_kind, speeds):
                     for direction in ("left", "right"):
                         maneuvers.append(
                             run_maneuver(name, config, road_kind, plant, speed, direction, duration, dt)
@@ -177,17 +180,18 @@ def track(
                         if progress:
                             progress()
     (out / "tracking.json").write_text(json.dumps([m.record() for m in maneuvers], indent=2) + "\n")
-    for speed in speeds:
-        plot_speed(
-            [
-                m
-                for m in maneuvers
-                if m.speed == speed
-                and m.road == "straight"
-                and m.plant == "kinematic"
-                and m.direction == "left"
-            ],
-            out / f"tracking_{speed:g}mps.png",
-            speed,
-        )
+    for road_kind in roads:
+        for plant in plants:
+            for speed in speeds_on(road_kind, speeds):
+                shown = [
+                    m
+                    for m in maneuvers
+                    if (m.road, m.plant, m.speed, m.direction) == (road_kind, plant, speed, "left")
+                ]
+                plot_maneuvers(shown, out / f"tracking_{road_kind}_{plant}_{speed:g}mps.png")
     return maneuvers
+
+
+def speeds_on(road: RoadKind, speeds: list[float]) -> list[float]:
+    """The `speeds` [m/s] a road is driven at (up to its `TOP_SPEED`)."""
+    return [speed for speed in speeds if speed <= TOP_SPEED.get(road, float("inf"))]

@@ -86,7 +86,9 @@ class ClosedLoop:
         self.sensor = SensorModel(config.perception.sensor, seed)
         self.perceived = self._observe()
         self.safety = SafetyLayer(config.planner.safety)
-        self.controller = self.given_controller or make_controller(config.controller, self.plant.dt)
+        self.controller = self.given_controller or make_controller(
+            config.controller, self.plant.dt, config.sim.plant
+        )
         self.controller.reset()
         self.fallbacks_before = self.controller.fallbacks
         self.solves_before = len(self.controller.solve_times)

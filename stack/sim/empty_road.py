@@ -8,11 +8,12 @@ speed laws `BuiltinDriver` hands the loop as a controller.
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Literal
 
 import numpy as np
-from highway_env.road.lane import CircularLane, LineType
+from highway_env.road.lane import AbstractLane, CircularLane, LineType
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.controller import ControlledVehicle
 from highway_env.vehicle.dynamics import BicycleVehicle
@@ -21,12 +22,12 @@ from highway_env.vehicle.kinematics import Vehicle
 from records import Actuation, EgoState, Reference, WorldState
 from stack.sim.highway import snapshot
 
-RoadKind = Literal["straight", "curved"]
+RoadKind = Literal["straight", "bend-1000", "bend-500"]
 PlantKind = Literal["kinematic", "dynamic", "builtin"]
 LANE_WIDTH = 4.0
 """[m]"""
-CURVE_RADIUS = 1000.0
-"""Radius of lane 0 of the bend [m]."""
+BEND_RADIUS: dict[RoadKind, float] = {"bend-1000": 1000.0, "bend-500": 500.0}
+"""Radius of lane 0 of each left-hand bend [m]."""
 START_S = 100.0
 """Where the vehicle starts along its lane [m]."""
 START_LANE = 1
@@ -34,7 +35,7 @@ START_LANE = 1
 
 
 def road_network(kind: RoadKind) -> RoadNetwork:
-    """Three lanes, straight (10 km) or a left-hand bend of CURVE_RADIUS."""
+    """Three lanes, straight (10 km) or a left-hand bend of `BEND_RADIUS[kind]`."""
     if kind == "straight":
         return RoadNetwork.straight_road_network(3, length=10000)
     network = RoadNetwork()
@@ -44,7 +45,7 @@ def road_network(kind: RoadKind) -> RoadNetwork:
             "b",
             CircularLane(
                 [0.0, 0.0],
-                CURVE_RADIUS + LANE_WIDTH * k,
+                BEND_RADIUS[kind] + LANE_WIDTH * k,
                 -np.pi / 2,
                 np.pi / 2,
                 clockwise=True,
@@ -53,6 +54,29 @@ def road_network(kind: RoadKind) -> RoadNetwork:
             ),
         )
     return network
+
+
+def steady_cornering(road: Road, lane: AbstractLane, speed: float, dynamic: bool) -> Vehicle:
+    """A bicycle at START_S on `lane`'s centre in the steady state of following it, as a car
+    already driving the bend would be: yaw rate r = v kappa [rad/s] and the sideslip beta that
+    puts its course along the lane (heading = lane heading - beta). Kinematic bicycle: beta =
+    asin(r L / 2v). Dynamic bicycle (Rajamani's 2.21-2.22 in steady state): beta = r (b / v -
+    m a v / (C_r L)), C_r the rear axle's cornering stiffness; without that start it would first
+    have to settle into the turn."""
+    curvature = lane.heading_at(START_S + 0.5) - lane.heading_at(START_S - 0.5)
+    yaw_rate = speed * curvature
+    position, lane_heading = lane.position(START_S, 0.0), lane.heading_at(START_S)
+    if not dynamic:
+        slip = math.asin(Vehicle.LENGTH / 2 * yaw_rate / speed)
+        vehicle = Vehicle(road, position, lane_heading - slip, speed)
+        vehicle.action = {"steering": math.atan(2 * math.tan(slip)), "acceleration": 0.0}
+        return vehicle
+    b, m, a = BicycleVehicle.LENGTH_B, BicycleVehicle.MASS, BicycleVehicle.LENGTH_A
+    stiffness_rear = 2 * BicycleVehicle.FRICTION_REAR
+    slip = yaw_rate * (b / speed - m * a * speed / (stiffness_rear * BicycleVehicle.LENGTH))
+    car = BicycleVehicle(road, position, lane_heading - slip, speed)
+    car.yaw_rate, car.lateral_speed = yaw_rate, speed * math.tan(slip)
+    return car
 
 
 class EmptyRoad:
@@ -83,8 +107,7 @@ class EmptyRoad:
                 target_speed=self.speed,
             )
         else:
-            kind = BicycleVehicle if self.plant_kind == "dynamic" else Vehicle
-            self.vehicle = kind(self.road, position, heading, self.speed)
+            self.vehicle = steady_cornering(self.road, lane, self.speed, self.plant_kind == "dynamic")
         self.road.vehicles.append(self.vehicle)
         self.ticks = 0
         return self.snapshot()
