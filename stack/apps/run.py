@@ -14,14 +14,16 @@ from rich.console import Console
 from rich.table import Table
 
 from perception.plot import plot_grid_over_road
+from stack.core.closed_loop import VIDEO_FRAME_TICKS
 from stack.core.config import RunConfig, write_config
 from stack.core.episodes import run
 from stack.core.metrics import EpisodeResult
 
 LANE_CHANGE_SPEED = 0.3
 """Lateral speed [m/s] above which an episode counts as changing lane in the traces plot."""
-VIDEO_FPS = 15
-"""Frames per second of the GIF (one frame per control tick at highway-env's default 15 Hz)."""
+CONTROL_RATE_HZ = 15
+"""Control ticks per second the GIF's timing assumes (highway-env's default 15 Hz): it plays in
+real time."""
 
 
 def run_and_report(config: RunConfig, out: Path, video: bool, jobs: int, progress: bool) -> bool:
@@ -50,7 +52,8 @@ def write_results(
         plot_grid_over_road(*episodes[0].snapshot, out / "grid.png")
     if frames:
         # imageio's stub types the frames as list[ArrayLike], invariant, so list[np.ndarray] is refused
-        imageio.mimsave(out / "episode0.gif", frames[::2], duration=2000 / VIDEO_FPS, loop=0)  # type: ignore[arg-type]
+        duration_ms = 1000 * VIDEO_FRAME_TICKS / CONTROL_RATE_HZ
+        imageio.mimsave(out / "episode0.gif", frames, duration=duration_ms, loop=0)  # type: ignore[arg-type]
 
 
 FEW_EPISODES = 8

@@ -25,6 +25,8 @@ from stack.core.video import command_text, video_frame
 
 SNAPSHOT_TIME_S = 10.0
 """Each episode keeps the (world, grid) of its first decision at or after this time [s]."""
+VIDEO_FRAME_TICKS = 2
+"""Control ticks per video frame: the 1st, 3rd, 5th ... tick is drawn (7.5 frames/s at 15 Hz)."""
 
 
 class Plant(Protocol):
@@ -77,8 +79,8 @@ class ClosedLoop:
         controller: Controller | None = None,
     ) -> None:
         """`grid` overrides the config's perception grid (an agent that needs its own view);
-        `frames`, when given, collects a rendered frame per tick; `controller` replaces the one
-        the config names (reset at every episode)."""
+        `frames`, when given, collects a rendered frame every `VIDEO_FRAME_TICKS` ticks;
+        `controller` replaces the one the config names (reset at every episode)."""
         self.config = config
         self.plant = plant
         self.frames = frames
@@ -163,7 +165,11 @@ class ClosedLoop:
         self.world = self.plant.step(actuation)
         self.perceived = self._observe()
         self.recorder.record(self.world, reference, actuation)
-        if self.frames is not None and self.plant.rendering:
+        if (
+            self.frames is not None
+            and self.plant.rendering
+            and len(self.recorder.speed) % VIDEO_FRAME_TICKS == 1
+        ):
             self.frames.append(self.frame())
 
     def frame(self) -> np.ndarray:
