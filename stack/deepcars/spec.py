@@ -5,8 +5,10 @@ the tabular learner. The authors' public code (github.com/MajidMoghadam2006/
 deepcars-reinforcement-learning: `DeepCars.py` has `MaxCarsInLane = 5`, so its state sees rows
 0-3; `Train_DeepCars_DQN.py` starts at epsilon 1.0 and multiplies it by `epsilon_decay = 0.995`
 every training step down to `epsilon_min = 0.01`): a 4-row line of sight and less and less
-exploration. Only the line of sight and the tabular learner's exploration differ; the rest (reward
-+1 / -1, one car spawned per step, gamma, alpha, the DQN rows' own exploration) is shared.
+exploration (the repository trains no tabular agent: its DQN script's schedule is applied to the
+tabular learner). Only the line of sight and the tabular exploration differ; the rest (the
+paper's reward +1 / -1, where the public code gives -100 for a collision; one car spawned per step;
+gamma, alpha; the DQN rows' own exploration) is shared.
 The budgets (`FULL`: the paper's; `QUICK`: a smoke run of the whole table) and `Row`, one line of
 results.md, live here too. No heavy imports: the CLI checks `--variant` against `RULES` before
 any training code loads, and `report` reads rows without the training code.
