@@ -168,7 +168,7 @@ class ClosedLoop:
         if (
             self.frames is not None
             and self.plant.rendering
-            and len(self.recorder.speed) % VIDEO_FRAME_TICKS == 1
+            and (len(self.recorder.speed) - 1) % VIDEO_FRAME_TICKS == 0
         ):
             self.frames.append(self.frame())
 
