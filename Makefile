@@ -30,6 +30,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/oracle_cost.py
 	$(BIN)/python benchmarks/grid_speed.py
 	$(BIN)/python benchmarks/deepcars_speed.py
+	$(BIN)/python benchmarks/deepcars_ceiling.py
 	$(BIN)/python benchmarks/train_rate.py
 	$(BIN)/drivestack track --out runs/bench-track --no-progress
 	$(BIN)/python benchmarks/tracking_table.py runs/bench-track

@@ -1,4 +1,4 @@
-"""Pictures of the grid: a pixel panel for videos and a matplotlib figure over the road."""
+"""Pictures of the grid: a panel on the road view's scale for videos, a matplotlib figure over the road."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Rectangle
+from PIL import Image, ImageDraw
 
 from perception.grid import OccupancyGrid
 from records import WorldState
@@ -15,24 +16,57 @@ EMPTY = (235, 235, 235)
 OCCUPIED = (220, 60, 50)
 EGO = (50, 110, 220)
 GRID_LINE = (160, 160, 160)
-ROW_HEIGHT_PX = 16
+TEXT = (20, 20, 20)
+CAPTION_PX = 14
+"""Height of the panel's title strip [px]."""
+AXIS_PX = 28
+"""Height of the distance axis under the cells [px]."""
+TICK_M = 10
+"""Distance between axis ticks [m]; every second one is labelled."""
 
 
-def grid_panel(grid: OccupancyGrid, width: int) -> np.ndarray:
-    """The grid as an RGB image `width` pixels wide, one row per lane, top row = row 0 (left);
-    occupied cells red, the ego's cell blue. For side-by-side video frames."""
-    rows, cells = grid.cells.shape
-    image = np.empty((rows, cells, 3), dtype=np.uint8)
-    image[:] = EMPTY
-    image[grid.cells > 0] = OCCUPIED
-    image[grid.ego_row, grid.config.ego_column] = EGO
-    column_px = max(1, width // cells)
-    scaled = np.repeat(np.repeat(image, ROW_HEIGHT_PX, axis=0), column_px, axis=1)
-    scaled[::ROW_HEIGHT_PX] = GRID_LINE
-    scaled[:, ::column_px] = GRID_LINE
-    panel = np.full((rows * ROW_HEIGHT_PX, width, 3), 255, dtype=np.uint8)
-    panel[:, : scaled.shape[1]] = scaled[:, :width]
-    return panel
+def grid_panel(
+    grid: OccupancyGrid, width: int, px_per_m: float, ego_x_px: float, lane_width_m: float
+) -> np.ndarray:
+    """The grid as an RGB image on the road view's scale, for video frames under highway-env's
+    render: `px_per_m` [px/m] along and across, the ego's cell centred at `ego_x_px` (where the
+    road view draws the ego), one `lane_width_m` tall row per grid row, row 0 on top like lane 0
+    on the road. Occupied cells red (rows beyond the road all red, as the agent sees them), the
+    ego's cell blue; rows labelled by lane ("off road" beyond the road), a distance axis
+    in metres from the ego underneath, a title with the cell size."""
+    config = grid.config
+    rows = grid.cells.shape[0]
+    row_px = max(8, round(lane_width_m * px_per_m))
+    cell_px = config.cell_length * px_per_m
+    image = Image.new("RGB", (width, CAPTION_PX + rows * row_px + AXIS_PX), "white")
+    draw = ImageDraw.Draw(image)
+    draw.text(
+        (4, 1),
+        f"grid the agent sees (red occupied, blue ego): {config.cell_length:g} m cells, {rows} rows, "
+        "road's scale",
+        fill=TEXT,
+    )
+    for row in range(rows):
+        top = CAPTION_PX + row * row_px
+        for column in range(config.cells):
+            left = ego_x_px + (column - config.ego_column - 0.5) * cell_px
+            ego = row == grid.ego_row and column == config.ego_column
+            colour = EGO if ego else OCCUPIED if grid.cells[row, column] > 0 else EMPTY
+            draw.rectangle((left, top, left + cell_px, top + row_px), fill=colour, outline=GRID_LINE)
+        lane = grid.row_lane(row)
+        label = f"lane {lane}" if 0 <= lane < grid.lanes_count else "off road"
+        draw.text((2, top + row_px / 2 - 6), label, fill=TEXT)
+    axis = CAPTION_PX + rows * row_px
+    first = -(config.cells_behind + 0.5) * config.cell_length
+    last = (config.cells_ahead - 0.5) * config.cell_length
+    draw.line((ego_x_px + first * px_per_m, axis, ego_x_px + last * px_per_m, axis), fill=TEXT)
+    for metres in range(int(np.ceil(first / TICK_M)) * TICK_M, int(last) + 1, TICK_M):
+        x = ego_x_px + metres * px_per_m
+        draw.line((x, axis, x, axis + 3), fill=TEXT)
+        if metres % (2 * TICK_M) == 0:
+            draw.text((x, axis + 4), f"{metres}", fill=TEXT, anchor="ma")
+    draw.text((width - 4, axis + 15), "longitudinal distance from the ego [m]", fill=TEXT, anchor="ra")
+    return np.asarray(image)
 
 
 def plot_grid_over_road(world: WorldState, grid: OccupancyGrid, path: Path) -> None:

@@ -1,7 +1,9 @@
 """Tabular Q-learning (epsilon-greedy), on any env whose observation is a small integer vector.
 
 The table has one axis per state component (sizes from the `Box` space's high + 1) and one for
-the action; Q(s, a) += alpha (r + gamma max_a' Q(s', a') (1 - terminal) - Q(s, a)).
+the action; Q(s, a) += alpha (r + gamma max_a' Q(s', a') (1 - terminal) - Q(s, a)). Exploration:
+epsilon, multiplied by `epsilon_decay` after every non-greedy `predict` (one per training step)
+down to `epsilon_min`; the defaults keep it fixed, as in the paper.
 """
 
 from __future__ import annotations
@@ -28,9 +30,12 @@ class QLearning:
         gamma: float = 0.9,
         epsilon: float = 0.2,
         seed: int = 0,
+        epsilon_decay: float = 1.0,
+        epsilon_min: float = 0.0,
     ) -> None:
         self.table = np.zeros((*state_sizes, actions))
         self.alpha, self.gamma, self.epsilon = alpha, gamma, epsilon
+        self.epsilon_decay, self.epsilon_min = epsilon_decay, epsilon_min
         self.rng = np.random.default_rng(seed)
         self.steps = 0
 
@@ -45,8 +50,11 @@ class QLearning:
         episode_start: Any = None,
         deterministic: bool = True,
     ) -> tuple[np.int64, Any]:
-        if not deterministic and self.rng.random() < self.epsilon:
-            return np.int64(self.rng.integers(self.table.shape[-1])), state
+        if not deterministic:
+            explore = self.rng.random() < self.epsilon
+            self.epsilon = max(self.epsilon_min, self.epsilon * self.epsilon_decay)
+            if explore:
+                return np.int64(self.rng.integers(self.table.shape[-1])), state
         values = self.table[tuple(np.asarray(observation, dtype=np.int64))]
         return np.int64(np.argmax(values)), state
 

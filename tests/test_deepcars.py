@@ -1,6 +1,7 @@
 """DeepCars: dynamics on hand-built grids, encodings, seeding, the reproduction (a tiny smoke run by
 default, the quick one with -m slow)."""
 
+import functools
 import json
 
 import gymnasium as gym
@@ -8,9 +9,14 @@ import numpy as np
 import pytest
 import torch
 from stable_baselines3.common.env_checker import check_env
+from typer.testing import CliRunner
 
+import stack.deepcars.reproduce as reproduce_module
 from records import N_ACTIONS, Command
+from stack.apps.cli import app
 from stack.deepcars.reproduce import Budget, lookahead, reproduce
+from stack.deepcars.rows import tabular_learner
+from stack.deepcars.spec import PAPER_RULES, PUBLIC_RULES
 from stack.deepcars.world import DeepCarsBatch
 from stack.sim.envs import DEEPCARS
 
@@ -182,3 +188,54 @@ def test_quick_reproduction_reports_every_row(tmp_path, one_torch_thread):
     assert table.count("\n| ") == 16 and "98.28 %" in table and "99.14 %" in table
     assert (tmp_path / "training_curves.png").is_file() and (tmp_path / "tabular_q_table.png").is_file()
     assert rows[-1].eval_accuracy == 100.0
+
+
+def test_the_public_rules_see_four_rows_the_paper_nine():
+    for rules, rows in ((PAPER_RULES, 9), (PUBLIC_RULES, 4)):
+        world, _ = tabular_learner(rules, seed=0)
+        assert world.rows == rows and world.observation_space().high.tolist() == [4] + [rows - 1] * 5
+        world.cars[0, rows - 1, 0] = True
+        assert world.observe()[0, 1] == rows - 1, "a car in the top row is seen"
+        grid = DeepCarsBatch(1, line_of_sight=rules.line_of_sight, encoding="binary")
+        assert grid.observe().shape == (1, rows * 5 + 3)
+    world, _ = tabular_learner(PUBLIC_RULES, seed=0)
+    world.cars[:] = False
+    world.step(np.array([Command.STAY]))
+    assert world.cars[0, 3].sum() == 1, "spawned in row 3, the public code's top row"
+
+
+def test_the_public_rules_decay_epsilon_by_0995_per_step_the_paper_keeps_02():
+    _, public = tabular_learner(PUBLIC_RULES, seed=0)
+    _, paper = tabular_learner(PAPER_RULES, seed=0)
+    state = np.array([2, 3, 3, 3, 3, 3])
+    assert public.epsilon == 1.0
+    for step in range(1, 1200):
+        public.predict(state, deterministic=False)
+        paper.predict(state, deterministic=False)
+        assert public.epsilon == pytest.approx(max(0.01, 0.995**step))
+        assert public.epsilon == pytest.approx(PUBLIC_RULES.epsilon_after(step))
+    assert public.epsilon == 0.01 and paper.epsilon == 0.2
+    public.predict(state)
+    assert public.epsilon == 0.01, "greedy predictions do not decay it"
+
+
+def test_cli_reproduces_under_both_rule_sets(tmp_path, monkeypatch, one_torch_thread):
+    tiny = functools.partial(reproduce_module.reproduce, budget=TINY, networks=("16",))
+    monkeypatch.setattr(reproduce_module, "reproduce", tiny)
+    result = CliRunner().invoke(app, ["reproduce", "deepcars", "--variant", "all", "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    table = (tmp_path / "results.md").read_text()
+    assert table.count("| paper |") == 7 and table.count("| public |") == 7
+    assert table.index("| paper | tabular |") < table.index("| public | tabular |")
+    assert "- public: 4-row line of sight, tabular epsilon 1 x0.995 per step, floor 0.01" in table
+    assert "- paper: 9-row line of sight, tabular epsilon 0.2" in table
+    for figure in ("tabular_q_table.png", "tabular_q_table-public.png", "training_curves.png"):
+        assert (tmp_path / figure).read_bytes().startswith(b"\x89PNG")
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert [r["line_of_sight"] for r in summary["rules"]] == [9, 4]
+
+
+def test_bad_variant_is_one_line_exit_2(tmp_path):
+    result = CliRunner().invoke(app, ["reproduce", "deepcars", "--variant", "github", "--out", str(tmp_path)])
+    assert result.exit_code == 2
+    assert result.output.strip() == "error: --variant: unknown 'github'; available: paper, public, all"

@@ -14,6 +14,7 @@ from stack.apps.options import (
     PLANT_HELP,
     SET_HELP,
     TRAIN_CONFIG,
+    VARIANT_HELP,
     VERSION_OPTION,
     check_memory,
     checked_run,
@@ -179,18 +180,16 @@ app.add_typer(reproduce_app, name="reproduce")
 @reproduce_app.command("deepcars")
 def reproduce_deepcars(
     quick: bool = typer.Option(False, "--quick", help="Small budgets: every row in under 2 minutes."),
+    variant: str = typer.Option("paper", help=VARIANT_HELP),
     seed: int = typer.Option(0, help="Seed of training and evaluation."),
     out: Path | None = typer.Option(None, help="Results folder (default: runs/deepcars-<time>)."),
 ) -> None:
     """The paper's DeepCars table: tabular Q-learning, DQN and DDQN per network size, baselines."""
-    from stack.deepcars.reproduce import reproduce
+    from stack.apps.reproduce import reproduce_and_report
+    from stack.deepcars.spec import VARIANTS
 
-    out = output_folder(out, "deepcars")
-    console = Console()
-    with console.status("reproducing DeepCars") as status:
-        reproduce(out, quick=quick, seed=seed, progress=lambda name: status.update(f"done: {name}"))
-    print((out / "results.md").read_text(), end="")
-    console.print(f"results: {out}")
+    variants = chosen("--variant", variant, VARIANTS)
+    reproduce_and_report(output_folder(out, "deepcars"), quick, seed, variants)
 
 
 @app.command()

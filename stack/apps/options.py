@@ -26,6 +26,10 @@ CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 """The default configs, shipped in the package (the checkout's configs/ links to them)."""
 RUN_CONFIG, TRAIN_CONFIG = CONFIGS / "highway.yaml", CONFIGS / "train" / "ddqn.yaml"
 PLANT_HELP = "The ego's vehicle model: kinematic | dynamic (sim.plant)."
+VARIANT_HELP = (
+    "DeepCars rules: paper (the paper's text: 9-row line of sight, epsilon 0.2) | public (the "
+    "authors' code: 4-row line of sight, epsilon 1.0 x0.995 per step, floor 0.01) | all (both)."
+)
 SET_HELP = "KEY=VALUE: a dotted config key and a YAML value (repeatable); overrides the config file."
 SET_KEY = re.compile(r"[A-Za-z_][\w-]*(\.[A-Za-z_][\w-]*)*")
 OPTIONS = {

@@ -14,6 +14,7 @@ from rich.table import Table
 
 from perception.plot import plot_grid_over_road
 from stack.apps.interrupts import deferred
+from stack.core.closed_loop import VIDEO_FRAME_TICKS
 from stack.core.config import RunConfig, write_config
 from stack.core.episodes import run
 from stack.core.files import EpisodeJournal, replacing, write_json
@@ -23,8 +24,9 @@ LANE_CHANGE_SPEED = 0.3
 """Lateral speed [m/s] above which an episode counts as changing lane in the traces plot."""
 JOURNAL = "episodes.partial.jsonl"
 """Finished episodes, one JSON line each, as they finish; replaced by the results at the end."""
-VIDEO_FPS = 15
-"""Frames per second of the GIF (one frame per control tick at highway-env's default 15 Hz)."""
+CONTROL_RATE_HZ = 15
+"""Control ticks per second the GIF's timing assumes (highway-env's default 15 Hz): it plays in
+real time."""
 
 
 def run_and_report(config: RunConfig, out: Path, video: bool, jobs: int, progress: bool) -> bool:
@@ -63,9 +65,10 @@ def write_results(
         with replacing(out / "grid.png") as path:
             plot_grid_over_road(*episodes[0].snapshot, path)
     if frames:
+        duration_ms = 1000 * VIDEO_FRAME_TICKS / CONTROL_RATE_HZ
         with replacing(out / "episode0.gif") as path:
             # imageio's stub types the frames as list[ArrayLike], invariant: list[np.ndarray] is refused
-            imageio.mimsave(path, frames[::2], duration=2000 / VIDEO_FPS, loop=0)  # type: ignore[arg-type]
+            imageio.mimsave(path, frames, duration=duration_ms, loop=0)  # type: ignore[arg-type]
 
 
 FEW_EPISODES = 8

@@ -16,15 +16,17 @@ import numpy as np
 from controllers.maneuver import Maneuver
 from controllers.tracker import Controller, make_controller
 from perception.grid import OccupancyGrid, OccupancyGridBuilder
-from perception.plot import grid_panel
 from perception.sensor import SensorModel
 from planner.safety import SafetyLayer
 from records import Actuation, Command, GridConfig, WorldState
 from stack.core.config import RunConfig, grid_config
 from stack.core.metrics import EpisodeRecorder, EpisodeResult
+from stack.core.video import command_text, video_frame
 
 SNAPSHOT_TIME_S = 10.0
 """Each episode keeps the (world, grid) of its first decision at or after this time [s]."""
+VIDEO_FRAME_TICKS = 2
+"""Control ticks per video frame: the 1st, 3rd, 5th ... tick is drawn (7.5 frames/s at 15 Hz)."""
 
 
 class Plant(Protocol):
@@ -47,6 +49,8 @@ class Plant(Protocol):
     def step(self, actuation: Actuation) -> WorldState: ...
 
     def render(self) -> np.ndarray: ...
+
+    def render_scale(self) -> tuple[float, float]: ...
 
 
 @dataclass(frozen=True)
@@ -71,8 +75,8 @@ class ClosedLoop:
         controller: Controller | None = None,
     ) -> None:
         """`grid` overrides the config's perception grid (an agent that needs its own view);
-        `frames`, when given, collects a rendered frame per tick; `controller` replaces the one
-        the config names (reset at every episode)."""
+        `frames`, when given, collects a rendered frame every `VIDEO_FRAME_TICKS` ticks;
+        `controller` replaces the one the config names (reset at every episode)."""
         self.config = config
         self.plant = plant
         self.frames = frames
@@ -99,6 +103,8 @@ class ClosedLoop:
             self.safety.should_abort,
         )
         self.recorder = EpisodeRecorder(self.world)
+        self.command: Command = Command.STAY
+        self.applied: Command | None = Command.STAY
         self.grid: OccupancyGrid | None = None
         self.snapshot: tuple[WorldState, OccupancyGrid] | None = None
         return self.world
@@ -136,9 +142,10 @@ class ClosedLoop:
         started, its end. With `ticks`, exactly that many ticks: the fixed-period step of the
         training MDP, so every transition spans the same time and one discount factor fits all."""
         considered = not self.maneuver.changing_lane
+        self.command, self.applied = command, None
         if considered:
-            lane = self.maneuver.lane
-            self.maneuver.command(self.safety.filter(command, self.perceived, lane), self.world)
+            self.applied = self.safety.filter(command, self.perceived, self.maneuver.lane)
+            self.maneuver.command(self.applied, self.world)
         run = 0
         while not self.done:
             self.tick()
@@ -158,10 +165,26 @@ class ClosedLoop:
         self.world = self.plant.step(actuation)
         self.perceived = self._observe()
         self.recorder.record(self.world, reference, actuation)
-        if self.frames is not None and self.plant.rendering:
-            frame = self.plant.render()
-            assert self.grid is not None, "frames are drawn after the first perceive()"
-            self.frames.append(np.vstack([frame, grid_panel(self.grid, frame.shape[1])]))
+        if (
+            self.frames is not None
+            and self.plant.rendering
+            and (len(self.recorder.speed) - 1) % VIDEO_FRAME_TICKS == 0
+        ):
+            self.frames.append(self.frame())
+
+    def frame(self) -> np.ndarray:
+        """This tick's video frame: caption, road view, and the grid on the road's scale."""
+        assert self.grid is not None, "frames are drawn after the first perceive()"
+        config, world, maneuver = self.config, self.world, self.maneuver
+        lane = f"lane {maneuver.lane}" + (f" -> {maneuver.target}" if maneuver.changing_lane else "")
+        lines = [
+            f"{config.planner.agent} + {config.controller.type}, {config.scenario or 'configured world'}, "
+            f"seed {self.seed}",
+            f"t = {world.time:5.1f} s   v = {world.speed[0]:5.2f} m/s   {lane}   "
+            + command_text(self.command, self.applied),
+        ]
+        road = self.plant.render()
+        return video_frame(road, self.grid, self.plant.render_scale(), world.lane_width, lines)
 
     def status(self) -> dict[str, float | int | bool]:
         """Counters so far: crashed, ego speed [m/s], passed cars, lane changes, masked and aborted

@@ -17,11 +17,12 @@ import numpy as np
 from records import Command
 
 if TYPE_CHECKING:
-    from stack.deepcars.rows import Budget, Row
+    from stack.deepcars.spec import Budget, Row, Rules
 
 
-def plot_q_table(table: np.ndarray, path: Path) -> None:
-    """The paper's sparsity figure: which state-action values training ever touched."""
+def plot_q_table(table: np.ndarray, path: Path, rules: str = "paper") -> None:
+    """The paper's sparsity figure: which state-action values training ever touched (`rules`: the
+    rule set's name, in the title)."""
     flat = table.reshape(-1, table.shape[-1])
     visited = np.any(flat != 0, axis=1)
     bins = min(len(flat), 400)
@@ -33,7 +34,7 @@ def plot_q_table(table: np.ndarray, path: Path) -> None:
     axis.set_xticks([int(c) for c in Command], [c.name.lower() for c in Command])
     axis.set_xlabel("action")
     axis.set_ylabel(f"state index, {bins} bins of {len(flat) / bins:.0f}")
-    axis.set_title(f"Q-table: {visited.mean():.1%} of {len(flat)} states visited")
+    axis.set_title(f"Q-table ({rules} rules): {visited.mean():.1%} of {len(flat)} states visited")
     figure.tight_layout()
     figure.savefig(path, dpi=100)
     plt.close(figure)
@@ -59,8 +60,9 @@ def plot_curves(curves: dict[tuple[str, str], list[float]], path: Path) -> None:
     plt.close(figure)
 
 
-def markdown(rows: list[Row], quick: bool) -> str:
-    """results.md: the table, one line per row, with the paper's numbers alongside."""
+def markdown(rows: list[Row], quick: bool, rules: list[Rules]) -> str:
+    """results.md: the table, one line per row, with the paper's numbers alongside; under it, what
+    each rule set in the `rules` column means."""
 
     def pct(value: float | None) -> str:
         return "-" if value is None else f"{value:.2f} %"
@@ -68,26 +70,26 @@ def markdown(rows: list[Row], quick: bool) -> str:
     lines = [
         f"# DeepCars reproduction{' (quick budgets)' if quick else ''}",
         "",
-        "| agent | network | training steps | train accuracy | eval accuracy (greedy) | eval collisions "
-        "| eval passed | wall time s | paper train | paper eval |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| rules | agent | network | training steps | train accuracy | eval accuracy (greedy) "
+        "| eval collisions | eval passed | wall time s | paper train | paper eval |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
-            f"| {r.agent} | {r.network} | {r.training_steps} | {pct(r.train_accuracy)} | "
+            f"| {r.rules} | {r.agent} | {r.network} | {r.training_steps} | {pct(r.train_accuracy)} | "
             f"{pct(r.eval_accuracy)} | {r.eval_collisions} | {r.eval_passed} | {r.wall_time_s:.1f} | "
             f"{pct(r.paper_train)} | {pct(r.paper_eval)} |"
         )
+    lines += ["", "Rules:", *(f"- {r.summary}" for r in rules)]
     return "\n".join(lines) + "\n"
 
 
-def write_tables(out: Path, rows: list[Row], budget: Budget, quick: bool, seed: int) -> None:
+def write_tables(
+    out: Path, rows: list[Row], budget: Budget, quick: bool, seed: int, rules: list[Rules]
+) -> None:
     """summary.json (the run's settings and every row, like every other run) and results.md."""
+    settings = {"quick": quick, "seed": seed, "budget": asdict(budget), "rules": [asdict(r) for r in rules]}
     (out / "summary.json").write_text(
-        json.dumps(
-            {"quick": quick, "seed": seed, "budget": asdict(budget), "rows": [asdict(r) for r in rows]},
-            indent=2,
-        )
-        + "\n"
+        json.dumps({**settings, "rows": [asdict(r) for r in rows]}, indent=2) + "\n"
     )
-    (out / "results.md").write_text(markdown(rows, quick))
+    (out / "results.md").write_text(markdown(rows, quick, rules))

@@ -5,7 +5,8 @@ DQN (SB3 + `planner.ddqn.DoubleDQN`) for every network size of the paper, traine
 with the paper's real-time validation (the best model is kept; training stops early once a long
 validation is collision-free), and the baselines random, always-stay and one-row lookahead. Every
 row is evaluated over 100k greedy steps on fresh seeded envs. Accuracy = passed / (passed +
-collided) x 100.
+collided) x 100. `variants` picks the rule sets (`spec.RULES`: the paper's text, the authors' public
+code); with more than one, the whole table runs under each, one block of rows per rule set.
 
 This module only runs the rows in the table's order and hands them to the report; how a row is
 trained and evaluated is in `rows`, the figures and tables in `report`.
@@ -18,7 +19,8 @@ from pathlib import Path
 
 from planner.networks import NET_ARCHS
 from stack.deepcars.report import plot_curves, write_tables
-from stack.deepcars.rows import FULL, QUICK, Budget, Row, baselines, deep, lookahead, tabular
+from stack.deepcars.rows import baselines, deep, lookahead, tabular
+from stack.deepcars.spec import FULL, QUICK, RULES, Budget, Row
 
 __all__ = ["FULL", "QUICK", "Budget", "Row", "lookahead", "reproduce"]
 
@@ -31,25 +33,33 @@ def reproduce(
     *,
     budget: Budget | None = None,
     networks: Sequence[str] = tuple(NET_ARCHS),
+    variants: Sequence[str] = ("paper",),
 ) -> list[Row]:
-    """Train and evaluate every row into `out` (summary.json, results.md, the two figures).
+    """Train and evaluate every row into `out` (summary.json, results.md, the figures), under each
+    rule set of `variants` in turn.
 
     `budget` defaults to `QUICK` or `FULL` by `quick`; `networks` (all of `NET_ARCHS` by default)
     narrows the DQN/DDQN rows, for smoke tests."""
     out.mkdir(parents=True, exist_ok=True)
     budget = budget or (QUICK if quick else FULL)
-    rows = [tabular(budget, seed, out), tabular(budget, seed, out, budget.tabular_long_steps)]
-    if progress:
-        progress("tabular")
+    rows: list[Row] = []
     curves = {}
-    for algorithm in ("dqn", "ddqn"):
-        for network in networks:
-            row, returns = deep(algorithm, network, budget, seed)
-            rows.append(row)
-            curves[(algorithm, network)] = returns
-            if progress:
-                progress(f"{algorithm} {network}")
-    rows += baselines(budget, seed)
+    for rules in (RULES[name] for name in variants):
+        rows += [
+            tabular(budget, seed, out, rules=rules),
+            tabular(budget, seed, out, budget.tabular_long_steps, rules),
+        ]
+        if progress:
+            progress(f"tabular ({rules.name})")
+        for algorithm in ("dqn", "ddqn"):
+            for network in networks:
+                row, returns = deep(algorithm, network, budget, seed, rules)
+                rows.append(row)
+                label = network if len(variants) == 1 else f"{network} ({rules.name})"
+                curves[(algorithm, label)] = returns
+                if progress:
+                    progress(f"{algorithm} {network} ({rules.name})")
+        rows += baselines(budget, seed, rules)
     plot_curves(curves, out / "training_curves.png")
-    write_tables(out, rows, budget, quick, seed)
+    write_tables(out, rows, budget, quick, seed, [RULES[name] for name in variants])
     return rows

@@ -3,7 +3,8 @@
 One function per kind of row: `tabular` (Q-learning), `deep` (DQN or Double DQN for one network
 size, with the paper's real-time validation) and `baselines` (random, always-stay and the one-row
 `lookahead` rule). Each returns `Row`s; `evaluate` is the greedy evaluation they all share. The
-step counts come from a `Budget` (`FULL`: the paper's; `QUICK`: a smoke run of the whole table).
+step counts come from a `Budget`, the world's line of sight and the tabular exploration from
+`Rules` (the paper's or the public code's; both in `spec`).
 Writing the report lives in `report`, running the whole table in `reproduce`.
 """
 
@@ -12,7 +13,6 @@ from __future__ import annotations
 import copy
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -26,68 +26,25 @@ from planner.tabular import QLearning
 from planner.validation import RealTimeValidation
 from records import N_ACTIONS, Command, child_seed
 from stack.deepcars.report import plot_q_table
+from stack.deepcars.spec import PAPER, PAPER_RULES, Budget, Row, Rules
 from stack.deepcars.world import DeepCarsBatch, DeepCarsEnv, DeepCarsVecEnv
 
 EVALUATION_STREAM = 1
 """Greedy evaluation runs on seed + this, apart from training's seed."""
 VALIDATION_STREAM = 10_000
 """Real-time validation runs on seed + this."""
-PAPER = {
-    "tabular": {"train": 98.28, "eval": 99.14},
-    "dqn": {"eval": 100.0},
-    "ddqn": {"eval": 100.0},
-}
-"""The paper's accuracies [%] (Moghadam & Elkaim 2019, section 4)."""
-
-
-@dataclass(frozen=True)
-class Budget:
-    """Environment steps for training, validation and evaluation of every row."""
-
-    tabular_steps: int = 50_000
-    tabular_long_steps: int = 1_000_000
-    dqn_max_steps: int = 500_000
-    eval_steps: int = 100_000
-    short_every: int = 5_000
-    long_every: int = 25_000
-    short_episodes: int = 3
-    long_episodes: int = 10
-
-
-FULL = Budget()
-QUICK = Budget(
-    tabular_steps=5_000,
-    tabular_long_steps=20_000,
-    dqn_max_steps=2_000,
-    eval_steps=10_000,
-    short_every=1_000,
-    long_every=2_000,
-    short_episodes=1,
-    long_episodes=2,
-)
-
-
-@dataclass
-class Row:
-    """One line of the table; accuracies in %, `paper_*` the paper's numbers where it gives them."""
-
-    agent: str
-    network: str
-    training_steps: int
-    train_accuracy: float | None
-    eval_accuracy: float
-    eval_collisions: int
-    eval_passed: int
-    wall_time_s: float
-    paper_train: float | None
-    paper_eval: float | None
 
 
 def evaluate(
-    policy: Callable[[np.ndarray], np.ndarray], steps: int, encoding: str, seed: int, envs: int = 100
+    policy: Callable[[np.ndarray], np.ndarray],
+    steps: int,
+    encoding: str,
+    seed: int,
+    rules: Rules = PAPER_RULES,
+    envs: int = 100,
 ) -> DeepCarsBatch:
     """Run `policy(observations) -> actions` greedily for `steps` env steps over `envs` envs."""
-    batch = DeepCarsBatch(envs, encoding=encoding, seed=seed)
+    batch = DeepCarsBatch(envs, line_of_sight=rules.line_of_sight, encoding=encoding, seed=seed)
     observations = batch.observe()
     for _ in range(max(1, steps // envs)):
         observations, *_ = batch.step(policy(observations))
@@ -109,7 +66,7 @@ def lookahead(observations: np.ndarray) -> np.ndarray:
     return actions
 
 
-def baselines(budget: Budget, seed: int) -> list[Row]:
+def baselines(budget: Budget, seed: int, rules: Rules = PAPER_RULES) -> list[Row]:
     """The rows without training: random, always-stay and the lookahead rule."""
     rng = np.random.default_rng(seed)
     policies = {
@@ -120,9 +77,10 @@ def baselines(budget: Budget, seed: int) -> list[Row]:
     rows = []
     for name, (encoding, policy) in policies.items():
         start = time.perf_counter()
-        batch = evaluate(policy, budget.eval_steps, encoding, seed)
+        batch = evaluate(policy, budget.eval_steps, encoding, seed, rules)
         rows.append(
             Row(
+                rules.name,
                 name,
                 "-",
                 0,
@@ -138,12 +96,29 @@ def baselines(budget: Budget, seed: int) -> list[Row]:
     return rows
 
 
-def tabular(budget: Budget, seed: int, out: Path, steps: int | None = None) -> Row:
-    """Q-learning for `steps` (the paper's 50k by default) steps; the Q-table figure for the paper budget."""
+def tabular_learner(rules: Rules, seed: int) -> tuple[DeepCarsBatch, QLearning]:
+    """The training world and the Q-learner (gamma 0.9, alpha 0.1; epsilon by `rules`)."""
+    train = DeepCarsBatch(1, line_of_sight=rules.line_of_sight, encoding="tabular", seed=seed)
+    agent = QLearning.for_space(
+        train.observation_space(),
+        alpha=0.1,
+        gamma=0.9,
+        epsilon=rules.epsilon_start,
+        epsilon_decay=rules.epsilon_decay,
+        epsilon_min=rules.epsilon_min,
+        seed=seed,
+    )
+    return train, agent
+
+
+def tabular(
+    budget: Budget, seed: int, out: Path, steps: int | None = None, rules: Rules = PAPER_RULES
+) -> Row:
+    """Q-learning for `steps` (the paper's 50k by default) steps; the Q-table figure for the paper
+    budget (`tabular_q_table.png`, `tabular_q_table-public.png` under the public rules)."""
     steps = steps or budget.tabular_steps
     start = time.perf_counter()
-    train = DeepCarsBatch(1, encoding="tabular", seed=seed)
-    agent = QLearning.for_space(train.observation_space(), alpha=0.1, gamma=0.9, epsilon=0.2, seed=seed)
+    train, agent = tabular_learner(rules, seed)
     observation = train.observe()[0]
     for _ in range(steps):
         action, _ = agent.predict(observation, deterministic=False)
@@ -151,10 +126,12 @@ def tabular(budget: Budget, seed: int, out: Path, steps: int | None = None) -> R
         agent.update(observation, action, float(rewards[0]), counts["final_observation"][0], bool(crashed[0]))
         observation = next_observations[0]
     greedy = lambda obs: np.argmax(agent.table[tuple(obs.T)], axis=1)  # noqa: E731
-    batch = evaluate(greedy, budget.eval_steps, "tabular", child_seed(seed, EVALUATION_STREAM))
+    batch = evaluate(greedy, budget.eval_steps, "tabular", child_seed(seed, EVALUATION_STREAM), rules)
     if steps == budget.tabular_steps:
-        plot_q_table(agent.table, out / "tabular_q_table.png")
+        suffix = "" if rules == PAPER_RULES else f"-{rules.name}"
+        plot_q_table(agent.table, out / f"tabular_q_table{suffix}.png", rules.name)
     return Row(
+        rules.name,
         "tabular",
         "-",
         steps,
@@ -182,11 +159,14 @@ class StopWhenPerfect(BaseCallback):
         )
 
 
-def deep(algorithm: str, network: str, budget: Budget, seed: int) -> tuple[Row, list[float]]:
+def deep(
+    algorithm: str, network: str, budget: Budget, seed: int, rules: Rules = PAPER_RULES
+) -> tuple[Row, list[float]]:
     """DQN or Double DQN (`algorithm`) with the `network` of `NET_ARCHS`, the best validated model
     evaluated; also the training episodes' returns (for the training curves)."""
     start = time.perf_counter()
-    vec = DeepCarsVecEnv(DeepCarsBatch(8, encoding="binary", seed=seed))
+    sight = rules.line_of_sight
+    vec = DeepCarsVecEnv(DeepCarsBatch(8, line_of_sight=sight, encoding="binary", seed=seed))
     model = (DoubleDQN if algorithm == "ddqn" else DQN)(
         "MlpPolicy",
         vec,
@@ -206,7 +186,7 @@ def deep(algorithm: str, network: str, budget: Budget, seed: int) -> tuple[Row, 
     )
     best: dict = {}
     validation = RealTimeValidation(
-        DeepCarsEnv(encoding="binary"),
+        DeepCarsEnv(line_of_sight=sight, encoding="binary"),
         budget.short_every,
         budget.short_episodes,
         budget.long_every,
@@ -222,8 +202,9 @@ def deep(algorithm: str, network: str, budget: Budget, seed: int) -> tuple[Row, 
         with th.no_grad():
             return model.policy.q_net(th.as_tensor(observations)).argmax(dim=1).numpy()
 
-    batch = evaluate(greedy, budget.eval_steps, "binary", child_seed(seed, EVALUATION_STREAM))
+    batch = evaluate(greedy, budget.eval_steps, "binary", child_seed(seed, EVALUATION_STREAM), rules)
     row = Row(
+        rules.name,
         algorithm,
         network,
         int(model.num_timesteps),

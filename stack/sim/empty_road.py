@@ -124,6 +124,9 @@ class EmptyRoad:
     def render(self) -> np.ndarray:
         raise NotImplementedError("the empty road is not rendered")
 
+    def render_scale(self) -> tuple[float, float]:
+        raise NotImplementedError("the empty road is not rendered")
+
 
 class BuiltinDriver:
     """highway-env's own lane change as a controller: `ControlledVehicle`'s steering and speed

@@ -98,6 +98,13 @@ class HighwayAdapter:
         # gymnasium types render() for every render mode; with rgb_array it is one RGB array
         return cast(np.ndarray, self.env.render())
 
+    def render_scale(self) -> tuple[float, float]:
+        """How `render` maps the road: pixels per metre, and the ego's x in the frame [px]
+        (highway-env centres its view on the ego at `centering_position`)."""
+        env: AbstractEnv = self.env.unwrapped
+        config = env.config
+        return float(config["scaling"]), float(config["centering_position"][0]) * config["screen_width"]
+
     @property
     def rendering(self) -> bool:
         return self.env.unwrapped.render_mode == "rgb_array"

@@ -1,0 +1,26 @@
+"""`drivestack reproduce deepcars`: the table under the chosen rule sets, with a status line while
+it trains, then results.md on the terminal."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from rich.console import Console
+
+
+def reproduce_and_report(out: Path, quick: bool, seed: int, variants: Sequence[str]) -> None:
+    """Reproduce the DeepCars table into `out` under each rule set of `variants` and print it."""
+    from stack.deepcars.reproduce import reproduce
+
+    console = Console()
+    with console.status("reproducing DeepCars") as status:
+        reproduce(
+            out,
+            quick=quick,
+            seed=seed,
+            progress=lambda name: status.update(f"done: {name}"),
+            variants=variants,
+        )
+    print((out / "results.md").read_text(), end="")
+    console.print(f"results: {out}")
