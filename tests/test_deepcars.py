@@ -239,3 +239,21 @@ def test_bad_variant_is_one_line_exit_2(tmp_path):
     result = CliRunner().invoke(app, ["reproduce", "deepcars", "--variant", "github", "--out", str(tmp_path)])
     assert result.exit_code == 2
     assert result.output.strip() == "error: --variant: unknown 'github'; available: paper, public, all"
+
+
+def test_a_stopped_reproduction_keeps_the_rows_it_finished(tmp_path, one_torch_thread, monkeypatch):
+    """Ctrl-C during the DQN rows: the two tabular rows, written as they finished, stay in
+    summary.json and results.md (state `interrupted`); nothing half-written is left."""
+    import stack.deepcars.reproduce as module
+
+    def interrupted(*arguments, **keywords):
+        assert json.loads((tmp_path / "summary.json").read_text())["state"] == "running"
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(module, "deep", interrupted)
+    rows = reproduce(tmp_path, budget=TINY, networks=("16",))
+    assert [r.agent for r in rows] == ["tabular", "tabular"]
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["state"] == "interrupted" and len(summary["rows"]) == 2
+    assert (tmp_path / "results.md").read_text().count("| tabular |") == 2
+    assert not list(tmp_path.glob(".*partial*"))

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from stack.apps import interrupts
+from stack.core import interrupts
 from stack.core.files import EpisodeJournal, replacing, write_text
 
 SHORT = ["--set", "highway.duration=4", "--set", "highway.vehicles_count=8", "--no-progress"]

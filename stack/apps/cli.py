@@ -189,7 +189,8 @@ def reproduce_deepcars(
     from stack.deepcars.spec import VARIANTS
 
     variants = chosen("--variant", variant, VARIANTS)
-    reproduce_and_report(output_folder(out, "deepcars"), quick, seed, variants)
+    folder = output_folder(out, "deepcars")
+    until_interrupted(lambda: reproduce_and_report(folder, quick, seed, variants))
 
 
 @app.command()

@@ -10,11 +10,11 @@ from typing import Any
 import matplotlib.pyplot as plt
 from matplotlib.axes import Axes
 
-from stack.apps.interrupts import deferred
 from stack.apps.run import JOURNAL
 from stack.core.config import RunConfig, write_config
 from stack.core.episodes import RunResults, run
 from stack.core.files import EpisodeJournal, save_figure, write_json
+from stack.core.interrupts import deferred
 from stack.core.metrics import EpisodeResult
 from stack.core.statistics import Interval, mean_interval, paired_difference, rate_interval
 

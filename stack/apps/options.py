@@ -16,7 +16,7 @@ import typer
 import yaml
 from rich.console import Console
 
-from stack.apps.interrupts import catch_signals, received
+from stack.core.interrupts import catch_signals, received
 
 if TYPE_CHECKING:
     from stack.core.config import RunConfig
@@ -212,7 +212,7 @@ def until_interrupted(work: Callable[[], bool]) -> None:
     try:
         interrupted = work()
     except KeyboardInterrupt:
-        fail("interrupted before the first episode finished; nothing to write")
+        fail("interrupted before anything finished; nothing to write")
     if interrupted:
         sys.exit(130)
 

@@ -3,14 +3,16 @@ it trains, then results.md on the terminal."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from pathlib import Path
 
 from rich.console import Console
 
 
-def reproduce_and_report(out: Path, quick: bool, seed: int, variants: Sequence[str]) -> None:
-    """Reproduce the DeepCars table into `out` under each rule set of `variants` and print it."""
+def reproduce_and_report(out: Path, quick: bool, seed: int, variants: Sequence[str]) -> bool:
+    """Reproduce the DeepCars table into `out` under each rule set of `variants` and print it; True
+    when Ctrl-C cut it short (the rows finished are written)."""
     from stack.deepcars.reproduce import reproduce
 
     console = Console()
@@ -23,4 +25,6 @@ def reproduce_and_report(out: Path, quick: bool, seed: int, variants: Sequence[s
             variants=variants,
         )
     print((out / "results.md").read_text(), end="")
-    console.print(f"results: {out}")
+    interrupted = json.loads((out / "summary.json").read_text())["state"] == "interrupted"
+    console.print(f"results: {out}" + (" (interrupted: the rows finished)" if interrupted else ""))
+    return interrupted

@@ -13,11 +13,11 @@ from rich.console import Console
 from rich.table import Table
 
 from perception.plot import plot_grid_over_road
-from stack.apps.interrupts import deferred
 from stack.core.closed_loop import VIDEO_FRAME_TICKS
 from stack.core.config import RunConfig, write_config
 from stack.core.episodes import run
 from stack.core.files import EpisodeJournal, replacing, write_json
+from stack.core.interrupts import deferred
 from stack.core.metrics import EpisodeResult
 
 LANE_CHANGE_SPEED = 0.3

@@ -6,7 +6,6 @@ read and changed without the training code; nothing here touches an environment 
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -15,6 +14,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from records import Command
+from stack.core.files import save_figure, write_json, write_text
 
 if TYPE_CHECKING:
     from stack.deepcars.spec import Budget, Row, Rules
@@ -36,7 +36,7 @@ def plot_q_table(table: np.ndarray, path: Path, rules: str = "paper") -> None:
     axis.set_ylabel(f"state index, {bins} bins of {len(flat) / bins:.0f}")
     axis.set_title(f"Q-table ({rules} rules): {visited.mean():.1%} of {len(flat)} states visited")
     figure.tight_layout()
-    figure.savefig(path, dpi=100)
+    save_figure(figure, path, dpi=100)
     plt.close(figure)
 
 
@@ -56,7 +56,7 @@ def plot_curves(curves: dict[tuple[str, str], list[float]], path: Path) -> None:
         axis.legend(fontsize="small")
     axes[0].set_ylabel("mean reward (last 100 episodes)")
     figure.tight_layout()
-    figure.savefig(path, dpi=100)
+    save_figure(figure, path, dpi=100)
     plt.close(figure)
 
 
@@ -85,11 +85,16 @@ def markdown(rows: list[Row], quick: bool, rules: list[Rules]) -> str:
 
 
 def write_tables(
-    out: Path, rows: list[Row], budget: Budget, quick: bool, seed: int, rules: list[Rules]
+    out: Path,
+    rows: list[Row],
+    budget: Budget,
+    quick: bool,
+    seed: int,
+    rules: list[Rules],
+    state: str = "complete",
 ) -> None:
-    """summary.json (the run's settings and every row, like every other run) and results.md."""
+    """summary.json (the run's settings, `state`: complete, running or interrupted, and every row
+    so far, like every other run) and results.md, each written whole."""
     settings = {"quick": quick, "seed": seed, "budget": asdict(budget), "rules": [asdict(r) for r in rules]}
-    (out / "summary.json").write_text(
-        json.dumps({**settings, "rows": [asdict(r) for r in rows]}, indent=2) + "\n"
-    )
-    (out / "results.md").write_text(markdown(rows, quick, rules))
+    write_json(out / "summary.json", {**settings, "state": state, "rows": [asdict(r) for r in rows]})
+    write_text(out / "results.md", markdown(rows, quick, rules))

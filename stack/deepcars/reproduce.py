@@ -18,6 +18,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from planner.networks import NET_ARCHS
+from stack.core.interrupts import deferred
 from stack.deepcars.report import plot_curves, write_tables
 from stack.deepcars.rows import baselines, deep, lookahead, tabular
 from stack.deepcars.spec import FULL, QUICK, RULES, Budget, Row
@@ -36,30 +37,46 @@ def reproduce(
     variants: Sequence[str] = ("paper",),
 ) -> list[Row]:
     """Train and evaluate every row into `out` (summary.json, results.md, the figures), under each
-    rule set of `variants` in turn.
+    rule set of `variants` in turn. Each finished row is written at once (summary `state`
+    running); Ctrl-C keeps the rows finished (`state` interrupted), none raises KeyboardInterrupt.
 
     `budget` defaults to `QUICK` or `FULL` by `quick`; `networks` (all of `NET_ARCHS` by default)
     narrows the DQN/DDQN rows, for smoke tests."""
     out.mkdir(parents=True, exist_ok=True)
     budget = budget or (QUICK if quick else FULL)
+    rule_sets = [RULES[name] for name in variants]
     rows: list[Row] = []
     curves = {}
-    for rules in (RULES[name] for name in variants):
-        rows += [
-            tabular(budget, seed, out, rules=rules),
-            tabular(budget, seed, out, budget.tabular_long_steps, rules),
-        ]
-        if progress:
-            progress(f"tabular ({rules.name})")
-        for algorithm in ("dqn", "ddqn"):
-            for network in networks:
-                row, returns = deep(algorithm, network, budget, seed, rules)
-                rows.append(row)
-                label = network if len(variants) == 1 else f"{network} ({rules.name})"
-                curves[(algorithm, label)] = returns
-                if progress:
-                    progress(f"{algorithm} {network} ({rules.name})")
-        rows += baselines(budget, seed, rules)
-    plot_curves(curves, out / "training_curves.png")
-    write_tables(out, rows, budget, quick, seed, [RULES[name] for name in variants])
+
+    def finished(*new: Row) -> None:
+        rows.extend(new)
+        with deferred():
+            write_tables(out, rows, budget, quick, seed, rule_sets, "running")
+
+    interrupted = False
+    try:
+        for rules in rule_sets:
+            finished(
+                tabular(budget, seed, out, rules=rules),
+                tabular(budget, seed, out, budget.tabular_long_steps, rules),
+            )
+            if progress:
+                progress(f"tabular ({rules.name})")
+            for algorithm in ("dqn", "ddqn"):
+                for network in networks:
+                    row, returns = deep(algorithm, network, budget, seed, rules)
+                    label = network if len(variants) == 1 else f"{network} ({rules.name})"
+                    curves[(algorithm, label)] = returns
+                    finished(row)
+                    if progress:
+                        progress(f"{algorithm} {network} ({rules.name})")
+            finished(*baselines(budget, seed, rules))
+    except KeyboardInterrupt:
+        interrupted = True
+    if not rows:
+        raise KeyboardInterrupt
+    with deferred(interrupt_after=False):
+        if curves:
+            plot_curves(curves, out / "training_curves.png")
+        write_tables(out, rows, budget, quick, seed, rule_sets, "interrupted" if interrupted else "complete")
     return rows
