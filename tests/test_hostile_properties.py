@@ -1,13 +1,17 @@
 """Property-based hostile input (hypothesis): whatever a config or a CLI override holds, loading it
-either gives a valid config or one line naming the key, never another exception."""
+either gives a valid config or one line naming the key, never another exception; through the CLI,
+exit code 2 and one line; a crafted model file is refused in one line without growing memory."""
 
 import json
+import resource
 import string
 
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from typer.testing import CliRunner
 
+from stack.apps.cli import app
 from stack.core.config import ConfigError, RunConfig, build_config, load_config
 
 SECTIONS = {
@@ -86,7 +90,40 @@ def test_any_model_metadata_loads_or_is_one_line(tmp_path_factory, changes):
 
     path = tmp_path_factory.mktemp("model") / "crafted.npz"
     with_metadata(path, **changes)
+    before = peak_rss_mb()
     try:
         load_agent(path)
     except ModelFileError as error:
         assert "\n" not in str(error) and len(str(error)) <= 400, str(error)[:500]
+    assert peak_rss_mb() - before < 50
+
+
+def peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(configs)
+def test_any_config_file_through_the_cli_is_exit_2_and_one_line(tmp_path_factory, data):
+    """As a user would meet it: `drivestack run -c FILE --out <a file>` ends before any work with
+    exit code 2 and one line (the config's error, or, for a valid config, the output location),
+    never a traceback, and the process's peak memory does not grow by more than 50 MB."""
+    folder = tmp_path_factory.mktemp("cli")
+    (path := folder / "config.yaml").write_text(
+        yaml.safe_dump(data) if _dumps(data) else json.dumps(data, default=str)
+    )
+    (existing := folder / "results.txt").write_text("keep")
+    before = peak_rss_mb()
+    result = CliRunner().invoke(app, ["run", "-c", str(path), "--out", str(existing)])
+    lines = result.output.strip().splitlines()
+    assert result.exit_code == 2 and len(lines) == 1 and len(lines[0]) <= 300, result.output[:500]
+    assert "Traceback" not in result.output and existing.read_text() == "keep"
+    assert peak_rss_mb() - before < 50
+
+
+def _dumps(data: object) -> bool:
+    try:
+        yaml.safe_dump(data)
+    except yaml.YAMLError:
+        return False
+    return True
