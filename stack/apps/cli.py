@@ -10,8 +10,10 @@ from typing import Any, cast
 import typer
 from rich.console import Console
 
+from stack.apps.commands import export, sweep
 from stack.apps.options import (
     PLANT_HELP,
+    RAY_OPTION,
     SET_HELP,
     TRAIN_CONFIG,
     VERSION_OPTION,
@@ -22,6 +24,7 @@ from stack.apps.options import (
     fail,
     guarded,
     output_folder,
+    ray_or_fail,
     train_or_fail,
 )
 
@@ -60,6 +63,7 @@ def run(
     plant: str | None = typer.Option(None, help=PLANT_HELP),
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
+    ray: str | None = RAY_OPTION,
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Run seeded closed-loop episodes and write a results folder."""
@@ -76,10 +80,11 @@ def run(
         seed=seed,
     )
     check_agent(cfg)
+    ray_or_fail(ray)
     from stack.apps.run import run_and_report
 
     try:
-        interrupted = run_and_report(cfg, output_folder(out, "run"), video, jobs, progress)
+        interrupted = run_and_report(cfg, output_folder(out, "run"), video, jobs, progress, ray)
     except KeyboardInterrupt:
         fail("interrupted before the first episode finished; nothing to write")
     if interrupted:
@@ -95,6 +100,7 @@ def track(
     config: Path | None = typer.Option(None, "--config", "-c", help="YAML config (controller section)."),
     sets: list[str] = typer.Option([], "--set", help=SET_HELP),
     out: Path | None = typer.Option(None, help="Results folder (default: runs/track-<time>)."),
+    ray: str | None = RAY_OPTION,
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Single lane changes on empty straight and curved roads: tracking metrics and plots."""
@@ -110,8 +116,10 @@ def track(
     if not all(0 < v <= 40 for v in speed_list):
         fail(f"--speeds: every speed must be in (0, 40] m/s, got {speeds}")
     cfg = configured(config, sets, controller__lane_change_duration_s=duration)
+    ray_or_fail(ray)
     folder = output_folder(out, "track")
-    track_and_report(cast(list[TrackController], names), speed_list, cfg, folder, progress, cast(Any, plants))
+    names_ = cast(list[TrackController], names)
+    track_and_report(names_, speed_list, cfg, folder, progress, cast(Any, plants), ray)
 
 
 @app.command()
@@ -128,6 +136,7 @@ def compare(
     baseline: str | None = typer.Option(None, help="Agent to report paired differences against."),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
+    ray: str | None = RAY_OPTION,
     out: Path | None = typer.Option(None, help="Results folder (default: runs/compare-<time>)."),
     progress: bool = typer.Option(True, help="Show progress bars."),
 ) -> None:
@@ -154,9 +163,10 @@ def compare(
     ]
     for cfg in configs:
         check_agent(cfg)
+    ray_or_fail(ray)
     from stack.apps.compare import compare_and_report
 
-    compare_and_report(configs, output_folder(out, "compare"), jobs, progress, baseline)
+    compare_and_report(configs, output_folder(out, "compare"), jobs, progress, baseline, ray)
 
 
 @app.command()
@@ -179,6 +189,8 @@ def agents() -> None:
 
 reproduce_app = typer.Typer(no_args_is_help=True, help="Reproduce the paper's experiments.")
 app.add_typer(reproduce_app, name="reproduce")
+app.command()(export)
+app.command()(sweep)
 
 
 @reproduce_app.command("deepcars")
@@ -196,21 +208,6 @@ def reproduce_deepcars(
         reproduce(out, quick=quick, seed=seed, progress=lambda name: status.update(f"done: {name}"))
     print((out / "results.md").read_text(), end="")
     console.print(f"results: {out}")
-
-
-@app.command()
-def export(
-    model: Path = typer.Argument(..., help="A DDQN or DQN model file (.npz, from drivestack train)."),
-    sb3: Path = typer.Option(..., "--sb3", help="The stable-baselines3 zip to write."),
-) -> None:
-    """Write a model file as a stable-baselines3 zip that `DQN.load` opens."""
-    from stack.apps.export import export_sb3
-
-    try:
-        written = export_sb3(model, sb3)
-    except ValueError as error:
-        fail(str(error))
-    Console().print(f"wrote {written}: stable_baselines3.DQN.load({str(written)!r})", highlight=False)
 
 
 @app.command()

@@ -45,9 +45,12 @@ def differences(results: RunResults, baseline: RunResults) -> dict[str, Interval
     }
 
 
-def compare(configs: list[RunConfig], jobs: int = 1, progress: bool = True) -> list[RunResults]:
-    """One run per config (one config per agent, the same episodes and seeds)."""
-    return [run(config, progress=progress, jobs=jobs) for config in configs]
+def compare(
+    configs: list[RunConfig], jobs: int = 1, progress: bool = True, ray: str | None = None
+) -> list[RunResults]:
+    """One run per config (one config per agent, the same episodes and seeds), over `jobs`
+    processes or as Ray tasks at address `ray`."""
+    return [run(config, progress=progress, jobs=jobs, ray=ray) for config in configs]
 
 
 def comparison(runs: list[RunResults], baseline: str | None = None) -> list[dict[str, Any]]:
@@ -65,10 +68,15 @@ def comparison(runs: list[RunResults], baseline: str | None = None) -> list[dict
 
 
 def compare_and_report(
-    configs: list[RunConfig], out: Path, jobs: int, progress: bool, baseline: str | None = None
+    configs: list[RunConfig],
+    out: Path,
+    jobs: int,
+    progress: bool,
+    baseline: str | None = None,
+    ray: str | None = None,
 ) -> None:
     """Run every config, write `out` (comparison.json, comparison.png), print the table."""
-    rows = comparison(compare(configs, jobs=jobs, progress=progress), baseline)
+    rows = comparison(compare(configs, jobs=jobs, progress=progress, ray=ray), baseline)
     write_comparison(rows, out)
     agents = ", ".join(config.planner.agent for config in configs)
     write_config(configs[0], out / "config.yaml", f"the resolved config; agents compared: {agents}")

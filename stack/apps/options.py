@@ -23,6 +23,10 @@ CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 RUN_CONFIG, TRAIN_CONFIG = CONFIGS / "highway.yaml", CONFIGS / "train" / "ddqn.yaml"
 PLANT_HELP = "The ego's vehicle model: kinematic | dynamic (sim.plant)."
 SET_HELP = "KEY=VALUE: a dotted config key and a YAML value (repeatable); overrides the config file."
+RAY_HELP = (
+    "Run the episodes as Ray tasks: on a local instance started for the run (bare --ray), on the "
+    "cluster `ray start` made (auto) or at HOST:PORT; needs the ray extra of drivestack."
+)
 SET_KEY = re.compile(r"[A-Za-z_][\w-]*(\.[A-Za-z_][\w-]*)*")
 OPTIONS = {
     "planner__agent": "--agent",
@@ -88,6 +92,29 @@ def check_agent(config: RunConfig) -> None:
         fail(str(error))
 
 
+def ray_or_fail(address: str | None) -> None:
+    """With `--ray`, connect now (see `stack.core.ray_tasks.connect`), so a missing Ray or an
+    unreachable address is one line before any work."""
+    if address is None:
+        return
+    from stack.core.ray_tasks import RayUnavailable, connect
+
+    try:
+        connect(address)
+    except RayUnavailable as error:
+        fail(str(error))
+
+
+def bare_ray_as_local(arguments: list[str]) -> list[str]:
+    """`--ray` without an address (last, or followed by another option) as `--ray local`."""
+    return [
+        "--ray=local"
+        if word == "--ray" and (index + 1 == len(arguments) or arguments[index + 1][:1] == "-")
+        else word
+        for index, word in enumerate(arguments)
+    ]
+
+
 def chosen(option: str, value: str, options: tuple[str, ...]) -> tuple[str, ...]:
     """The comma-separated names of `value` (`all`: every option), or a one-line error."""
     names = options if value == "all" else tuple(value.split(","))
@@ -141,7 +168,6 @@ def train_or_fail(config: RunConfig, folder: Path, progress: bool) -> bool:
     """`drivestack train` in `folder`; a checkpoint that cannot be resumed is a one-line error.
     True when interrupted (resumable)."""
     from planner.model_file import ModelFileError
-    from stack.apps.train import train_and_report
 
     try:
         return train_and_report(config, folder, progress)
@@ -149,10 +175,29 @@ def train_or_fail(config: RunConfig, folder: Path, progress: bool) -> bool:
         fail(str(error))
 
 
+def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:
+    """Train (or resume) in `folder` and print the outcome; True when interrupted (resumable)."""
+    from stack.apps.train import Trainer
+
+    summary = Trainer(config, folder, progress=progress).run()
+    best, interrupted = summary["best_validation"], bool(summary["interrupted"])
+    found = (
+        "no validation yet"
+        if not best
+        else (
+            f"best validation at step {best['step']}: collision rate {best['collision_rate']:.1%}, "
+            f"mean return {best['mean_return']:.2f}, mean speed {best['mean_speed']:.2f} m/s"
+        )
+    )
+    print(f"{summary['algorithm']}: {summary['steps']} steps in {summary['wall_time_s']:.0f} s; {found}")
+    print(f"run folder: {folder}" + (" (interrupted: resume with --resume)" if interrupted else ""))
+    return interrupted
+
+
 def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
     """Run the CLI `app`; a failure nobody foresaw is one line pointing at `--debug` (which shows
     the traceback) instead of a traceback."""
-    arguments = list(sys.argv[1:] if arguments is None else arguments)
+    arguments = bare_ray_as_local(list(sys.argv[1:] if arguments is None else arguments))
     debug = "--debug" in arguments
     if debug:
         arguments.remove("--debug")
@@ -169,6 +214,7 @@ def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
         sys.exit(1)
 
 
+RAY_OPTION = typer.Option(None, "--ray", metavar="[ADDRESS]", help=RAY_HELP)
 VERSION_OPTION = typer.Option(
     False, "--version", callback=_print_version, is_eager=True, help="Print the version and exit."
 )

@@ -24,10 +24,13 @@ VIDEO_FPS = 15
 """Frames per second of the GIF (one frame per control tick at highway-env's default 15 Hz)."""
 
 
-def run_and_report(config: RunConfig, out: Path, video: bool, jobs: int, progress: bool) -> bool:
-    """Run `config`'s episodes, write `out`, print the tables; True when Ctrl-C cut the run short
-    (the finished episodes are written). Raises KeyboardInterrupt if none finished."""
-    results = run(config, video=video, progress=progress, jobs=jobs)
+def run_and_report(
+    config: RunConfig, out: Path, video: bool, jobs: int, progress: bool, ray: str | None = None
+) -> bool:
+    """Run `config`'s episodes (over `jobs` processes, or Ray tasks at address `ray`), write `out`,
+    print the tables; True when Ctrl-C cut the run short (the finished episodes are written).
+    Raises KeyboardInterrupt if none finished."""
+    results = run(config, video=video, progress=progress, jobs=jobs, ray=ray)
     write_results(out, results.summary, results.episodes, results.frames)
     write_config(config, out / "config.yaml", "the resolved config of this run")
     print_tables(results.summary, results.episodes)
