@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, NoReturn
 import typer
 import yaml
 from rich.console import Console
+from rich.markup import escape
 
 if TYPE_CHECKING:
     from stack.core.config import RunConfig
@@ -25,7 +26,7 @@ PLANT_HELP = "The ego's vehicle model: kinematic | dynamic (sim.plant)."
 SET_HELP = "KEY=VALUE: a dotted config key and a YAML value (repeatable); overrides the config file."
 RAY_HELP = (
     "Run the episodes as Ray tasks: on a local instance started for the run (bare --ray), on the "
-    "cluster `ray start` made (auto) or at HOST:PORT; needs the ray extra of drivestack."
+    "cluster `ray start` made (auto) or at HOST:PORT; needs pip install 'drivestack\\[ray]'."
 )
 SET_KEY = re.compile(r"[A-Za-z_][\w-]*(\.[A-Za-z_][\w-]*)*")
 OPTIONS = {
@@ -45,7 +46,8 @@ MAX_SET_LENGTH = 1000
 
 
 def fail(message: str) -> NoReturn:
-    Console(stderr=True).print(f"[red]error:[/red] {message}", highlight=False, soft_wrap=True)
+    """`message` as one line on stderr (brackets in it printed as they are), then exit code 2."""
+    Console(stderr=True).print(f"[red]error:[/red] {escape(message)}", highlight=False, soft_wrap=True)
     raise typer.Exit(code=2)
 
 
