@@ -13,25 +13,15 @@ from typer.testing import CliRunner
 
 from stack.apps.cli import app
 from stack.apps.options import bare_ray_as_local
+from tests.test_train import TINY
 
 ray = pytest.importorskip("ray")
 
 TINY_RUN = ["--set", "highway.duration=4", "--set", "highway.vehicles_count=10", "--no-progress"]
 TINY_TRAINING = {
-    "seed": 1,
-    "highway": {"vehicles_count": 12, "duration": 5},
-    "perception": {"lanes": "ego", "features": ["relative_speed", "ttc", "ego_speed"]},
+    **TINY,
     "planner": {"agent": "ddqn"},
-    "train": {
-        "steps": 40,
-        "learning_starts": 5,
-        "batch_size": 8,
-        "buffer_size": 200,
-        "checkpoint_every": 10,
-        "network": "16",
-        "reward": {"collision": 0.0},
-        "validation": {"short_every": 10, "short_episodes": 1, "long_every": 20, "long_episodes": 2},
-    },
+    "train": {**TINY["train"], "reward": {"collision": 0.0}},
 }
 PLANTED_BEST = 20.0
 """The alive reward of the trial that must win: with no crash penalty a return is alive x the
