@@ -4,6 +4,7 @@ file) as one line with exit code 2 before any work."""
 
 import csv
 import json
+import subprocess
 import sys
 import time
 
@@ -124,6 +125,12 @@ def test_without_ray_both_paths_say_how_to_install_it(tmp_path, monkeypatch):
         assert result.exit_code == 2
         assert "pip install 'drivestack[ray]'" in result.output, result.output
         assert len(result.output.strip().splitlines()) == 1
+
+
+def test_the_command_line_imports_ray_only_when_asked():
+    probe = "import sys, stack.apps.cli; print('ray' in sys.modules)"
+    completed = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert completed.stdout.strip() == "False"
 
 
 def test_a_bare_ray_option_means_a_local_instance():

@@ -9,7 +9,7 @@ from pathlib import Path
 import typer
 from rich.console import Console
 
-from stack.apps.options import fail, output_folder, ray_or_fail
+from stack.apps.options import check_memory, fail, output_folder, ray_or_fail
 
 SWEEP_FILE = "sweep.yaml"
 """The sweep file a sweep folder keeps (`--resume` reads it)."""
@@ -34,12 +34,13 @@ def sweep(
     if resume is not None and not spec.is_file():
         fail(f"--resume: {resume} is not a sweep folder (no {SWEEP_FILE})")
     from stack.core.config import ConfigError
-    from stack.core.sweep_config import load_sweep
+    from stack.core.sweep_config import load_sweep, trial_config
 
     try:
         sweep_file, base = load_sweep(spec)
     except ConfigError as error:
         fail(str(error))
+    check_memory(trial_config(base, sweep_file.fixed, {}))
     ray_or_fail(ray or "local")
     folder = resume or output_folder(out, "sweep")
     from stack.apps.sweep import sweep_and_report
