@@ -21,7 +21,8 @@ FIGURES = ("collision_rate", "mean_return", "mean_speed")
 
 
 def trial_row(sweep: SweepFile, folder: Path, params: dict, metrics: dict, error: object) -> dict[str, Any]:
-    """One trial: id, status, its parameters, steps trained and its kept model's validation."""
+    """One trial: id, status, its parameters, steps trained and its kept model's validation (an
+    unfinished trial has no summary yet: its steps are those Tune last heard of)."""
     trial = str(metrics.get("trial_id", "?"))
     summary_path = folder / TRIALS / trial / "summary.json"
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
@@ -29,7 +30,7 @@ def trial_row(sweep: SweepFile, folder: Path, params: dict, metrics: dict, error
     status = "error" if error else "finished" if metrics.get("finished") else "unfinished"
     row: dict[str, Any] = {"trial": trial, "status": status}
     row |= {key: params.get(key) for key in sweep.space}
-    row |= {"steps": summary.get("steps", 0), "best_step": best.get("step")}
+    row |= {"steps": summary.get("steps", metrics.get("step", 0)), "best_step": best.get("step")}
     row |= {figure: best.get(figure) for figure in FIGURES}
     return row | {"score": best.get(sweep.metric)}
 
@@ -89,6 +90,7 @@ def report(sweep: SweepFile, folder: Path, trials: list[tuple[dict, dict, object
     """Write and print the sweep's report from Tune's (params, last metrics, error) per trial;
     True when some trial is unfinished (the sweep can be resumed)."""
     rows = [trial_row(sweep, folder, params, metrics, error) for params, metrics, error in trials]
+    rows.sort(key=lambda row: row["trial"])
     best = best_row(rows, sweep.mode)
     with (folder / "trials.csv").open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
