@@ -69,13 +69,13 @@ def connect(address: str) -> ModuleType:
         "logging_level": logging.ERROR,
     }
     if address == LOCAL:
-        options["num_cpus"] = len(os.sched_getaffinity(0))
+        options["num_cpus"] = usable_cpus()
     else:
         options["address"] = address
     try:
         with _stderr_silenced():
             ray.init(**options)
-    except ConnectionError as error:
+    except (ConnectionError, TimeoutError) as error:
         message = str(error).splitlines()[0][:160]
         raise RayUnavailable(f"--ray {address}: {message}") from None
     return ray
@@ -96,7 +96,15 @@ def _stderr_silenced() -> Iterator[None]:
         os.close(saved)
 
 
+def usable_cpus() -> int:
+    """The CPUs this process may run on (a local instance gets one task slot per CPU)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
 def _call(task: Callable[[Item], Result], item: Item) -> Result:
+    """The Ray task: `task` (shared once through the object store) on one item."""
     return task(item)
 
 
