@@ -18,6 +18,7 @@ base config before any trial starts, so a typo is one line, not a failed trial a
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any, Literal
 
@@ -31,6 +32,8 @@ METRICS = {"mean_return": "max", "mean_speed": "max", "collision_rate": "min"}
 RANGES = ("uniform", "loguniform", "randint")
 """Random distributions over [low, high) given as [low, high]."""
 DISTRIBUTIONS = (*RANGES, "choice")
+DOTTED_KEY = re.compile(r"[A-Za-z_][\w-]*(\.[A-Za-z_][\w-]*)*")
+"""A config key as `--set` takes it (`stack.apps.options.SET_KEY`)."""
 
 
 class SweepFile(Strict):
@@ -40,6 +43,29 @@ class SweepFile(Strict):
     samples: int = Field(1, ge=1, le=10_000)
     metric: Literal["mean_return", "mean_speed", "collision_rate"] = "mean_return"
     concurrent: int | None = Field(None, ge=1, le=1024)
+
+    @field_validator("fixed")
+    @classmethod
+    def _dotted(cls, fixed: dict[str, Any]) -> dict[str, Any]:
+        for key in fixed:
+            if not DOTTED_KEY.fullmatch(key):
+                raise ValueError(f"{key[:80]!r}: expected a dotted config key (as --set takes)")
+        return fixed
+
+    @field_validator("space", mode="before")
+    @classmethod
+    def _shaped(cls, space: object) -> object:
+        """Dotted keys, each with a list or a one-key mapping to a list (before pydantic's own
+        messages, which would name the union's members instead)."""
+        for key, values in space.items() if isinstance(space, dict) else ():
+            if not isinstance(key, str) or not DOTTED_KEY.fullmatch(key):
+                raise ValueError(f"{str(key)[:80]!r}: expected a dotted config key (as --set takes)")
+            distribution = isinstance(values, dict) and all(isinstance(v, list) for v in values.values())
+            if not isinstance(values, list) and not distribution:
+                raise ValueError(
+                    f"{key}: expected a list (grid) or one of {{{'|'.join(DISTRIBUTIONS)}: [...]}}"
+                )
+        return space
 
     @field_validator("space")
     @classmethod
