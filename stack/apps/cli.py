@@ -118,8 +118,8 @@ def track(
     cfg = configured(config, sets, controller__lane_change_duration_s=duration)
     ray_or_fail(ray)
     folder = output_folder(out, "track")
-    names_ = cast(list[TrackController], names)
-    track_and_report(names_, speed_list, cfg, folder, progress, cast(Any, plants), ray)
+    controllers = cast(list[TrackController], names)
+    track_and_report(controllers, speed_list, cfg, folder, progress, cast(Any, plants), ray)
 
 
 @app.command()
