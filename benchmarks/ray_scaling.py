@@ -2,11 +2,13 @@
 whether the three give the same comparison.
 
     .venv/bin/python benchmarks/ray_scaling.py [--agents rule,mobil,keep-lane,ddqn] [--episodes 20]
-                                               [--set highway.duration=40 ...]
+                                               [--repeats 3] [--set highway.duration=40 ...]
 
 Each mode is a fresh `python -m stack compare` process on the same seeds, so the wall time includes
 what a user waits for: the process pool's spawned interpreters, or starting Ray (one CPU per core)
-and its workers. Needs the ray extra (pip install 'drivestack[ray]').
+and its workers. The modes take turns, in a rotated order each repeat, and the median is reported,
+so a load that drifts during the measurement (a shared machine) does not favour one mode. Needs the
+ray extra (pip install 'drivestack[ray]').
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import argparse
 import json
 import os
 import platform
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -36,26 +39,31 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--agents", default="rule,mobil,keep-lane,ddqn")
     parser.add_argument("--episodes", type=int, default=20)
+    parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--set", dest="sets", action="append", default=[], help="KEY=VALUE, as drivestack")
     args = parser.parse_args()
     common = ["--agents", args.agents, "--episodes", str(args.episodes)]
     common += [word for entry in args.sets for word in ("--set", entry)]
-    rows = []
+    walls: dict[str, list[float]] = {name: [] for name, _ in MODES}
+    comparisons: dict[str, list[list]] = {name: [] for name, _ in MODES}
     with tempfile.TemporaryDirectory() as scratch:
-        for name, mode in MODES:
-            wall, comparison = timed_compare(common + mode, Path(scratch) / name.split()[0].strip("-"))
-            rows.append((name, wall, comparison))
-    reference, serial = rows[0][2], rows[0][1]
+        for repeat in range(args.repeats):
+            for index, (name, mode) in enumerate(MODES[repeat % len(MODES) :] + MODES[: repeat % len(MODES)]):
+                wall, comparison = timed_compare(common + mode, Path(scratch) / f"{repeat}-{index}")
+                walls[name].append(wall)
+                comparisons[name].append(comparison)
+    median = {name: statistics.median(times) for name, times in walls.items()}
+    reference, serial = comparisons[MODES[0][0]][0], median[MODES[0][0]]
     machine = platform.processor() or platform.machine()
-    print(f"{machine}, {os.cpu_count()} CPUs, python {platform.python_version()}")
-    print(f"compare {' '.join(common)}")
+    load = os.getloadavg()[0]
+    print(f"{machine}, {os.cpu_count()} CPUs, python {platform.python_version()}, load average {load:.1f}")
+    print(f"compare {' '.join(common)}; median of {args.repeats}")
     print("| mode | wall time s | speed-up vs --jobs 1 | summaries identical to --jobs 1 |")
     print("|---|---|---|---|")
-    for name, wall, comparison in rows:
-        print(
-            f"| {name} | {wall:.1f} | {serial / wall:.2f}x | {'yes' if comparison == reference else 'NO'} |"
-        )
-    jobs2, ray = rows[1][1], rows[2][1]
+    for name, _ in MODES:
+        same = "yes" if all(comparison == reference for comparison in comparisons[name]) else "NO"
+        print(f"| {name} | {median[name]:.1f} | {serial / median[name]:.2f}x | {same} |")
+    jobs2, ray = median["--jobs 2"], median["--ray (local)"]
     print(f"--ray / --jobs 2 wall time: {ray / jobs2:.2f}")
 
 
