@@ -21,6 +21,7 @@ Result = TypeVar("Result")
 INSTALL = "pip install 'drivestack[ray]'"
 LOCAL = "local"
 ADDRESS = re.compile(r"(?:ray://)?(?P<host>[\w.-]+|\[[0-9a-fA-F:]+\]):(?P<port>\d{1,5})")
+AUTH_HINT = "a cluster with token authentication needs RAY_AUTH_MODE=token and its RAY_AUTH_TOKEN here"
 PROBE_TIMEOUT_S = 3.0
 """How long an address may take to accept a TCP connection before it counts as unreachable [s]."""
 
@@ -40,10 +41,12 @@ def ray_module() -> ModuleType:
 
 def check_address(address: str) -> None:
     """Refuse, in one line and within `PROBE_TIMEOUT_S`, an address that is neither `local`, `auto`
-    nor a HOST:PORT accepting connections (Ray itself would retry for minutes)."""
-    if address in (LOCAL, "auto"):
+    nor a HOST:PORT accepting connections (Ray itself would retry for minutes). `auto` is checked
+    where it points: the cluster `ray start` last recorded on this machine, or RAY_ADDRESS."""
+    if address == LOCAL:
         return
-    match = ADDRESS.fullmatch(address)
+    target = started_cluster() if address == "auto" else address
+    match = ADDRESS.fullmatch(target)
     if match is None:
         raise RayUnavailable(
             f"--ray: expected local, auto or HOST:PORT (e.g. 10.0.0.5:6379), got {address!r}"
@@ -53,7 +56,22 @@ def check_address(address: str) -> None:
         socket.create_connection((host, port), timeout=PROBE_TIMEOUT_S).close()
     except OSError as error:
         reason = error.strerror or type(error).__name__
-        raise RayUnavailable(f"--ray {address}: no Ray cluster reachable there ({reason})") from None
+        raise RayUnavailable(f"--ray {address}: no Ray cluster reachable at {target} ({reason})") from None
+
+
+def started_cluster() -> str:
+    """The HOST:PORT `--ray auto` means, as Ray resolves it; RayUnavailable when there is none."""
+    from ray._private.services import canonicalize_bootstrap_address
+
+    try:
+        found = canonicalize_bootstrap_address("auto")
+    except (ConnectionError, ValueError):
+        found = None
+    if found is None:
+        raise RayUnavailable(
+            "--ray auto: no Ray cluster started on this machine (ray start --head) nor RAY_ADDRESS"
+        )
+    return found
 
 
 def connect(address: str) -> ModuleType:
@@ -75,9 +93,14 @@ def connect(address: str) -> ModuleType:
     try:
         with _stderr_silenced():
             ray.init(**options)
-    except (ConnectionError, TimeoutError) as error:
+    except (
+        ConnectionError,
+        TimeoutError,
+        getattr(ray.exceptions, "AuthenticationError", ConnectionError),
+    ) as error:
         message = str(error).splitlines()[0][:160]
-        raise RayUnavailable(f"--ray {address}: {message}") from None
+        hint = "" if address == LOCAL else f"; {AUTH_HINT}"
+        raise RayUnavailable(f"--ray {address}: {message}{hint}") from None
     return ray
 
 
