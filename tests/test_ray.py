@@ -115,6 +115,9 @@ def test_an_unreachable_address_is_one_line_before_any_episode(tmp_path):
     assert len(result.output.strip().splitlines()) == 1 and not out.exists()
     nonsense = invoke("run", "--ray", "nowhere", "--out", str(out))
     assert nonsense.exit_code == 2 and "expected local, auto or HOST:PORT" in nonsense.output
+    spec = sweep_file(tmp_path, {"seed": [1, 2]})
+    sweep = invoke("sweep", "--config", spec, "--ray", "127.0.0.1:1", "--out", str(out))
+    assert sweep.exit_code == 2 and "no Ray cluster reachable" in sweep.output and not out.exists()
 
 
 def test_without_ray_both_paths_say_how_to_install_it(tmp_path, monkeypatch):
