@@ -1,5 +1,6 @@
 # Two entry points: `make run` (closed loop, default agent) and `make test`.
 # Both create or refresh .venv themselves; the stamp re-installs when the package metadata changes.
+# `make test` installs the ray extra too: the suite tests --ray and sweep on a local Ray instance.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -11,7 +12,7 @@ ARGS ?=
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[dev,ray]'
 	touch $(STAMP)
 
 run: $(STAMP)
@@ -35,6 +36,7 @@ bench: $(STAMP)
 	$(BIN)/drivestack track --out runs/bench-track --no-progress
 	$(BIN)/python benchmarks/tracking_table.py runs/bench-track
 	$(BIN)/python benchmarks/decision_ceiling.py
+	$(BIN)/python benchmarks/ray_scaling.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

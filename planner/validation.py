@@ -56,7 +56,7 @@ def validate(predict: Callable, env: gym.Env, episodes: int, seed: int) -> tuple
 class RealTimeValidation(BaseCallback):
     """Validate every `short_every` steps on `short_episodes` episodes and every `long_every` steps
     (and on promotion) on `long_episodes`; call `on_improvement(model, validation)` when the best long
-    score improves."""
+    score improves, then `on_validation(validation)` (if given) after every validation."""
 
     model: Any
     """What is validated: an SB3 algorithm, or a `QLearning` its trainer sets (only `predict` is used)."""
@@ -72,8 +72,10 @@ class RealTimeValidation(BaseCallback):
         on_improvement: Callable[[Any, Validation], None],
         history: list[Validation] | None = None,
         best: dict[str, tuple[float, float] | None] | None = None,
+        on_validation: Callable[[Validation], None] | None = None,
     ) -> None:
         super().__init__()
+        self.on_validation = on_validation
         self.env = env
         self.short_every, self.short_episodes = short_every, short_episodes
         self.long_every, self.long_episodes = long_every, long_episodes
@@ -123,6 +125,8 @@ class RealTimeValidation(BaseCallback):
             self.best[period] = score
             if period == "long":
                 self.on_improvement(self.model, result)
+        if self.on_validation is not None:
+            self.on_validation(result)
         return result
 
     def state(self) -> dict:

@@ -44,6 +44,18 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
         "decision_ceiling.py", "--episodes", "1", "--horizon", "2", "--jobs", "1", "--config", str(tiny)
     )
     assert "mean speed" in ceiling
+    scaling = run(
+        "ray_scaling.py",
+        "--agents",
+        "rule",
+        "--episodes",
+        "2",
+        "--repeats",
+        "1",
+        "--set",
+        "highway.duration=2",
+    )
+    assert scaling.count("| yes |") == 3
     track = tmp_path / "track"
     subprocess.run(
         [

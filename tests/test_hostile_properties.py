@@ -127,3 +127,37 @@ def _dumps(data: object) -> bool:
     except yaml.YAMLError:
         return False
     return True
+
+
+sweep_spaces = st.dictionaries(
+    st.sampled_from(["seed", "train.gamma", "train.steps", "train.network", "train.lr", "scenario", "x..y"]),
+    values
+    | st.lists(scalars, max_size=3)
+    | st.dictionaries(
+        st.sampled_from(["uniform", "loguniform", "randint", "choice", "normal"]),
+        st.lists(st.integers(-3, 3) | st.floats(allow_nan=True) | scalars, max_size=3) | values,
+        max_size=2,
+    ),
+    max_size=3,
+)
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    sweep_spaces,
+    st.integers(min_value=1, max_value=3) | values,
+    st.sampled_from(["mean_return", "collision_rate"]) | values,
+)
+def test_any_sweep_file_loads_or_is_one_line(tmp_path_factory, space, samples, metric):
+    from stack.core.sweep_config import SweepFile, load_sweep
+
+    folder = tmp_path_factory.mktemp("sweep")
+    (folder / "base.yaml").write_text("episodes: 1\n")
+    data = {"config": "base.yaml", "space": space, "samples": samples, "metric": metric}
+    (folder / "sweep.yaml").write_text(json.dumps(data, default=str))
+    try:
+        sweep, base = load_sweep(folder / "sweep.yaml")
+    except ConfigError as error:
+        assert "\n" not in str(error) and len(str(error)) <= 300, str(error)[:400]
+        return
+    assert isinstance(sweep, SweepFile) and base.is_file()

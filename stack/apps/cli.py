@@ -8,24 +8,25 @@ from pathlib import Path
 from typing import Any, cast
 
 import typer
-from rich.console import Console
 
+from stack.apps.commands import export, sweep
 from stack.apps.options import (
     PLANT_HELP,
+    RAY_OPTION,
     SET_HELP,
     TRAIN_CONFIG,
     VARIANT_HELP,
     VERSION_OPTION,
-    check_memory,
     checked_run,
     chosen,
     configured,
     fail,
     guarded,
     output_folder,
-    train_or_fail,
+    ray_or_fail,
     until_interrupted,
 )
+from stack.apps.training import check_memory, train_or_fail
 
 app = typer.Typer(
     add_completion=False,
@@ -62,6 +63,7 @@ def run(
     plant: str | None = typer.Option(None, help=PLANT_HELP),
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
+    ray: str | None = RAY_OPTION,
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Run seeded closed-loop episodes and write a results folder."""
@@ -77,10 +79,11 @@ def run(
         episodes=episodes,
         seed=seed,
     )
+    ray_or_fail(ray)
     folder = checked_run([cfg], out, "run")
     from stack.apps.run import run_and_report
 
-    until_interrupted(lambda: run_and_report(cfg, folder, video, jobs, progress))
+    until_interrupted(lambda: run_and_report(cfg, folder, video, jobs, progress, ray))
 
 
 @app.command()
@@ -92,6 +95,7 @@ def track(
     config: Path | None = typer.Option(None, "--config", "-c", help="YAML config (controller section)."),
     sets: list[str] = typer.Option([], "--set", help=SET_HELP),
     out: Path | None = typer.Option(None, help="Results folder (default: runs/track-<time>)."),
+    ray: str | None = RAY_OPTION,
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Single lane changes on empty straight and curved roads: tracking metrics and plots."""
@@ -107,8 +111,10 @@ def track(
     if not all(0 < v <= 40 for v in speed_list):
         fail(f"--speeds: every speed must be in (0, 40] m/s, got {speeds}")
     cfg = configured(config, sets, controller__lane_change_duration_s=duration)
+    ray_or_fail(ray)
     folder = output_folder(out, "track")
-    track_and_report(cast(list[TrackController], names), speed_list, cfg, folder, progress, cast(Any, plants))
+    controllers = cast(list[TrackController], names)
+    track_and_report(controllers, speed_list, cfg, folder, progress, cast(Any, plants), ray)
 
 
 @app.command()
@@ -125,6 +131,7 @@ def compare(
     baseline: str | None = typer.Option(None, help="Agent to report paired differences against."),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
+    ray: str | None = RAY_OPTION,
     out: Path | None = typer.Option(None, help="Results folder (default: runs/compare-<time>)."),
     progress: bool = typer.Option(True, help="Show progress bars."),
 ) -> None:
@@ -149,10 +156,11 @@ def compare(
         )
         for name in names
     ]
+    ray_or_fail(ray)
     folder = checked_run(configs, out, "compare")
     from stack.apps.compare import compare_and_report
 
-    until_interrupted(lambda: compare_and_report(configs, folder, jobs, progress, baseline))
+    until_interrupted(lambda: compare_and_report(configs, folder, jobs, progress, baseline, ray))
 
 
 @app.command()
@@ -175,6 +183,8 @@ def agents() -> None:
 
 reproduce_app = typer.Typer(no_args_is_help=True, help="Reproduce the paper's experiments.")
 app.add_typer(reproduce_app, name="reproduce")
+app.command()(export)
+app.command()(sweep)
 
 
 @reproduce_app.command("deepcars")
@@ -191,21 +201,6 @@ def reproduce_deepcars(
     variants = chosen("--variant", variant, VARIANTS)
     folder = output_folder(out, "deepcars")
     until_interrupted(lambda: reproduce_and_report(folder, quick, seed, variants))
-
-
-@app.command()
-def export(
-    model: Path = typer.Argument(..., help="A DDQN or DQN model file (.npz, from drivestack train)."),
-    sb3: Path = typer.Option(..., "--sb3", help="The stable-baselines3 zip to write."),
-) -> None:
-    """Write a model file as a stable-baselines3 zip that `DQN.load` opens."""
-    from stack.apps.export import export_sb3
-
-    try:
-        written = export_sb3(model, sb3)
-    except ValueError as error:
-        fail(str(error))
-    Console().print(f"wrote {written}: stable_baselines3.DQN.load({str(written)!r})", highlight=False)
 
 
 @app.command()

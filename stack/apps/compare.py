@@ -51,10 +51,13 @@ def differences(results: RunResults, baseline: RunResults) -> dict[str, Interval
     }
 
 
-def compare(configs: list[RunConfig], out: Path, jobs: int = 1, progress: bool = True) -> list[RunResults]:
-    """One run per config (one config per agent, the same episodes and seeds), each finished
-    episode journaled in `out` as it finishes. Ctrl-C stops the comparison: the agents run so far
-    are returned (the last one with the episodes it finished); none raises KeyboardInterrupt."""
+def compare(
+    configs: list[RunConfig], out: Path, jobs: int = 1, progress: bool = True, ray: str | None = None
+) -> list[RunResults]:
+    """One run per config (one config per agent, the same episodes and seeds), over `jobs`
+    processes or as Ray tasks at address `ray`, each finished episode journaled in `out` as it
+    finishes. Ctrl-C stops the comparison: the agents run so far are returned (the last one with
+    the episodes it finished); none raises KeyboardInterrupt."""
     runs: list[RunResults] = []
     for config in configs:
         journal = EpisodeJournal(out / f"{config.planner.agent}.{JOURNAL}")
@@ -64,7 +67,7 @@ def compare(configs: list[RunConfig], out: Path, jobs: int = 1, progress: bool =
                 journal.record(result.row())
 
         try:
-            runs.append(run(config, progress=progress, jobs=jobs, on_finished=keep))
+            runs.append(run(config, progress=progress, jobs=jobs, ray=ray, on_finished=keep))
         except KeyboardInterrupt:
             if not runs:
                 raise
@@ -89,11 +92,16 @@ def comparison(runs: list[RunResults], baseline: str | None = None) -> list[dict
 
 
 def compare_and_report(
-    configs: list[RunConfig], out: Path, jobs: int, progress: bool, baseline: str | None = None
+    configs: list[RunConfig],
+    out: Path,
+    jobs: int,
+    progress: bool,
+    baseline: str | None = None,
+    ray: str | None = None,
 ) -> bool:
     """Run every config, write `out` (comparison.json, comparison.png), print the table; True
     when Ctrl-C cut the comparison short (the agents run so far are written)."""
-    runs = compare(configs, out, jobs=jobs, progress=progress)
+    runs = compare(configs, out, jobs=jobs, progress=progress, ray=ray)
     interrupted = len(runs) < len(configs) or bool(runs[-1].summary["interrupted"])
     rows = comparison(runs, baseline)
     with deferred(interrupt_after=False):

@@ -3,7 +3,6 @@ one-line error (exit 2), and checks done before any work."""
 
 from __future__ import annotations
 
-import math
 import os
 import re
 import sys
@@ -15,6 +14,7 @@ from typing import TYPE_CHECKING, NoReturn
 import typer
 import yaml
 from rich.console import Console
+from rich.markup import escape
 
 from stack.core.interrupts import catch_signals, received
 
@@ -31,6 +31,10 @@ VARIANT_HELP = (
     "authors' code: 4-row line of sight, epsilon 1.0 x0.995 per step, floor 0.01) | all (both)."
 )
 SET_HELP = "KEY=VALUE: a dotted config key and a YAML value (repeatable); overrides the config file."
+RAY_HELP = (
+    "Run the episodes as Ray tasks: on a local instance started for the run (bare --ray), on the "
+    "cluster `ray start` made (auto) or at HOST:PORT; needs pip install 'drivestack\\[ray]'."
+)
 SET_KEY = re.compile(r"[A-Za-z_][\w-]*(\.[A-Za-z_][\w-]*)*")
 OPTIONS = {
     "planner__agent": "--agent",
@@ -49,7 +53,8 @@ MAX_SET_LENGTH = 1000
 
 
 def fail(message: str) -> NoReturn:
-    Console(stderr=True).print(f"[red]error:[/red] {message}", highlight=False, soft_wrap=True)
+    """`message` as one line on stderr (brackets in it printed as they are), then exit code 2."""
+    Console(stderr=True).print(f"[red]error:[/red] {escape(message)}", highlight=False, soft_wrap=True)
     raise typer.Exit(code=2)
 
 
@@ -122,6 +127,29 @@ def checked_run(configs: list[RunConfig], out: Path | None, prefix: str) -> Path
     return folder
 
 
+def ray_or_fail(address: str | None) -> None:
+    """With `--ray`, connect now (see `stack.core.ray_tasks.connect`), so a missing Ray or an
+    unreachable address is one line before any work."""
+    if address is None:
+        return
+    from stack.core.ray_tasks import RayUnavailable, connect
+
+    try:
+        connect(address)
+    except RayUnavailable as error:
+        fail(str(error))
+
+
+def bare_ray_as_local(arguments: list[str]) -> list[str]:
+    """`--ray` without an address (last, or followed by another option) as `--ray local`."""
+    return [
+        "--ray=local"
+        if word == "--ray" and (index + 1 == len(arguments) or arguments[index + 1][:1] == "-")
+        else word
+        for index, word in enumerate(arguments)
+    ]
+
+
 def chosen(option: str, value: str, options: tuple[str, ...]) -> tuple[str, ...]:
     """The comma-separated names of `value` (`all`: every option), or a one-line error."""
     names = options if value == "all" else tuple(value.split(","))
@@ -159,53 +187,6 @@ def _print_version(value: bool) -> None:
         raise typer.Exit()
 
 
-def replay_buffer_bytes(config: RunConfig) -> int:
-    """Memory SB3's replay buffer takes for `config` [bytes]: observations and next observations
-    (float32) plus action, reward, done and timeout per transition."""
-    from perception.grid import OccupancyGridBuilder
-    from stack.core.config import grid_config
-
-    grid = OccupancyGridBuilder(grid_config(config))
-    size = math.prod(grid.space(config.train.encoding, config.highway.lanes_count).shape)
-    return config.train.buffer_size * (2 * 4 * size + 8 + 4 + 4 + 4)
-
-
-def available_memory_bytes() -> int | None:
-    """MemAvailable of /proc/meminfo [bytes]; None where it cannot be read."""
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
-
-
-def check_memory(config: RunConfig) -> None:
-    """Refuse, before anything is allocated, a replay buffer that does not fit in memory."""
-    needed, available = replay_buffer_bytes(config), available_memory_bytes()
-    if config.train.algorithm != "tabular" and available is not None and needed > 0.8 * available:
-        fail(
-            f"train.buffer_size: {config.train.buffer_size} transitions need {needed / 2**30:.1f} GB; "
-            f"{available / 2**30:.1f} GB of memory is available"
-        )
-
-
-def train_or_fail(config: RunConfig, folder: Path, progress: bool) -> bool:
-    """`drivestack train` in `folder`; a checkpoint that cannot be resumed is a one-line error.
-    True when interrupted (resumable)."""
-    from planner.model_file import ModelFileError, load_checkpoint
-
-    try:
-        if (checkpoint := folder / "checkpoint.npz").is_file():
-            load_checkpoint(checkpoint, arrays=False)
-        from stack.apps.train import train_and_report
-
-        return train_and_report(config, folder, progress)
-    except ModelFileError as error:
-        fail(str(error))
-
-
 def until_interrupted(work: Callable[[], bool]) -> None:
     """Run `work`, which returns True when Ctrl-C cut it short with its finished part written, and
     exit 130 then; one line when it was cut before anything finished."""
@@ -220,7 +201,7 @@ def until_interrupted(work: Callable[[], bool]) -> None:
 def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
     """Run the CLI `app`; a failure nobody foresaw is one line pointing at `--debug` (which shows
     the traceback) instead of a traceback."""
-    arguments = list(sys.argv[1:] if arguments is None else arguments)
+    arguments = bare_ray_as_local(list(sys.argv[1:] if arguments is None else arguments))
     debug = "--debug" in arguments
     if debug:
         arguments.remove("--debug")
@@ -242,6 +223,7 @@ def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
         sys.exit(1)
 
 
+RAY_OPTION = typer.Option(None, "--ray", metavar="[ADDRESS]", help=RAY_HELP)
 VERSION_OPTION = typer.Option(
     False, "--version", callback=_print_version, is_eager=True, help="Print the version and exit."
 )

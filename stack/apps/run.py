@@ -29,16 +29,19 @@ CONTROL_RATE_HZ = 15
 real time."""
 
 
-def run_and_report(config: RunConfig, out: Path, video: bool, jobs: int, progress: bool) -> bool:
-    """Run `config`'s episodes, write `out`, print the tables; True when Ctrl-C cut the run short
-    (the finished episodes are written). Raises KeyboardInterrupt if none finished."""
+def run_and_report(
+    config: RunConfig, out: Path, video: bool, jobs: int, progress: bool, ray: str | None = None
+) -> bool:
+    """Run `config`'s episodes (over `jobs` processes, or Ray tasks at address `ray`), write `out`,
+    print the tables; True when Ctrl-C cut the run short (the finished episodes are written, each
+    journaled as it finished). Raises KeyboardInterrupt if none finished."""
     journal = EpisodeJournal(out / JOURNAL)
 
     def keep(result: EpisodeResult) -> None:
         with deferred():
             journal.record(result.row())
 
-    results = run(config, video=video, progress=progress, jobs=jobs, on_finished=keep)
+    results = run(config, video=video, progress=progress, jobs=jobs, ray=ray, on_finished=keep)
     with deferred(interrupt_after=False):
         write_results(out, results.summary, results.episodes, results.frames)
         write_config(config, out / "config.yaml", "the resolved config of this run")

@@ -28,6 +28,7 @@ from records import PLANTS, Command, PlantName
 from stack.apps.track_report import plot_maneuvers, print_tracking
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import RunConfig, write_config
+from stack.core.executors import completed
 from stack.core.metrics import Tracking, lateral_series, tracking
 from stack.sim.empty_road import BuiltinDriver, EmptyRoad, PlantKind, RoadKind
 
@@ -120,6 +121,11 @@ def run_maneuver(
     )
 
 
+def _run_maneuver(arguments: tuple) -> Maneuver:
+    """`run_maneuver` on one tuple of arguments (a task for `completed`)."""
+    return run_maneuver(*arguments)
+
+
 def track_and_report(
     controllers: list[TrackController],
     speeds: list[float],
@@ -127,8 +133,10 @@ def track_and_report(
     out: Path,
     progress: bool,
     plants: tuple[PlantName, ...] = PLANTS,
+    ray: str | None = None,
 ) -> list[Maneuver]:
-    """Every maneuver with a progress bar, then the table and where the results are."""
+    """Every maneuver (here, or as Ray tasks at address `ray`) with a progress bar, then the table
+    and where the results are."""
     builtin_runs = 1 if "kinematic" in plants else 0
     total = (
         sum(len(speeds_on(road, speeds)) for road in ROADS)
@@ -145,6 +153,7 @@ def track_and_report(
             config.dt,
             plants=plants,
             progress=lambda: bar.update(1),
+            ray=ray,
         )
     write_config(config, out / "config.yaml", "the resolved config of this run (its controller section)")
     print_tracking(maneuvers)
@@ -162,23 +171,27 @@ def track(
     roads: tuple[RoadKind, ...] = ROADS,
     plants: tuple[PlantName, ...] = PLANTS,
     progress: Callable[[], object] | None = None,
+    ray: str | None = None,
 ) -> list[Maneuver]:
-    """All maneuvers; writes out/tracking.json and one figure per speed (straight road, kinematic
-    plant, left change, all controllers overlaid)."""
+    """All maneuvers, in a fixed order whatever ran them (here, or Ray tasks at address `ray`);
+    writes out/tracking.json and one figure per road, plant and speed (the left change, all
+    controllers overlaid)."""
     out.mkdir(parents=True, exist_ok=True)
-    maneuvers = []
-    for road_kind in roads:
-        for plant in plants:
-            for name in controllers:
-                if name == "builtin" and plant == "dynamic":
-                    continue
-                for speed in speeds_on(road_kind, speeds):
-                    for direction in ("left", "right"):
-                        maneuvers.append(
-                            run_maneuver(name, config, road_kind, plant, speed, direction, duration, dt)
-                        )
-                        if progress:
-                            progress()
+    chosen = [
+        (name, config, road_kind, plant, speed, direction, duration, dt)
+        for road_kind in roads
+        for plant in plants
+        for name in controllers
+        if not (name == "builtin" and plant == "dynamic")
+        for speed in speeds_on(road_kind, speeds)
+        for direction in ("left", "right")
+    ]
+    done: dict[int, Maneuver] = {}
+    for index, maneuver in completed(_run_maneuver, chosen, ray=ray):
+        done[index] = maneuver
+        if progress:
+            progress()
+    maneuvers = [done[index] for index in sorted(done)]
     (out / "tracking.json").write_text(json.dumps([m.record() for m in maneuvers], indent=2) + "\n")
     for road_kind in roads:
         for plant in plants:

@@ -8,7 +8,6 @@ buffer and counters, so `--resume DIR` continues where the last checkpoint left 
 
 from __future__ import annotations
 
-import signal
 import sys
 import time
 from collections.abc import Callable
@@ -32,6 +31,7 @@ from stack.apps.train_model import (
     build_dqn,
     model_metadata,
     monitored_env,
+    stop_signals,
     worker_env,
 )
 from stack.apps.train_report import write_training_summary
@@ -52,8 +52,16 @@ class Trainer:
 
     model: DQN | QLearning
 
-    def __init__(self, config: RunConfig, out: Path, progress: bool = True) -> None:
+    def __init__(
+        self,
+        config: RunConfig,
+        out: Path,
+        progress: bool = True,
+        on_validation: Callable[[Validation], None] | None = None,
+    ) -> None:
+        """`on_validation` hears every validation (a sweep reports them to Ray Tune)."""
         self.config, self.out, self.progress = config, Path(out), progress
+        self.on_validation = on_validation
         envs = config.train.envs
         self.env: Monitor | SubprocVecEnv = (
             monitored_env(config) if envs == 1 else SubprocVecEnv([partial(worker_env, config)] * envs)
@@ -75,19 +83,18 @@ class Trainer:
     def run(self) -> dict:
         self.out.mkdir(parents=True, exist_ok=True)
         write_config(self.config, self.out / "config.yaml", "the resolved config; --resume reads it")
-        self.stop_requested = False
-        previous = {sig: signal.signal(sig, self._request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
-        interrupted = False
+        self.stop_requested = interrupted = False
         try:
-            steps = self._train_tabular() if self.config.train.algorithm == "tabular" else self._train_dqn()
+            with stop_signals(self._request_stop):
+                steps = (
+                    self._train_tabular() if self.config.train.algorithm == "tabular" else self._train_dqn()
+                )
         except StopTraining:
             interrupted, steps = True, self._steps_done()
         except KeyboardInterrupt:
             self.stop_requested = interrupted = True
             steps = self._save_checkpoint()
         finally:
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
             self.env.close()
         return self._finish(steps, interrupted)
 
@@ -123,6 +130,7 @@ class Trainer:
             self._improved(save),
             self.history,
             self.best,
+            self.on_validation,
         )
 
     # --- DDQN / DQN -------------------------------------------------------------------------
@@ -233,20 +241,3 @@ class Trainer:
         history = self.validation.history if hasattr(self, "validation") else self.history
         run = {"steps": steps, "wall_time_s": round(self._elapsed(), 1), "interrupted": interrupted}
         return write_training_summary(self.config, self.out, history, run, self.out / BEST)
-
-
-def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:
-    """Train (or resume) in `folder` and print the outcome; True when interrupted (resumable)."""
-    summary = Trainer(config, folder, progress=progress).run()
-    best, interrupted = summary["best_validation"], bool(summary["interrupted"])
-    found = (
-        "no validation yet"
-        if not best
-        else (
-            f"best validation at step {best['step']}: collision rate {best['collision_rate']:.1%}, "
-            f"mean return {best['mean_return']:.2f}, mean speed {best['mean_speed']:.2f} m/s"
-        )
-    )
-    print(f"{summary['algorithm']}: {summary['steps']} steps in {summary['wall_time_s']:.0f} s; {found}")
-    print(f"run folder: {folder}" + (" (interrupted: resume with --resume)" if interrupted else ""))
-    return interrupted

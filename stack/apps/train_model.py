@@ -4,8 +4,11 @@ the config, the callback that checkpoints it, the metadata every model file carr
 from __future__ import annotations
 
 import signal
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -55,6 +58,21 @@ class Checkpoints(BaseCallback):
 
     def _on_step(self) -> bool:
         return True
+
+
+@contextmanager
+def stop_signals(handler: Callable[[int, Any], None]) -> Iterator[None]:
+    """SIGINT and SIGTERM call `handler` inside the block; only in the main thread, where Python
+    delivers signals (a sweep's trial trains in a worker thread and Ray Tune stops it)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
 
 
 def monitored_env(config: RunConfig) -> Monitor:

@@ -139,7 +139,7 @@ class _NoAliasLoader(yaml.SafeLoader):
         return super().compose_node(parent, index)
 
 
-def _one_line(error: ValidationError, source: str, labels: dict[str, str]) -> str:
+def one_line(error: ValidationError, source: str, labels: dict[str, str]) -> str:
     first = error.errors()[0]
     key = ".".join(str(part) for part in first["loc"])
     source = labels.get(key, source)
@@ -206,11 +206,12 @@ def build_config(
     try:
         return RunConfig.model_validate(data)
     except ValidationError as error:
-        raise ConfigError(_one_line(error, source, labels)) from None
+        raise ConfigError(one_line(error, source, labels)) from None
 
 
-def load_config(path: Path | str, labels: dict[str, str] | None = None, **overrides: Any) -> RunConfig:
-    """Read a YAML run config, apply CLI overrides, validate; raise ConfigError on any problem."""
+def read_mapping(path: Path | str) -> dict[str, Any]:
+    """The YAML mapping in the file at `path` (at most MAX_CONFIG_BYTES, no anchors or aliases);
+    raise ConfigError (one line naming the file) on any problem."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"{path}: no such config file")
@@ -228,7 +229,12 @@ def load_config(path: Path | str, labels: dict[str, str] | None = None, **overri
         raise ConfigError(f"{path}: not valid YAML{where}{reason}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping of keys at the top level")
-    return build_config(data, str(path), labels, **overrides)
+    return data
+
+
+def load_config(path: Path | str, labels: dict[str, str] | None = None, **overrides: Any) -> RunConfig:
+    """Read a YAML run config, apply CLI overrides, validate; raise ConfigError on any problem."""
+    return build_config(read_mapping(path), str(path), labels, **overrides)
 
 
 def grid_config(config: RunConfig) -> GridConfig:
@@ -242,9 +248,5 @@ def road_mismatch(
     """Why a model that expects `size` observation values, seen through `grid` with `encoding`,
     cannot drive a road of `lanes` lanes (None when it can)."""
     given = int(OccupancyGridBuilder(grid).space(encoding, lanes).shape[0])
-    if given == size:
-        return None
-    return (
-        f"{model}: expects observations of {size} values; "
-        f"its {encoding} grid gives {given} on this {lanes}-lane road"
-    )
+    why = f"{model}: expects observations of {size} values; its {encoding} grid gives {given}"
+    return None if given == size else f"{why} on this {lanes}-lane road"

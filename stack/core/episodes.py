@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
-from multiprocessing import get_context
+from functools import partial
 
 import numpy as np
 from tqdm import tqdm
@@ -15,6 +14,7 @@ from planner.factory import make_agent, model_path
 from records import child_seed
 from stack.core.closed_loop import ClosedLoop, grid_config
 from stack.core.config import RunConfig, road_mismatch
+from stack.core.executors import completed
 from stack.core.metrics import EpisodeResult, summarize
 from stack.core.oracle import Oracle
 from stack.sim.highway import HighwayAdapter
@@ -81,11 +81,13 @@ def run(
     video: bool = False,
     progress: bool = True,
     jobs: int = 1,
+    ray: str | None = None,
     on_finished: Callable[[EpisodeResult], None] | None = None,
 ) -> RunResults:
-    """Run `config.episodes` seeded episodes over `jobs` processes; results are ordered by episode,
-    identical for any `jobs`. With `video`, episode 0 runs here and keeps its frames. Ctrl-C keeps
-    the finished episodes (`summary["interrupted"]`); `on_finished` sees each as it finishes."""
+    """Run `config.episodes` seeded episodes over `jobs` processes, or as Ray tasks with `ray` (an
+    address, see `stack.core.executors`); results are ordered by episode, identical for any `jobs`
+    or `ray`. With `video`, episode 0 runs here and keeps its frames. Ctrl-C keeps the finished
+    episodes (`summary["interrupted"]`); `on_finished` sees each as it finishes."""
     frames: list[np.ndarray] = []
     results: dict[int, EpisodeResult] = {}
     pending = list(range(config.episodes))
@@ -102,19 +104,8 @@ def run(
     try:
         if video:
             finished(run_episode(config, pending.pop(0), frames))
-        if jobs <= 1:
-            for episode in pending:
-                finished(run_episode(config, episode))
-        else:
-            with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as pool:
-                futures = [pool.submit(run_episode, config, episode) for episode in pending]
-                try:
-                    for future in as_completed(futures):
-                        finished(future.result())
-                except KeyboardInterrupt:
-                    for future in futures:
-                        future.cancel()
-                    raise
+        for _, result in completed(partial(run_episode, config), pending, jobs, ray):
+            finished(result)
     except KeyboardInterrupt:
         interrupted = True
     finally:

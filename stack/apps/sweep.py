@@ -1,0 +1,114 @@
+"""`drivestack sweep`: `drivestack train` runs over a grid or random space (`stack.core.sweep_config`)
+as Ray Tune trials. Each trial trains in its own run folder, `trials/<trial id>` (the same
+checkpoints, best model and summary as `drivestack train`), and reports every long real-time
+validation to Tune: `score` is the sweep's metric of the trial's kept (best) model so far. An
+interrupted sweep continues with `--resume`: Tune restarts the unfinished trials and each picks up
+its run folder's last checkpoint.
+
+The sweep folder: config.yaml (the base config, fixed overrides applied), sweep.yaml (the sweep
+file, pointing at config.yaml, which `--resume` reads), tune/ (Tune's state), trials/, and the
+report of `stack.apps.sweep_report`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from planner.validation import Validation
+from stack.apps.commands import SWEEP_FILE
+from stack.apps.sweep_report import TRIALS, report
+from stack.core.config import write_config
+from stack.core.sweep_config import SweepFile, trial_config
+
+BASE, TUNE = "config.yaml", "tune"
+SCORE = "score"
+"""The metric every trial reports: the sweep's metric of its kept model (NaN before one is kept)."""
+
+
+def prepare(sweep: SweepFile, base: Path, folder: Path) -> None:
+    """A new sweep folder: the base config with the fixed overrides as config.yaml, and the sweep
+    file pointing at it as sweep.yaml."""
+    write_config(trial_config(base, sweep.fixed, {}), folder / BASE, "the base config of every trial")
+    spec = sweep.model_dump(mode="json") | {"config": BASE, "fixed": {}}
+    (folder / SWEEP_FILE).write_text(yaml.safe_dump(spec, sort_keys=False))
+
+
+def tune_space(sweep: SweepFile) -> dict[str, Any]:
+    """The sweep's space as Tune's param_space: lists as grid searches, the rest as distributions."""
+    from ray import tune
+
+    ranges = {"uniform": tune.uniform, "loguniform": tune.loguniform, "randint": tune.randint}
+    space: dict[str, Any] = {}
+    for key, values in sweep.space.items():
+        if isinstance(values, list):
+            space[key] = tune.grid_search(values)
+        else:
+            ((kind, bounds),) = values.items()
+            space[key] = tune.choice(bounds) if kind == "choice" else ranges[kind](*bounds)
+    return space
+
+
+def train_trial(params: dict[str, Any], folder: Path, metric: str) -> None:
+    """One Tune trial: a training run in folder/trials/<trial id> with `params` over the sweep's
+    base config, resumed from that folder's checkpoint when an earlier attempt left one."""
+    from ray import tune
+
+    from stack.apps.train import Trainer
+
+    out = folder / TRIALS / tune.get_context().get_trial_id()
+    kept = math.nan
+
+    def heard(validation: Validation) -> None:
+        nonlocal kept
+        if validation.period == "long":
+            kept = getattr(validation, metric) if validation.improved else kept
+            tune.report({"step": validation.step, SCORE: kept, "validation": getattr(validation, metric)})
+
+    config = trial_config(folder / BASE, {}, params)
+    summary = Trainer(config, out, progress=False, on_validation=heard).run()
+    best = summary["best_validation"]
+    tune.report({"step": summary["steps"], SCORE: best[metric] if best else math.nan, "finished": True})
+
+
+def tuner(sweep: SweepFile, folder: Path, resume: bool, progress: bool) -> Any:
+    """Tune's Tuner for the sweep in `folder`: new, or restored from folder/tune. Without
+    `progress`, Tune's console output is off (its new output engine ignores verbose=0)."""
+    if not progress:
+        os.environ["RAY_AIR_NEW_OUTPUT"] = "0"
+    from ray import tune
+
+    trainable = tune.with_resources(
+        tune.with_parameters(train_trial, folder=folder.resolve(), metric=sweep.metric),
+        {"cpu": trial_config(folder / BASE, {}, {}).train.envs},
+    )
+    if resume:
+        return tune.Tuner.restore(str((folder / TUNE).resolve()), trainable, restart_errored=True)
+    return tune.Tuner(
+        trainable,
+        param_space=tune_space(sweep),
+        tune_config=tune.TuneConfig(
+            metric=SCORE,
+            mode=sweep.mode,
+            num_samples=sweep.samples,
+            max_concurrent_trials=sweep.concurrent,
+            reuse_actors=True,
+        ),
+        run_config=tune.RunConfig(
+            name=TUNE, storage_path=str(folder.resolve()), verbose=1 if progress else 0
+        ),
+    )
+
+
+def sweep_and_report(sweep: SweepFile, base: Path, folder: Path, resume: bool, progress: bool) -> bool:
+    """Run (or continue) the sweep in `folder` and write its report; True when trials are left
+    unfinished (interrupted: `--resume` continues)."""
+    if not resume:
+        prepare(sweep, base, folder)
+    results = tuner(sweep, folder, resume, progress).fit()
+    trials = [(result.config, result.metrics or {}, result.error) for result in results]
+    return report(sweep, folder, trials)

@@ -1,0 +1,118 @@
+"""The report of a sweep (`stack.apps.sweep`), read from the trials' own run folders: trials.csv and
+trials.md (one row per trial: its parameters, status and best long validation), sweep.png (every
+trial's long validations over training steps, and each trial's kept score), the best trial's model
+as best_model.npz, and summary.json."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import matplotlib.pyplot as plt
+
+from stack.core.sweep_config import SweepFile
+
+TRIALS = "trials"
+FIGURES = ("collision_rate", "mean_return", "mean_speed")
+"""A kept validation's figures in the table (collision rate as a fraction, mean speed in m/s)."""
+
+
+def trial_row(sweep: SweepFile, folder: Path, params: dict, metrics: dict, error: object) -> dict[str, Any]:
+    """One trial: id, status, its parameters, steps trained and its kept model's validation (an
+    unfinished trial has no summary yet: its steps are those Tune last heard of)."""
+    trial = str(metrics.get("trial_id", "?"))
+    summary_path = folder / TRIALS / trial / "summary.json"
+    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+    best = summary.get("best_validation") or {}
+    status = "error" if error else "finished" if metrics.get("finished") else "unfinished"
+    row: dict[str, Any] = {"trial": trial, "status": status}
+    row |= {key: params.get(key) for key in sweep.space}
+    row |= {"steps": summary.get("steps", metrics.get("step", 0)), "best_step": best.get("step")}
+    row |= {figure: best.get(figure) for figure in FIGURES}
+    return row | {"score": best.get(sweep.metric)}
+
+
+def best_row(rows: list[dict[str, Any]], mode: str) -> dict[str, Any] | None:
+    """The trial whose kept model scores best (`mode` max or min; the first one on a tie)."""
+    scored = [row for row in rows if row["score"] is not None]
+    if not scored:
+        return None
+    sign = 1.0 if mode == "max" else -1.0
+    return max(scored, key=lambda row: sign * row["score"])
+
+
+def markdown(rows: list[dict[str, Any]], best: dict[str, Any] | None) -> str:
+    """The trials as a markdown table, the best one marked."""
+    columns = list(rows[0])
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    for row in rows:
+        cells = [f"{v:.4g}" if isinstance(v, float) else "" if v is None else str(v) for v in row.values()]
+        cells[0] += " (best)" if row is best else ""
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_sweep(
+    rows: list[dict[str, Any]], best: dict[str, Any] | None, folder: Path, sweep: SweepFile
+) -> None:
+    """sweep.png: every trial's long validations against training steps (left), its kept score
+    (right); the legend gives each trial's parameters."""
+    metric = sweep.metric
+    figure, (curves, bars) = plt.subplots(1, 2, figsize=(12, 4.5), gridspec_kw={"width_ratios": [2, 1]})
+    for row in rows:
+        history_path = folder / TRIALS / row["trial"] / "validation.json"
+        history = json.loads(history_path.read_text()) if history_path.is_file() else []
+        points = [v for v in history if v["period"] == "long"]
+        width = 2.5 if row is best else 1.0
+        params = ", ".join(f"{key.rsplit('.', 1)[-1]}={row[key]}" for key in sweep.space)
+        steps, values = [v["step"] for v in points], [v[metric] for v in points]
+        curves.plot(steps, values, "o-", lw=width, label=f"{row['trial']}: {params}")
+    curves.set_xlabel("training steps")
+    curves.set_ylabel(f"long validation {metric}")
+    curves.legend(fontsize="small")
+    names = [row["trial"] for row in rows]
+    scores = [row["score"] if row["score"] is not None else 0.0 for row in rows]
+    colours = ["tab:orange" if row is best else "tab:blue" for row in rows]
+    bars.bar(names, scores, color=colours)
+    bars.set_ylabel(f"kept model's {metric}")
+    bars.set_xlabel("trial (orange: best)")
+    bars.tick_params(axis="x", rotation=30)
+    figure.suptitle(f"sweep: {len(rows)} trials, metric {metric} of the long real-time validation")
+    figure.tight_layout()
+    figure.savefig(folder / "sweep.png", dpi=100)
+    plt.close(figure)
+
+
+def report(sweep: SweepFile, folder: Path, trials: list[tuple[dict, dict, object]]) -> bool:
+    """Write and print the sweep's report from Tune's (params, last metrics, error) per trial;
+    True when some trial is unfinished (the sweep can be resumed)."""
+    rows = [trial_row(sweep, folder, params, metrics, error) for params, metrics, error in trials]
+    rows.sort(key=lambda row: row["trial"])
+    best = best_row(rows, sweep.mode)
+    with (folder / "trials.csv").open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    table = markdown(rows, best)
+    (folder / "trials.md").write_text(table)
+    plot_sweep(rows, best, folder, sweep)
+    best_model = folder / TRIALS / best["trial"] / "best.npz" if best else None
+    if best_model and best_model.is_file():
+        shutil.copyfile(best_model, folder / "best_model.npz")
+    unfinished = any(row["status"] != "finished" for row in rows)
+    summary = {
+        "metric": sweep.metric,
+        "mode": sweep.mode,
+        "trials": len(rows),
+        "finished": sum(row["status"] == "finished" for row in rows),
+        "interrupted": unfinished,
+        "best": best,
+        "best_model": "best_model.npz" if (folder / "best_model.npz").is_file() else None,
+    }
+    (folder / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    print(table, end="")
+    print(f"results: {folder}" + (" (unfinished trials: continue with --resume)" if unfinished else ""))
+    return unfinished

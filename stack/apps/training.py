@@ -1,0 +1,77 @@
+"""What `drivestack train` checks before any work (the replay buffer fits in memory, a checkpoint
+to resume is one) and prints after."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from stack.apps.options import fail
+
+if TYPE_CHECKING:
+    from stack.core.config import RunConfig
+
+
+def replay_buffer_bytes(config: RunConfig) -> int:
+    """Memory SB3's replay buffer takes for `config` [bytes]: observations and next observations
+    (float32) plus action, reward, done and timeout per transition."""
+    from perception.grid import OccupancyGridBuilder
+    from stack.core.config import grid_config
+
+    grid = OccupancyGridBuilder(grid_config(config))
+    size = math.prod(grid.space(config.train.encoding, config.highway.lanes_count).shape)
+    return config.train.buffer_size * (2 * 4 * size + 8 + 4 + 4 + 4)
+
+
+def available_memory_bytes() -> int | None:
+    """MemAvailable of /proc/meminfo [bytes]; None where it cannot be read."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def check_memory(config: RunConfig) -> None:
+    """Refuse, before anything is allocated, a replay buffer that does not fit in memory."""
+    needed, available = replay_buffer_bytes(config), available_memory_bytes()
+    if config.train.algorithm != "tabular" and available is not None and needed > 0.8 * available:
+        fail(
+            f"train.buffer_size: {config.train.buffer_size} transitions need {needed / 2**30:.1f} GB; "
+            f"{available / 2**30:.1f} GB of memory is available"
+        )
+
+
+def train_or_fail(config: RunConfig, folder: Path, progress: bool) -> bool:
+    """`drivestack train` in `folder`; a checkpoint that cannot be resumed is a one-line error.
+    True when interrupted (resumable)."""
+    from planner.model_file import ModelFileError, load_checkpoint
+
+    try:
+        if (checkpoint := folder / "checkpoint.npz").is_file():
+            load_checkpoint(checkpoint, arrays=False)
+        return train_and_report(config, folder, progress)
+    except ModelFileError as error:
+        fail(str(error))
+
+
+def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:
+    """Train (or resume) in `folder` and print the outcome; True when interrupted (resumable)."""
+    from stack.apps.train import Trainer
+
+    summary = Trainer(config, folder, progress=progress).run()
+    best, interrupted = summary["best_validation"], bool(summary["interrupted"])
+    found = (
+        "no validation yet"
+        if not best
+        else (
+            f"best validation at step {best['step']}: collision rate {best['collision_rate']:.1%}, "
+            f"mean return {best['mean_return']:.2f}, mean speed {best['mean_speed']:.2f} m/s"
+        )
+    )
+    print(f"{summary['algorithm']}: {summary['steps']} steps in {summary['wall_time_s']:.0f} s; {found}")
+    print(f"run folder: {folder}" + (" (interrupted: resume with --resume)" if interrupted else ""))
+    return interrupted

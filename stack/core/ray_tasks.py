@@ -1,0 +1,151 @@
+"""Ray Core behind `--ray`: connect once (a local instance started for the run, `auto` for the
+cluster `ray start` made, or HOST:PORT), then one task per work item. Ray is an optional extra and
+is imported only here, when a command asks for it. Workers import this package by name: on a
+cluster, drivestack must be installed on every node."""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import socket
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from types import ModuleType
+from typing import Any, TypeVar
+
+Item = TypeVar("Item")
+Result = TypeVar("Result")
+
+INSTALL = "pip install 'drivestack[ray]'"
+LOCAL = "local"
+ADDRESS = re.compile(r"(?:ray://)?(?P<host>[\w.-]+|\[[0-9a-fA-F:]+\]):(?P<port>\d{1,5})")
+AUTH_HINT = "a cluster with token authentication needs RAY_AUTH_MODE=token and its RAY_AUTH_TOKEN here"
+PROBE_TIMEOUT_S = 3.0
+"""How long an address may take to accept a TCP connection before it counts as unreachable [s]."""
+
+
+class RayUnavailable(ValueError):
+    """Ray cannot run the work: not installed, or no cluster at the address; one line for the user."""
+
+
+def ray_module() -> ModuleType:
+    """The `ray` package, or RayUnavailable saying how to install it."""
+    try:
+        import ray
+    except ImportError:
+        raise RayUnavailable(f"--ray and sweep need Ray, which is not installed: {INSTALL}") from None
+    return ray
+
+
+def check_address(address: str) -> None:
+    """Refuse, in one line and within `PROBE_TIMEOUT_S`, an address that is neither `local`, `auto`
+    nor a HOST:PORT accepting connections (Ray itself would retry for minutes). `auto` is checked
+    where it points: the cluster `ray start` last recorded on this machine, or RAY_ADDRESS."""
+    if address == LOCAL:
+        return
+    target = started_cluster() if address == "auto" else address
+    match = ADDRESS.fullmatch(target)
+    if match is None:
+        raise RayUnavailable(
+            f"--ray: expected local, auto or HOST:PORT (e.g. 10.0.0.5:6379), got {address!r}"
+        )
+    host, port = match["host"].strip("[]"), int(match["port"])
+    try:
+        socket.create_connection((host, port), timeout=PROBE_TIMEOUT_S).close()
+    except OSError as error:
+        reason = error.strerror or type(error).__name__
+        raise RayUnavailable(f"--ray {address}: no Ray cluster reachable at {target} ({reason})") from None
+
+
+def started_cluster() -> str:
+    """The HOST:PORT `--ray auto` means, as Ray resolves it; RayUnavailable when there is none."""
+    from ray._private.services import canonicalize_bootstrap_address
+
+    try:
+        found = canonicalize_bootstrap_address("auto")
+    except (ConnectionError, ValueError):
+        found = None
+    if found is None:
+        raise RayUnavailable(
+            "--ray auto: no Ray cluster started on this machine (ray start --head) nor RAY_ADDRESS"
+        )
+    return found
+
+
+def connect(address: str) -> ModuleType:
+    """Ray, initialised for `address` (see module doc); an instance already initialised in this
+    process is reused. Raises RayUnavailable before any work."""
+    ray = ray_module()
+    check_address(address)
+    if ray.is_initialized():
+        return ray
+    options: dict[str, Any] = {
+        "include_dashboard": False,
+        "log_to_driver": False,
+        "logging_level": logging.ERROR,
+    }
+    if address == LOCAL:
+        options["num_cpus"] = usable_cpus()
+    else:
+        options["address"] = address
+    try:
+        with _stderr_silenced():
+            ray.init(**options)
+    except (
+        ConnectionError,
+        TimeoutError,
+        getattr(ray.exceptions, "AuthenticationError", ConnectionError),
+    ) as error:
+        message = str(error).splitlines()[0][:160]
+        hint = "" if address == LOCAL else f"; {AUTH_HINT}"
+        raise RayUnavailable(f"--ray {address}: {message}{hint}") from None
+    return ray
+
+
+@contextmanager
+def _stderr_silenced() -> Iterator[None]:
+    """File descriptor 2 to /dev/null inside the block: Ray's C++ core logs every connection retry
+    there for up to a minute, which would bury the one-line error."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with open(os.devnull, "w") as null:
+        os.dup2(null.fileno(), 2)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def usable_cpus() -> int:
+    """The CPUs this process may run on (a local instance gets one task slot per CPU)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def _call(task: Callable[[Item], Result], item: Item) -> Result:
+    """The Ray task: `task` (shared once through the object store) on one item."""
+    return task(item)
+
+
+def ray_completed(
+    task: Callable[[Item], Result], items: Sequence[Item], address: str
+) -> Iterator[tuple[int, Result]]:
+    """(index, task(item)) as the Ray tasks finish, one CPU each; the tasks not finished when the
+    iterator is closed (Ctrl-C) are cancelled."""
+    ray = connect(address)
+    remote = ray.remote(num_cpus=1, max_retries=0)(_call)
+    shared = ray.put(task)
+    indices = {remote.remote(shared, item): index for index, item in enumerate(items)}
+    pending = list(indices)
+    try:
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            for ref in done:
+                yield indices[ref], ray.get(ref)
+    finally:
+        for ref in pending:
+            ray.cancel(ref, force=True)

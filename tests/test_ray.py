@@ -1,0 +1,143 @@
+"""`--ray` and `drivestack sweep` on a local 2-CPU Ray instance: the same summaries as `--jobs 1`, a
+sweep that picks its planted best trial, and bad input (no Ray, an unreachable address, a bad sweep
+file) as one line with exit code 2 before any work."""
+
+import csv
+import json
+import subprocess
+import sys
+import time
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from stack.apps.cli import app
+from stack.apps.options import bare_ray_as_local
+from stack.core.metrics import outcome
+from tests.test_train import TINY
+
+ray = pytest.importorskip("ray")
+
+TINY_RUN = ["--set", "highway.duration=4", "--set", "highway.vehicles_count=10", "--no-progress"]
+TINY_TRAINING = {
+    **TINY,
+    "planner": {"agent": "ddqn"},
+    "train": {**TINY["train"], "reward": {"collision": 0.0}},
+}
+PLANTED_BEST = 20.0
+"""The alive reward of the trial that must win: with no crash penalty a return is alive x the
+seconds survived, so 20 beats 1, 1.5 and 2 on any episode that lasts a decision."""
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    """One local 2-CPU Ray instance for the module; `--ray local` reuses it."""
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield
+    ray.shutdown()
+
+
+def invoke(*arguments: str):
+    return CliRunner().invoke(app, list(arguments))
+
+
+def sweep_file(tmp_path, space: dict, **extra) -> str:
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(TINY_TRAINING))
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump({"config": "base.yaml", "space": space, **extra}))
+    return str(path)
+
+
+def test_compare_on_ray_gives_the_summaries_of_one_job(tmp_path, local_ray):
+    common = ["compare", "--agents", "rule,keep-lane", "--episodes", "3", *TINY_RUN]
+    local = invoke(*common, "--jobs", "1", "--out", str(tmp_path / "local"))
+    remote = invoke(*common, "--ray", "local", "--out", str(tmp_path / "ray"))
+    assert local.exit_code == 0 and remote.exit_code == 0, remote.output
+    rows = [json.loads((tmp_path / name / "comparison.json").read_text()) for name in ("local", "ray")]
+    assert [outcome(row) for row in rows[0]] == [outcome(row) for row in rows[1]]
+
+
+def test_track_on_ray_keeps_the_maneuver_order(tmp_path, local_ray):
+    common = ["track", "--controller", "pid", "--plant", "kinematic", "--speeds", "20", "--no-progress"]
+    assert invoke(*common, "--out", str(tmp_path / "local")).exit_code == 0
+    assert invoke(*common, "--ray", "local", "--out", str(tmp_path / "ray")).exit_code == 0
+
+    def figures(name):
+        records = json.loads((tmp_path / name / "tracking.json").read_text())
+        return [{k: v for k, v in r.items() if not k.startswith("solve_ms")} for r in records]
+
+    assert figures("local") == figures("ray")
+
+
+def test_sweep_picks_the_planted_best_trial(tmp_path, local_ray):
+    spec = sweep_file(tmp_path, {"train.reward.alive": [1.0, 1.5, 2.0, PLANTED_BEST]})
+    out = tmp_path / "sweep"
+    start = time.perf_counter()
+    result = invoke("sweep", "--config", spec, "--out", str(out), "--no-progress")
+    elapsed = time.perf_counter() - start
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["best"]["train.reward.alive"] == PLANTED_BEST and summary["finished"] == 4
+    with (out / "trials.csv").open() as handle:
+        assert len(list(csv.DictReader(handle))) == 4
+    for name in ("best_model.npz", "sweep.png", "trials.md", "config.yaml"):
+        assert (out / name).is_file(), name
+    assert elapsed <= 90, f"4 tiny trials took {elapsed:.0f} s"
+
+    resumed = invoke("sweep", "--resume", str(out), "--no-progress")
+    assert resumed.exit_code == 0, resumed.output
+    again = json.loads((out / "summary.json").read_text())
+    assert again["best"] == summary["best"], "resuming a finished sweep trains nothing again"
+
+
+@pytest.mark.parametrize(
+    ("space", "expected"),
+    [
+        ({"train.learning_rat": [0.001]}, "space: train.learning_rat: unknown key"),
+        ({"seed": []}, "space: seed: expected a non-empty list of values"),
+        ({"train.gamma": {"uniform": [0.99, 0.9]}}, "train.gamma: uniform: empty range"),
+        ({"train.gamma": {"normal": [0.9, 0.1]}}, "train.gamma: expected a list (grid) or one of"),
+        ({"train.gamma": [0.9, 2.0]}, "space: train.gamma: Input should be less than or equal to 1"),
+    ],
+)
+def test_a_bad_sweep_file_is_one_line_before_any_trial(tmp_path, space, expected):
+    result = invoke("sweep", "--config", sweep_file(tmp_path, space), "--out", str(tmp_path / "out"))
+    assert result.exit_code == 2
+    assert expected in result.output and len(result.output.strip().splitlines()) == 1, result.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_unreachable_address_is_one_line_before_any_episode(tmp_path):
+    out = tmp_path / "out"
+    result = invoke("run", "--agent", "rule", "--episodes", "1", "--ray", "127.0.0.1:1", "--out", str(out))
+    assert result.exit_code == 2
+    assert "--ray 127.0.0.1:1: no Ray cluster reachable" in result.output
+    assert len(result.output.strip().splitlines()) == 1 and not out.exists()
+    nonsense = invoke("run", "--ray", "nowhere", "--out", str(out))
+    assert nonsense.exit_code == 2 and "expected local, auto or HOST:PORT" in nonsense.output
+    spec = sweep_file(tmp_path, {"seed": [1, 2]})
+    sweep = invoke("sweep", "--config", spec, "--ray", "127.0.0.1:1", "--out", str(out))
+    assert sweep.exit_code == 2 and "no Ray cluster reachable" in sweep.output and not out.exists()
+
+
+def test_without_ray_both_paths_say_how_to_install_it(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)
+    compare = invoke("compare", "--agents", "rule", "--ray", "local", "--out", str(tmp_path / "c"))
+    sweep = invoke("sweep", "--config", sweep_file(tmp_path, {"seed": [1, 2]}), "--out", str(tmp_path / "s"))
+    for result in (compare, sweep):
+        assert result.exit_code == 2
+        assert "pip install 'drivestack[ray]'" in result.output, result.output
+        assert len(result.output.strip().splitlines()) == 1
+
+
+def test_the_command_line_imports_ray_only_when_asked():
+    probe = "import sys, stack.apps.cli; print('ray' in sys.modules)"
+    completed = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert completed.stdout.strip() == "False"
+
+
+def test_a_bare_ray_option_means_a_local_instance():
+    assert bare_ray_as_local(["run", "--ray"]) == ["run", "--ray=local"]
+    assert bare_ray_as_local(["run", "--ray", "--jobs", "2"]) == ["run", "--ray=local", "--jobs", "2"]
+    assert bare_ray_as_local(["run", "--ray", "auto"]) == ["run", "--ray", "auto"]
