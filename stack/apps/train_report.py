@@ -2,17 +2,17 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 
 from planner.validation import Validation, kept_models
 from stack.core.config import RunConfig
+from stack.core.files import save_figure, write_json
 
 
-def plot_training_curve(history: list[Validation], path: Path) -> None:
-    """Mean validation return and collision rate against training steps."""
+def plot_training_curve(history: list[Validation], path: Path, title: str) -> None:
+    """Mean validation return and collision rate against training steps, titled `title`."""
     figure, (returns, collisions) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
     for period, marker in (("short", "o"), ("long", "s")):
         points = [v for v in history if v.period == period]
@@ -24,12 +24,13 @@ def plot_training_curve(history: list[Validation], path: Path) -> None:
     returns.plot(
         [v.step for v in best], [v.mean_return for v in best], "k*", markersize=10, label="kept (best)"
     )
+    returns.set_title(title, fontsize="medium")
     returns.set_ylabel("mean return")
     collisions.set_ylabel("collision rate [%]")
     collisions.set_xlabel("training steps")
     returns.legend(fontsize="small")
     figure.tight_layout()
-    figure.savefig(path, dpi=110)
+    save_figure(figure, path, dpi=110)
     plt.close(figure)
 
 
@@ -39,7 +40,10 @@ def write_training_summary(
     """`summary.json` (the run's `steps`, `wall_time_s`, `interrupted`, the best validation and
     model), `validation.json` and `training_curve.png` in `out`; returns the summary."""
     if history:
-        plot_training_curve(history, out / "training_curve.png")
+        train = config.train
+        scenarios = ", ".join(train.scenarios) if train.scenarios else (config.scenario or "configured world")
+        title = f"{train.algorithm} ({train.network}), seed {config.seed}: validation on {scenarios}"
+        plot_training_curve(history, out / "training_curve.png", title)
     kept = kept_models(history)
     summary = {
         "algorithm": config.train.algorithm,
@@ -51,6 +55,6 @@ def write_training_summary(
         "best_model": str(best) if best.is_file() else None,
         "training_curve": "training_curve.png" if history else "not drawn: no validation ran yet",
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    (out / "validation.json").write_text(json.dumps([v.__dict__ for v in history], indent=2) + "\n")
+    write_json(out / "summary.json", summary)
+    write_json(out / "validation.json", [v.__dict__ for v in history])
     return summary
