@@ -49,6 +49,11 @@ def test_sqp_first_move_matches_an_ipopt_reference_on_a_recorded_lane_change(mod
         assert abs(moves[0] - moves[1]) <= 1e-3
 
 
+def lane_state(vehicle: BicycleVehicle) -> list[float]:
+    """(d, psi, v, v_y, r) of a vehicle on a straight road along x: d = y."""
+    return [vehicle.position[1], vehicle.heading, vehicle.speed, vehicle.lateral_speed, vehicle.yaw_rate]
+
+
 def test_dynamic_model_steps_as_highway_env_bicycle_vehicle():
     settings = MPCSettings()
     assert settings.mass == BicycleVehicle.MASS
@@ -60,12 +65,11 @@ def test_dynamic_model_steps_as_highway_env_bicycle_vehicle():
     rng = np.random.default_rng(0)
     for _ in range(100):
         acceleration, steering = rng.uniform(-3, 3), rng.uniform(-0.1, 0.1)
-        before = [vehicle.position[1], vehicle.heading, vehicle.speed, vehicle.lateral_speed, vehicle.yaw_rate]
+        before = lane_state(vehicle)
         vehicle.act({"acceleration": acceleration, "steering": steering})
         vehicle.step(DT)
         predicted = np.array(model(ca.DM(before), ca.DM([acceleration, steering]), 0.0, DT)).ravel()
-        after = [vehicle.position[1], vehicle.heading, vehicle.speed, vehicle.lateral_speed, vehicle.yaw_rate]
-        np.testing.assert_allclose(predicted, after, atol=1e-10)
+        np.testing.assert_allclose(predicted, lane_state(vehicle), atol=1e-10)
 
 
 def test_an_infeasible_comfort_bound_is_softened_not_a_fallback():
