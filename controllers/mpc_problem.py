@@ -118,7 +118,7 @@ def _solver_plugin(settings: MPCSettings) -> tuple[str, dict]:
                 "print_level": 0,
                 "sb": "yes",
                 "max_iter": settings.max_iterations,
-                "tol": 1e-9,
+                "tol": 1e-6,
                 "warm_start_init_point": "yes",
                 "mu_init": 1e-3,
             },

@@ -38,6 +38,7 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
     assert "cheaper" in run("oracle_cost.py", "--seeds", "0", "--duration", "2")
     assert "env steps/s" in run("train_rate.py", "--steps", "510")
     assert "env steps/s" in run("deepcars_speed.py")
+    assert "| kinematic |" in run("mpc_solve.py", "--repeats", "1")
     ceiling = run(
         "decision_ceiling.py", "--episodes", "1", "--horizon", "2", "--jobs", "1", "--config", str(tiny)
     )
