@@ -35,6 +35,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/train_rate.py
 	$(BIN)/drivestack track --out runs/bench-track --no-progress
 	$(BIN)/python benchmarks/tracking_table.py runs/bench-track
+	$(BIN)/python benchmarks/mpc_solve.py
 	$(BIN)/python benchmarks/decision_ceiling.py
 	$(BIN)/python benchmarks/ray_scaling.py
 

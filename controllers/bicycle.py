@@ -1,5 +1,6 @@
 """The kinematic bicycle of highway-env 1.12 (`vehicle/kinematics.py`), as a pure function and as
-a CasADi symbolic function: one model shared by the MPC, the tests and offline tracking.
+a CasADi symbolic function: one model shared by the MPC, the tests and offline tracking; and its
+dynamic bicycle with linear tyres (`vehicle/dynamics.py`, `BicycleVehicle`) as a CasADi function.
 
 CoG at mid-length: beta = atan(tan(delta) / 2); x' = v cos(psi + beta), y' = v sin(psi + beta),
 psi' = v sin(beta) / (L / 2), v' = a; integrated with forward Euler, position first with the old
@@ -78,3 +79,36 @@ def symbolic_lane_model() -> ca.Function:
         control[0],
     )
     return ca.Function("bicycle", [state, control, curvature, dt], [state + dt * derivative])
+
+
+def symbolic_dynamic_lane_model(
+    mass: float, yaw_inertia: float, stiffness_front: float, stiffness_rear: float
+) -> ca.Function:
+    """CasADi `f(state, input, curvature, dt) -> next state` of highway-env's `BicycleVehicle` in a
+    lane frame: state (d [m], psi [rad], v [m/s], v_y [m/s], r [rad/s]) with v and v_y the body
+    speeds and r the yaw rate, input (a [m/s^2], delta [rad]). Tyre forces are stiffness [N/rad]
+    x slip angle, CoG at mid-length; mass [kg] and yaw inertia [kg m^2] as the plant's. One RK4
+    step of dt, as `BicycleVehicle.step` takes one per tick (its |v| < 1 m/s damping is left out)."""
+    state, control = ca.SX.sym("state", 5), ca.SX.sym("input", 2)
+    curvature, dt = ca.SX.sym("curvature"), ca.SX.sym("dt")
+    half = LENGTH / 2
+
+    def derivative(x: ca.SX) -> ca.SX:
+        d, psi, v, v_y, r = x[0], x[1], x[2], x[3], x[4]
+        front = stiffness_front * (control[1] - ca.atan2(v_y + half * r, v))
+        rear = -stiffness_rear * ca.atan2(v_y - half * r, v)
+        s_dot = (v * ca.cos(psi) - v_y * ca.sin(psi)) / (1 - curvature * d)
+        return ca.vertcat(
+            v * ca.sin(psi) + v_y * ca.cos(psi),
+            r - curvature * s_dot,
+            control[0],
+            (front + rear) / mass - r * v,
+            half * (front - rear) / yaw_inertia,
+        )
+
+    k1 = derivative(state)
+    k2 = derivative(state + dt / 2 * k1)
+    k3 = derivative(state + dt / 2 * k2)
+    k4 = derivative(state + dt * k3)
+    next_state = state + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return ca.Function("dynamic_bicycle", [state, control, curvature, dt], [next_state])

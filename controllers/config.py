@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from records import CONTROLLER_NAMES, ControllerName, one_of
+from records import CONTROLLER_NAMES, PLANTS, ControllerName, PlantName, one_of
+
+MPCSolver = Literal["sqp", "ipopt"]
+"""`sqp`: CasADi's sqpmethod with the qrqp active-set QP solver on the expanded problem; `ipopt`:
+the interior-point reference (slower, same optimum)."""
+MPC_SOLVERS: tuple[MPCSolver, ...] = get_args(MPCSolver)
 
 
 class _Settings(BaseModel):
@@ -31,8 +36,18 @@ class PIDGains(_Settings):
 
 
 class MPCSettings(_Settings):
-    """Joint steering + acceleration MPC on the bicycle model (controllers.mpc)."""
+    """Joint steering + acceleration MPC on the bicycle model (controllers.mpc). `model` is the
+    prediction model: highway-env's kinematic bicycle or its dynamic bicycle, whose parameters
+    default to `BicycleVehicle`'s (highway_env/vehicle/dynamics.py: MASS = 1 kg, INERTIA_Z =
+    MASS (LENGTH^2 + WIDTH^2) / 12 with 5 m x 2 m, FRICTION_FRONT = FRICTION_REAR = 15 N per wheel,
+    two wheels per axle)."""
 
+    model: Annotated[PlantName, one_of("MPC model", PLANTS)] = "kinematic"
+    solver: Annotated[MPCSolver, one_of("MPC solver", MPC_SOLVERS)] = "sqp"
+    mass: float = Field(1.0, gt=0, description="dynamic model mass [kg]")
+    yaw_inertia: float = Field(29 / 12, gt=0, description="dynamic model yaw inertia [kg m^2]")
+    cornering_stiffness_front: float = Field(30.0, gt=0, description="front axle [N/rad]")
+    cornering_stiffness_rear: float = Field(30.0, gt=0, description="rear axle [N/rad]")
     horizon: int = Field(20, ge=1, le=200, description="steps at the control rate")
     weight_lateral: float = Field(200.0, ge=0)
     weight_heading: float = Field(20.0, ge=0)
@@ -42,8 +57,13 @@ class MPCSettings(_Settings):
     weight_steering_rate: float = Field(2000.0, ge=0)
     weight_jerk: float = Field(1.0, ge=0)
     max_steering: float = Field(math.pi / 4, gt=0, le=math.pi / 4, description="[rad]")
-    max_steering_rate: float = Field(0.5, gt=0, description="[rad/s]")
-    max_lateral_acceleration: float = Field(2.0, gt=0, description="comfort bound [m/s^2]")
+    max_steering_rate: float = Field(0.5, gt=0, description="soft comfort bound [rad/s]")
+    max_lateral_acceleration: float = Field(
+        2.0, gt=0, description="soft comfort bound on v psi' relative to the lane [m/s^2]"
+    )
+    weight_slack: float = Field(
+        1e6, gt=0, description="quadratic penalty on comfort-bound violations (slack^2)"
+    )
     max_acceleration: float = Field(2.0, gt=0, le=5, description="[m/s^2]")
     max_deceleration: float = Field(5.0, gt=0, le=5, description="[m/s^2]")
     max_solve_ms: float = Field(

@@ -40,6 +40,7 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
     assert "env steps/s" in run("deepcars_speed.py")
     ceiling = run("deepcars_ceiling.py", "--rows", "1,2", "--check-steps", "2000")
     assert "| 2 | 96.000 % | 97.858 % |" in ceiling and "simulated lookahead rule" in ceiling
+    assert "| kinematic |" in run("mpc_solve.py", "--repeats", "1")
     ceiling = run(
         "decision_ceiling.py", "--episodes", "1", "--horizon", "2", "--jobs", "1", "--config", str(tiny)
     )

@@ -1,0 +1,104 @@
+"""The MPC's solvers and models: sqpmethod + qrqp against an IPOPT reference on a recorded lane
+change, the dynamic prediction model against highway-env's BicycleVehicle, soft comfort bounds that
+never make a solve infeasible, and bad solver, model and parameter names refused in one line."""
+
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+from highway_env.road.road import Road, RoadNetwork
+from highway_env.vehicle.dynamics import BicycleVehicle
+from typer.testing import CliRunner
+
+from controllers.config import MPCSettings, PIDGains
+from controllers.cruise import AdaptiveCruise
+from controllers.mpc import MPCTracker
+from controllers.mpc_problem import build_problem, prediction_model
+from controllers.tracker import PIDTracker
+from records import EgoState, Reference
+from stack.apps.cli import app
+from stack.apps.track import run_maneuver
+from stack.core.config import ControllerConfig
+
+DT = 1 / 15
+
+
+def recorded_solves(settings: MPCSettings, monkeypatch) -> list[tuple[np.ndarray, ...]]:
+    """The solver arguments of every tick of a 25 m/s lane change on the plant of the model."""
+    calls: list[tuple[np.ndarray, ...]] = []
+    monkeypatch.setattr(MPCTracker, "recording", calls)
+    config = ControllerConfig(mpc=settings)
+    maneuver = run_maneuver("mpc", config, "straight", settings.model, 25.0, "left", 5.0, DT)
+    assert maneuver.fallbacks == 0
+    return calls
+
+
+@pytest.mark.parametrize("model", ["kinematic", "dynamic"])
+def test_sqp_first_move_matches_an_ipopt_reference_on_a_recorded_lane_change(model, monkeypatch):
+    settings = MPCSettings(model=model)
+    calls = recorded_solves(settings, monkeypatch)
+    sqp = build_problem(settings, DT)
+    ipopt = build_problem(settings.model_copy(update={"solver": "ipopt"}), DT)
+    for arguments in calls:
+        moves = []
+        for problem in (sqp, ipopt):
+            w = np.array(problem.solver(*arguments)[0]).ravel()
+            assert problem.solver.stats()["success"]
+            moves.append(problem.unpack(w)[0][1, 0])
+        assert abs(moves[0] - moves[1]) <= 1e-3
+
+
+def lane_state(vehicle: BicycleVehicle) -> list[float]:
+    """(d, psi, v, v_y, r) of a vehicle on a straight road along x: d = y."""
+    return [vehicle.position[1], vehicle.heading, vehicle.speed, vehicle.lateral_speed, vehicle.yaw_rate]
+
+
+def test_dynamic_model_steps_as_highway_env_bicycle_vehicle():
+    settings = MPCSettings()
+    assert settings.mass == BicycleVehicle.MASS
+    assert settings.yaw_inertia == pytest.approx(BicycleVehicle.INERTIA_Z, rel=1e-12)
+    assert settings.cornering_stiffness_front == 2 * BicycleVehicle.FRICTION_FRONT
+    assert settings.cornering_stiffness_rear == 2 * BicycleVehicle.FRICTION_REAR
+    model, _ = prediction_model(settings.model_copy(update={"model": "dynamic"}))
+    vehicle = BicycleVehicle(Road(RoadNetwork.straight_road_network(3)), [10.0, 4.0], 0.01, 25.0)
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        acceleration, steering = rng.uniform(-3, 3), rng.uniform(-0.1, 0.1)
+        before = lane_state(vehicle)
+        vehicle.act({"acceleration": acceleration, "steering": steering})
+        vehicle.step(DT)
+        predicted = np.array(model(ca.DM(before), ca.DM([acceleration, steering]), 0.0, DT)).ravel()
+        np.testing.assert_allclose(predicted, lane_state(vehicle), atol=1e-10)
+
+
+def test_an_infeasible_comfort_bound_is_softened_not_a_fallback():
+    """Already yawing at 0.1 rad/s at 30 m/s (a_y = 3 m/s^2) with a 0.2 m/s^2 bound: no input meets
+    the hard bound at the first step, the slack does."""
+    fallback = PIDTracker(PIDGains(), AdaptiveCruise(1.5, 8.0, 3.0), DT)
+    for model in ("kinematic", "dynamic"):
+        settings = MPCSettings(model=model, max_lateral_acceleration=0.2, max_steering_rate=0.01)
+        tracker = MPCTracker(settings, DT, fallback)
+        tracker.last_input = np.array([0.0, 0.05])
+        state = EgoState(d=0.5, heading=0.05, speed=30.0, lateral_speed=0.3, yaw_rate=0.1)
+        actuation = tracker.step(state, Reference(4.0, 0.0, 0.0, set_speed=30.0))
+        assert tracker.fallbacks == 0 and tracker.status == "Solve_Succeeded", model
+        assert np.isfinite([actuation.acceleration, actuation.steering]).all()
+
+
+@pytest.mark.parametrize(
+    ("setting", "key"),
+    [
+        ("controller.mpc.solver=osqp", "controller.mpc.solver"),
+        ("controller.mpc.model=unicycle", "controller.mpc.model"),
+        ("controller.mpc.cornering_stiffness_front=0", "controller.mpc.cornering_stiffness_front"),
+        ("controller.mpc.yaw_inertia=-1", "controller.mpc.yaw_inertia"),
+        ("controller.mpc.horizon=0", "controller.mpc.horizon"),
+    ],
+)
+def test_bad_mpc_names_and_parameters_are_one_line_exit_2(setting, key, tmp_path: Path):
+    out = tmp_path / "out"
+    result = CliRunner().invoke(app, ["track", "--set", setting, "--out", str(out), "--no-progress"])
+    assert result.exit_code == 2
+    assert len(result.output.strip().splitlines()) == 1 and key in result.output
+    assert not out.exists()
