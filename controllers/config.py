@@ -7,7 +7,7 @@ from typing import Annotated, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from records import CONTROLLER_NAMES, PLANTS, ControllerName, PlantName, one_of
+from records import CONTROLLER_NAMES, ControllerName, one_of
 
 MPCSolver = Literal["sqp", "ipopt"]
 """`sqp`: CasADi's sqpmethod with the qrqp active-set QP solver on the expanded problem; `ipopt`:
@@ -42,7 +42,9 @@ class MPCSettings(_Settings):
     MASS (LENGTH^2 + WIDTH^2) / 12 with 5 m x 2 m, FRICTION_FRONT = FRICTION_REAR = 15 N per wheel,
     two wheels per axle)."""
 
-    model: Annotated[PlantName, one_of("MPC model", PLANTS)] = "kinematic"
+    model: Literal["plant", "kinematic", "dynamic"] = Field(
+        "plant", description="prediction model; plant: the one simulated (sim.plant)"
+    )
     solver: Annotated[MPCSolver, one_of("MPC solver", MPC_SOLVERS)] = "sqp"
     mass: float = Field(1.0, gt=0, description="dynamic model mass [kg]")
     yaw_inertia: float = Field(29 / 12, gt=0, description="dynamic model yaw inertia [kg m^2]")

@@ -24,10 +24,18 @@ import time
 
 import numpy as np
 
+from controllers.bicycle import LENGTH
 from controllers.config import MPCSettings
 from controllers.mpc_problem import build_problem, shift
 from controllers.tracker import Controller
 from records import Actuation, EgoState, Reference
+
+
+def steady_steering(state: EgoState) -> float:
+    """The steering [rad] that holds the ego's yaw rate in a steady turn (delta = atan(L r / v),
+    neutral steer on both bicycles): the previous input of an episode's first solve, so a car
+    that starts in a bend is not asked to unwind its steering first."""
+    return math.atan(LENGTH * state.yaw_rate / max(state.speed, 1.0))
 
 
 class MPCTracker:
@@ -50,7 +58,7 @@ class MPCTracker:
     def reset(self) -> None:
         self.fallback.reset()
         self.guess: np.ndarray | None = None
-        self.last_input = np.zeros(2)
+        self.last_input: np.ndarray | None = None
         self.status = "idle"
         self.solve_time = 0.0
 
@@ -99,6 +107,8 @@ class MPCTracker:
         x0 = self._start(state)
         references = self._references(state, reference, backup.acceleration)
         p = problem.parameters(references, state.curvature)
+        if self.last_input is None:
+            self.last_input = np.array([0.0, steady_steering(state)])
         lbx, ubx = problem.bounds(x0, self.last_input)
         w0 = problem.initial_guess(x0, self.last_input) if self.guess is None else self.guess
         no_multipliers = (np.zeros(len(lbx)), np.zeros(len(problem.lbg)))

@@ -62,5 +62,8 @@ def make_controller(config: ControllerConfig, dt: float, plant: PlantName = "kin
     if config.type == "mpc":
         from controllers.mpc import MPCTracker
 
-        return MPCTracker(config.mpc, dt, fallback=pid)
+        settings = config.mpc
+        if settings.model == "plant":
+            settings = settings.model_copy(update={"model": plant})
+        return MPCTracker(settings, dt, fallback=pid)
     return pid

@@ -77,22 +77,29 @@ def test_lane_change_meets_the_targets(controller, speed, direction):
     assert abs(m.trace["d"][-1]) == pytest.approx(4.0, abs=0.02)
 
 
-PLANT_TARGETS = {"kinematic": (0.02, 0.03), "dynamic": (0.03, 0.04)}
-"""(overshoot, RMS) bounds of the PID per plant [m]."""
+TARGETS = {
+    ("pid", "kinematic"): (0.02, 0.03),
+    ("pid", "dynamic"): (0.03, 0.04),
+    ("mpc", "kinematic"): (0.02, 0.01),
+    ("mpc", "dynamic"): (0.03, 0.02),
+}
+"""(overshoot, RMS) bounds per controller and plant [m] (the control issue's targets)."""
 
 
+@pytest.mark.parametrize("controller", ["pid", "mpc"])
 @pytest.mark.parametrize("plant", ["kinematic", "dynamic"])
 @pytest.mark.parametrize(
     ("road", "speeds"), [("straight", (10.0, 35.0)), ("bend-1000", (22.0, 35.0)), ("bend-500", (25.0,))]
 )
-def test_pid_meets_the_targets_on_both_plants_and_on_bends(plant, road, speeds):
-    overshoot, rms = PLANT_TARGETS[plant]
+def test_the_controllers_meet_the_targets_on_both_plants_and_on_bends(controller, plant, road, speeds):
+    overshoot, rms = TARGETS[(controller, plant)]
     for speed in speeds:
         for direction in ("left", "right"):
-            m = run_maneuver("pid", ControllerConfig(), road, plant, speed, direction, 5.0, DT)
+            m = run_maneuver(controller, ControllerConfig(), road, plant, speed, direction, 5.0, DT)
             assert m.duration_s is not None and 3.5 <= m.duration_s <= 5.0, (speed, direction)
             assert m.overshoot_m <= overshoot and m.rms_error_m <= rms, (speed, direction)
             assert m.peak_lat_accel <= 2.0 and m.peak_lat_jerk <= 2.5, (speed, direction)
+            assert m.fallbacks == 0, (speed, direction)
 
 
 def test_a_car_on_a_bend_starts_in_steady_cornering():

@@ -75,7 +75,7 @@ def test_dynamic_model_steps_as_highway_env_bicycle_vehicle():
 def test_an_infeasible_comfort_bound_is_softened_not_a_fallback():
     """Already yawing at 0.1 rad/s at 30 m/s (a_y = 3 m/s^2) with a 0.2 m/s^2 bound: no input meets
     the hard bound at the first step, the slack does."""
-    fallback = PIDTracker(PIDGains(), AdaptiveCruise(1.5, 8.0, 3.0), DT)
+    fallback = PIDTracker(PIDGains(), AdaptiveCruise(1.5, 8.0, 3.0), DT, "kinematic")
     for model in ("kinematic", "dynamic"):
         settings = MPCSettings(model=model, max_lateral_acceleration=0.2, max_steering_rate=0.01)
         tracker = MPCTracker(settings, DT, fallback)
