@@ -15,6 +15,10 @@ the interior-point reference (slower, same optimum)."""
 MPC_SOLVERS: tuple[MPCSolver, ...] = get_args(MPCSolver)
 
 
+VehicleModel = Literal["plant", "kinematic", "dynamic"]
+"""The bicycle a controller's model assumes; `plant`: the one simulated (`sim.plant`)."""
+
+
 class _Settings(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
@@ -25,9 +29,7 @@ class PIDGains(_Settings):
     kp_lateral: float = Field(2.0, gt=0, description="lateral position gain [1/s]")
     ki_lateral: float = Field(0.6, ge=0, description="lateral integral gain [1/s^2]")
     kp_heading: float = Field(6.0, gt=0, description="heading gain [1/s]")
-    model: Literal["plant", "kinematic", "dynamic"] = Field(
-        "plant", description="the bicycle the feedforward inverts; plant: the one simulated (sim.plant)"
-    )
+    model: VehicleModel = Field("plant", description="the bicycle the feedforward inverts")
     steering_rate: float = Field(0.5, gt=0, description="steering rate limit [rad/s]")
     max_steering: float = Field(math.pi / 4, gt=0, le=math.pi / 4, description="steering limit [rad]")
     kp_speed: float = Field(0.6, gt=0, description="speed gain [1/s]")
@@ -42,9 +44,7 @@ class MPCSettings(_Settings):
     MASS (LENGTH^2 + WIDTH^2) / 12 with 5 m x 2 m, FRICTION_FRONT = FRICTION_REAR = 15 N per wheel,
     two wheels per axle)."""
 
-    model: Literal["plant", "kinematic", "dynamic"] = Field(
-        "plant", description="prediction model; plant: the one simulated (sim.plant)"
-    )
+    model: VehicleModel = Field("plant", description="the prediction model")
     solver: Annotated[MPCSolver, one_of("MPC solver", MPC_SOLVERS)] = "sqp"
     mass: float = Field(1.0, gt=0, description="dynamic model mass [kg]")
     yaw_inertia: float = Field(29 / 12, gt=0, description="dynamic model yaw inertia [kg m^2]")
