@@ -17,6 +17,7 @@ import time
 
 from stack.core.config import build_config
 from stack.core.episodes import run_episode
+from stack.core.metrics import TIMING_FIELDS
 
 
 def main() -> None:
@@ -41,7 +42,9 @@ def main() -> None:
             start = time.process_time()
             episode = run_episode(config, 0)
             record = {
-                f.name: getattr(episode, f.name) for f in dataclasses.fields(episode) if f.name != "snapshot"
+                f.name: getattr(episode, f.name)
+                for f in dataclasses.fields(episode)
+                if f.name not in ("snapshot", *TIMING_FIELDS)
             }
             results[backend] = json.dumps(record, default=lambda value: value.tolist())
             cost[backend] += time.process_time() - start
