@@ -23,7 +23,7 @@ from stack.apps.track import run_maneuver
 from stack.core.config import ControllerConfig
 
 DT = 1 / 15
-CASES = (("straight", 22.0), ("curved", 35.0))
+CASES = (("straight", 22.0), ("bend-1000", 35.0))
 
 
 def record(settings: MPCSettings) -> list[tuple[np.ndarray, ...]]:
