@@ -23,6 +23,8 @@ import numpy as np
 FORMAT = "drivestack-model/1"
 MODEL_BYTES = 64 * 2**20
 """Largest model file drivestack loads as an agent, inflated [bytes] (the shipped ones: < 2 MB)."""
+CHECKPOINT = "checkpoint.npz"
+"""A training run folder's checkpoint file."""
 CHECKPOINT_BYTES = 4 * 2**30
 """Largest training checkpoint (weights, optimizer, replay buffer), inflated [bytes]."""
 MAX_METADATA_BYTES = 2**20

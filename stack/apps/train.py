@@ -21,7 +21,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import SubprocVecEnv
 
 from planner.learned import export_q_network, save_q_table
-from planner.model_file import ModelFileError, load_checkpoint, save_model
+from planner.model_file import CHECKPOINT, ModelFileError, load_checkpoint, save_model
 from planner.tabular import QLearning
 from planner.validation import RealTimeValidation, Validation
 from records import child_seed
@@ -39,7 +39,6 @@ from stack.apps.train_state import dqn_state, restore_dqn_state, restore_tabular
 from stack.core.config import RunConfig, load_config, write_config
 from stack.core.decision_env import HierarchicalHighwayEnv
 
-CHECKPOINT = "checkpoint.npz"
 BEST = "best.npz"
 FINAL = "final.npz"
 

@@ -48,10 +48,10 @@ def check_memory(config: RunConfig) -> None:
 def train_or_fail(config: RunConfig, folder: Path, progress: bool) -> bool:
     """`drivestack train` in `folder`; a checkpoint that cannot be resumed is a one-line error.
     True when interrupted (resumable)."""
-    from planner.model_file import ModelFileError, load_checkpoint
+    from planner.model_file import CHECKPOINT, ModelFileError, load_checkpoint
 
     try:
-        if (checkpoint := folder / "checkpoint.npz").is_file():
+        if (checkpoint := folder / CHECKPOINT).is_file():
             load_checkpoint(checkpoint, arrays=False)
         return train_and_report(config, folder, progress)
     except ModelFileError as error:
