@@ -7,6 +7,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -87,8 +88,8 @@ def test_a_file_is_written_whole_or_left_as_it_was(tmp_path):
 
 def test_the_journal_is_on_disk_after_each_episode(tmp_path):
     journal = EpisodeJournal(tmp_path / "j.jsonl")
-    journal.record({"episode": 0})
-    journal.record({"episode": 1})
+    for episode in (0, 1):
+        journal.record(SimpleNamespace(row=lambda episode=episode: {"episode": episode}))
     assert [json.loads(line)["episode"] for line in (tmp_path / "j.jsonl").read_text().splitlines()] == [0, 1]
-    journal.close(remove=True)
+    journal.discard()
     assert not (tmp_path / "j.jsonl").exists()

@@ -15,7 +15,6 @@ from stack.core.config import RunConfig, write_config
 from stack.core.episodes import RunResults, run
 from stack.core.files import EpisodeJournal, save_figure, write_json
 from stack.core.interrupts import deferred
-from stack.core.metrics import EpisodeResult
 from stack.core.statistics import Interval, mean_interval, paired_difference, rate_interval
 
 MEANS = ("mean_speed", "lane_changes", "masked_commands", "aborted_changes")
@@ -60,14 +59,9 @@ def compare(
     the episodes it finished); none raises KeyboardInterrupt."""
     runs: list[RunResults] = []
     for config in configs:
-        journal = EpisodeJournal(out / f"{config.planner.agent}.{JOURNAL}")
-
-        def keep(result: EpisodeResult, journal: EpisodeJournal = journal) -> None:
-            with deferred():
-                journal.record(result.row())
-
+        journal = journal_of(config, out)
         try:
-            runs.append(run(config, progress=progress, jobs=jobs, ray=ray, on_finished=keep))
+            runs.append(run(config, progress=progress, jobs=jobs, ray=ray, on_finished=journal.record))
         except KeyboardInterrupt:
             if not runs:
                 raise
@@ -75,6 +69,11 @@ def compare(
         if runs[-1].summary["interrupted"]:
             break
     return runs
+
+
+def journal_of(config: RunConfig, out: Path) -> EpisodeJournal:
+    """Where the finished episodes of `config`'s agent are kept while a comparison runs."""
+    return EpisodeJournal(out / f"{config.planner.agent}.{JOURNAL}")
 
 
 def comparison(runs: list[RunResults], baseline: str | None = None) -> list[dict[str, Any]]:
@@ -109,7 +108,7 @@ def compare_and_report(
         agents = ", ".join(config.planner.agent for config in configs)
         write_config(configs[0], out / "config.yaml", f"the resolved config; agents compared: {agents}")
         for config in configs:
-            (out / f"{config.planner.agent}.{JOURNAL}").unlink(missing_ok=True)
+            journal_of(config, out).discard()
     print(markdown(rows), end="")
     print(f"results: {out}" + (" (interrupted: the agents run so far)" if interrupted else ""))
     return interrupted

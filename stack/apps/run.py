@@ -36,16 +36,11 @@ def run_and_report(
     print the tables; True when Ctrl-C cut the run short (the finished episodes are written, each
     journaled as it finished). Raises KeyboardInterrupt if none finished."""
     journal = EpisodeJournal(out / JOURNAL)
-
-    def keep(result: EpisodeResult) -> None:
-        with deferred():
-            journal.record(result.row())
-
-    results = run(config, video=video, progress=progress, jobs=jobs, ray=ray, on_finished=keep)
+    results = run(config, video, progress, jobs, ray, on_finished=journal.record)
     with deferred(interrupt_after=False):
         write_results(out, results.summary, results.episodes, results.frames)
         write_config(config, out / "config.yaml", "the resolved config of this run")
-        journal.close(remove=True)
+        journal.discard()
     print_tables(results.summary, results.episodes)
     Console().print(f"results: {out}")
     return bool(results.summary["interrupted"])

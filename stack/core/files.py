@@ -11,10 +11,14 @@ import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any
+
+from stack.core.interrupts import deferred
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
+
+    from stack.core.metrics import EpisodeResult
 
 
 @contextmanager
@@ -44,24 +48,21 @@ def save_figure(figure: Figure, path: Path, dpi: int) -> None:
 
 
 class EpisodeJournal:
-    """`path` gets one JSON line per finished episode, on disk before the next episode counts.
-    The ordered results replace it at the end (`close(remove=True)`)."""
+    """`path` gets one JSON line per finished episode, on disk before the next episode counts;
+    a signal arriving meanwhile waits for the line (`stack.core.interrupts.deferred`). The ordered
+    results replace it at the end (`discard`)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self.handle: IO[str] | None = None
 
-    def record(self, row: dict[str, Any]) -> None:
-        if self.handle is None:
+    def record(self, episode: EpisodeResult) -> None:
+        row = episode.row()
+        with deferred():
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self.handle = self.path.open("a")
-        self.handle.write(json.dumps(row) + "\n")
-        self.handle.flush()
-        os.fsync(self.handle.fileno())
+            with self.path.open("a") as handle:
+                handle.write(json.dumps(row) + "\n")
+                handle.flush()
+                os.fsync(handle.fileno())
 
-    def close(self, remove: bool) -> None:
-        if self.handle is not None:
-            self.handle.close()
-            self.handle = None
-        if remove:
-            self.path.unlink(missing_ok=True)
+    def discard(self) -> None:
+        self.path.unlink(missing_ok=True)
