@@ -95,8 +95,7 @@ class ContinueEpisodes(BaseCallback):
             raise ValueError(f"{len(self.episodes)} episodes under way for {n_envs} envs")
         self.numpy_random = ("MT19937", arrays["random/numpy_keys"], *counters["numpy_random"])
         np.random.RandomState().set_state(self.numpy_random)
-        self.action_space_random = counters["action_space_random"]
-        np.random.PCG64().state = self.action_space_random
+        self.action_space_random = generator_state(counters["action_space_random"])
 
     def _on_training_start(self) -> None:
         if not self.exact:
@@ -127,8 +126,14 @@ def episode_record(data: object) -> EpisodeRecord:
         or not all(type(a) is int and 0 <= a < N_ACTIONS for a in actions)
     ):
         raise ValueError(f"episode actions are not a list of integers in [0, {N_ACTIONS})")
-    np.random.Generator(np.random.PCG64()).bit_generator.state = data["generator_state"]
-    return EpisodeRecord(data["generator_state"], actions)
+    return EpisodeRecord(generator_state(data["generator_state"]), actions)
+
+
+def generator_state(state: dict) -> dict:
+    """`state` once a PCG64 generator accepts it (ValueError / TypeError otherwise): checked here,
+    before it reaches an env worker, where a bad one would end the process."""
+    np.random.PCG64().state = state
+    return state
 
 
 def tabular_state(model: QLearning, env: Monitor) -> tuple[dict[str, np.ndarray], dict]:
