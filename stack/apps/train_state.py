@@ -132,7 +132,7 @@ def episode_record(data: object) -> EpisodeRecord:
 def generator_state(state: dict) -> dict:
     """`state` once a PCG64 generator accepts it (ValueError / TypeError otherwise): checked here,
     before it reaches an env worker, where a bad one would end the process."""
-    np.random.PCG64().state = state
+    np.random.Generator(np.random.PCG64()).bit_generator.state = state
     return state
 
 
