@@ -55,6 +55,7 @@ TRAFFIC = {
         {"name": "car", "share": 0.7, "speed_mps": [21, 29]},
     ],
 }
+CAR_ONLY = {**TRAFFIC["classes"][1], "share": 1}
 
 
 @pytest.mark.parametrize(
@@ -65,13 +66,17 @@ TRAFFIC = {
         ({"classes": TRAFFIC["classes"][:1]}, "classes", "the shares must sum to 1, got 0.3"),
         ({"classes": [{**TRAFFIC["classes"][1], "speed_mps": [29, 21], "share": 1}]}, "speed_mps", "low <="),
         ({"ego_position": 1.5}, "ego_position", "less than or equal to 1"),
+        ({"spawn_speed_mps": 0}, "spawn_speed_mps", "greater than 0"),
+        ({"classes": [{**CAR_ONLY, "lanes": [0, 4]}]}, "lanes", "lanes of the road (0..3)"),
+        ({"classes": [{**CAR_ONLY, "lanes": []}]}, "lanes", "at least 1 item"),
     ],
 )
 def test_bad_traffic_is_refused_in_one_line_naming_the_key(change, key, expected):
     with pytest.raises(ConfigError) as error:
         build_config({"highway": {"traffic": {**TRAFFIC, **change}}}, "x.yaml")
     message = str(error.value)
-    assert message.startswith("x.yaml: highway.traffic.") and key in message and expected in message
+    assert message.startswith("x.yaml: highway") and "traffic." in message and key in message
+    assert expected in message
     assert "\n" not in message
 
 
@@ -101,7 +106,12 @@ def test_overtaking_traffic_is_seeded_heterogeneous_and_around_the_ego(backend):
     trucks = lengths >= 10
     assert 0 < trucks.sum() < len(lengths)
     assert np.all((speeds[trucks] >= 16) & (speeds[trucks] <= 20))
-    assert np.all((speeds[~trucks] >= 21) & (speeds[~trucks] <= 29))
+    assert np.all((speeds[~trucks] >= 23) & (speeds[~trucks] <= 31))
+    assert set(world.lane[1:][trucks]) <= {2, 3} and world.lane[0] == 3, "trucks and the ego keep right"
+    assert not any(v.enable_lane_change for v, truck in zip(vehicles, trucks, strict=True) if truck)
+    assert np.all(world.speed == 18), "every vehicle spawns at the same speed"
+    jam = np.array([v.DISTANCE_WANTED for v in vehicles])
+    np.testing.assert_allclose(jam, 5.0 + lengths, err_msg="the IDM jam distance grows with the length")
 
 
 def test_fast_and_stock_backends_drive_the_same_scenario_traffic():

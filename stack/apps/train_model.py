@@ -104,6 +104,7 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
         learning_starts=train.learning_starts,
         batch_size=train.batch_size,
         gamma=train.gamma,
+        n_steps=train.n_steps,
         train_freq=train.train_freq,
         gradient_steps=train.envs,
         target_update_interval=train.target_update_interval,

@@ -67,6 +67,7 @@ class TrainConfig(Strict):
     learning_starts: int = Field(1_000, ge=0)
     batch_size: int = Field(64, ge=1)
     gamma: float = Field(0.95, gt=0, le=1)
+    n_steps: int = Field(1, ge=1, le=20, description="n-step returns (SB3's NStepReplayBuffer)")
     train_freq: int = Field(1, ge=1)
     target_update_interval: int = Field(500, ge=1)
     exploration_fraction: float = Field(0.3, gt=0, le=1)

@@ -21,7 +21,9 @@ def _ordered_range(bounds: tuple[float, float]) -> tuple[float, float]:
 
 class VehicleClass(BaseModel):
     """One kind of traffic vehicle: its share of the traffic, the range its desired (IDM target)
-    speed is drawn from [m/s] and the range its length is drawn from [m]."""
+    speed is drawn from [m/s], the range its length is drawn from [m], the lanes it is spawned in
+    (None: any) and whether it changes lane (MOBIL) at all; trucks that keep right are
+    `lanes: [2, 3], changes_lane: false` on 4 lanes."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
@@ -29,6 +31,8 @@ class VehicleClass(BaseModel):
     share: float = Field(gt=0, le=1)
     speed_mps: tuple[float, float] = Field(description="desired speed range [m/s]")
     length_m: tuple[float, float] = (5.0, 5.0)
+    lanes: tuple[int, ...] | None = Field(None, min_length=1, description="spawn lanes (None: any)")
+    changes_lane: bool = True
 
     @field_validator("speed_mps", "length_m")
     @classmethod
@@ -40,13 +44,21 @@ class VehicleClass(BaseModel):
 
 class TrafficConfig(BaseModel):
     """Heterogeneous traffic (highway-env's IDM / MOBIL vehicles, drawn from the env's seeded
-    generator): the vehicle classes, and where the ego is spawned, as the fraction of the traffic
-    spawned behind it (0: behind everybody, highway-env's own placement)."""
+    generator): the vehicle classes, where the ego is spawned, as the fraction of the traffic
+    spawned behind it (0: behind everybody, highway-env's own placement), and one speed for every
+    vehicle at spawn: highway-env spaces vehicles for equal speeds, so a fast car spawned at its
+    desired speed just behind a slow truck can rear-end it before IDM has braked."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     classes: tuple[VehicleClass, ...] = Field(min_length=1)
     ego_position: float = Field(0.0, ge=0, le=1, description="fraction of the traffic behind the ego")
+    spawn_speed_mps: float | None = Field(
+        None,
+        gt=0,
+        le=60,
+        description="every vehicle's speed at spawn [m/s] (None: its desired speed, the ego 25)",
+    )
 
     @field_validator("classes")
     @classmethod
@@ -91,6 +103,12 @@ class HighwayConfig(BaseModel):
                 f"initial_lane_id: must be a lane of the road (0..{self.lanes_count - 1}), "
                 f"got {self.initial_lane_id}"
             )
+        for vehicle_class in self.traffic.classes if self.traffic else ():
+            if any(not 0 <= lane < self.lanes_count for lane in vehicle_class.lanes or ()):
+                raise ValueError(
+                    f"traffic.classes.lanes: class {vehicle_class.name!r} must spawn on lanes of the "
+                    f"road (0..{self.lanes_count - 1}), got {list(vehicle_class.lanes or ())}"
+                )
         return self
 
 

@@ -6,7 +6,8 @@ behind all of them and meets a platoon that has settled at the speed of its slow
 choice is then worth little. `ScenarioTraffic._create_vehicles` keeps highway-env's own vehicles,
 behaviours (IDM + MOBIL) and placement rule, and only (1) spawns `ego_position` of the traffic before
 the ego, so that part is behind it, and (2) gives each vehicle a class drawn by share, with its
-desired (IDM target) speed and length drawn from the class's ranges. Every draw comes from the
+desired (IDM target) speed and length drawn from the class's ranges, a lane from the class's lanes
+and MOBIL lane changes on or off. Every draw comes from the
 env's seeded generator, so the same seed gives the same traffic. Without `traffic` in the config,
 highway-env's own `_create_vehicles` runs unchanged.
 """
@@ -20,8 +21,15 @@ from highway_env import utils
 from highway_env.envs.highway_env import HighwayEnv
 from highway_env.vehicle.kinematics import Vehicle
 
+EGO_SPAWN_SPEED = 25.0
+"""highway-env's ego speed at spawn [m/s]."""
 
-def _spawn_other(env: HighwayEnv, classes: list[dict[str, Any]]) -> None:
+IDM_JAM_CLEARANCE = 5.0
+"""highway-env's IDM jam distance is 5 m + the vehicle's length (centre to centre); scaled with each
+vehicle's own length, a truck stopped behind a truck keeps its 5 m instead of overlapping it [m]."""
+
+
+def _spawn_other(env: HighwayEnv, classes: list[dict[str, Any]], spawn_speed: float | None) -> None:
     """One traffic vehicle of a class drawn by share, behind-the-last rule of highway-env."""
     rng = env.np_random
     shares = np.array([c["share"] for c in classes])
@@ -29,10 +37,15 @@ def _spawn_other(env: HighwayEnv, classes: list[dict[str, Any]]) -> None:
     desired = float(rng.uniform(*kind["speed_mps"]))
     length = float(rng.uniform(*kind["length_m"]))
     vehicle_type = utils.class_from_path(env.config["other_vehicles_type"])
-    vehicle = vehicle_type.create_random(env.road, speed=desired, spacing=1 / env.config["vehicles_density"])
+    lane = int(rng.choice(kind["lanes"])) if kind.get("lanes") else None
+    vehicle = vehicle_type.create_random(
+        env.road, speed=spawn_speed or desired, lane_id=lane, spacing=1 / env.config["vehicles_density"]
+    )
     vehicle.randomize_behavior()
+    vehicle.enable_lane_change = kind.get("changes_lane", True)
     vehicle.target_speed = desired
     vehicle.LENGTH = length
+    vehicle.DISTANCE_WANTED = IDM_JAM_CLEARANCE + length
     vehicle.diagonal = float(np.sqrt(length**2 + vehicle.WIDTH**2))
     env.road.vehicles.append(vehicle)
 
@@ -46,13 +59,14 @@ class ScenarioTraffic(HighwayEnv):
             super()._create_vehicles()
             return
         classes = list(traffic["classes"])
+        spawn_speed = traffic.get("spawn_speed_mps")
         count = self.config["vehicles_count"]
         behind = round(traffic["ego_position"] * count)
         for _ in range(behind):
-            _spawn_other(self, classes)
+            _spawn_other(self, classes, spawn_speed)
         spawned = Vehicle.create_random(
             self.road,
-            speed=25.0,
+            speed=spawn_speed or EGO_SPAWN_SPEED,
             lane_id=self.config["initial_lane_id"],
             spacing=self.config["ego_spacing"],
         )
@@ -60,4 +74,4 @@ class ScenarioTraffic(HighwayEnv):
         self.controlled_vehicles = [ego]
         self.road.vehicles.append(ego)
         for _ in range(count - behind):
-            _spawn_other(self, classes)
+            _spawn_other(self, classes, spawn_speed)

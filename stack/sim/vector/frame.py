@@ -66,15 +66,18 @@ class TrafficFrame:
         ahead = np.where(order[ahead] == me, self.next_on[lane_rows, np.minimum(ahead + 1, count)], ahead)
         return order[ahead], order[self.last_before[lane_rows, start]]
 
-    def idm(self, ego: np.ndarray, front: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    def idm(
+        self, ego: np.ndarray, front: np.ndarray, delta: np.ndarray, distance_wanted: np.ndarray
+    ) -> np.ndarray:
         """`IDMVehicle.acceleration(ego_vehicle=ego, front_vehicle=front)` [m/s^2] per row, for an
-        evaluating IDM vehicle of exponent `delta`; rows -1 stand for no vehicle (0 without ego);
-        the gap is measured along the ego's lane, as stock does."""
+        evaluating IDM vehicle of exponent `delta` and jam distance `distance_wanted` [m]; rows -1
+        stand for no vehicle (0 without ego); the gap is measured along the ego's lane, as stock
+        does."""
         acceleration = np.zeros(len(ego))
         valid = (ego >= 0) & self.is_vehicle[ego]
         if not valid.any():
             return acceleration
-        e, f, delta = ego[valid], front[valid], delta[valid]
+        e, f, delta, distance_wanted = ego[valid], front[valid], delta[valid], distance_wanted[valid]
         speed = self.speed[e]
         limit = self.lanes.speed_limit[self.lane[e]]
         desired = np.where(np.isnan(limit), self.target_speed[e], np.clip(self.target_speed[e], 0, limit))
@@ -83,15 +86,11 @@ class TrafficFrame:
         )
         led = f >= 0
         if led.any():
-            e, f, led_speed = e[led], f[led], speed[led]
+            e, f, led_speed, jam = e[led], f[led], speed[led], distance_wanted[led]
             relative = np.ascontiguousarray(self.velocity[e] - self.velocity[f])
             closing = np.vecdot(relative, np.ascontiguousarray(self.direction[e]))
             ab = -IDMVehicle.COMFORT_ACC_MAX * IDMVehicle.COMFORT_ACC_MIN
-            desired_gap = (
-                IDMVehicle.DISTANCE_WANTED
-                + led_speed * IDMVehicle.TIME_WANTED
-                + led_speed * closing / (2 * np.sqrt(ab))
-            )
+            desired_gap = jam + led_speed * IDMVehicle.TIME_WANTED + led_speed * closing / (2 * np.sqrt(ab))
             gap = self.s[f] - self.s[e]
             free[led] -= IDMVehicle.COMFORT_ACC_MAX * np.power(desired_gap / not_zero(gap), 2)
         acceleration[valid] = free

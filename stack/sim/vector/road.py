@@ -122,9 +122,10 @@ class VectorRoad(FastRoad):
         new_front, new_rear = frame.neighbours(me, sides)
         own_front, own_rear = frame.neighbours(me, frame.lane[me])
         delta = np.tile(np.array([v.DELTA for v, _ in candidates], dtype=float), 6)
+        jam = np.tile(np.array([v.DISTANCE_WANTED for v, _ in candidates], dtype=float), 6)
         egos = np.concatenate([new_rear, new_rear, me, me, own_rear, own_rear])
         leaders = np.concatenate([new_front, me, new_front, own_front, me, own_front])
-        a = frame.idm(egos, leaders, delta).reshape(6, -1)
+        a = frame.idm(egos, leaders, delta, jam).reshape(6, -1)
         new_rear_a, new_rear_pred_a, self_pred_a, self_a, own_rear_a, own_rear_pred_a = a
         gain = (
             self_pred_a
@@ -157,12 +158,13 @@ class VectorRoad(FastRoad):
         )
 
         delta = np.array([v.DELTA for v in drivers], dtype=float)
+        jam = np.array([v.DISTANCE_WANTED for v in drivers], dtype=float)
         own_front, _ = frame.neighbours(me, frame.lane[me])
-        acceleration = frame.idm(me, own_front, delta)
+        acceleration = frame.idm(me, own_front, delta, jam)
         if changing.any():
             movers = np.flatnonzero(changing)
             target_front, _ = frame.neighbours(me[movers], target[movers])
-            on_target = frame.idm(me[movers], target_front, delta[movers])
+            on_target = frame.idm(me[movers], target_front, delta[movers], jam[movers])
             acceleration[movers] = np.where(on_target < acceleration[movers], on_target, acceleration[movers])
         acceleration = np.clip(acceleration, -IDMVehicle.ACC_MAX, IDMVehicle.ACC_MAX)
         for v, steer, accel in zip(drivers, steering, acceleration, strict=True):
