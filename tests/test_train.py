@@ -8,6 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import yaml
+from stable_baselines3.common.buffers import NStepReplayBuffer
 from stable_baselines3.common.env_checker import check_env
 from typer.testing import CliRunner
 
@@ -331,3 +332,16 @@ def test_no_empty_training_curve_is_drawn(tmp_path):
     summary = Trainer(build_config(data), tmp_path / "short", progress=False).run()
     assert summary["validations"] == 0 and summary["training_curve"] == "not drawn: no validation ran yet"
     assert not (tmp_path / "short" / "training_curve.png").exists()
+
+
+def test_n_step_returns_discount_each_sample_by_gamma_to_its_length(tmp_path):
+    """`train.n_steps` switches SB3 to its n-step buffer: a sample's reward sums up to n rewards
+    and its discount is gamma^k, k <= n (shorter where the episode ended)."""
+    config = build_config({**TINY, "train": {**TINY["train"], "n_steps": 3, "gamma": 0.9}})
+    trainer = Trainer(config, tmp_path, progress=False)
+    trainer.run()
+    buffer = trainer.model.replay_buffer
+    assert isinstance(buffer, NStepReplayBuffer) and buffer.n_steps == 3
+    discounts = buffer.sample(200).discounts.numpy().ravel()
+    assert np.isclose(discounts[:, None], [0.9, 0.81, 0.729]).any(axis=1).all()
+    assert np.isclose(discounts, 0.729).mean() > 0.5, "most samples span three decisions"
