@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml constraints.txt
 	touch $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/drivestack run --config configs/highway.yaml $(ARGS)
+	$(BIN)/drivestack run --config configs/highway.yaml --scenario overtaking --beside keep-lane $(ARGS)
 
 test: $(STAMP)
 	$(BIN)/ruff check .

@@ -57,6 +57,21 @@ def test_agent_option_swaps_the_agent(tmp_path):
     assert json.loads((out / "summary.json").read_text())["agent"] == "keep-lane"
 
 
+def test_beside_drives_the_same_seeds_with_a_second_agent_and_prints_both(tmp_path):
+    result, out = run_tiny(tmp_path, "--agent", "rule", "--beside", "keep-lane", "--episodes", "2")
+    assert result.exit_code == 0, result.output
+    rows = json.loads((out / "beside.json").read_text())
+    assert [row["agent"] for row in rows] == ["rule", "keep-lane"]
+    assert all(row["seed"] == 0 and row["episodes"] == 2 for row in rows)
+    assert rows[0]["difference"]["mean_speed"][0] == rows[0]["mean_speed"] - rows[1]["mean_speed"]
+    assert json.loads((out / "summary.json").read_text())["agent"] == "rule"
+    assert "| speed - keep-lane m/s |" in result.output
+    (tmp_path / "b").mkdir()
+    bad, elsewhere = run_tiny(tmp_path / "b", "--beside", "genius")
+    assert bad.exit_code == 2 and bad.output.startswith("error: --beside: unknown agent 'genius'")
+    assert not elsewhere.exists()
+
+
 def test_bad_input_exits_non_zero_with_one_line(tmp_path):
     result, out = run_tiny(tmp_path, "--agent", "genius")
     assert result.exit_code == 2

@@ -9,6 +9,7 @@ from typing import Any, cast
 
 import typer
 
+from records import AGENT_NAMES, unknown_name
 from stack.apps.commands import export, sweep
 from stack.apps.options import (
     PLANT_HELP,
@@ -65,25 +66,31 @@ def run(
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
     ray: str | None = RAY_OPTION,
     progress: bool = typer.Option(True, help="Show a progress bar."),
+    beside: str | None = typer.Option(None, help="Also run this agent on the same seeds, then both."),
 ) -> None:
     """Run seeded closed-loop episodes and write a results folder."""
-    cfg = configured(
-        config,
-        sets,
-        scenario=scenario,
-        planner__agent=agent,
-        planner__model=model,
-        controller__type=controller,
-        sim__backend=backend,
-        sim__plant=plant,
-        episodes=episodes,
-        seed=seed,
-    )
+    if beside is not None and beside not in AGENT_NAMES:
+        fail(f"--beside: {unknown_name('agent', beside, AGENT_NAMES)}")
+    cfgs = [
+        configured(
+            config,
+            sets,
+            scenario=scenario,
+            planner__agent=name,
+            planner__model=model if name == agent else None,
+            controller__type=controller,
+            sim__backend=backend,
+            sim__plant=plant,
+            episodes=episodes,
+            seed=seed,
+        )
+        for name in (agent, beside)[: 1 + (beside is not None)]
+    ]
     ray_or_fail(ray)
-    folder = checked_run([cfg], out, "run")
+    folder = checked_run(cfgs, out, "run")
     from stack.apps.run import run_and_report
 
-    until_interrupted(lambda: run_and_report(cfg, folder, video, jobs, progress, ray))
+    until_interrupted(lambda: run_and_report(cfgs, folder, video, jobs, progress, ray))
 
 
 @app.command()

@@ -10,10 +10,9 @@ from typing import Any
 import matplotlib.pyplot as plt
 from matplotlib.axes import Axes
 
-from stack.apps.run import JOURNAL
 from stack.core.config import RunConfig, write_config
 from stack.core.episodes import RunResults, run
-from stack.core.files import EpisodeJournal, save_figure, write_json
+from stack.core.files import JOURNAL, EpisodeJournal, save_figure, write_json
 from stack.core.interrupts import deferred
 from stack.core.statistics import Interval, mean_interval, paired_difference, rate_interval
 

@@ -13,28 +13,30 @@ from rich.console import Console
 from rich.table import Table
 
 from perception.plot import plot_grid_over_road
+from stack.apps.compare import comparison, markdown
 from stack.core.closed_loop import VIDEO_FRAME_TICKS
 from stack.core.config import RunConfig, write_config
 from stack.core.episodes import run
-from stack.core.files import EpisodeJournal, replacing, write_json
+from stack.core.files import JOURNAL, EpisodeJournal, replacing, write_json
 from stack.core.interrupts import deferred
 from stack.core.metrics import EpisodeResult
 
 LANE_CHANGE_SPEED = 0.3
 """Lateral speed [m/s] above which an episode counts as changing lane in the traces plot."""
-JOURNAL = "episodes.partial.jsonl"
-"""Finished episodes, one JSON line each, as they finish; replaced by the results at the end."""
 CONTROL_RATE_HZ = 15
 """Control ticks per second the GIF's timing assumes (highway-env's default 15 Hz): it plays in
 real time."""
 
 
 def run_and_report(
-    config: RunConfig, out: Path, video: bool, jobs: int, progress: bool, ray: str | None = None
+    configs: list[RunConfig], out: Path, video: bool, jobs: int, progress: bool, ray: str | None = None
 ) -> bool:
-    """Run `config`'s episodes (over `jobs` processes, or Ray tasks at address `ray`), write `out`,
-    print the tables; True when Ctrl-C cut the run short (the finished episodes are written, each
-    journaled as it finished). Raises KeyboardInterrupt if none finished."""
+    """Run the first config's episodes (over `jobs` processes, or Ray tasks at address `ray`),
+    write `out`, print the tables; True when Ctrl-C cut the run short (the finished episodes are
+    written, each journaled as it finished). Raises KeyboardInterrupt if none finished. A second
+    config (`--beside AGENT`) then drives the same seeds: `beside.json` and a table hold both
+    agents with the paired difference to it."""
+    config = configs[0]
     journal = EpisodeJournal(out / JOURNAL)
     results = run(config, video, progress, jobs, ray, on_finished=journal.record)
     with deferred(interrupt_after=False):
@@ -42,6 +44,11 @@ def run_and_report(
         write_config(config, out / "config.yaml", "the resolved config of this run")
         journal.discard()
     print_tables(results.summary, results.episodes)
+    if len(configs) > 1 and not results.summary["interrupted"]:
+        beside = run(configs[1], progress=progress, jobs=jobs, ray=ray)
+        rows = comparison([results, beside], baseline=configs[1].planner.agent)
+        write_json(out / "beside.json", rows)
+        print(markdown(rows), end="")
     Console().print(f"results: {out}")
     return bool(results.summary["interrupted"])
 

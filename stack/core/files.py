@@ -47,6 +47,10 @@ def save_figure(figure: Figure, path: Path, dpi: int) -> None:
         figure.savefig(temporary, dpi=dpi)
 
 
+JOURNAL = "episodes.partial.jsonl"
+"""Finished episodes, one JSON line each, as they finish; replaced by the results at the end."""
+
+
 class EpisodeJournal:
     """`path` gets one JSON line per finished episode, on disk before the next episode counts;
     a signal arriving meanwhile waits for the line (`stack.core.interrupts.deferred`). The ordered
