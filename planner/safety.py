@@ -61,18 +61,22 @@ class SafetyLayer:
     def _clear(other: Neighbour, min_gap: float, closing: float, min_ttc: float) -> bool:
         return other.gap >= min_gap and _ttc(other.gap, closing) >= min_ttc
 
-    def filter(self, command: Command, world: WorldState, lane: int) -> Command:
-        """`command`, or STAY when it leads off the road or into an unsafe gap."""
+    def permits(self, command: Command, world: WorldState, lane: int) -> bool:
+        """Whether `filter` lets `command` through (without counting a mask)."""
         if command is Command.STAY or not self.config.enabled:
-            return command
+            return True
         target = lane + command.lane_shift
         config = self.config
-        if not 0 <= target < world.lanes_count or not self.gap_is_safe(
+        return 0 <= target < world.lanes_count and self.gap_is_safe(
             world, target, config.min_gap_m, config.min_ttc_s, strict=True
-        ):
-            self.masked += 1
-            return Command.STAY
-        return command
+        )
+
+    def filter(self, command: Command, world: WorldState, lane: int) -> Command:
+        """`command`, or STAY when it leads off the road or into an unsafe gap."""
+        if self.permits(command, world, lane):
+            return command
+        self.masked += 1
+        return Command.STAY
 
     def should_abort(self, world: WorldState, target: int) -> bool:
         """True when the gap in `target` has closed below the abort margins."""

@@ -1,5 +1,7 @@
 """The perfect-information oracle: a tree over consecutive decisions on copies of the loop."""
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -53,3 +55,24 @@ def test_oracle_settings_are_validated():
     for bad, key in [({"depth": 0}, "depth"), ({"horizon_s": -1}, "horizon_s"), ({"base": "ddqn"}, "base")]:
         with pytest.raises(ConfigError, match=f"planner.oracle.{key}"):
             build_config({"planner": {"oracle": bad}})
+
+
+def test_a_command_the_safety_layer_masks_is_refused_before_any_copy(monkeypatch):
+    """The ego joins `overtaking` in the rightmost lane: RIGHT leads off the road, so its branch is
+    worth nothing without copying the loop; with both changes masked, STAY needs no search."""
+    config = build_config(
+        {**SHORT, "planner": {"agent": "oracle", "oracle": {"horizon_s": 2}}}, scenario="overtaking"
+    )
+    oracle = build_agent(config, 0)
+    copies: list[object] = []
+    real_deepcopy = copy.deepcopy
+    monkeypatch.setattr(copy, "deepcopy", lambda *args: copies.append(args[0]) or real_deepcopy(*args))
+    with HighwayAdapter(config.highway, config.sim.backend) as adapter:
+        loop = ClosedLoop(config, adapter)
+        loop.reset(3)
+        loop.perceive()
+        assert loop.maneuver.lane == 3
+        copies.clear()
+        assert oracle._value(loop, Command.RIGHT, 2, 0.0, 0.0) == -np.inf and not copies
+        monkeypatch.setattr(type(loop.safety), "permits", lambda self, command, *_: command is Command.STAY)
+        assert oracle.plan(loop) is Command.STAY and not copies

@@ -47,6 +47,8 @@ class Oracle(Policy):
     def plan(self, loop: ClosedLoop) -> Command:
         """The root command whose best branch gets furthest without a crash."""
         start_s, start_time = float(loop.world.s[0]), loop.world.time
+        if not any(loop.safety.permits(c, loop.perceived, loop.maneuver.lane) for c in COMMANDS[1:]):
+            return Command.STAY
         values = [self._value(loop, command, self.config.depth, start_s, start_time) for command in COMMANDS]
         values[1:] = [value - self.config.margin_m for value in values[1:]]
         return COMMANDS[int(np.argmax(values))]
@@ -54,12 +56,14 @@ class Oracle(Policy):
     def _value(
         self, loop: ClosedLoop, command: Command, depth: int, start_s: float, start_time: float
     ) -> float:
-        """Best distance [m] from `start_s` after `command` and `depth - 1` more decisions."""
-        future = copy.deepcopy(loop, {id(loop.frames): None})
-        masked = future.safety.masked
-        future.act(command)
-        if future.safety.masked != masked:
+        """Best distance [m] from `start_s` after `command` and `depth - 1` more decisions; a
+        command the safety layer would mask is worth nothing, decided before anything is copied."""
+        if not loop.maneuver.changing_lane and not loop.safety.permits(
+            command, loop.perceived, loop.maneuver.lane
+        ):
             return -math.inf
+        future = copy.deepcopy(loop, {id(loop.frames): None})
+        future.act(command)
         if future.crashed:
             return -math.inf
         if depth > 1 and not future.done:
