@@ -6,10 +6,10 @@ behind all of them and meets a platoon that has settled at the speed of its slow
 choice is then worth little. `ScenarioTraffic._create_vehicles` keeps highway-env's own vehicles,
 behaviours (IDM + MOBIL) and placement rule, and only (1) spawns `ego_position` of the traffic before
 the ego, so that part is behind it, and (2) gives each vehicle a class drawn by share, with its
-desired (IDM target) speed and length drawn from the class's ranges, a lane from the class's lanes
-and MOBIL lane changes on or off. Every draw comes from the
-env's seeded generator, so the same seed gives the same traffic. Without `traffic` in the config,
-highway-env's own `_create_vehicles` runs unchanged.
+desired (IDM target) speed and length drawn from the class's ranges, a lane from the class's lanes,
+MOBIL lane changes on or off and an IDM jam distance that grows with its length. Every draw comes
+from the env's seeded generator, so the same seed gives the same traffic. Without `traffic` in the
+config, highway-env's own `_create_vehicles` runs unchanged.
 """
 
 from __future__ import annotations
