@@ -37,6 +37,17 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
     assert "ticks/s" in run("loop_rate.py", "--episodes", "1", "--config", str(tiny))
     assert "cheaper" in run("oracle_cost.py", "--seeds", "0", "--duration", "2")
     assert "env steps/s" in run("train_rate.py", "--steps", "510")
+    training = yaml.safe_load((ROOT / "configs" / "train" / "ddqn.yaml").read_text())
+    training |= {"scenario": None, "highway": {"vehicles_count": 10, "duration": 3}}
+    training["train"] |= {"envs": 1, "learning_starts": 10, "scenarios": {}, "checkpoint_every": 20}
+    training["train"]["validation"] |= {"short_every": 20, "short_episodes": 1, "long_episodes": 1}
+    (tmp_path / "train.yaml").write_text(yaml.safe_dump(training))
+    ablation = run(
+        "state_ablation.py",
+        *("--steps", "40", "--episodes", "1", "--variants", "grid", "--config", str(tmp_path / "train.yaml")),
+        *("--out", str(tmp_path / "ablation")),
+    )
+    assert "| grid | [] | 1 |" in ablation
     assert "env steps/s" in run("deepcars_speed.py")
     ceiling = run("deepcars_ceiling.py", "--rows", "1,2", "--check-steps", "2000")
     assert "| 2 | 96.000 % | 97.858 % |" in ceiling and "simulated lookahead rule" in ceiling
