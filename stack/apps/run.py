@@ -44,13 +44,15 @@ def run_and_report(
         write_config(config, out / "config.yaml", "the resolved config of this run")
         journal.discard()
     print_tables(results.summary, results.episodes)
-    if len(configs) > 1 and not results.summary["interrupted"]:
+    interrupted = bool(results.summary["interrupted"])
+    if len(configs) > 1 and not interrupted:
         beside = run(configs[1], progress=progress, jobs=jobs, ray=ray)
+        interrupted = bool(beside.summary["interrupted"])
         rows = comparison([results, beside], baseline=configs[1].planner.agent)
         write_json(out / "beside.json", rows)
         print(markdown(rows), end="")
     Console().print(f"results: {out}")
-    return bool(results.summary["interrupted"])
+    return interrupted
 
 
 def write_results(
