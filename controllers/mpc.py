@@ -109,14 +109,13 @@ class MPCTracker:
         problem = self.problem
         x0 = self._start(state)
         references = self._references(state, reference, backup.acceleration)
-        p = ca.DM(problem.parameters(references, state.curvature))
         if self.last_input is None:
             self.last_input = np.array([0.0, steady_steering(state)])
-        lbx, ubx = problem.bounds(x0, self.last_input)
+        p = ca.DM(problem.parameters(references, state.curvature, x0, self.last_input))
         w0 = self.guess
         if w0 is None:
             w0 = ca.DM(problem.initial_guess(x0, self.last_input))
-        arguments = (w0, p, lbx, ubx, *problem.constants)
+        arguments = (w0, p, *problem.constants)
         start = time.perf_counter()
         success, w = self._solve(arguments)
         self.solve_time = time.perf_counter() - start
