@@ -93,7 +93,8 @@ class Problem:
     @staticmethod
     def first_input(w: ca.DM) -> tuple[float, float]:
         """(acceleration [m/s^2], steering [rad]) of the first stage of a decision vector."""
-        return float(w[0]), float(w[1])
+        acceleration, steering = w.nonzeros()[:2]
+        return acceleration, steering
 
     @staticmethod
     def parameters(

@@ -5,7 +5,8 @@ on the QP.
 The cost is a sum of squares of terms linear in the decision vector, so its Hessian is constant;
 Gauss-Newton leaves out the constraints' curvature, so the QP's Hessian is computed once at build
 time. Per tick: one call of an expanded SX function (cost gradient, constraint Jacobian and the
-QP's bounds at the guess) and one `qrqp` solve. A guess that is already optimal (zero cost
+QP's bounds at the guess; compiled to C when the machine can, `controllers.compiled`) and one
+`qrqp` solve. A guess that is already optimal (zero cost
 gradient, feasible: lane keeping exactly at the steady state) is kept without a QP, as sqpmethod's
 convergence test before its first iteration does: qrqp can cycle between equivalent active sets
 on that degenerate QP. The step succeeds when `qrqp` converges within `max_iterations` active-set
@@ -18,6 +19,8 @@ from __future__ import annotations
 from typing import Any
 
 import casadi as ca
+
+from controllers.compiled import compiled
 
 QP_OPTIONS = {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False}
 QP_TOLERANCE = 1e-8
@@ -62,10 +65,12 @@ class RealTimeIteration:
         infeasibility = ca.mmax(
             ca.fmax(ca.vertcat(qp_bounds[0], qp_bounds[2], -qp_bounds[1], -qp_bounds[3]), 0)
         )
-        self.linearise = ca.Function(
-            "rti_linearise",
-            [w, p, *bounds],
-            [gradient, jacobian, *qp_bounds, ca.fmax(ca.norm_inf(gradient), infeasibility)],
+        self.linearise = compiled(
+            ca.Function(
+                "rti_linearise",
+                [w, p, *bounds],
+                [gradient, jacobian, *qp_bounds, ca.fmax(ca.norm_inf(gradient), infeasibility)],
+            )
         )
         hessian = ca.hessian(nlp["f"], w)[0]
         self.hessian = ca.Function("rti_hessian", [], [hessian])()["o0"]
@@ -73,25 +78,28 @@ class RealTimeIteration:
         options = {**QP_OPTIONS, "max_iter": max_iterations}
         self.qp = ca.conic("rti_qp", "qrqp", qp, options)
         self.optimality = optimality(self.hessian, jacobian.sparsity())
+        n, m = jacobian.size2(), jacobian.size1()
+        self.qp_start = (ca.DM.zeros(n), ca.DM.zeros(n), ca.DM.zeros(m), ca.DM(), ca.DM())
+        """(x0, lam_x0, lam_a0, q, p) of qrqp: a cold QP from a zero step, no parameters."""
         self._stats: dict[str, Any] = {"success": False, "return_status": "idle"}
 
     def __call__(self, x0: Any, p: Any, lbx: Any, ubx: Any, lbg: Any, ubg: Any, *_: Any) -> list[ca.DM]:
         """[the decision vector after one full SQP step from `x0`]."""
-        guess = ca.DM(x0)
+        guess = x0 if isinstance(x0, ca.DM) else ca.DM(x0)
         gradient, jacobian, lba, uba, lower, upper, residual = self.linearise(guess, p, lbx, ubx, lbg, ubg)
         if residual <= QP_TOLERANCE:
             self._stats = {"success": True, "return_status": "Solve_Succeeded"}
             return [guess]
-        step = self.qp(h=self.hessian, g=gradient, a=jacobian, lba=lba, uba=uba, lbx=lower, ubx=upper)
-        success = bool(self.qp.stats()["success"])
-        status = "Solve_Succeeded" if success else f"QP: {self.qp.stats()['return_status']}"
+        qp_bounds = (lba, uba, lower, upper)
+        step, _, lam_a, lam_x = self.qp(self.hessian, gradient, jacobian, *qp_bounds, *self.qp_start)
+        stats = self.qp.stats()
+        success, status = bool(stats["success"]), "Solve_Succeeded"
         if not success:
-            multipliers = (step["lam_x"], step["lam_a"])
-            residual = self.optimality(step["x"], *multipliers, gradient, jacobian, lba, uba, lower, upper)
+            residual = self.optimality(step, lam_x, lam_a, gradient, jacobian, *qp_bounds)
             success = bool(residual <= QP_TOLERANCE)
-            status = "Solved_At_Iteration_Limit" if success else status
+            status = "Solved_At_Iteration_Limit" if success else f"QP: {stats['return_status']}"
         self._stats = {"success": success, "return_status": status}
-        return [guess + step["x"]]
+        return [guess + step]
 
     def stats(self) -> dict[str, Any]:
         """`success` and `return_status` of the last call's QP."""
