@@ -70,10 +70,10 @@ class MPCTracker:
         self, state: EgoState, reference: Reference, acceleration: float
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         n = self.settings.horizon
-        preview = reference.preview(n, self.dt)
-        d = np.array([reference.d] + [p[0] for p in preview])
+        d_preview, d_dot_preview = reference.preview(n, self.dt)
+        d = np.concatenate([[reference.d], d_preview])
         speed = max(state.speed, 1.0)
-        d_dot = np.array([reference.d_dot] + [p[1] for p in preview])
+        d_dot = np.concatenate([[reference.d_dot], d_dot_preview])
         psi = np.arcsin(np.clip(d_dot / speed, -0.5, 0.5))
         v = np.clip(
             state.speed + acceleration * self.dt * np.arange(n + 1),
