@@ -6,12 +6,12 @@ The cost is a sum of squares of terms linear in the decision vector, so its Hess
 Gauss-Newton leaves out the constraints' curvature, so the QP's Hessian is computed once at build
 time. Per tick: one call of an expanded SX function (cost gradient, constraint Jacobian and the
 QP's bounds at the guess; compiled to C when the machine can, `controllers.compiled`) and one
-`qrqp` solve. A guess that is already optimal (zero cost
-gradient, feasible: lane keeping exactly at the steady state) is kept without a QP, as sqpmethod's
-convergence test before its first iteration does: qrqp can cycle between equivalent active sets
-on that degenerate QP. The step succeeds when `qrqp` converges within `max_iterations` active-set
-iterations, or when its last iterate meets the QP's optimality conditions to `QP_TOLERANCE`
-anyway, and the result is finite. The QP's own outcome, never the clock, decides a fallback.
+`qrqp` solve. A guess that is already optimal (zero cost gradient, feasible: lane keeping exactly
+at the steady state) is kept without a QP, as sqpmethod's convergence test before its first
+iteration does: qrqp can cycle between equivalent active sets on that degenerate QP. The step
+succeeds when `qrqp` converges within `max_iterations` active-set iterations, or when its last
+iterate meets the QP's optimality conditions to `QP_TOLERANCE` anyway, and the result is finite.
+The QP's own outcome, never the clock, decides a fallback.
 """
 
 from __future__ import annotations
@@ -79,8 +79,8 @@ class RealTimeIteration:
         self.qp = ca.conic("rti_qp", "qrqp", qp, options)
         self.optimality = optimality(self.hessian, jacobian.sparsity())
         n, m = jacobian.size2(), jacobian.size1()
+        # qrqp's (x0, lam_x0, lam_a0, q, p): a cold QP from a zero step, no parameters.
         self.qp_start = (ca.DM.zeros(n), ca.DM.zeros(n), ca.DM.zeros(m), ca.DM(), ca.DM())
-        """(x0, lam_x0, lam_a0, q, p) of qrqp: a cold QP from a zero step, no parameters."""
         self._stats: dict[str, Any] = {"success": False, "return_status": "idle"}
 
     def __call__(self, x0: Any, p: Any, lbx: Any, ubx: Any, lbg: Any, ubg: Any, *_: Any) -> list[ca.DM]:
