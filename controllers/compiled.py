@@ -69,8 +69,8 @@ def compiled(function: ca.Function) -> ca.Function:
     generator.add(function)
     source = generator.dump()
     key = hashlib.sha256(f"{ca.CasadiMeta.version()} {cc} {FLAGS}\n{source}".encode()).hexdigest()[:24]
-    library = cache_directory() / f"{name}_{key}.so"
     try:
+        library = cache_directory() / f"{name}_{key}.so"
         if library.exists() or _build(source, library, cc):
             return ca.external(name, str(library))
     except (OSError, RuntimeError):

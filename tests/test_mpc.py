@@ -118,6 +118,9 @@ def test_the_compiled_linearisation_equals_the_interpreted_one_bit_for_bit(monke
     )
     fast = compiled(function)
     assert fast.is_a("External") == (compiler() is not None)
+    with monkeypatch.context() as no_compiler:
+        no_compiler.setattr("controllers.compiled.shutil.which", lambda name: None)
+        assert compiled(function) is function
     monkeypatch.setenv("DRIVESTACK_COMPILE", "0")
     assert compiled(function) is function
     rng = np.random.default_rng(0)
