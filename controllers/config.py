@@ -51,7 +51,7 @@ class MPCSettings(_Settings):
     yaw_inertia: float = Field(29 / 12, gt=0, description="dynamic model yaw inertia [kg m^2]")
     cornering_stiffness_front: float = Field(30.0, gt=0, description="front axle [N/rad]")
     cornering_stiffness_rear: float = Field(30.0, gt=0, description="rear axle [N/rad]")
-    horizon: int = Field(20, ge=1, le=200, description="steps at the control rate")
+    horizon: int = Field(16, ge=1, le=200, description="steps at the control rate (16: 1.07 s at 15 Hz)")
     weight_lateral: float = Field(200.0, ge=0)
     weight_heading: float = Field(20.0, ge=0)
     weight_speed: float = Field(1.0, ge=0)
