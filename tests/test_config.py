@@ -72,3 +72,13 @@ def test_missing_and_malformed_files(tmp_path):
     listed.write_text("- 1\n- 2\n")
     with pytest.raises(ConfigError, match="expected a mapping"):
         load_config(listed)
+
+
+@pytest.mark.parametrize(
+    "path", sorted((ROOT / "stack" / "configs").rglob("*.yaml")), ids=lambda path: path.name
+)
+def test_every_packaged_config_loads(path):
+    """The run config and each shipped model's training config validate as they ship."""
+    config = load_config(path)
+    if "train" in path.parts:
+        assert config.planner.agent == config.train.algorithm
