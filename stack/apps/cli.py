@@ -24,6 +24,7 @@ from stack.apps.options import (
     fail,
     guarded,
     output_folder,
+    per_agent,
     ray_or_fail,
     until_interrupted,
 )
@@ -71,21 +72,18 @@ def run(
     """Run seeded closed-loop episodes and write a results folder."""
     if beside is not None and beside not in AGENT_NAMES:
         fail(f"--beside: {unknown_name('agent', beside, AGENT_NAMES)}")
-    cfgs = [
-        configured(
-            config,
-            sets,
-            scenario=scenario,
-            planner__agent=name,
-            planner__model=model if name == agent else None,
-            controller__type=controller,
-            sim__backend=backend,
-            sim__plant=plant,
-            episodes=episodes,
-            seed=seed,
-        )
-        for name in (agent, beside)[: 1 + (beside is not None)]
-    ]
+    pairs = [(agent, model)] + ([(beside, None)] if beside is not None else [])
+    cfgs = per_agent(
+        config,
+        sets,
+        pairs,
+        scenario=scenario,
+        controller__type=controller,
+        sim__backend=backend,
+        sim__plant=plant,
+        episodes=episodes,
+        seed=seed,
+    )
     ray_or_fail(ray)
     folder = checked_run(cfgs, out, "run")
     from stack.apps.run import run_and_report
@@ -150,19 +148,10 @@ def compare(
     names = [name for name in agents.split(",") if name]
     if baseline is not None and baseline not in names:
         fail(f"--baseline: {baseline!r} is not among --agents ({', '.join(names)})")
-    configs = [
-        configured(
-            config,
-            sets,
-            scenario=scenario,
-            planner__agent=name,
-            planner__model=model_paths.get(name),
-            sim__plant=plant,
-            episodes=episodes,
-            seed=seed,
-        )
-        for name in names
-    ]
+    pairs = [(name, model_paths.get(name)) for name in names]
+    configs = per_agent(
+        config, sets, pairs, scenario=scenario, sim__plant=plant, episodes=episodes, seed=seed
+    )
     ray_or_fail(ray)
     folder = checked_run(configs, out, "compare")
     from stack.apps.compare import compare_and_report

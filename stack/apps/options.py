@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 import re
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
@@ -72,6 +72,19 @@ def configured(path: Path | None, sets: list[str], **overrides: object) -> RunCo
         return load_config(path or RUN_CONFIG, labels, **values)
     except ConfigError as error:
         fail(str(error))
+
+
+def per_agent(
+    path: Path | None,
+    sets: list[str],
+    agents: Sequence[tuple[str | None, Path | str | None]],
+    **overrides: object,
+) -> list[RunConfig]:
+    """One `configured` config per (agent name, model file) pair; None keeps the config's own."""
+    return [
+        configured(path, sets, planner__agent=name, planner__model=model, **overrides)
+        for name, model in agents
+    ]
 
 
 def parsed_sets(sets: list[str]) -> dict[str, object]:
