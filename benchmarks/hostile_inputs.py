@@ -23,7 +23,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from planner.factory import DEFAULT_MODEL  # noqa: E402
+from planner.factory import SHIPPED_MODELS  # noqa: E402
 from planner.model_file import FORMAT  # noqa: E402
 from tests.test_hostile_inputs import BOMB  # noqa: E402
 from tests.test_model_files import metadata_bytes, npy, shipped, with_metadata, write  # noqa: E402
@@ -141,8 +141,8 @@ def cases(folder: Path) -> dict[str, list[str]]:
     found["run --out an existing file"] = ["run", "--out", str(existing)]
     found["train --out an existing file"] = ["train", "--out", str(existing)]
     for name, content in (
-        ("a truncated checkpoint", DEFAULT_MODEL.read_bytes()[:5000]),
-        ("a model file as checkpoint", DEFAULT_MODEL.read_bytes()),
+        ("a truncated checkpoint", SHIPPED_MODELS["ddqn"].read_bytes()[:5000]),
+        ("a model file as checkpoint", SHIPPED_MODELS["ddqn"].read_bytes()),
     ):
         checkpoint_folder(content)(run := folder / name.replace(" ", "-"))
         found[f"train --resume from {name}"] = ["train", "--resume", str(run), "--no-progress"]

@@ -118,9 +118,13 @@ class OccupancyGrid:
         raise ValueError(unknown_name("encoding", encoding, ENCODINGS))
 
     def to_tabular_state(self, line_of_sight: int | None = None) -> np.ndarray:
-        """[ego_lane, distance in cells to the closest car ahead in each row] (the paper's tabular
-        state), capped at line_of_sight - 1."""
-        return np.concatenate([[self.ego_lane], self.distances_ahead(line_of_sight)]).astype(np.int64)
+        """[where the ego is, distance in cells to the closest car ahead in each row] (the paper's
+        tabular state), capped at line_of_sight - 1. Where the ego is: its lane index, or with
+        the `sides` lane code 2 x (a lane on its left) + (a lane on its right), 0-3 on any road."""
+        where = self.ego_lane
+        if self.config.lane_code == "sides":
+            where = 2 * min(self.ego_lane, 1) + min(self.lanes_count - 1 - self.ego_lane, 1)
+        return np.concatenate([[where], self.distances_ahead(line_of_sight)]).astype(np.int64)
 
 
 class OccupancyGridBuilder:
@@ -148,7 +152,8 @@ class OccupancyGridBuilder:
         return spaces.Box(low, np.ones(size, dtype=np.float32), dtype=np.float32)
 
     def tabular_space(self, lanes_count: int) -> spaces.Box:
-        high = np.array([lanes_count - 1] + [self.config.cells_ahead - 1] * self.config.rows(lanes_count))
+        where = 3 if self.config.lane_code == "sides" else lanes_count - 1
+        high = np.array([where] + [self.config.cells_ahead - 1] * self.config.rows(lanes_count))
         return spaces.Box(0, high, dtype=np.int64)
 
     def space(self, encoding: Encoding, lanes_count: int) -> spaces.Box:

@@ -8,14 +8,17 @@ from planner.agents import Agent, FreeGapAgent, KeepLaneAgent, RandomAgent
 from planner.mobil import MobilAgent
 from records import LEARNED_AGENTS, POLICY_NAMES, GridConfig, unknown_name
 
-DEFAULT_MODEL = Path(__file__).parent / "models" / "ddqn_highway.npz"
-"""The shipped Double DQN, trained by `drivestack train --config configs/train/ddqn_highway.yaml`."""
+SHIPPED_MODELS: dict[str, Path] = {
+    name: Path(__file__).parent / "models" / f"{name}.npz" for name in ("ddqn", "dqn", "tabular")
+}
+"""The model each learned agent loads without --model, trained by
+`drivestack train --config configs/train/NAME.yaml` (NAME: ddqn, dqn, tabular)."""
 
 
 AGENT_DESCRIPTIONS: dict[str, str] = {
-    "ddqn": "Double DQN (the paper's best); the shipped model (planner/models/) unless --model",
-    "dqn": "DQN; needs --model (a file written by drivestack train --agent dqn)",
-    "tabular": "tabular Q-learning on the paper's tabular state; needs --model",
+    "ddqn": "Double DQN (the paper's best, the default); the shipped model unless --model",
+    "dqn": "DQN; the shipped small model unless --model",
+    "tabular": "tabular Q-learning on the paper's tabular state; the shipped table unless --model",
     "rule": "hand-written: into the adjacent lane with the most free cells ahead when it is clearly freer",
     "mobil": "MOBIL (Kesting et al.): a change when the incentive beats the threshold and it is safe",
     "keep-lane": "never changes lane (adaptive cruise only): the baseline of every comparison",
@@ -29,7 +32,7 @@ def make_agent(
     name: str, lanes: int, grid: GridConfig, seed: int = 0, model: Path | str | None = None
 ) -> Agent:
     """Build the agent `name` for a road of `lanes` lanes seen through `grid`; learned agents load
-    `model` (the shipped DDQN by default for `ddqn`)."""
+    `model` (the shipped one by default)."""
     if (path := model_path(name, model)) is not None:
         from planner.learned import load_agent
 
@@ -46,10 +49,8 @@ def make_agent(
 
 
 def model_path(name: str, model: Path | str | None) -> Path | None:
-    """The model file the agent `name` loads (None for agents without one); ValueError when a
-    learned agent has none."""
+    """The model file the agent `name` loads: `model`, else the shipped one (None for agents
+    without a model)."""
     if name not in LEARNED_AGENTS:
         return None
-    if model is None and name != "ddqn":
-        raise ValueError(f"agent {name!r} needs a model file (--model PATH, written by drivestack train)")
-    return Path(model or DEFAULT_MODEL)
+    return Path(model or SHIPPED_MODELS[name])

@@ -57,6 +57,15 @@ def test_agent_option_swaps_the_agent(tmp_path):
     assert json.loads((out / "summary.json").read_text())["agent"] == "keep-lane"
 
 
+def test_every_learned_agent_drives_out_of_the_box_with_its_shipped_model(tmp_path):
+    for agent in ("dqn", "tabular"):
+        (tmp_path / agent).mkdir()
+        result, out = run_tiny(tmp_path / agent, "--agent", agent, "--episodes", "1", "--scenario", "lanes-5")
+        assert result.exit_code == 0, result.output
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["agent"] == agent and summary["episodes"] == 1
+
+
 def test_beside_drives_the_same_seeds_with_a_second_agent_and_prints_both(tmp_path):
     result, out = run_tiny(tmp_path, "--agent", "rule", "--beside", "keep-lane", "--episodes", "2")
     assert result.exit_code == 0, result.output
@@ -116,6 +125,16 @@ def test_compare_runs_every_agent_on_the_same_episodes(tmp_path):
     assert summaries[1]["difference"]["mean_speed"] == [0.0, 0.0, 0.0]
     assert "| speed - keep-lane m/s |" in result.output and " [" in result.output
     assert (out / "comparison.png").stat().st_size > 5_000
+    rows = (out / "episodes.csv").read_text().strip().splitlines()
+    assert rows[0].startswith("agent,episode,seed,") and len(rows) == 1 + 3 * 2
+    assert [row.split(",")[0] for row in rows[1:]] == [
+        "rule",
+        "rule",
+        "keep-lane",
+        "keep-lane",
+        "random",
+        "random",
+    ]
     stray = CliRunner().invoke(app, ["compare", "--agents", "rule", "--baseline", "mobil"])
     assert stray.exit_code == 2 and "--baseline: 'mobil' is not among --agents" in stray.output
     bad = CliRunner().invoke(app, ["compare", "--agents", "rule,genius", "--out", str(tmp_path / "no")])
@@ -165,8 +184,10 @@ def test_a_bad_model_file_fails_before_any_work(tmp_path):
     assert result.exit_code == 2
     assert f"{crafted}: not a drivestack model file" in result.output.replace("\n", "")
     assert not out.exists()
-    missing = CliRunner().invoke(app, ["run", "--agent", "dqn", "--out", str(out)])
-    assert missing.exit_code == 2 and "needs a model file" in missing.output
+    missing = CliRunner().invoke(
+        app, ["run", "--agent", "dqn", "--model", str(tmp_path / "no.npz"), "--out", str(out)]
+    )
+    assert missing.exit_code == 2 and "no such model file" in missing.output
 
 
 def test_the_dynamic_plant_drives_every_command(tmp_path):

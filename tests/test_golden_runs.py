@@ -15,7 +15,7 @@ from stack.core.episodes import run
 
 GOLDEN = Path(__file__).parent / "golden" / "runs.json"
 CASES = {
-    "ddqn-pid-masked": {"seed": 1, "planner": {"agent": "ddqn"}},
+    "ddqn-pid": {"seed": 1, "planner": {"agent": "ddqn"}},
     "mobil-mpc-changes": {"seed": 2, "planner": {"agent": "mobil"}, "controller": {"type": "mpc"}},
     "rule-pid-changes": {"seed": 2, "planner": {"agent": "rule"}},
     "rule-pid-noisy": {

@@ -117,6 +117,17 @@ def test_side_lanes_code_makes_the_encodings_independent_of_the_lane_count(encod
         np.testing.assert_array_equal(encoded[-2:], sides), "lanes left, lanes right, capped at 2, over 2"
 
 
+def test_the_tabular_state_with_the_side_lanes_code_fits_one_table_on_any_road():
+    builder = OccupancyGridBuilder(
+        GRID.model_copy(update={"lanes": "ego", "lane_code": "sides", "lateral_reach": 1})
+    )
+    assert {builder.tabular_space(lanes).high.tolist()[0] for lanes in (2, 3, 4, 5, 6)} == {3}
+    for lanes, ego_lane, where in [(5, 0, 1), (5, 2, 3), (5, 4, 2), (3, 1, 3), (6, 5, 2)]:
+        state = builder.build(scene(lanes, (0.0, ego_lane), [(20.0, 4.0 * ego_lane)])).to_tabular_state()
+        assert state[0] == where, "2 x (a lane on the left) + (a lane on the right)"
+        assert state[1 + 1] == 4 and builder.tabular_space(lanes).contains(state), "the car 20 m ahead"
+
+
 def test_ego_lateral_feature_shows_a_lane_change_under_way():
     config = GRID.model_copy(update={"features": ("ego_lateral",)})
     builder = OccupancyGridBuilder(config)

@@ -83,14 +83,14 @@ def test_a_replay_buffer_larger_than_memory_is_refused_before_allocation(tmp_pat
 
 
 def test_resume_from_a_broken_or_foreign_checkpoint_is_one_line(tmp_path):
-    from planner.factory import DEFAULT_MODEL
+    from planner.factory import SHIPPED_MODELS
 
     folder = tmp_path / "run"
     folder.mkdir()
     (folder / "config.yaml").write_text(yaml.safe_dump({"train": {"steps": 10}, "highway": {"duration": 2}}))
-    (folder / "checkpoint.npz").write_bytes(DEFAULT_MODEL.read_bytes())
+    (folder / "checkpoint.npz").write_bytes(SHIPPED_MODELS["ddqn"].read_bytes())
     one_line_refusal(["train", "--resume", str(folder), "--no-progress"], "not a training checkpoint")
-    (folder / "checkpoint.npz").write_bytes(DEFAULT_MODEL.read_bytes()[:5000])
+    (folder / "checkpoint.npz").write_bytes(SHIPPED_MODELS["ddqn"].read_bytes()[:5000])
     one_line_refusal(["train", "--resume", str(folder), "--no-progress"], "not a drivestack model file")
 
 

@@ -9,7 +9,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from planner.factory import DEFAULT_MODEL
+from planner.factory import SHIPPED_MODELS
 from planner.learned import load_agent
 from planner.model_file import FORMAT, ModelFileError, load_model
 
@@ -25,7 +25,7 @@ def metadata_bytes(metadata: object) -> bytes:
 
 
 def shipped() -> tuple[dict[str, np.ndarray], dict]:
-    return load_model(DEFAULT_MODEL)
+    return load_model(SHIPPED_MODELS["ddqn"])
 
 
 def write(path, members: dict[str, bytes], compression=zipfile.ZIP_DEFLATED) -> None:

@@ -22,7 +22,7 @@ def test_the_tree_searches_copies_and_leaves_the_loop_untouched(monkeypatch):
     oracle = build_agent(config, 0)
     assert isinstance(oracle, Oracle)
     with HighwayAdapter(config.highway, config.sim.backend) as adapter:
-        loop = ClosedLoop(config, adapter)
+        loop = ClosedLoop(config, adapter, grid=oracle.grid_config)
         loop.reset(3)
         loop.perceive()
         before = loop.world
@@ -52,7 +52,7 @@ def test_the_oracle_is_refused_as_an_observation_policy_and_drives_like_any_agen
 def test_oracle_settings_are_validated():
     from stack.core.config import ConfigError
 
-    for bad, key in [({"depth": 0}, "depth"), ({"horizon_s": -1}, "horizon_s"), ({"base": "ddqn"}, "base")]:
+    for bad, key in [({"depth": 0}, "depth"), ({"horizon_s": -1}, "horizon_s"), ({"base": "oracle"}, "base")]:
         with pytest.raises(ConfigError, match=f"planner.oracle.{key}"):
             build_config({"planner": {"oracle": bad}})
 
@@ -68,7 +68,7 @@ def test_a_command_the_safety_layer_masks_is_refused_before_any_copy(monkeypatch
     real_deepcopy = copy.deepcopy
     monkeypatch.setattr(copy, "deepcopy", lambda *args: copies.append(args[0]) or real_deepcopy(*args))
     with HighwayAdapter(config.highway, config.sim.backend) as adapter:
-        loop = ClosedLoop(config, adapter)
+        loop = ClosedLoop(config, adapter, grid=oracle.grid_config)
         loop.reset(3)
         loop.perceive()
         assert loop.maneuver.lane == 3

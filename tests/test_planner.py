@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 from perception.grid import GridConfig, OccupancyGridBuilder
 from planner.agents import decide
 from planner.ddqn import DoubleDQN, double_q_target
-from planner.factory import DEFAULT_MODEL, make_agent
+from planner.factory import SHIPPED_MODELS, make_agent
 from planner.learned import export_q_network, load_agent
 from planner.mobil import MobilAgent
 from planner.model_file import ModelFileError, save_model
@@ -84,8 +84,6 @@ def test_unknown_agent_lists_what_is_available():
         ValueError, match="unknown agent 'genius'; available: ddqn, dqn, tabular, rule, mobil"
     ):
         make_agent("genius", 3, GRID)
-    with pytest.raises(ValueError, match="agent 'dqn' needs a model file"):
-        make_agent("dqn", 3, GRID)
 
 
 def test_a_model_for_another_algorithm_or_shape_is_refused(model_files):
@@ -201,10 +199,17 @@ def test_crafted_and_truncated_model_files_are_refused(tmp_path, model_files):
         load_agent(tmp_path / "absent.npz")
 
 
+@pytest.mark.parametrize("algorithm", ["dqn", "tabular"])
+def test_every_learned_agent_ships_a_small_model(algorithm):
+    agent = make_agent(algorithm, 4, GRID)
+    assert agent.metadata["algorithm"] == algorithm
+    assert SHIPPED_MODELS[algorithm].stat().st_size <= 2_000_000
+
+
 def test_shipped_default_model_loads_safely():
-    agent = load_agent(DEFAULT_MODEL, expected_algorithms=("ddqn",))
+    agent = load_agent(SHIPPED_MODELS["ddqn"], expected_algorithms=("ddqn",))
     assert agent.metadata["algorithm"] == "ddqn"
-    assert DEFAULT_MODEL.stat().st_size < 500_000
+    assert SHIPPED_MODELS["ddqn"].stat().st_size <= 2_000_000
     assert agent.metadata["actions"] == N_ACTIONS
     world = scene(4, (0.0, 1), [(15.0, 4.0), (30.0, 0.0)])
     observation = OccupancyGridBuilder(agent.grid_config).build(world).encode(agent.encoding)
@@ -214,15 +219,15 @@ def test_shipped_default_model_loads_safely():
 
 def test_export_writes_an_sb3_zip_that_dqn_load_opens_and_drives_alike(tmp_path):
     out = tmp_path / "ddqn.zip"
-    result = CliRunner().invoke(app, ["export", str(DEFAULT_MODEL), "--sb3", str(out)])
+    result = CliRunner().invoke(app, ["export", str(SHIPPED_MODELS["ddqn"]), "--sb3", str(out)])
     assert result.exit_code == 0, result.output
     sb3 = DQN.load(out, device="cpu")
-    agent = load_agent(DEFAULT_MODEL)
+    agent = load_agent(SHIPPED_MODELS["ddqn"])
     observations = np.random.default_rng(0).uniform(0, 1, (64, agent.observation_size)).astype(np.float32)
     np.testing.assert_array_equal(
         sb3.predict(observations, deterministic=True)[0], agent.predict(observations)[0]
     )
-    again = CliRunner().invoke(app, ["export", str(DEFAULT_MODEL), "--sb3", str(out)])
+    again = CliRunner().invoke(app, ["export", str(SHIPPED_MODELS["ddqn"]), "--sb3", str(out)])
     assert again.exit_code == 2 and "exists" in again.output
     missing = CliRunner().invoke(
         app, ["export", str(tmp_path / "none.npz"), "--sb3", str(tmp_path / "x.zip")]

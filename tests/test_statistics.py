@@ -20,6 +20,9 @@ def test_wilson_interval_stays_in_zero_one_and_is_not_empty_at_zero():
     half = rate_interval(5, 10)
     assert (half.low, half.high) == pytest.approx((0.2366, 0.7634), abs=1e-4)
     assert rate_interval(10, 10).high == pytest.approx(1.0) and rate_interval(10, 10).low < 1.0
+    for trials in range(1, 1001):
+        none, every = rate_interval(0, trials), rate_interval(trials, trials)
+        assert none.low == 0.0 and every.high == 1.0, "the rate lies inside its interval, to the last bit"
 
 
 def test_paired_difference_removes_the_shared_spread():

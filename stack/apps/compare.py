@@ -1,6 +1,7 @@
 """`drivestack compare`: several agents on the same seeded episodes; every metric with its 95 %
 confidence interval and, with a baseline, the paired difference to it (`stack.core.statistics`).
-Writes comparison.json and comparison.png and prints one markdown table."""
+Writes comparison.json, comparison.png and episodes.csv (every agent's episodes, for pairings the
+table does not show) and prints one markdown table."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from matplotlib.axes import Axes
 
 from stack.core.config import RunConfig, write_config
 from stack.core.episodes import RunResults, run
-from stack.core.files import JOURNAL, EpisodeJournal, save_figure, write_json
+from stack.core.files import JOURNAL, EpisodeJournal, save_figure, write_csv, write_json
 from stack.core.interrupts import deferred
 from stack.core.statistics import Interval, mean_interval, paired_difference, rate_interval
 
@@ -104,6 +105,9 @@ def compare_and_report(
     rows = comparison(runs, baseline)
     with deferred(interrupt_after=False):
         write_comparison(rows, out)
+        write_csv(
+            out / "episodes.csv", [{"agent": r.summary["agent"], **e.row()} for r in runs for e in r.episodes]
+        )
         agents = ", ".join(config.planner.agent for config in configs)
         write_config(configs[0], out / "config.yaml", f"the resolved config; agents compared: {agents}")
         for config in configs:

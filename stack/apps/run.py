@@ -3,7 +3,6 @@ episodes.csv, a speed / lateral-position plot, the grid over the road, optional 
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 import imageio.v2 as imageio
@@ -17,7 +16,7 @@ from stack.apps.compare import comparison, markdown
 from stack.core.closed_loop import VIDEO_FRAME_TICKS
 from stack.core.config import RunConfig, write_config
 from stack.core.episodes import run
-from stack.core.files import JOURNAL, EpisodeJournal, replacing, write_json
+from stack.core.files import JOURNAL, EpisodeJournal, replacing, write_csv, write_json
 from stack.core.interrupts import deferred
 from stack.core.metrics import EpisodeResult
 
@@ -61,11 +60,7 @@ def write_results(
     """The results folder, each file written whole (`stack.core.files`)."""
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "summary.json", summary)
-    rows = [episode.row() for episode in episodes]
-    with replacing(out / "episodes.csv") as path, path.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(out / "episodes.csv", [episode.row() for episode in episodes])
     with replacing(out / "traces.png") as path:
         plot_traces(episodes, path, summary)
     if episodes[0].snapshot is not None:

@@ -49,12 +49,13 @@ class PerceptionConfig(GridConfig):
 
 class OracleConfig(Strict):
     """The tree's depth (decisions), the look-ahead horizon [s], the lane-change margin [m] and the
-    agent that drives after the tree's last decision."""
+    agent that drives after the tree's last decision (`ddqn`: the shipped Double DQN, so the
+    search improves on the best agent there is)."""
 
     depth: int = Field(2, ge=1, le=3)
-    horizon_s: float = Field(10.0, gt=0, le=30)
-    margin_m: float = Field(1.0, ge=0)
-    base: Literal["keep-lane", "mobil", "rule"] = "keep-lane"
+    horizon_s: float = Field(30.0, gt=0, le=60)
+    margin_m: float = Field(0.0, ge=0)
+    base: Literal["keep-lane", "mobil", "rule", "ddqn"] = "ddqn"
 
 
 class PlannerConfig(Strict):

@@ -6,9 +6,11 @@ vehicles exactly) and searches a tree of `depth` consecutive decisions: every co
 layer lets through, then every command at the next decision point, and so on; each leaf is
 followed by the `base` agent until `horizon_s` after the root. A branch is worth the distance the
 ego gains along the road by then (minus infinity on a crash); a lane change must gain `margin_m`
-more than staying. No real planner knows the future, so its mean speed is a practical upper bound
-for any agent on the same seeds, controllers and safety layer. It is slow: about 3^depth
-look-ahead rollouts per decision (the cost per episode is in BENCHMARKS.md).
+more than staying. With the shipped Double DQN as `base` (the default) the rollouts drive the best
+agent there is and the tree adds what changing its next decisions gains with the future known: a
+reference ceiling for any agent on the same seeds, controllers and safety layer, though not an
+exhaustive optimum. It is slow: about 3^depth look-ahead rollouts per decision (the cost per episode
+is in BENCHMARKS.md).
 """
 
 from __future__ import annotations

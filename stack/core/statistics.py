@@ -47,7 +47,7 @@ def rate_interval(successes: int, trials: int) -> Interval:
     z = float(stats.norm.ppf((1 + LEVEL) / 2))
     centre = (rate + z**2 / (2 * trials)) / (1 + z**2 / trials)
     half = z / (1 + z**2 / trials) * math.sqrt(rate * (1 - rate) / trials + z**2 / (4 * trials**2))
-    return Interval(rate, max(0.0, centre - half), min(1.0, centre + half))
+    return Interval(rate, min(rate, max(0.0, centre - half)), max(rate, min(1.0, centre + half)))
 
 
 def paired_difference(agent: list[float], baseline: list[float]) -> Interval:
