@@ -23,7 +23,7 @@ def test_video_frames_carry_a_changing_caption_over_the_road_and_the_grid(tmp_pa
     assert all(len(np.unique(frame.reshape(-1, 3), axis=0)) > 10 for frame in frames), "never blank"
     caption_px = 4 + 2 * LINE_PX
     rows = (frames[0].shape[0] - caption_px - ROAD_HEIGHT_PX - CAPTION_PX - AXIS_PX) / 22
-    assert rows == 3, "caption, road view and the DDQN's 3-row grid, 22 px (4 m) a row"
+    assert rows == 5, "caption, road view and the DDQN's 5-row grid (2 lanes each side), 22 px (4 m) a row"
     captions = [frame[:caption_px] for frame in frames]
     assert not np.array_equal(captions[0], captions[-1]), "the time in the caption moves on"
     assert all(np.any(caption != 255) for caption in captions), "the caption has text"
