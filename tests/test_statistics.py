@@ -25,6 +25,12 @@ def test_wilson_interval_stays_in_zero_one_and_is_not_empty_at_zero():
         assert none.low == 0.0 and every.high == 1.0, "the rate lies inside its interval, to the last bit"
 
 
+def test_a_mean_interval_can_be_cut_at_the_metrics_floor():
+    counts = [0, 0, 0, 0, 9]
+    assert mean_interval(counts).low < 0 and mean_interval(counts, floor=0.0).low == 0.0
+    assert mean_interval(counts, floor=0.0).high == mean_interval(counts).high
+
+
 def test_paired_difference_removes_the_shared_spread():
     baseline = [20.0, 25.0, 30.0, 22.0]
     agent = [21.0, 26.1, 30.9, 23.0]

@@ -18,7 +18,7 @@ from stack.core.interrupts import deferred
 from stack.core.statistics import Interval, mean_interval, paired_difference, rate_interval
 
 MEANS = ("mean_speed", "lane_changes", "masked_commands", "aborted_changes")
-"""Per-episode metrics reported as means over episodes."""
+"""Per-episode metrics reported as means over episodes (none can be negative)."""
 PANELS = (
     ("collision_rate", "collision rate [%]", 100.0),
     ("mean_speed", "mean speed [m/s]", 1.0),
@@ -31,7 +31,7 @@ def intervals(results: RunResults) -> dict[str, Interval]:
     episodes = results.episodes
     found = {"collision_rate": rate_interval(sum(e.crashed for e in episodes), len(episodes))}
     for metric in MEANS:
-        found[metric] = mean_interval([getattr(e, metric) for e in episodes])
+        found[metric] = mean_interval([getattr(e, metric) for e in episodes], floor=0.0)
     return found
 
 

@@ -31,14 +31,15 @@ class Interval:
         return [self.value, self.low, self.high]
 
 
-def mean_interval(values: np.ndarray | list[float]) -> Interval:
-    """Mean and Student's t interval (a single value: the interval is that value)."""
+def mean_interval(values: np.ndarray | list[float], floor: float = -math.inf) -> Interval:
+    """Mean and Student's t interval (a single value: the interval is that value), cut at `floor`
+    for a metric that cannot go below it (a count cannot be negative)."""
     data = np.asarray(values, dtype=float)
     mean = float(np.mean(data))
     if len(data) < 2:
         return Interval(mean, mean, mean)
     half = float(stats.t.ppf((1 + LEVEL) / 2, len(data) - 1) * np.std(data, ddof=1) / math.sqrt(len(data)))
-    return Interval(mean, mean - half, mean + half)
+    return Interval(mean, max(floor, mean - half), mean + half)
 
 
 def rate_interval(successes: int, trials: int) -> Interval:
