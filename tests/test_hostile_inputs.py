@@ -1,6 +1,5 @@
 """Hostile configs and locations: one line, exit 2, before any work (issue: hardening)."""
 
-
 import pytest
 import yaml
 from typer.testing import CliRunner
