@@ -345,3 +345,30 @@ def test_n_step_returns_discount_each_sample_by_gamma_to_its_length(tmp_path):
     discounts = buffer.sample(200).discounts.numpy().ravel()
     assert np.isclose(discounts[:, None], [0.9, 0.81, 0.729]).any(axis=1).all()
     assert np.isclose(discounts, 0.729).mean() > 0.5, "most samples span three decisions"
+
+
+def test_a_run_starts_from_init_model_and_refuses_one_that_does_not_fit(tmp_path):
+    """`train.init_model`: the online and target networks start as the file's network (no gradient
+    step before learning_starts, so the final model is that network); a file with other hidden
+    layers, a missing file or a tabular run are refused in one line before any episode."""
+    Trainer(build_config(TINY), tmp_path / "first", progress=False).run()
+    start = tmp_path / "first" / "final.npz"
+    data = {**TINY, "train": {**TINY["train"], "steps": 6, "learning_starts": 100, "init_model": str(start)}}
+    trainer = Trainer(build_config(data), tmp_path / "tuned", progress=False)
+    trainer.run()
+    tuned, original = load_model(tmp_path / "tuned" / "final.npz")[0], load_model(start)[0]
+    for key in original:
+        np.testing.assert_array_equal(tuned[key], original[key], err_msg=key)
+    target = trainer.model.policy.q_net_target.q_net.state_dict()
+    np.testing.assert_array_equal(target["0.weight"].numpy(), original["0.weight"])
+
+    config = tmp_path / "other.yaml"
+    for change, message in (
+        ({"network": "16x16"}, "train.init_model: " + str(start) + " has hidden layers [16]"),
+        ({"init_model": str(tmp_path / "none.npz")}, "no such model file"),
+        ({"algorithm": "tabular", "encoding": "tabular"}, "init_model: tabular Q-learning starts"),
+    ):
+        config.write_text(yaml.safe_dump({**data, "train": {**data["train"], **change}}))
+        result = CliRunner().invoke(app, ["train", "-c", str(config), "--out", str(tmp_path / "o")])
+        assert result.exit_code == 2 and message in result.output, result.output
+        assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "o").exists()

@@ -28,7 +28,7 @@ from stack.apps.options import (
     ray_or_fail,
     until_interrupted,
 )
-from stack.apps.training import check_memory, train_or_fail
+from stack.apps.training import check_init_model, check_memory, train_or_fail
 
 app = typer.Typer(
     add_completion=False,
@@ -234,6 +234,7 @@ def train(
             seed=seed,
         )
     check_memory(cfg)
+    check_init_model(cfg)
 
     folder = resume or output_folder(out, f"train-{cfg.train.algorithm}")
     if train_or_fail(cfg, folder, progress):

@@ -11,13 +11,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import gymnasium as gym
-import torch as th
 from stable_baselines3 import DQN
 
 from perception.grid import OccupancyGridBuilder
 from planner.learned import LearnedAgent, load_agent
 from planner.model_file import ModelFileError
 from records import N_ACTIONS, GridConfig
+from stack.apps.train_model import warm_start
 
 
 class _Spaces(gym.Env):
@@ -54,9 +54,6 @@ def export_sb3(model: Path, out: Path) -> Path:
         device="cpu",
         verbose=0,
     )
-    weights = agent.network.state_dict()
-    with th.no_grad():
-        sb3.policy.q_net.q_net.load_state_dict(weights)
-        sb3.policy.q_net_target.q_net.load_state_dict(weights)
+    warm_start(sb3, agent)
     sb3.save(out)
     return out if out.suffix == ".zip" else out.with_suffix(out.suffix + ".zip")

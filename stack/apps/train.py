@@ -29,9 +29,11 @@ from stack.apps.train_model import (
     Checkpoints,
     StopTraining,
     build_dqn,
+    initial_model,
     model_metadata,
     monitored_env,
     stop_signals,
+    warm_start,
     worker_env,
 )
 from stack.apps.train_report import write_training_summary
@@ -61,6 +63,7 @@ class Trainer:
         """`on_validation` hears every validation (a sweep reports them to Ray Tune)."""
         self.config, self.out, self.progress = config, Path(out), progress
         self.on_validation = on_validation
+        self.start = initial_model(config)
         envs = config.train.envs
         self.env: Monitor | SubprocVecEnv = (
             monitored_env(config) if envs == 1 else SubprocVecEnv([partial(worker_env, config)] * envs)
@@ -147,6 +150,8 @@ class Trainer:
                     f"{self.out / CHECKPOINT}: does not fit this run's model ({message})"
                 ) from None
             self._restore_common(metadata)
+        elif self.start is not None:
+            warm_start(self.model, self.start)
         self.validation = self._validation_callback(export_q_network)
         checkpoints = Checkpoints(
             self.config.train.checkpoint_every, self._save_checkpoint, lambda: self.stop_requested

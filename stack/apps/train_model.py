@@ -19,6 +19,9 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecEnv
 
 from planner.ddqn import DoubleDQN
+from planner.factory import model_path
+from planner.learned import LearnedAgent, load_agent
+from planner.model_file import ModelFileError
 from planner.networks import net_arch
 from records import N_ACTIONS
 from stack.core.closed_loop import grid_config
@@ -109,6 +112,7 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
         gradient_steps=train.envs,
         target_update_interval=train.target_update_interval,
         exploration_fraction=train.exploration_fraction,
+        exploration_initial_eps=train.exploration_initial_eps,
         exploration_final_eps=train.exploration_final_eps,
         policy_kwargs={"net_arch": net_arch(train.network)},
         tensorboard_log=str(tensorboard),
@@ -133,3 +137,39 @@ def model_metadata(config: RunConfig, env: HierarchicalHighwayEnv, trained_steps
         "trained_steps": trained_steps,
         "seed": config.seed,
     }
+
+
+def initial_model(config: RunConfig) -> LearnedAgent | None:
+    """The Q-network `train.init_model` names, checked against the run before any episode: a DDQN /
+    DQN file with this run's encoding, grid, observation size and hidden layers; ModelFileError
+    (one line) otherwise."""
+    train = config.train
+    if train.init_model is None:
+        return None
+    path = model_path(train.algorithm, None if train.init_model == "shipped" else train.init_model)
+    assert path is not None, "init_model is refused for tabular runs"
+    agent = load_agent(path, expected_algorithms=("ddqn", "dqn"))
+    assert isinstance(agent, LearnedAgent), "DDQN / DQN files hold Q-networks"
+    env = HierarchicalHighwayEnv(config)
+    theirs = (agent.encoding, agent.grid_config, agent.observation_size, list(agent.metadata["hidden"]))
+    ours = (
+        train.encoding,
+        grid_config(config),
+        int(np.prod(env.observation_space.shape)),
+        net_arch(train.network),
+    )
+    env.close()
+    for field, their, our in zip(
+        ("encoding", "grid", "observation size", "hidden layers"), theirs, ours, strict=True
+    ):
+        if their != our:
+            raise ModelFileError(f"train.init_model: {path} has {field} {their}, this run needs {our}")
+    return agent
+
+
+def warm_start(model: DQN, start: LearnedAgent) -> None:
+    """Copy `start`'s Q-network into the online and target networks of `model`."""
+    weights = start.network.state_dict()
+    with th.no_grad():
+        model.policy.q_net.q_net.load_state_dict(weights)
+        model.policy.q_net_target.q_net.load_state_dict(weights)

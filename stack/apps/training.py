@@ -45,6 +45,17 @@ def check_memory(config: RunConfig) -> None:
         )
 
 
+def check_init_model(config: RunConfig) -> None:
+    """Refuse, before the run folder exists, a `train.init_model` that does not fit the run."""
+    from planner.model_file import ModelFileError
+    from stack.apps.train_model import initial_model
+
+    try:
+        initial_model(config)
+    except ModelFileError as error:
+        fail(str(error))
+
+
 def train_or_fail(config: RunConfig, folder: Path, progress: bool) -> bool:
     """`drivestack train` in `folder`; a checkpoint that cannot be resumed is a one-line error.
     True when interrupted (resumable)."""

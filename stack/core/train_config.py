@@ -3,6 +3,7 @@ reward and the real-time validation."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -71,10 +72,17 @@ class TrainConfig(Strict):
     train_freq: int = Field(1, ge=1)
     target_update_interval: int = Field(500, ge=1)
     exploration_fraction: float = Field(0.3, gt=0, le=1)
+    exploration_initial_eps: float = Field(1.0, ge=0, le=1)
     exploration_final_eps: float = Field(0.05, ge=0, le=1)
     tabular_alpha: float = Field(0.1, gt=0, le=1)
     tabular_epsilon: float = Field(0.2, ge=0, le=1)
     checkpoint_every: int = Field(5_000, ge=1)
+    init_model: str | None = Field(
+        None,
+        description="a DDQN / DQN model file whose Q-network starts the training (fine-tuning), or "
+        "'shipped' for the algorithm's shipped model; it must take this run's observations through "
+        "the same network",
+    )
     reward: RewardConfig = RewardConfig()
     validation: ValidationConfig = ValidationConfig()
 
@@ -88,8 +96,17 @@ class TrainConfig(Strict):
                 raise ValueError(f"scenario {name!r}: the share must be a positive number, got {share}")
         return mix
 
+    @field_validator("init_model")
+    @classmethod
+    def _existing_model(cls, path: str | None) -> str | None:
+        if path not in (None, "shipped") and not Path(path).is_file():
+            raise ValueError(f"no such model file {path} (a model file or 'shipped')")
+        return path
+
     @model_validator(mode="after")
     def _one_env_for_tables(self) -> TrainConfig:
         if self.algorithm == "tabular" and self.envs > 1:
             raise ValueError("envs: tabular Q-learning steps one environment; use 1")
+        if self.algorithm == "tabular" and self.init_model is not None:
+            raise ValueError("init_model: tabular Q-learning starts from an empty table")
         return self
