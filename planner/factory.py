@@ -8,15 +8,21 @@ from planner.agents import Agent, FreeGapAgent, KeepLaneAgent, RandomAgent
 from planner.mobil import MobilAgent
 from records import LEARNED_AGENTS, POLICY_NAMES, GridConfig, unknown_name
 
-SHIPPED_MODELS: dict[str, Path] = {
-    name: Path(__file__).parent / "models" / f"{name}.npz" for name in ("ddqn", "dqn", "tabular")
-}
+MODELS = Path(__file__).parent / "models"
+
+SHIPPED_MODELS: dict[str, Path] = {name: MODELS / f"{name}.npz" for name in ("ddqn", "dqn", "tabular")}
 """The model each learned agent loads without --model, trained by
 `drivestack train --config configs/train/NAME.yaml` (NAME: ddqn, dqn, tabular)."""
 
+SCENARIO_MODELS: dict[tuple[str, str], Path] = {("ddqn", "highway-v0"): MODELS / "ddqn-highway.npz"}
+"""Shipped models that replace SHIPPED_MODELS on one scenario: (agent, scenario) -> file. The
+Double DQN's highway-v0 model is the mix model fine-tuned on highway-v0
+(configs/train/ddqn-highway.yaml)."""
+
 
 AGENT_DESCRIPTIONS: dict[str, str] = {
-    "ddqn": "Double DQN (the paper's best, the default); the shipped model unless --model",
+    "ddqn": "Double DQN (the paper's best, the default); the shipped model (its own on highway-v0) "
+    "unless --model",
     "dqn": "DQN; the shipped small model unless --model",
     "tabular": "tabular Q-learning on the paper's tabular state; the shipped table unless --model",
     "rule": "hand-written: into the adjacent lane with the most free cells ahead when it is clearly freer",
@@ -29,11 +35,16 @@ AGENT_DESCRIPTIONS: dict[str, str] = {
 
 
 def make_agent(
-    name: str, lanes: int, grid: GridConfig, seed: int = 0, model: Path | str | None = None
+    name: str,
+    lanes: int,
+    grid: GridConfig,
+    seed: int = 0,
+    model: Path | str | None = None,
+    scenario: str | None = None,
 ) -> Agent:
     """Build the agent `name` for a road of `lanes` lanes seen through `grid`; learned agents load
-    `model` (the shipped one by default)."""
-    if (path := model_path(name, model)) is not None:
+    `model` (by default the shipped one, for `scenario` where one is shipped for it)."""
+    if (path := model_path(name, model, scenario)) is not None:
         from planner.learned import load_agent
 
         return load_agent(path, expected_algorithms=(name,))
@@ -48,9 +59,9 @@ def make_agent(
     raise ValueError(unknown_name("agent", name, POLICY_NAMES))
 
 
-def model_path(name: str, model: Path | str | None) -> Path | None:
-    """The model file the agent `name` loads: `model`, else the shipped one (None for agents
-    without a model)."""
+def model_path(name: str, model: Path | str | None, scenario: str | None = None) -> Path | None:
+    """The model file the agent `name` loads: `model`, else the one shipped for `scenario`, else
+    the shipped one (None for agents without a model)."""
     if name not in LEARNED_AGENTS:
         return None
-    return Path(model or SHIPPED_MODELS[name])
+    return Path(model or SCENARIO_MODELS.get((name, scenario or ""), SHIPPED_MODELS[name]))

@@ -115,7 +115,7 @@ def checked_run(configs: list[RunConfig], out: Path | None, prefix: str) -> Path
 
     for config in configs:
         try:
-            if (path := model_path(config.planner.agent, config.planner.model)) is not None:
+            if (path := model_path(config.planner.agent, config.planner.model, config.scenario)) is not None:
                 _, metadata = checked_model(path, (config.planner.agent,))
                 if metadata["kind"] == "mlp" and (
                     why := road_mismatch(

@@ -40,8 +40,11 @@ class Oracle(Policy):
         self.grid_config: GridConfig | None = base.grid_config
 
     @classmethod
-    def for_road(cls, config: OracleConfig, lanes: int, grid: GridConfig) -> Oracle:
-        return cls(config, make_agent(config.base, lanes, grid))
+    def for_road(
+        cls, config: OracleConfig, lanes: int, grid: GridConfig, scenario: str | None = None
+    ) -> Oracle:
+        """The oracle whose base policy is `config.base` as built for this road and scenario."""
+        return cls(config, make_agent(config.base, lanes, grid, scenario=scenario))
 
     def choose(self, observation: np.ndarray) -> Action:
         raise TypeError("the oracle plans on copies of the simulator: call plan(loop), not predict")
