@@ -65,3 +65,11 @@ def model_path(name: str, model: Path | str | None, scenario: str | None = None)
     if name not in LEARNED_AGENTS:
         return None
     return Path(model or SCENARIO_MODELS.get((name, scenario or ""), SHIPPED_MODELS[name]))
+
+
+def model_label(path: Path | None) -> str | None:
+    """How a run names the model file it loaded: `shipped/FILE` for a shipped one (the same on
+    every machine), else the path as given."""
+    if path is None:
+        return None
+    return f"shipped/{path.name}" if path.parent == MODELS else str(path)

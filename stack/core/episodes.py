@@ -10,7 +10,7 @@ import numpy as np
 from tqdm import tqdm
 
 from planner.agents import Agent, decide
-from planner.factory import make_agent, model_path
+from planner.factory import make_agent, model_label, model_path
 from records import child_seed
 from stack.core.closed_loop import ClosedLoop, grid_config
 from stack.core.config import RunConfig, road_mismatch
@@ -121,6 +121,7 @@ def run(
         ordered,
         scenario=config.scenario,
         agent=config.planner.agent,
+        model=model_label(model_path(config.planner.agent, config.planner.model, config.scenario)),
         controller=config.controller.type,
         backend=config.sim.backend,
         plant=config.sim.plant,
