@@ -18,6 +18,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecEnv
 
+from perception.grid import OccupancyGridBuilder
 from planner.ddqn import DoubleDQN
 from planner.factory import model_path
 from planner.learned import LearnedAgent, load_agent
@@ -150,15 +151,9 @@ def initial_model(config: RunConfig) -> LearnedAgent | None:
     assert path is not None, "init_model is refused for tabular runs"
     agent = load_agent(path, expected_algorithms=("ddqn", "dqn"))
     assert isinstance(agent, LearnedAgent), "DDQN / DQN files hold Q-networks"
-    env = HierarchicalHighwayEnv(config)
+    space = OccupancyGridBuilder(grid_config(config)).space(train.encoding, config.highway.lanes_count)
     theirs = (agent.encoding, agent.grid_config, agent.observation_size, list(agent.metadata["hidden"]))
-    ours = (
-        train.encoding,
-        grid_config(config),
-        int(np.prod(env.observation_space.shape)),
-        net_arch(train.network),
-    )
-    env.close()
+    ours = (train.encoding, grid_config(config), int(np.prod(space.shape)), net_arch(train.network))
     for field, their, our in zip(
         ("encoding", "grid", "observation size", "hidden layers"), theirs, ours, strict=True
     ):
