@@ -18,7 +18,6 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecEnv
 
-from perception.grid import OccupancyGridBuilder
 from planner.ddqn import DoubleDQN
 from planner.factory import model_path
 from planner.learned import LearnedAgent, load_agent
@@ -26,7 +25,7 @@ from planner.model_file import ModelFileError
 from planner.networks import net_arch
 from records import N_ACTIONS
 from stack.core.closed_loop import grid_config
-from stack.core.config import RunConfig
+from stack.core.config import RunConfig, road_mismatch
 from stack.core.decision_env import HierarchicalHighwayEnv
 
 ALGORITHMS: dict[str, type[DQN]] = {"ddqn": DoubleDQN, "dqn": DQN}
@@ -151,14 +150,15 @@ def initial_model(config: RunConfig) -> LearnedAgent | None:
     assert path is not None, "init_model is refused for tabular runs"
     agent = load_agent(path, expected_algorithms=("ddqn", "dqn"))
     assert isinstance(agent, LearnedAgent), "DDQN / DQN files hold Q-networks"
-    space = OccupancyGridBuilder(grid_config(config)).space(train.encoding, config.highway.lanes_count)
-    theirs = (agent.encoding, agent.grid_config, agent.observation_size, list(agent.metadata["hidden"]))
-    ours = (train.encoding, grid_config(config), int(np.prod(space.shape)), net_arch(train.network))
-    for field, their, our in zip(
-        ("encoding", "grid", "observation size", "hidden layers"), theirs, ours, strict=True
-    ):
+    theirs = (agent.encoding, agent.grid_config, list(agent.metadata["hidden"]))
+    grid = grid_config(config)
+    ours = (train.encoding, grid, net_arch(train.network))
+    for field, their, our in zip(("encoding", "grid", "hidden layers"), theirs, ours, strict=True):
         if their != our:
             raise ModelFileError(f"train.init_model: {path} has {field} {their}, this run needs {our}")
+    lanes = config.highway.lanes_count
+    if why := road_mismatch(path, grid, agent.encoding, agent.observation_size, lanes):
+        raise ModelFileError(f"train.init_model: {why}")
     return agent
 
 

@@ -26,18 +26,11 @@ def build_agent(config: RunConfig, seed: int) -> Agent:
     planner, lanes = config.planner, config.highway.lanes_count
     if planner.agent == "oracle":
         return Oracle.for_road(planner.oracle, lanes, grid_config(config), config.scenario)
-    agent = make_agent(planner.agent, lanes, grid_config(config), seed, planner.model, config.scenario)
+    path = model_path(planner.agent, planner.model, config.scenario)
+    agent = make_agent(planner.agent, lanes, grid_config(config), seed, path)
     expected = getattr(agent, "observation_size", None)
     grid = agent.grid_config or grid_config(config)
-    if expected is not None and (
-        why := road_mismatch(
-            model_path(planner.agent, planner.model, config.scenario) or "",
-            grid,
-            agent.encoding,
-            expected,
-            lanes,
-        )
-    ):
+    if expected is not None and (why := road_mismatch(path or "", grid, agent.encoding, expected, lanes)):
         raise ValueError(why)
     return agent
 
