@@ -44,10 +44,11 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
     (tmp_path / "train.yaml").write_text(yaml.safe_dump(training))
     ablation = run(
         "state_ablation.py",
-        *("--steps", "40", "--episodes", "1", "--variants", "grid", "--config", str(tmp_path / "train.yaml")),
-        *("--out", str(tmp_path / "ablation")),
+        *("--steps", "40", "--episodes", "1", "--variants", "paper,grid"),
+        *("--config", str(tmp_path / "train.yaml"), "--out", str(tmp_path / "ablation")),
     )
-    assert "| grid | [] | 1 |" in ablation
+    assert "| grid | [] | 1 |" in ablation and "| paper | [] | road |" in ablation
+    assert (tmp_path / "ablation" / "ablation.md").read_text().strip() in ablation
     assert "env steps/s" in run("deepcars_speed.py")
     ceiling = run("deepcars_ceiling.py", "--rows", "1,2", "--check-steps", "2000")
     assert "| 2 | 96.000 % | 97.858 % |" in ceiling and "simulated lookahead rule" in ceiling
