@@ -17,13 +17,14 @@ import argparse
 import json
 import platform
 from pathlib import Path
+from typing import Any
 
 from stack.apps.compare import differences
 from stack.apps.train import BEST, Trainer
 from stack.core.config import RunConfig, load_config
 from stack.core.episodes import run
 
-VARIANTS: dict[str, dict[str, object]] = {
+VARIANTS: dict[str, dict[str, Any]] = {
     "paper": {"features": [], "lanes": "absolute", "lane_code": "binary", "lateral_reach": 1},
     "grid": {"features": [], "lateral_reach": 1},
     "speeds": {"features": ["relative_speed", "ttc", "ego_speed"], "lateral_reach": 1},
