@@ -14,15 +14,22 @@ SHIPPED_MODELS: dict[str, Path] = {name: MODELS / f"{name}.npz" for name in ("dd
 """The model each learned agent loads without --model, trained by
 `drivestack train --config configs/train/NAME.yaml` (NAME: ddqn, dqn, tabular)."""
 
-SCENARIO_MODELS: dict[tuple[str, str], Path] = {("ddqn", "highway-v0"): MODELS / "ddqn-highway.npz"}
+HIGHWAY_ENV_TRAFFIC = ("highway-v0", "dense", "lanes-3", "lanes-5")
+"""The scenarios that keep highway-env's own traffic (its spawn behind a platoon), only denser or on
+another lane count."""
+
+SCENARIO_MODELS: dict[tuple[str, str], Path] = {
+    ("ddqn", scenario): MODELS / "ddqn-highway.npz" for scenario in HIGHWAY_ENV_TRAFFIC
+}
 """Shipped models that replace SHIPPED_MODELS on one scenario: (agent, scenario) -> file. The
-Double DQN's highway-v0 model is the mix model fine-tuned on highway-v0
-(configs/train/ddqn-highway.yaml)."""
+Double DQN's highway-v0 model (the mix model fine-tuned on highway-v0 by
+configs/train/ddqn-highway.yaml) drives all of highway-env's own traffic: on selection seeds it
+beat the mix model on each of those scenarios (BENCHMARKS.md)."""
 
 
 AGENT_DESCRIPTIONS: dict[str, str] = {
-    "ddqn": "Double DQN (the paper's best, the default); the shipped model (its own on highway-v0) "
-    "unless --model",
+    "ddqn": "Double DQN (the paper's best, the default); the shipped model (its own on highway-env's "
+    "traffic) unless --model",
     "dqn": "DQN; the shipped small model unless --model",
     "tabular": "tabular Q-learning on the paper's tabular state; the shipped table unless --model",
     "rule": "hand-written: into the adjacent lane with the most free cells ahead when it is clearly freer",

@@ -298,8 +298,8 @@ def test_an_error_from_an_option_names_the_option_not_the_file(tmp_path):
         assert result.exit_code == 2 and result.output.startswith(message), result.output
 
 
-def test_run_names_the_model_it_loaded_and_highway_v0_gets_its_own(tmp_path):
-    for scenario, model in (("highway-v0", "shipped/ddqn-highway.npz"), ("lanes-3", "shipped/ddqn.npz")):
+def test_run_names_the_model_it_loaded_and_highway_env_traffic_gets_its_own(tmp_path):
+    for scenario, model in (("lanes-3", "shipped/ddqn-highway.npz"), ("overtaking", "shipped/ddqn.npz")):
         out = tmp_path / scenario
         result = CliRunner().invoke(
             app,

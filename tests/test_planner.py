@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 from perception.grid import GridConfig, OccupancyGridBuilder
 from planner.agents import decide
 from planner.ddqn import DoubleDQN, double_q_target
-from planner.factory import SCENARIO_MODELS, SHIPPED_MODELS, make_agent
+from planner.factory import HIGHWAY_ENV_TRAFFIC, SCENARIO_MODELS, SHIPPED_MODELS, make_agent
 from planner.learned import export_q_network, load_agent
 from planner.mobil import MobilAgent
 from planner.model_file import ModelFileError, save_model
@@ -236,13 +236,15 @@ def test_export_writes_an_sb3_zip_that_dqn_load_opens_and_drives_alike(tmp_path)
 
 
 def test_the_ddqn_picks_its_shipped_model_by_scenario(tmp_path):
-    """highway-v0 has its own shipped Double DQN (small, data-only); every other scenario, and no
-    scenario, load the mix model; --model wins over both."""
-    highway = make_agent("ddqn", 4, GRID, scenario="highway-v0")
-    assert highway.source == str(SCENARIO_MODELS[("ddqn", "highway-v0")])
+    """highway-env's own traffic (highway-v0, dense, 3 and 5 lanes) has its own shipped Double DQN
+    (small, data-only); every other scenario, and no scenario, load the mix model; --model wins
+    over both."""
+    for scenario in HIGHWAY_ENV_TRAFFIC:
+        highway = make_agent("ddqn", 4, GRID, scenario=scenario)
+        assert highway.source == str(SCENARIO_MODELS[("ddqn", "highway-v0")])
     assert SCENARIO_MODELS[("ddqn", "highway-v0")].stat().st_size <= 2_000_000
     assert highway.metadata["grid"] == load_agent(SHIPPED_MODELS["ddqn"]).metadata["grid"]
-    for scenario in (None, "overtaking", "lanes-5"):
+    for scenario in (None, "overtaking", "noisy", "exit"):
         assert make_agent("ddqn", 4, GRID, scenario=scenario).source == str(SHIPPED_MODELS["ddqn"])
     chosen = make_agent("ddqn", 4, GRID, model=SHIPPED_MODELS["ddqn"], scenario="highway-v0")
     assert chosen.source == str(SHIPPED_MODELS["ddqn"])
