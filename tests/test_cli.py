@@ -318,3 +318,21 @@ def test_run_names_the_model_it_loaded_and_highway_env_traffic_gets_its_own(tmp_
         )
         assert result.exit_code == 0, result.output
         assert json.loads((out / "summary.json").read_text())["model"] == model
+
+
+def test_compare_resume_refuses_a_folder_without_its_comparison_and_an_oversized_journal(tmp_path):
+    arguments = ["compare", "-c", str(tiny_config_file(tmp_path)), "--agents", "keep-lane", "--episodes", "2"]
+    out = tmp_path / "out"
+    for extra, message in (
+        ([], "error: --resume: name the interrupted comparison's folder with --out"),
+        (["--out", str(out)], f"error: --resume: {out} holds no comparison (no config.yaml)"),
+    ):
+        result = CliRunner().invoke(app, [*arguments, *extra, "--resume"])
+        assert result.exit_code == 2 and result.output.startswith(message), result.output
+    assert not out.exists()
+    started = CliRunner().invoke(app, [*arguments, "--out", str(out), "--no-progress"])
+    assert started.exit_code == 0, started.output
+    with (out / "keep-lane.episodes.partial.jsonl").open("wb") as journal:
+        journal.truncate(10**12)
+    result = CliRunner().invoke(app, [*arguments, "--out", str(out), "--resume"])
+    assert result.exit_code == 2 and "bytes; a journal of these episodes holds at most 4000" in result.output

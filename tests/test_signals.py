@@ -10,8 +10,10 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
+from typer.testing import CliRunner
 
-from stack.core import interrupts
+from stack.apps.cli import app
+from stack.core import episodes, interrupts
 from stack.core.files import EpisodeJournal, replacing, write_text
 
 SHORT = ["--set", "highway.duration=4", "--set", "highway.vehicles_count=8", "--no-progress"]
@@ -52,14 +54,39 @@ def test_a_stopped_run_keeps_its_finished_episodes(tmp_path, sig):
     ]
 
 
-def test_a_stopped_comparison_keeps_the_agents_run_so_far(tmp_path):
+def test_a_stopped_comparison_keeps_the_agents_run_so_far_and_resume_finishes_it(tmp_path, monkeypatch):
     out = tmp_path / "compare"
-    arguments = ["compare", "--agents", "keep-lane,rule", "--episodes", "30", "--out", str(out), *SHORT]
-    assert stopped_after_first_episode(arguments, out / "rule.episodes.partial.jsonl", signal.SIGTERM) == 130
+    arguments = ["compare", "--agents", "keep-lane,rule", "--episodes", "30", *SHORT]
+    journal = out / "rule.episodes.partial.jsonl"
+    assert stopped_after_first_episode([*arguments, "--out", str(out)], journal, signal.SIGTERM) == 130
     rows = json.loads((out / "comparison.json").read_text())
     assert [row["agent"] for row in rows] == ["keep-lane", "rule"]
     assert rows[0]["episodes"] == 30 and 1 <= rows[1]["episodes"] < 30 and rows[1]["interrupted"]
-    assert not list(out.glob("*.partial*")) and (out / "comparison.png").is_file()
+    assert (out / "comparison.png").is_file() and journal.is_file()
+
+    other = CliRunner().invoke(app, [*arguments, "--seed", "5", "--out", str(out), "--resume"])
+    assert (
+        other.exit_code == 2
+        and other.output.startswith("error: --resume: ")
+        and "another comparison" in other.output
+    )
+    with journal.open("a") as handle:
+        handle.write('{"episode": 3, "seed": 1, "ste')
+    ran: list[int] = []
+    real = episodes.run_episode
+    monkeypatch.setattr(episodes, "run_episode", lambda c, e, f=None: ran.append(e) or real(c, e, f))
+    resumed = CliRunner().invoke(app, [*arguments, "--out", str(out), "--resume"])
+    assert resumed.exit_code == 0, resumed.output
+    assert len(ran) == 30 - rows[1]["episodes"] and not list(out.glob("*.partial*"))
+    monkeypatch.undo()
+    whole = CliRunner().invoke(app, [*arguments, "--out", str(tmp_path / "whole")])
+    assert whole.exit_code == 0, whole.output
+
+    def untimed(folder: Path) -> list[dict]:
+        rows = json.loads((folder / "comparison.json").read_text())
+        return [{k: v for k, v in row.items() if not k.startswith("solve_ms")} for row in rows]
+
+    assert untimed(out) == untimed(tmp_path / "whole") and untimed(out)[1]["episodes"] == 30
 
 
 def test_a_second_signal_waits_for_the_results_being_written(monkeypatch):

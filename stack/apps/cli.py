@@ -138,6 +138,9 @@ def compare(
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
     ray: str | None = RAY_OPTION,
     out: Path | None = typer.Option(None, help="Results folder (default: runs/compare-<time>)."),
+    resume: bool = typer.Option(
+        False, help="Finish the interrupted comparison in --out (same arguments): its episodes are kept."
+    ),
     progress: bool = typer.Option(True, help="Show progress bars."),
 ) -> None:
     """Every agent on the same seeded episodes: one table, one bar plot."""
@@ -153,10 +156,18 @@ def compare(
         config, sets, pairs, scenario=scenario, sim__plant=plant, episodes=episodes, seed=seed
     )
     ray_or_fail(ray)
-    folder = checked_run(configs, out, "compare")
-    from stack.apps.compare import compare_and_report
+    from stack.apps.compare import compare_and_report, resumable
 
-    until_interrupted(lambda: compare_and_report(configs, folder, jobs, progress, baseline, ray))
+    done = None
+    if resume:
+        if out is None:
+            fail("--resume: name the interrupted comparison's folder with --out")
+        try:
+            done = resumable(configs, out)
+        except ValueError as error:
+            fail(str(error))
+    folder = checked_run(configs, out, "compare")
+    until_interrupted(lambda: compare_and_report(configs, folder, jobs, progress, baseline, ray, done))
 
 
 @app.command()

@@ -11,12 +11,16 @@ from typing import Any
 import matplotlib.pyplot as plt
 from matplotlib.axes import Axes
 
-from stack.core.config import RunConfig, write_config
+from records import child_seed
+from stack.core.config import RunConfig, config_text
 from stack.core.episodes import RunResults, run
-from stack.core.files import JOURNAL, EpisodeJournal, save_figure, write_csv, write_json
+from stack.core.files import JOURNAL, EpisodeJournal, save_figure, write_csv, write_json, write_text
 from stack.core.interrupts import deferred
+from stack.core.metrics import EpisodeResult
 from stack.core.statistics import Interval, mean_interval, paired_difference, rate_interval
 
+JOURNAL_ROW_BYTES = 2_000
+"""Bytes one journaled episode takes at most (about 450 in practice): bounds what --resume reads."""
 MEANS = ("mean_speed", "lane_changes", "masked_commands", "aborted_changes")
 """Per-episode metrics reported as means over episodes (none can be negative)."""
 PANELS = (
@@ -51,17 +55,26 @@ def differences(results: RunResults, baseline: RunResults) -> dict[str, Interval
 
 
 def compare(
-    configs: list[RunConfig], out: Path, jobs: int = 1, progress: bool = True, ray: str | None = None
+    configs: list[RunConfig],
+    out: Path,
+    jobs: int = 1,
+    progress: bool = True,
+    ray: str | None = None,
+    done: dict[str, list[EpisodeResult]] | None = None,
 ) -> list[RunResults]:
     """One run per config (one config per agent, the same episodes and seeds), over `jobs`
     processes or as Ray tasks at address `ray`, each finished episode journaled in `out` as it
-    finishes. Ctrl-C stops the comparison: the agents run so far are returned (the last one with
-    the episodes it finished); none raises KeyboardInterrupt."""
+    finishes; `done` holds each agent's episodes an interrupted comparison finished (`resumable`).
+    Ctrl-C stops the comparison: the agents run so far are returned (the last one with the
+    episodes it finished); none raises KeyboardInterrupt."""
     runs: list[RunResults] = []
     for config in configs:
         journal = journal_of(config, out)
+        finished = (done or {}).get(config.planner.agent, [])
         try:
-            runs.append(run(config, progress=progress, jobs=jobs, ray=ray, on_finished=journal.record))
+            runs.append(
+                run(config, progress=progress, jobs=jobs, ray=ray, on_finished=journal.record, done=finished)
+            )
         except KeyboardInterrupt:
             if not runs:
                 raise
@@ -69,6 +82,39 @@ def compare(
         if runs[-1].summary["interrupted"]:
             break
     return runs
+
+
+def comparison_config(configs: list[RunConfig]) -> str:
+    """The config.yaml of a comparison: the resolved config and, first, the agents and models."""
+    agents = ", ".join(
+        c.planner.agent + (f" ({c.planner.model})" if c.planner.model else "") for c in configs
+    )
+    return config_text(configs[0], f"the resolved config; agents compared: {agents}")
+
+
+def resumable(configs: list[RunConfig], out: Path) -> dict[str, list[EpisodeResult]]:
+    """Per agent, the episodes the interrupted comparison in `out` finished: that comparison's
+    config.yaml (written when it started) must be the one `configs` write, and each journaled
+    episode one of theirs (its number in range, its seed the one that number gets). ValueError,
+    naming the file, when `out` holds another comparison or none."""
+    stored, expected = out / "config.yaml", comparison_config(configs)
+    if not stored.is_file():
+        raise ValueError(f"--resume: {out} holds no comparison (no config.yaml)")
+    if stored.stat().st_size != len(expected.encode()) or stored.read_text() != expected:
+        raise ValueError(
+            f"--resume: {stored} is another comparison's (other agents, models or config); "
+            "resume with the arguments that started it"
+        )
+    done: dict[str, list[EpisodeResult]] = {}
+    for config in configs:
+        rows = journal_of(config, out).rows(JOURNAL_ROW_BYTES * config.episodes)
+        episodes = {e.episode: e for e in map(EpisodeResult.from_row, rows) if e is not None}
+        done[config.planner.agent] = [
+            e
+            for e in episodes.values()
+            if 0 <= e.episode < config.episodes and e.seed == child_seed(config.seed, e.episode)
+        ]
+    return done
 
 
 def journal_of(config: RunConfig, out: Path) -> EpisodeJournal:
@@ -97,10 +143,13 @@ def compare_and_report(
     progress: bool,
     baseline: str | None = None,
     ray: str | None = None,
+    done: dict[str, list[EpisodeResult]] | None = None,
 ) -> bool:
     """Run every config, write `out` (comparison.json, comparison.png), print the table; True
-    when Ctrl-C cut the comparison short (the agents run so far are written)."""
-    runs = compare(configs, out, jobs=jobs, progress=progress, ray=ray)
+    when Ctrl-C cut the comparison short (the agents run so far are written, the journals kept
+    for `--resume`). `done`: the episodes resumed (`resumable`)."""
+    write_text(out / "config.yaml", comparison_config(configs))
+    runs = compare(configs, out, jobs=jobs, progress=progress, ray=ray, done=done)
     interrupted = len(runs) < len(configs) or bool(runs[-1].summary["interrupted"])
     rows = comparison(runs, baseline)
     with deferred(interrupt_after=False):
@@ -108,12 +157,11 @@ def compare_and_report(
         write_csv(
             out / "episodes.csv", [{"agent": r.summary["agent"], **e.row()} for r in runs for e in r.episodes]
         )
-        agents = ", ".join(config.planner.agent for config in configs)
-        write_config(configs[0], out / "config.yaml", f"the resolved config; agents compared: {agents}")
-        for config in configs:
+        for config in configs if not interrupted else []:
             journal_of(config, out).discard()
     print(markdown(rows), end="")
-    print(f"results: {out}" + (" (interrupted: the agents run so far)" if interrupted else ""))
+    stopped = " (interrupted: the agents run so far; the same command with --resume finishes it)"
+    print(f"results: {out}" + (stopped if interrupted else ""))
     return interrupted
 
 

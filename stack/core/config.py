@@ -10,24 +10,13 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import (
-    Field,
-    ValidationError,
-    model_validator,
-)
+from pydantic import Field, ValidationError, model_validator
 
 from controllers.config import ControllerConfig
 from perception.grid import OccupancyGridBuilder
 from perception.sensor import SensorConfig
 from planner.safety import SafetyConfig
-from records import (
-    AGENT_NAMES,
-    SEED_LIMIT,
-    AgentName,
-    Encoding,
-    GridConfig,
-    one_of,
-)
+from records import AGENT_NAMES, SEED_LIMIT, AgentName, Encoding, GridConfig, one_of
 from stack.core.files import write_text
 from stack.core.train_config import Strict, TrainConfig
 from stack.sim import scenarios
@@ -169,10 +158,14 @@ def _set_dotted(data: dict[str, Any], dotted: str, value: Any, source: str) -> N
     node[leaf] = value
 
 
-def write_config(config: RunConfig, path: Path, comment: str = "") -> None:
-    """The resolved `config` as YAML at `path`, loadable with `--config` (a `# comment` first)."""
+def config_text(config: RunConfig, comment: str = "") -> str:
+    """The resolved `config` as YAML, loadable with `--config` (a `# comment` first)."""
     header = "".join(f"# {line}\n" for line in comment.splitlines())
-    write_text(path, header + yaml.safe_dump(config.model_dump(mode="json"), sort_keys=False))
+    return header + yaml.safe_dump(config.model_dump(mode="json"), sort_keys=False)
+
+
+def write_config(config: RunConfig, path: Path, comment: str = "") -> None:
+    write_text(path, config_text(config, comment))
 
 
 def in_scenario(config: RunConfig, name: str) -> RunConfig:

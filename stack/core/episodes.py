@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 
@@ -80,16 +80,18 @@ def run(
     jobs: int = 1,
     ray: str | None = None,
     on_finished: Callable[[EpisodeResult], None] | None = None,
+    done: Sequence[EpisodeResult] = (),
 ) -> RunResults:
     """Run `config.episodes` seeded episodes over `jobs` processes, or as Ray tasks with `ray` (an
     address, see `stack.core.executors`); results are ordered by episode, identical for any `jobs`
-    or `ray`. With `video`, episode 0 runs here and keeps its frames. Ctrl-C keeps the finished
-    episodes (`summary["interrupted"]`); `on_finished` sees each as it finishes."""
+    or `ray`. With `video`, the first episode runs here and keeps its frames. `done` are episodes
+    an earlier run of `config` finished: they count as they are and are not run again. Ctrl-C keeps
+    the finished episodes (`summary["interrupted"]`); `on_finished` sees each as it finishes."""
     frames: list[np.ndarray] = []
-    results: dict[int, EpisodeResult] = {}
-    pending = list(range(config.episodes))
+    results: dict[int, EpisodeResult] = {episode.episode: episode for episode in done}
+    pending = [episode for episode in range(config.episodes) if episode not in results]
     interrupted = False
-    bar = tqdm(total=config.episodes, unit="episode", disable=not progress)
+    bar = tqdm(total=config.episodes, initial=len(results), unit="episode", disable=not progress)
 
     def finished(result: EpisodeResult) -> None:
         results[result.episode] = result
@@ -99,7 +101,7 @@ def run(
             on_finished(result)
 
     try:
-        if video:
+        if video and pending:
             finished(run_episode(config, pending.pop(0), frames))
         for _, result in completed(partial(run_episode, config), pending, jobs, ray):
             finished(result)

@@ -77,5 +77,27 @@ class EpisodeJournal:
                 handle.flush()
                 os.fsync(handle.fileno())
 
+    def rows(self, max_bytes: int) -> list[dict[str, Any]]:
+        """The rows journaled so far, up to the first line that is not a whole JSON object (a run
+        killed in mid-line); the file is rewritten to hold exactly those, so appending goes on
+        after them. A journal over `max_bytes` is refused (ValueError) before it is read."""
+        if not self.path.is_file():
+            return []
+        if (size := self.path.stat().st_size) > max_bytes:
+            raise ValueError(
+                f"{self.path}: {size} bytes; a journal of these episodes holds at most {max_bytes}"
+            )
+        rows = []
+        for line in self.path.read_text().splitlines():
+            try:
+                row = json.loads(line)
+            except json.JSONDecodeError:
+                break
+            if not isinstance(row, dict):
+                break
+            rows.append(row)
+        write_text(self.path, "".join(json.dumps(row) + "\n" for row in rows))
+        return rows
+
     def discard(self) -> None:
         self.path.unlink(missing_ok=True)

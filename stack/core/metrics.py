@@ -10,6 +10,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
+from typing import Any
 
 import numpy as np
 
@@ -112,6 +113,16 @@ class EpisodeResult:
     def row(self) -> dict:
         """The flat record written to CSV (no traces, no snapshot)."""
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("trace", "snapshot")}
+
+    @classmethod
+    def from_row(cls, row: dict[str, Any]) -> EpisodeResult | None:
+        """The episode `row()` recorded, or None when `row` is not one (other keys, a value not of
+        its field's type)."""
+        kinds = {"int": int, "bool": bool, "float": int | float}
+        typed = {f.name: kinds[str(f.type)] for f in fields(cls) if f.name not in ("trace", "snapshot")}
+        if sorted(row) != sorted(typed) or not all(isinstance(row[n], kind) for n, kind in typed.items()):
+            return None
+        return cls(**row)
 
 
 class EpisodeRecorder:
