@@ -336,3 +336,6 @@ def test_compare_resume_refuses_a_folder_without_its_comparison_and_an_oversized
         journal.truncate(10**12)
     result = CliRunner().invoke(app, [*arguments, "--out", str(out), "--resume"])
     assert result.exit_code == 2 and "bytes; a journal of these episodes holds at most 4000" in result.output
+    (out / "keep-lane.episodes.partial.jsonl").write_text("[" * 3_000 + "\n" + '{"episode": 0}\n')
+    result = CliRunner().invoke(app, [*arguments, "--out", str(out), "--resume", "--no-progress"])
+    assert result.exit_code == 0 and json.loads((out / "comparison.json").read_text())[0]["episodes"] == 2

@@ -91,7 +91,7 @@ class EpisodeJournal:
         for line in self.path.read_text().splitlines():
             try:
                 row = json.loads(line)
-            except json.JSONDecodeError:
+            except (json.JSONDecodeError, RecursionError):
                 break
             if not isinstance(row, dict):
                 break
