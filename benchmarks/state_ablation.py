@@ -23,6 +23,7 @@ from stack.apps.compare import differences
 from stack.apps.train import BEST, Trainer
 from stack.core.config import RunConfig, load_config
 from stack.core.episodes import run
+from stack.core.files import write_text
 
 VARIANTS: dict[str, dict[str, Any]] = {
     "paper": {"features": [], "lanes": "absolute", "lane_code": "binary", "lateral_reach": 1},
@@ -79,7 +80,7 @@ def main() -> None:
         *rows,
     ]
     print("\n".join(table))
-    (args.out / "ablation.md").write_text("\n".join(table) + "\n")
+    write_text(args.out / "ablation.md", "\n".join(table) + "\n")
 
 
 if __name__ == "__main__":
