@@ -23,8 +23,10 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from perception.grid import OccupancyGridBuilder  # noqa: E402
 from planner.factory import SHIPPED_MODELS  # noqa: E402
 from planner.model_file import FORMAT  # noqa: E402
+from records import GridConfig  # noqa: E402
 from tests.test_hostile_inputs import BOMB  # noqa: E402
 from tests.test_model_files import metadata_bytes, npy, shipped, with_metadata, write  # noqa: E402
 
@@ -42,6 +44,22 @@ def nan_weights(path: Path) -> None:
     write(
         path,
         {"metadata.npy": metadata_bytes(metadata), **{f"array/{k}.npy": npy(v) for k, v in arrays.items()}},
+    )
+
+
+def four_lane_paper_model(path: Path) -> None:
+    """A model on the paper's state (every road lane, binary lane code), trained for 4 lanes: its
+    observation size depends on the lane count, so a 2-lane road must be refused."""
+    arrays, metadata = shipped()
+    grid = {**metadata["grid"], "lanes": "absolute", "lane_code": "binary", "features": []}
+    size = int(OccupancyGridBuilder(GridConfig(**grid)).space("observation", 4).shape[0])
+    arrays["0.weight"] = np.zeros((arrays["0.weight"].shape[0], size), dtype=arrays["0.weight"].dtype)
+    write(
+        path,
+        {
+            "metadata.npy": metadata_bytes({**metadata, "grid": grid, "observation_size": size}),
+            **{f"array/{k}.npy": npy(v) for k, v in arrays.items()},
+        },
     )
 
 
@@ -147,7 +165,16 @@ def cases(folder: Path) -> dict[str, list[str]]:
         checkpoint_folder(content)(run := folder / name.replace(" ", "-"))
         found[f"train --resume from {name}"] = ["train", "--resume", str(run), "--no-progress"]
     found["unknown scenario"] = ["run", "--scenario", "moon"]
-    found["the shipped model on a 2-lane road"] = ["run", "--set", "highway.lanes_count=2"]
+    four_lane_paper_model(paper := folder / "paper-4-lanes.npz")
+    found["a 4-lane paper-state model on a 2-lane road"] = [
+        "run",
+        "--agent",
+        "ddqn",
+        "--model",
+        str(paper),
+        "--set",
+        "highway.lanes_count=2",
+    ]
     return found
 
 

@@ -109,3 +109,19 @@ def test_an_unforeseen_failure_is_one_line_pointing_at_debug(capsys):
     )
     with pytest.raises(RuntimeError):
         guarded(broken, ["--debug"])
+
+
+def test_train_refuses_an_output_file_before_importing_torch(tmp_path):
+    import subprocess
+    import sys
+
+    existing = tmp_path / "results.txt"
+    existing.write_text("keep me")
+    probe = (
+        "import sys\nfrom stack.apps.cli import app\n"
+        f"try:\n    app(['train', '--out', {str(existing)!r}])\n"
+        "except SystemExit as stop:\n"
+        "    print(stop.code, 'torch' in sys.modules, 'stable_baselines3' in sys.modules)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert result.stdout.split() == ["2", "False", "False"], result.stderr

@@ -46,7 +46,10 @@ def check_memory(config: RunConfig) -> None:
 
 
 def check_init_model(config: RunConfig) -> None:
-    """Refuse, before the run folder exists, a `train.init_model` that does not fit the run."""
+    """Refuse, before the run folder exists, a `train.init_model` that does not fit the run (torch
+    and SB3 are imported only when there is one to check)."""
+    if config.train.init_model is None:
+        return
     from planner.model_file import ModelFileError
     from stack.apps.train_model import initial_model
 
