@@ -324,8 +324,8 @@ def test_compare_resume_refuses_a_folder_without_its_comparison_and_an_oversized
     arguments = ["compare", "-c", str(tiny_config_file(tmp_path)), "--agents", "keep-lane", "--episodes", "2"]
     out = tmp_path / "out"
     for extra, message in (
-        ([], "error: --resume: name the interrupted comparison's folder with --out"),
-        (["--out", str(out)], f"error: --resume: {out} holds no comparison (no config.yaml)"),
+        ([], "error: --resume: name the folder of the interrupted run with --out"),
+        (["--out", str(out)], f"error: --resume: {out} holds no run to resume (no config.yaml)"),
     ):
         result = CliRunner().invoke(app, [*arguments, *extra, "--resume"])
         assert result.exit_code == 2 and result.output.startswith(message), result.output

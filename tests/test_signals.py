@@ -1,6 +1,7 @@
 """Nothing finished is lost: SIGTERM or Ctrl-C, once or twice, during `run` and `compare` leaves
 every finished episode readable (journaled as it finishes, results written whole) and exits 130."""
 
+import csv
 import json
 import signal
 import subprocess
@@ -37,11 +38,21 @@ def stopped_after_first_episode(arguments: list[str], journal: Path, sig: signal
     return process.returncode
 
 
+def untimed(path: Path) -> dict:
+    return {k: v for k, v in json.loads(path.read_text()).items() if not k.startswith(("solve_ms", "wall"))}
+
+
+def untimed_rows(path: Path) -> list[dict]:
+    rows = csv.DictReader(path.open())
+    return [{k: v for k, v in row.items() if not k.startswith("solve_ms")} for row in rows]
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
-def test_a_stopped_run_keeps_its_finished_episodes(tmp_path, sig):
+def test_a_stopped_run_keeps_its_finished_episodes_and_resume_finishes_it(tmp_path, sig):
     out = tmp_path / "run"
-    arguments = ["run", "--agent", "keep-lane", "--episodes", "40", "--out", str(out), *SHORT]
-    assert stopped_after_first_episode(arguments, out / "episodes.partial.jsonl", sig) == 130
+    arguments = ["run", "--agent", "keep-lane", "--episodes", "40", *SHORT]
+    journal = out / "keep-lane.episodes.partial.jsonl"
+    assert stopped_after_first_episode([*arguments, "--out", str(out)], journal, sig) == 130
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] and 1 <= summary["episodes"] < 40
     assert len((out / "episodes.csv").read_text().splitlines()) == summary["episodes"] + 1
@@ -49,9 +60,18 @@ def test_a_stopped_run_keeps_its_finished_episodes(tmp_path, sig):
         "config.yaml",
         "episodes.csv",
         "grid.png",
+        journal.name,
         "summary.json",
         "traces.png",
     ]
+    other = CliRunner().invoke(app, [*arguments, "--seed", "5", "--out", str(out), "--resume"])
+    assert other.exit_code == 2 and "is another run's" in other.output
+    resumed = CliRunner().invoke(app, [*arguments, "--out", str(out), "--resume"])
+    assert resumed.exit_code == 0 and not journal.exists(), resumed.output
+    whole = CliRunner().invoke(app, [*arguments, "--out", str(tmp_path / "whole")])
+    assert whole.exit_code == 0, whole.output
+    assert untimed(out / "summary.json") == untimed(tmp_path / "whole" / "summary.json")
+    assert untimed_rows(out / "episodes.csv") == untimed_rows(tmp_path / "whole" / "episodes.csv")
 
 
 def test_a_stopped_comparison_keeps_the_agents_run_so_far_and_resume_finishes_it(tmp_path, monkeypatch):
@@ -68,7 +88,7 @@ def test_a_stopped_comparison_keeps_the_agents_run_so_far_and_resume_finishes_it
     assert (
         other.exit_code == 2
         and other.output.startswith("error: --resume: ")
-        and "another comparison" in other.output
+        and "is another run's" in other.output
     )
     with journal.open("a") as handle:
         handle.write('{"episode": 3, "seed": 1, "ste')

@@ -26,9 +26,12 @@ from stack.apps.options import (
     output_folder,
     per_agent,
     ray_or_fail,
+    resumed,
     until_interrupted,
 )
 from stack.apps.training import check_init_model, check_memory, train_or_fail
+
+RESUME_HELP = "Finish the interrupted run in --out (same arguments): its finished episodes are kept."
 
 app = typer.Typer(
     add_completion=False,
@@ -68,6 +71,7 @@ def run(
     ray: str | None = RAY_OPTION,
     progress: bool = typer.Option(True, help="Show a progress bar."),
     beside: str | None = typer.Option(None, help="Also run this agent on the same seeds, then both."),
+    resume: bool = typer.Option(False, help=RESUME_HELP),
 ) -> None:
     """Run seeded closed-loop episodes and write a results folder."""
     if beside is not None and beside not in AGENT_NAMES:
@@ -85,10 +89,11 @@ def run(
         seed=seed,
     )
     ray_or_fail(ray)
+    done = resumed(cfgs, out) if resume else None
     folder = checked_run(cfgs, out, "run")
     from stack.apps.run import run_and_report
 
-    until_interrupted(lambda: run_and_report(cfgs, folder, video, jobs, progress, ray))
+    until_interrupted(lambda: run_and_report(cfgs, folder, video, jobs, progress, ray, done))
 
 
 @app.command()
@@ -138,9 +143,7 @@ def compare(
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
     ray: str | None = RAY_OPTION,
     out: Path | None = typer.Option(None, help="Results folder (default: runs/compare-<time>)."),
-    resume: bool = typer.Option(
-        False, help="Finish the interrupted comparison in --out (same arguments): its episodes are kept."
-    ),
+    resume: bool = typer.Option(False, help=RESUME_HELP),
     progress: bool = typer.Option(True, help="Show progress bars."),
 ) -> None:
     """Every agent on the same seeded episodes: one table, one bar plot."""
@@ -156,17 +159,10 @@ def compare(
         config, sets, pairs, scenario=scenario, sim__plant=plant, episodes=episodes, seed=seed
     )
     ray_or_fail(ray)
-    from stack.apps.compare import compare_and_report, resumable
-
-    done = None
-    if resume:
-        if out is None:
-            fail("--resume: name the interrupted comparison's folder with --out")
-        try:
-            done = resumable(configs, out)
-        except ValueError as error:
-            fail(str(error))
+    done = resumed(configs, out) if resume else None
     folder = checked_run(configs, out, "compare")
+    from stack.apps.compare import compare_and_report
+
     until_interrupted(lambda: compare_and_report(configs, folder, jobs, progress, baseline, ray, done))
 
 

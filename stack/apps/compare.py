@@ -84,25 +84,26 @@ def compare(
     return runs
 
 
-def comparison_config(configs: list[RunConfig]) -> str:
-    """The config.yaml of a comparison: the resolved config and, first, the agents and models."""
+def resolved_config(configs: list[RunConfig]) -> str:
+    """The config.yaml of a run or comparison of `configs`, written when it starts (so `--resume`
+    can tell it is the same): the resolved config and, first, the agents and models."""
     agents = ", ".join(
         c.planner.agent + (f" ({c.planner.model})" if c.planner.model else "") for c in configs
     )
-    return config_text(configs[0], f"the resolved config; agents compared: {agents}")
+    return config_text(configs[0], f"the resolved config; agents: {agents}")
 
 
 def resumable(configs: list[RunConfig], out: Path) -> dict[str, list[EpisodeResult]]:
-    """Per agent, the episodes the interrupted comparison in `out` finished: that comparison's
-    config.yaml (written when it started) must be the one `configs` write, and each journaled
-    episode one of theirs (its number in range, its seed the one that number gets). ValueError,
-    naming the file, when `out` holds another comparison or none."""
-    stored, expected = out / "config.yaml", comparison_config(configs)
+    """Per agent, the episodes the interrupted run or comparison in `out` finished: its
+    config.yaml must be the one `configs` write, and each journaled episode one of theirs (its
+    number in range, its seed the one that number gets). ValueError, naming the file, when `out`
+    holds another run or none."""
+    stored, expected = out / "config.yaml", resolved_config(configs)
     if not stored.is_file():
-        raise ValueError(f"--resume: {out} holds no comparison (no config.yaml)")
+        raise ValueError(f"--resume: {out} holds no run to resume (no config.yaml)")
     if stored.stat().st_size != len(expected.encode()) or stored.read_text() != expected:
         raise ValueError(
-            f"--resume: {stored} is another comparison's (other agents, models or config); "
+            f"--resume: {stored} is another run's (other agents, models or config); "
             "resume with the arguments that started it"
         )
     done: dict[str, list[EpisodeResult]] = {}
@@ -118,7 +119,7 @@ def resumable(configs: list[RunConfig], out: Path) -> dict[str, list[EpisodeResu
 
 
 def journal_of(config: RunConfig, out: Path) -> EpisodeJournal:
-    """Where the finished episodes of `config`'s agent are kept while a comparison runs."""
+    """Where the finished episodes of `config`'s agent are kept while a run or comparison goes on."""
     return EpisodeJournal(out / f"{config.planner.agent}.{JOURNAL}")
 
 
@@ -148,7 +149,7 @@ def compare_and_report(
     """Run every config, write `out` (comparison.json, comparison.png), print the table; True
     when Ctrl-C cut the comparison short (the agents run so far are written, the journals kept
     for `--resume`). `done`: the episodes resumed (`resumable`)."""
-    write_text(out / "config.yaml", comparison_config(configs))
+    write_text(out / "config.yaml", resolved_config(configs))
     runs = compare(configs, out, jobs=jobs, progress=progress, ray=ray, done=done)
     interrupted = len(runs) < len(configs) or bool(runs[-1].summary["interrupted"])
     rows = comparison(runs, baseline)

@@ -20,6 +20,7 @@ from stack.core.interrupts import catch_signals, received
 
 if TYPE_CHECKING:
     from stack.core.config import RunConfig
+    from stack.core.metrics import EpisodeResult
 
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
@@ -198,6 +199,18 @@ def _print_version(value: bool) -> None:
 
         typer.echo(f"drivestack {version('drivestack')}")
         raise typer.Exit()
+
+
+def resumed(configs: list[RunConfig], out: Path | None) -> dict[str, list[EpisodeResult]]:
+    """`--resume`: the episodes the interrupted run in `out` finished, per agent (`resumable`)."""
+    from stack.apps.compare import resumable
+
+    if out is None:
+        fail("--resume: name the folder of the interrupted run with --out")
+    try:
+        return resumable(configs, out)
+    except ValueError as error:
+        fail(str(error))
 
 
 def until_interrupted(work: Callable[[], bool]) -> None:

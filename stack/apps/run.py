@@ -12,11 +12,11 @@ from rich.console import Console
 from rich.table import Table
 
 from perception.plot import plot_grid_over_road
-from stack.apps.compare import comparison, markdown
+from stack.apps.compare import comparison, journal_of, markdown, resolved_config
 from stack.core.closed_loop import VIDEO_FRAME_TICKS
-from stack.core.config import RunConfig, write_config
+from stack.core.config import RunConfig
 from stack.core.episodes import run
-from stack.core.files import JOURNAL, EpisodeJournal, replacing, write_csv, write_json
+from stack.core.files import replacing, write_csv, write_json, write_text
 from stack.core.interrupts import deferred
 from stack.core.metrics import EpisodeResult
 
@@ -28,29 +28,37 @@ real time."""
 
 
 def run_and_report(
-    configs: list[RunConfig], out: Path, video: bool, jobs: int, progress: bool, ray: str | None = None
+    configs: list[RunConfig],
+    out: Path,
+    video: bool,
+    jobs: int,
+    progress: bool,
+    ray: str | None = None,
+    done: dict[str, list[EpisodeResult]] | None = None,
 ) -> bool:
     """Run the first config's episodes (over `jobs` processes, or Ray tasks at address `ray`),
     write `out`, print the tables; True when Ctrl-C cut the run short (the finished episodes are
-    written, each journaled as it finished). Raises KeyboardInterrupt if none finished. A second
-    config (`--beside AGENT`) then drives the same seeds: `beside.json` and a table hold both
-    agents with the paired difference to it."""
-    config = configs[0]
-    journal = EpisodeJournal(out / JOURNAL)
-    results = run(config, video, progress, jobs, ray, on_finished=journal.record)
+    written, and kept journaled for `--resume`). Raises KeyboardInterrupt if none finished. A
+    second config (`--beside AGENT`) then drives the same seeds: `beside.json` and a table hold
+    both agents with the paired difference to it. `done`: the episodes resumed (`resumable`)."""
+    write_text(out / "config.yaml", resolved_config(configs))
+    journals = [journal_of(config, out) for config in configs]
+    finished = [(done or {}).get(config.planner.agent, []) for config in configs]
+    results = run(configs[0], video, progress, jobs, ray, on_finished=journals[0].record, done=finished[0])
     with deferred(interrupt_after=False):
         write_results(out, results.summary, results.episodes, results.frames)
-        write_config(config, out / "config.yaml", "the resolved config of this run")
-        journal.discard()
     print_tables(results.summary, results.episodes)
     interrupted = bool(results.summary["interrupted"])
     if len(configs) > 1 and not interrupted:
-        beside = run(configs[1], progress=progress, jobs=jobs, ray=ray)
+        beside = run(configs[1], False, progress, jobs, ray, on_finished=journals[1].record, done=finished[1])
         interrupted = bool(beside.summary["interrupted"])
         rows = comparison([results, beside], baseline=configs[1].planner.agent)
         write_json(out / "beside.json", rows)
         print(markdown(rows), end="")
-    Console().print(f"results: {out}")
+    for journal in journals if not interrupted else []:
+        journal.discard()
+    stopped = " (interrupted: the same command with --resume finishes it)"
+    Console().print(f"results: {out}" + (stopped if interrupted else ""))
     return interrupted
 
 
@@ -61,8 +69,9 @@ def write_results(
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "summary.json", summary)
     write_csv(out / "episodes.csv", [episode.row() for episode in episodes])
-    with replacing(out / "traces.png") as path:
-        plot_traces(episodes, path, summary)
+    if any(episode.trace for episode in episodes):
+        with replacing(out / "traces.png") as path:
+            plot_traces(episodes, path, summary)
     if episodes[0].snapshot is not None:
         with replacing(out / "grid.png") as path:
             plot_grid_over_road(*episodes[0].snapshot, path)
@@ -79,13 +88,17 @@ FEW_EPISODES = 8
 
 def plot_traces(episodes: list[EpisodeResult], path: Path, summary: dict) -> None:
     """Ego speed and lateral motion over time: one line per episode for a few episodes; for many,
-    the median speed with its 10-90 % band and how many episodes are changing lane at each time."""
+    the median speed with its 10-90 % band and how many episodes are changing lane at each time.
+    Episodes resumed from a journal have no traces: the plot holds those run in this process."""
     figure, (speed_axis, lateral_axis) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
     first, last = episodes[0].seed, episodes[-1].seed
+    traced = [episode for episode in episodes if episode.trace]
+    resumed = f" (traces of the {len(traced)} run on --resume)" if len(traced) < len(episodes) else ""
     figure.suptitle(
         f"{summary['agent']} + {summary['controller']}, {summary.get('scenario') or 'configured world'}, "
-        f"{summary.get('plant', 'kinematic')} plant: {len(episodes)} episodes, seeds {first}-{last}"
+        f"{summary.get('plant', 'kinematic')} plant: {len(episodes)} episodes, seeds {first}-{last}{resumed}"
     )
+    episodes = traced
     if len(episodes) <= FEW_EPISODES:
         for episode in episodes:
             label = f"seed {episode.seed}" + (" (crash)" if episode.crashed else "")
