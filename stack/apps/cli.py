@@ -88,6 +88,8 @@ def run(
         episodes=episodes,
         seed=seed,
     )
+    if len(cfgs) > 1 and cfgs[1].planner.agent == cfgs[0].planner.agent:
+        fail(f"--beside: expected an agent other than the run's own ({cfgs[0].planner.agent})")
     ray_or_fail(ray)
     done = resumed(cfgs, out) if resume else None
     folder = checked_run(cfgs, out, "run")
@@ -152,6 +154,8 @@ def compare(
     except ValueError:
         fail(f"--models: expected name=path[,name=path], got {models!r}")
     names = [name for name in agents.split(",") if name]
+    if len(set(names)) < len(names):
+        fail(f"--agents: expected each agent once, got {agents!r}")
     if baseline is not None and baseline not in names:
         fail(f"--baseline: {baseline!r} is not among --agents ({', '.join(names)})")
     pairs = [(name, model_paths.get(name)) for name in names]

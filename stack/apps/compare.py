@@ -11,16 +11,14 @@ from typing import Any
 import matplotlib.pyplot as plt
 from matplotlib.axes import Axes
 
-from records import child_seed
-from stack.core.config import RunConfig, config_text
+from stack.apps.resume import journal_of, started
+from stack.core.config import RunConfig
 from stack.core.episodes import RunResults, run
-from stack.core.files import JOURNAL, EpisodeJournal, save_figure, write_csv, write_json, write_text
+from stack.core.files import save_figure, write_csv, write_json
 from stack.core.interrupts import deferred
 from stack.core.metrics import EpisodeResult
 from stack.core.statistics import Interval, mean_interval, paired_difference, rate_interval
 
-JOURNAL_ROW_BYTES = 2_000
-"""Bytes one journaled episode takes at most (about 450 in practice): bounds what --resume reads."""
 MEANS = ("mean_speed", "lane_changes", "masked_commands", "aborted_changes")
 """Per-episode metrics reported as means over episodes (none can be negative)."""
 PANELS = (
@@ -64,9 +62,9 @@ def compare(
 ) -> list[RunResults]:
     """One run per config (one config per agent, the same episodes and seeds), over `jobs`
     processes or as Ray tasks at address `ray`, each finished episode journaled in `out` as it
-    finishes; `done` holds each agent's episodes an interrupted comparison finished (`resumable`).
-    Ctrl-C stops the comparison: the agents run so far are returned (the last one with the
-    episodes it finished); none raises KeyboardInterrupt."""
+    finishes; `done` holds each agent's episodes an interrupted comparison finished
+    (`stack.apps.resume.resumable`). Ctrl-C stops the comparison: the agents run so far are
+    returned (the last one with the episodes it finished); none raises KeyboardInterrupt."""
     runs: list[RunResults] = []
     for config in configs:
         journal = journal_of(config, out)
@@ -82,45 +80,6 @@ def compare(
         if runs[-1].summary["interrupted"]:
             break
     return runs
-
-
-def resolved_config(configs: list[RunConfig]) -> str:
-    """The config.yaml of a run or comparison of `configs`, written when it starts (so `--resume`
-    can tell it is the same): the resolved config and, first, the agents and models."""
-    agents = ", ".join(
-        c.planner.agent + (f" ({c.planner.model})" if c.planner.model else "") for c in configs
-    )
-    return config_text(configs[0], f"the resolved config; agents: {agents}")
-
-
-def resumable(configs: list[RunConfig], out: Path) -> dict[str, list[EpisodeResult]]:
-    """Per agent, the episodes the interrupted run or comparison in `out` finished: its
-    config.yaml must be the one `configs` write, and each journaled episode one of theirs (its
-    number in range, its seed the one that number gets). ValueError, naming the file, when `out`
-    holds another run or none."""
-    stored, expected = out / "config.yaml", resolved_config(configs)
-    if not stored.is_file():
-        raise ValueError(f"--resume: {out} holds no run to resume (no config.yaml)")
-    if stored.stat().st_size != len(expected.encode()) or stored.read_text() != expected:
-        raise ValueError(
-            f"--resume: {stored} is another run's (other agents, models or config); "
-            "resume with the arguments that started it"
-        )
-    done: dict[str, list[EpisodeResult]] = {}
-    for config in configs:
-        rows = journal_of(config, out).rows(JOURNAL_ROW_BYTES * config.episodes)
-        episodes = {e.episode: e for e in map(EpisodeResult.from_row, rows) if e is not None}
-        done[config.planner.agent] = [
-            e
-            for e in episodes.values()
-            if 0 <= e.episode < config.episodes and e.seed == child_seed(config.seed, e.episode)
-        ]
-    return done
-
-
-def journal_of(config: RunConfig, out: Path) -> EpisodeJournal:
-    """Where the finished episodes of `config`'s agent are kept while a run or comparison goes on."""
-    return EpisodeJournal(out / f"{config.planner.agent}.{JOURNAL}")
 
 
 def comparison(runs: list[RunResults], baseline: str | None = None) -> list[dict[str, Any]]:
@@ -148,8 +107,8 @@ def compare_and_report(
 ) -> bool:
     """Run every config, write `out` (comparison.json, comparison.png), print the table; True
     when Ctrl-C cut the comparison short (the agents run so far are written, the journals kept
-    for `--resume`). `done`: the episodes resumed (`resumable`)."""
-    write_text(out / "config.yaml", resolved_config(configs))
+    for `--resume`). `done`: the episodes resumed (`stack.apps.resume.resumable`)."""
+    started(configs, out, resuming=done is not None)
     runs = compare(configs, out, jobs=jobs, progress=progress, ray=ray, done=done)
     interrupted = len(runs) < len(configs) or bool(runs[-1].summary["interrupted"])
     rows = comparison(runs, baseline)

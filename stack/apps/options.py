@@ -203,7 +203,7 @@ def _print_version(value: bool) -> None:
 
 def resumed(configs: list[RunConfig], out: Path | None) -> dict[str, list[EpisodeResult]]:
     """`--resume`: the episodes the interrupted run in `out` finished, per agent (`resumable`)."""
-    from stack.apps.compare import resumable
+    from stack.apps.resume import resumable
 
     if out is None:
         fail("--resume: name the folder of the interrupted run with --out")

@@ -12,11 +12,12 @@ from rich.console import Console
 from rich.table import Table
 
 from perception.plot import plot_grid_over_road
-from stack.apps.compare import comparison, journal_of, markdown, resolved_config
+from stack.apps.compare import comparison, markdown
+from stack.apps.resume import started
 from stack.core.closed_loop import VIDEO_FRAME_TICKS
 from stack.core.config import RunConfig
 from stack.core.episodes import run
-from stack.core.files import replacing, write_csv, write_json, write_text
+from stack.core.files import replacing, write_csv, write_json
 from stack.core.interrupts import deferred
 from stack.core.metrics import EpisodeResult
 
@@ -40,23 +41,30 @@ def run_and_report(
     write `out`, print the tables; True when Ctrl-C cut the run short (the finished episodes are
     written, and kept journaled for `--resume`). Raises KeyboardInterrupt if none finished. A
     second config (`--beside AGENT`) then drives the same seeds: `beside.json` and a table hold
-    both agents with the paired difference to it. `done`: the episodes resumed (`resumable`)."""
-    write_text(out / "config.yaml", resolved_config(configs))
-    journals = [journal_of(config, out) for config in configs]
+    both agents with the paired difference to it. `done`: the episodes resumed
+    (`stack.apps.resume.resumable`)."""
+    journals = started(configs, out, resuming=done is not None)
     finished = [(done or {}).get(config.planner.agent, []) for config in configs]
     results = run(configs[0], video, progress, jobs, ray, on_finished=journals[0].record, done=finished[0])
     with deferred(interrupt_after=False):
         write_results(out, results.summary, results.episodes, results.frames)
     print_tables(results.summary, results.episodes)
     interrupted = bool(results.summary["interrupted"])
+    rows = None
     if len(configs) > 1 and not interrupted:
-        beside = run(configs[1], False, progress, jobs, ray, on_finished=journals[1].record, done=finished[1])
-        interrupted = bool(beside.summary["interrupted"])
-        rows = comparison([results, beside], baseline=configs[1].planner.agent)
-        write_json(out / "beside.json", rows)
+        try:
+            beside = run(configs[1], False, progress, jobs, ray, journals[1].record, finished[1])
+            interrupted = bool(beside.summary["interrupted"])
+            rows = comparison([results, beside], baseline=configs[1].planner.agent)
+        except KeyboardInterrupt:
+            interrupted = True
+    with deferred(interrupt_after=False):
+        if rows is not None:
+            write_json(out / "beside.json", rows)
+        for journal in journals if not interrupted else []:
+            journal.discard()
+    if rows is not None:
         print(markdown(rows), end="")
-    for journal in journals if not interrupted else []:
-        journal.discard()
     stopped = " (interrupted: the same command with --resume finishes it)"
     Console().print(f"results: {out}" + (stopped if interrupted else ""))
     return interrupted
@@ -93,7 +101,7 @@ def plot_traces(episodes: list[EpisodeResult], path: Path, summary: dict) -> Non
     figure, (speed_axis, lateral_axis) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
     first, last = episodes[0].seed, episodes[-1].seed
     traced = [episode for episode in episodes if episode.trace]
-    resumed = f" (traces of the {len(traced)} run on --resume)" if len(traced) < len(episodes) else ""
+    resumed = f" ({len(traced)} traced: those run after --resume)" if len(traced) < len(episodes) else ""
     figure.suptitle(
         f"{summary['agent']} + {summary['controller']}, {summary.get('scenario') or 'configured world'}, "
         f"{summary.get('plant', 'kinematic')} plant: {len(episodes)} episodes, seeds {first}-{last}{resumed}"

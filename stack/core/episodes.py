@@ -84,9 +84,10 @@ def run(
 ) -> RunResults:
     """Run `config.episodes` seeded episodes over `jobs` processes, or as Ray tasks with `ray` (an
     address, see `stack.core.executors`); results are ordered by episode, identical for any `jobs`
-    or `ray`. With `video`, the first episode runs here and keeps its frames. `done` are episodes
-    an earlier run of `config` finished: they count as they are and are not run again. Ctrl-C keeps
-    the finished episodes (`summary["interrupted"]`); `on_finished` sees each as it finishes."""
+    or `ray`. With `video`, episode 0 (unless done) runs here and keeps its frames. `done` are
+    episodes an earlier run of `config` finished: they count as they are and are not run again.
+    Ctrl-C keeps the finished episodes (`summary["interrupted"]`); `on_finished` sees each as it
+    finishes."""
     frames: list[np.ndarray] = []
     results: dict[int, EpisodeResult] = {episode.episode: episode for episode in done}
     pending = [episode for episode in range(config.episodes) if episode not in results]
@@ -101,7 +102,7 @@ def run(
             on_finished(result)
 
     try:
-        if video and pending:
+        if video and pending and pending[0] == 0:
             finished(run_episode(config, pending.pop(0), frames))
         for _, result in completed(partial(run_episode, config), pending, jobs, ray):
             finished(result)
