@@ -25,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 
 from perception.grid import OccupancyGridBuilder  # noqa: E402
 from planner.factory import SHIPPED_MODELS  # noqa: E402
-from planner.model_file import FORMAT  # noqa: E402
+from planner.model_file import FORMAT, save_model  # noqa: E402
 from records import GridConfig  # noqa: E402
 from tests.test_hostile_inputs import BOMB  # noqa: E402
 from tests.test_model_files import metadata_bytes, npy, shipped, with_metadata, write  # noqa: E402
@@ -41,10 +41,7 @@ def nan_weights(path: Path) -> None:
     arrays, metadata = shipped()
     arrays["0.weight"] = arrays["0.weight"].copy()
     arrays["0.weight"][0, 0] = np.nan
-    write(
-        path,
-        {"metadata.npy": metadata_bytes(metadata), **{f"array/{k}.npy": npy(v) for k, v in arrays.items()}},
-    )
+    save_model(path, arrays, metadata)
 
 
 def four_lane_paper_model(path: Path) -> None:
@@ -54,13 +51,7 @@ def four_lane_paper_model(path: Path) -> None:
     grid = {**metadata["grid"], "lanes": "absolute", "lane_code": "binary", "features": []}
     size = int(OccupancyGridBuilder(GridConfig(**grid)).space("observation", 4).shape[0])
     arrays["0.weight"] = np.zeros((arrays["0.weight"].shape[0], size), dtype=arrays["0.weight"].dtype)
-    write(
-        path,
-        {
-            "metadata.npy": metadata_bytes({**metadata, "grid": grid, "observation_size": size}),
-            **{f"array/{k}.npy": npy(v) for k, v in arrays.items()},
-        },
-    )
+    save_model(path, arrays, {**metadata, "grid": grid, "observation_size": size})
 
 
 def header_liar(path: Path) -> None:

@@ -11,7 +11,7 @@ import pytest
 
 from planner.factory import SHIPPED_MODELS
 from planner.learned import load_agent
-from planner.model_file import FORMAT, ModelFileError, load_model
+from planner.model_file import FORMAT, ModelFileError, load_model, save_model
 
 
 def npy(array: np.ndarray) -> bytes:
@@ -36,8 +36,7 @@ def write(path, members: dict[str, bytes], compression=zipfile.ZIP_DEFLATED) -> 
 
 def with_metadata(path, **changes) -> None:
     arrays, metadata = shipped()
-    members = {f"array/{name}.npy": npy(value) for name, value in arrays.items()}
-    write(path, {"metadata.npy": metadata_bytes({**metadata, **changes}), **members})
+    save_model(path, arrays, {**metadata, **changes})
 
 
 def peak_rss_mb() -> float:
@@ -119,9 +118,7 @@ def test_nan_weights_are_refused(tmp_path):
     arrays, metadata = shipped()
     arrays["0.weight"] = arrays["0.weight"].copy()
     arrays["0.weight"][0, 0] = np.nan
-    path = tmp_path / "nan.npz"
-    members = {f"array/{name}.npy": npy(value) for name, value in arrays.items()}
-    write(path, {"metadata.npy": metadata_bytes(metadata), **members})
+    path = save_model(tmp_path / "nan.npz", arrays, metadata)
     with pytest.raises(ModelFileError, match="array '0.weight' holds NaN or infinite values"):
         load_agent(path)
 
