@@ -10,11 +10,7 @@ from stack.core import episodes
 from stack.core.config import load_config
 from stack.core.episodes import run_episode
 from tests.test_cli import tiny_config_file
-
-
-def untimed(path) -> list[dict]:
-    rows = json.loads(path.read_text())
-    return [{k: v for k, v in row.items() if not k.startswith(("solve_ms", "wall"))} for row in rows]
+from tests.test_signals import untimed
 
 
 def test_a_run_beside_another_agent_resumes_each_agent_from_its_own_journal(tmp_path, monkeypatch):

@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 from stack.apps.cli import app
 from stack.core import episodes, interrupts
 from stack.core.files import EpisodeJournal, replacing, write_text
+from stack.core.metrics import outcome
 
 SHORT = ["--set", "highway.duration=4", "--set", "highway.vehicles_count=8", "--no-progress"]
 
@@ -38,13 +39,11 @@ def stopped_after_first_episode(arguments: list[str], journal: Path, sig: signal
     return process.returncode
 
 
-def untimed(path: Path) -> dict:
-    return {k: v for k, v in json.loads(path.read_text()).items() if not k.startswith(("solve_ms", "wall"))}
-
-
-def untimed_rows(path: Path) -> list[dict]:
-    rows = csv.DictReader(path.open())
-    return [{k: v for k, v in row.items() if not k.startswith("solve_ms")} for row in rows]
+def untimed(path: Path) -> list[dict]:
+    """The rows of a results file (summary.json, comparison.json, episodes.csv) without their
+    wall-clock timing fields (`outcome`)."""
+    loaded = list(csv.DictReader(path.open())) if path.suffix == ".csv" else json.loads(path.read_text())
+    return [outcome(row) for row in (loaded if isinstance(loaded, list) else [loaded])]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
@@ -71,7 +70,7 @@ def test_a_stopped_run_keeps_its_finished_episodes_and_resume_finishes_it(tmp_pa
     whole = CliRunner().invoke(app, [*arguments, "--out", str(tmp_path / "whole")])
     assert whole.exit_code == 0, whole.output
     assert untimed(out / "summary.json") == untimed(tmp_path / "whole" / "summary.json")
-    assert untimed_rows(out / "episodes.csv") == untimed_rows(tmp_path / "whole" / "episodes.csv")
+    assert untimed(out / "episodes.csv") == untimed(tmp_path / "whole" / "episodes.csv")
 
 
 def test_a_stopped_comparison_keeps_the_agents_run_so_far_and_resume_finishes_it(tmp_path, monkeypatch):
@@ -101,12 +100,9 @@ def test_a_stopped_comparison_keeps_the_agents_run_so_far_and_resume_finishes_it
     monkeypatch.undo()
     whole = CliRunner().invoke(app, [*arguments, "--out", str(tmp_path / "whole")])
     assert whole.exit_code == 0, whole.output
-
-    def untimed(folder: Path) -> list[dict]:
-        rows = json.loads((folder / "comparison.json").read_text())
-        return [{k: v for k, v in row.items() if not k.startswith("solve_ms")} for row in rows]
-
-    assert untimed(out) == untimed(tmp_path / "whole") and untimed(out)[1]["episodes"] == 30
+    resumed_rows = untimed(out / "comparison.json")
+    assert resumed_rows == untimed(tmp_path / "whole" / "comparison.json")
+    assert resumed_rows[1]["episodes"] == 30
 
 
 def test_a_second_signal_waits_for_the_results_being_written(monkeypatch):

@@ -108,7 +108,7 @@ def compare_and_report(
     """Run every config, write `out` (comparison.json, comparison.png), print the table; True
     when Ctrl-C cut the comparison short (the agents run so far are written, the journals kept
     for `--resume`). `done`: the episodes resumed (`stack.apps.resume.resumable`)."""
-    started(configs, out, resuming=done is not None)
+    journals = started(configs, out, resuming=done is not None)
     runs = compare(configs, out, jobs=jobs, progress=progress, ray=ray, done=done)
     interrupted = len(runs) < len(configs) or bool(runs[-1].summary["interrupted"])
     rows = comparison(runs, baseline)
@@ -117,8 +117,8 @@ def compare_and_report(
         write_csv(
             out / "episodes.csv", [{"agent": r.summary["agent"], **e.row()} for r in runs for e in r.episodes]
         )
-        for config in configs if not interrupted else []:
-            journal_of(config, out).discard()
+        for journal in journals if not interrupted else []:
+            journal.discard()
     print(markdown(rows), end="")
     stopped = " (interrupted: the agents run so far; the same command with --resume finishes it)"
     print(f"results: {out}" + (stopped if interrupted else ""))
