@@ -11,10 +11,10 @@ from typing import Any
 import matplotlib.pyplot as plt
 from matplotlib.axes import Axes
 
-from stack.apps.resume import journal_of, started
+from stack.apps.resume import started
 from stack.core.config import RunConfig
 from stack.core.episodes import RunResults, run
-from stack.core.files import save_figure, write_csv, write_json
+from stack.core.files import EpisodeJournal, save_figure, write_csv, write_json
 from stack.core.interrupts import deferred
 from stack.core.metrics import EpisodeResult
 from stack.core.statistics import Interval, mean_interval, paired_difference, rate_interval
@@ -54,20 +54,19 @@ def differences(results: RunResults, baseline: RunResults) -> dict[str, Interval
 
 def compare(
     configs: list[RunConfig],
-    out: Path,
+    journals: list[EpisodeJournal],
     jobs: int = 1,
     progress: bool = True,
     ray: str | None = None,
     done: dict[str, list[EpisodeResult]] | None = None,
 ) -> list[RunResults]:
     """One run per config (one config per agent, the same episodes and seeds), over `jobs`
-    processes or as Ray tasks at address `ray`, each finished episode journaled in `out` as it
-    finishes; `done` holds each agent's episodes an interrupted comparison finished
+    processes or as Ray tasks at address `ray`, each finished episode recorded in its agent's
+    journal as it finishes; `done` holds each agent's episodes an interrupted comparison finished
     (`stack.apps.resume.resumable`). Ctrl-C stops the comparison: the agents run so far are
     returned (the last one with the episodes it finished); none raises KeyboardInterrupt."""
     runs: list[RunResults] = []
-    for config in configs:
-        journal = journal_of(config, out)
+    for config, journal in zip(configs, journals, strict=True):
         finished = (done or {}).get(config.planner.agent, [])
         try:
             runs.append(
@@ -109,7 +108,7 @@ def compare_and_report(
     when Ctrl-C cut the comparison short (the agents run so far are written, the journals kept
     for `--resume`). `done`: the episodes resumed (`stack.apps.resume.resumable`)."""
     journals = started(configs, out, resuming=done is not None)
-    runs = compare(configs, out, jobs=jobs, progress=progress, ray=ray, done=done)
+    runs = compare(configs, journals, jobs=jobs, progress=progress, ray=ray, done=done)
     interrupted = len(runs) < len(configs) or bool(runs[-1].summary["interrupted"])
     rows = comparison(runs, baseline)
     with deferred(interrupt_after=False):

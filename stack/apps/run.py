@@ -106,9 +106,8 @@ def plot_traces(episodes: list[EpisodeResult], path: Path, summary: dict) -> Non
         f"{summary['agent']} + {summary['controller']}, {summary.get('scenario') or 'configured world'}, "
         f"{summary.get('plant', 'kinematic')} plant: {len(episodes)} episodes, seeds {first}-{last}{resumed}"
     )
-    episodes = traced
-    if len(episodes) <= FEW_EPISODES:
-        for episode in episodes:
+    if len(traced) <= FEW_EPISODES:
+        for episode in traced:
             label = f"seed {episode.seed}" + (" (crash)" if episode.crashed else "")
             speed_axis.plot(episode.trace["time"], episode.trace["speed"], label=label)
             lateral_axis.plot(episode.trace["time"], episode.trace["d"])
@@ -116,11 +115,11 @@ def plot_traces(episodes: list[EpisodeResult], path: Path, summary: dict) -> Non
         lateral_axis.invert_yaxis()
         speed_axis.legend(loc="lower right", fontsize="small", ncol=4)
     else:
-        longest = max(episodes, key=lambda e: len(e.trace["time"]))
+        longest = max(traced, key=lambda e: len(e.trace["time"]))
         time = np.asarray(longest.trace["time"])
-        speed = np.full((len(episodes), len(time)), np.nan)
+        speed = np.full((len(traced), len(time)), np.nan)
         lateral_speed = np.full_like(speed, np.nan)
-        for row, episode in enumerate(episodes):
+        for row, episode in enumerate(traced):
             ticks = len(episode.trace["time"])
             speed[row, :ticks] = episode.trace["speed"]
             lateral_speed[row, 1:ticks] = np.abs(np.diff(episode.trace["d"])) / np.diff(time[:ticks])
