@@ -1,14 +1,22 @@
-"""Double DQN (van Hasselt et al., 2016) on stable-baselines3: `DQN` with `train()` overridden.
+"""Double DQN (van Hasselt et al., 2016) on stable-baselines3: `DQN` with `train()` overridden,
+optionally learning from an expert's demonstrations as DQfD does (Hester et al., 2018).
 
-The only change is the TD target: the online network picks the next action, the target network
-evaluates it, y = r + gamma * (1 - done) * Q_target(s', argmax_a Q_online(s', a)).
+The TD target: the online network picks the next action, the target network evaluates it,
+y = r + gamma * (1 - done) * Q_target(s', argmax_a Q_online(s', a)). With demonstrations, a share
+of every batch is drawn from them and those rows add DQfD's large-margin loss,
+max_a [Q(s, a) + margin * (a != a_E)] - Q(s, a_E), which keeps the expert's action ahead of the
+others by `margin`; `pretrain` takes gradient steps on demonstrations alone before any episode.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
+from typing import Any, NamedTuple
+
 import numpy as np
 import torch as th
 from stable_baselines3 import DQN
+from stable_baselines3.common.utils import polyak_update
 from torch.nn import functional as F
 
 
@@ -25,33 +33,181 @@ def double_q_target(
     return rewards + (1 - dones) * discounts * next_values
 
 
+def margin_loss(q_values: th.Tensor, expert_actions: th.Tensor, margin: float) -> th.Tensor:
+    """DQfD's supervised loss, mean over the batch: how far the best action, with every action but
+    the expert's (shape (batch, 1)) raised by `margin`, lies above the expert's action's value."""
+    raised = q_values + margin * (1 - F.one_hot(expert_actions.reshape(-1), q_values.shape[1]).float())
+    return (raised.max(dim=1).values - th.gather(q_values, 1, expert_actions).reshape(-1)).mean()
+
+
+class Batch(NamedTuple):
+    """Transitions as the loss takes them: every tensor has one row per transition; `rewards` are
+    n-step returns and `discounts` gamma^k for the k steps they sum."""
+
+    observations: th.Tensor
+    actions: th.Tensor
+    next_observations: th.Tensor
+    dones: th.Tensor
+    rewards: th.Tensor
+    discounts: th.Tensor
+
+
+@dataclass
+class Demonstrations:
+    """An expert's transitions with n-step returns (fewer steps where its episode ended): row i is
+    an observation, the expert's action there, the discounted reward of the next k <= n steps, the
+    observation k steps later, whether the episode terminated within them and gamma^k."""
+
+    observations: np.ndarray
+    actions: np.ndarray
+    rewards: np.ndarray
+    next_observations: np.ndarray
+    dones: np.ndarray
+    discounts: np.ndarray
+
+    @classmethod
+    def from_episode(
+        cls,
+        observations: np.ndarray,
+        actions: np.ndarray,
+        rewards: np.ndarray,
+        terminated: bool,
+        gamma: float,
+        n_steps: int,
+    ) -> Demonstrations:
+        """One episode of T decisions: T + 1 observations, T actions and rewards; `terminated`
+        when it ended in a crash (a time limit bootstraps from the last observation)."""
+        steps = len(actions)
+        ends = np.minimum(np.arange(steps) + n_steps, steps)
+        returns = np.array(
+            [sum(gamma**k * rewards[t + k] for k in range(end - t)) for t, end in enumerate(ends)]
+        )
+        return cls(
+            observations[:steps].astype(np.float32),
+            np.asarray(actions, dtype=np.int64),
+            returns.astype(np.float32),
+            observations[ends].astype(np.float32),
+            ((ends == steps) & terminated).astype(np.float32),
+            (gamma ** (ends - np.arange(steps))).astype(np.float32),
+        )
+
+    @classmethod
+    def concatenate(cls, parts: list[Demonstrations]) -> Demonstrations:
+        return cls(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)))
+
+    def __len__(self) -> int:
+        return len(self.actions)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray], observation_size: int, actions: int) -> Demonstrations:
+        """The demonstrations `arrays()` gave (a checkpoint's), checked: every field, one row per
+        transition, observations of `observation_size` values, actions below `actions`, all finite;
+        ValueError otherwise."""
+        names = [f.name for f in fields(cls)]
+        if sorted(arrays) != sorted(names):
+            raise ValueError(f"demonstrations hold {sorted(arrays)}, expected {names}")
+        rows = len(arrays["actions"])
+        shapes = {name: (rows, observation_size) if "observations" in name else (rows,) for name in names}
+        for name, shape in shapes.items():
+            if arrays[name].shape != shape or not np.isfinite(arrays[name]).all():
+                raise ValueError(f"demonstrations/{name}: expected {shape} finite values")
+        if rows == 0 or not ((arrays["actions"] >= 0) & (arrays["actions"] < actions)).all():
+            raise ValueError(f"demonstrations/actions: expected at least one, each in [0, {actions})")
+        return cls(**{name: np.asarray(arrays[name]) for name in names})
+
+    def sample(self, size: int) -> Batch:
+        """`size` rows drawn with replacement from numpy's global generator (SB3's replay buffer
+        draws from it too, and checkpoints keep its state)."""
+        rows = np.random.randint(0, len(self), size=size)
+
+        def column(values: np.ndarray) -> th.Tensor:
+            return th.as_tensor(values[rows]).reshape(size, -1)
+
+        return Batch(
+            column(self.observations),
+            column(self.actions),
+            column(self.next_observations),
+            column(self.dones),
+            column(self.rewards),
+            column(self.discounts),
+        )
+
+
 class DoubleDQN(DQN):
-    """SB3's DQN with the Double-DQN target."""
+    """SB3's DQN with the Double-DQN target. Once `demonstrations` are set, `demonstration_share`
+    of every batch is drawn from them, with DQfD's margin loss (`margin`, weight `margin_weight`)."""
+
+    def __init__(
+        self,
+        *args: Any,
+        demonstration_share: float = 0.25,
+        margin: float = 0.8,
+        margin_weight: float = 1.0,
+        **kwargs: Any,
+    ) -> None:
+        self.demonstrations: Demonstrations | None = None
+        self.demonstration_share, self.margin, self.margin_weight = demonstration_share, margin, margin_weight
+        super().__init__(*args, **kwargs)
+
+    def pretrain(self, gradient_steps: int, batch_size: int) -> float:
+        """Gradient steps on demonstrations alone (DQfD's pre-training), the target network
+        copied every `target_update_interval` of them; the last step's loss."""
+        assert self.demonstrations is not None, "pretraining needs demonstrations"
+        self.policy.set_training_mode(True)
+        loss = float("nan")
+        for step in range(1, gradient_steps + 1):
+            loss = self._gradient_step(self.demonstrations.sample(batch_size), batch_size)
+            if step % self.target_update_interval == 0:
+                polyak_update(self.q_net.parameters(), self.q_net_target.parameters(), 1.0)
+        polyak_update(self.q_net.parameters(), self.q_net_target.parameters(), 1.0)
+        return loss
 
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
+        demonstrated = round(batch_size * self.demonstration_share) if self.demonstrations else 0
         losses = []
         for _ in range(gradient_steps):
-            replay_data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
-            discounts = replay_data.discounts if replay_data.discounts is not None else self.gamma
-            with th.no_grad():
-                target_q_values = double_q_target(
-                    replay_data.rewards,
-                    replay_data.dones,
-                    discounts,
-                    self.q_net(replay_data.next_observations),
-                    self.q_net_target(replay_data.next_observations),
-                )
-            current_q_values = th.gather(
-                self.q_net(replay_data.observations), dim=1, index=replay_data.actions.long()
+            replay = self.replay_buffer.sample(batch_size - demonstrated, env=self._vec_normalize_env)  # type: ignore[union-attr]
+            discounts = replay.discounts if replay.discounts is not None else th.full_like(replay.rewards, self.gamma)
+            batch = Batch(
+                replay.observations,
+                replay.actions.long(),
+                replay.next_observations,
+                replay.dones,
+                replay.rewards,
+                discounts,
             )
-            loss = F.smooth_l1_loss(current_q_values, target_q_values)
-            losses.append(loss.item())
-            self.policy.optimizer.zero_grad()
-            loss.backward()
-            th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
-            self.policy.optimizer.step()
+            if demonstrated:
+                expert = self.demonstrations.sample(demonstrated)  # type: ignore[union-attr]
+                batch = Batch(*(th.cat([ours, theirs]) for ours, theirs in zip(batch, expert, strict=True)))
+            losses.append(self._gradient_step(batch, demonstrated))
         self._n_updates += gradient_steps
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/loss", np.mean(losses))
+
+    def _gradient_step(self, batch: Batch, demonstrated: int) -> float:
+        """One Adam step on the TD loss of `batch`, plus the margin loss on its last
+        `demonstrated` rows (the expert's)."""
+        with th.no_grad():
+            target_q_values = double_q_target(
+                batch.rewards,
+                batch.dones,
+                batch.discounts,
+                self.q_net(batch.next_observations),
+                self.q_net_target(batch.next_observations),
+            )
+        q_values = self.q_net(batch.observations)
+        loss = F.smooth_l1_loss(th.gather(q_values, dim=1, index=batch.actions), target_q_values)
+        if demonstrated:
+            loss = loss + self.margin_weight * margin_loss(
+                q_values[-demonstrated:], batch.actions[-demonstrated:], self.margin
+            )
+        self.policy.optimizer.zero_grad()
+        loss.backward()
+        th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
+        self.policy.optimizer.step()
+        return float(loss.item())

@@ -106,6 +106,12 @@ class RealTimeValidation(BaseCallback):
         elif due(self.short_every) and self.run_validation("short", self.short_episodes).improved:
             self.run_validation("long", self.long_episodes)
 
+    def validate_start(self, model: Any) -> Validation:
+        """Validate the model training starts from (pre-trained, say) on the long period, at
+        step 0: it is the first candidate to keep."""
+        self.model, self.num_timesteps = model, 0
+        return self.run_validation("long", self.long_episodes)
+
     def run_validation(self, period: str, episodes: int) -> Validation:
         """Validate now; `improved` in the result means it beat the best score of its period."""
         collision_rate, mean_return, mean_speed = validate(self.model.predict, self.env, episodes, self.seed)

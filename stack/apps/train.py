@@ -25,6 +25,7 @@ from planner.model_file import CHECKPOINT, ModelFileError, load_checkpoint, save
 from planner.tabular import QLearning
 from planner.validation import RealTimeValidation, Validation
 from records import child_seed
+from stack.apps.demonstrations import start_from_demonstrations
 from stack.apps.train_model import (
     Checkpoints,
     StopTraining,
@@ -153,6 +154,8 @@ class Trainer:
         elif self.start is not None:
             warm_start(self.model, self.start)
         self.validation = self._validation_callback(export_q_network)
+        if not resumed and self.config.train.demonstrations is not None:
+            start_from_demonstrations(self.model, self.config, self.validation, self.progress)  # type: ignore[arg-type]
         checkpoints = Checkpoints(
             self.config.train.checkpoint_every, self._save_checkpoint, lambda: self.stop_requested
         )

@@ -98,7 +98,16 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
     th.set_num_threads(1)
     train = config.train
     algorithm = ALGORITHMS[train.algorithm]
-
+    demonstrations = train.demonstrations
+    learning_from_demonstrations = (
+        {}
+        if demonstrations is None
+        else {
+            "demonstration_share": demonstrations.share,
+            "margin": demonstrations.margin,
+            "margin_weight": demonstrations.margin_weight,
+        }
+    )
     return algorithm(
         "MlpPolicy",
         env,
@@ -119,6 +128,7 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
         seed=config.seed,
         verbose=0,
         device="cpu",
+        **learning_from_demonstrations,
     )
 
 

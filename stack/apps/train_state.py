@@ -13,6 +13,7 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 
+from planner.ddqn import Demonstrations, DoubleDQN
 from planner.tabular import QLearning
 from records import N_ACTIONS
 from stack.core.decision_env import EpisodeRecord
@@ -24,7 +25,7 @@ BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "don
 
 def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], dict]:
     """(arrays, counters) of `model`, for a safe model file: networks, optimizer, replay buffer,
-    the counters SB3 schedules by, numpy's global generator (exploration and replay sampling draw
+    the counters SB3 schedules by, the demonstrations learnt from, numpy's global generator (exploration and replay sampling draw
     from it), the action space's generator (random actions before learning starts) and each env's
     episode under way."""
     arrays = {f"q/{k}": v.cpu().numpy() for k, v in model.policy.q_net.state_dict().items()}
@@ -37,6 +38,8 @@ def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], dict]:
     assert buffer is not None, "SB3 builds the replay buffer with the model"
     for name in BUFFER_FIELDS:
         arrays[f"buffer/{name}"] = getattr(buffer, name)
+    if isinstance(model, DoubleDQN) and model.demonstrations is not None:
+        arrays |= {f"demonstrations/{k}": v for k, v in model.demonstrations.arrays().items()}
     _, arrays["random/numpy_keys"], *numpy_random = np.random.get_state()
     env = model.get_env()
     assert env is not None, "a model in training has its env"
@@ -76,6 +79,11 @@ def restore_dqn_state(model: DQN, arrays: dict[str, np.ndarray], counters: dict)
     model._episode_num = counters["episode_num"]
     model._n_calls = counters.get("n_calls", 0)
     model.exploration_rate = counters.get("exploration_rate", model.exploration_rate)
+    if isinstance(model, DoubleDQN) and (demonstrations := _prefixed(arrays, "demonstrations/")):
+        size = int(np.prod(model.observation_space.shape))  # type: ignore[arg-type]
+        model.demonstrations = Demonstrations.from_arrays(
+            {k: v.numpy() for k, v in demonstrations.items()}, size, N_ACTIONS
+        )
     return ContinueEpisodes(arrays, counters, model.n_envs)
 
 

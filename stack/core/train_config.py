@@ -50,6 +50,26 @@ class ValidationConfig(Strict):
     seed: int = Field(100_000, ge=0)
 
 
+EXPERTS = ("mobil", "rule", "oracle")
+"""Agents whose decisions can be demonstrations: the classical baselines and the oracle."""
+
+
+class DemonstrationConfig(Strict):
+    """DQfD (Hester et al., 2018): `episodes` training episodes driven by `expert` (seeded from
+    `seed`, a stream of its own) are recorded with n-step returns; `pretrain_steps` gradient steps
+    on them alone precede the first episode of training, and afterwards `share` of every batch is
+    drawn from them. On those rows a large-margin loss (weight `margin_weight`) keeps the expert's
+    action `margin` above the others."""
+
+    expert: Annotated[str, one_of("expert", EXPERTS)] = "mobil"
+    episodes: int = Field(200, ge=1, le=100_000)
+    pretrain_steps: int = Field(10_000, ge=0, le=10_000_000)
+    share: float = Field(0.25, ge=0, lt=1)
+    margin: float = Field(0.8, ge=0)
+    margin_weight: float = Field(1.0, ge=0)
+    seed: int = Field(200_000, ge=0)
+
+
 class TrainConfig(Strict):
     """`drivestack train`: algorithm, budget, network, SB3 hyper-parameters, reward, validation."""
 
@@ -85,6 +105,9 @@ class TrainConfig(Strict):
     )
     reward: RewardConfig = RewardConfig()
     validation: ValidationConfig = ValidationConfig()
+    demonstrations: DemonstrationConfig | None = Field(
+        None, description="an expert's episodes to pre-train on and keep learning from (ddqn only)"
+    )
 
     @field_validator("scenarios")
     @classmethod
@@ -109,4 +132,6 @@ class TrainConfig(Strict):
             raise ValueError("envs: tabular Q-learning steps one environment; use 1")
         if self.algorithm == "tabular" and self.init_model is not None:
             raise ValueError("init_model: tabular Q-learning starts from an empty table")
+        if self.algorithm != "ddqn" and self.demonstrations is not None:
+            raise ValueError("demonstrations: only the ddqn algorithm learns from them")
         return self

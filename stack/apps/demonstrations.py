@@ -1,0 +1,80 @@
+"""An expert's demonstrations for DQfD-style training (`train.demonstrations`): recorded in the
+decision MDP the learner trains in, on training seeds of their own stream, spread over processes."""
+
+from __future__ import annotations
+
+from functools import partial
+
+import numpy as np
+from tqdm import tqdm
+
+from perception.grid import OccupancyGridBuilder
+from planner.agents import decide
+from planner.ddqn import Demonstrations, DoubleDQN
+from planner.factory import make_agent
+from planner.validation import RealTimeValidation
+from records import child_seed
+from stack.core.closed_loop import ClosedLoop
+from stack.core.config import RunConfig, grid_config
+from stack.core.decision_env import HierarchicalHighwayEnv
+from stack.core.executors import completed
+from stack.core.oracle import Oracle
+
+
+def expert_command(loop: ClosedLoop, expert_name: str) -> int:
+    """The expert's decision in the state `loop` is in: the oracle plans on copies of the loop, a
+    policy decides on its own view of what the controllers act on (the sensor's report)."""
+    world = loop.config
+    lanes, grid = world.highway.lanes_count, grid_config(world)
+    if expert_name == "oracle":
+        return Oracle.for_road(world.planner.oracle, lanes, grid, world.scenario).plan(loop).value
+    expert = make_agent(expert_name, lanes, grid)
+    view = OccupancyGridBuilder(expert.grid_config or grid).build(loop.perceived)
+    return decide(expert, view.encode(expert.encoding)).value
+
+
+def expert_episode(config: RunConfig, expert_name: str, seed: int) -> Demonstrations:
+    """One episode of the decision MDP (its world and traffic drawn from `seed`) driven by the
+    expert, with the learner's observations and rewards."""
+    env = HierarchicalHighwayEnv(config)
+    observation, _ = env.reset(seed=seed)
+    observations, actions, rewards = [observation], [], []
+    terminated = truncated = False
+    while not (terminated or truncated):
+        action = expert_command(env.loop, expert_name)
+        observation, reward, terminated, truncated, _ = env.step(action)
+        observations.append(observation)
+        actions.append(action)
+        rewards.append(reward)
+    env.close()
+    train = config.train
+    return Demonstrations.from_episode(
+        np.stack(observations), np.array(actions), np.array(rewards), terminated, train.gamma, train.n_steps
+    )
+
+
+def collect_demonstrations(config: RunConfig, progress: bool = True) -> Demonstrations:
+    """`train.demonstrations.episodes` expert episodes over `train.envs` processes, in seed order
+    (the result does not depend on the number of processes)."""
+    demonstrations = config.train.demonstrations
+    assert demonstrations is not None, "the run names no demonstrations"
+    seeds = [child_seed(demonstrations.seed, k) for k in range(demonstrations.episodes)]
+    episodes: dict[int, Demonstrations] = {}
+    task = partial(expert_episode, config, demonstrations.expert)
+    with tqdm(total=len(seeds), unit="episode", desc="demonstrations", disable=not progress) as bar:
+        for index, episode in completed(task, seeds, config.train.envs):
+            episodes[index] = episode
+            bar.update(1)
+    return Demonstrations.concatenate([episodes[index] for index in range(len(seeds))])
+
+
+def start_from_demonstrations(
+    model: DoubleDQN, config: RunConfig, validation: RealTimeValidation, progress: bool = True
+) -> None:
+    """Before the first episode: record the expert, pre-train on its episodes, and validate the
+    pre-trained model as the first candidate to keep (at step 0)."""
+    settings = config.train.demonstrations
+    assert settings is not None, "the run names no demonstrations"
+    model.demonstrations = collect_demonstrations(config, progress)
+    model.pretrain(settings.pretrain_steps, config.train.batch_size)
+    validation.validate_start(model)
