@@ -102,7 +102,9 @@ class Demonstrations:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray], observation_size: int, actions: int) -> Demonstrations:
+    def from_arrays(
+        cls, arrays: dict[str, np.ndarray], observation_size: int, actions: int
+    ) -> Demonstrations:
         """The demonstrations `arrays()` gave (a checkpoint's), checked: every field, one row per
         transition, observations of `observation_size` values, actions below `actions`, all finite;
         ValueError otherwise."""
@@ -172,7 +174,9 @@ class DoubleDQN(DQN):
         losses = []
         for _ in range(gradient_steps):
             replay = self.replay_buffer.sample(batch_size - demonstrated, env=self._vec_normalize_env)  # type: ignore[union-attr]
-            discounts = replay.discounts if replay.discounts is not None else th.full_like(replay.rewards, self.gamma)
+            discounts = replay.discounts
+            if discounts is None:
+                discounts = th.full_like(replay.rewards, self.gamma)
             batch = Batch(
                 replay.observations,
                 replay.actions.long(),

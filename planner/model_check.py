@@ -19,7 +19,6 @@ MAX_WIDTH, MAX_LAYERS = 4096, 8
 """Largest hidden layer [units] and number of hidden layers a model may declare."""
 
 
-
 def checked_model(
     path: Path | str, expected_algorithms: tuple[str, ...] | None = None
 ) -> tuple[dict[str, np.ndarray], dict]:

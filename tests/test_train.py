@@ -275,22 +275,27 @@ def test_a_mix_of_roads_needs_an_encoding_of_one_size(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+DEMONSTRATIONS = {"expert": "mobil", "episodes": 2, "pretrain_steps": 20}
 RESUMABLE = [
-    pytest.param("ddqn", 1, id="ddqn"),
-    pytest.param("tabular", 1, id="tabular"),
-    pytest.param("ddqn", 2, id="ddqn-2-envs", marks=pytest.mark.slow),
+    pytest.param("ddqn", 1, None, id="ddqn"),
+    pytest.param("tabular", 1, None, id="tabular"),
+    pytest.param("ddqn", 1, DEMONSTRATIONS, id="ddqn-demonstrations"),
+    pytest.param("ddqn", 2, None, id="ddqn-2-envs", marks=pytest.mark.slow),
 ]
 
 
-@pytest.mark.parametrize(("algorithm", "envs"), RESUMABLE)
-def test_a_stopped_and_resumed_run_ends_as_an_uninterrupted_one(tmp_path, monkeypatch, algorithm, envs):
+@pytest.mark.parametrize(("algorithm", "envs", "demonstrations"), RESUMABLE)
+def test_a_stopped_and_resumed_run_ends_as_an_uninterrupted_one(
+    tmp_path, monkeypatch, algorithm, envs, demonstrations
+):
     """SIGTERM twice (here: the handler, called at a step of the env class or, for the workers, of
     the validation) stops at the next consistent point, mid-episode: the checkpoint holds every
-    transition collected, every gradient step taken, the generators and the episodes under way, so
-    the resumed run ends with the counts and the very weights of a run never stopped."""
+    transition collected, every gradient step taken, the generators, the episodes under way and
+    the demonstrations, so the resumed run ends with the counts and the very weights of a run
+    never stopped (and does not record or pre-train again)."""
     encoding = "tabular" if algorithm == "tabular" else "observation"
     train = {**TINY["train"], "algorithm": algorithm, "encoding": encoding, "envs": envs}
-    train |= {"target_update_interval": 8}
+    train |= {"target_update_interval": 8, "demonstrations": demonstrations}
     highway = {**TINY["highway"], "duration": 5 if envs == 1 else 7}
     config = build_config({**TINY, "highway": highway, "train": train})
     Trainer(config, tmp_path / "whole", progress=False).run()
@@ -301,7 +306,7 @@ def test_a_stopped_and_resumed_run_ends_as_an_uninterrupted_one(tmp_path, monkey
 
     def step_then_signal(self, action):
         calls["n"] += 1
-        if calls["n"] == (27 if envs == 1 else 3):
+        if calls["n"] == (3 if envs > 1 else 27 if demonstrations is None else 47):
             trainer._request_stop(15, None)
             trainer._request_stop(15, None)  # a second signal waits too
         return real_step(self, action)

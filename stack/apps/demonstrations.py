@@ -3,6 +3,7 @@ decision MDP the learner trains in, on training seeds of their own stream, sprea
 
 from __future__ import annotations
 
+import copy
 from functools import partial
 
 import numpy as np
@@ -22,12 +23,16 @@ from stack.core.oracle import Oracle
 
 
 def expert_command(loop: ClosedLoop, expert_name: str) -> int:
-    """The expert's decision in the state `loop` is in: the oracle plans on copies of the loop, a
-    policy decides on its own view of what the controllers act on (the sensor's report)."""
+    """The expert's decision in the state `loop` is in: the oracle plans on copies of the loop
+    whose rollouts perceive on its base agent's grid, a policy decides on its own view of what the
+    controllers act on (the sensor's report)."""
     world = loop.config
     lanes, grid = world.highway.lanes_count, grid_config(world)
     if expert_name == "oracle":
-        return Oracle.for_road(world.planner.oracle, lanes, grid, world.scenario).plan(loop).value
+        oracle = Oracle.for_road(world.planner.oracle, lanes, grid, world.scenario)
+        seen_as_its_base_sees = copy.copy(loop)
+        seen_as_its_base_sees.builder = OccupancyGridBuilder(oracle.grid_config or grid)
+        return oracle.plan(seen_as_its_base_sees).value
     expert = make_agent(expert_name, lanes, grid)
     view = OccupancyGridBuilder(expert.grid_config or grid).build(loop.perceived)
     return decide(expert, view.encode(expert.encoding)).value
@@ -78,3 +83,18 @@ def start_from_demonstrations(
     model.demonstrations = collect_demonstrations(config, progress)
     model.pretrain(settings.pretrain_steps, config.train.batch_size)
     validation.validate_start(model)
+
+
+def demonstrations_summary(config: RunConfig, model: object) -> dict[str, dict]:
+    """`{"demonstrations": {expert, episodes, transitions}}` for a run's summary, when it learnt
+    from some (else empty)."""
+    settings, demonstrations = config.train.demonstrations, getattr(model, "demonstrations", None)
+    if settings is None or demonstrations is None:
+        return {}
+    return {
+        "demonstrations": {
+            "expert": settings.expert,
+            "episodes": settings.episodes,
+            "transitions": len(demonstrations),
+        }
+    }

@@ -25,7 +25,7 @@ from planner.model_file import CHECKPOINT, ModelFileError, load_checkpoint, save
 from planner.tabular import QLearning
 from planner.validation import RealTimeValidation, Validation
 from records import child_seed
-from stack.apps.demonstrations import start_from_demonstrations
+from stack.apps.demonstrations import demonstrations_summary, start_from_demonstrations
 from stack.apps.train_model import (
     Checkpoints,
     StopTraining,
@@ -246,5 +246,7 @@ class Trainer:
             else:
                 export_q_network(self.model, self.out / FINAL, self.metadata(steps))
         history = self.validation.history if hasattr(self, "validation") else self.history
-        run = {"steps": steps, "wall_time_s": round(self._elapsed(), 1), "interrupted": interrupted}
+        run: dict[str, object] = {"steps": steps, "wall_time_s": round(self._elapsed(), 1)}
+        run["interrupted"] = interrupted
+        run |= demonstrations_summary(self.config, getattr(self, "model", None))
         return write_training_summary(self.config, self.out, history, run, self.out / BEST)

@@ -99,7 +99,7 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
     train = config.train
     algorithm = ALGORITHMS[train.algorithm]
     demonstrations = train.demonstrations
-    learning_from_demonstrations = (
+    learning_from_demonstrations: dict[str, Any] = (
         {}
         if demonstrations is None
         else {

@@ -25,9 +25,9 @@ BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "don
 
 def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], dict]:
     """(arrays, counters) of `model`, for a safe model file: networks, optimizer, replay buffer,
-    the counters SB3 schedules by, the demonstrations learnt from, numpy's global generator (exploration and replay sampling draw
-    from it), the action space's generator (random actions before learning starts) and each env's
-    episode under way."""
+    the demonstrations learnt from, the counters SB3 schedules by, numpy's global generator
+    (exploration and replay sampling draw from it), the action space's generator (random actions
+    before learning starts) and each env's episode under way."""
     arrays = {f"q/{k}": v.cpu().numpy() for k, v in model.policy.q_net.state_dict().items()}
     arrays |= {f"target/{k}": v.cpu().numpy() for k, v in model.policy.q_net_target.state_dict().items()}
     optimizer = model.policy.optimizer.state_dict()

@@ -1,0 +1,146 @@
+"""Learning from an expert's demonstrations (DQfD): n-step returns of recorded episodes, the
+large-margin loss, pre-training that makes the greedy policy the expert's, recording in the decision
+MDP, and the config and checkpoint checks."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+
+from planner.agents import decide
+from planner.ddqn import Demonstrations, DoubleDQN, margin_loss
+from planner.mobil import MobilAgent
+from stack.apps.demonstrations import collect_demonstrations, expert_command, expert_episode
+from stack.apps.train import Trainer
+from stack.core.config import build_config, grid_config
+from stack.core.decision_env import HierarchicalHighwayEnv
+from tests.test_train import TINY
+
+
+def test_an_episode_s_n_step_returns_stop_at_its_end():
+    observations = np.arange(4, dtype=np.float32).reshape(4, 1)
+    demonstrations = Demonstrations.from_episode(
+        observations, np.array([0, 1, 2]), np.array([1.0, 2.0, 3.0]), True, gamma=0.5, n_steps=2
+    )
+    np.testing.assert_allclose(demonstrations.rewards, [1 + 0.5 * 2, 2 + 0.5 * 3, 3])
+    np.testing.assert_array_equal(demonstrations.next_observations.ravel(), [2, 3, 3])
+    np.testing.assert_array_equal(demonstrations.dones, [0, 1, 1]), "the crash ends the last two"
+    np.testing.assert_allclose(demonstrations.discounts, [0.25, 0.25, 0.5])
+    timed_out = Demonstrations.from_episode(observations, np.array([0, 1, 2]), np.ones(3), False, 0.5, 2)
+    assert not timed_out.dones.any(), "a time limit bootstraps from the last observation"
+
+
+def test_the_margin_loss_is_zero_once_the_expert_s_action_leads_by_the_margin():
+    q_values = th.tensor([[1.5, 2.0, 0.0], [1.0, 2.0, 0.0], [3.0, 2.0, 0.0]])
+    expert = th.tensor([[1], [0], [0]])
+    per_row = [margin_loss(q_values[i : i + 1], expert[i : i + 1], 0.8).item() for i in range(3)]
+    np.testing.assert_allclose(per_row, [0.3, 1.8, 0.0], atol=1e-6), "leads by 0.5, trails by 1, leads by 1"
+    np.testing.assert_allclose(margin_loss(q_values, expert, 0.8).item(), np.mean(per_row), atol=1e-6)
+
+
+class Bandit(gym.Env):
+    """One-step episodes with a 3-value observation; the model only needs its spaces."""
+
+    observation_space, action_space = gym.spaces.Box(-1, 1, (3,)), gym.spaces.Discrete(3)
+
+    def reset(self, *, seed=None, options=None):
+        return np.zeros(3, np.float32), {}
+
+    def step(self, action):
+        return np.zeros(3, np.float32), 0.0, True, False, {}
+
+
+def test_pretraining_makes_the_greedy_policy_the_expert_s():
+    """An expert picks the largest of three values; rewards say nothing (all zero), so only the
+    margin loss can teach its choice: after pre-training the greedy policy agrees on new states."""
+    rng = np.random.default_rng(0)
+    states = rng.uniform(-1, 1, (512, 3)).astype(np.float32)
+    experts = states.argmax(axis=1)
+    parts = [
+        Demonstrations.from_episode(np.stack([s, s]), np.array([a]), np.zeros(1), True, 0.9, 1)
+        for s, a in zip(states, experts, strict=True)
+    ]
+    model = DoubleDQN("MlpPolicy", Bandit(), learning_rate=3e-3, seed=0, policy_kwargs={"net_arch": [32]})
+    model.demonstrations = Demonstrations.concatenate(parts)
+    new_states = rng.uniform(-1, 1, (256, 3)).astype(np.float32)
+    before = (model.predict(new_states, deterministic=True)[0] == new_states.argmax(axis=1)).mean()
+    np.random.seed(0)
+    model.pretrain(1500, 64)
+    after = (model.predict(new_states, deterministic=True)[0] == new_states.argmax(axis=1)).mean()
+    assert before < 0.6 and after > 0.9, (before, after)
+    target, online = model.q_net_target.state_dict(), model.q_net.state_dict()
+    assert all(th.equal(target[k], online[k]) for k in online), "the target copies the pre-trained net"
+
+
+def test_recorded_demonstrations_are_the_expert_s_decisions_on_the_learner_s_observations():
+    config = build_config(TINY)
+    episode = expert_episode(config, "mobil", 200_000)
+    env = HierarchicalHighwayEnv(config)
+    observation, _ = env.reset(seed=200_000)
+    mobil = MobilAgent(grid_config(config))
+    for step, action in enumerate(episode.actions):
+        np.testing.assert_array_equal(episode.observations[step], observation)
+        assert action == expert_command(env.loop, "mobil") == decide(mobil, mobil_view(env, mobil)).value
+        observation, *_ = env.step(action)
+    np.testing.assert_array_equal(episode.next_observations[-1], observation)
+    assert len(episode) == 5, "TINY's 5 s episodes hold five 1 s decisions"
+
+
+def mobil_view(env, mobil):
+    from perception.grid import OccupancyGridBuilder
+
+    return OccupancyGridBuilder(mobil.grid_config).build(env.loop.perceived).encode("observation")
+
+
+@pytest.mark.slow
+def test_demonstrations_do_not_depend_on_the_number_of_processes():
+    data = {**TINY, "train": {**TINY["train"], "demonstrations": {"episodes": 3}}}
+    one = collect_demonstrations(build_config(data), progress=False)
+    two = collect_demonstrations(build_config({**data, "train": {**data["train"], "envs": 2}}), False)
+    for name, values in one.arrays().items():
+        np.testing.assert_array_equal(two.arrays()[name], values, err_msg=name)
+
+
+def test_a_run_with_demonstrations_validates_its_pretrained_model_first(tmp_path):
+    data = {**TINY, "train": {**TINY["train"], "demonstrations": {"episodes": 2, "pretrain_steps": 30}}}
+    trainer = Trainer(build_config(data), tmp_path, progress=False)
+    summary = trainer.run()
+    assert [v.step for v in trainer.validation.history][:2] == [0, 10]
+    assert trainer.validation.history[0].period == "long"
+    assert summary["demonstrations"] == {"expert": "mobil", "episodes": 2, "transitions": 10}
+    assert len(trainer.model.demonstrations) == 10
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"algorithm": "dqn"}, "demonstrations: only the ddqn algorithm learns from them"),
+        ({"demonstrations": {"expert": "ddqn"}}, "unknown expert 'ddqn'; available: mobil, rule, oracle"),
+        ({"demonstrations": {"share": 1.0}}, "share"),
+    ],
+)
+def test_bad_demonstration_settings_are_refused_in_one_line(change, message):
+    with pytest.raises(ValueError, match=message):
+        build_config({**TINY, "train": {**TINY["train"], "demonstrations": {}, **change}})
+
+
+def test_a_checkpoint_s_demonstrations_are_checked_before_use():
+    good = Demonstrations.from_episode(np.zeros((3, 4)), np.array([0, 2]), np.ones(2), False, 0.9, 1)
+    assert len(Demonstrations.from_arrays(good.arrays(), 4, 3)) == 2
+    for change, field in (
+        ({"actions": np.array([0, 3])}, "actions"),
+        ({"rewards": np.array([1.0, np.nan], np.float32)}, "rewards"),
+        ({"observations": np.zeros((2, 5), np.float32)}, "observations"),
+    ):
+        with pytest.raises(ValueError, match=field):
+            Demonstrations.from_arrays(good.arrays() | change, 4, 3)
+    with pytest.raises(ValueError, match="expected"):
+        Demonstrations.from_arrays({"actions": np.zeros(2)}, 4, 3)
+
+
+@pytest.mark.parametrize("expert", ["rule", "oracle"])
+def test_every_expert_drives_a_recorded_episode(expert):
+    config = build_config(TINY)
+    episode = expert_episode(config, expert, 200_001)
+    assert len(episode) == 5 and set(episode.actions) <= {0, 1, 2}
+    assert episode.observations.shape[1] == HierarchicalHighwayEnv(config).observation_space.shape[0]
