@@ -10,6 +10,7 @@ others by `margin`; `pretrain` takes gradient steps on demonstrations alone befo
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Any, NamedTuple
 
@@ -154,9 +155,12 @@ class DoubleDQN(DQN):
         self.demonstration_share, self.margin, self.margin_weight = demonstration_share, margin, margin_weight
         super().__init__(*args, **kwargs)
 
-    def pretrain(self, gradient_steps: int, batch_size: int) -> float:
+    def pretrain(
+        self, gradient_steps: int, batch_size: int, on_step: Callable[[], object] | None = None
+    ) -> float:
         """Gradient steps on demonstrations alone (DQfD's pre-training), the target network
-        copied every `target_update_interval` of them; the last step's loss."""
+        copied every `target_update_interval` of them; `on_step` hears each (progress); returns the
+        last step's loss."""
         assert self.demonstrations is not None, "pretraining needs demonstrations"
         self.policy.set_training_mode(True)
         loss = float("nan")
@@ -164,6 +168,8 @@ class DoubleDQN(DQN):
             loss = self._gradient_step(self.demonstrations.sample(batch_size), batch_size)
             if step % self.target_update_interval == 0:
                 polyak_update(self.q_net.parameters(), self.q_net_target.parameters(), 1.0)
+            if on_step is not None:
+                on_step()
         polyak_update(self.q_net.parameters(), self.q_net_target.parameters(), 1.0)
         return loss
 

@@ -81,7 +81,9 @@ def start_from_demonstrations(
     settings = config.train.demonstrations
     assert settings is not None, "the run names no demonstrations"
     model.demonstrations = collect_demonstrations(config, progress)
-    model.pretrain(settings.pretrain_steps, config.train.batch_size)
+    steps = settings.pretrain_steps
+    with tqdm(total=steps, unit="step", desc="pre-training", disable=not progress) as bar:
+        model.pretrain(steps, config.train.batch_size, lambda: bar.update(1))
     validation.validate_start(model)
 
 
