@@ -22,9 +22,9 @@ SCENARIO_MODELS: dict[tuple[str, str], Path] = {
     ("ddqn", scenario): MODELS / "ddqn-highway.npz" for scenario in HIGHWAY_ENV_TRAFFIC
 }
 """Shipped models that replace SHIPPED_MODELS on one scenario: (agent, scenario) -> file. The
-Double DQN's highway-v0 model (the mix model fine-tuned on highway-v0 by
-configs/train/ddqn-highway.yaml) drives all of highway-env's own traffic: on selection seeds it
-beat the mix model on each of those scenarios (BENCHMARKS.md)."""
+Double DQN's highway-v0 model (the mix model pre-trained on MOBIL's decisions and fine-tuned on
+highway-v0 by configs/train/ddqn-highway.yaml) drives all of highway-env's own traffic: on selection
+seeds it beat the mix model on each of those scenarios (BENCHMARKS.md)."""
 
 
 AGENT_DESCRIPTIONS: dict[str, str] = {
