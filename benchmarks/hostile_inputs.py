@@ -144,6 +144,16 @@ def cases(folder: Path) -> dict[str, list[str]]:
     found["config: not UTF-8"] = ["run", "-c", str(latin)]
     (buffer := folder / "buffer.yaml").write_text("train: {buffer_size: 100000000}\n")
     found["train.buffer_size: 10^8"] = ["train", "-c", str(buffer), "--out", str(folder / "t")]
+    (demonstrations := folder / "demonstrations.yaml").write_text(
+        "highway: {duration: 3600}\ntrain: {demonstrations: {episodes: 100000}}\n"
+    )
+    found["train.demonstrations: 10^5 one-hour episodes"] = [
+        "train",
+        "-c",
+        str(demonstrations),
+        "--out",
+        str(folder / "t4"),
+    ]
     found["train --seed 2^70"] = ["train", "--seed", str(2**70), "--out", str(folder / "t2")]
     found["train --envs 0"] = ["train", "--envs", "0", "--out", str(folder / "t3")]
     (existing := folder / "results.txt").write_text("keep")

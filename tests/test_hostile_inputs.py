@@ -78,6 +78,17 @@ def test_a_replay_buffer_larger_than_memory_is_refused_before_allocation(tmp_pat
     assert not (tmp_path / "t").exists()
 
 
+def test_demonstrations_larger_than_memory_are_refused_before_any_episode(tmp_path):
+    config = tmp_path / "train.yaml"
+    config.write_text(
+        yaml.safe_dump({"highway": {"duration": 3600}, "train": {"demonstrations": {"episodes": 100_000}}})
+    )
+    one_line_refusal(
+        ["train", "-c", str(config), "--out", str(tmp_path / "t")], "train.demonstrations.episodes: 100000"
+    )
+    assert not (tmp_path / "t").exists()
+
+
 def test_resume_from_a_broken_or_foreign_checkpoint_is_one_line(tmp_path):
     from planner.factory import SHIPPED_MODELS
 

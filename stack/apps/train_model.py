@@ -98,16 +98,10 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
     th.set_num_threads(1)
     train = config.train
     algorithm = ALGORITHMS[train.algorithm]
-    demonstrations = train.demonstrations
-    learning_from_demonstrations: dict[str, Any] = (
-        {}
-        if demonstrations is None
-        else {
-            "demonstration_share": demonstrations.share,
-            "margin": demonstrations.margin,
-            "margin_weight": demonstrations.margin_weight,
-        }
-    )
+    dqfd: dict[str, Any] = {}
+    if (demonstrations := train.demonstrations) is not None:
+        dqfd = {"demonstration_share": demonstrations.share, "margin": demonstrations.margin}
+        dqfd["margin_weight"] = demonstrations.margin_weight
     return algorithm(
         "MlpPolicy",
         env,
@@ -128,7 +122,7 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
         seed=config.seed,
         verbose=0,
         device="cpu",
-        **learning_from_demonstrations,
+        **dqfd,
     )
 
 

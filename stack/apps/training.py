@@ -13,15 +13,29 @@ if TYPE_CHECKING:
     from stack.core.config import RunConfig
 
 
-def replay_buffer_bytes(config: RunConfig) -> int:
-    """Memory SB3's replay buffer takes for `config` [bytes]: observations and next observations
-    (float32) plus action, reward, done and timeout per transition."""
+def transition_bytes(config: RunConfig) -> int:
+    """Memory one stored transition takes [bytes]: its observation and next observation (float32)
+    plus action, reward, done and timeout (or discount)."""
     from perception.grid import OccupancyGridBuilder
     from stack.core.config import grid_config
 
     grid = OccupancyGridBuilder(grid_config(config))
     size = math.prod(grid.space(config.train.encoding, config.highway.lanes_count).shape)
-    return config.train.buffer_size * (2 * 4 * size + 8 + 4 + 4 + 4)
+    return 2 * 4 * size + 8 + 4 + 4 + 4
+
+
+def replay_buffer_bytes(config: RunConfig) -> int:
+    """Memory SB3's replay buffer takes for `config` [bytes]."""
+    return config.train.buffer_size * transition_bytes(config)
+
+
+def demonstrations_bytes(config: RunConfig) -> int:
+    """Memory `train.demonstrations` take at most while recorded [bytes]: every episode's decisions
+    (episode length / decision period), twice (the episodes and their concatenation)."""
+    if (demonstrations := config.train.demonstrations) is None:
+        return 0
+    decisions = math.ceil(config.highway.duration / config.decision_period_s)
+    return 2 * demonstrations.episodes * decisions * transition_bytes(config)
 
 
 def available_memory_bytes() -> int | None:
@@ -36,12 +50,23 @@ def available_memory_bytes() -> int | None:
 
 
 def check_memory(config: RunConfig) -> None:
-    """Refuse, before anything is allocated, a replay buffer that does not fit in memory."""
-    needed, available = replay_buffer_bytes(config), available_memory_bytes()
-    if config.train.algorithm != "tabular" and available is not None and needed > 0.8 * available:
+    """Refuse, before anything is allocated, a replay buffer (with the demonstrations) that does not
+    fit in memory."""
+    available = available_memory_bytes()
+    if config.train.algorithm == "tabular" or available is None:
+        return
+    buffer, demonstrations = replay_buffer_bytes(config), demonstrations_bytes(config)
+    if buffer > 0.8 * available:
         fail(
-            f"train.buffer_size: {config.train.buffer_size} transitions need {needed / 2**30:.1f} GB; "
+            f"train.buffer_size: {config.train.buffer_size} transitions need {buffer / 2**30:.1f} GB; "
             f"{available / 2**30:.1f} GB of memory is available"
+        )
+    if buffer + demonstrations > 0.8 * available:
+        episodes = config.train.demonstrations.episodes  # type: ignore[union-attr]
+        fail(
+            f"train.demonstrations.episodes: {episodes} episodes need {demonstrations / 2**30:.1f} GB "
+            f"beside the replay buffer's {buffer / 2**30:.1f} GB; {available / 2**30:.1f} GB of memory "
+            "is available"
         )
 
 
