@@ -2,6 +2,8 @@
 large-margin loss, pre-training that makes the greedy policy the expert's, recording in the decision
 MDP, and the config and checkpoint checks."""
 
+import signal
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -14,6 +16,7 @@ from stack.apps.demonstrations import collect_demonstrations, expert_command, ex
 from stack.apps.train import Trainer
 from stack.core.config import build_config, grid_config
 from stack.core.decision_env import HierarchicalHighwayEnv
+from stack.core.executors import completed
 from tests.test_train import TINY
 
 
@@ -144,3 +147,16 @@ def test_every_expert_drives_a_recorded_episode(expert):
     episode = expert_episode(config, expert, 200_001)
     assert len(episode) == 5 and set(episode.actions) <= {0, 1, 2}
     assert episode.observations.shape[1] == HierarchicalHighwayEnv(config).observation_space.shape[0]
+
+
+def deaf_after_an_expert_episode(seed):
+    """Whether Ctrl-C is ignored once an expert episode ran here."""
+    expert_episode(build_config(TINY), "mobil", seed)
+    return signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+
+
+def test_recording_workers_leave_ctrl_c_to_the_learner():
+    """Ctrl-C reaches every process of the terminal's group: the recording workers ignore it (a
+    worker that died would break the pool), the learner stops the run with a checkpoint."""
+    assert [deaf for _, deaf in completed(deaf_after_an_expert_episode, [1, 2], jobs=2)] == [True, True]
+    assert not deaf_after_an_expert_episode(3), "in the learner's own process Ctrl-C still stops the run"

@@ -4,6 +4,8 @@ decision MDP the learner trains in, on training seeds of their own stream, sprea
 from __future__ import annotations
 
 import copy
+import multiprocessing
+import signal
 from functools import partial
 
 import numpy as np
@@ -40,7 +42,10 @@ def expert_command(loop: ClosedLoop, expert_name: str) -> int:
 
 def expert_episode(config: RunConfig, expert_name: str, seed: int) -> Demonstrations:
     """One episode of the decision MDP (its world and traffic drawn from `seed`) driven by the
-    expert, with the learner's observations and rewards."""
+    expert, with the learner's observations and rewards. In a worker process it is deaf to Ctrl-C,
+    as the training env workers are: the learner stops the run (with a checkpoint) itself."""
+    if multiprocessing.parent_process() is not None:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
     env = HierarchicalHighwayEnv(config)
     observation, _ = env.reset(seed=seed)
     observations, actions, rewards = [observation], [], []
