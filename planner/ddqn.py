@@ -117,8 +117,13 @@ class Demonstrations:
         for name, shape in shapes.items():
             if arrays[name].shape != shape or not np.isfinite(arrays[name]).all():
                 raise ValueError(f"demonstrations/{name}: expected {shape} finite values")
-        if rows == 0 or not ((arrays["actions"] >= 0) & (arrays["actions"] < actions)).all():
-            raise ValueError(f"demonstrations/actions: expected at least one, each in [0, {actions})")
+        chosen = arrays["actions"]
+        if (
+            rows == 0
+            or not np.issubdtype(chosen.dtype, np.integer)
+            or not ((chosen >= 0) & (chosen < actions)).all()
+        ):
+            raise ValueError(f"demonstrations/actions: expected at least one, integers in [0, {actions})")
         return cls(**{name: np.asarray(arrays[name]) for name in names})
 
     def sample(self, size: int) -> Batch:

@@ -131,6 +131,7 @@ def test_a_checkpoint_s_demonstrations_are_checked_before_use():
     assert len(Demonstrations.from_arrays(good.arrays(), 4, 3)) == 2
     for change, field in (
         ({"actions": np.array([0, 3])}, "actions"),
+        ({"actions": np.array([0.0, 0.5])}, "actions"),
         ({"rewards": np.array([1.0, np.nan], np.float32)}, "rewards"),
         ({"observations": np.zeros((2, 5), np.float32)}, "observations"),
     ):
