@@ -13,7 +13,7 @@ from perception.grid import OccupancyGridBuilder
 from planner.agents import decide
 from planner.ddqn import Demonstrations, DoubleDQN, margin_loss
 from planner.mobil import MobilAgent
-from stack.apps.demonstrations import collect_demonstrations, expert_command, expert_episode
+from stack.apps.demonstrations import collect_demonstrations, expert_episode, expert_policy
 from stack.apps.train import Trainer
 from stack.core.config import build_config, grid_config
 from stack.core.decision_env import HierarchicalHighwayEnv
@@ -81,10 +81,10 @@ def test_recorded_demonstrations_are_the_expert_s_decisions_on_the_learner_s_obs
     episode = expert_episode(config, "mobil", 200_000)
     env = HierarchicalHighwayEnv(config)
     observation, _ = env.reset(seed=200_000)
-    mobil = MobilAgent(grid_config(config))
+    mobil, expert = MobilAgent(grid_config(config)), expert_policy(env.loop.config, "mobil")
     for step, action in enumerate(episode.actions):
         np.testing.assert_array_equal(episode.observations[step], observation)
-        assert action == expert_command(env.loop, "mobil") == decide(mobil, mobil_view(env, mobil)).value
+        assert action == expert(env.loop) == decide(mobil, mobil_view(env, mobil)).value
         observation, *_ = env.step(action)
     np.testing.assert_array_equal(episode.next_observations[-1], observation)
     assert len(episode) == 5, "TINY's 5 s episodes hold five 1 s decisions"

@@ -6,6 +6,7 @@ from __future__ import annotations
 import copy
 import multiprocessing
 import signal
+from collections.abc import Callable
 from functools import partial
 
 import numpy as np
@@ -24,20 +25,24 @@ from stack.core.executors import completed
 from stack.core.oracle import Oracle
 
 
-def expert_command(loop: ClosedLoop, expert_name: str) -> int:
-    """The expert's decision in the state `loop` is in: the oracle plans on copies of the loop
-    whose rollouts perceive on its base agent's grid, a policy decides on its own view of what the
-    controllers act on (the sensor's report)."""
-    world = loop.config
+def expert_policy(world: RunConfig, expert_name: str) -> Callable[[ClosedLoop], int]:
+    """The expert, built once for a loop of `world`, as a function of the loop's state to its
+    decision: the oracle plans on copies of the loop whose rollouts perceive on its base agent's
+    grid, a policy decides on its own view of what the controllers act on (the sensor's report)."""
     lanes, grid = world.highway.lanes_count, grid_config(world)
     if expert_name == "oracle":
         oracle = Oracle.for_road(world.planner.oracle, lanes, grid, world.scenario)
-        seen_as_its_base_sees = copy.copy(loop)
-        seen_as_its_base_sees.builder = OccupancyGridBuilder(oracle.grid_config or grid)
-        return oracle.plan(seen_as_its_base_sees).value
+        base_view = OccupancyGridBuilder(oracle.grid_config or grid)
+
+        def plan(loop: ClosedLoop) -> int:
+            seen_as_its_base_sees = copy.copy(loop)
+            seen_as_its_base_sees.builder = base_view
+            return oracle.plan(seen_as_its_base_sees).value
+
+        return plan
     expert = make_agent(expert_name, lanes, grid)
-    view = OccupancyGridBuilder(expert.grid_config or grid).build(loop.perceived)
-    return decide(expert, view.encode(expert.encoding)).value
+    view = OccupancyGridBuilder(expert.grid_config or grid)
+    return lambda loop: decide(expert, view.build(loop.perceived).encode(expert.encoding)).value
 
 
 def expert_episode(config: RunConfig, expert_name: str, seed: int) -> Demonstrations:
@@ -48,10 +53,11 @@ def expert_episode(config: RunConfig, expert_name: str, seed: int) -> Demonstrat
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     env = HierarchicalHighwayEnv(config)
     observation, _ = env.reset(seed=seed)
+    expert = expert_policy(env.loop.config, expert_name)
     observations, actions, rewards = [observation], [], []
     terminated = truncated = False
     while not (terminated or truncated):
-        action = expert_command(env.loop, expert_name)
+        action = expert(env.loop)
         observation, reward, terminated, truncated, _ = env.step(action)
         observations.append(observation)
         actions.append(action)
