@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal, get_args
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from records import CONTROLLER_NAMES, ControllerName, one_of
 
@@ -83,8 +83,10 @@ class MPCSettings(_Settings):
 
 
 class ControllerConfig(_Settings):
-    """The control layer: which tracker (`pid` or `mpc`), its gains, the lane-change duration and
-    the adaptive cruise (set speed, time gap, standstill gap, comfort deceleration)."""
+    """The control layer: which tracker (`pid` or `mpc`), its gains, the lane change (nominal
+    duration, the course limit that stretches it at low speed, the speed below which none starts),
+    the adaptive cruise (set speed, time gap, standstill gap, comfort deceleration) and emergency
+    braking (`controllers.emergency`: deceleration, trigger time to collision)."""
 
     type: Annotated[ControllerName, one_of("controller", CONTROLLER_NAMES)] = "pid"
     pid: PIDGains = PIDGains()
@@ -94,3 +96,24 @@ class ControllerConfig(_Settings):
     time_gap_s: float = Field(1.5, ge=0, description="[s]")
     standstill_gap_m: float = Field(8.0, ge=0, description="[m]")
     comfort_decel_mps2: float = Field(3.0, gt=0, le=5, description="[m/s^2]")
+    lane_change_max_course_deg: float = Field(
+        12.0, gt=0, le=25, description="course a lane change's reference may ask for [deg]"
+    )
+    min_lane_change_speed_mps: float = Field(
+        3.0, ge=0, le=40, description="no lane change starts below this speed [m/s]"
+    )
+    emergency_decel_mps2: float = Field(
+        5.0, gt=0, le=5, description="emergency braking [m/s^2]; the plant brakes at most 5"
+    )
+    emergency_ttc_s: float = Field(
+        1.0, ge=0, le=10, description="emergency braking below this time to collision [s]"
+    )
+
+    @model_validator(mode="after")
+    def _emergency_beyond_comfort(self) -> ControllerConfig:
+        if self.emergency_decel_mps2 < self.comfort_decel_mps2:
+            raise ValueError(
+                f"emergency_decel_mps2: must be >= comfort_decel_mps2 ({self.comfort_decel_mps2}), "
+                f"got {self.emergency_decel_mps2}"
+            )
+        return self

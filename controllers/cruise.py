@@ -10,11 +10,10 @@ from records import Neighbour
 
 class AdaptiveCruise:
     """Hold a set speed; keep standstill_gap + time_gap * v to each leader (the ego lane's and,
-    during a lane change, the target lane's). Braking is limited to the comfort deceleration unless
-    the kinematic stopping need (closing^2 / 2 gap) exceeds it: then up to full braking."""
+    during a lane change, the target lane's), down to standstill at standstill_gap behind a stopped
+    leader, and off again when it leaves. Braking is limited to the comfort deceleration: beyond it
+    `controllers.emergency.EmergencyBraking` takes over."""
 
-    EMERGENCY_DECELERATION = 5.0
-    """Full braking, used only when a collision is imminent [m/s^2]."""
     KP_GAP = 0.25
     """Gap-error gain [1/s^2]."""
     KP_CLOSING = 0.8
@@ -41,14 +40,8 @@ class AdaptiveCruise:
     def update(self, speed: float, set_speed: float, leaders: tuple[Neighbour, ...], dt: float) -> float:
         """Acceleration command [m/s^2]."""
         command = self.speed_pid.update(set_speed - speed, dt)
-        floor = -self.comfort_deceleration
         for leader in leaders:
             desired_gap = self.standstill_gap + self.time_gap * speed
             closing = speed - leader.speed
             command = min(command, self.KP_GAP * (leader.gap - desired_gap) - self.KP_CLOSING * closing)
-            if closing > 0:
-                stopping_need = closing**2 / (2.0 * max(leader.gap - 1.0, 0.1))
-                if stopping_need > self.comfort_deceleration:
-                    floor = -self.EMERGENCY_DECELERATION
-                    command = min(command, -stopping_need)
-        return float(np.clip(command, floor, self.max_acceleration))
+        return float(np.clip(command, -self.comfort_deceleration, self.max_acceleration))

@@ -16,6 +16,13 @@ the defaults (kp_h 6, kp 2, ki 0.6) put the poles at -2.82 +- 1.42j and -0.36 (p
 overshoot and a slow tail: the integrator pole at -0.36 1/s, placed to remove a bend's residual
 bias within the lane change; a lane change is fed forward and settles within 5 s (`track`).
 
+Below FULL_BANDWIDTH_SPEED the loop is slowed in proportion to the speed: every pole is scaled by
+sigma = v / FULL_BANDWIDTH_SPEED (kp_heading and kp by sigma, ki by sigma^2). The steering a yaw
+rate needs grows as 1/v (delta ~ L r / v), so at full bandwidth a heading oscillation at crawl
+speed asks for more steering rate than the 0.5 rad/s limit, and the rate-limited loop turns into a
+growing limit cycle (seen at 5-9 m/s in stop-and-go traffic); with the poles scaled the steering
+rate the loop needs falls with the speed instead.
+
 The dynamic bicycle (tyre slip, `model="dynamic"`) differs in two ways, both speed-scheduled
 model inversions rather than higher gains: (1) its steady sideslip is smaller by SLIP_GRADIENT v r
 (-0.72 deg instead of +0.14 deg at 30 m/s on a 1000 m bend), which the heading command subtracts
@@ -39,11 +46,30 @@ from records import EgoState, PlantName, Reference
 
 MIN_SPEED = 1.0
 """Below this speed [m/s] the lateral law is evaluated at MIN_SPEED, avoiding division by ~0."""
+FULL_BANDWIDTH_SPEED = 10.0
+"""From this speed [m/s] up the lateral loop runs at its design gains; below, slower (see above)."""
+MAX_COURSE = math.pi / 6
+"""The course command's limit relative to the lane [rad]: the outer loop's lateral-speed output is
+limited to +-v sin(MAX_COURSE), and its integrator clamps there (no windup at crawl speed, where a
+lane change's reference asks for at most `Maneuver.max_course`, 12 deg by default)."""
+
+
+def bandwidth_scale(speed: float) -> float:
+    """sigma in (0, 1]: how much the lateral loop's poles are slowed at `speed` [m/s]."""
+    return min(1.0, max(speed, MIN_SPEED) / FULL_BANDWIDTH_SPEED)
+
+
+def scheduled_gains(gains: PIDGains, speed: float) -> tuple[float, float, float]:
+    """(kp_lateral, ki_lateral, kp_heading) at `speed` [m/s]: every pole scaled by `bandwidth_scale`."""
+    sigma = bandwidth_scale(speed)
+    if sigma == 1.0:
+        return gains.kp_lateral, gains.ki_lateral, gains.kp_heading
+    return gains.kp_lateral * sigma, gains.ki_lateral * sigma**2, gains.kp_heading * sigma
 
 
 def closed_loop(gains: PIDGains, speed: float = 25.0) -> control.StateSpace:
     """The linearised lateral loop above, input d_ref, output d (for poles and step_info)."""
-    kp, ki, kh, v = gains.kp_lateral, gains.ki_lateral, gains.kp_heading, speed
+    (kp, ki, kh), v = scheduled_gains(gains, speed), speed
     # states: d, psi, z (= integral of d_ref - d)
     a = np.array([[0.0, v, 0.0], [-kh * kp / v, -kh, kh * ki / v], [-1.0, 0.0, 0.0]])
     b = np.array([[0.0], [kh * kp / v], [1.0]])
@@ -78,17 +104,32 @@ class LateralPID:
         self.last_steering = 0.0
         self.last_yaw_rate: float | None = None
 
+    def _stoppable_yaw_rate(self, heading_error: float, speed: float) -> float:
+        """The largest yaw rate [rad/s] that the rate-limited steering can still bring to zero
+        within `heading_error` [rad] at `speed` [m/s]: sqrt(2 r'_max |error|), with half the yaw
+        acceleration the steering rate gives, r'_max = v steering_rate / (2 L) (the time-optimal
+        stop, as a bang-bang position loop). Binds only at crawl speed or large heading errors:
+        without it the heading overshoots while the steering unwinds at its rate limit."""
+        return math.sqrt(speed * self.gains.steering_rate / LENGTH * heading_error)
+
     def update(self, state: EgoState, reference: Reference, dt: float) -> float:
         gains = self.gains
         v = max(state.speed, MIN_SPEED)
+        self.lateral.kp, self.lateral.ki, kp_heading = scheduled_gains(gains, v)
+        self.lateral.high = v * math.sin(MAX_COURSE)
+        self.lateral.low = -self.lateral.high
         lateral_speed = self.lateral.update(reference.d - state.d, dt, feedforward=reference.d_dot)
-        course = math.asin(float(np.clip(lateral_speed / v, -0.5, 0.5)))
+        course = math.asin(max(-1.0, min(1.0, lateral_speed / v)))
         road_rate = state.curvature * v / (1 - state.curvature * state.d)
         feedforward_rate = reference.d_ddot / v + road_rate
         slip = math.asin(float(np.clip(LENGTH / 2 * feedforward_rate / v, -0.5, 0.5)))
         if self.model == "dynamic":
             slip -= SLIP_GRADIENT * v * feedforward_rate
-        yaw_rate = feedforward_rate + gains.kp_heading * (course - slip - state.heading)
+        heading_error = course - slip - state.heading
+        yaw_rate = feedforward_rate + math.copysign(
+            min(kp_heading * abs(heading_error), self._stoppable_yaw_rate(abs(heading_error), v)),
+            heading_error,
+        )
         if self.model == "dynamic":
             previous = yaw_rate if self.last_yaw_rate is None else self.last_yaw_rate
             self.last_yaw_rate = yaw_rate

@@ -3,9 +3,10 @@ reference it hands the controller every tick."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
-from controllers.reference import QuinticProfile, lane_change, lane_keeping
+from controllers.reference import QuinticProfile, WarpedProfile, drivable_duration, lane_change, lane_keeping
 from records import Command, Reference, WorldState
 
 AbortRule = Callable[[WorldState, int], bool]
@@ -19,17 +20,33 @@ def never_abort(world: WorldState, target: int) -> bool:
 class Maneuver:
     """Turns decisions into references. A lane change runs to its end (or is aborted by
     `should_abort` while the ego's centre is still in the origin lane); a command towards a lane
-    that does not exist is ignored. Speeds in m/s, durations in s."""
+    that does not exist, or given below `min_speed`, is ignored. Speeds in m/s, durations in s,
+    angles in rad.
+
+    Drivable at any speed: a lane change lasts `duration`, or longer when the ego is slow, so the
+    quintic's peak lateral speed stays within v tan(`max_course`) (`drivable_duration`); when the
+    ego slows down during the change, the profile's clock slows with it (`WarpedProfile`, rate =
+    v tan(max_course) / peak lateral speed, at most 1), so the course it asks for never exceeds
+    `max_course` and a car that stops holds its lateral position until it moves again."""
 
     def __init__(
-        self, world: WorldState, duration: float, set_speed: float, should_abort: AbortRule = never_abort
+        self,
+        world: WorldState,
+        duration: float,
+        set_speed: float,
+        should_abort: AbortRule = never_abort,
+        min_speed: float = 0.0,
+        max_course: float = math.radians(12.0),
     ) -> None:
         self.duration = duration
         self.set_speed = set_speed
         self.should_abort = should_abort
+        self.min_speed = min_speed
+        self.max_course = max_course
         self.lane = world.ego_lane
         self.target = self.lane
         self.profile = lane_keeping(float(world.lane_offsets[self.lane]), world.time)
+        self.clock = WarpedProfile(self.profile)
         self.lane_changes = 0
 
     @property
@@ -38,21 +55,26 @@ class Maneuver:
 
     def command(self, command: Command, world: WorldState, start_time: float | None = None) -> bool:
         """Start the lane change `command` asks for, now or, planned ahead, at `start_time` [s]
-        (the reference holds the lane until then, so a controller with preview sees it coming);
-        False when it is STAY or off the road."""
+        (the reference holds the lane until then, so a controller with preview sees it coming),
+        from where the reference is now (its offset and lateral speed), so the reference stays
+        smooth whatever the car's own tracking error; False when it is STAY, off the road or the
+        ego is slower than `min_speed`."""
         target = self.lane + command.lane_shift
-        if command is Command.STAY or not 0 <= target < world.lanes_count:
+        speed = float(world.speed[0])
+        if command is Command.STAY or not 0 <= target < world.lanes_count or speed < self.min_speed:
             return False
-        ego = world.ego_state()
+        d, d_dot, _ = self.clock.sample(world.time)
+        distance = float(world.lane_offsets[target]) - d
         self.profile = lane_change(
             world.lane_offsets,
             self.lane,
             target,
-            ego.d,
+            d,
             world.time if start_time is None else start_time,
-            self.duration,
-            v0=ego.d_dot,
+            drivable_duration(distance, max(speed, self.min_speed, 1e-3), self.duration, self.max_course),
+            v0=d_dot,
         )
+        self.clock = WarpedProfile(self.profile)
         self.target = target
         self.lane_changes += 1
         return True
@@ -62,15 +84,23 @@ class Maneuver:
         the lateral profile and lists the leaders of the occupied lanes."""
         if self.changing_lane and not self._crossed(world) and self.should_abort(world, self.target):
             self._abort(world)
+        self.clock = self.clock.at_rate(world.time, self._rate(float(world.speed[0])))
         lanes = (self.lane, self.target) if self.changing_lane else (self.lane,)
-        heading_for = self.target if world.time >= self.profile.t0 else self.lane
+        heading_for = self.target if self.clock.profile_time(world.time) >= self.profile.t0 else self.lane
         return Reference.sampled(
-            self.profile, world.time, self.set_speed, world.leaders(lanes), target_lane=heading_for
+            self.clock, world.time, self.set_speed, world.leaders(lanes), target_lane=heading_for
         )
+
+    def _rate(self, speed: float) -> float:
+        """How fast the profile's clock runs at `speed` [m/s] (see the class docstring)."""
+        peak = self.profile.peak_lateral_speed
+        if peak == 0.0:
+            return 1.0
+        return min(1.0, max(speed, 0.0) * math.tan(self.max_course) / peak)
 
     def update(self, world: WorldState) -> bool:
         """Advance the state machine; True on the tick a lane change completes."""
-        if self.changing_lane and self.profile.finished(world.time):
+        if self.changing_lane and self.clock.finished(world.time):
             self.lane = self.target
             return True
         return False
@@ -78,7 +108,7 @@ class Maneuver:
     def _abort(self, world: WorldState) -> None:
         """Give up the lane change: a new quintic from the current lateral state back to the
         origin lane's centre, over half the lane-change duration."""
-        _, d_dot, d_ddot = self.profile.sample(world.time)
+        _, d_dot, d_ddot = self.clock.sample(world.time)
         self.target = self.lane
         self.profile = QuinticProfile(
             d0=float(world.d[0]),
@@ -88,6 +118,7 @@ class Maneuver:
             v0=d_dot,
             a0=d_ddot,
         )
+        self.clock = WarpedProfile(self.profile)
 
     def _crossed(self, world: WorldState) -> bool:
         """The ego's centre has left the origin lane."""

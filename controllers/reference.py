@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -58,6 +59,55 @@ class QuinticProfile:
 
     def finished(self, t: float) -> bool:
         return t - self.t0 >= self.duration
+
+    @cached_property
+    def peak_lateral_speed(self) -> float:
+        """Largest |d_dot| [m/s] over the profile (sampled on 64 points)."""
+        _, d_dot = self.samples(self.t0 + np.linspace(0.0, self.duration, 64, endpoint=False))
+        return float(np.max(np.abs(d_dot)))
+
+
+QUINTIC_PEAK_SPEED = 15.0 / 8.0
+"""The minimum-jerk lane change's peak lateral speed is 15/8 * distance / duration."""
+
+
+def drivable_duration(distance: float, speed: float, nominal: float, max_course: float) -> float:
+    """The lane-change duration [s] for a lateral `distance` [m] at `speed` [m/s]: `nominal` [s],
+    stretched so the quintic's peak lateral speed stays within speed * tan(max_course [rad])."""
+    return max(nominal, QUINTIC_PEAK_SPEED * abs(distance) / (speed * math.tan(max_course)))
+
+
+@dataclass(frozen=True)
+class WarpedProfile:
+    """A lateral profile run on its own clock: profile time = `profile_anchor` + (t - `anchor`) *
+    `rate`, so at rate < 1 it is driven slower than planned (rate 0: held), and d_dot scales by
+    `rate`, d_ddot by `rate`^2. The maneuver sets the rate from the ego's speed so the course the
+    profile asks for never exceeds what that speed allows (`Maneuver.reference`)."""
+
+    profile: QuinticProfile
+    anchor: float = 0.0
+    profile_anchor: float = 0.0
+    rate: float = 1.0
+
+    def profile_time(self, t: float) -> float:
+        return self.profile_anchor + (t - self.anchor) * self.rate
+
+    def sample(self, t: float) -> tuple[float, float, float]:
+        d, d_dot, d_ddot = self.profile.sample(self.profile_time(t))
+        return d, d_dot * self.rate, d_ddot * self.rate**2
+
+    def samples(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        d, d_dot = self.profile.samples(self.profile_anchor + (times - self.anchor) * self.rate)
+        return d, d_dot * self.rate
+
+    def finished(self, t: float) -> bool:
+        return self.profile.finished(self.profile_time(t))
+
+    def at_rate(self, t: float, rate: float) -> WarpedProfile:
+        """This profile from time `t` [s] on at `rate` (itself when the rate is unchanged)."""
+        if rate == self.rate:
+            return self
+        return WarpedProfile(self.profile, t, self.profile_time(t), rate)
 
 
 def lane_change(

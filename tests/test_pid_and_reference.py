@@ -51,12 +51,12 @@ def test_pid_rejects_bad_gains(bad):
         PID(**bad)
 
 
-def test_cruise_holds_comfort_braking_unless_a_collision_is_imminent():
+def test_cruise_never_brakes_beyond_comfort():
     cruise = AdaptiveCruise(time_gap=1.5, standstill_gap=8.0, comfort_deceleration=3.0)
     mild = cruise.update(25.0, 30.0, (Neighbour(gap=30.0, speed=22.0),), 1 / 15)
     assert -3.0 <= mild < 0.0
     cruise.reset()
     hard = cruise.update(30.0, 30.0, (Neighbour(gap=12.0, speed=10.0),), 1 / 15)
-    assert hard == -5.0
+    assert hard == -3.0
     cruise.reset()
     assert cruise.update(20.0, 30.0, (), 1 / 15) == cruise.max_acceleration == 2.0

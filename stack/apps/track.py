@@ -45,7 +45,8 @@ SETTLE_S = 3.0
 @dataclass(frozen=True)
 class Maneuver(Tracking):
     """One lane change: which, how it tracked (`Tracking`), the controller's time per tick [ms] and
-    fallbacks; `trace` holds the time series used by the plots."""
+    fallbacks, whether it `started` at all (not below the minimum lane-change speed: then the
+    record is lane keeping); `trace` holds the time series used by the plots."""
 
     controller: str
     road: str
@@ -55,6 +56,7 @@ class Maneuver(Tracking):
     solve_ms_p50: float
     solve_ms_p95: float
     fallbacks: int
+    started: bool = True
     trace: dict[str, list[float]] = field(default_factory=dict)
 
     def record(self) -> dict:
@@ -91,8 +93,9 @@ def run_maneuver(
     loop = ClosedLoop(run_config, road, controller=BuiltinDriver(road) if builtin else None)
     world = loop.reset(seed=0)
     command = Command.LEFT if direction == "left" else Command.RIGHT
-    loop.maneuver.command(command, world, start_time=LEAD_IN_S)
-    loop.act(Command.STAY, ticks=round((LEAD_IN_S + duration + SETTLE_S) / dt))
+    started = loop.maneuver.command(command, world, start_time=LEAD_IN_S)
+    changing = loop.maneuver.profile.duration if started else duration
+    loop.act(Command.STAY, ticks=round((LEAD_IN_S + changing + SETTLE_S) / dt))
     recorder = loop.recorder
     time, d = np.array(recorder.time[:-1]), np.array(recorder.d[:-1])
     heading, speeds = np.array(recorder.heading[:-1]), np.array(recorder.speed[:-1])
@@ -110,6 +113,7 @@ def run_maneuver(
         solve_ms_p50=float(np.percentile(solve_ms, 50)),
         solve_ms_p95=float(np.percentile(solve_ms, 95)),
         fallbacks=loop.controller.fallbacks,
+        started=started,
         trace={
             "time": time.tolist(),
             "d": (d - d[0]).tolist(),

@@ -42,7 +42,8 @@ STYLES = {
 def worst_cases(records: list[dict[str, Any]]) -> list[list[str]]:
     """Table rows (`COLUMNS`) of `tracking.json` records: per controller, road, plant and speed,
     the worse of the left and right change in every figure ("not settled" when either never
-    settles within 0.1 m)."""
+    settles within 0.1 m; "below min. speed" when no lane change starts, the rest is then lane
+    keeping)."""
     groups: dict[tuple[str, str, str, float], list[dict[str, Any]]] = {}
     for r in records:
         groups.setdefault((r["controller"], r["road"], r["plant"], r["speed"]), []).append(r)
@@ -54,6 +55,8 @@ def worst_cases(records: list[dict[str, Any]]) -> list[list[str]]:
 
         durations = [r["duration_s"] for r in group]
         duration = "not settled" if None in durations else f"{max(durations):.2f}"
+        if not all(r.get("started", True) for r in group):
+            duration = "below min. speed"
         rows.append(
             [
                 name,

@@ -8,11 +8,13 @@ reference, the controller the actuation, the plant the next world.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
+from controllers.emergency import EmergencyBraking
 from controllers.maneuver import Maneuver
 from controllers.tracker import Controller, make_controller
 from perception.grid import OccupancyGrid, OccupancyGridBuilder
@@ -21,6 +23,7 @@ from planner.safety import SafetyLayer
 from records import Actuation, Command, GridConfig, WorldState
 from stack.core.config import RunConfig, grid_config
 from stack.core.metrics import EpisodeRecorder, EpisodeResult
+from stack.core.safety_metrics import SafetyMonitor
 from stack.core.video import command_text, video_frame
 
 SNAPSHOT_TIME_S = 10.0
@@ -96,12 +99,19 @@ class ClosedLoop:
         self.controller.reset()
         self.fallbacks_before = self.controller.fallbacks
         self.solves_before = len(self.controller.solve_times)
+        control = config.controller
         self.maneuver = Maneuver(
             self.world,
-            config.controller.lane_change_duration_s,
-            config.controller.set_speed_mps,
+            control.lane_change_duration_s,
+            control.set_speed_mps,
             self.safety.should_abort,
+            min_speed=control.min_lane_change_speed_mps,
+            max_course=math.radians(control.lane_change_max_course_deg),
         )
+        self.emergency = EmergencyBraking(
+            control.emergency_decel_mps2, control.comfort_decel_mps2, control.emergency_ttc_s
+        )
+        self.monitor = SafetyMonitor(self.plant.dt)
         self.recorder = EpisodeRecorder(self.world)
         self.command: Command = Command.STAY
         self.applied: Command | None = Command.STAY
@@ -111,7 +121,9 @@ class ClosedLoop:
 
     @property
     def done(self) -> bool:
-        return self.plant.done
+        """The plant's episode ended, or the ego left the road (a failure, as highway-env's
+        `offroad_terminal`)."""
+        return self.plant.done or self.monitor.road_departure
 
     @property
     def crashed(self) -> bool:
@@ -145,7 +157,8 @@ class ClosedLoop:
         self.command, self.applied = command, None
         if considered:
             self.applied = self.safety.filter(command, self.perceived, self.maneuver.lane)
-            self.maneuver.command(self.applied, self.world)
+            if not self.maneuver.command(self.applied, self.world):
+                self.applied = Command.STAY
         run = 0
         while not self.done:
             self.tick()
@@ -161,10 +174,13 @@ class ClosedLoop:
 
     def tick(self) -> None:
         reference = self.maneuver.reference(self.perceived)
-        actuation = self.controller.step(self.world.ego_state(), reference)
+        state = self.world.ego_state()
+        actuation = self.controller.step(state, reference)
+        actuation = self.emergency.apply(actuation, state.speed, reference.leaders, self.plant.dt)
         self.world = self.plant.step(actuation)
         self.perceived = self._observe()
         self.recorder.record(self.world, reference, actuation)
+        self.monitor.record(self.world, self.maneuver.changing_lane)
         if (
             self.frames is not None
             and self.plant.rendering
@@ -208,6 +224,13 @@ class ClosedLoop:
             masked=self.safety.masked,
             aborted=self.safety.aborted,
         )
+        monitor = self.monitor
+        result.road_departure = monitor.road_departure
+        result.collision_kind = monitor.collision.kind if monitor.collision else ""
+        result.at_fault_collision = monitor.collision is not None and monitor.collision.at_fault
+        result.min_ttc_s = monitor.min_ttc_s
+        result.time_below_min_distance_s = monitor.time_below_min_distance_s
+        result.emergency_brakings = self.emergency.activations
         result.snapshot = self.snapshot
         result.mpc_fallbacks = self.controller.fallbacks - self.fallbacks_before
         solve_ms = 1e3 * np.array(self.controller.solve_times[self.solves_before :])

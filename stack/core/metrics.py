@@ -16,6 +16,7 @@ import numpy as np
 
 from perception.grid import OccupancyGrid
 from records import Actuation, Reference, WorldState
+from stack.core.safety_metrics import TTC_CAP_S
 
 COMFORT_WINDOW_S = 0.5
 """Moving-average window for lateral acceleration and jerk [s] (UN R79)."""
@@ -105,6 +106,12 @@ class EpisodeResult:
     masked_commands: int = 0
     aborted_changes: int = 0
     mpc_fallbacks: int = 0
+    road_departure: bool = False
+    at_fault_collision: bool = False
+    collision_kind: str = ""
+    min_ttc_s: float = TTC_CAP_S
+    time_below_min_distance_s: float = 0.0
+    emergency_brakings: int = 0
     solve_ms_p50: float = field(default=0.0, compare=False)
     solve_ms_p95: float = field(default=0.0, compare=False)
     trace: dict[str, list[float]] = field(default_factory=dict, repr=False)
@@ -118,7 +125,7 @@ class EpisodeResult:
     def from_row(cls, row: dict[str, Any]) -> EpisodeResult | None:
         """The episode `row()` recorded, or None when `row` is not one (other keys, a value not of
         its field's type)."""
-        kinds = {"int": int, "bool": bool, "float": int | float}
+        kinds = {"int": int, "bool": bool, "float": int | float, "str": str}
         typed = {f.name: kinds[str(f.type)] for f in fields(cls) if f.name not in ("trace", "snapshot")}
         if sorted(row) != sorted(typed) or not all(isinstance(row[n], kind) for n, kind in typed.items()):
             return None
@@ -201,11 +208,19 @@ def summarize(results: list[EpisodeResult], **identity: object) -> dict:
     only fields that differ between two runs of one seed (see `TIMING_FIELDS`)."""
     collisions = sum(r.crashed for r in results)
     passed = sum(r.passed_cars for r in results)
+    at_fault = sum(r.at_fault_collision for r in results)
     return {
         **identity,
         "episodes": len(results),
         "collisions": collisions,
         "collision_rate": collisions / len(results),
+        "at_fault_collisions": at_fault,
+        "not_at_fault_collisions": collisions - at_fault,
+        "road_departures": sum(r.road_departure for r in results),
+        "failures": sum(r.at_fault_collision or r.road_departure for r in results),
+        "min_ttc_s": float(min(r.min_ttc_s for r in results)),
+        "time_below_min_distance_s": float(np.mean([r.time_below_min_distance_s for r in results])),
+        "emergency_brakings": float(np.mean([r.emergency_brakings for r in results])),
         "passed_cars": passed,
         "accuracy": 100.0 * passed / (passed + collisions) if passed + collisions else None,
         "mean_speed": float(np.mean([r.mean_speed for r in results])),

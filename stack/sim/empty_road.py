@@ -21,6 +21,7 @@ from highway_env.vehicle.kinematics import Vehicle
 
 from records import Actuation, EgoState, Reference, WorldState
 from stack.sim.highway import snapshot
+from stack.sim.plant import StableBicycleVehicle
 
 RoadKind = Literal["straight", "bend-1000", "bend-500"]
 PlantKind = Literal["kinematic", "dynamic", "builtin"]
@@ -74,7 +75,7 @@ def steady_cornering(road: Road, lane: AbstractLane, speed: float, dynamic: bool
     b, m, a = BicycleVehicle.LENGTH_B, BicycleVehicle.MASS, BicycleVehicle.LENGTH_A
     stiffness_rear = 2 * BicycleVehicle.FRICTION_REAR
     slip = yaw_rate * (b / speed - m * a * speed / (stiffness_rear * BicycleVehicle.LENGTH))
-    car = BicycleVehicle(road, position, lane_heading - slip, speed)
+    car = StableBicycleVehicle(road, position, lane_heading - slip, speed)
     car.yaw_rate, car.lateral_speed = yaw_rate, speed * math.tan(slip)
     return car
 

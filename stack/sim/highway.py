@@ -24,6 +24,7 @@ from highway_env.vehicle.kinematics import Vehicle
 
 from records import BACKENDS, Actuation, Backend, PlantName, RoadName, WorldState, unknown_name
 from stack.sim.envs import FAST_EXIT, FAST_HIGHWAY, HIGHWAY, VECTOR_HIGHWAY
+from stack.sim.plant import stabilised
 from stack.sim.settings import HighwayConfig
 
 ENV_IDS: dict[RoadName, dict[Backend, str]] = {
@@ -81,6 +82,8 @@ class HighwayAdapter:
 
     def reset(self, seed: int) -> WorldState:
         self.env.reset(seed=seed)
+        env: AbstractEnv = self.env.unwrapped
+        stabilised(env.vehicle)
         self.terminated = self.truncated = False
         return self.snapshot()
 

@@ -42,6 +42,17 @@ class VehicleClass(BaseModel):
         return _ordered_range(bounds)
 
 
+class IncidentConfig(BaseModel):
+    """A stopped vehicle (IDM target speed 0, no lane changes) that blocks `lane`, `ahead_m` metres
+    ahead of the ego at spawn; traffic in that lane must stop behind it or merge around it."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    lane: int = Field(ge=0, description="the blocked lane")
+    ahead_m: float = Field(gt=0, le=2000, description="distance ahead of the ego at spawn [m]")
+    length_m: float = Field(5.0, gt=0, le=25, description="the stopped vehicle's length [m]")
+
+
 class TrafficConfig(BaseModel):
     """Heterogeneous traffic (highway-env's IDM / MOBIL vehicles, drawn from the env's seeded
     generator): the vehicle classes, where the ego is spawned, as the fraction of the traffic
@@ -59,6 +70,7 @@ class TrafficConfig(BaseModel):
         le=60,
         description="every vehicle's speed at spawn [m/s] (None: its desired speed, the ego 25)",
     )
+    incident: IncidentConfig | None = None
 
     @field_validator("classes")
     @classmethod
@@ -102,6 +114,12 @@ class HighwayConfig(BaseModel):
             raise ValueError(
                 f"initial_lane_id: must be a lane of the road (0..{self.lanes_count - 1}), "
                 f"got {self.initial_lane_id}"
+            )
+        incident = self.traffic.incident if self.traffic else None
+        if incident is not None and incident.lane >= self.lanes_count:
+            raise ValueError(
+                f"traffic.incident.lane: must be a lane of the road (0..{self.lanes_count - 1}), "
+                f"got {incident.lane}"
             )
         for vehicle_class in self.traffic.classes if self.traffic else ():
             if any(not 0 <= lane < self.lanes_count for lane in vehicle_class.lanes or ()):

@@ -7,7 +7,9 @@ choice is then worth little. `ScenarioTraffic._create_vehicles` keeps highway-en
 behaviours (IDM + MOBIL) and placement rule, and only (1) spawns `ego_position` of the traffic before
 the ego, so that part is behind it, and (2) gives each vehicle a class drawn by share, with its
 desired (IDM target) speed and length drawn from the class's ranges, a lane from the class's lanes,
-MOBIL lane changes on or off and an IDM jam distance that grows with its length. Every draw comes
+MOBIL lane changes on or off and an IDM jam distance that grows with its length, and (3) keeps every
+start feasible: a vehicle placed too close ahead of the last one in its lane, for both lengths and a
+safe gap at the follower's speed (`make_room`), is moved forward. Every draw comes
 from the env's seeded generator, so the same seed gives the same traffic. Without `traffic` in the
 config, highway-env's own `_create_vehicles` runs unchanged.
 """
@@ -29,6 +31,44 @@ IDM_JAM_CLEARANCE = 5.0
 vehicle's own length, a truck stopped behind a truck keeps its 5 m instead of overlapping it [m]."""
 
 
+SPAWN_TIME_GAP_S = 0.5
+"""Bumper-to-bumper time gap [s] an IDM follower gets at spawn, beyond its jam clearance: highway-env's
+IDM brakes at up to 6 m/s^2 with no reaction time, so this is safe, not its 1.5 s equilibrium."""
+EGO_SPAWN_TIME_GAP_S = 1.0
+"""The ego's time gap at spawn [s]: UN R157's minimum at the lowest speeds, leaving the stack time
+for a decision before it has to brake."""
+SPAWN_BRAKING = 3.0
+"""Deceleration [m/s^2] that a faster follower is given room to slow to its new leader's speed at."""
+
+
+def make_room(env: HighwayEnv, vehicle: Vehicle) -> None:
+    """Move `vehicle`, just placed ahead of every other, forward along its lane until the vehicle
+    behind it in that lane has both half-lengths, the jam clearance, a time gap at its speed and
+    room to brake to `vehicle`'s speed between them."""
+    lane = env.road.network.get_lane(vehicle.lane_index)
+    s_new = lane.local_coordinates(vehicle.position)[0]
+    behind = [
+        (lane.local_coordinates(other.position)[0], other)
+        for other in env.road.vehicles
+        if other.lane_index == vehicle.lane_index and other is not vehicle
+    ]
+    behind = [(s, other) for s, other in behind if s <= s_new]
+    if not behind:
+        return
+    s_follower, follower = max(behind, key=lambda pair: pair[0])
+    time_gap = EGO_SPAWN_TIME_GAP_S if follower is env.vehicle else SPAWN_TIME_GAP_S
+    closing = max(follower.speed - vehicle.speed, 0.0)
+    needed = (
+        (follower.LENGTH + vehicle.LENGTH) / 2
+        + IDM_JAM_CLEARANCE
+        + follower.speed * time_gap
+        + closing**2 / (2 * SPAWN_BRAKING)
+    )
+    if s_new - s_follower < needed:
+        s_new = s_follower + needed
+        vehicle.position = lane.position(s_new, 0.0)
+
+
 def _spawn_other(env: HighwayEnv, classes: list[dict[str, Any]], spawn_speed: float | None) -> None:
     """One traffic vehicle of a class drawn by share, behind-the-last rule of highway-env."""
     rng = env.np_random
@@ -47,7 +87,34 @@ def _spawn_other(env: HighwayEnv, classes: list[dict[str, Any]], spawn_speed: fl
     vehicle.LENGTH = length
     vehicle.DISTANCE_WANTED = IDM_JAM_CLEARANCE + length
     vehicle.diagonal = float(np.sqrt(length**2 + vehicle.WIDTH**2))
+    make_room(env, vehicle)
     env.road.vehicles.append(vehicle)
+
+
+def _place_incident(env: HighwayEnv, incident: dict[str, Any]) -> None:
+    """A stopped vehicle `incident["ahead_m"]` ahead of the ego in `incident["lane"]`; the traffic
+    vehicles it would overlap, or that could not stop behind it, leave the road."""
+    ego = env.vehicle
+    lane_index = (*ego.lane_index[:2], int(incident["lane"]))
+    lane = env.road.network.get_lane(lane_index)
+    s_stop = lane.local_coordinates(ego.position)[0] + float(incident["ahead_m"])
+    stopped = utils.class_from_path(env.config["other_vehicles_type"])(
+        env.road, lane.position(s_stop, 0.0), lane.heading_at(s_stop), 0.0
+    )
+    stopped.target_speed = 0.0
+    stopped.enable_lane_change = False
+    stopped.LENGTH = float(incident["length_m"])
+    stopped.diagonal = float(np.sqrt(stopped.LENGTH**2 + stopped.WIDTH**2))
+
+    def blocked(other: Vehicle) -> bool:
+        if other is ego or other.lane_index != lane_index:
+            return False
+        ahead = s_stop - lane.local_coordinates(other.position)[0]
+        room = (other.LENGTH + stopped.LENGTH) / 2 + IDM_JAM_CLEARANCE + other.speed**2 / (2 * SPAWN_BRAKING)
+        return -(other.LENGTH + stopped.LENGTH) / 2 < ahead < room
+
+    env.road.vehicles = [other for other in env.road.vehicles if not blocked(other)]
+    env.road.vehicles.append(stopped)
 
 
 class ScenarioTraffic(HighwayEnv):
@@ -72,6 +139,9 @@ class ScenarioTraffic(HighwayEnv):
         )
         ego = self.action_type.vehicle_class(self.road, spawned.position, spawned.heading, spawned.speed)
         self.controlled_vehicles = [ego]
+        make_room(self, ego)
         self.road.vehicles.append(ego)
         for _ in range(count - behind):
             _spawn_other(self, classes, spawn_speed)
+        if traffic.get("incident"):
+            _place_incident(self, traffic["incident"])

@@ -1,0 +1,149 @@
+"""Closed-loop safety metrics, as planners are judged by nuPlan and lane keeping systems by UN R157.
+
+- **road departure**: a corner of the ego's footprint lies more than `DEPARTURE_TOLERANCE_M` beyond
+  the road's outer lane edges (nuPlan's drivable-area compliance, whose violation threshold is
+  0.3 m); it ends the episode as a failure, like highway-env's `offroad_terminal`.
+- **collision fault** (nuPlan's collision categories): the contact side is the axis of least
+  penetration between the two footprints in the ego's body frame. At fault: the ego hits something
+  with its front (`front`), hits a stopped vehicle (`stopped vehicle`), touches a vehicle side on
+  while its footprint spans two lanes or it is changing lane (`lane change`), or collides while off
+  the road (`off road`). Not at fault: the ego stands (`ego stopped`), is hit from behind while
+  keeping one lane (`rear`), or is touched side on while keeping one lane (`side swipe`: the other
+  moved into it).
+- **minimum time to collision** [s]: gap / closing speed to the nearest vehicle ahead in each lane
+  the ego's footprint occupies, over the episode (`TTC_CAP_S` when nothing ever closed in).
+- **time below the R157 minimum following distance** [s]: the gap to the vehicle ahead in the ego's
+  lane is below d_min = v * t_front(v), UN R157 paragraph 5.2.3.3's table (1.0 s at 7.2 km/h up
+  to 1.6 s at 60 km/h, linear in between, 1.6 s above); counted from 7.2 km/h up.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from records import WorldState
+
+DEPARTURE_TOLERANCE_M = 0.3
+"""How far a footprint corner may lie beyond the road edge before it counts as a departure [m]."""
+STOPPED_SPEED_MPS = 0.5
+"""Below this speed a vehicle counts as stopped [m/s]."""
+TTC_CAP_S = 99.0
+"""The minimum TTC an episode reports when nothing ever closed in on a leader [s]."""
+R157_TIME_GAP = ((7.2, 1.0), (10.0, 1.1), (20.0, 1.2), (30.0, 1.3), (40.0, 1.4), (50.0, 1.5), (60.0, 1.6))
+"""UN R157 paragraph 5.2.3.3: (present speed [km/h], minimum time gap t_front [s])."""
+R157_MIN_SPEED_MPS = 7.2 / 3.6
+"""The table starts at 7.2 km/h [m/s]."""
+
+AT_FAULT_KINDS = ("front", "stopped vehicle", "lane change", "off road")
+NOT_AT_FAULT_KINDS = ("ego stopped", "rear", "side swipe")
+
+
+def r157_min_following_distance(speed: float) -> float:
+    """d_min = v * t_front(v) [m] at `speed` [m/s]; 0 below 7.2 km/h, where R157 sets none."""
+    if speed < R157_MIN_SPEED_MPS:
+        return 0.0
+    kmh, gap = zip(*R157_TIME_GAP, strict=True)
+    return speed * float(np.interp(speed * 3.6, kmh, gap))
+
+
+def footprint_lateral_extent(world: WorldState) -> tuple[float, float]:
+    """(lowest, highest) lateral coordinate [m] of the ego's footprint corners in the reference lane
+    frame (its heading relative to the lane turns the rectangle)."""
+    ego = world.ego_state()
+    half = (
+        float(world.length[0] * abs(math.sin(ego.heading)) + world.width[0] * abs(math.cos(ego.heading))) / 2
+    )
+    return ego.d - half, ego.d + half
+
+
+def road_edges(world: WorldState) -> tuple[float, float]:
+    """(lowest, highest) lateral coordinate [m] of the drivable area: the outer edges of the outer lanes."""
+    half = world.lane_width / 2
+    return float(np.min(world.lane_offsets)) - half, float(np.max(world.lane_offsets)) + half
+
+
+def departed(world: WorldState) -> bool:
+    """A footprint corner lies more than DEPARTURE_TOLERANCE_M beyond the road edges."""
+    low, high = footprint_lateral_extent(world)
+    edge_low, edge_high = road_edges(world)
+    return bool(low < edge_low - DEPARTURE_TOLERANCE_M or high > edge_high + DEPARTURE_TOLERANCE_M)
+
+
+def occupied_lanes(world: WorldState) -> tuple[int, ...]:
+    """The lanes the ego's footprint reaches into."""
+    low, high = footprint_lateral_extent(world)
+    half = world.lane_width / 2
+    return tuple(
+        lane for lane, centre in enumerate(world.lane_offsets) if low < centre + half and high > centre - half
+    )
+
+
+@dataclass(frozen=True)
+class Collision:
+    """What the ego hit and who is at fault (see the module docstring for `kind`)."""
+
+    kind: str
+
+    @property
+    def at_fault(self) -> bool:
+        return self.kind in AT_FAULT_KINDS
+
+
+def classify_collision(world: WorldState, changing_lane: bool) -> Collision:
+    """The category of the ego's collision in `world` (the first frame its `crashed` flag is set);
+    `changing_lane`: the maneuver is in a lane change."""
+    if departed(world):
+        return Collision("off road")
+    other = _collided_with(world)
+    if world.speed[0] < STOPPED_SPEED_MPS:
+        return Collision("ego stopped")
+    if other is None:
+        return Collision("front")
+    heading = float(world.heading[0])
+    delta = world.position[other] - world.position[0]
+    along = float(delta[0] * math.cos(heading) + delta[1] * math.sin(heading))
+    across = float(-delta[0] * math.sin(heading) + delta[1] * math.cos(heading))
+    depth_along = (world.length[0] + world.length[other]) / 2 - abs(along)
+    depth_across = (world.width[0] + world.width[other]) / 2 - abs(across)
+    in_two_lanes = len(occupied_lanes(world)) > 1
+    if depth_along <= depth_across:
+        if along > 0:
+            return Collision("stopped vehicle" if world.speed[other] < STOPPED_SPEED_MPS else "front")
+        return Collision("lane change" if changing_lane or in_two_lanes else "rear")
+    return Collision("lane change" if changing_lane or in_two_lanes else "side swipe")
+
+
+def _collided_with(world: WorldState) -> int | None:
+    """Row of the crashed vehicle whose centre is closest to the ego's (None if none is flagged)."""
+    crashed = np.flatnonzero(world.crashed[1:]) + 1
+    if not crashed.size:
+        return None
+    distance = np.linalg.norm(world.position[crashed] - world.position[0], axis=1)
+    return int(crashed[np.argmin(distance)])
+
+
+class SafetyMonitor:
+    """Per-episode safety record, fed the true world after every control tick."""
+
+    def __init__(self, dt: float) -> None:
+        self.dt = dt
+        self.min_ttc_s = TTC_CAP_S
+        self.time_below_min_distance_s = 0.0
+        self.road_departure = False
+        self.collision: Collision | None = None
+
+    def record(self, world: WorldState, changing_lane: bool) -> None:
+        if world.crashed[0] and self.collision is None:
+            self.collision = classify_collision(world, changing_lane)
+        self.road_departure = self.road_departure or departed(world)
+        v = float(world.speed[0])
+        for lane in occupied_lanes(world):
+            leader = world.neighbours(lane)[0]
+            if leader is not None and v > leader.speed:
+                self.min_ttc_s = min(self.min_ttc_s, max(leader.gap, 0.0) / (v - leader.speed))
+        leader = world.neighbours(world.ego_lane)[0] if 0 <= world.ego_lane < world.lanes_count else None
+        if leader is not None and leader.gap < r157_min_following_distance(v):
+            self.time_below_min_distance_s += self.dt
