@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import typer
 
-from records import AGENT_NAMES, unknown_name
+from records import AGENT_NAMES
+from records.plugins import AGENT_GROUP, SPEC_FORMS, checked_name
 from stack.apps.commands import export, sweep
 from stack.apps.options import (
     PLANT_HELP,
@@ -25,12 +26,17 @@ from stack.apps.options import (
     guarded,
     output_folder,
     per_agent,
+    plugins_or_fail,
     ray_or_fail,
     resumed,
     until_interrupted,
 )
 from stack.apps.training import check_init_model, check_memory, train_or_fail
 
+if TYPE_CHECKING:
+    from stack.core.config import RunConfig
+
+PLUGIN_HELP = f"a plug-in class: {SPEC_FORMS} (docs/plugins.md)."
 RESUME_HELP = "Finish the interrupted run in --out (same arguments): its finished episodes are kept."
 
 app = typer.Typer(
@@ -57,9 +63,11 @@ def run(
         None, "--config", "-c", help="YAML run config (default: configs/highway.yaml)."
     ),
     sets: list[str] = typer.Option([], "--set", help=SET_HELP),
-    agent: str | None = typer.Option(None, help="Decision agent (overrides planner.agent)."),
+    agent: str | None = typer.Option(None, help=f"Decision agent (overrides planner.agent); {PLUGIN_HELP}"),
     model: Path | None = typer.Option(None, help="Model file of a learned agent (planner.model)."),
-    controller: str | None = typer.Option(None, help="Controller (overrides controller.type)."),
+    controller: str | None = typer.Option(
+        None, help=f"Controller (overrides controller.type); {PLUGIN_HELP}"
+    ),
     episodes: int | None = typer.Option(None, help="Number of seeded episodes."),
     seed: int | None = typer.Option(None, help="Seed of the first episode."),
     out: Path | None = typer.Option(None, help="Results folder (default: runs/run-<time>)."),
@@ -70,26 +78,34 @@ def run(
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
     ray: str | None = RAY_OPTION,
     progress: bool = typer.Option(True, help="Show a progress bar."),
-    beside: str | None = typer.Option(None, help="Also run this agent on the same seeds, then both."),
+    beside: str | None = typer.Option(
+        None, help="Also run this agent (a name or a plug-in) on the same seeds, then both."
+    ),
     resume: bool = typer.Option(False, help=RESUME_HELP),
 ) -> None:
     """Run seeded closed-loop episodes and write a results folder."""
-    if beside is not None and beside not in AGENT_NAMES:
-        fail(f"--beside: {unknown_name('agent', beside, AGENT_NAMES)}")
-    pairs = [(agent, model)] + ([(beside, None)] if beside is not None else [])
-    cfgs = per_agent(
-        config,
-        sets,
-        pairs,
-        scenario=scenario,
-        controller__type=controller,
-        sim__backend=backend,
-        sim__plant=plant,
-        episodes=episodes,
-        seed=seed,
-    )
+    def configs(pairs: list[tuple[str | None, Path | None]]) -> list[RunConfig]:
+        return per_agent(
+            config,
+            sets,
+            pairs,
+            scenario=scenario,
+            controller__type=controller,
+            sim__backend=backend,
+            sim__plant=plant,
+            episodes=episodes,
+            seed=seed,
+        )
+
+    if beside is not None:
+        try:
+            checked_name("agent", AGENT_NAMES, AGENT_GROUP, beside)
+        except ValueError as error:
+            fail(f"--beside: {error}")
+    cfgs = configs([(agent, model)] + ([(beside, None)] if beside is not None else []))
     if len(cfgs) > 1 and cfgs[1].planner.agent == cfgs[0].planner.agent:
         fail(f"--beside: expected an agent other than the run's own ({cfgs[0].planner.agent})")
+    plugins_or_fail(cfgs, ["--agent" if agent else "planner.agent", "--beside"])
     ray_or_fail(ray)
     done = resumed(cfgs, out) if resume else None
     folder = checked_run(cfgs, out, "run")
@@ -100,7 +116,11 @@ def run(
 
 @app.command()
 def track(
-    controller: str = typer.Option("all", help="pid | mpc | builtin | all"),
+    controller: str = typer.Option(
+        "all",
+        help="Comma-separated: pid | mpc | pure-pursuit | stanley | lqr | builtin | an installed or "
+        "plug-in controller (module.path:Class, file.py:Class) | all (every built-in and installed one).",
+    ),
     plant: str = typer.Option("all", help="kinematic | dynamic | all (the built-in change runs kinematic)."),
     speeds: str = typer.Option("15,20,25,30", help="Comma-separated speeds [m/s]."),
     duration: float | None = typer.Option(None, help="Lane-change duration T [s] (controller config)."),
@@ -112,9 +132,12 @@ def track(
 ) -> None:
     """Single lane changes on empty straight and curved roads: tracking metrics and plots."""
     from records import PLANTS
-    from stack.apps.track import TRACK_CONTROLLERS, TrackController, track_and_report
+    from stack.apps.track import controller_names, track_and_report
 
-    names = chosen("--controller", controller, TRACK_CONTROLLERS)
+    try:
+        names = controller_names(controller)
+    except ValueError as error:
+        fail(f"--controller: {error}")
     plants = chosen("--plant", plant, PLANTS)
     try:
         speed_list = [float(value) for value in speeds.split(",")]
@@ -125,13 +148,14 @@ def track(
     cfg = configured(config, sets, controller__lane_change_duration_s=duration)
     ray_or_fail(ray)
     folder = output_folder(out, "track")
-    controllers = cast(list[TrackController], names)
-    track_and_report(controllers, speed_list, cfg, folder, progress, cast(Any, plants), ray)
+    track_and_report(names, speed_list, cfg, folder, progress, cast(Any, plants), ray)
 
 
 @app.command()
 def compare(
-    agents: str = typer.Option("ddqn,rule,mobil,keep-lane", help="Comma-separated agent names."),
+    agents: str = typer.Option(
+        "ddqn,rule,mobil,keep-lane", help=f"Comma-separated agent names or plug-ins; {PLUGIN_HELP}"
+    ),
     models: str = typer.Option("", help="Model files for learned agents: name=path,name=path."),
     config: Path | None = typer.Option(
         None, "--config", "-c", help="YAML run config (default: configs/highway.yaml)."
@@ -160,8 +184,16 @@ def compare(
         fail(f"--baseline: {baseline!r} is not among --agents ({', '.join(names)})")
     pairs = [(name, model_paths.get(name)) for name in names]
     configs = per_agent(
-        config, sets, pairs, scenario=scenario, sim__plant=plant, episodes=episodes, seed=seed
+        config,
+        sets,
+        pairs,
+        labels={"planner.agent": "--agents"},
+        scenario=scenario,
+        sim__plant=plant,
+        episodes=episodes,
+        seed=seed,
     )
+    plugins_or_fail(configs, ["--agents"] * len(configs))
     ray_or_fail(ray)
     done = resumed(configs, out) if resume else None
     folder = checked_run(configs, out, "compare")
@@ -181,11 +213,30 @@ def scenarios() -> None:
 
 @app.command()
 def agents() -> None:
-    """The decision agents `--agent` takes, one line each."""
+    """The decision agents `--agent` takes, one line each: the built-in ones, then those installed
+    packages register (entry points `drivestack.agents`)."""
     from planner.factory import AGENT_DESCRIPTIONS
+    from records.plugins import AGENT_GROUP, entry_points
 
     for name, text in AGENT_DESCRIPTIONS.items():
         typer.echo(f"{name:10} {text}")
+    for name, target in entry_points(AGENT_GROUP).items():
+        typer.echo(f"{name:10} installed plug-in {target}")
+    typer.echo(f"{'':10} or a plug-in: {SPEC_FORMS} (docs/plugins.md)")
+
+
+@app.command()
+def controllers() -> None:
+    """The controllers `--controller` takes, one line each: the built-in ones, then those installed
+    packages register (entry points `drivestack.controllers`)."""
+    from records.plugins import CONTROLLER_GROUP, entry_points
+    from stack.apps.track import CONTROLLER_DESCRIPTIONS
+
+    for name, text in CONTROLLER_DESCRIPTIONS.items():
+        typer.echo(f"{name:13} {text}")
+    for name, target in entry_points(CONTROLLER_GROUP).items():
+        typer.echo(f"{name:13} installed plug-in {target}")
+    typer.echo(f"{'':13} or a plug-in: {SPEC_FORMS} (docs/plugins.md)")
 
 
 reproduce_app = typer.Typer(no_args_is_help=True, help="Reproduce the paper's experiments.")

@@ -59,18 +59,22 @@ def fail(message: str) -> NoReturn:
     raise typer.Exit(code=2)
 
 
-def configured(path: Path | None, sets: list[str], **overrides: object) -> RunConfig:
+def configured(
+    path: Path | None, sets: list[str], labels: dict[str, str] | None = None, **overrides: object
+) -> RunConfig:
     """The validated config at `path` (the packaged run config when None) with the `--set` entries
-    and then the CLI `overrides` applied, or a one-line error (exit 2)."""
+    and then the CLI `overrides` applied, or a one-line error (exit 2); `labels` (dotted key ->
+    option) name the option to blame where it is not the usual one."""
     given = {key: value for key, value in overrides.items() if value is not None}
     set_values = parsed_sets(sets)
     values = {**set_values, **given}
-    labels = {key.replace("__", "."): f"--set {key.replace('__', '.')}" for key in set_values}
-    labels |= {key.replace("__", "."): OPTIONS.get(key, f"--{key}") for key in given}
+    blamed = {key.replace("__", "."): f"--set {key.replace('__', '.')}" for key in set_values}
+    blamed |= {key.replace("__", "."): OPTIONS.get(key, f"--{key}") for key in given}
+    blamed |= {key: label for key, label in (labels or {}).items() if key in blamed}
     from stack.core.config import ConfigError, load_config
 
     try:
-        return load_config(path or RUN_CONFIG, labels, **values)
+        return load_config(path or RUN_CONFIG, blamed, **values)
     except ConfigError as error:
         fail(str(error))
 
@@ -79,11 +83,12 @@ def per_agent(
     path: Path | None,
     sets: list[str],
     agents: Sequence[tuple[str | None, Path | str | None]],
+    labels: dict[str, str] | None = None,
     **overrides: object,
 ) -> list[RunConfig]:
     """One `configured` config per (agent name, model file) pair; None keeps the config's own."""
     return [
-        configured(path, sets, planner__agent=name, planner__model=model, **overrides)
+        configured(path, sets, labels, planner__agent=name, planner__model=model, **overrides)
         for name, model in agents
     ]
 
@@ -139,6 +144,27 @@ def checked_run(configs: list[RunConfig], out: Path | None, prefix: str) -> Path
         except ValueError as error:
             fail(str(error))
     return folder
+
+
+def plugins_or_fail(configs: Sequence[RunConfig], options: Sequence[str]) -> None:
+    """Build now each plug-in agent and controller `configs` name (the i-th config's agent set by
+    `options[i]`, its controller by --controller), so a plug-in that does not import, build or fit
+    its protocol is one line naming the option (exit 2) before any episode."""
+    from controllers.tracker import make_controller
+    from records import AGENT_NAMES, CONTROLLER_NAMES
+    from stack.core.episodes import build_agent
+
+    for config, option in zip(configs, options, strict=False):
+        try:
+            if config.planner.agent not in AGENT_NAMES:
+                build_agent(config, config.seed)
+        except ValueError as error:
+            fail(f"{option}: {error}")
+        try:
+            if config.controller.type not in CONTROLLER_NAMES:
+                make_controller(config.controller, config.dt, config.sim.plant)
+        except ValueError as error:
+            fail(f"--controller: {error}")
 
 
 def ray_or_fail(address: str | None) -> None:
