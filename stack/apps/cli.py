@@ -216,27 +216,29 @@ def agents() -> None:
     """The decision agents `--agent` takes, one line each: the built-in ones, then those installed
     packages register (entry points `drivestack.agents`)."""
     from planner.factory import AGENT_DESCRIPTIONS
-    from records.plugins import AGENT_GROUP, entry_points
 
-    for name, text in AGENT_DESCRIPTIONS.items():
-        typer.echo(f"{name:10} {text}")
-    for name, target in entry_points(AGENT_GROUP).items():
-        typer.echo(f"{name:10} installed plug-in {target}")
-    typer.echo(f"{'':10} or a plug-in: {SPEC_FORMS} (docs/plugins.md)")
+    _listing(AGENT_DESCRIPTIONS, AGENT_GROUP, 10)
 
 
 @app.command()
 def controllers() -> None:
     """The controllers `--controller` takes, one line each: the built-in ones, then those installed
     packages register (entry points `drivestack.controllers`)."""
-    from records.plugins import CONTROLLER_GROUP, entry_points
+    from records.plugins import CONTROLLER_GROUP
     from stack.apps.track import CONTROLLER_DESCRIPTIONS
 
-    for name, text in CONTROLLER_DESCRIPTIONS.items():
-        typer.echo(f"{name:13} {text}")
-    for name, target in entry_points(CONTROLLER_GROUP).items():
-        typer.echo(f"{name:13} installed plug-in {target}")
-    typer.echo(f"{'':13} or a plug-in: {SPEC_FORMS} (docs/plugins.md)")
+    _listing(CONTROLLER_DESCRIPTIONS, CONTROLLER_GROUP, 13)
+
+
+def _listing(descriptions: dict[str, str], group: str, width: int) -> None:
+    """One line per built-in name, then per name installed in the entry-point `group`."""
+    from records.plugins import entry_points
+
+    for name, text in descriptions.items():
+        typer.echo(f"{name:{width}} {text}")
+    for name, target in entry_points(group).items():
+        typer.echo(f"{name:{width}} installed plug-in {target}")
+    typer.echo(f"{'':{width}} or a plug-in: {SPEC_FORMS} (docs/plugins.md)")
 
 
 reproduce_app = typer.Typer(no_args_is_help=True, help="Reproduce the paper's experiments.")
