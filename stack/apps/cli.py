@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import Any, cast
 
 import typer
 
@@ -32,9 +32,6 @@ from stack.apps.options import (
     until_interrupted,
 )
 from stack.apps.training import check_init_model, check_memory, train_or_fail
-
-if TYPE_CHECKING:
-    from stack.core.config import RunConfig
 
 PLUGIN_HELP = f"a plug-in class: {SPEC_FORMS} (docs/plugins.md)."
 RESUME_HELP = "Finish the interrupted run in --out (same arguments): its finished episodes are kept."
@@ -84,25 +81,23 @@ def run(
     resume: bool = typer.Option(False, help=RESUME_HELP),
 ) -> None:
     """Run seeded closed-loop episodes and write a results folder."""
-    def configs(pairs: list[tuple[str | None, Path | None]]) -> list[RunConfig]:
-        return per_agent(
-            config,
-            sets,
-            pairs,
-            scenario=scenario,
-            controller__type=controller,
-            sim__backend=backend,
-            sim__plant=plant,
-            episodes=episodes,
-            seed=seed,
-        )
-
     if beside is not None:
         try:
             checked_name("agent", AGENT_NAMES, AGENT_GROUP, beside)
         except ValueError as error:
             fail(f"--beside: {error}")
-    cfgs = configs([(agent, model)] + ([(beside, None)] if beside is not None else []))
+    pairs = [(agent, model)] + ([(beside, None)] if beside is not None else [])
+    cfgs = per_agent(
+        config,
+        sets,
+        pairs,
+        scenario=scenario,
+        controller__type=controller,
+        sim__backend=backend,
+        sim__plant=plant,
+        episodes=episodes,
+        seed=seed,
+    )
     if len(cfgs) > 1 and cfgs[1].planner.agent == cfgs[0].planner.agent:
         fail(f"--beside: expected an agent other than the run's own ({cfgs[0].planner.agent})")
     plugins_or_fail(cfgs, ["--agent" if agent else "planner.agent", "--beside"])
