@@ -55,7 +55,9 @@ MAX_SET_LENGTH = 1000
 
 def fail(message: str) -> NoReturn:
     """`message` as one line on stderr (brackets in it printed as they are), then exit code 2."""
-    Console(stderr=True).print(f"[red]error:[/red] {escape(message)}", highlight=False, soft_wrap=True)
+    Console(stderr=True, emoji=False).print(
+        f"[red]error:[/red] {escape(message)}", highlight=False, soft_wrap=True
+    )
     raise typer.Exit(code=2)
 
 
