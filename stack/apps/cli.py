@@ -9,9 +9,8 @@ from typing import Any, cast
 
 import typer
 
-from records import AGENT_NAMES
-from records.plugins import AGENT_GROUP, SPEC_FORMS, checked_name
-from stack.apps.commands import export, sweep
+from records.plugins import SPEC_FORMS
+from stack.apps.commands import agents, controllers, export, sweep
 from stack.apps.options import (
     PLANT_HELP,
     RAY_OPTION,
@@ -26,11 +25,11 @@ from stack.apps.options import (
     guarded,
     output_folder,
     per_agent,
-    plugins_or_fail,
     ray_or_fail,
     resumed,
     until_interrupted,
 )
+from stack.apps.plugin_checks import agent_name_or_fail, plugins_or_fail
 from stack.apps.training import check_init_model, check_memory, train_or_fail
 
 PLUGIN_HELP = f"a plug-in class: {SPEC_FORMS} (docs/plugins.md)."
@@ -62,9 +61,7 @@ def run(
     sets: list[str] = typer.Option([], "--set", help=SET_HELP),
     agent: str | None = typer.Option(None, help=f"Decision agent (overrides planner.agent); {PLUGIN_HELP}"),
     model: Path | None = typer.Option(None, help="Model file of a learned agent (planner.model)."),
-    controller: str | None = typer.Option(
-        None, help=f"Controller (overrides controller.type); {PLUGIN_HELP}"
-    ),
+    controller: str | None = typer.Option(None, help=f"Controller (controller.type); {PLUGIN_HELP}"),
     episodes: int | None = typer.Option(None, help="Number of seeded episodes."),
     seed: int | None = typer.Option(None, help="Seed of the first episode."),
     out: Path | None = typer.Option(None, help="Results folder (default: runs/run-<time>)."),
@@ -75,17 +72,11 @@ def run(
     jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
     ray: str | None = RAY_OPTION,
     progress: bool = typer.Option(True, help="Show a progress bar."),
-    beside: str | None = typer.Option(
-        None, help="Also run this agent (a name or a plug-in) on the same seeds, then both."
-    ),
+    beside: str | None = typer.Option(None, help="Also run this agent on the same seeds, then both."),
     resume: bool = typer.Option(False, help=RESUME_HELP),
 ) -> None:
     """Run seeded closed-loop episodes and write a results folder."""
-    if beside is not None:
-        try:
-            checked_name("agent", AGENT_NAMES, AGENT_GROUP, beside)
-        except ValueError as error:
-            fail(f"--beside: {error}")
+    agent_name_or_fail("--beside", beside)
     pairs = [(agent, model)] + ([(beside, None)] if beside is not None else [])
     cfgs = per_agent(
         config,
@@ -111,11 +102,7 @@ def run(
 
 @app.command()
 def track(
-    controller: str = typer.Option(
-        "all",
-        help="Comma-separated: pid | mpc | pure-pursuit | stanley | lqr | builtin | an installed or "
-        "plug-in controller (module.path:Class, file.py:Class) | all (every built-in and installed one).",
-    ),
+    controller: str = typer.Option("all", help=f"Comma-separated names (all: every one) or {PLUGIN_HELP}"),
     plant: str = typer.Option("all", help="kinematic | dynamic | all (the built-in change runs kinematic)."),
     speeds: str = typer.Option("15,20,25,30", help="Comma-separated speeds [m/s]."),
     duration: float | None = typer.Option(None, help="Lane-change duration T [s] (controller config)."),
@@ -148,9 +135,7 @@ def track(
 
 @app.command()
 def compare(
-    agents: str = typer.Option(
-        "ddqn,rule,mobil,keep-lane", help=f"Comma-separated agent names or plug-ins; {PLUGIN_HELP}"
-    ),
+    agents: str = typer.Option("ddqn,rule,mobil,keep-lane", help=f"Comma-separated names or {PLUGIN_HELP}"),
     models: str = typer.Option("", help="Model files for learned agents: name=path,name=path."),
     config: Path | None = typer.Option(
         None, "--config", "-c", help="YAML run config (default: configs/highway.yaml)."
@@ -206,39 +191,11 @@ def scenarios() -> None:
         typer.echo(f"{name:12} {named.description(name)}")
 
 
-@app.command()
-def agents() -> None:
-    """The decision agents `--agent` takes, one line each: the built-in ones, then those installed
-    packages register (entry points `drivestack.agents`)."""
-    from planner.factory import AGENT_DESCRIPTIONS
-
-    _listing(AGENT_DESCRIPTIONS, AGENT_GROUP, 10)
-
-
-@app.command()
-def controllers() -> None:
-    """The controllers `--controller` takes, one line each: the built-in ones, then those installed
-    packages register (entry points `drivestack.controllers`)."""
-    from records.plugins import CONTROLLER_GROUP
-    from stack.apps.track import CONTROLLER_DESCRIPTIONS
-
-    _listing(CONTROLLER_DESCRIPTIONS, CONTROLLER_GROUP, 13)
-
-
-def _listing(descriptions: dict[str, str], group: str, width: int) -> None:
-    """One line per built-in name, then per name installed in the entry-point `group`."""
-    from records.plugins import entry_points
-
-    for name, text in descriptions.items():
-        typer.echo(f"{name:{width}} {text}")
-    for name, target in entry_points(group).items():
-        typer.echo(f"{name:{width}} installed plug-in {target}")
-    typer.echo(f"{'':{width}} or a plug-in: {SPEC_FORMS} (docs/plugins.md)")
-
-
 reproduce_app = typer.Typer(no_args_is_help=True, help="Reproduce the paper's experiments.")
 app.add_typer(reproduce_app, name="reproduce")
 app.command()(export)
+app.command()(agents)
+app.command()(controllers)
 app.command()(sweep)
 
 

@@ -148,27 +148,6 @@ def checked_run(configs: list[RunConfig], out: Path | None, prefix: str) -> Path
     return folder
 
 
-def plugins_or_fail(configs: Sequence[RunConfig], options: Sequence[str]) -> None:
-    """Build now each plug-in agent and controller `configs` name (the i-th config's agent set by
-    `options[i]`, its controller by --controller), so a plug-in that does not import, build or fit
-    its protocol is one line naming the option (exit 2) before any episode."""
-    from controllers.tracker import make_controller
-    from records import AGENT_NAMES, CONTROLLER_NAMES
-    from stack.core.episodes import build_agent
-
-    for config, option in zip(configs, options, strict=False):
-        try:
-            if config.planner.agent not in AGENT_NAMES:
-                build_agent(config, config.seed)
-        except ValueError as error:
-            fail(f"{option}: {error}")
-        try:
-            if config.controller.type not in CONTROLLER_NAMES:
-                make_controller(config.controller, config.dt, config.sim.plant)
-        except ValueError as error:
-            fail(f"--controller: {error}")
-
-
 def ray_or_fail(address: str | None) -> None:
     """With `--ray`, connect now (see `stack.core.ray_tasks.connect`), so a missing Ray or an
     unreachable address is one line before any work."""
