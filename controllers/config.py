@@ -7,7 +7,8 @@ from typing import Annotated, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from records import CONTROLLER_NAMES, ControllerName, one_of
+from records import CONTROLLER_NAMES, one_of
+from records.plugins import CONTROLLER_GROUP, plugin_name
 
 MPCSolver = Literal["rti", "sqp", "ipopt"]
 """`rti`: one Gauss-Newton SQP step per tick from the shifted last solution (acados' real-time
@@ -82,15 +83,52 @@ class MPCSettings(_Settings):
     )
 
 
+class SteeringLimits(_Settings):
+    """The steering limits every classic tracker applies (the PID's defaults)."""
+
+    steering_rate: float = Field(0.5, gt=0, description="steering rate limit [rad/s]")
+    max_steering: float = Field(math.pi / 4, gt=0, le=math.pi / 4, description="steering limit [rad]")
+
+
+class PurePursuitSettings(SteeringLimits):
+    """Pure pursuit (controllers.pure_pursuit): the look-ahead distance grows with the speed."""
+
+    lookahead_time: float = Field(0.4, gt=0, description="look-ahead distance per speed [s]")
+    min_lookahead: float = Field(4.0, gt=0, description="shortest look-ahead distance [m]")
+
+
+class StanleyGains(SteeringLimits):
+    """Stanley (controllers.stanley): cross-track gain, its low-speed softening, yaw-rate damping."""
+
+    gain: float = Field(3.0, gt=0, description="cross-track gain k [1/s]")
+    softening: float = Field(2.0, gt=0, description="k_soft, added to the speed [m/s]")
+    yaw_damping: float = Field(0.0, ge=0, description="steering per yaw-rate error [s]")
+
+
+class LQRSettings(SteeringLimits):
+    """LQR on the lateral error dynamics (controllers.lqr), weights by Bryson's rule: each state or
+    input is divided by the largest value it should take."""
+
+    max_lateral_error: float = Field(0.05, gt=0, description="Bryson scale of the lateral error [m]")
+    max_heading_error: float = Field(0.02, gt=0, description="Bryson scale of the heading error [rad]")
+    max_slip: float = Field(0.01, gt=0, description="Bryson scale of the slip-angle correction [rad]")
+    speed_step: float = Field(1.0, gt=0, le=10, description="spacing of the gain schedule [m/s]")
+
+
 class ControllerConfig(_Settings):
-    """The control layer: which tracker (`pid` or `mpc`), its gains, the lane change (nominal
+    """The control layer: which tracker (`pid`, `mpc`, `pure-pursuit`, `stanley`, `lqr`, a name an
+    installed package registers under the entry points `drivestack.controllers`, or a plug-in class
+    `module.path:Class` / `file.py:Class`, see docs/plugins.md), its gains, the lane change (nominal
     duration, the course limit that stretches it at low speed, the speed below which none starts),
     the adaptive cruise (set speed, time gap, standstill gap, comfort deceleration) and emergency
     braking (`controllers.emergency`: deceleration, trigger time to collision)."""
 
-    type: Annotated[ControllerName, one_of("controller", CONTROLLER_NAMES)] = "pid"
+    type: Annotated[str, plugin_name("controller", CONTROLLER_NAMES, CONTROLLER_GROUP)] = "pid"
     pid: PIDGains = PIDGains()
     mpc: MPCSettings = MPCSettings()
+    pure_pursuit: PurePursuitSettings = PurePursuitSettings()
+    stanley: StanleyGains = StanleyGains()
+    lqr: LQRSettings = LQRSettings()
     lane_change_duration_s: float = Field(5.0, gt=0, description="[s]")
     set_speed_mps: float = Field(30.0, gt=0, le=40, description="[m/s]")
     time_gap_s: float = Field(1.5, ge=0, description="[s]")

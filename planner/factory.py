@@ -6,7 +6,8 @@ from pathlib import Path
 
 from planner.agents import Agent, FreeGapAgent, KeepLaneAgent, RandomAgent
 from planner.mobil import MobilAgent
-from records import LEARNED_AGENTS, POLICY_NAMES, GridConfig, unknown_name
+from records import AGENT_NAMES, LEARNED_AGENTS, POLICY_NAMES, GridConfig, unknown_name
+from records.plugins import AGENT_GROUP, checked_name
 
 MODELS = Path(__file__).parent / "models"
 
@@ -50,7 +51,8 @@ def make_agent(
     scenario: str | None = None,
 ) -> Agent:
     """Build the agent `name` for a road of `lanes` lanes seen through `grid`; learned agents load
-    `model` (by default the shipped one, for `scenario` where one is shipped for it)."""
+    `model` (by default the shipped one, for `scenario` where one is shipped for it). Any other
+    name is a plug-in (`planner.plugins`), given `model` if it takes one."""
     if (path := model_path(name, model, scenario)) is not None:
         from planner.learned import load_agent
 
@@ -63,7 +65,12 @@ def make_agent(
         return KeepLaneAgent()
     if name == "random":
         return RandomAgent(seed)
-    raise ValueError(unknown_name("agent", name, POLICY_NAMES))
+    if name in AGENT_NAMES:
+        raise ValueError(unknown_name("agent", name, POLICY_NAMES))
+    checked_name("agent", AGENT_NAMES, AGENT_GROUP, name)
+    from planner.plugins import plugin_agent
+
+    return plugin_agent(name, lanes, grid, seed, model)
 
 
 def model_path(name: str, model: Path | str | None, scenario: str | None = None) -> Path | None:

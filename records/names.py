@@ -14,7 +14,8 @@ AgentName = Literal[PolicyName, "oracle"]
 """Every agent a run can use: the policies and the perfect-information oracle (`stack.core.oracle`)."""
 LearnedAgentName = Literal["ddqn", "dqn", "tabular"]
 Encoding = Literal["observation", "paper", "tabular"]
-ControllerName = Literal["pid", "mpc"]
+ControllerName = Literal["pid", "mpc", "pure-pursuit", "stanley", "lqr"]
+"""The built-in trackers; a run also takes plug-ins (`records.plugins`)."""
 Backend = Literal["vector", "fast", "stock"]
 PlantName = Literal["kinematic", "dynamic"]
 """The ego's vehicle model: highway-env's kinematic bicycle, or its dynamic bicycle with tyre slip."""

@@ -9,7 +9,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 LAYERS = ("perception", "planner", "controllers")
 PROJECT = (*LAYERS, "stack", "records")
-MAX_LINES = 255
+MAX_LINES = 400
+"""A module past this many lines holds more than one role (the median module is about 100)."""
 
 
 def modules(package: str) -> list[Path]:

@@ -164,8 +164,8 @@ def test_track_cli_writes_tracking_json_and_plots(tmp_path):
         "direction",
     } <= set(records[0])
     assert (out / "tracking_straight_kinematic_20mps.png").is_file()
-    bad = CliRunner().invoke(app, ["track", "--controller", "lqr", "--out", str(tmp_path / "x")])
-    assert bad.exit_code == 2 and "--controller: unknown 'lqr'" in bad.output
+    bad = CliRunner().invoke(app, ["track", "--controller", "lqr2", "--out", str(tmp_path / "x")])
+    assert bad.exit_code == 2 and "--controller: unknown controller 'lqr2'" in bad.output
     bad = CliRunner().invoke(app, ["track", "--speeds", "fast", "--out", str(tmp_path / "x")])
     assert bad.exit_code == 2 and "--speeds" in bad.output
 
@@ -266,9 +266,9 @@ def test_version_agents_and_the_packaged_defaults_from_any_directory(tmp_path, m
     listing = CliRunner().invoke(app, ["agents"])
     from records import AGENT_NAMES
 
-    assert listing.exit_code == 0 and [line.split()[0] for line in listing.output.splitlines()] == list(
-        AGENT_NAMES
-    )
+    lines = listing.output.splitlines()
+    assert listing.exit_code == 0 and [line.split()[0] for line in lines[:-1]] == list(AGENT_NAMES)
+    assert "or a plug-in: module.path:ClassName" in lines[-1]
     monkeypatch.chdir(tmp_path)  # no configs/ here: the packaged default config runs
     result = CliRunner().invoke(
         app,
@@ -290,7 +290,7 @@ def test_version_agents_and_the_packaged_defaults_from_any_directory(tmp_path, m
 
 def test_an_error_from_an_option_names_the_option_not_the_file(tmp_path):
     for arguments, message in [
-        (["--controller", "lqr"], "error: --controller: controller.type: unknown controller 'lqr'"),
+        (["--controller", "nope"], "error: --controller: controller.type: unknown controller 'nope'"),
         (["--scenario", "nope"], "error: --scenario: scenario: unknown scenario 'nope'"),
         (["--set", "seed.x=1"], "error: --set seed.x: seed: not a section"),
     ]:

@@ -43,7 +43,7 @@ def test_overrides_replace_file_values(tmp_path):
             {"planner": {"agent": "genius"}},
             "planner.agent: unknown agent 'genius'; available: ddqn, dqn, tabular, rule",
         ),
-        ({"controller": {"type": "lqr"}}, "controller.type: unknown controller 'lqr'"),
+        ({"controller": {"type": "lqr2"}}, "controller.type: unknown controller 'lqr2'"),
         ({"perception": {"cell_length": 0}}, "perception.cell_length: Input should be greater than 0"),
     ],
 )

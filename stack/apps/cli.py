@@ -9,8 +9,8 @@ from typing import Any, cast
 
 import typer
 
-from records import AGENT_NAMES, unknown_name
-from stack.apps.commands import export, sweep
+from records.plugins import SPEC_FORMS
+from stack.apps.commands import agents, controllers, export, sweep
 from stack.apps.options import (
     PLANT_HELP,
     RAY_OPTION,
@@ -29,8 +29,10 @@ from stack.apps.options import (
     resumed,
     until_interrupted,
 )
+from stack.apps.plugin_checks import agent_name_or_fail, plugins_or_fail
 from stack.apps.training import check_init_model, check_memory, train_or_fail
 
+PLUGIN_HELP = f"a plug-in class: {SPEC_FORMS} (docs/plugins.md)."
 RESUME_HELP = "Finish the interrupted run in --out (same arguments): its finished episodes are kept."
 
 app = typer.Typer(
@@ -57,9 +59,9 @@ def run(
         None, "--config", "-c", help="YAML run config (default: configs/highway.yaml)."
     ),
     sets: list[str] = typer.Option([], "--set", help=SET_HELP),
-    agent: str | None = typer.Option(None, help="Decision agent (overrides planner.agent)."),
+    agent: str | None = typer.Option(None, help=f"Decision agent (overrides planner.agent); {PLUGIN_HELP}"),
     model: Path | None = typer.Option(None, help="Model file of a learned agent (planner.model)."),
-    controller: str | None = typer.Option(None, help="Controller (overrides controller.type)."),
+    controller: str | None = typer.Option(None, help=f"Controller (controller.type); {PLUGIN_HELP}"),
     episodes: int | None = typer.Option(None, help="Number of seeded episodes."),
     seed: int | None = typer.Option(None, help="Seed of the first episode."),
     out: Path | None = typer.Option(None, help="Results folder (default: runs/run-<time>)."),
@@ -74,8 +76,7 @@ def run(
     resume: bool = typer.Option(False, help=RESUME_HELP),
 ) -> None:
     """Run seeded closed-loop episodes and write a results folder."""
-    if beside is not None and beside not in AGENT_NAMES:
-        fail(f"--beside: {unknown_name('agent', beside, AGENT_NAMES)}")
+    agent_name_or_fail("--beside", beside)
     pairs = [(agent, model)] + ([(beside, None)] if beside is not None else [])
     cfgs = per_agent(
         config,
@@ -90,6 +91,7 @@ def run(
     )
     if len(cfgs) > 1 and cfgs[1].planner.agent == cfgs[0].planner.agent:
         fail(f"--beside: expected an agent other than the run's own ({cfgs[0].planner.agent})")
+    plugins_or_fail(cfgs, ["--agent" if agent else "planner.agent", "--beside"])
     ray_or_fail(ray)
     done = resumed(cfgs, out) if resume else None
     folder = checked_run(cfgs, out, "run")
@@ -100,7 +102,7 @@ def run(
 
 @app.command()
 def track(
-    controller: str = typer.Option("all", help="pid | mpc | builtin | all"),
+    controller: str = typer.Option("all", help=f"Comma-separated names (all: every one) or {PLUGIN_HELP}"),
     plant: str = typer.Option("all", help="kinematic | dynamic | all (the built-in change runs kinematic)."),
     speeds: str = typer.Option("15,20,25,30", help="Comma-separated speeds [m/s]."),
     duration: float | None = typer.Option(None, help="Lane-change duration T [s] (controller config)."),
@@ -112,9 +114,12 @@ def track(
 ) -> None:
     """Single lane changes on empty straight and curved roads: tracking metrics and plots."""
     from records import PLANTS
-    from stack.apps.track import TRACK_CONTROLLERS, TrackController, track_and_report
+    from stack.apps.track import controller_names, track_and_report
 
-    names = chosen("--controller", controller, TRACK_CONTROLLERS)
+    try:
+        names = controller_names(controller)
+    except ValueError as error:
+        fail(f"--controller: {error}")
     plants = chosen("--plant", plant, PLANTS)
     try:
         speed_list = [float(value) for value in speeds.split(",")]
@@ -125,13 +130,12 @@ def track(
     cfg = configured(config, sets, controller__lane_change_duration_s=duration)
     ray_or_fail(ray)
     folder = output_folder(out, "track")
-    controllers = cast(list[TrackController], names)
-    track_and_report(controllers, speed_list, cfg, folder, progress, cast(Any, plants), ray)
+    track_and_report(names, speed_list, cfg, folder, progress, cast(Any, plants), ray)
 
 
 @app.command()
 def compare(
-    agents: str = typer.Option("ddqn,rule,mobil,keep-lane", help="Comma-separated agent names."),
+    agents: str = typer.Option("ddqn,rule,mobil,keep-lane", help=f"Comma-separated names or {PLUGIN_HELP}"),
     models: str = typer.Option("", help="Model files for learned agents: name=path,name=path."),
     config: Path | None = typer.Option(
         None, "--config", "-c", help="YAML run config (default: configs/highway.yaml)."
@@ -160,8 +164,16 @@ def compare(
         fail(f"--baseline: {baseline!r} is not among --agents ({', '.join(names)})")
     pairs = [(name, model_paths.get(name)) for name in names]
     configs = per_agent(
-        config, sets, pairs, scenario=scenario, sim__plant=plant, episodes=episodes, seed=seed
+        config,
+        sets,
+        pairs,
+        labels={"planner.agent": "--agents"},
+        scenario=scenario,
+        sim__plant=plant,
+        episodes=episodes,
+        seed=seed,
     )
+    plugins_or_fail(configs, ["--agents"] * len(configs))
     ray_or_fail(ray)
     done = resumed(configs, out) if resume else None
     folder = checked_run(configs, out, "compare")
@@ -179,18 +191,11 @@ def scenarios() -> None:
         typer.echo(f"{name:12} {named.description(name)}")
 
 
-@app.command()
-def agents() -> None:
-    """The decision agents `--agent` takes, one line each."""
-    from planner.factory import AGENT_DESCRIPTIONS
-
-    for name, text in AGENT_DESCRIPTIONS.items():
-        typer.echo(f"{name:10} {text}")
-
-
 reproduce_app = typer.Typer(no_args_is_help=True, help="Reproduce the paper's experiments.")
 app.add_typer(reproduce_app, name="reproduce")
 app.command()(export)
+app.command()(agents)
+app.command()(controllers)
 app.command()(sweep)
 
 

@@ -1,5 +1,6 @@
-"""The `drivestack` commands that do not run episodes here: `sweep` (training runs on Ray Tune) and
-`export`. Parsing and one-line errors only, like `stack.apps.cli`, which registers them."""
+"""The `drivestack` commands that do not run episodes here: `sweep` (training runs on Ray Tune),
+`export`, and the `agents` and `controllers` listings. Parsing and one-line errors only, like
+`stack.apps.cli`, which registers them."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from pathlib import Path
 import typer
 from rich.console import Console
 
+from records.plugins import AGENT_GROUP, SPEC_FORMS
 from stack.apps.options import fail, output_folder, ray_or_fail
 from stack.apps.training import check_memory
 
@@ -62,3 +64,31 @@ def export(
     except ValueError as error:
         fail(str(error))
     Console().print(f"wrote {written}: stable_baselines3.DQN.load({str(written)!r})", highlight=False)
+
+
+def agents() -> None:
+    """The decision agents `--agent` takes, one line each: the built-in ones, then those installed
+    packages register (entry points `drivestack.agents`)."""
+    from planner.factory import AGENT_DESCRIPTIONS
+
+    _listing(AGENT_DESCRIPTIONS, AGENT_GROUP, 10)
+
+
+def controllers() -> None:
+    """The controllers `--controller` takes, one line each: the built-in ones, then those installed
+    packages register (entry points `drivestack.controllers`)."""
+    from records.plugins import CONTROLLER_GROUP
+    from stack.apps.track import CONTROLLER_DESCRIPTIONS
+
+    _listing(CONTROLLER_DESCRIPTIONS, CONTROLLER_GROUP, 13)
+
+
+def _listing(descriptions: dict[str, str], group: str, width: int) -> None:
+    """One line per built-in name, then per name installed in the entry-point `group`."""
+    from records.plugins import entry_points
+
+    for name, text in descriptions.items():
+        typer.echo(f"{name:{width}} {text}")
+    for name, target in entry_points(group).items():
+        typer.echo(f"{name:{width}} installed plug-in {target}")
+    typer.echo(f"{'':{width}} or a plug-in: {SPEC_FORMS} (docs/plugins.md)")

@@ -55,22 +55,28 @@ MAX_SET_LENGTH = 1000
 
 def fail(message: str) -> NoReturn:
     """`message` as one line on stderr (brackets in it printed as they are), then exit code 2."""
-    Console(stderr=True).print(f"[red]error:[/red] {escape(message)}", highlight=False, soft_wrap=True)
+    Console(stderr=True, emoji=False).print(
+        f"[red]error:[/red] {escape(message)}", highlight=False, soft_wrap=True
+    )
     raise typer.Exit(code=2)
 
 
-def configured(path: Path | None, sets: list[str], **overrides: object) -> RunConfig:
+def configured(
+    path: Path | None, sets: list[str], labels: dict[str, str] | None = None, **overrides: object
+) -> RunConfig:
     """The validated config at `path` (the packaged run config when None) with the `--set` entries
-    and then the CLI `overrides` applied, or a one-line error (exit 2)."""
+    and then the CLI `overrides` applied, or a one-line error (exit 2); `labels` (dotted key ->
+    option) name the option to blame where it is not the usual one."""
     given = {key: value for key, value in overrides.items() if value is not None}
     set_values = parsed_sets(sets)
     values = {**set_values, **given}
-    labels = {key.replace("__", "."): f"--set {key.replace('__', '.')}" for key in set_values}
-    labels |= {key.replace("__", "."): OPTIONS.get(key, f"--{key}") for key in given}
+    blamed = {key.replace("__", "."): f"--set {key.replace('__', '.')}" for key in set_values}
+    blamed |= {key.replace("__", "."): OPTIONS.get(key, f"--{key}") for key in given}
+    blamed |= {key: label for key, label in (labels or {}).items() if key in blamed}
     from stack.core.config import ConfigError, load_config
 
     try:
-        return load_config(path or RUN_CONFIG, labels, **values)
+        return load_config(path or RUN_CONFIG, blamed, **values)
     except ConfigError as error:
         fail(str(error))
 
@@ -79,11 +85,12 @@ def per_agent(
     path: Path | None,
     sets: list[str],
     agents: Sequence[tuple[str | None, Path | str | None]],
+    labels: dict[str, str] | None = None,
     **overrides: object,
 ) -> list[RunConfig]:
     """One `configured` config per (agent name, model file) pair; None keeps the config's own."""
     return [
-        configured(path, sets, planner__agent=name, planner__model=model, **overrides)
+        configured(path, sets, labels, planner__agent=name, planner__model=model, **overrides)
         for name, model in agents
     ]
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from records import child_seed
+from records.plugins import file_safe
 from stack.core.config import RunConfig, config_text
 from stack.core.files import JOURNAL, EpisodeJournal, write_text
 from stack.core.metrics import EpisodeResult
@@ -26,7 +27,7 @@ def resolved_config(configs: list[RunConfig]) -> str:
 
 def journal_of(config: RunConfig, out: Path) -> EpisodeJournal:
     """Where the finished episodes of `config`'s agent are kept while a run or comparison goes on."""
-    return EpisodeJournal(out / f"{config.planner.agent}.{JOURNAL}")
+    return EpisodeJournal(out / f"{file_safe(config.planner.agent)}.{JOURNAL}")
 
 
 def started(configs: list[RunConfig], out: Path, resuming: bool) -> list[EpisodeJournal]:

@@ -4,7 +4,9 @@ For every road (straight; bends of 1000 m and, up to 25 m/s, 500 m radius), plan
 kinematic bicycle; its dynamic bicycle with tyre slip), controller, speed and direction, the closed
 loop of `drivestack run` drives `stack.sim.empty_road`: 1 s of lane keeping, then a quintic lane
 change of `duration` seconds from the middle lane's centre to the neighbour's, then lane keeping
-to 3 s after its end. `builtin` is highway-env's own ControlledVehicle lane change.
+to 3 s after its end. `builtin` is highway-env's own ControlledVehicle lane change; `all` is every
+built-in controller and every one installed packages register (entry points
+`drivestack.controllers`); plug-in classes (`module.path:Class`, `file.py:Class`) join by name.
 
 Metrics (`stack.core.metrics.tracking`, defined in docs/architecture.md): lateral RMS / max error to
 the reference, overshoot, duration, peak |a_y| and lateral jerk, controller time per tick p50 / p95,
@@ -17,14 +19,16 @@ import json
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
+from pydantic import ValidationError
 from rich.console import Console
 from tqdm import tqdm
 
 from controllers.config import ControllerConfig
-from records import PLANTS, Command, PlantName
+from controllers.tracker import make_controller
+from records import CONTROLLER_NAMES, PLANTS, Command, PlantName
+from records.plugins import CONTROLLER_GROUP, entry_points, label
 from stack.apps.track_report import plot_maneuvers, print_tracking
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import RunConfig, write_config
@@ -32,8 +36,15 @@ from stack.core.executors import completed
 from stack.core.metrics import Tracking, lateral_series, tracking
 from stack.sim.empty_road import BuiltinDriver, EmptyRoad, PlantKind, RoadKind
 
-TrackController = Literal["pid", "mpc", "builtin"]
-TRACK_CONTROLLERS: tuple[TrackController, ...] = ("pid", "mpc", "builtin")
+TRACK_CONTROLLERS: tuple[str, ...] = (*CONTROLLER_NAMES, "builtin")
+CONTROLLER_DESCRIPTIONS: dict[str, str] = {
+    "pid": "cascaded lateral PID with model-inverting feedforward (the default)",
+    "mpc": "joint steering + acceleration MPC on the bicycle model (CasADi), PID fallback",
+    "pure-pursuit": "pure pursuit: the arc to a goal point 0.4 s ahead on the reference, no feedforward",
+    "stanley": "Stanley: front-axle cross-track and heading errors, curvature feedforward",
+    "lqr": "LQR on the lateral error dynamics (python-control dlqr), speed-scheduled, feedforward",
+}
+"""One line per built-in controller (`drivestack controllers`); each uses the adaptive cruise."""
 ROADS: tuple[RoadKind, ...] = ("straight", "bend-1000", "bend-500")
 TOP_SPEED: dict[RoadKind, float] = {"bend-500": 25.0}
 """Fastest maneuver on a road [m/s]: the 500 m bend's lateral acceleration is 1.25 m/s² at 25 m/s
@@ -66,8 +77,28 @@ class Maneuver(Tracking):
         return {**{k: figures.pop(k) for k in which}, **figures}
 
 
+def controller_names(value: str) -> list[str]:
+    """The controllers a comma-separated `--controller` value names, `all` expanded to every built-in
+    and installed one, plug-in files made absolute; ValueError (one line) for an unknown name."""
+    names: list[str] = []
+    for name in value.split(","):
+        if name == "all":
+            names += [*TRACK_CONTROLLERS, *entry_points(CONTROLLER_GROUP)]
+        elif name == "builtin":
+            names.append(name)
+        elif name:
+            try:
+                config = ControllerConfig(type=name)
+            except ValidationError as error:
+                raise ValueError(error.errors()[0]["msg"].removeprefix("Value error, ")) from None
+            if config.type not in CONTROLLER_NAMES:
+                make_controller(config, 1 / 15)
+            names.append(config.type)
+    return list(dict.fromkeys(names))
+
+
 def run_maneuver(
-    controller_name: TrackController,
+    controller_name: str,
     config: ControllerConfig,
     road_kind: RoadKind,
     plant: PlantKind,
@@ -104,7 +135,7 @@ def run_maneuver(
     solve_ms = np.array(loop.controller.solve_times) * 1e3
     lateral_acceleration, jerk = lateral_series(heading, speeds, dt)
     return Maneuver(
-        controller=controller_name,
+        controller=label(controller_name),
         road=road_kind,
         plant=plant,
         speed=speed,
@@ -131,7 +162,7 @@ def _run_maneuver(arguments: tuple) -> Maneuver:
 
 
 def track_and_report(
-    controllers: list[TrackController],
+    controllers: list[str],
     speeds: list[float],
     config: RunConfig,
     out: Path,
@@ -166,7 +197,7 @@ def track_and_report(
 
 
 def track(
-    controllers: list[TrackController],
+    controllers: list[str],
     speeds: list[float],
     duration: float,
     config: ControllerConfig,

@@ -34,9 +34,13 @@ COLUMNS = (
 STYLES = {
     "pid": {"color": "tab:blue", "ls": "-"},
     "mpc": {"color": "tab:orange", "ls": "--"},
+    "pure-pursuit": {"color": "tab:green", "ls": "-."},
+    "stanley": {"color": "tab:red", "ls": "-"},
+    "lqr": {"color": "tab:purple", "ls": "--"},
     "builtin": {"color": "tab:gray", "ls": ":"},
 }
-"""One colour and line style per controller, so PID and MPC stay apart where they overlap."""
+"""One colour and line style per built-in controller, so they stay apart where they overlap (plug-ins
+take matplotlib's next colours)."""
 
 
 def worst_cases(records: list[dict[str, Any]]) -> list[list[str]]:

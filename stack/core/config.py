@@ -16,7 +16,8 @@ from controllers.config import ControllerConfig
 from perception.grid import OccupancyGridBuilder
 from perception.sensor import SensorConfig
 from planner.safety import SafetyConfig
-from records import AGENT_NAMES, SEED_LIMIT, AgentName, Encoding, GridConfig, one_of
+from records import AGENT_NAMES, SEED_LIMIT, Encoding, GridConfig
+from records.plugins import AGENT_GROUP, plugin_name
 from stack.core.files import write_text
 from stack.core.train_config import Strict, TrainConfig
 from stack.sim import scenarios
@@ -48,7 +49,10 @@ class OracleConfig(Strict):
 
 
 class PlannerConfig(Strict):
-    agent: Annotated[AgentName, one_of("agent", AGENT_NAMES)] = "rule"
+    """`agent`: a built-in name, a name an installed package registers (entry points
+    `drivestack.agents`) or a plug-in class `module.path:Class` / `file.py:Class` (docs/plugins.md)."""
+
+    agent: Annotated[str, plugin_name("agent", AGENT_NAMES, AGENT_GROUP)] = "rule"
     model: Path | None = None
     safety: SafetyConfig = SafetyConfig()
     oracle: OracleConfig = OracleConfig()

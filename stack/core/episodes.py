@@ -27,7 +27,7 @@ def build_agent(config: RunConfig, seed: int) -> Agent:
     if planner.agent == "oracle":
         return Oracle.for_road(planner.oracle, lanes, grid_config(config), config.scenario)
     path = model_path(planner.agent, planner.model, config.scenario)
-    agent = make_agent(planner.agent, lanes, grid_config(config), seed, path)
+    agent = make_agent(planner.agent, lanes, grid_config(config), seed, path or planner.model)
     expected = getattr(agent, "observation_size", None)
     grid = agent.grid_config or grid_config(config)
     if expected is not None and (why := road_mismatch(path or "", grid, agent.encoding, expected, lanes)):
