@@ -11,6 +11,7 @@ import typer
 
 from records import AGENT_NAMES, unknown_name
 from stack.apps.commands import export, sweep
+from stack.apps.folders import claimed, location
 from stack.apps.options import (
     PLANT_HELP,
     RAY_OPTION,
@@ -23,13 +24,18 @@ from stack.apps.options import (
     configured,
     fail,
     guarded,
-    output_folder,
     per_agent,
     ray_or_fail,
     resumed,
     until_interrupted,
 )
-from stack.apps.training import check_init_model, check_memory, train_or_fail
+from stack.apps.training import (
+    check_init_model,
+    check_memory,
+    resumed_training,
+    train_or_fail,
+    training_owner,
+)
 
 RESUME_HELP = "Finish the interrupted run in --out (same arguments): its finished episodes are kept."
 
@@ -91,8 +97,8 @@ def run(
     if len(cfgs) > 1 and cfgs[1].planner.agent == cfgs[0].planner.agent:
         fail(f"--beside: expected an agent other than the run's own ({cfgs[0].planner.agent})")
     ray_or_fail(ray)
-    done = resumed(cfgs, out) if resume else None
-    folder = checked_run(cfgs, out, "run")
+    done = resumed(cfgs, out, "run") if resume else None
+    folder = checked_run(cfgs, out, "run", resume)
     from stack.apps.run import run_and_report
 
     until_interrupted(lambda: run_and_report(cfgs, folder, video, jobs, progress, ray, done))
@@ -124,7 +130,11 @@ def track(
         fail(f"--speeds: every speed must be in (0, 40] m/s, got {speeds}")
     cfg = configured(config, sets, controller__lane_change_duration_s=duration)
     ray_or_fail(ray)
-    folder = output_folder(out, "track")
+    from stack.core.config import config_text
+    from stack.core.owner import Owner, fingerprint
+
+    asked = fingerprint(f"{config_text(cfg)}{names}{plants}{speed_list}")
+    folder = claimed(location(out, "track"), "track", Owner("track", asked))
     controllers = cast(list[TrackController], names)
     track_and_report(controllers, speed_list, cfg, folder, progress, cast(Any, plants), ray)
 
@@ -163,8 +173,8 @@ def compare(
         config, sets, pairs, scenario=scenario, sim__plant=plant, episodes=episodes, seed=seed
     )
     ray_or_fail(ray)
-    done = resumed(configs, out) if resume else None
-    folder = checked_run(configs, out, "compare")
+    done = resumed(configs, out, "compare") if resume else None
+    folder = checked_run(configs, out, "compare", resume)
     from stack.apps.compare import compare_and_report
 
     until_interrupted(lambda: compare_and_report(configs, folder, jobs, progress, baseline, ray, done))
@@ -203,10 +213,12 @@ def reproduce_deepcars(
 ) -> None:
     """The paper's DeepCars table: tabular Q-learning, DQN and DDQN per network size, baselines."""
     from stack.apps.reproduce import reproduce_and_report
+    from stack.core.owner import Owner, fingerprint
     from stack.deepcars.spec import VARIANTS
 
     variants = chosen("--variant", variant, VARIANTS)
-    folder = output_folder(out, "deepcars")
+    asked = Owner("reproduce deepcars", fingerprint(f"{quick}{variants}{seed}"))
+    folder = claimed(location(out, "deepcars"), "deepcars", asked)
     until_interrupted(lambda: reproduce_and_report(folder, quick, seed, variants))
 
 
@@ -230,9 +242,8 @@ def train(
 ) -> None:
     """Train a decision agent inside the closed loop, keeping the best model by real-time validation."""
     if resume is not None:
-        if not (resume / "config.yaml").is_file():
-            fail(f"{resume}: not a training run folder (no config.yaml)")
-        cfg = configured(resume / "config.yaml", sets, train__steps=steps)
+        given = {"--agent": agent, "--config": config, "--envs": envs, "--plant": plant, "--seed": seed}
+        cfg = resumed_training(resume, sets, steps, given | {"--scenario": scenario, "--out": out})
     else:
         cfg = configured(
             config or TRAIN_CONFIG,
@@ -246,7 +257,7 @@ def train(
         )
     check_memory(cfg)
     check_init_model(cfg)
-
-    folder = resume or output_folder(out, f"train-{cfg.train.algorithm}")
+    folder = location(resume or out, f"train-{cfg.train.algorithm}")
+    claimed(folder, "train", training_owner(cfg), resuming=resume is not None, restart=False)
     if train_or_fail(cfg, folder, progress):
         sys.exit(130)

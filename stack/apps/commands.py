@@ -9,7 +9,7 @@ from pathlib import Path
 import typer
 from rich.console import Console
 
-from stack.apps.options import fail, output_folder, ray_or_fail
+from stack.apps.options import fail, ray_or_fail
 from stack.apps.training import check_memory
 
 SWEEP_FILE = "sweep.yaml"
@@ -43,7 +43,10 @@ def sweep(
         fail(str(error))
     check_memory(trial_config(base, sweep_file.fixed, {}))
     ray_or_fail(ray or "local")
-    folder = resume or output_folder(out, "sweep")
+    from stack.apps.folders import claimed, location
+    from stack.core.owner import Owner
+
+    folder = claimed(location(resume or out, "sweep"), "sweep", Owner("sweep", ""), resume is not None, False)
     from stack.apps.sweep import sweep_and_report
 
     if sweep_and_report(sweep_file, base, folder, resume is not None, progress):

@@ -3,11 +3,9 @@ one-line error (exit 2), and checks done before any work."""
 
 from __future__ import annotations
 
-import os
 import re
 import sys
 from collections.abc import Callable, Sequence
-from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
@@ -105,10 +103,11 @@ def parsed_sets(sets: list[str]) -> dict[str, object]:
     return values
 
 
-def checked_run(configs: list[RunConfig], out: Path | None, prefix: str) -> Path:
+def checked_run(configs: list[RunConfig], out: Path | None, prefix: str, resuming: bool = False) -> Path:
     """The results folder of a run of `configs`, after checking (one line, exit 2, before any
-    work) each agent's model file with numpy alone, then the folder (`output_folder`), then each
-    agent as built for its road (this imports torch)."""
+    work) each agent's model file with numpy alone, then the location, then each agent as built
+    for its road (this imports torch), then taking the folder for this command
+    (`stack.apps.folders.claimed`; `prefix` names the command)."""
     from planner.factory import model_path
     from planner.model_check import checked_model
     from records import GridConfig
@@ -130,7 +129,10 @@ def checked_run(configs: list[RunConfig], out: Path | None, prefix: str) -> Path
                     fail(why)
         except ValueError as error:
             fail(str(error))
-    folder = output_folder(out, prefix)
+    from stack.apps.folders import claimed, location
+    from stack.apps.resume import run_owner
+
+    folder = location(out, prefix)
     from stack.core.episodes import build_agent
 
     for config in configs:
@@ -138,7 +140,7 @@ def checked_run(configs: list[RunConfig], out: Path | None, prefix: str) -> Path
             build_agent(config, config.seed)
         except ValueError as error:
             fail(str(error))
-    return folder
+    return claimed(folder, prefix, run_owner(configs, prefix), resuming)
 
 
 def ray_or_fail(address: str | None) -> None:
@@ -172,26 +174,6 @@ def chosen(option: str, value: str, options: tuple[str, ...]) -> tuple[str, ...]
     return names
 
 
-def output_folder(out: Path | None, prefix: str) -> Path:
-    """`out` (or a fresh `runs/<prefix>-<time>`), created now and checked writable, so a bad
-    location fails in one line before any work."""
-    folder = out or fresh_run_dir(prefix)
-    if folder.exists() and not folder.is_dir():
-        fail(f"--out: {folder} is a file; expected a folder for the results")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        fail(f"--out: cannot create {folder} ({error.strerror})")
-    if not os.access(folder, os.W_OK):
-        fail(f"--out: {folder} is not writable")
-    return folder
-
-
-def fresh_run_dir(prefix: str) -> Path:
-    stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
-    return Path("runs") / f"{prefix}-{stamp}"
-
-
 def _print_version(value: bool) -> None:
     """`--version`: the installed distribution's version, then exit."""
     if value:
@@ -201,14 +183,14 @@ def _print_version(value: bool) -> None:
         raise typer.Exit()
 
 
-def resumed(configs: list[RunConfig], out: Path | None) -> dict[str, list[EpisodeResult]]:
+def resumed(configs: list[RunConfig], out: Path | None, command: str) -> dict[str, list[EpisodeResult]]:
     """`--resume`: the episodes the interrupted run in `out` finished, per agent (`resumable`)."""
     from stack.apps.resume import resumable
 
     if out is None:
         fail("--resume: name the folder of the interrupted run with --out")
     try:
-        return resumable(configs, out)
+        return resumable(configs, out, command)
     except ValueError as error:
         fail(str(error))
 

@@ -43,7 +43,7 @@ def run_and_report(
     second config (`--beside AGENT`) then drives the same seeds: `beside.json` and a table hold
     both agents with the paired difference to it. `done`: the episodes resumed
     (`stack.apps.resume.resumable`)."""
-    journals = started(configs, out, resuming=done is not None)
+    journals = started(configs, out, done)
     finished = [(done or {}).get(config.planner.agent, []) for config in configs]
     results = run(configs[0], video, progress, jobs, ray, on_finished=journals[0].record, done=finished[0])
     with deferred(interrupt_after=False):

@@ -41,12 +41,17 @@ from stack.apps.train_report import write_training_summary
 from stack.apps.train_state import dqn_state, restore_dqn_state, restore_tabular_state, tabular_state
 from stack.core.config import RunConfig, load_config, write_config
 from stack.core.decision_env import HierarchicalHighwayEnv
+from stack.core.interrupts import note_stop
 
 BEST = "best.npz"
 FINAL = "final.npz"
 
 SaveModel = Callable[[Any, Path, dict], Path]
 """`export_q_network` or `save_q_table`: (model, path, metadata) -> the file written."""
+
+
+class EnvWorkerDied(RuntimeError):
+    """A training env worker process died; the message is one line for the user."""
 
 
 class Trainer:
@@ -84,26 +89,56 @@ class Trainer:
         return model_metadata(self.config, self.validation_env, steps)
 
     def run(self) -> dict:
+        """Train to `train.steps` (or until SIGINT / SIGTERM: a checkpoint first) and write the
+        summary; signals arriving meanwhile, however many, only ask for the stop again, so the
+        files are written whole. An env worker that dies raises `EnvWorkerDied`, the last
+        checkpoint kept."""
         self.out.mkdir(parents=True, exist_ok=True)
         write_config(self.config, self.out / "config.yaml", "the resolved config; --resume reads it")
-        self.stop_requested = interrupted = False
+        self.stop_requested = False
+        with stop_signals(self._request_stop):
+            interrupted, steps = self._train()
+            return self._finish(steps, interrupted)
+
+    def _train(self) -> tuple[bool, int]:
+        """(interrupted, steps done) of the training."""
+        interrupted = False
         try:
-            with stop_signals(self._request_stop):
-                steps = (
-                    self._train_tabular() if self.config.train.algorithm == "tabular" else self._train_dqn()
-                )
+            steps = self._train_tabular() if self.config.train.algorithm == "tabular" else self._train_dqn()
         except StopTraining:
             interrupted, steps = True, self._steps_done()
         except KeyboardInterrupt:
             self.stop_requested = interrupted = True
             steps = self._save_checkpoint()
+        except (EOFError, ConnectionError) as error:
+            raise EnvWorkerDied(self._worker_death(error)) from None
         finally:
+            self._close_env()
+        return interrupted, steps
+
+    def _worker_death(self, error: BaseException) -> str:
+        """One line: which env worker died, and what the run keeps."""
+        codes = [p.exitcode for p in getattr(self.env, "processes", []) if p.exitcode not in (None, 0)]
+        how = f" (exit code {codes[0]})" if codes else f" ({type(error).__name__})"
+        kept = (
+            f"its last checkpoint ({self.out / CHECKPOINT}) is kept: --resume {self.out} continues from it"
+            if (self.out / CHECKPOINT).is_file()
+            else "no checkpoint was written yet: start the run again"
+        )
+        return f"a training environment process died{how}; {kept}"
+
+    def _close_env(self) -> None:
+        """Close the env and its worker processes, also when one of them is dead."""
+        try:
             self.env.close()
-        return self._finish(steps, interrupted)
+        except (EOFError, OSError):
+            for process in getattr(self.env, "processes", []):
+                process.kill()
 
     def _request_stop(self, signum: int, frame: object) -> None:
         """SIGINT / SIGTERM: stop at the next consistent point, with a checkpoint; a second
         signal only says so again (it never cuts the checkpoint short)."""
+        note_stop()
         print(
             "stopping: the checkpoint is written after the current step (further signals wait for it)",
             file=sys.stderr,
@@ -163,13 +198,14 @@ class Trainer:
         if self.progress:
             callbacks.append(ProgressBarCallback())
         remaining = self.config.train.steps - self.model.num_timesteps
-        if remaining > 0:
-            self.model.learn(
-                remaining,
-                callback=CallbackList(callbacks),
-                reset_num_timesteps=not resumed,
-                tb_log_name=self.config.train.algorithm,
-            )
+        if remaining <= 0:
+            return int(self.model.num_timesteps)
+        self.model.learn(
+            remaining,
+            callback=CallbackList(callbacks),
+            reset_num_timesteps=not resumed,
+            tb_log_name=self.config.train.algorithm,
+        )
         return self._save_checkpoint()
 
     # --- tabular Q-learning -----------------------------------------------------------------
@@ -204,9 +240,9 @@ class Trainer:
 
         self.validation = validation
         remaining = train.steps - self.model.steps
-        if remaining > 0:
-            seed = child_seed(self.config.seed, 0)
-            self.model.learn(self.env, remaining, seed, on_step, observation)
+        if remaining <= 0:
+            return self.model.steps
+        self.model.learn(self.env, remaining, child_seed(self.config.seed, 0), on_step, observation)
         return self._save_checkpoint()
 
     # --- shared -------------------------------------------------------------------------------

@@ -244,3 +244,14 @@ def road_mismatch(
     given = int(OccupancyGridBuilder(grid).space(encoding, lanes).shape[0])
     why = f"{model}: expects observations of {size} values; its {encoding} grid gives {given}"
     return None if given == size else f"{why} on this {lanes}-lane road"
+
+
+def first_change(old: Any, new: Any, key: str = "") -> tuple[str, Any, Any] | None:
+    """The first dotted key whose value differs between two config dumps (`model_dump`), with
+    its old and new values; None when they are equal."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        for name in [*old, *(k for k in new if k not in old)]:
+            if found := first_change(old.get(name), new.get(name), f"{key}.{name}" if key else name):
+                return found
+        return None
+    return None if old == new else (key, old, new)

@@ -31,6 +31,13 @@ def received() -> bool:
     return _received > 0
 
 
+def note_stop() -> None:
+    """A stop asked for elsewhere (training's own handler): the command ends with exit code 130,
+    and a later signal, once these handlers are back, only waits like a second one."""
+    global _received
+    _received = max(_received, 1)
+
+
 def _handler(signum: int, frame: FrameType | None) -> None:
     global _received, _pending
     _received += 1
