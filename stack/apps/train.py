@@ -134,6 +134,7 @@ class Trainer:
         except (EOFError, OSError):
             for process in getattr(self.env, "processes", []):
                 process.kill()
+                process.join(timeout=10)
 
     def _request_stop(self, signum: int, frame: object) -> None:
         """SIGINT / SIGTERM: stop at the next consistent point, with a checkpoint; a second
