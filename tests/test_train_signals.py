@@ -46,14 +46,13 @@ def test_repeated_signals_end_training_with_its_files_and_exit_130(tmp_path):
 
 
 def test_a_finished_training_is_not_resumed_and_more_steps_continue_it(tmp_path):
-    config = tmp_path / "tiny.yaml"
-    config.write_text(yaml.safe_dump(TINY))
     out = tmp_path / "t"
-    trained = CliRunner().invoke(app, ["train", "-c", str(config), "--out", str(out), "--no-progress"])
-    assert trained.exit_code == 0, trained.output
-    one_line_refusal(["train", "--resume", str(out), "--no-progress"], "finished its 40 steps; nothing to resume")
-    more = CliRunner().invoke(app, ["train", "--resume", str(out), "--steps", "50", "--no-progress"])
-    assert more.exit_code == 0, more.output
+    (tmp_path / "tiny.yaml").write_text(yaml.safe_dump(TINY))
+    for options in (["-c", str(tmp_path / "tiny.yaml"), "--out"], ["--steps", "50", "--resume"]):
+        done = CliRunner().invoke(app, ["train", *options, str(out), "--no-progress"])
+        assert done.exit_code == 0, done.output
+        finished = f"finished its {json.loads((out / 'summary.json').read_text())['steps']} steps"
+        one_line_refusal(["train", "--resume", str(out), "--no-progress"], f"{finished}; nothing to resume")
     assert json.loads((out / "summary.json").read_text())["steps"] == 50
 
 
