@@ -19,6 +19,7 @@ from stack.apps.options import (
     TRAIN_CONFIG,
     VARIANT_HELP,
     VERSION_OPTION,
+    check_jobs,
     checked_run,
     chosen,
     configured,
@@ -37,6 +38,7 @@ from stack.apps.training import (
     training_owner,
 )
 
+JOBS_HELP = "Parallel processes for the episodes (at most one per CPU; checked against memory)."
 RESUME_HELP = "Finish the interrupted run in --out (same arguments): its finished episodes are kept."
 
 app = typer.Typer(
@@ -73,7 +75,7 @@ def run(
     backend: str | None = typer.Option(None, help="Simulation backend: vector | fast | stock (sim.backend)."),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
-    jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
+    jobs: int = typer.Option(1, min=1, help=JOBS_HELP),
     ray: str | None = RAY_OPTION,
     progress: bool = typer.Option(True, help="Show a progress bar."),
     beside: str | None = typer.Option(None, help="Also run this agent on the same seeds, then both."),
@@ -96,6 +98,7 @@ def run(
     )
     if len(cfgs) > 1 and cfgs[1].planner.agent == cfgs[0].planner.agent:
         fail(f"--beside: expected an agent other than the run's own ({cfgs[0].planner.agent})")
+    check_jobs(jobs)
     ray_or_fail(ray)
     done = resumed(cfgs, out, "run") if resume else None
     folder = checked_run(cfgs, out, "run", resume)
@@ -136,7 +139,9 @@ def track(
     asked = fingerprint(f"{config_text(cfg)}{names}{plants}{speed_list}")
     folder = claimed(location(out, "track"), "track", Owner("track", asked))
     controllers = cast(list[TrackController], names)
-    track_and_report(controllers, speed_list, cfg, folder, progress, cast(Any, plants), ray)
+    until_interrupted(
+        lambda: track_and_report(controllers, speed_list, cfg, folder, progress, cast(Any, plants), ray)
+    )
 
 
 @app.command()
@@ -152,7 +157,7 @@ def compare(
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
     baseline: str | None = typer.Option(None, help="Agent to report paired differences against."),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
-    jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
+    jobs: int = typer.Option(1, min=1, help=JOBS_HELP),
     ray: str | None = RAY_OPTION,
     out: Path | None = typer.Option(None, help="Results folder (default: runs/compare-<time>)."),
     resume: bool = typer.Option(False, help=RESUME_HELP),
@@ -172,6 +177,7 @@ def compare(
     configs = per_agent(
         config, sets, pairs, scenario=scenario, sim__plant=plant, episodes=episodes, seed=seed
     )
+    check_jobs(jobs)
     ray_or_fail(ray)
     done = resumed(configs, out, "compare") if resume else None
     folder = checked_run(configs, out, "compare", resume)

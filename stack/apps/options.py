@@ -143,6 +143,25 @@ def checked_run(configs: list[RunConfig], out: Path | None, prefix: str, resumin
     return claimed(folder, prefix, run_owner(configs, prefix), resuming)
 
 
+WORKER_BYTES = 450 * 2**20
+"""Memory one episode process takes at most [bytes] (240-440 MB measured: simulator, torch)."""
+
+
+def check_jobs(jobs: int) -> None:
+    """Refuse, before any process starts, more episode processes (`--jobs`, at most one per usable
+    CPU) than the available memory holds."""
+    from stack.apps.training import available_memory_bytes
+    from stack.core.executors import usable_cpus
+
+    workers = min(jobs, usable_cpus())
+    if workers > 1 and (available := available_memory_bytes()) is not None:
+        if workers * WORKER_BYTES > 0.8 * available:
+            fail(
+                f"--jobs: {workers} processes need about {workers * WORKER_BYTES / 2**30:.1f} GB; "
+                f"{available / 2**30:.1f} GB of memory is available"
+            )
+
+
 def ray_or_fail(address: str | None) -> None:
     """With `--ray`, connect now (see `stack.core.ray_tasks.connect`), so a missing Ray or an
     unreachable address is one line before any work."""
@@ -197,11 +216,12 @@ def resumed(configs: list[RunConfig], out: Path | None, command: str) -> dict[st
 
 def until_interrupted(work: Callable[[], bool]) -> None:
     """Run `work`, which returns True when Ctrl-C cut it short with its finished part written, and
-    exit 130 then; one line when it was cut before anything finished."""
+    exit 130 then; one line (and exit 130) when it was cut before anything finished."""
     try:
         interrupted = work()
     except KeyboardInterrupt:
-        fail("interrupted before anything finished; nothing to write")
+        print("interrupted before anything finished; nothing written", file=sys.stderr)
+        sys.exit(130)
     if interrupted:
         sys.exit(130)
 

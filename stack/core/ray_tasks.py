@@ -15,6 +15,8 @@ from contextlib import contextmanager
 from types import ModuleType
 from typing import Any, TypeVar
 
+from stack.core.executors import usable_cpus
+
 Item = TypeVar("Item")
 Result = TypeVar("Result")
 
@@ -117,13 +119,6 @@ def _stderr_silenced() -> Iterator[None]:
     finally:
         os.dup2(saved, 2)
         os.close(saved)
-
-
-def usable_cpus() -> int:
-    """The CPUs this process may run on (a local instance gets one task slot per CPU)."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
 
 
 def _call(task: Callable[[Item], Result], item: Item) -> Result:
