@@ -173,9 +173,11 @@ def compare(
         fail(f"--agents: expected each agent once, got {agents!r}")
     if baseline is not None and baseline not in names:
         fail(f"--baseline: {baseline!r} is not among --agents ({', '.join(names)})")
+    if unknown := [name for name in model_paths if name not in names]:
+        fail(f"--models: {unknown[0]!r} is not among --agents ({', '.join(names)})")
     pairs = [(name, model_paths.get(name)) for name in names]
     configs = per_agent(
-        config, sets, pairs, scenario=scenario, sim__plant=plant, episodes=episodes, seed=seed
+        config, sets, pairs, "--models", scenario=scenario, sim__plant=plant, episodes=episodes, seed=seed
     )
     check_jobs(jobs)
     ray_or_fail(ray)

@@ -8,6 +8,8 @@ classes); drivestack itself never loads it: its model files stay data-only.
 
 from __future__ import annotations
 
+import errno
+import os
 from pathlib import Path
 
 import gymnasium as gym
@@ -33,10 +35,7 @@ def export_sb3(model: Path, out: Path) -> Path:
     ValueError (ModelFileError) with a one-line message, before anything is written."""
     if not model.is_file():
         raise ValueError(f"{model}: no such model file")
-    if out.exists() or out.with_suffix(".zip").exists():
-        raise ValueError(f"--sb3: {out} exists; choose a new file")
-    if not out.parent.is_dir():
-        raise ValueError(f"--sb3: no folder {out.parent}")
+    check_destination(out)
     agent = load_agent(model, expected_algorithms=("ddqn", "dqn"))
     if not isinstance(agent, LearnedAgent):
         raise ModelFileError(f"{model}: a Q-table has no SB3 counterpart; export a DDQN or DQN model")
@@ -55,5 +54,24 @@ def export_sb3(model: Path, out: Path) -> Path:
         verbose=0,
     )
     warm_start(sb3, agent)
-    sb3.save(out)
-    return out if out.suffix == ".zip" else out.with_suffix(out.suffix + ".zip")
+    written = out if out.suffix == ".zip" else out.with_suffix(out.suffix + ".zip")
+    try:
+        sb3.save(out)
+    except OSError as error:
+        written.unlink(missing_ok=True)
+        raise ValueError(f"--sb3: cannot write {written} ({error.strerror})") from None
+    return written
+
+
+def check_destination(out: Path) -> None:
+    """Refuse (ValueError, one line) an `out` that exists, lies in no writable folder or has a
+    name the system refuses, before any work."""
+    written = out if out.suffix == ".zip" else out.with_suffix(out.suffix + ".zip")
+    if len(written.name.encode()) > os.pathconf(written.absolute().anchor, "PC_NAME_MAX"):
+        raise ValueError(f"--sb3: {str(written)[:80]}...: {os.strerror(errno.ENAMETOOLONG)}")
+    if out.exists() or written.exists():
+        raise ValueError(f"--sb3: {out} exists; choose a new file")
+    if not out.parent.is_dir():
+        raise ValueError(f"--sb3: no folder {out.parent}")
+    if not os.access(out.parent, os.W_OK | os.X_OK):
+        raise ValueError(f"--sb3: {out.parent} is not writable")

@@ -77,13 +77,24 @@ def per_agent(
     path: Path | None,
     sets: list[str],
     agents: Sequence[tuple[str | None, Path | str | None]],
+    model_option: str = "--model",
     **overrides: object,
 ) -> list[RunConfig]:
-    """One `configured` config per (agent name, model file) pair; None keeps the config's own."""
-    return [
-        configured(path, sets, planner__agent=name, planner__model=model, **overrides)
-        for name, model in agents
-    ]
+    """One `configured` config per (agent name, model file) pair; None keeps the config's own. A
+    model file given (by `model_option`) for an agent that loads none is refused: it would have
+    no effect."""
+    from records import LEARNED_AGENTS
+
+    configs = []
+    for name, model in agents:
+        config = configured(path, sets, planner__agent=name, planner__model=model, **overrides)
+        if model is not None and config.planner.agent not in LEARNED_AGENTS:
+            fail(
+                f"{model_option}: the {config.planner.agent} agent loads no model file "
+                f"(only {', '.join(LEARNED_AGENTS)} do)"
+            )
+        configs.append(config)
+    return configs
 
 
 def parsed_sets(sets: list[str]) -> dict[str, object]:

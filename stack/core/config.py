@@ -6,11 +6,12 @@ Every error is one line naming the file and the dotted key, e.g.
 
 from __future__ import annotations
 
+import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import Field, ValidationError, model_validator
+from pydantic import BaseModel, Field, ValidationError, model_validator
 
 from controllers.config import ControllerConfig
 from perception.grid import OccupancyGridBuilder
@@ -132,8 +133,8 @@ class _NoAliasLoader(yaml.SafeLoader):
 def one_line(error: ValidationError, source: str, labels: dict[str, str]) -> str:
     first = error.errors()[0]
     key = ".".join(str(part) for part in first["loc"])
-    source = labels.get(key, source)
     message = first["msg"].removeprefix("Value error, ")
+    source = labels.get(key or message.split(":", 1)[0], source)
     if first["type"] == "extra_forbidden":
         message = "unknown key"
     elif first["type"] != "value_error" and not isinstance(first.get("input"), dict):
@@ -197,10 +198,36 @@ def build_config(
         if value is not None:
             key = dotted.replace("__", ".")
             _set_dotted(data, key, value, labels.get(key, source))
+    if mismatch := boolean_mismatch(RunConfig, data):
+        key, message = mismatch
+        raise ConfigError(printable(f"{labels.get(key, source)}: {key}: {message}"))
     try:
         return RunConfig.model_validate(data)
     except ValidationError as error:
         raise ConfigError(one_line(error, source, labels)) from None
+
+
+def boolean_mismatch(model: type[BaseModel], data: object, prefix: str = "") -> tuple[str, str] | None:
+    """(dotted key, why) of the first value in `data` that is a boolean where `model` takes a
+    number, or a number where it takes a boolean: YAML reads `yes`, `on` and `true` as booleans,
+    and pydantic would quietly turn them into 1 (and 1 into true). None when there is none."""
+    if not isinstance(data, dict):
+        return None
+    for name, value in data.items():
+        field = model.model_fields.get(str(name))
+        if field is None:
+            continue
+        kinds = typing.get_args(field.annotation) or (field.annotation,)
+        key = f"{prefix}{name}"
+        sections = [kind for kind in kinds if isinstance(kind, type) and issubclass(kind, BaseModel)]
+        if sections and isinstance(value, dict):
+            if found := boolean_mismatch(sections[0], value, f"{key}."):
+                return found
+        elif isinstance(value, bool) and bool not in kinds and (int in kinds or float in kinds):
+            return key, f"expected a number, got a boolean ({str(value).lower()})"
+        elif type(value) in (int, float) and bool in kinds:
+            return key, f"expected true or false, got a number ({value})"
+    return None
 
 
 def read_mapping(path: Path | str) -> dict[str, Any]:
