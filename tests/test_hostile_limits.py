@@ -168,3 +168,24 @@ def test_odd_destinations_are_one_line_before_any_work(tmp_path):
             )
     finally:
         locked.chmod(0o700)
+
+
+def test_a_ray_address_where_something_else_listens_is_refused_within_seconds():
+    import http.server
+    import threading
+    import time
+
+    from stack.core.ray_tasks import PROBE_TIMEOUT_S, RayUnavailable, check_address
+
+    http_server = http.server.HTTPServer(("127.0.0.1", 0), http.server.BaseHTTPRequestHandler)
+    threading.Thread(target=http_server.serve_forever, daemon=True).start()
+    silent = __import__("socket").create_server(("127.0.0.1", 0))
+    try:
+        for port in (http_server.server_address[1], silent.getsockname()[1]):
+            started = time.monotonic()
+            with pytest.raises(RayUnavailable, match="answers, but not as a Ray cluster"):
+                check_address(f"127.0.0.1:{port}")
+            assert time.monotonic() - started < PROBE_TIMEOUT_S + 1
+    finally:
+        http_server.shutdown()
+        silent.close()
