@@ -58,9 +58,12 @@ def export(
     sb3: Path = typer.Option(..., "--sb3", help="The stable-baselines3 zip to write."),
 ) -> None:
     """Write a model file as a stable-baselines3 zip that `DQN.load` opens."""
-    from stack.apps.export import export_sb3
+    from stack.apps.folders import check_destination
 
     try:
+        check_destination(sb3)
+        from stack.apps.export import export_sb3
+
         written = export_sb3(model, sb3)
     except ValueError as error:
         fail(str(error))

@@ -8,8 +8,6 @@ classes); drivestack itself never loads it: its model files stay data-only.
 
 from __future__ import annotations
 
-import errno
-import os
 from pathlib import Path
 
 import gymnasium as gym
@@ -19,6 +17,7 @@ from perception.grid import OccupancyGridBuilder
 from planner.learned import LearnedAgent, load_agent
 from planner.model_file import ModelFileError
 from records import N_ACTIONS, GridConfig
+from stack.apps.folders import check_destination
 from stack.apps.train_model import warm_start
 
 
@@ -61,17 +60,3 @@ def export_sb3(model: Path, out: Path) -> Path:
         written.unlink(missing_ok=True)
         raise ValueError(f"--sb3: cannot write {written} ({error.strerror})") from None
     return written
-
-
-def check_destination(out: Path) -> None:
-    """Refuse (ValueError, one line) an `out` that exists, lies in no writable folder or has a
-    name the system refuses, before any work."""
-    written = out if out.suffix == ".zip" else out.with_suffix(out.suffix + ".zip")
-    if len(written.name.encode()) > os.pathconf(written.absolute().anchor, "PC_NAME_MAX"):
-        raise ValueError(f"--sb3: {str(written)[:80]}...: {os.strerror(errno.ENAMETOOLONG)}")
-    if out.exists() or written.exists():
-        raise ValueError(f"--sb3: {out} exists; choose a new file")
-    if not out.parent.is_dir():
-        raise ValueError(f"--sb3: no folder {out.parent}")
-    if not os.access(out.parent, os.W_OK | os.X_OK):
-        raise ValueError(f"--sb3: {out.parent} is not writable")

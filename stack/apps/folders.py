@@ -68,3 +68,17 @@ def claimed(
         fail(f"--out: cannot write {folder} ({error.strerror})")
     _held.append(handle)
     return folder
+
+
+def check_destination(out: Path) -> None:
+    """Refuse (ValueError, one line) an `out` that exists, lies in no writable folder or has a
+    name the system refuses, before any work."""
+    written = out if out.suffix == ".zip" else out.with_suffix(out.suffix + ".zip")
+    if len(written.name.encode()) > os.pathconf(written.absolute().anchor, "PC_NAME_MAX"):
+        raise ValueError(f"--sb3: {str(written)[:80]}...: {os.strerror(errno.ENAMETOOLONG)}")
+    if out.exists() or written.exists():
+        raise ValueError(f"--sb3: {out} exists; choose a new file")
+    if not out.parent.is_dir():
+        raise ValueError(f"--sb3: no folder {out.parent}")
+    if not os.access(out.parent, os.W_OK | os.X_OK):
+        raise ValueError(f"--sb3: {out.parent} is not writable")

@@ -144,6 +144,10 @@ def checked_run(configs: list[RunConfig], out: Path | None, prefix: str, resumin
     from stack.apps.resume import run_owner
 
     folder = location(out, prefix)
+    from stack.core.owner import refusal
+
+    if why := refusal(folder, run_owner(configs, prefix), resuming):
+        fail(why)
     from stack.core.episodes import build_agent
 
     for config in configs:
