@@ -13,7 +13,6 @@ from pydantic import BaseModel
 from typer.testing import CliRunner
 
 from planner import model_file
-from stack.apps import options
 from stack.apps.cli import app
 from stack.core.train_config import TrainConfig
 from stack.sim.settings import HighwayConfig
@@ -142,7 +141,7 @@ def test_jobs_beyond_memory_are_refused_before_any_process(tmp_path, monkeypatch
     from stack.apps import training
     from stack.core import executors
 
-    monkeypatch.setattr(training, "available_memory_bytes", lambda: 2 * options.WORKER_BYTES)
+    monkeypatch.setattr(training, "available_memory_bytes", lambda: 2 * training.WORKER_BYTES)
     monkeypatch.setattr(executors, "usable_cpus", lambda: 8)
     one_line_refusal(
         ["run", "-c", str(tiny_config_file(tmp_path)), "--jobs", "64", "--out", str(tmp_path / "o")],

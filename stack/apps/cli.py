@@ -11,15 +11,15 @@ import typer
 
 from records import AGENT_NAMES, unknown_name
 from stack.apps.commands import export, sweep
-from stack.apps.folders import claimed, location
+from stack.apps.folders import claimed, claimed_for, resumed
 from stack.apps.options import (
+    JOBS_OPTION,
     PLANT_HELP,
     RAY_OPTION,
     SET_HELP,
     TRAIN_CONFIG,
     VARIANT_HELP,
     VERSION_OPTION,
-    check_jobs,
     checked_run,
     chosen,
     configured,
@@ -27,7 +27,6 @@ from stack.apps.options import (
     guarded,
     per_agent,
     ray_or_fail,
-    resumed,
     until_interrupted,
 )
 from stack.apps.training import (
@@ -38,7 +37,6 @@ from stack.apps.training import (
     training_owner,
 )
 
-JOBS_HELP = "Parallel processes for the episodes (at most one per CPU; checked against memory)."
 RESUME_HELP = "Finish the interrupted run in --out (same arguments): its finished episodes are kept."
 
 app = typer.Typer(
@@ -75,7 +73,7 @@ def run(
     backend: str | None = typer.Option(None, help="Simulation backend: vector | fast | stock (sim.backend)."),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
-    jobs: int = typer.Option(1, min=1, help=JOBS_HELP),
+    jobs: int = JOBS_OPTION,
     ray: str | None = RAY_OPTION,
     progress: bool = typer.Option(True, help="Show a progress bar."),
     beside: str | None = typer.Option(None, help="Also run this agent on the same seeds, then both."),
@@ -98,10 +96,9 @@ def run(
     )
     if len(cfgs) > 1 and cfgs[1].planner.agent == cfgs[0].planner.agent:
         fail(f"--beside: expected an agent other than the run's own ({cfgs[0].planner.agent})")
-    check_jobs(jobs)
     ray_or_fail(ray)
     done = resumed(cfgs, out, "run") if resume else None
-    folder = checked_run(cfgs, out, "run", resume)
+    folder = checked_run(cfgs, out, "run", resume, jobs)
     from stack.apps.run import run_and_report
 
     until_interrupted(lambda: run_and_report(cfgs, folder, video, jobs, progress, ray, done))
@@ -133,11 +130,7 @@ def track(
         fail(f"--speeds: every speed must be in (0, 40] m/s, got {speeds}")
     cfg = configured(config, sets, controller__lane_change_duration_s=duration)
     ray_or_fail(ray)
-    from stack.core.config import config_text
-    from stack.core.owner import Owner, fingerprint
-
-    asked = fingerprint(f"{config_text(cfg)}{names}{plants}{speed_list}")
-    folder = claimed(location(out, "track"), "track", Owner("track", asked))
+    folder = claimed_for("track", out, f"{names}{plants}{speed_list}", cfg)
     controllers = cast(list[TrackController], names)
     until_interrupted(
         lambda: track_and_report(controllers, speed_list, cfg, folder, progress, cast(Any, plants), ray)
@@ -157,7 +150,7 @@ def compare(
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
     baseline: str | None = typer.Option(None, help="Agent to report paired differences against."),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
-    jobs: int = typer.Option(1, min=1, help=JOBS_HELP),
+    jobs: int = JOBS_OPTION,
     ray: str | None = RAY_OPTION,
     out: Path | None = typer.Option(None, help="Results folder (default: runs/compare-<time>)."),
     resume: bool = typer.Option(False, help=RESUME_HELP),
@@ -179,10 +172,9 @@ def compare(
     configs = per_agent(
         config, sets, pairs, "--models", scenario=scenario, sim__plant=plant, episodes=episodes, seed=seed
     )
-    check_jobs(jobs)
     ray_or_fail(ray)
     done = resumed(configs, out, "compare") if resume else None
-    folder = checked_run(configs, out, "compare", resume)
+    folder = checked_run(configs, out, "compare", resume, jobs)
     from stack.apps.compare import compare_and_report
 
     until_interrupted(lambda: compare_and_report(configs, folder, jobs, progress, baseline, ray, done))
@@ -221,12 +213,10 @@ def reproduce_deepcars(
 ) -> None:
     """The paper's DeepCars table: tabular Q-learning, DQN and DDQN per network size, baselines."""
     from stack.apps.reproduce import reproduce_and_report
-    from stack.core.owner import Owner, fingerprint
     from stack.deepcars.spec import VARIANTS
 
     variants = chosen("--variant", variant, VARIANTS)
-    asked = Owner("reproduce deepcars", fingerprint(f"{quick}{variants}{seed}"))
-    folder = claimed(location(out, "deepcars"), "deepcars", asked)
+    folder = claimed_for("reproduce deepcars", out, f"{quick}{variants}{seed}")
     until_interrupted(lambda: reproduce_and_report(folder, quick, seed, variants))
 
 
@@ -253,19 +243,11 @@ def train(
         given = {"--agent": agent, "--config": config, "--envs": envs, "--plant": plant, "--seed": seed}
         cfg = resumed_training(resume, sets, steps, given | {"--scenario": scenario, "--out": out})
     else:
-        cfg = configured(
-            config or TRAIN_CONFIG,
-            sets,
-            scenario=scenario,
-            train__algorithm=agent,
-            train__steps=steps,
-            train__envs=envs,
-            sim__plant=plant,
-            seed=seed,
-        )
+        given = {"scenario": scenario, "train__algorithm": agent, "train__envs": envs, "seed": seed}
+        cfg = configured(config or TRAIN_CONFIG, sets, train__steps=steps, sim__plant=plant, **given)
     check_memory(cfg)
     check_init_model(cfg)
-    folder = location(resume or out, f"train-{cfg.train.algorithm}")
-    claimed(folder, "train", training_owner(cfg), resuming=resume is not None, restart=False)
+    owner, resuming = training_owner(cfg), resume is not None
+    folder = claimed(resume or out, f"train-{cfg.train.algorithm}", owner, resuming, restart=False)
     if train_or_fail(cfg, folder, progress):
         sys.exit(130)

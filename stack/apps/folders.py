@@ -7,10 +7,14 @@ import errno
 import os
 from datetime import datetime
 from pathlib import Path
-from typing import IO
+from typing import IO, TYPE_CHECKING
 
 from stack.apps.options import fail
-from stack.core.owner import FolderRefused, Owner, claim
+from stack.core.owner import FolderRefused, Owner, claim, fingerprint
+
+if TYPE_CHECKING:
+    from stack.core.config import RunConfig
+    from stack.core.metrics import EpisodeResult
 
 
 def fresh_run_dir(prefix: str) -> Path:
@@ -70,6 +74,16 @@ def claimed(
     return folder
 
 
+def claimed_for(command: str, out: Path | None, arguments: str, config: RunConfig | None = None) -> Path:
+    """`claimed` for a command without `--resume`, owned by the hash of its `arguments` and
+    resolved `config`; its folder's default name is the command's last word."""
+    from stack.core.config import config_text
+
+    asked = fingerprint(arguments + (config_text(config) if config is not None else ""))
+    prefix = command.split()[-1]
+    return claimed(location(out, prefix), prefix, Owner(command, asked))
+
+
 def check_destination(out: Path) -> None:
     """Refuse (ValueError, one line) an `out` that exists, lies in no writable folder or has a
     name the system refuses, before any work."""
@@ -82,3 +96,15 @@ def check_destination(out: Path) -> None:
         raise ValueError(f"--sb3: no folder {out.parent}")
     if not os.access(out.parent, os.W_OK | os.X_OK):
         raise ValueError(f"--sb3: {out.parent} is not writable")
+
+
+def resumed(configs: list[RunConfig], out: Path | None, command: str) -> dict[str, list[EpisodeResult]]:
+    """`--resume`: the episodes the interrupted run in `out` finished, per agent (`resumable`)."""
+    from stack.apps.resume import resumable
+
+    if out is None:
+        fail("--resume: name the folder of the interrupted run with --out")
+    try:
+        return resumable(configs, out, command)
+    except ValueError as error:
+        fail(str(error))

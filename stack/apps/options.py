@@ -18,7 +18,6 @@ from stack.core.interrupts import catch_signals, received
 
 if TYPE_CHECKING:
     from stack.core.config import RunConfig
-    from stack.core.metrics import EpisodeResult
 
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
@@ -33,6 +32,9 @@ SET_HELP = "KEY=VALUE: a dotted config key and a YAML value (repeatable); overri
 RAY_HELP = (
     "Run the episodes as Ray tasks: on a local instance started for the run (bare --ray), on the "
     "cluster `ray start` made (auto) or at HOST:PORT; needs pip install 'drivestack\\[ray]'."
+)
+JOBS_OPTION = typer.Option(
+    1, min=1, help="Parallel processes for the episodes (at most one per CPU; checked against memory)."
 )
 SET_KEY = re.compile(r"[A-Za-z_][\w-]*(\.[A-Za-z_][\w-]*)*")
 OPTIONS = {
@@ -114,7 +116,9 @@ def parsed_sets(sets: list[str]) -> dict[str, object]:
     return values
 
 
-def checked_run(configs: list[RunConfig], out: Path | None, prefix: str, resuming: bool = False) -> Path:
+def checked_run(
+    configs: list[RunConfig], out: Path | None, prefix: str, resuming: bool = False, jobs: int = 1
+) -> Path:
     """The results folder of a run of `configs`, after checking (one line, exit 2, before any
     work) each agent's model file with numpy alone, then the location, then each agent as built
     for its road (this imports torch), then taking the folder for this command
@@ -142,7 +146,9 @@ def checked_run(configs: list[RunConfig], out: Path | None, prefix: str, resumin
             fail(str(error))
     from stack.apps.folders import claimed, location
     from stack.apps.resume import run_owner
+    from stack.apps.training import check_jobs
 
+    check_jobs(jobs)
     folder = location(out, prefix)
     from stack.core.owner import refusal
 
@@ -156,25 +162,6 @@ def checked_run(configs: list[RunConfig], out: Path | None, prefix: str, resumin
         except ValueError as error:
             fail(str(error))
     return claimed(folder, prefix, run_owner(configs, prefix), resuming)
-
-
-WORKER_BYTES = 450 * 2**20
-"""Memory one episode process takes at most [bytes] (240-440 MB measured: simulator, torch)."""
-
-
-def check_jobs(jobs: int) -> None:
-    """Refuse, before any process starts, more episode processes (`--jobs`, at most one per usable
-    CPU) than the available memory holds."""
-    from stack.apps.training import available_memory_bytes
-    from stack.core.executors import usable_cpus
-
-    workers = min(jobs, usable_cpus())
-    if workers > 1 and (available := available_memory_bytes()) is not None:
-        if workers * WORKER_BYTES > 0.8 * available:
-            fail(
-                f"--jobs: {workers} processes need about {workers * WORKER_BYTES / 2**30:.1f} GB; "
-                f"{available / 2**30:.1f} GB of memory is available"
-            )
 
 
 def ray_or_fail(address: str | None) -> None:
@@ -215,18 +202,6 @@ def _print_version(value: bool) -> None:
 
         typer.echo(f"drivestack {version('drivestack')}")
         raise typer.Exit()
-
-
-def resumed(configs: list[RunConfig], out: Path | None, command: str) -> dict[str, list[EpisodeResult]]:
-    """`--resume`: the episodes the interrupted run in `out` finished, per agent (`resumable`)."""
-    from stack.apps.resume import resumable
-
-    if out is None:
-        fail("--resume: name the folder of the interrupted run with --out")
-    try:
-        return resumable(configs, out, command)
-    except ValueError as error:
-        fail(str(error))
 
 
 def until_interrupted(work: Callable[[], bool]) -> None:

@@ -8,7 +8,6 @@ buffer and counters, so `--resume DIR` continues where the last checkpoint left 
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Callable
 from functools import partial
@@ -28,30 +27,28 @@ from records import child_seed
 from stack.apps.demonstrations import demonstrations_summary, start_from_demonstrations
 from stack.apps.train_model import (
     Checkpoints,
+    EnvWorkerDied,
     StopTraining,
     build_dqn,
+    close_env,
     initial_model,
     model_metadata,
     monitored_env,
     stop_signals,
     warm_start,
+    worker_death,
     worker_env,
 )
 from stack.apps.train_report import write_training_summary
 from stack.apps.train_state import dqn_state, restore_dqn_state, restore_tabular_state, tabular_state
 from stack.core.config import RunConfig, load_config, write_config
 from stack.core.decision_env import HierarchicalHighwayEnv
-from stack.core.interrupts import note_stop
 
 BEST = "best.npz"
 FINAL = "final.npz"
 
 SaveModel = Callable[[Any, Path, dict], Path]
 """`export_q_network` or `save_q_table`: (model, path, metadata) -> the file written."""
-
-
-class EnvWorkerDied(RuntimeError):
-    """A training env worker process died; the message is one line for the user."""
 
 
 class Trainer:
@@ -89,61 +86,30 @@ class Trainer:
         return model_metadata(self.config, self.validation_env, steps)
 
     def run(self) -> dict:
-        """Train to `train.steps` (or until SIGINT / SIGTERM: a checkpoint first) and write the
-        summary; signals arriving meanwhile, however many, only ask for the stop again, so the
-        files are written whole. An env worker that dies raises `EnvWorkerDied`, the last
-        checkpoint kept."""
+        """Train to `train.steps`, or until SIGINT / SIGTERM (a checkpoint first), and write the
+        summary; further signals only wait for the files. A dead env worker: `EnvWorkerDied`."""
         self.out.mkdir(parents=True, exist_ok=True)
         write_config(self.config, self.out / "config.yaml", "the resolved config; --resume reads it")
-        self.stop_requested = False
+        self.stop_requested = interrupted = False
         with stop_signals(self._request_stop):
-            interrupted, steps = self._train()
+            try:
+                steps = (
+                    self._train_tabular() if self.config.train.algorithm == "tabular" else self._train_dqn()
+                )
+            except StopTraining:
+                interrupted, steps = True, self._steps_done()
+            except KeyboardInterrupt:
+                self.stop_requested = interrupted = True
+                steps = self._save_checkpoint()
+            except (EOFError, ConnectionError) as error:
+                raise EnvWorkerDied(worker_death(self.env, self.out, error)) from None
+            finally:
+                close_env(self.env)
             return self._finish(steps, interrupted)
-
-    def _train(self) -> tuple[bool, int]:
-        """(interrupted, steps done) of the training."""
-        interrupted = False
-        try:
-            steps = self._train_tabular() if self.config.train.algorithm == "tabular" else self._train_dqn()
-        except StopTraining:
-            interrupted, steps = True, self._steps_done()
-        except KeyboardInterrupt:
-            self.stop_requested = interrupted = True
-            steps = self._save_checkpoint()
-        except (EOFError, ConnectionError) as error:
-            raise EnvWorkerDied(self._worker_death(error)) from None
-        finally:
-            self._close_env()
-        return interrupted, steps
-
-    def _worker_death(self, error: BaseException) -> str:
-        """One line: which env worker died, and what the run keeps."""
-        codes = [p.exitcode for p in getattr(self.env, "processes", []) if p.exitcode not in (None, 0)]
-        how = f" (exit code {codes[0]})" if codes else f" ({type(error).__name__})"
-        kept = (
-            f"its last checkpoint ({self.out / CHECKPOINT}) is kept: --resume {self.out} continues from it"
-            if (self.out / CHECKPOINT).is_file()
-            else "no checkpoint was written yet: start the run again"
-        )
-        return f"a training environment process died{how}; {kept}"
-
-    def _close_env(self) -> None:
-        """Close the env and its worker processes, also when one of them is dead."""
-        try:
-            self.env.close()
-        except (EOFError, OSError):
-            for process in getattr(self.env, "processes", []):
-                process.kill()
-                process.join(timeout=10)
 
     def _request_stop(self, signum: int, frame: object) -> None:
         """SIGINT / SIGTERM: stop at the next consistent point, with a checkpoint; a second
         signal only says so again (it never cuts the checkpoint short)."""
-        note_stop()
-        print(
-            "stopping: the checkpoint is written after the current step (further signals wait for it)",
-            file=sys.stderr,
-        )
         self.stop_requested = True
 
     def _steps_done(self) -> int:
@@ -198,8 +164,7 @@ class Trainer:
         callbacks += [self.validation, checkpoints]
         if self.progress:
             callbacks.append(ProgressBarCallback())
-        remaining = self.config.train.steps - self.model.num_timesteps
-        if remaining <= 0:
+        if (remaining := self.config.train.steps - self.model.num_timesteps) <= 0:
             return int(self.model.num_timesteps)
         self.model.learn(
             remaining,
@@ -240,8 +205,7 @@ class Trainer:
             return True
 
         self.validation = validation
-        remaining = train.steps - self.model.steps
-        if remaining <= 0:
+        if (remaining := train.steps - self.model.steps) <= 0:
             return self.model.steps
         self.model.learn(self.env, remaining, child_seed(self.config.seed, 0), on_step, observation)
         return self._save_checkpoint()

@@ -77,6 +77,24 @@ def check_memory(config: RunConfig) -> None:
         )
 
 
+WORKER_BYTES = 450 * 2**20
+"""Memory one episode process takes at most [bytes] (240-440 MB measured: simulator, torch)."""
+
+
+def check_jobs(jobs: int) -> None:
+    """Refuse, before any process starts, more episode processes (`--jobs`, at most one per usable
+    CPU) than the available memory holds."""
+    from stack.core.executors import usable_cpus
+
+    workers = min(jobs, usable_cpus())
+    if workers > 1 and (available := available_memory_bytes()) is not None:
+        if workers * WORKER_BYTES > 0.8 * available:
+            fail(
+                f"--jobs: {workers} processes need about {workers * WORKER_BYTES / 2**30:.1f} GB; "
+                f"{available / 2**30:.1f} GB of memory is available"
+            )
+
+
 def check_init_model(config: RunConfig) -> None:
     """Refuse, before the run folder exists, a `train.init_model` that does not fit the run (torch
     and SB3 are imported only when there is one to check)."""
@@ -108,7 +126,8 @@ def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:
     """Train (or resume) in `folder` and print the outcome; True when a signal stopped it (its
     checkpoint written: resumable). A signal while the env processes start stops before training;
     signals after training only wait for the files. A dead env process ends it in one line."""
-    from stack.apps.train import EnvWorkerDied, Trainer
+    from stack.apps.train import Trainer
+    from stack.apps.train_model import EnvWorkerDied
     from stack.core.interrupts import deferred, received
 
     try:
@@ -163,7 +182,7 @@ def resumed_training(
         fail(f"--resume: {folder} holds the results of `{found.command}`, not a training run")
     if not (folder / "config.yaml").is_file() or (found is None and not (folder / CHECKPOINT_FILE).is_file()):
         fail(f"--resume: {folder} is not a training run folder (no config.yaml and checkpoint.npz)")
-    from stack.core.config import first_change
+    from stack.core.config_checks import first_change
 
     stored = configured(folder / "config.yaml", [])
     config = configured(folder / "config.yaml", sets, train__steps=steps)

@@ -6,18 +6,18 @@ Every error is one line naming the file and the dotted key, e.g.
 
 from __future__ import annotations
 
-import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import BaseModel, Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, model_validator
 
 from controllers.config import ControllerConfig
 from perception.grid import OccupancyGridBuilder
 from perception.sensor import SensorConfig
 from planner.safety import SafetyConfig
 from records import AGENT_NAMES, SEED_LIMIT, AgentName, Encoding, GridConfig, one_of
+from stack.core.config_checks import boolean_mismatch
 from stack.core.files import write_text
 from stack.core.train_config import Strict, TrainConfig
 from stack.sim import scenarios
@@ -207,29 +207,6 @@ def build_config(
         raise ConfigError(one_line(error, source, labels)) from None
 
 
-def boolean_mismatch(model: type[BaseModel], data: object, prefix: str = "") -> tuple[str, str] | None:
-    """(dotted key, why) of the first value in `data` that is a boolean where `model` takes a
-    number, or a number where it takes a boolean: YAML reads `yes`, `on` and `true` as booleans,
-    and pydantic would quietly turn them into 1 (and 1 into true). None when there is none."""
-    if not isinstance(data, dict):
-        return None
-    for name, value in data.items():
-        field = model.model_fields.get(str(name))
-        if field is None:
-            continue
-        kinds = typing.get_args(field.annotation) or (field.annotation,)
-        key = f"{prefix}{name}"
-        sections = [kind for kind in kinds if isinstance(kind, type) and issubclass(kind, BaseModel)]
-        if sections and isinstance(value, dict):
-            if found := boolean_mismatch(sections[0], value, f"{key}."):
-                return found
-        elif isinstance(value, bool) and bool not in kinds and (int in kinds or float in kinds):
-            return key, f"expected a number, got a boolean ({str(value).lower()})"
-        elif type(value) in (int, float) and bool in kinds:
-            return key, f"expected true or false, got a number ({value})"
-    return None
-
-
 def read_mapping(path: Path | str) -> dict[str, Any]:
     """The YAML mapping in the file at `path` (at most MAX_CONFIG_BYTES, no anchors or aliases);
     raise ConfigError (one line naming the file) on any problem."""
@@ -271,14 +248,3 @@ def road_mismatch(
     given = int(OccupancyGridBuilder(grid).space(encoding, lanes).shape[0])
     why = f"{model}: expects observations of {size} values; its {encoding} grid gives {given}"
     return None if given == size else f"{why} on this {lanes}-lane road"
-
-
-def first_change(old: Any, new: Any, key: str = "") -> tuple[str, Any, Any] | None:
-    """The first dotted key whose value differs between two config dumps (`model_dump`), with
-    its old and new values; None when they are equal."""
-    if isinstance(old, dict) and isinstance(new, dict):
-        for name in [*old, *(k for k in new if k not in old)]:
-            if found := first_change(old.get(name), new.get(name), f"{key}.{name}" if key else name):
-                return found
-        return None
-    return None if old == new else (key, old, new)
