@@ -14,7 +14,7 @@ import yaml
 from rich.console import Console
 from rich.markup import escape
 
-from stack.core.interrupts import catch_signals, received
+from stack.core.interrupts import catch_signals, ignore_signals, received
 
 if TYPE_CHECKING:
     from stack.core.config import RunConfig
@@ -227,6 +227,7 @@ def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
     try:
         app(arguments, prog_name="drivestack")
     except SystemExit as done:
+        ignore_signals()
         if received() and not done.code:
             sys.exit(130)
         raise

@@ -40,7 +40,7 @@ class VehicleClass(BaseModel):
     @classmethod
     def _positive_and_ordered(cls, bounds: tuple[float, float]) -> tuple[float, float]:
         if not all(0 < bound <= MAX_CLASS_BOUND for bound in bounds):
-            raise ValueError(f"must be in (0, {MAX_CLASS_BOUND:g}], got {list(bounds)}")
+            raise ValueError(f"must be positive and at most {MAX_CLASS_BOUND:g}, got {list(bounds)}")
         return _ordered_range(bounds)
 
 
