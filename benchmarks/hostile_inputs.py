@@ -176,7 +176,31 @@ def cases(folder: Path) -> dict[str, list[str]]:
         "--set",
         "highway.lanes_count=2",
     ]
+    found.update(folder_cases(folder))
     return found
+
+
+def folder_cases(folder: Path) -> dict[str, list[str]]:
+    """Issue 36: results folders of other commands, other configs, mistyped and unbounded values,
+    options without effect, a Ray address where something else listens."""
+    (run := folder / "a-run").mkdir()
+    (run / ".drivestack-owner.json").write_text('{"command": "run", "config": "0"}')
+    (run / "config.yaml").write_text("seed: 0\n")
+    (run / "summary.json").write_text("{}\n")
+    (mine := folder / "my-files").mkdir()
+    (mine / "notes.txt").write_text("keep")
+    return {
+        "train --resume a run's folder": ["train", "--resume", str(run)],
+        "compare --out a run's folder": ["compare", "--out", str(run)],
+        "run --out a folder of the user's files": ["run", "--out", str(mine)],
+        "run --resume a run with other arguments": ["run", "--seed", "3", "--out", str(run), "--resume"],
+        "--set highway.ego_spacing=1e308": ["run", "--set", "highway.ego_spacing=1e308"],
+        "--set highway.lanes_count=true": ["run", "--set", "highway.lanes_count=true"],
+        "--agent rule --model x.npz": ["run", "--agent", "rule", "--model", "x.npz"],
+        "run --out a 300-character name": ["run", "--out", str(folder / ("x" * 300))],
+        "export --sb3 a 300-character name": ["export", str(SHIPPED_MODELS["ddqn"]), "--sb3", "x" * 300],
+        "--ray at a port nobody answers on": ["run", "--ray", "127.0.0.1:1"],
+    }
 
 
 def measure(arguments: list[str], scratch: Path) -> tuple[int, str, float, float]:

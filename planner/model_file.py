@@ -38,16 +38,20 @@ class ModelFileError(ValueError):
 
 
 def save_model(path: Path | str, arrays: dict[str, np.ndarray], metadata: dict) -> Path:
-    """Write arrays + metadata atomically (a temporary file renamed over `path`)."""
+    """Write arrays + metadata atomically (a temporary file renamed over `path`; removed on any
+    error, so a full disk keeps no half file)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     payload = {f"array/{name}": np.asarray(value) for name, value in arrays.items()}
     payload["metadata"] = np.frombuffer(json.dumps({"format": FORMAT, **metadata}).encode(), dtype=np.uint8)
     temporary = path.with_name(path.name + ".partial")
-    with temporary.open("wb") as handle:
-        # numpy's stub matches **payload against savez's `allow_pickle: bool` too (no key is named that)
-        np.savez(handle, **payload)  # type: ignore[arg-type]
-    temporary.replace(path)
+    try:
+        with temporary.open("wb") as handle:
+            # numpy's stub matches **payload against savez's `allow_pickle: bool` (no key is named that)
+            np.savez(handle, **payload)  # type: ignore[arg-type]
+        temporary.replace(path)
+    finally:
+        temporary.unlink(missing_ok=True)
     return path
 
 

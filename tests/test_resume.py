@@ -9,6 +9,7 @@ from stack.apps.cli import app
 from stack.core import episodes
 from stack.core.config import load_config
 from stack.core.episodes import run_episode
+from stack.core.owner import MARKER
 from tests.test_cli import tiny_config_file
 from tests.test_signals import untimed
 
@@ -24,7 +25,8 @@ def test_a_run_beside_another_agent_resumes_each_agent_from_its_own_journal(tmp_
     refused = CliRunner().invoke(app, [*arguments, "--episodes", "1", "--out", str(out), "--resume"])
     assert refused.exit_code == 2 and "nothing to resume" in refused.output
 
-    (out / "config.yaml").write_text((tmp_path / "whole" / "config.yaml").read_text())
+    for name in ("config.yaml", MARKER):
+        (out / name).write_text((tmp_path / "whole" / name).read_text())
     beside = load_config(config, planner__agent="keep-lane", episodes=3)
     (out / "keep-lane.episodes.partial.jsonl").write_text(json.dumps(run_episode(beside, 1).row()) + "\n")
     ran: list[tuple[str, int]] = []
@@ -41,10 +43,11 @@ def test_a_run_beside_another_agent_resumes_each_agent_from_its_own_journal(tmp_
 
 def test_a_fresh_start_empties_the_journals_an_interrupted_run_left(tmp_path):
     out = tmp_path / "out"
-    out.mkdir()
+    arguments = ["compare", "-c", str(tiny_config_file(tmp_path)), "--agents", "keep-lane", "--episodes", "1"]
+    first = CliRunner().invoke(app, [*arguments, "--out", str(out), "--no-progress"])
+    assert first.exit_code == 0, first.output
     stale = out / "keep-lane.episodes.partial.jsonl"
     stale.write_text('{"episode": 0, "seed": 0, "stale": true}\n' * 50)
-    arguments = ["compare", "-c", str(tiny_config_file(tmp_path)), "--agents", "keep-lane", "--episodes", "1"]
     result = CliRunner().invoke(app, [*arguments, "--out", str(out), "--no-progress"])
     assert result.exit_code == 0 and not stale.exists(), result.output
 

@@ -3,6 +3,7 @@ every finished episode readable (journaled as it finishes, results written whole
 
 import csv
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -13,10 +14,13 @@ from types import SimpleNamespace
 import pytest
 from typer.testing import CliRunner
 
+from stack.apps import track as track_module
 from stack.apps.cli import app
-from stack.core import episodes, interrupts
+from stack.apps.run import undrawn
+from stack.core import episodes, executors, interrupts
 from stack.core.files import EpisodeJournal, replacing, write_text
 from stack.core.metrics import outcome
+from tests.test_cli import tiny_config_file
 
 SHORT = ["--set", "highway.duration=4", "--set", "highway.vehicles_count=8", "--no-progress"]
 
@@ -56,6 +60,8 @@ def test_a_stopped_run_keeps_its_finished_episodes_and_resume_finishes_it(tmp_pa
     assert summary["interrupted"] and 1 <= summary["episodes"] < 40
     assert len((out / "episodes.csv").read_text().splitlines()) == summary["episodes"] + 1
     assert sorted(p.name for p in out.iterdir()) == [
+        ".drivestack-owner.json",
+        ".drivestack.lock",
         "config.yaml",
         "episodes.csv",
         "grid.png",
@@ -136,3 +142,114 @@ def test_the_journal_is_on_disk_after_each_episode(tmp_path):
     assert [json.loads(line)["episode"] for line in (tmp_path / "j.jsonl").read_text().splitlines()] == [0, 1]
     journal.discard()
     assert not (tmp_path / "j.jsonl").exists()
+
+
+def children(pid: int) -> list[int]:
+    """The pids of `pid`'s child processes (Linux /proc)."""
+    found = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+    return [int(child) for child in found]
+
+
+def alive(pid: int) -> bool:
+    """Whether process `pid` exists and is not a zombie."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def started_with_workers(arguments: list[str], journal: Path, **popen: object) -> subprocess.Popen:
+    """`drivestack ARGUMENTS` started, returned once `journal` holds an episode (its workers run)."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "stack", *arguments], stdout=subprocess.PIPE, stderr=subprocess.PIPE, **popen
+    )
+    deadline = time.monotonic() + 120
+    while not (journal.is_file() and journal.read_text().count("\n") >= 1):
+        assert process.poll() is None and time.monotonic() < deadline, process.communicate()
+        time.sleep(0.05)
+    return process
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="reads /proc")
+def test_pool_workers_end_when_their_driver_is_killed(tmp_path):
+    out = tmp_path / "run"
+    arguments = ["run", "--agent", "keep-lane", "--episodes", "40", "--jobs", "2", *SHORT, "--out", str(out)]
+    process = started_with_workers(arguments, out / "keep-lane.episodes.partial.jsonl")
+    workers = children(process.pid)
+    assert workers, "the run has its pool"
+    process.kill()
+    process.communicate(timeout=30)
+    deadline = time.monotonic() + 10
+    while any(alive(worker) for worker in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(alive(worker) for worker in workers)
+
+
+def test_ctrl_c_on_a_terminal_during_jobs_shows_no_worker_traceback(tmp_path):
+    out = tmp_path / "run"
+    arguments = ["run", "--agent", "keep-lane", "--episodes", "40", "--jobs", "2", *SHORT, "--out", str(out)]
+    process = started_with_workers(
+        arguments, out / "keep-lane.episodes.partial.jsonl", start_new_session=True
+    )
+    os.killpg(process.pid, signal.SIGINT)
+    _, errors = process.communicate(timeout=60)
+    assert process.returncode == 130 and "Traceback" not in errors.decode(), errors.decode()
+    assert json.loads((out / "summary.json").read_text())["interrupted"]
+
+
+def test_an_interrupt_before_the_first_episode_exits_130_and_resume_runs_it(tmp_path, monkeypatch):
+    out = tmp_path / "run"
+    arguments = ["run", "-c", str(tiny_config_file(tmp_path)), "--agent", "keep-lane", "--episodes", "1"]
+
+    def interrupted(*_: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(episodes, "run_episode", interrupted)
+    stopped = CliRunner().invoke(app, [*arguments, "--out", str(out), "--no-progress"])
+    assert stopped.exit_code == 130 and "interrupted before anything finished" in stopped.output
+    monkeypatch.undo()
+    resumed = CliRunner().invoke(app, [*arguments, "--out", str(out), "--resume", "--no-progress"])
+    assert resumed.exit_code == 0, resumed.output
+    assert json.loads((out / "summary.json").read_text())["episodes"] == 1
+
+
+def test_an_interrupted_track_keeps_the_maneuvers_finished(tmp_path, monkeypatch):
+    real = track_module._run_maneuver
+    calls = []
+
+    def two_then_interrupt(job):
+        calls.append(job)
+        if len(calls) > 2:
+            raise KeyboardInterrupt
+        return real(job)
+
+    monkeypatch.setattr(track_module, "_run_maneuver", two_then_interrupt)
+    out = tmp_path / "track"
+    arguments = ["track", "--controller", "pid", "--plant", "kinematic", "--speeds", "20"]
+    result = CliRunner().invoke(app, [*arguments, "--out", str(out), "--no-progress"])
+    assert result.exit_code == 130 and "interrupted: the 2 of" in result.output
+    assert len(json.loads((out / "tracking.json").read_text())) == 2
+
+
+def test_a_resumed_run_says_what_it_could_not_draw(tmp_path):
+    resumed = [SimpleNamespace(trace={}, snapshot=None)]
+    (tmp_path / "grid.png").write_bytes(b"png")
+    assert [
+        note.split(":")[0] + ":" + note.split(":")[1].split("(")[0] for note in undrawn(tmp_path, resumed)
+    ] == [
+        "traces.png: not drawn ",
+        "grid.png: kept from before --resume ",
+    ]
+
+
+def test_episodes_are_submitted_as_workers_free_up(monkeypatch):
+    submitted = []
+    real = executors.ProcessPoolExecutor.submit
+    monkeypatch.setattr(
+        executors.ProcessPoolExecutor, "submit", lambda pool, *a: submitted.append(a) or real(pool, *a)
+    )
+    monkeypatch.setattr(executors, "usable_cpus", lambda: 2)
+    results = executors.completed(abs, list(range(-1000, 0)), jobs=64)
+    next(results)
+    assert len(submitted) <= 2 * executors.QUEUED_PER_WORKER + 1
+    results.close()

@@ -11,7 +11,9 @@ import typer
 
 from records.plugins import SPEC_FORMS
 from stack.apps.commands import agents, controllers, export, sweep
+from stack.apps.folders import claimed, claimed_for, resumed
 from stack.apps.options import (
+    JOBS_OPTION,
     PLANT_HELP,
     RAY_OPTION,
     SET_HELP,
@@ -23,14 +25,18 @@ from stack.apps.options import (
     configured,
     fail,
     guarded,
-    output_folder,
     per_agent,
     ray_or_fail,
-    resumed,
     until_interrupted,
 )
 from stack.apps.plugin_checks import agent_name_or_fail, plugins_or_fail
-from stack.apps.training import check_init_model, check_memory, train_or_fail
+from stack.apps.training import (
+    check_init_model,
+    check_memory,
+    resumed_training,
+    train_or_fail,
+    training_owner,
+)
 
 PLUGIN_HELP = f"a plug-in class: {SPEC_FORMS} (docs/plugins.md)."
 RESUME_HELP = "Finish the interrupted run in --out (same arguments): its finished episodes are kept."
@@ -69,7 +75,7 @@ def run(
     backend: str | None = typer.Option(None, help="Simulation backend: vector | fast | stock (sim.backend)."),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
-    jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
+    jobs: int = JOBS_OPTION,
     ray: str | None = RAY_OPTION,
     progress: bool = typer.Option(True, help="Show a progress bar."),
     beside: str | None = typer.Option(None, help="Also run this agent on the same seeds, then both."),
@@ -93,8 +99,8 @@ def run(
         fail(f"--beside: expected an agent other than the run's own ({cfgs[0].planner.agent})")
     plugins_or_fail(cfgs, ["--agent" if agent else "planner.agent", "--beside"])
     ray_or_fail(ray)
-    done = resumed(cfgs, out) if resume else None
-    folder = checked_run(cfgs, out, "run")
+    done = resumed(cfgs, out, "run") if resume else None
+    folder = checked_run(cfgs, out, "run", resume, jobs)
     from stack.apps.run import run_and_report
 
     until_interrupted(lambda: run_and_report(cfgs, folder, video, jobs, progress, ray, done))
@@ -129,8 +135,10 @@ def track(
         fail(f"--speeds: every speed must be in (0, 40] m/s, got {speeds}")
     cfg = configured(config, sets, controller__lane_change_duration_s=duration)
     ray_or_fail(ray)
-    folder = output_folder(out, "track")
-    track_and_report(names, speed_list, cfg, folder, progress, cast(Any, plants), ray)
+    folder = claimed_for("track", out, f"{names}{plants}{speed_list}", cfg)
+    until_interrupted(
+        lambda: track_and_report(names, speed_list, cfg, folder, progress, cast(Any, plants), ray)
+    )
 
 
 @app.command()
@@ -146,7 +154,7 @@ def compare(
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
     baseline: str | None = typer.Option(None, help="Agent to report paired differences against."),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
-    jobs: int = typer.Option(1, min=1, help="Parallel processes for the episodes."),
+    jobs: int = JOBS_OPTION,
     ray: str | None = RAY_OPTION,
     out: Path | None = typer.Option(None, help="Results folder (default: runs/compare-<time>)."),
     resume: bool = typer.Option(False, help=RESUME_HELP),
@@ -162,12 +170,15 @@ def compare(
         fail(f"--agents: expected each agent once, got {agents!r}")
     if baseline is not None and baseline not in names:
         fail(f"--baseline: {baseline!r} is not among --agents ({', '.join(names)})")
+    if unknown := [name for name in model_paths if name not in names]:
+        fail(f"--models: {unknown[0]!r} is not among --agents ({', '.join(names)})")
     pairs = [(name, model_paths.get(name)) for name in names]
     configs = per_agent(
         config,
         sets,
         pairs,
         labels={"planner.agent": "--agents"},
+        model_option="--models",
         scenario=scenario,
         sim__plant=plant,
         episodes=episodes,
@@ -175,8 +186,8 @@ def compare(
     )
     plugins_or_fail(configs, ["--agents"] * len(configs))
     ray_or_fail(ray)
-    done = resumed(configs, out) if resume else None
-    folder = checked_run(configs, out, "compare")
+    done = resumed(configs, out, "compare") if resume else None
+    folder = checked_run(configs, out, "compare", resume, jobs)
     from stack.apps.compare import compare_and_report
 
     until_interrupted(lambda: compare_and_report(configs, folder, jobs, progress, baseline, ray, done))
@@ -211,7 +222,7 @@ def reproduce_deepcars(
     from stack.deepcars.spec import VARIANTS
 
     variants = chosen("--variant", variant, VARIANTS)
-    folder = output_folder(out, "deepcars")
+    folder = claimed_for("reproduce deepcars", out, f"{quick}{variants}{seed}")
     until_interrupted(lambda: reproduce_and_report(folder, quick, seed, variants))
 
 
@@ -235,23 +246,14 @@ def train(
 ) -> None:
     """Train a decision agent inside the closed loop, keeping the best model by real-time validation."""
     if resume is not None:
-        if not (resume / "config.yaml").is_file():
-            fail(f"{resume}: not a training run folder (no config.yaml)")
-        cfg = configured(resume / "config.yaml", sets, train__steps=steps)
+        given = {"--agent": agent, "--config": config, "--envs": envs, "--plant": plant, "--seed": seed}
+        cfg = resumed_training(resume, sets, steps, given | {"--scenario": scenario, "--out": out})
     else:
-        cfg = configured(
-            config or TRAIN_CONFIG,
-            sets,
-            scenario=scenario,
-            train__algorithm=agent,
-            train__steps=steps,
-            train__envs=envs,
-            sim__plant=plant,
-            seed=seed,
-        )
+        options = {"scenario": scenario, "train__algorithm": agent, "train__envs": envs, "seed": seed}
+        cfg = configured(config or TRAIN_CONFIG, sets, None, train__steps=steps, sim__plant=plant, **options)
     check_memory(cfg)
     check_init_model(cfg)
-
-    folder = resume or output_folder(out, f"train-{cfg.train.algorithm}")
+    owner, resuming = training_owner(cfg), resume is not None
+    folder = claimed(resume or out, f"train-{cfg.train.algorithm}", owner, resuming, restart=False)
     if train_or_fail(cfg, folder, progress):
         sys.exit(130)

@@ -11,7 +11,7 @@ import typer
 from rich.console import Console
 
 from records.plugins import AGENT_GROUP, SPEC_FORMS
-from stack.apps.options import fail, output_folder, ray_or_fail
+from stack.apps.options import fail, ray_or_fail
 from stack.apps.training import check_memory
 
 SWEEP_FILE = "sweep.yaml"
@@ -45,7 +45,10 @@ def sweep(
         fail(str(error))
     check_memory(trial_config(base, sweep_file.fixed, {}))
     ray_or_fail(ray or "local")
-    folder = resume or output_folder(out, "sweep")
+    from stack.apps.folders import claimed, location
+    from stack.core.owner import Owner
+
+    folder = claimed(location(resume or out, "sweep"), "sweep", Owner("sweep", ""), resume is not None, False)
     from stack.apps.sweep import sweep_and_report
 
     if sweep_and_report(sweep_file, base, folder, resume is not None, progress):
@@ -57,9 +60,12 @@ def export(
     sb3: Path = typer.Option(..., "--sb3", help="The stable-baselines3 zip to write."),
 ) -> None:
     """Write a model file as a stable-baselines3 zip that `DQN.load` opens."""
-    from stack.apps.export import export_sb3
+    from stack.apps.folders import check_destination
 
     try:
+        check_destination(sb3)
+        from stack.apps.export import export_sb3
+
         written = export_sb3(model, sb3)
     except ValueError as error:
         fail(str(error))

@@ -107,7 +107,7 @@ def compare_and_report(
     """Run every config, write `out` (comparison.json, comparison.png), print the table; True
     when Ctrl-C cut the comparison short (the agents run so far are written, the journals kept
     for `--resume`). `done`: the episodes resumed (`stack.apps.resume.resumable`)."""
-    journals = started(configs, out, resuming=done is not None)
+    journals = started(configs, out, done)
     runs = compare(configs, journals, jobs=jobs, progress=progress, ray=ray, done=done)
     interrupted = len(runs) < len(configs) or bool(runs[-1].summary["interrupted"])
     rows = comparison(runs, baseline)

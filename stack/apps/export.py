@@ -17,6 +17,7 @@ from perception.grid import OccupancyGridBuilder
 from planner.learned import LearnedAgent, load_agent
 from planner.model_file import ModelFileError
 from records import N_ACTIONS, GridConfig
+from stack.apps.folders import check_destination
 from stack.apps.train_model import warm_start
 
 
@@ -33,10 +34,7 @@ def export_sb3(model: Path, out: Path) -> Path:
     ValueError (ModelFileError) with a one-line message, before anything is written."""
     if not model.is_file():
         raise ValueError(f"{model}: no such model file")
-    if out.exists() or out.with_suffix(".zip").exists():
-        raise ValueError(f"--sb3: {out} exists; choose a new file")
-    if not out.parent.is_dir():
-        raise ValueError(f"--sb3: no folder {out.parent}")
+    check_destination(out)
     agent = load_agent(model, expected_algorithms=("ddqn", "dqn"))
     if not isinstance(agent, LearnedAgent):
         raise ModelFileError(f"{model}: a Q-table has no SB3 counterpart; export a DDQN or DQN model")
@@ -55,5 +53,10 @@ def export_sb3(model: Path, out: Path) -> Path:
         verbose=0,
     )
     warm_start(sb3, agent)
-    sb3.save(out)
-    return out if out.suffix == ".zip" else out.with_suffix(out.suffix + ".zip")
+    written = out if out.suffix == ".zip" else out.with_suffix(out.suffix + ".zip")
+    try:
+        sb3.save(out)
+    except OSError as error:
+        written.unlink(missing_ok=True)
+        raise ValueError(f"--sb3: cannot write {written} ({error.strerror})") from None
+    return written

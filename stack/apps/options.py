@@ -3,11 +3,9 @@ one-line error (exit 2), and checks done before any work."""
 
 from __future__ import annotations
 
-import os
 import re
 import sys
 from collections.abc import Callable, Sequence
-from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
@@ -16,11 +14,10 @@ import yaml
 from rich.console import Console
 from rich.markup import escape
 
-from stack.core.interrupts import catch_signals, received
+from stack.core.interrupts import catch_signals, ignore_signals, received
 
 if TYPE_CHECKING:
     from stack.core.config import RunConfig
-    from stack.core.metrics import EpisodeResult
 
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
@@ -35,6 +32,9 @@ SET_HELP = "KEY=VALUE: a dotted config key and a YAML value (repeatable); overri
 RAY_HELP = (
     "Run the episodes as Ray tasks: on a local instance started for the run (bare --ray), on the "
     "cluster `ray start` made (auto) or at HOST:PORT; needs pip install 'drivestack\\[ray]'."
+)
+JOBS_OPTION = typer.Option(
+    1, min=1, help="Parallel processes for the episodes (at most one per CPU; checked against memory)."
 )
 SET_KEY = re.compile(r"[A-Za-z_][\w-]*(\.[A-Za-z_][\w-]*)*")
 OPTIONS = {
@@ -86,13 +86,24 @@ def per_agent(
     sets: list[str],
     agents: Sequence[tuple[str | None, Path | str | None]],
     labels: dict[str, str] | None = None,
+    model_option: str = "--model",
     **overrides: object,
 ) -> list[RunConfig]:
-    """One `configured` config per (agent name, model file) pair; None keeps the config's own."""
-    return [
-        configured(path, sets, labels, planner__agent=name, planner__model=model, **overrides)
-        for name, model in agents
-    ]
+    """One `configured` config per (agent name, model file) pair; None keeps the config's own. A
+    model file given (by `model_option`) for an agent that loads none is refused: it would have
+    no effect."""
+    from records import LEARNED_AGENTS
+
+    configs = []
+    for name, model in agents:
+        config = configured(path, sets, labels, planner__agent=name, planner__model=model, **overrides)
+        if model is not None and config.planner.agent not in LEARNED_AGENTS:
+            fail(
+                f"{model_option}: the {config.planner.agent} agent loads no model file "
+                f"(only {', '.join(LEARNED_AGENTS)} do)"
+            )
+        configs.append(config)
+    return configs
 
 
 def parsed_sets(sets: list[str]) -> dict[str, object]:
@@ -112,10 +123,13 @@ def parsed_sets(sets: list[str]) -> dict[str, object]:
     return values
 
 
-def checked_run(configs: list[RunConfig], out: Path | None, prefix: str) -> Path:
+def checked_run(
+    configs: list[RunConfig], out: Path | None, prefix: str, resuming: bool = False, jobs: int = 1
+) -> Path:
     """The results folder of a run of `configs`, after checking (one line, exit 2, before any
-    work) each agent's model file with numpy alone, then the folder (`output_folder`), then each
-    agent as built for its road (this imports torch)."""
+    work) each agent's model file with numpy alone, then the location, then each agent as built
+    for its road (this imports torch), then taking the folder for this command
+    (`stack.apps.folders.claimed`; `prefix` names the command)."""
     from planner.factory import model_path
     from planner.model_check import checked_model
     from records import GridConfig
@@ -137,7 +151,16 @@ def checked_run(configs: list[RunConfig], out: Path | None, prefix: str) -> Path
                     fail(why)
         except ValueError as error:
             fail(str(error))
-    folder = output_folder(out, prefix)
+    from stack.apps.folders import claimed, location
+    from stack.apps.resume import run_owner
+    from stack.apps.training import check_jobs
+
+    check_jobs(jobs)
+    folder = location(out, prefix)
+    from stack.core.owner import refusal
+
+    if why := refusal(folder, run_owner(configs, prefix), resuming):
+        fail(why)
     from stack.core.episodes import build_agent
 
     for config in configs:
@@ -145,7 +168,7 @@ def checked_run(configs: list[RunConfig], out: Path | None, prefix: str) -> Path
             build_agent(config, config.seed)
         except ValueError as error:
             fail(str(error))
-    return folder
+    return claimed(folder, prefix, run_owner(configs, prefix), resuming)
 
 
 def ray_or_fail(address: str | None) -> None:
@@ -179,26 +202,6 @@ def chosen(option: str, value: str, options: tuple[str, ...]) -> tuple[str, ...]
     return names
 
 
-def output_folder(out: Path | None, prefix: str) -> Path:
-    """`out` (or a fresh `runs/<prefix>-<time>`), created now and checked writable, so a bad
-    location fails in one line before any work."""
-    folder = out or fresh_run_dir(prefix)
-    if folder.exists() and not folder.is_dir():
-        fail(f"--out: {folder} is a file; expected a folder for the results")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        fail(f"--out: cannot create {folder} ({error.strerror})")
-    if not os.access(folder, os.W_OK):
-        fail(f"--out: {folder} is not writable")
-    return folder
-
-
-def fresh_run_dir(prefix: str) -> Path:
-    stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
-    return Path("runs") / f"{prefix}-{stamp}"
-
-
 def _print_version(value: bool) -> None:
     """`--version`: the installed distribution's version, then exit."""
     if value:
@@ -208,25 +211,14 @@ def _print_version(value: bool) -> None:
         raise typer.Exit()
 
 
-def resumed(configs: list[RunConfig], out: Path | None) -> dict[str, list[EpisodeResult]]:
-    """`--resume`: the episodes the interrupted run in `out` finished, per agent (`resumable`)."""
-    from stack.apps.resume import resumable
-
-    if out is None:
-        fail("--resume: name the folder of the interrupted run with --out")
-    try:
-        return resumable(configs, out)
-    except ValueError as error:
-        fail(str(error))
-
-
 def until_interrupted(work: Callable[[], bool]) -> None:
     """Run `work`, which returns True when Ctrl-C cut it short with its finished part written, and
-    exit 130 then; one line when it was cut before anything finished."""
+    exit 130 then; one line (and exit 130) when it was cut before anything finished."""
     try:
         interrupted = work()
     except KeyboardInterrupt:
-        fail("interrupted before anything finished; nothing to write")
+        print("interrupted before anything finished; nothing written", file=sys.stderr)
+        sys.exit(130)
     if interrupted:
         sys.exit(130)
 
@@ -242,6 +234,7 @@ def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
     try:
         app(arguments, prog_name="drivestack")
     except SystemExit as done:
+        ignore_signals()
         if received() and not done.code:
             sys.exit(130)
         raise

@@ -4,13 +4,16 @@ import: a refused `--resume` costs no simulator import."""
 
 from __future__ import annotations
 
+import math
+import sys
 from pathlib import Path
 
 from records import child_seed
 from records.plugins import file_safe
-from stack.core.config import RunConfig, config_text
+from stack.core.config import RunConfig, config_text, printable
 from stack.core.files import JOURNAL, EpisodeJournal, write_text
 from stack.core.metrics import EpisodeResult
+from stack.core.owner import Owner, fingerprint, refusal
 
 JOURNAL_ROW_BYTES = 2_000
 """Bytes one journaled episode takes at most (about 450 in practice): bounds what --resume reads."""
@@ -25,30 +28,40 @@ def resolved_config(configs: list[RunConfig]) -> str:
     return config_text(configs[0], f"the resolved config; agents: {agents}")
 
 
+def run_owner(configs: list[RunConfig], command: str) -> Owner:
+    """The owner a `run` or `compare` of `configs` records in its results folder."""
+    return Owner(command, fingerprint(resolved_config(configs)))
+
+
 def journal_of(config: RunConfig, out: Path) -> EpisodeJournal:
     """Where the finished episodes of `config`'s agent are kept while a run or comparison goes on."""
     return EpisodeJournal(out / f"{file_safe(config.planner.agent)}.{JOURNAL}")
 
 
-def started(configs: list[RunConfig], out: Path, resuming: bool) -> list[EpisodeJournal]:
-    """Write `out`/config.yaml and return each agent's journal; a fresh start (not `resuming`)
-    empties journals an earlier interrupted run left there."""
+def started(
+    configs: list[RunConfig], out: Path, done: dict[str, list[EpisodeResult]] | None
+) -> list[EpisodeJournal]:
+    """Write `out`/config.yaml and return each agent's journal, holding exactly the episodes
+    resumed (`done`; none on a fresh start, which empties journals an earlier run left there).
+    Every journal exists from now on, so a run stopped before its first episode can be resumed."""
     write_text(out / "config.yaml", resolved_config(configs))
     journals = [journal_of(config, out) for config in configs]
-    for journal in journals if not resuming else []:
-        journal.discard()
+    for config, journal in zip(configs, journals, strict=True):
+        journal.keep((done or {}).get(config.planner.agent, []))
     return journals
 
 
-def resumable(configs: list[RunConfig], out: Path) -> dict[str, list[EpisodeResult]]:
-    """Per agent, the episodes the interrupted run or comparison in `out` finished: its
-    config.yaml must be the one `configs` write, and each journaled episode one of theirs (its
-    number in range, its seed the one that number gets). ValueError, naming the file, when `out`
+def resumable(configs: list[RunConfig], out: Path, command: str) -> dict[str, list[EpisodeResult]]:
+    """Per agent, the episodes the interrupted `command` (run or compare) in `out` finished: the
+    folder must be that command's (`stack.core.owner`), its config.yaml the one `configs` write,
+    and each journaled episode one of theirs (`journaled`). ValueError, naming the file, when `out`
     holds another run, none, or no journal (a finished run: nothing to resume)."""
-    stored, expected = out / "config.yaml", resolved_config(configs)
+    if why := refusal(out, run_owner(configs, command), resuming=True):
+        raise ValueError(why)
+    stored, expected = out / "config.yaml", resolved_config(configs).encode()
     if not stored.is_file():
         raise ValueError(f"--resume: {out} holds no run to resume (no config.yaml)")
-    if stored.stat().st_size != len(expected.encode()) or stored.read_text() != expected:
+    if stored.stat().st_size != len(expected) or stored.read_bytes() != expected:
         raise ValueError(
             f"--resume: {stored} is another run's (other agents, models or config); "
             "resume with the arguments that started it"
@@ -56,13 +69,45 @@ def resumable(configs: list[RunConfig], out: Path) -> dict[str, list[EpisodeResu
     journals = [journal_of(config, out) for config in configs]
     if not any(journal.path.is_file() for journal in journals):
         raise ValueError(f"--resume: {out} holds no unfinished episodes (no journal); nothing to resume")
-    done: dict[str, list[EpisodeResult]] = {}
-    for config, journal in zip(configs, journals, strict=True):
-        rows = journal.rows(JOURNAL_ROW_BYTES * config.episodes)
-        episodes = {e.episode: e for e in map(EpisodeResult.from_row, rows) if e is not None}
-        done[config.planner.agent] = [
-            e
-            for e in episodes.values()
-            if 0 <= e.episode < config.episodes and e.seed == child_seed(config.seed, e.episode)
-        ]
-    return done
+    return {
+        config.planner.agent: journaled(config, journal)
+        for config, journal in zip(configs, journals, strict=True)
+    }
+
+
+def journaled(config: RunConfig, journal: EpisodeJournal) -> list[EpisodeResult]:
+    """The episodes of `config` that `journal` holds; a line that is not one (damaged, cut short,
+    a value out of range, another run's episode) is dropped with a one-line warning naming the
+    file, and that episode runs again."""
+    episodes: dict[int, EpisodeResult] = {}
+    dropped = []
+    for number, row in enumerate(journal.lines(JOURNAL_ROW_BYTES * config.episodes), start=1):
+        episode = EpisodeResult.from_row(row) if row is not None and in_range(row) else None
+        if episode is None or not belongs(episode, config):
+            dropped.append(number)
+        else:
+            episodes[episode.episode] = episode
+    if dropped:
+        lines = ", ".join(map(str, dropped[:5])) + (" ..." if len(dropped) > 5 else "")
+        warn(
+            f"{journal.path}: dropped line {lines} (not a finished episode of this run: damaged, "
+            "cut short or out of range); its episode runs again"
+        )
+    return list(episodes.values())
+
+
+def in_range(row: dict[str, object]) -> bool:
+    """Whether every number in a journaled `row` is one an episode can record: finite, and
+    counts (integers) not negative. Checked by type, so fields added later are covered."""
+    numbers = [v for v in row.values() if isinstance(v, int | float) and not isinstance(v, bool)]
+    return all(math.isfinite(v) and (v >= 0 or not isinstance(v, int)) for v in numbers)
+
+
+def belongs(episode: EpisodeResult, config: RunConfig) -> bool:
+    """Whether `episode` is one of `config`'s: its number in range, its seed the one it gets."""
+    return 0 <= episode.episode < config.episodes and episode.seed == child_seed(config.seed, episode.episode)
+
+
+def warn(message: str) -> None:
+    """`message` as one warning line on stderr."""
+    print(f"warning: {printable(message)}", file=sys.stderr)

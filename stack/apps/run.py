@@ -43,12 +43,14 @@ def run_and_report(
     second config (`--beside AGENT`) then drives the same seeds: `beside.json` and a table hold
     both agents with the paired difference to it. `done`: the episodes resumed
     (`stack.apps.resume.resumable`)."""
-    journals = started(configs, out, resuming=done is not None)
+    journals = started(configs, out, done)
     finished = [(done or {}).get(config.planner.agent, []) for config in configs]
     results = run(configs[0], video, progress, jobs, ray, on_finished=journals[0].record, done=finished[0])
     with deferred(interrupt_after=False):
         write_results(out, results.summary, results.episodes, results.frames)
     print_tables(results.summary, results.episodes)
+    for note in undrawn(out, results.episodes):
+        Console().print(note, highlight=False)
     interrupted = bool(results.summary["interrupted"])
     rows = None
     if len(configs) > 1 and not interrupted:
@@ -88,6 +90,20 @@ def write_results(
         with replacing(out / "episode0.gif") as path:
             # imageio's stub types the frames as list[ArrayLike], invariant: list[np.ndarray] is refused
             imageio.mimsave(path, frames, duration=duration_ms, loop=0)  # type: ignore[arg-type]
+
+
+def undrawn(out: Path, episodes: list[EpisodeResult]) -> list[str]:
+    """What a resumed run could not draw, one line each: episodes resumed from the journal keep
+    no traces (traces.png) and no snapshot of the road (grid.png, from episode 0)."""
+    notes = []
+    for name, missing, why in (
+        ("traces.png", not any(e.trace for e in episodes), "every episode was resumed from the journal"),
+        ("grid.png", episodes[0].snapshot is None, "episode 0 was resumed from the journal"),
+    ):
+        if missing:
+            kept = "kept from before --resume" if (out / name).is_file() else "not drawn"
+            notes.append(f"{name}: {kept} ({why}, which keeps no traces or road snapshots)")
+    return notes
 
 
 FEW_EPISODES = 8

@@ -15,7 +15,6 @@ MPC fallbacks.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -33,6 +32,8 @@ from stack.apps.track_report import plot_maneuvers, print_tracking
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import RunConfig, write_config
 from stack.core.executors import completed
+from stack.core.files import write_json
+from stack.core.interrupts import deferred
 from stack.core.metrics import Tracking, lateral_series, tracking
 from stack.sim.empty_road import BuiltinDriver, EmptyRoad, PlantKind, RoadKind
 
@@ -169,9 +170,10 @@ def track_and_report(
     progress: bool,
     plants: tuple[PlantName, ...] = PLANTS,
     ray: str | None = None,
-) -> list[Maneuver]:
+) -> bool:
     """Every maneuver (here, or as Ray tasks at address `ray`) with a progress bar, then the table
-    and where the results are."""
+    and where the results are; True when Ctrl-C cut it short (the maneuvers finished are written;
+    none finished: KeyboardInterrupt)."""
     builtin_runs = 1 if "kinematic" in plants else 0
     total = (
         sum(len(speeds_on(road, speeds)) for road in ROADS)
@@ -190,10 +192,13 @@ def track_and_report(
             progress=lambda: bar.update(1),
             ray=ray,
         )
-    write_config(config, out / "config.yaml", "the resolved config of this run (its controller section)")
+    with deferred(interrupt_after=False):
+        write_config(config, out / "config.yaml", "the resolved config of this run (its controller section)")
     print_tracking(maneuvers)
-    Console().print(f"results: {out}")
-    return maneuvers
+    interrupted = len(maneuvers) < total
+    stopped = f" (interrupted: the {len(maneuvers)} of {total} maneuvers finished)"
+    Console().print(f"results: {out}" + (stopped if interrupted else ""))
+    return interrupted
 
 
 def track(
@@ -210,7 +215,7 @@ def track(
 ) -> list[Maneuver]:
     """All maneuvers, in a fixed order whatever ran them (here, or Ray tasks at address `ray`);
     writes out/tracking.json and one figure per road, plant and speed (the left change, all
-    controllers overlaid)."""
+    controllers overlaid). Ctrl-C keeps and writes the maneuvers finished (none: it is raised)."""
     out.mkdir(parents=True, exist_ok=True)
     chosen = [
         (name, config, road_kind, plant, speed, direction, duration, dt)
@@ -222,12 +227,29 @@ def track(
         for direction in ("left", "right")
     ]
     done: dict[int, Maneuver] = {}
-    for index, maneuver in completed(_run_maneuver, chosen, ray=ray):
-        done[index] = maneuver
-        if progress:
-            progress()
+    try:
+        for index, maneuver in completed(_run_maneuver, chosen, ray=ray):
+            done[index] = maneuver
+            if progress:
+                progress()
+    except KeyboardInterrupt:
+        if not done:
+            raise
     maneuvers = [done[index] for index in sorted(done)]
-    (out / "tracking.json").write_text(json.dumps([m.record() for m in maneuvers], indent=2) + "\n")
+    with deferred(interrupt_after=False):
+        write_tracking(maneuvers, out, roads, plants, speeds)
+    return maneuvers
+
+
+def write_tracking(
+    maneuvers: list[Maneuver],
+    out: Path,
+    roads: tuple[RoadKind, ...],
+    plants: tuple[PlantName, ...],
+    speeds: list[float],
+) -> None:
+    """out/tracking.json and one figure per road, plant and speed that has a maneuver."""
+    write_json(out / "tracking.json", [m.record() for m in maneuvers])
     for road_kind in roads:
         for plant in plants:
             for speed in speeds_on(road_kind, speeds):
@@ -237,7 +259,6 @@ def track(
                     if (m.road, m.plant, m.speed, m.direction) == (road_kind, plant, speed, "left")
                 ]
                 plot_maneuvers(shown, out / f"tracking_{road_kind}_{plant}_{speed:g}mps.png")
-    return maneuvers
 
 
 def speeds_on(road: RoadKind, speeds: list[float]) -> list[float]:

@@ -8,7 +8,6 @@ buffer and counters, so `--resume DIR` continues where the last checkpoint left 
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Callable
 from functools import partial
@@ -28,13 +27,16 @@ from records import child_seed
 from stack.apps.demonstrations import demonstrations_summary, start_from_demonstrations
 from stack.apps.train_model import (
     Checkpoints,
+    EnvWorkerDied,
     StopTraining,
     build_dqn,
+    close_env,
     initial_model,
     model_metadata,
     monitored_env,
     stop_signals,
     warm_start,
+    worker_death,
     worker_env,
 )
 from stack.apps.train_report import write_training_summary
@@ -84,30 +86,30 @@ class Trainer:
         return model_metadata(self.config, self.validation_env, steps)
 
     def run(self) -> dict:
+        """Train to `train.steps`, or until SIGINT / SIGTERM (a checkpoint first), and write the
+        summary; further signals only wait for the files. A dead env worker: `EnvWorkerDied`."""
         self.out.mkdir(parents=True, exist_ok=True)
         write_config(self.config, self.out / "config.yaml", "the resolved config; --resume reads it")
         self.stop_requested = interrupted = False
-        try:
-            with stop_signals(self._request_stop):
+        with stop_signals(self._request_stop):
+            try:
                 steps = (
                     self._train_tabular() if self.config.train.algorithm == "tabular" else self._train_dqn()
                 )
-        except StopTraining:
-            interrupted, steps = True, self._steps_done()
-        except KeyboardInterrupt:
-            self.stop_requested = interrupted = True
-            steps = self._save_checkpoint()
-        finally:
-            self.env.close()
-        return self._finish(steps, interrupted)
+            except StopTraining:
+                interrupted, steps = True, self._steps_done()
+            except KeyboardInterrupt:
+                self.stop_requested = interrupted = True
+                steps = self._save_checkpoint()
+            except (EOFError, ConnectionError) as error:
+                raise EnvWorkerDied(worker_death(self.env, self.out, error)) from None
+            finally:
+                close_env(self.env)
+            return self._finish(steps, interrupted)
 
     def _request_stop(self, signum: int, frame: object) -> None:
         """SIGINT / SIGTERM: stop at the next consistent point, with a checkpoint; a second
         signal only says so again (it never cuts the checkpoint short)."""
-        print(
-            "stopping: the checkpoint is written after the current step (further signals wait for it)",
-            file=sys.stderr,
-        )
         self.stop_requested = True
 
     def _steps_done(self) -> int:
@@ -162,14 +164,14 @@ class Trainer:
         callbacks += [self.validation, checkpoints]
         if self.progress:
             callbacks.append(ProgressBarCallback())
-        remaining = self.config.train.steps - self.model.num_timesteps
-        if remaining > 0:
-            self.model.learn(
-                remaining,
-                callback=CallbackList(callbacks),
-                reset_num_timesteps=not resumed,
-                tb_log_name=self.config.train.algorithm,
-            )
+        if (remaining := self.config.train.steps - self.model.num_timesteps) <= 0:
+            return int(self.model.num_timesteps)
+        self.model.learn(
+            remaining,
+            callback=CallbackList(callbacks),
+            reset_num_timesteps=not resumed,
+            tb_log_name=self.config.train.algorithm,
+        )
         return self._save_checkpoint()
 
     # --- tabular Q-learning -----------------------------------------------------------------
@@ -203,10 +205,9 @@ class Trainer:
             return True
 
         self.validation = validation
-        remaining = train.steps - self.model.steps
-        if remaining > 0:
-            seed = child_seed(self.config.seed, 0)
-            self.model.learn(self.env, remaining, seed, on_step, observation)
+        if (remaining := train.steps - self.model.steps) <= 0:
+            return self.model.steps
+        self.model.learn(self.env, remaining, child_seed(self.config.seed, 0), on_step, observation)
         return self._save_checkpoint()
 
     # --- shared -------------------------------------------------------------------------------

@@ -4,6 +4,7 @@ the config, the callback that checkpoints it, the metadata every model file carr
 from __future__ import annotations
 
 import signal
+import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -21,18 +22,22 @@ from stable_baselines3.common.vec_env import VecEnv
 from planner.ddqn import DoubleDQN
 from planner.factory import model_path
 from planner.learned import LearnedAgent, load_agent
-from planner.model_file import ModelFileError
+from planner.model_file import CHECKPOINT, ModelFileError
 from planner.networks import net_arch
 from records import N_ACTIONS
 from stack.core.closed_loop import grid_config
 from stack.core.config import RunConfig, road_mismatch
 from stack.core.decision_env import HierarchicalHighwayEnv
+from stack.core.interrupts import note_stop
 
 ALGORITHMS: dict[str, type[DQN]] = {"ddqn": DoubleDQN, "dqn": DQN}
 
 
 class StopTraining(Exception):
     """Raised once a requested stop has its checkpoint written."""
+
+
+STOPPING = "stopping: the checkpoint is written after the current step (further signals wait for it)"
 
 
 class Checkpoints(BaseCallback):
@@ -65,12 +70,19 @@ class Checkpoints(BaseCallback):
 
 @contextmanager
 def stop_signals(handler: Callable[[int, Any], None]) -> Iterator[None]:
-    """SIGINT and SIGTERM call `handler` inside the block; only in the main thread, where Python
-    delivers signals (a sweep's trial trains in a worker thread and Ray Tune stops it)."""
+    """SIGINT and SIGTERM call `handler` inside the block (the command then exits 130, and says
+    that it stops); only in the main thread, where Python delivers signals (a sweep's trial trains
+    in a worker thread and Ray Tune stops it)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+    def noted(signum: int, frame: Any) -> None:
+        note_stop()
+        print(STOPPING, file=sys.stderr)
+        handler(signum, frame)
+
+    previous = {sig: signal.signal(sig, noted) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
@@ -172,3 +184,29 @@ def warm_start(model: DQN, start: LearnedAgent) -> None:
     with th.no_grad():
         model.policy.q_net.q_net.load_state_dict(weights)
         model.policy.q_net_target.q_net.load_state_dict(weights)
+
+
+class EnvWorkerDied(RuntimeError):
+    """A training env worker process died; the message is one line for the user."""
+
+
+def worker_death(env: object, out: Path, error: BaseException) -> str:
+    """One line: that an env worker of `env` died, how, and what the run in `out` keeps."""
+    codes = [p.exitcode for p in getattr(env, "processes", []) if p.exitcode not in (None, 0)]
+    how = f" (exit code {codes[0]})" if codes else f" ({type(error).__name__})"
+    kept = (
+        f"its last checkpoint ({out / CHECKPOINT}) is kept: --resume {out} continues from it"
+        if (out / CHECKPOINT).is_file()
+        else "no checkpoint was written yet: start the run again"
+    )
+    return f"a training environment process died{how}; {kept}"
+
+
+def close_env(env: Monitor | VecEnv) -> None:
+    """Close `env` and its worker processes, also when one of them is dead."""
+    try:
+        env.close()
+    except (EOFError, OSError):
+        for process in getattr(env, "processes", []):
+            process.kill()
+            process.join(timeout=10)

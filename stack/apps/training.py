@@ -3,14 +3,21 @@ to resume is one) and prints after."""
 
 from __future__ import annotations
 
+import json
 import math
+import sys
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from stack.apps.options import fail
+from planner.model_file import CHECKPOINT as CHECKPOINT_FILE
+from stack.apps.options import configured, fail
+from stack.core.owner import Owner, fingerprint, owner_of
 
 if TYPE_CHECKING:
     from stack.core.config import RunConfig
+
+RESUME_ONLY_STEPS = "only --steps may change on resume (the run goes on as it was configured)"
 
 
 def transition_bytes(config: RunConfig) -> int:
@@ -70,6 +77,24 @@ def check_memory(config: RunConfig) -> None:
         )
 
 
+WORKER_BYTES = 450 * 2**20
+"""Memory one episode process takes at most [bytes] (240-440 MB measured: simulator, torch)."""
+
+
+def check_jobs(jobs: int) -> None:
+    """Refuse, before any process starts, more episode processes (`--jobs`, at most one per usable
+    CPU) than the available memory holds."""
+    from stack.core.executors import usable_cpus
+
+    workers = min(jobs, usable_cpus())
+    if workers > 1 and (available := available_memory_bytes()) is not None:
+        if workers * WORKER_BYTES > 0.8 * available:
+            fail(
+                f"--jobs: {workers} processes need about {workers * WORKER_BYTES / 2**30:.1f} GB; "
+                f"{available / 2**30:.1f} GB of memory is available"
+            )
+
+
 def check_init_model(config: RunConfig) -> None:
     """Refuse, before the run folder exists, a `train.init_model` that does not fit the run (torch
     and SB3 are imported only when there is one to check)."""
@@ -98,10 +123,31 @@ def train_or_fail(config: RunConfig, folder: Path, progress: bool) -> bool:
 
 
 def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:
-    """Train (or resume) in `folder` and print the outcome; True when interrupted (resumable)."""
+    """Train (or resume) in `folder` and print the outcome; True when a signal stopped it (its
+    checkpoint written: resumable). A signal while the env processes start stops before training;
+    signals after training only wait for the files. A dead env process ends it in one line."""
     from stack.apps.train import Trainer
+    from stack.apps.train_model import EnvWorkerDied
+    from stack.core.interrupts import deferred, received
 
-    summary = Trainer(config, folder, progress=progress).run()
+    try:
+        with deferred():
+            trainer = Trainer(config, folder, progress=progress)
+    except KeyboardInterrupt:
+        print("interrupted before training started; nothing trained", file=sys.stderr)
+        return True
+    with deferred(interrupt_after=False):
+        try:
+            summary = trainer.run()
+        except EnvWorkerDied as error:
+            print(f"error: {error}", file=sys.stderr)
+            sys.exit(1)
+        report(summary, folder)
+    return bool(summary["interrupted"]) or received()
+
+
+def report(summary: dict, folder: Path) -> None:
+    """The outcome of a training run on the terminal."""
     best, interrupted = summary["best_validation"], bool(summary["interrupted"])
     found = (
         "no validation yet"
@@ -113,4 +159,59 @@ def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:
     )
     print(f"{summary['algorithm']}: {summary['steps']} steps in {summary['wall_time_s']:.0f} s; {found}")
     print(f"run folder: {folder}" + (" (interrupted: resume with --resume)" if interrupted else ""))
-    return interrupted
+
+
+def training_owner(config: RunConfig) -> Owner:
+    """The owner a training run records in its folder: the hash of its config without
+    `train.steps`, the one key a resumed run may change (grow)."""
+    data = config.model_dump(mode="json")
+    data["train"].pop("steps")
+    return Owner("train", fingerprint(json.dumps(data, sort_keys=True)))
+
+
+def resumed_training(
+    folder: Path, sets: list[str], steps: int | None, given: Mapping[str, object]
+) -> RunConfig:
+    """The config `train --resume folder` goes on with: the run's own, `--steps` grown; a one-line
+    error (exit 2) for an option that would have no effect (`given`, by option name), a `--set`
+    that changes anything, fewer steps, a folder that is not an interrupted training run."""
+    if unused := next((option for option, value in given.items() if value is not None), None):
+        fail(f"{unused}: has no effect with --resume; {RESUME_ONLY_STEPS}")
+    found = owner_of(folder)
+    if found is not None and found.command != "train":
+        fail(f"--resume: {folder} holds the results of `{found.command}`, not a training run")
+    if not (folder / "config.yaml").is_file() or (found is None and not (folder / CHECKPOINT_FILE).is_file()):
+        fail(f"--resume: {folder} is not a training run folder (no config.yaml and checkpoint.npz)")
+    from stack.core.config_checks import first_change
+
+    stored = configured(folder / "config.yaml", [])
+    config = configured(folder / "config.yaml", sets, train__steps=steps)
+    old, new = stored.model_dump(mode="json"), config.model_dump(mode="json")
+    old["train"].pop("steps"), new["train"].pop("steps")
+    if changed := first_change(old, new):
+        key, was, asked = changed
+        fail(f"--set {key}: the run in {folder} was trained with {was!r}, not {asked!r}; {RESUME_ONLY_STEPS}")
+    if config.train.steps < stored.train.steps:
+        fail(f"--steps: expected at least {stored.train.steps} (the run's budget); {RESUME_ONLY_STEPS}")
+    if (done := checkpoint_steps(folder)) is not None and done >= config.train.steps:
+        fail(
+            f"--resume: {folder} finished its {done} steps; nothing to resume "
+            f"(--steps above {done} trains it further)"
+        )
+    return config
+
+
+def checkpoint_steps(folder: Path) -> int | None:
+    """The steps the checkpoint in `folder` holds (None without one); a one-line error for a
+    file that is not a checkpoint."""
+    from planner.model_file import ModelFileError, load_checkpoint
+
+    if not (folder / CHECKPOINT_FILE).is_file():
+        return None
+    try:
+        _, metadata = load_checkpoint(folder / CHECKPOINT_FILE, arrays=False)
+        return int(metadata["counters"]["num_timesteps"])
+    except ModelFileError as error:
+        fail(str(error))
+    except (KeyError, TypeError, ValueError):
+        fail(f"{folder / CHECKPOINT_FILE}: not a training checkpoint (no step count)")

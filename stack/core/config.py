@@ -18,6 +18,7 @@ from perception.sensor import SensorConfig
 from planner.safety import SafetyConfig
 from records import AGENT_NAMES, SEED_LIMIT, Encoding, GridConfig
 from records.plugins import AGENT_GROUP, plugin_name
+from stack.core.config_checks import boolean_mismatch
 from stack.core.files import write_text
 from stack.core.train_config import Strict, TrainConfig
 from stack.sim import scenarios
@@ -136,8 +137,8 @@ class _NoAliasLoader(yaml.SafeLoader):
 def one_line(error: ValidationError, source: str, labels: dict[str, str]) -> str:
     first = error.errors()[0]
     key = ".".join(str(part) for part in first["loc"])
-    source = labels.get(key, source)
     message = first["msg"].removeprefix("Value error, ")
+    source = labels.get(key or message.split(":", 1)[0], source)
     if first["type"] == "extra_forbidden":
         message = "unknown key"
     elif first["type"] != "value_error" and not isinstance(first.get("input"), dict):
@@ -201,6 +202,9 @@ def build_config(
         if value is not None:
             key = dotted.replace("__", ".")
             _set_dotted(data, key, value, labels.get(key, source))
+    if mismatch := boolean_mismatch(RunConfig, data):
+        key, message = mismatch
+        raise ConfigError(printable(f"{labels.get(key, source)}: {key}: {message}"))
     try:
         return RunConfig.model_validate(data)
     except ValidationError as error:

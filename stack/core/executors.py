@@ -5,13 +5,29 @@ Ctrl-C (or the caller dropping the iterator) cancels the items not yet started."
 
 from __future__ import annotations
 
+import ctypes
+import os
+import signal
+import sys
+import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from itertools import islice
 from multiprocessing import get_context
 from typing import TypeVar
 
 Item = TypeVar("Item")
 Result = TypeVar("Result")
+
+QUEUED_PER_WORKER = 2
+"""Items submitted per worker ahead of the results: keeps every worker busy, bounds what waits."""
+WATCH_PERIOD_S = 1.0
+"""How often a pool worker checks that its parent is alive [s] (where the system cannot tell it)."""
+
+
+PR_SET_PDEATHSIG = 1
+"""prctl option: the signal a process gets when its parent dies (linux/prctl.h)."""
 
 
 def completed(
@@ -30,15 +46,69 @@ def completed(
         yield from _pool_completed(task, items, jobs)
 
 
+def usable_cpus() -> int:
+    """The CPUs this process may run on: the most processes `jobs` starts, and a local Ray
+    instance's task slots."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
 def _pool_completed(
     task: Callable[[Item], Result], items: Sequence[Item], jobs: int
 ) -> Iterator[tuple[int, Result]]:
-    """`completed` over a pool of `jobs` spawned processes (fresh interpreters: no state shared)."""
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as pool:
-        futures: dict[Future[Result], int] = {pool.submit(task, item): i for i, item in enumerate(items)}
-        try:
-            for future in as_completed(futures):
-                yield futures[future], future.result()
-        finally:
-            for future in futures:
-                future.cancel()
+    """`completed` over a pool of `jobs` spawned processes (fresh interpreters: no state shared),
+    at most one per usable CPU. Items are submitted as workers free up (a few queued ahead), so a
+    long run costs no memory for items not yet started. If the caller stops early (Ctrl-C), the
+    workers are ended at once instead of finishing their items."""
+    workers = min(jobs, usable_cpus(), len(items))
+    queue = iter(enumerate(items))
+    pool = ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=get_context("spawn"),
+        initializer=_worker_start,
+        initargs=(os.getpid(),),
+    )
+    running: dict[Future[Result], int] = {}
+    finished = False
+    try:
+        for index, item in islice(queue, QUEUED_PER_WORKER * workers):
+            running[pool.submit(task, item)] = index
+        while running:
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in done:
+                index = running.pop(future)
+                for following, item in islice(queue, 1):
+                    running[pool.submit(task, item)] = following
+                yield index, future.result()
+        finished = True
+    finally:
+        if not finished:
+            _end_workers(pool)
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _end_workers(pool: ProcessPoolExecutor) -> None:
+    """Kill `pool`'s worker processes (the executor has no public way before Python 3.14)."""
+    for process in list(getattr(pool, "_processes", {}).values()):
+        process.kill()
+
+
+def _worker_start(parent: int) -> None:
+    """A pool worker's first act: deaf to Ctrl-C (a terminal sends it to the whole process group;
+    the parent stops the run and ends the workers, no worker traceback), and ends when its parent
+    dies, even by SIGKILL: the kernel tells it on Linux (PR_SET_PDEATHSIG), a watchdog thread
+    elsewhere."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent:
+        os._exit(1)
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
+
+
+def _watch_parent(parent: int) -> None:
+    """End this process once `parent` is no longer its parent (it died: the process was re-parented)."""
+    while os.getppid() == parent:
+        time.sleep(WATCH_PERIOD_S)
+    os._exit(1)

@@ -77,27 +77,32 @@ class EpisodeJournal:
                 handle.flush()
                 os.fsync(handle.fileno())
 
-    def rows(self, max_bytes: int) -> list[dict[str, Any]]:
-        """The rows journaled so far, up to the first line that is not a whole JSON object (a run
-        killed in mid-line); the file is rewritten to hold exactly those, so appending goes on
-        after them. A journal over `max_bytes` is refused (ValueError) before it is read."""
+    def lines(self, max_bytes: int) -> list[dict[str, Any] | None]:
+        """Each line journaled so far as its JSON object, or None where a line is not one (not
+        UTF-8, not JSON: a run killed in mid-line, a damaged file). Read only; a journal over
+        `max_bytes` is refused (ValueError) before it is read."""
         if not self.path.is_file():
             return []
         if (size := self.path.stat().st_size) > max_bytes:
             raise ValueError(
                 f"{self.path}: {size} bytes; a journal of these episodes holds at most {max_bytes}"
             )
-        rows = []
-        for line in self.path.read_text().splitlines():
-            try:
-                row = json.loads(line)
-            except (json.JSONDecodeError, RecursionError):
-                break
-            if not isinstance(row, dict):
-                break
-            rows.append(row)
-        write_text(self.path, "".join(json.dumps(row) + "\n" for row in rows))
-        return rows
+        return [_json_object(line) for line in self.path.read_bytes().splitlines()]
+
+    def keep(self, episodes: list[EpisodeResult]) -> None:
+        """Rewrite the journal to hold exactly `episodes` (those a resumed run keeps), so appending
+        goes on after them; an empty journal when there are none."""
+        with deferred():
+            write_text(self.path, "".join(json.dumps(episode.row()) + "\n" for episode in episodes))
 
     def discard(self) -> None:
         self.path.unlink(missing_ok=True)
+
+
+def _json_object(line: bytes) -> dict[str, Any] | None:
+    """`line` as a JSON object, or None when it is not one (not UTF-8, not JSON, not an object)."""
+    try:
+        row = json.loads(line.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
+        return None
+    return row if isinstance(row, dict) else None

@@ -26,9 +26,24 @@ def catch_signals() -> None:
         signal.signal(sig, _handler)
 
 
+def ignore_signals() -> None:
+    """SIGINT and SIGTERM ignored from now on: the command's work is done and its exit code set.
+    (At exit Python puts the default action back for signals it handles, so a signal during the
+    interpreter's teardown would otherwise end the process with -SIGTERM instead of its code.)"""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
+
+
 def received() -> bool:
     """Whether a stop was asked for (the command then ends with exit code 130)."""
     return _received > 0
+
+
+def note_stop() -> None:
+    """A stop asked for elsewhere (training's own handler): the command ends with exit code 130,
+    and a later signal, once these handlers are back, only waits like a second one."""
+    global _received
+    _received = max(_received, 1)
 
 
 def _handler(signum: int, frame: FrameType | None) -> None:

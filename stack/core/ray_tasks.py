@@ -15,6 +15,8 @@ from contextlib import contextmanager
 from types import ModuleType
 from typing import Any, TypeVar
 
+from stack.core.executors import usable_cpus
+
 Item = TypeVar("Item")
 Result = TypeVar("Result")
 
@@ -53,10 +55,35 @@ def check_address(address: str) -> None:
         )
     host, port = match["host"].strip("[]"), int(match["port"])
     try:
-        socket.create_connection((host, port), timeout=PROBE_TIMEOUT_S).close()
+        speaks = speaks_grpc(host, port)
     except OSError as error:
         reason = error.strerror or type(error).__name__
         raise RayUnavailable(f"--ray {address}: no Ray cluster reachable at {target} ({reason})") from None
+    if not speaks:
+        raise RayUnavailable(
+            f"--ray {address}: {target} answers, but not as a Ray cluster (no gRPC); check the port"
+        )
+
+
+HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+"""What an HTTP/2 client sends first: the connection preface and an empty SETTINGS frame."""
+SETTINGS_FRAME = 4
+"""HTTP/2 frame type of SETTINGS, which a server sends first (RFC 9113, 3.4)."""
+
+
+def speaks_grpc(host: str, port: int) -> bool:
+    """Whether `host:port` answers the HTTP/2 preface with a SETTINGS frame within
+    `PROBE_TIMEOUT_S`, as the gRPC servers of Ray (GCS and Ray Client) do; OSError when it does
+    not accept the connection."""
+    with socket.create_connection((host, port), timeout=PROBE_TIMEOUT_S) as connection:
+        try:
+            connection.sendall(HTTP2_PREFACE)
+            header = b""
+            while len(header) < 9 and (chunk := connection.recv(9 - len(header))):
+                header += chunk
+        except OSError:
+            return False
+    return len(header) == 9 and header[3] == SETTINGS_FRAME
 
 
 def started_cluster() -> str:
@@ -117,13 +144,6 @@ def _stderr_silenced() -> Iterator[None]:
     finally:
         os.dup2(saved, 2)
         os.close(saved)
-
-
-def usable_cpus() -> int:
-    """The CPUs this process may run on (a local instance gets one task slot per CPU)."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
 
 
 def _call(task: Callable[[Item], Result], item: Item) -> Result:

@@ -9,8 +9,16 @@ from typing import Annotated
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from planner.networks import NET_ARCHS
-from records import ENCODINGS, LEARNED_AGENTS, Encoding, LearnedAgentName, one_of, unknown_name
+from records import ENCODINGS, LEARNED_AGENTS, SEED_LIMIT, Encoding, LearnedAgentName, one_of, unknown_name
 from stack.sim import scenarios
+
+MAX_STEPS = 1_000_000_000
+"""Upper bound of every step count and period [environment steps] (the largest `train.steps`)."""
+MAX_SPEED_RANGE = 100.0
+"""Upper end of the reward's speed range [m/s]."""
+MAX_REWARD = 1_000.0
+"""Upper bound of every reward term and loss weight, by magnitude: well past any useful value,
+far from where float32 arithmetic overflows."""
 
 
 class Strict(BaseModel):
@@ -26,28 +34,30 @@ class RewardConfig(Strict):
     (granted or masked), a margin like MOBIL's threshold so it asks only when the change pays. The
     paper's reward is alive = 1, collision = -1, speed_weight = 0, lane_change = 0."""
 
-    alive: float = 1.0
-    collision: float = -1.0
-    speed_weight: float = Field(0.0, ge=0)
+    alive: float = Field(1.0, ge=-MAX_REWARD, le=MAX_REWARD)
+    collision: float = Field(-1.0, ge=-MAX_REWARD, le=MAX_REWARD)
+    speed_weight: float = Field(0.0, ge=0, le=MAX_REWARD)
     speed_range: tuple[float, float] = (20.0, 30.0)
-    lane_change: float = Field(0.0, ge=0)
+    lane_change: float = Field(0.0, ge=0, le=MAX_REWARD)
 
     @field_validator("speed_range")
     @classmethod
     def _ordered(cls, bounds: tuple[float, float]) -> tuple[float, float]:
-        if not bounds[0] < bounds[1]:
-            raise ValueError(f"must be (low, high) with low < high, got {list(bounds)}")
+        if not 0 <= bounds[0] < bounds[1] <= MAX_SPEED_RANGE:
+            raise ValueError(
+                f"must be (low, high) with 0 <= low < high <= {MAX_SPEED_RANGE:g}, got {list(bounds)}"
+            )
         return bounds
 
 
 class ValidationConfig(Strict):
     """The paper's real-time validation: short and long periods in environment steps."""
 
-    short_every: int = Field(2_000, ge=1)
-    short_episodes: int = Field(3, ge=1)
-    long_every: int = Field(10_000, ge=1)
-    long_episodes: int = Field(10, ge=1)
-    seed: int = Field(100_000, ge=0)
+    short_every: int = Field(2_000, ge=1, le=MAX_STEPS)
+    short_episodes: int = Field(3, ge=1, le=100_000)
+    long_every: int = Field(10_000, ge=1, le=MAX_STEPS)
+    long_episodes: int = Field(10, ge=1, le=100_000)
+    seed: int = Field(100_000, ge=0, le=SEED_LIMIT - 1_000_000)
 
 
 EXPERTS = ("mobil", "rule", "oracle")
@@ -65,16 +75,16 @@ class DemonstrationConfig(Strict):
     episodes: int = Field(200, ge=1, le=100_000)
     pretrain_steps: int = Field(10_000, ge=0, le=10_000_000)
     share: float = Field(0.25, ge=0, lt=1)
-    margin: float = Field(0.8, ge=0)
-    margin_weight: float = Field(1.0, ge=0)
-    seed: int = Field(200_000, ge=0)
+    margin: float = Field(0.8, ge=0, le=MAX_REWARD)
+    margin_weight: float = Field(1.0, ge=0, le=MAX_REWARD)
+    seed: int = Field(200_000, ge=0, le=SEED_LIMIT - 1_000_000)
 
 
 class TrainConfig(Strict):
     """`drivestack train`: algorithm, budget, network, SB3 hyper-parameters, reward, validation."""
 
     algorithm: Annotated[LearnedAgentName, one_of("algorithm", LEARNED_AGENTS)] = "ddqn"
-    steps: int = Field(50_000, ge=1, le=1_000_000_000)
+    steps: int = Field(50_000, ge=1, le=MAX_STEPS)
     envs: int = Field(1, ge=1, le=64, description="environments stepped in parallel processes (DDQN / DQN)")
     scenarios: dict[str, float] = Field(
         default_factory=dict,
@@ -83,20 +93,20 @@ class TrainConfig(Strict):
     )
     encoding: Annotated[Encoding, one_of("encoding", ENCODINGS)] = "observation"
     network: Annotated[str, one_of("network", tuple(NET_ARCHS))] = "shallow"
-    learning_rate: float = Field(5e-4, gt=0)
+    learning_rate: float = Field(5e-4, gt=0, le=1)
     buffer_size: int = Field(50_000, ge=1, le=50_000_000)
-    learning_starts: int = Field(1_000, ge=0)
-    batch_size: int = Field(64, ge=1)
+    learning_starts: int = Field(1_000, ge=0, le=MAX_STEPS)
+    batch_size: int = Field(64, ge=1, le=65_536)
     gamma: float = Field(0.95, gt=0, le=1)
     n_steps: int = Field(1, ge=1, le=20, description="n-step returns (SB3's NStepReplayBuffer)")
-    train_freq: int = Field(1, ge=1)
-    target_update_interval: int = Field(500, ge=1)
+    train_freq: int = Field(1, ge=1, le=MAX_STEPS)
+    target_update_interval: int = Field(500, ge=1, le=MAX_STEPS)
     exploration_fraction: float = Field(0.3, gt=0, le=1)
     exploration_initial_eps: float = Field(1.0, ge=0, le=1)
     exploration_final_eps: float = Field(0.05, ge=0, le=1)
     tabular_alpha: float = Field(0.1, gt=0, le=1)
     tabular_epsilon: float = Field(0.2, ge=0, le=1)
-    checkpoint_every: int = Field(5_000, ge=1)
+    checkpoint_every: int = Field(5_000, ge=1, le=MAX_STEPS)
     init_model: str | None = Field(
         None,
         description="a DDQN / DQN model file whose Q-network starts the training (fine-tuning), or "

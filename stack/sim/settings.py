@@ -9,6 +9,8 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from records import BACKENDS, PLANTS, ROADS, Backend, PlantName, RoadName, one_of
 
+MAX_CLASS_BOUND = 60.0
+"""Largest desired speed [m/s] and length [m] of a traffic vehicle class (the spawn speed's bound)."""
 SHARE_TOLERANCE = 1e-6
 """How far the shares of the traffic classes may sum from 1."""
 
@@ -37,8 +39,8 @@ class VehicleClass(BaseModel):
     @field_validator("speed_mps", "length_m")
     @classmethod
     def _positive_and_ordered(cls, bounds: tuple[float, float]) -> tuple[float, float]:
-        if not (bounds[0] > 0 and bounds[1] > 0):
-            raise ValueError(f"must be positive, got {list(bounds)}")
+        if not all(0 < bound <= MAX_CLASS_BOUND for bound in bounds):
+            raise ValueError(f"must be positive and at most {MAX_CLASS_BOUND:g}, got {list(bounds)}")
         return _ordered_range(bounds)
 
 
@@ -48,7 +50,7 @@ class IncidentConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
-    lane: int = Field(ge=0, description="the blocked lane")
+    lane: int = Field(ge=0, le=9, description="the blocked lane")
     ahead_m: float = Field(gt=0, le=2000, description="distance ahead of the ego at spawn [m]")
     length_m: float = Field(5.0, gt=0, le=25, description="the stopped vehicle's length [m]")
 
@@ -94,8 +96,8 @@ class HighwayConfig(BaseModel):
     vehicles_density: float = Field(1.0, gt=0, le=10)
     duration: float = Field(40.0, gt=0, le=3600, description="episode length [s]")
     simulation_frequency: int = Field(15, ge=1, le=1000, description="physics rate [Hz]")
-    ego_spacing: float = Field(2.0, gt=0, description="ratio of the ego's spawn gap to the default")
-    initial_lane_id: int | None = Field(None, ge=0, description="the ego's lane at spawn (None: random)")
+    ego_spacing: float = Field(2.0, gt=0, le=20, description="ratio of the ego's spawn gap to the default")
+    initial_lane_id: int | None = Field(None, ge=0, le=9, description="the ego's spawn lane (None: random)")
     traffic: TrafficConfig | None = None
 
     @model_validator(mode="after")

@@ -1,0 +1,110 @@
+"""Where a command writes: `--out` checked without creating anything, then taken for the command
+(`stack.core.owner`) as the last check before any work, the lock held until the command ends."""
+
+from __future__ import annotations
+
+import errno
+import os
+from datetime import datetime
+from pathlib import Path
+from typing import IO, TYPE_CHECKING
+
+from stack.apps.options import fail
+from stack.core.owner import FolderRefused, Owner, claim, fingerprint
+
+if TYPE_CHECKING:
+    from stack.core.config import RunConfig
+    from stack.core.metrics import EpisodeResult
+
+
+def fresh_run_dir(prefix: str) -> Path:
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
+    return Path("runs") / f"{prefix}-{stamp}"
+
+
+def location(out: Path | None, prefix: str) -> Path:
+    """`out` (or a fresh `runs/<prefix>-<time>`) once it is a folder, or can become one, that this
+    user may write; a one-line error (exit 2) otherwise. Nothing is created."""
+    folder = out or fresh_run_dir(prefix)
+    try:
+        if folder.exists() and not folder.is_dir():
+            fail(f"--out: {folder} is a file; expected a folder for the results")
+    except OSError as error:
+        fail(f"--out: cannot create {str(folder)[:80]}... ({error.strerror})")
+    parent = folder.absolute()
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        fail(f"--out: cannot create {folder} ({parent} is a file)")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        fail(f"--out: {parent} is not writable")
+    if too_long := _too_long(folder):
+        fail(f"--out: cannot create {str(folder)[:80]}... ({too_long})")
+    return folder
+
+
+def _too_long(folder: Path) -> str | None:
+    """Why the system would refuse `folder` as a name (None when it would not)."""
+    limit = os.pathconf(folder.absolute().anchor, "PC_NAME_MAX")
+    if any(len(part.encode()) > limit for part in folder.parts):
+        return os.strerror(errno.ENAMETOOLONG)
+    return None
+
+
+_held: list[IO[str]] = []
+"""The lock this process holds, until the process ends or its next command (commands run one at a
+time in a process: a test runs several in one)."""
+
+
+def claimed(
+    out: Path | None, prefix: str, owner: Owner, resuming: bool = False, restart: bool = True
+) -> Path:
+    """`location(out, prefix)` taken for `owner` (`stack.core.owner.claim`): the folder exists,
+    is locked until the command ends and records its owner; a one-line error otherwise."""
+    folder = location(out, prefix)
+    while _held:
+        _held.pop().close()
+    try:
+        handle = claim(folder, owner, resuming, restart)
+    except FolderRefused as error:
+        fail(str(error))
+    except OSError as error:
+        fail(f"--out: cannot write {folder} ({error.strerror})")
+    _held.append(handle)
+    return folder
+
+
+def claimed_for(command: str, out: Path | None, arguments: str, config: RunConfig | None = None) -> Path:
+    """`claimed` for a command without `--resume`, owned by the hash of its `arguments` and
+    resolved `config`; its folder's default name is the command's last word."""
+    from stack.core.config import config_text
+
+    asked = fingerprint(arguments + (config_text(config) if config is not None else ""))
+    prefix = command.split()[-1]
+    return claimed(location(out, prefix), prefix, Owner(command, asked))
+
+
+def check_destination(out: Path) -> None:
+    """Refuse (ValueError, one line) an `out` that exists, lies in no writable folder or has a
+    name the system refuses, before any work."""
+    written = out if out.suffix == ".zip" else out.with_suffix(out.suffix + ".zip")
+    if len(written.name.encode()) > os.pathconf(written.absolute().anchor, "PC_NAME_MAX"):
+        raise ValueError(f"--sb3: {str(written)[:80]}...: {os.strerror(errno.ENAMETOOLONG)}")
+    if out.exists() or written.exists():
+        raise ValueError(f"--sb3: {out} exists; choose a new file")
+    if not out.parent.is_dir():
+        raise ValueError(f"--sb3: no folder {out.parent}")
+    if not os.access(out.parent, os.W_OK | os.X_OK):
+        raise ValueError(f"--sb3: {out.parent} is not writable")
+
+
+def resumed(configs: list[RunConfig], out: Path | None, command: str) -> dict[str, list[EpisodeResult]]:
+    """`--resume`: the episodes the interrupted run in `out` finished, per agent (`resumable`)."""
+    from stack.apps.resume import resumable
+
+    if out is None:
+        fail("--resume: name the folder of the interrupted run with --out")
+    try:
+        return resumable(configs, out, command)
+    except ValueError as error:
+        fail(str(error))

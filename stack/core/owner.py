@@ -1,0 +1,114 @@
+"""One owner per results folder: the command that made it and a hash of its config, recorded in
+`MARKER`, and a lock (`LOCK`, an advisory `flock`) held while a command writes the folder.
+
+A second command, a second writer at the same time, or a `--resume` with another config would mix
+two runs' files in one folder; they are refused in one line before anything is written. A fresh
+command may take an empty folder, or start over in a folder the same command with the same config
+made (`restart`); any other non-empty folder is refused. Folders made before markers existed carry
+none: `--resume` judges them by their files (the caller's checks)."""
+
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import json
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import IO
+
+from stack.core.files import write_json
+
+MARKER = ".drivestack-owner.json"
+"""The owner record of a results folder: {"command": ..., "config": ...}."""
+LOCK = ".drivestack.lock"
+"""The lock file of a results folder: holds the pid of the command writing it."""
+BOOKKEEPING = (MARKER, LOCK)
+
+
+class FolderRefused(ValueError):
+    """A results folder this command may not write; the message is one line for the user."""
+
+
+@dataclass(frozen=True)
+class Owner:
+    """Who made a results folder: the sub-command (run, compare, train, track, ...) and the
+    `fingerprint` of what it was asked to do (its resolved config and arguments)."""
+
+    command: str
+    config: str
+
+
+def fingerprint(text: str) -> str:
+    """A short hash of `text` (the resolved config and arguments of a command)."""
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def owner_of(folder: Path) -> Owner | None:
+    """The owner `folder` records; None without a marker; an unreadable marker is an unknown
+    owner (never equal to a command's)."""
+    try:
+        data = json.loads((folder / MARKER).read_bytes())
+        return Owner(str(data["command"]), str(data["config"]))
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError, KeyError, TypeError):
+        return Owner("unknown command", "")
+
+
+def holds_results(folder: Path) -> bool:
+    """Whether `folder` holds any file besides this module's bookkeeping."""
+    try:
+        return folder.is_dir() and any(p.name not in BOOKKEEPING for p in folder.iterdir())
+    except OSError:
+        return True
+
+
+def refusal(folder: Path, wanted: Owner, resuming: bool, restart: bool = True) -> str | None:
+    """Why the command `wanted` may not write `folder` (one line), or None when it may: a resumed
+    command needs the same owner (or none: an older folder), a fresh one an empty folder or, with
+    `restart`, one it made itself with the same config."""
+    found = owner_of(folder)
+    if resuming:
+        if found is not None and found.command != wanted.command:
+            return f"--resume: {folder} holds the results of `{found.command}`, not of `{wanted.command}`"
+        if found is not None and found.config != wanted.config:
+            return (
+                f"--resume: {folder} is another run's (`{found.command}` with other arguments or config); "
+                "resume with the arguments that started it"
+            )
+        return None
+    if not holds_results(folder) or (restart and found == wanted):
+        return None
+    what = f"the results of `{found.command}`" if found is not None else "files drivestack did not write"
+    more = " with other arguments or config" if found is not None and found.command == wanted.command else ""
+    hint = " (--resume continues an interrupted one)" if found is not None else ""
+    return f"--out: {folder} already holds {what}{more}; choose a new folder{hint}"
+
+
+def claim(folder: Path, wanted: Owner, resuming: bool, restart: bool = True) -> IO[str]:
+    """Take `folder` for `wanted`: create it, lock it (FolderRefused when another command holds
+    the lock), check `refusal` under the lock, record the owner. Returns the open lock file: the
+    lock lasts until it is closed (at the latest when the process ends)."""
+    if why := refusal(folder, wanted, resuming, restart):
+        raise FolderRefused(why)
+    folder.mkdir(parents=True, exist_ok=True)
+    handle = (folder / LOCK).open("a+")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.seek(0)
+        holder = handle.read().strip()[:20] or "?"
+        handle.close()
+        raise FolderRefused(
+            f"--out: {folder} is being written by another drivestack command (pid {holder}); "
+            "wait for it to end or choose another folder"
+        ) from None
+    if why := refusal(folder, wanted, resuming, restart):
+        handle.close()
+        raise FolderRefused(why)
+    handle.truncate(0)
+    handle.write(f"{os.getpid()}\n")
+    handle.flush()
+    write_json(folder / MARKER, asdict(wanted))
+    return handle

@@ -1,0 +1,195 @@
+"""Hostile inputs and limits (issue 36, defects 10-13): damaged journals, full disks, unbounded
+or mistyped values, options without effect, odd destinations. Each ends in one line (exit 2)
+before any work, or with the damaged part dropped and said."""
+
+import json
+import typing
+from pathlib import Path
+
+import annotated_types
+import numpy as np
+import pytest
+from pydantic import BaseModel
+from typer.testing import CliRunner
+
+from planner import model_file
+from stack.apps.cli import app
+from stack.core.train_config import TrainConfig
+from stack.sim.settings import HighwayConfig
+from tests.test_cli import tiny_config_file
+from tests.test_hostile_inputs import one_line_refusal
+
+
+def interrupted_run(tmp_path: Path) -> tuple[Path, list[str], Path]:
+    """A finished one-episode run turned into an interrupted one (its journal put back)."""
+    out = tmp_path / "run"
+    arguments = ["run", "-c", str(tiny_config_file(tmp_path)), "--agent", "keep-lane", "--episodes", "2"]
+    result = CliRunner().invoke(app, [*arguments, "--out", str(out), "--no-progress"])
+    assert result.exit_code == 0, result.output
+    rows = [json.dumps({k: v for k, v in row.items()}) for row in csv_rows(out / "episodes.csv")]
+    journal = out / "keep-lane.episodes.partial.jsonl"
+    journal.write_text(rows[0] + "\n")
+    return out, arguments, journal
+
+
+def csv_rows(path: Path) -> list[dict]:
+    """episodes.csv as the typed rows the journal holds."""
+    import csv
+
+    def typed(value: str) -> object:
+        if value in ("True", "False"):
+            return value == "True"
+        for kind in (int, float):
+            try:
+                return kind(value)
+            except ValueError:
+                pass
+        return value
+
+    return [{k: typed(v) for k, v in row.items()} for row in csv.DictReader(path.open())]
+
+
+@pytest.mark.parametrize(
+    "damage",
+    [b"\xff\xfe not utf-8\n", b'{"episode": 1, "seed": NaN}\n', b"-Infinity\n"],
+)
+def test_a_damaged_journal_row_is_dropped_with_a_warning_and_the_rows_before_kept(tmp_path, damage):
+    out, arguments, journal = interrupted_run(tmp_path)
+    first = json.loads(journal.read_text())
+    with journal.open("ab") as handle:
+        handle.write(damage)
+    resumed = CliRunner().invoke(app, [*arguments, "--out", str(out), "--resume", "--no-progress"])
+    assert resumed.exit_code == 0, resumed.output
+    assert f"warning: {journal}: dropped line 2" in resumed.output
+    assert json.loads((out / "summary.json").read_text())["episodes"] == 2
+    assert csv_rows(out / "episodes.csv")[0] == first
+
+
+def test_journal_values_out_of_range_never_reach_the_summary(tmp_path):
+    out, arguments, journal = interrupted_run(tmp_path)
+    row = json.loads(journal.read_text())
+    bad = [{**row, "mean_speed": float("nan")}, {**row, "lane_changes": -3}, {**row, "peak_lat_jerk": 1e400}]
+    journal.write_text("".join(json.dumps(r) + "\n" for r in bad))
+    resumed = CliRunner().invoke(app, [*arguments, "--out", str(out), "--resume", "--no-progress"])
+    assert resumed.exit_code == 0 and "dropped line 1, 2, 3" in resumed.output, resumed.output
+    summary = json.loads((out / "summary.json").read_text(), parse_constant=lambda c: pytest.fail(c))
+    assert summary["episodes"] == 2
+
+
+def test_a_failed_model_write_leaves_no_temporary_file(tmp_path, monkeypatch):
+    def disk_full(handle, **_: object) -> None:
+        handle.write(b"half")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(np, "savez", disk_full)
+    with pytest.raises(OSError):
+        model_file.save_model(tmp_path / "checkpoint.npz", {"a": np.zeros(3)}, {"kind": "checkpoint"})
+    assert list(tmp_path.iterdir()) == []
+
+
+def numeric_fields(model: type[BaseModel], prefix: str = "") -> typing.Iterator[tuple[str, object]]:
+    """(dotted key, field) of every single number of `model` and its sections (pairs such as
+    speed ranges are bounded by their validators)."""
+    for name, field in model.model_fields.items():
+        if typing.get_origin(field.annotation) in (tuple, dict):
+            continue
+        kinds = typing.get_args(field.annotation) or (field.annotation,)
+        for kind in kinds:
+            if isinstance(kind, type) and issubclass(kind, BaseModel):
+                yield from numeric_fields(kind, f"{prefix}{name}.")
+        if int in kinds or float in kinds:
+            yield f"{prefix}{name}", field
+
+
+@pytest.mark.parametrize("section", [HighwayConfig, TrainConfig])
+def test_every_number_of_the_world_and_training_is_bounded(section):
+    unbounded = [
+        key
+        for key, field in numeric_fields(section)
+        if not any(isinstance(m, annotated_types.Le | annotated_types.Lt) for m in field.metadata)
+    ]
+    assert unbounded == []
+
+
+@pytest.mark.parametrize(
+    ("setting", "expected"),
+    [
+        ("highway.ego_spacing=1e308", "--set highway.ego_spacing: highway.ego_spacing: Input should be less"),
+        ("highway.lanes_count=true", "--set highway.lanes_count: highway.lanes_count: expected a number"),
+        ("highway.vehicles_count=yes", "expected a number, got a boolean (true)"),
+        ("perception.control_on_ground_truth=1", "expected true or false, got a number (1)"),
+        ("control_rate_hz=20", "--set control_rate_hz: control_rate_hz: must equal"),
+        ("train.validation.seed=10000000000000000000000", "train.validation.seed: Input should be less"),
+    ],
+)
+def test_mistyped_or_unbounded_values_are_refused_naming_the_option(tmp_path, setting, expected):
+    one_line_refusal(["run", "--set", setting, "--out", str(tmp_path / "out")], expected)
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_option_without_effect_is_refused(tmp_path):
+    config = str(tiny_config_file(tmp_path))
+    one_line_refusal(
+        ["run", "-c", config, "--agent", "rule", "--model", "x.npz"], "--model: the rule agent loads no"
+    )
+    one_line_refusal(
+        ["compare", "-c", config, "--agents", "rule,mobil", "--models", "mobil=x.npz"],
+        "--models: the mobil agent loads no model file",
+    )
+    one_line_refusal(
+        ["compare", "-c", config, "--agents", "rule", "--models", "ddqn=x.npz"],
+        "--models: 'ddqn' is not among",
+    )
+
+
+def test_jobs_beyond_memory_are_refused_before_any_process(tmp_path, monkeypatch):
+    from stack.apps import training
+    from stack.core import executors
+
+    monkeypatch.setattr(training, "available_memory_bytes", lambda: 2 * training.WORKER_BYTES)
+    monkeypatch.setattr(executors, "usable_cpus", lambda: 8)
+    one_line_refusal(
+        ["run", "-c", str(tiny_config_file(tmp_path)), "--jobs", "64", "--out", str(tmp_path / "o")],
+        "--jobs: 8 processes need about",
+    )
+    assert not (tmp_path / "o").exists()
+
+
+def test_odd_destinations_are_one_line_before_any_work(tmp_path):
+    from planner.factory import SHIPPED_MODELS
+
+    long_name = tmp_path / ("x" * 300)
+    one_line_refusal(
+        ["run", "-c", str(tiny_config_file(tmp_path)), "--out", str(long_name)], "--out: cannot create"
+    )
+    one_line_refusal(["export", str(SHIPPED_MODELS["ddqn"]), "--sb3", str(long_name)], "File name too long")
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o500)
+    try:
+        if not __import__("os").access(locked, __import__("os").W_OK):
+            one_line_refusal(
+                ["export", str(SHIPPED_MODELS["ddqn"]), "--sb3", str(locked / "m")], "is not writable"
+            )
+    finally:
+        locked.chmod(0o700)
+
+
+def test_a_ray_address_where_something_else_listens_is_refused_within_seconds():
+    import http.server
+    import threading
+    import time
+
+    from stack.core.ray_tasks import PROBE_TIMEOUT_S, RayUnavailable, check_address
+
+    http_server = http.server.HTTPServer(("127.0.0.1", 0), http.server.BaseHTTPRequestHandler)
+    threading.Thread(target=http_server.serve_forever, daemon=True).start()
+    silent = __import__("socket").create_server(("127.0.0.1", 0))
+    try:
+        for port in (http_server.server_address[1], silent.getsockname()[1]):
+            started = time.monotonic()
+            with pytest.raises(RayUnavailable, match="answers, but not as a Ray cluster"):
+                check_address(f"127.0.0.1:{port}")
+            assert time.monotonic() - started < PROBE_TIMEOUT_S + 1
+    finally:
+        http_server.shutdown()
+        silent.close()

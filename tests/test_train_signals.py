@@ -1,0 +1,75 @@
+"""`drivestack train` under signals and dead processes (issue 36, defects 5 and 7): any number of
+SIGTERM ends with the summary and a resumable checkpoint (exit 130); a finished run is not
+resumed; a dead env worker ends the run in one line with its last checkpoint kept."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from planner.model_file import load_checkpoint
+from stack.apps.cli import app
+from stack.apps.train import Trainer
+from stack.apps.train_model import EnvWorkerDied
+from stack.core.config import build_config
+from tests.test_hostile_inputs import one_line_refusal
+from tests.test_train import TINY
+
+
+def test_repeated_signals_end_training_with_its_files_and_exit_130(tmp_path):
+    config = tmp_path / "long.yaml"
+    config.write_text(yaml.safe_dump({**TINY, "train": {**TINY["train"], "steps": 5_000}}))
+    out = tmp_path / "t"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "stack", "train", "-c", str(config), "--out", str(out), "--no-progress"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    deadline = time.monotonic() + 60
+    while not (out / "checkpoint.npz").is_file():
+        assert process.poll() is None and time.monotonic() < deadline, process.communicate()
+        time.sleep(0.05)
+    for _ in range(6):
+        process.send_signal(signal.SIGTERM)
+        time.sleep(0.03)
+    _, errors = process.communicate(timeout=60)
+    assert process.returncode == 130, errors.decode()
+    assert "Traceback" not in errors.decode(), errors.decode()
+    summary = json.loads((out / "summary.json").read_text())
+    _, checkpoint = load_checkpoint(out / "checkpoint.npz", arrays=False)
+    assert summary["interrupted"] and summary["steps"] == checkpoint["counters"]["num_timesteps"]
+
+
+def test_a_finished_training_is_not_resumed_and_more_steps_continue_it(tmp_path):
+    out = tmp_path / "t"
+    (tmp_path / "tiny.yaml").write_text(yaml.safe_dump(TINY))
+    for options in (["-c", str(tmp_path / "tiny.yaml"), "--out"], ["--steps", "50", "--resume"]):
+        done = CliRunner().invoke(app, ["train", *options, str(out), "--no-progress"])
+        assert done.exit_code == 0, done.output
+        finished = f"finished its {json.loads((out / 'summary.json').read_text())['steps']} steps"
+        one_line_refusal(["train", "--resume", str(out), "--no-progress"], f"{finished}; nothing to resume")
+    assert json.loads((out / "summary.json").read_text())["steps"] == 50
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="env workers are processes")
+def test_a_dead_env_worker_ends_training_in_one_line_with_its_checkpoint_kept(tmp_path):
+    config = build_config({**TINY, "train": {**TINY["train"], "envs": 2, "steps": 400}})
+    trainer = Trainer(config, tmp_path / "t", progress=False)
+    real_save = trainer._save_checkpoint
+
+    def save_then_kill_a_worker() -> int:
+        steps = real_save()
+        os.kill(trainer.env.processes[0].pid, signal.SIGKILL)
+        return steps
+
+    trainer._save_checkpoint = save_then_kill_a_worker
+    with pytest.raises(EnvWorkerDied, match="a training environment process died .*--resume"):
+        trainer.run()
+    assert (tmp_path / "t" / "checkpoint.npz").is_file()
+    assert not any(p.is_alive() for p in trainer.env.processes)
