@@ -225,3 +225,47 @@ def test_spawns_are_feasible_and_safety_metrics_reach_the_summary(scenario):
     assert results.summary["collisions"] == 0
     for key in ("at_fault_collisions", "road_departures", "min_ttc_s", "time_below_min_distance_s"):
         assert key in results.summary
+
+
+@pytest.mark.parametrize("plant", ["kinematic", "dynamic"])
+def test_lane_keeping_from_standstill_on_both_plants(plant):
+    from stack.core.closed_loop import ClosedLoop
+    from stack.sim.empty_road import EmptyRoad
+
+    config = build_config(
+        {"sim": {"plant": plant}, "controller": {"set_speed_mps": 8.0}, "planner": {"agent": "keep-lane"}}
+    )
+    road = EmptyRoad("bend-500", plant, 0.0, DT)
+    loop = ClosedLoop(config, road)
+    start = loop.reset(0)
+    loop.act(Command.STAY, ticks=round(15 / DT))
+    drift = np.abs(np.array(loop.recorder.d) - start.d[0])
+    assert loop.recorder.speed[-1] == pytest.approx(8.0, abs=0.3)
+    assert drift.max() < 0.05
+
+
+def test_track_runs_lane_changes_whose_speed_changes_and_refuses_below_the_minimum_speed(tmp_path):
+    from stack.apps.track import parse_speeds, track
+
+    assert parse_speeds("3,20-5") == [(3.0, 3.0), (20.0, 5.0)]
+    with pytest.raises(ValueError, match="A-B"):
+        parse_speeds("20-5-3")
+    maneuvers = track(
+        ["pid"],
+        [(2.0, 2.0), (20.0, 5.0), (3.0, 15.0)],
+        5.0,
+        ControllerConfig(),
+        tmp_path,
+        roads=("straight",),
+        plants=("kinematic",),
+    )
+    by_speed = {(m.speed, m.end_speed, m.direction): m for m in maneuvers}
+    assert not by_speed[(2.0, 2.0, "left")].started
+    for speeds in ((20.0, 5.0), (3.0, 15.0)):
+        for direction in ("left", "right"):
+            maneuver = by_speed[(*speeds, direction)]
+            assert maneuver.started and maneuver.duration_s is not None
+            assert maneuver.rms_error_m <= 0.04 and maneuver.overshoot_m <= 0.03
+            assert maneuver.peak_lat_accel <= 2.0 and maneuver.peak_lat_jerk <= 2.5
+    braking = by_speed[(20.0, 5.0, "left")].trace["time"]
+    assert braking[-1] > 1.0 + 3.0 + 3.0

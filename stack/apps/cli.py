@@ -110,7 +110,10 @@ def run(
 def track(
     controller: str = typer.Option("all", help=f"Comma-separated names (all: every one) or {PLUGIN_HELP}"),
     plant: str = typer.Option("all", help="kinematic | dynamic | all (the built-in change runs kinematic)."),
-    speeds: str = typer.Option("15,20,25,30", help="Comma-separated speeds [m/s]."),
+    speeds: str = typer.Option(
+        "3,5,10,15,20,25,30,35,40,20-5,3-15",
+        help="Comma-separated speeds [m/s]: V (constant) or A-B (from A, the cruise set to B).",
+    ),
     duration: float | None = typer.Option(None, help="Lane-change duration T [s] (controller config)."),
     config: Path | None = typer.Option(None, "--config", "-c", help="YAML config (controller section)."),
     sets: list[str] = typer.Option([], "--set", help=SET_HELP),
@@ -120,7 +123,7 @@ def track(
 ) -> None:
     """Single lane changes on empty straight and curved roads: tracking metrics and plots."""
     from records import PLANTS
-    from stack.apps.track import controller_names, track_and_report
+    from stack.apps.track import controller_names, parse_speeds, track_and_report
 
     try:
         names = controller_names(controller)
@@ -128,11 +131,9 @@ def track(
         fail(f"--controller: {error}")
     plants = chosen("--plant", plant, PLANTS)
     try:
-        speed_list = [float(value) for value in speeds.split(",")]
-    except ValueError:
-        fail(f"--speeds: expected comma-separated numbers in m/s, got {speeds!r}")
-    if not all(0 < v <= 40 for v in speed_list):
-        fail(f"--speeds: every speed must be in (0, 40] m/s, got {speeds}")
+        speed_list = parse_speeds(speeds)
+    except ValueError as error:
+        fail(f"--speeds: {error}")
     cfg = configured(config, sets, controller__lane_change_duration_s=duration)
     ray_or_fail(ray)
     folder = claimed_for("track", out, f"{names}{plants}{speed_list}", cfg)

@@ -19,8 +19,21 @@ from stack.core.interrupts import deferred
 from stack.core.metrics import EpisodeResult
 from stack.core.statistics import Interval, mean_interval, paired_difference, rate_interval
 
-MEANS = ("mean_speed", "lane_changes", "masked_commands", "aborted_changes")
+MEANS = (
+    "mean_speed",
+    "lane_changes",
+    "masked_commands",
+    "aborted_changes",
+    "time_below_min_distance_s",
+    "emergency_brakings",
+)
 """Per-episode metrics reported as means over episodes (none can be negative)."""
+RATES = {
+    "collision_rate": "crashed",
+    "at_fault_rate": "at_fault_collision",
+    "road_departure_rate": "road_departure",
+}
+"""Rates of per-episode outcomes: the reported metric and the episode field it counts."""
 PANELS = (
     ("collision_rate", "collision rate [%]", 100.0),
     ("mean_speed", "mean speed [m/s]", 1.0),
@@ -31,7 +44,10 @@ PANELS = (
 def intervals(results: RunResults) -> dict[str, Interval]:
     """Every reported metric of one agent with its 95 % interval."""
     episodes = results.episodes
-    found = {"collision_rate": rate_interval(sum(e.crashed for e in episodes), len(episodes))}
+    found = {
+        metric: rate_interval(sum(getattr(e, field) for e in episodes), len(episodes))
+        for metric, field in RATES.items()
+    }
     for metric in MEANS:
         found[metric] = mean_interval([getattr(e, metric) for e in episodes], floor=0.0)
     return found
@@ -40,7 +56,7 @@ def intervals(results: RunResults) -> dict[str, Interval]:
 def differences(results: RunResults, baseline: RunResults) -> dict[str, Interval]:
     """Agent minus baseline, episode by episode (same seeds), for every reported metric, over the
     episodes both finished (all of them unless the comparison was interrupted)."""
-    pairs = {"collision_rate": "crashed", **{metric: metric for metric in MEANS}}
+    pairs = {**RATES, **{metric: metric for metric in MEANS}}
     theirs = {e.episode: e for e in baseline.episodes}
     shared = [(e, theirs[e.episode]) for e in results.episodes if e.episode in theirs]
     return {
@@ -200,4 +216,23 @@ def markdown(rows: list[dict[str, Any]]) -> str:
             line += f" {_cell(difference['mean_speed'], sign='+')} |"
             line += f" {_cell(difference['collision_rate'], 100, 1, '+')} |"
         lines.append(line)
+    return "\n".join(lines) + "\n\n" + safety_markdown(rows)
+
+
+def safety_markdown(rows: list[dict[str, Any]]) -> str:
+    """The safety table (docs/safety-metrics.md): at-fault collisions and road departures as rates
+    with their intervals, the worst minimum TTC, time below R157's minimum following distance and
+    emergency brakings per episode."""
+    header = (
+        "| agent | at-fault collisions % | not at fault | road departures % | min TTC s "
+        "| below R157 d_min s / ep | emergency brakings / ep |"
+    )
+    lines = [header, "|" + "---|" * (header.count("|") - 1)]
+    for row in rows:
+        ci = row["intervals"]
+        lines.append(
+            f"| {row['agent']} | {_cell(ci['at_fault_rate'], 100, 1)} | {row['not_at_fault_collisions']} | "
+            f"{_cell(ci['road_departure_rate'], 100, 1)} | {row['min_ttc_s']:.2f} | "
+            f"{_cell(ci['time_below_min_distance_s'])} | {_cell(ci['emergency_brakings'])} |"
+        )
     return "\n".join(lines) + "\n"

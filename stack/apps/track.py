@@ -28,7 +28,7 @@ from controllers.config import ControllerConfig
 from controllers.tracker import make_controller
 from records import CONTROLLER_NAMES, PLANTS, Command, PlantName
 from records.plugins import CONTROLLER_GROUP, entry_points, label
-from stack.apps.track_report import plot_maneuvers, print_tracking
+from stack.apps.track_report import plot_maneuvers, print_tracking, speed_label
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import RunConfig, write_config
 from stack.core.executors import completed
@@ -52,19 +52,26 @@ TOP_SPEED: dict[RoadKind, float] = {"bend-500": 25.0}
 before any lane change (and 2.45 at 35, beyond the comfort bound)."""
 LEAD_IN_S = 1.0
 SETTLE_S = 3.0
+MAX_CHANGE_S = 60.0
+"""The longest a lane change is followed [s] (one slowed down by a braking car takes longer than planned)."""
+Speeds = tuple[float, float]
+"""(speed at the start, the cruise's set speed) [m/s]; equal for a maneuver at constant speed."""
 
 
 @dataclass(frozen=True)
 class Maneuver(Tracking):
     """One lane change: which, how it tracked (`Tracking`), the controller's time per tick [ms] and
     fallbacks, whether it `started` at all (not below the minimum lane-change speed: then the
-    record is lane keeping); `trace` holds the time series used by the plots."""
+    record is lane keeping); it starts at `speed` and the cruise's set speed is `end_speed` [m/s]
+    (a maneuver that brakes or accelerates while it changes lane when they differ); `trace` holds
+    the time series used by the plots."""
 
     controller: str
     road: str
     plant: str
     speed: float
     direction: str
+    end_speed: float
     solve_ms_p50: float
     solve_ms_p95: float
     fallbacks: int
@@ -74,7 +81,7 @@ class Maneuver(Tracking):
     def record(self) -> dict:
         """The flat record of tracking.json: which maneuver first, then its figures."""
         figures = {k: v for k, v in asdict(self).items() if k != "trace"}
-        which = ("controller", "road", "plant", "speed", "direction")
+        which = ("controller", "road", "plant", "speed", "end_speed", "direction")
         return {**{k: figures.pop(k) for k in which}, **figures}
 
 
@@ -103,16 +110,19 @@ def run_maneuver(
     config: ControllerConfig,
     road_kind: RoadKind,
     plant: PlantKind,
-    speed: float,
+    speeds: float | Speeds,
     direction: str,
     duration: float,
     dt: float,
 ) -> Maneuver:
-    """One lane change to the `direction` ("left" or "right") at `speed` [m/s], in the closed loop."""
+    """One lane change to the `direction` ("left" or "right") at `speeds` [m/s], or starting at
+    `speeds[0]` with the cruise set to `speeds[1]`, in the closed loop: lane keeping for LEAD_IN_S,
+    the change (however long the car's speed makes it), lane keeping for SETTLE_S."""
+    speed, end_speed = speeds if isinstance(speeds, tuple) else (speeds, speeds)
     builtin = controller_name == "builtin"
     road = EmptyRoad(road_kind, "builtin" if builtin else plant, speed, dt)
     controller = config.model_copy(
-        update={"type": "pid" if builtin else controller_name, "set_speed_mps": speed}
+        update={"type": "pid" if builtin else controller_name, "set_speed_mps": end_speed}
     )
     run_config = RunConfig.model_validate(
         {
@@ -127,19 +137,23 @@ def run_maneuver(
     command = Command.LEFT if direction == "left" else Command.RIGHT
     started = loop.maneuver.command(command, world, start_time=LEAD_IN_S)
     changing = loop.maneuver.profile.duration if started else duration
-    loop.act(Command.STAY, ticks=round((LEAD_IN_S + changing + SETTLE_S) / dt))
+    loop.act(Command.STAY, ticks=round((LEAD_IN_S + changing) / dt))
+    while loop.maneuver.changing_lane and loop.world.time < LEAD_IN_S + MAX_CHANGE_S:
+        loop.act(Command.STAY, ticks=1)
+    loop.act(Command.STAY, ticks=round(SETTLE_S / dt))
     recorder = loop.recorder
     time, d = np.array(recorder.time[:-1]), np.array(recorder.d[:-1])
-    heading, speeds = np.array(recorder.heading[:-1]), np.array(recorder.speed[:-1])
+    heading, speed_trace = np.array(recorder.heading[:-1]), np.array(recorder.speed[:-1])
     d_reference = np.array(recorder.d_reference)
-    metrics: Tracking = tracking(time, d, d_reference, heading, speeds, dt)
+    metrics: Tracking = tracking(time, d, d_reference, heading, speed_trace, dt)
     solve_ms = np.array(loop.controller.solve_times) * 1e3
-    lateral_acceleration, jerk = lateral_series(heading, speeds, dt)
+    lateral_acceleration, jerk = lateral_series(heading, speed_trace, dt)
     return Maneuver(
         controller=label(controller_name),
         road=road_kind,
         plant=plant,
         speed=speed,
+        end_speed=end_speed,
         direction=direction,
         **asdict(metrics),
         solve_ms_p50=float(np.percentile(solve_ms, 50)),
@@ -164,7 +178,7 @@ def _run_maneuver(arguments: tuple) -> Maneuver:
 
 def track_and_report(
     controllers: list[str],
-    speeds: list[float],
+    speeds: list[Speeds],
     config: RunConfig,
     out: Path,
     progress: bool,
@@ -203,7 +217,7 @@ def track_and_report(
 
 def track(
     controllers: list[str],
-    speeds: list[float],
+    speeds: list[Speeds],
     duration: float,
     config: ControllerConfig,
     out: Path,
@@ -246,7 +260,7 @@ def write_tracking(
     out: Path,
     roads: tuple[RoadKind, ...],
     plants: tuple[PlantName, ...],
-    speeds: list[float],
+    speeds: list[Speeds],
 ) -> None:
     """out/tracking.json and one figure per road, plant and speed that has a maneuver."""
     write_json(out / "tracking.json", [m.record() for m in maneuvers])
@@ -256,11 +270,28 @@ def write_tracking(
                 shown = [
                     m
                     for m in maneuvers
-                    if (m.road, m.plant, m.speed, m.direction) == (road_kind, plant, speed, "left")
+                    if (m.road, m.plant, (m.speed, m.end_speed), m.direction)
+                    == (road_kind, plant, speed, "left")
                 ]
-                plot_maneuvers(shown, out / f"tracking_{road_kind}_{plant}_{speed:g}mps.png")
+                plot_maneuvers(shown, out / f"tracking_{road_kind}_{plant}_{speed_label(speed)}mps.png")
 
 
-def speeds_on(road: RoadKind, speeds: list[float]) -> list[float]:
-    """The `speeds` [m/s] a road is driven at (up to its `TOP_SPEED`)."""
-    return [speed for speed in speeds if speed <= TOP_SPEED.get(road, float("inf"))]
+def speeds_on(road: RoadKind, speeds: list[Speeds]) -> list[Speeds]:
+    """The `speeds` a road is driven at (up to its `TOP_SPEED` [m/s])."""
+    return [speed for speed in speeds if max(speed) <= TOP_SPEED.get(road, float("inf"))]
+
+
+def parse_speeds(text: str) -> list[Speeds]:
+    """`--speeds` entries, each `V` (constant) or `A-B` (from A with the cruise set to B) [m/s];
+    ValueError (one line) for anything else or a speed outside (0, 40]."""
+    found: list[Speeds] = []
+    for entry in text.split(","):
+        parts = entry.split("-")
+        try:
+            values = [float(part) for part in parts]
+        except ValueError:
+            raise ValueError(f"expected V or A-B in m/s, comma-separated, got {entry!r}") from None
+        if len(values) not in (1, 2) or not all(0 < v <= 40 for v in values):
+            raise ValueError(f"every speed must be V or A-B with speeds in (0, 40] m/s, got {entry!r}")
+        found.append((values[0], values[-1]))
+    return found

@@ -43,16 +43,23 @@ STYLES = {
 take matplotlib's next colours)."""
 
 
+def speed_label(speeds: tuple[float, float]) -> str:
+    """`20` for a constant speed, `20-5` for a maneuver from 20 m/s with the cruise set to 5."""
+    start, end = speeds
+    return f"{start:g}" if start == end else f"{start:g}-{end:g}"
+
+
 def worst_cases(records: list[dict[str, Any]]) -> list[list[str]]:
     """Table rows (`COLUMNS`) of `tracking.json` records: per controller, road, plant and speed,
     the worse of the left and right change in every figure ("not settled" when either never
     settles within 0.1 m; "below min. speed" when no lane change starts, the rest is then lane
     keeping)."""
-    groups: dict[tuple[str, str, str, float], list[dict[str, Any]]] = {}
+    groups: dict[tuple[str, str, str, tuple[float, float]], list[dict[str, Any]]] = {}
     for r in records:
-        groups.setdefault((r["controller"], r["road"], r["plant"], r["speed"]), []).append(r)
+        speeds = (r["speed"], r.get("end_speed", r["speed"]))
+        groups.setdefault((r["controller"], r["road"], r["plant"], speeds), []).append(r)
     rows = []
-    for (name, road, plant, speed), group in groups.items():
+    for (name, road, plant, speeds), group in groups.items():
 
         def worst(key: str, scale: float = 1.0, digits: int = 2, group: list = group) -> str:
             return f"{scale * max(r[key] for r in group):.{digits}f}"
@@ -66,7 +73,7 @@ def worst_cases(records: list[dict[str, Any]]) -> list[list[str]]:
                 name,
                 road,
                 plant,
-                f"{speed:g}",
+                speed_label(speeds),
                 duration,
                 worst("overshoot_m", 100, 1),
                 worst("rms_error_m", 100),
@@ -130,7 +137,8 @@ def plot_maneuvers(maneuvers: list[Maneuver], path: Path) -> None:
         axis.grid(alpha=0.3)
     axes[0].legend(fontsize="small", loc="lower right")
     axes[0].set_title(
-        f"left lane change at {first.speed:g} m/s, road {first.road}, {first.plant} plant\n"
+        f"left lane change at {speed_label((first.speed, first.end_speed))} m/s, road {first.road}, "
+        f"{first.plant} plant\n"
         "built-in change (if run): offset panel and right-hand error axis",
         fontsize="medium",
     )

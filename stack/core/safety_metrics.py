@@ -11,7 +11,9 @@
   keeping one lane (`rear`), or is touched side on while keeping one lane (`side swipe`: the other
   moved into it).
 - **minimum time to collision** [s]: gap / closing speed to the nearest vehicle ahead in each lane
-  the ego's footprint occupies, over the episode (`TTC_CAP_S` when nothing ever closed in).
+  the ego's footprint occupies, over the episode (`TTC_CAP_S` when nothing ever closed in); a
+  vehicle alongside (its centre ahead, its rear beside the ego: gap <= 0) is not ahead of the ego's
+  path, and a contact with it is a side collision, counted as such.
 - **time below the R157 minimum following distance** [s]: the gap to the vehicle ahead in the ego's
   lane is below d_min = v * t_front(v), UN R157 paragraph 5.2.3.3's table (1.0 s at 7.2 km/h up
   to 1.6 s at 60 km/h, linear in between, 1.6 s above); counted from 7.2 km/h up.
@@ -142,8 +144,8 @@ class SafetyMonitor:
         v = float(world.speed[0])
         for lane in occupied_lanes(world):
             leader = world.neighbours(lane)[0]
-            if leader is not None and v > leader.speed:
-                self.min_ttc_s = min(self.min_ttc_s, max(leader.gap, 0.0) / (v - leader.speed))
+            if leader is not None and leader.gap > 0 and v > leader.speed:
+                self.min_ttc_s = min(self.min_ttc_s, leader.gap / (v - leader.speed))
         leader = world.neighbours(world.ego_lane)[0] if 0 <= world.ego_lane < world.lanes_count else None
         if leader is not None and leader.gap < r157_min_following_distance(v):
             self.time_below_min_distance_s += self.dt

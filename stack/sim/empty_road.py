@@ -61,20 +61,21 @@ def steady_cornering(road: Road, lane: AbstractLane, speed: float, dynamic: bool
     """A bicycle at START_S on `lane`'s centre in the steady state of following it, as a car
     already driving the bend would be: yaw rate r = v kappa [rad/s] and the sideslip beta that
     puts its course along the lane (heading = lane heading - beta). Kinematic bicycle: beta =
-    asin(r L / 2v). Dynamic bicycle (Rajamani's 2.21-2.22 in steady state): beta = r (b / v -
-    m a v / (C_r L)), C_r the rear axle's cornering stiffness; without that start it would first
-    have to settle into the turn."""
+    asin(r L / 2v) = asin(kappa L / 2). Dynamic bicycle (Rajamani's 2.21-2.22 in steady state):
+    beta = r (b / v - m a v / (C_r L)) = kappa (b - m a v^2 / (C_r L)), C_r the rear axle's
+    cornering stiffness; without that start it would first have to settle into the turn. Both are
+    written without dividing by v, so a car can start at standstill."""
     curvature = lane.heading_at(START_S + 0.5) - lane.heading_at(START_S - 0.5)
     yaw_rate = speed * curvature
     position, lane_heading = lane.position(START_S, 0.0), lane.heading_at(START_S)
     if not dynamic:
-        slip = math.asin(Vehicle.LENGTH / 2 * yaw_rate / speed)
+        slip = math.asin(Vehicle.LENGTH / 2 * curvature)
         vehicle = Vehicle(road, position, lane_heading - slip, speed)
         vehicle.action = {"steering": math.atan(2 * math.tan(slip)), "acceleration": 0.0}
         return vehicle
     b, m, a = BicycleVehicle.LENGTH_B, BicycleVehicle.MASS, BicycleVehicle.LENGTH_A
     stiffness_rear = 2 * BicycleVehicle.FRICTION_REAR
-    slip = yaw_rate * (b / speed - m * a * speed / (stiffness_rear * BicycleVehicle.LENGTH))
+    slip = curvature * (b - m * a * speed**2 / (stiffness_rear * BicycleVehicle.LENGTH))
     car = StableBicycleVehicle(road, position, lane_heading - slip, speed)
     car.yaw_rate, car.lateral_speed = yaw_rate, speed * math.tan(slip)
     return car
