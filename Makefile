@@ -1,4 +1,5 @@
-# Two entry points: `make run` (closed loop, default agent) and `make test`.
+# Two entry points: `make run` (closed loop, default agent) and `make test`; `make test-slow` runs the
+# tests marked slow (pyproject's addopts deselect them by default; a later -m replaces that).
 # Both create or refresh .venv themselves; the stamp re-installs when the package metadata changes.
 # `make test` installs the ray extra too: the suite tests --ray and sweep on a local Ray instance.
 PYTHON ?= python3
@@ -7,7 +8,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 ARGS ?=
 
-.PHONY: run test bench lint clean
+.PHONY: run test test-slow bench lint clean
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -22,6 +23,9 @@ test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 	$(BIN)/python -m pytest
+
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -m slow
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/cli_startup.py
