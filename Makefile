@@ -33,6 +33,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/loop_rate.py
 	$(BIN)/python benchmarks/sim_speed.py
 	$(BIN)/python benchmarks/oracle_cost.py
+	$(BIN)/python benchmarks/feasible_spawns.py
 	$(BIN)/python benchmarks/grid_speed.py
 	$(BIN)/python benchmarks/deepcars_speed.py
 	$(BIN)/python benchmarks/deepcars_ceiling.py

@@ -44,3 +44,25 @@ def test_abort_when_the_gap_closes_and_switch_off_for_ablation():
     assert not off.should_abort(closing, target=0)
     assert off.filter(Command.LEFT, closing, 1) is Command.LEFT
     assert off.masked == 0
+
+
+def test_at_crawl_speed_a_gap_is_judged_in_metres():
+    # 2 m/s: 0.8 s x 2 m/s = 1.6 m, but the gap must still be 6 m: 4 m (9 m centre to centre) is refused
+    crawl = scene(2, (0.0, 1), [(9.0, 0.0)], speed=2.0, other_speed=2.0)
+    assert layer().filter(Command.LEFT, crawl, 1) is Command.STAY
+    assert layer().filter(Command.LEFT, scene(2, (0.0, 1), [(12.0, 0.0)], 2.0, 2.0), 1) is Command.LEFT
+
+
+def test_a_car_nosing_into_the_lane_is_seen_there_by_its_turned_footprint():
+    import math
+
+    import numpy as np
+
+    world = scene(3, (0.0, 2), [(8.0, 4.9)], speed=12.0, other_speed=0.0)
+    assert world.neighbours(2)[0] is None
+    heading = world.heading.copy()
+    heading[1] = math.radians(33.0)
+    nosing = type(world)(**{**world.__dict__, "heading": heading})
+    leader = nosing.neighbours(2)[0]
+    assert leader is not None and leader.gap == 3.0
+    assert np.isclose(nosing.lateral_extent()[0], 5 * math.sin(heading[1]) + 2 * math.cos(heading[1]))
