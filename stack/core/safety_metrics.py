@@ -3,8 +3,9 @@
 - **road departure**: a corner of the ego's footprint lies more than `DEPARTURE_TOLERANCE_M` beyond
   the road's outer lane edges (nuPlan's drivable-area compliance, whose violation threshold is
   0.3 m); it ends the episode as a failure, like highway-env's `offroad_terminal`.
-- **collision fault** (nuPlan's collision categories): the contact side is the axis of least
-  penetration between the two footprints in the ego's body frame. At fault: the ego hits something
+- **collision fault** (nuPlan's collision categories): the contact side is the side of the ego's
+  footprint the other's centre lies beyond, in the ego's body frame (front or rear when it is
+  further beyond the bumper than beyond the flank, else a side). At fault: the ego hits something
   with its front (`front`), hits a stopped vehicle (`stopped vehicle`), touches a vehicle side on
   while its footprint spans two lanes or it is changing lane (`lane change`), or collides while off
   the road (`off road`). Not at fault: the ego stands (`ego stopped`), is hit from behind while
@@ -108,10 +109,8 @@ def classify_collision(world: WorldState, changing_lane: bool) -> Collision:
     delta = world.position[other] - world.position[0]
     along = float(delta[0] * math.cos(heading) + delta[1] * math.sin(heading))
     across = float(-delta[0] * math.sin(heading) + delta[1] * math.cos(heading))
-    depth_along = (world.length[0] + world.length[other]) / 2 - abs(along)
-    depth_across = (world.width[0] + world.width[other]) / 2 - abs(across)
     in_two_lanes = len(occupied_lanes(world)) > 1
-    if depth_along <= depth_across:
+    if abs(along) - world.length[0] / 2 >= abs(across) - world.width[0] / 2:
         if along > 0:
             return Collision("stopped vehicle" if world.speed[other] < STOPPED_SPEED_MPS else "front")
         return Collision("lane change" if changing_lane or in_two_lanes else "rear")

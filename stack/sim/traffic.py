@@ -11,7 +11,7 @@ MOBIL lane changes on or off and an IDM jam distance that grows with its length,
 start feasible: a vehicle placed too close ahead of the last one in its lane, for both lengths and a
 safe gap at the follower's speed (`make_room`), is moved forward. Every draw comes
 from the env's seeded generator, so the same seed gives the same traffic. Without `traffic` in the
-config, highway-env's own `_create_vehicles` runs unchanged.
+config, highway-env's own placement runs, with the same draws, its starts made feasible too.
 """
 
 from __future__ import annotations
@@ -120,10 +120,29 @@ def _place_incident(env: HighwayEnv, incident: dict[str, Any]) -> None:
 class ScenarioTraffic(HighwayEnv):
     """highway-v0 whose `_create_vehicles` reads `config["traffic"]` (see the module docstring)."""
 
+    def _create_highway_env_vehicles(self) -> None:
+        """highway-env's own `_create_vehicles` (the ego at 25 m/s behind all the traffic, the same
+        draws in the same order), with every start made feasible by `make_room`."""
+        other_type = utils.class_from_path(self.config["other_vehicles_type"])
+        spawned = Vehicle.create_random(
+            self.road,
+            speed=EGO_SPAWN_SPEED,
+            lane_id=self.config["initial_lane_id"],
+            spacing=self.config["ego_spacing"],
+        )
+        ego = self.action_type.vehicle_class(self.road, spawned.position, spawned.heading, spawned.speed)
+        self.controlled_vehicles = [ego]
+        self.road.vehicles.append(ego)
+        for _ in range(self.config["vehicles_count"]):
+            vehicle = other_type.create_random(self.road, spacing=1 / self.config["vehicles_density"])
+            vehicle.randomize_behavior()
+            make_room(self, vehicle)
+            self.road.vehicles.append(vehicle)
+
     def _create_vehicles(self) -> None:
         traffic = self.config.get("traffic")
         if not traffic:
-            super()._create_vehicles()
+            self._create_highway_env_vehicles()
             return
         classes = list(traffic["classes"])
         spawn_speed = traffic.get("spawn_speed_mps")
