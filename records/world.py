@@ -101,19 +101,59 @@ class WorldState:
 
     def ego_state(self) -> EgoState:
         """The ego in the reference lane's frame, where `d` is measured, with that lane's curvature."""
-        s, reference = float(self.s[0]), self.lanes[0]
-        return EgoState(
-            d=float(self.d[0]),
-            heading=float(self.heading[0]) - reference.heading_at(s),
-            speed=float(self.speed[0]),
-            curvature=lane_curvature(reference, s),
-            lateral_speed=self.ego_lateral_speed,
-            yaw_rate=self.ego_yaw_rate,
-        )
+        cached = self.__dict__.get("_ego_state")
+        if cached is None:
+            s, reference = float(self.s[0]), self.lanes[0]
+            cached = self.__dict__["_ego_state"] = EgoState(
+                d=float(self.d[0]),
+                heading=float(self.heading[0]) - reference.heading_at(s),
+                speed=float(self.speed[0]),
+                curvature=lane_curvature(reference, s),
+                lateral_speed=self.ego_lateral_speed,
+                yaw_rate=self.ego_yaw_rate,
+            )
+        return cached
 
     def neighbours(self, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
         """(closest vehicle ahead, closest vehicle behind) of the ego among those whose footprint
-        reaches into `lane`; ahead/behind by centre position along the road."""
+        reaches into `lane`; ahead/behind by centre position along the road.
+
+        Every lane's pair is found at once, on the first query, and kept with the snapshot (which,
+        like every record, is never changed once made)."""
+        table = self.__dict__.get("_neighbours")
+        if table is None:
+            table = self.__dict__["_neighbours"] = self._neighbour_table()
+        if -len(table) <= lane < len(table):
+            return table[lane]
+        return self._neighbours_of(lane)
+
+    def _neighbour_table(self) -> list[tuple[Neighbour | None, Neighbour | None]]:
+        """`_neighbours_of` every lane, as array operations over all lanes and vehicles."""
+        lanes = len(self.lane_offsets)
+        if self.count < 2:
+            return [(None, None)] * lanes
+        rel_s = self.s[1:] - self.s[0]
+        distance = np.abs(rel_s)
+        gap = (distance - (self.length[1:] + self.length[0]) / 2).tolist()
+        speed = self.speed[1:].tolist()
+        in_lane = np.abs(self.d[1:] - self.lane_offsets[:, None]) < (self.lane_width + self.width[1:]) / 2
+        every_lane = np.arange(lanes)
+        sides: list[list[Neighbour | None]] = []
+        for side in (rel_s > 0, rel_s <= 0):
+            candidates = in_lane & side
+            rows = np.argmin(np.where(candidates, distance, np.inf), axis=1)
+            found = candidates.any(axis=1)
+            if not np.array_equal(candidates[every_lane, rows], found):
+                return [self._neighbours_of(lane) for lane in range(lanes)]
+            sides.append(
+                [
+                    Neighbour(gap[row], speed[row]) if has else None
+                    for row, has in zip(rows.tolist(), found.tolist(), strict=True)
+                ]
+            )
+        return list(zip(sides[0], sides[1], strict=True))
+
+    def _neighbours_of(self, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
         rel_s = self.s[1:] - self.s[0]
         gap = np.abs(rel_s) - (self.length[1:] + self.length[0]) / 2
         in_lane = np.abs(self.d[1:] - self.lane_offsets[lane]) < (self.lane_width + self.width[1:]) / 2
