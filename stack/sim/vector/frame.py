@@ -11,6 +11,16 @@ from highway_env.vehicle.objects import RoadObject
 from stack.sim.fast_road import LaneProjections
 from stack.sim.vector.lanes import LaneTable, not_zero
 
+_VEHICLE: dict[type, bool] = {}
+
+
+def _is_vehicle(cls: type) -> bool:
+    """`isinstance(o, Vehicle)` by the object's type, remembered per type."""
+    known = _VEHICLE.get(cls)
+    if known is None:
+        known = _VEHICLE[cls] = issubclass(cls, Vehicle)
+    return known
+
 
 class TrafficFrame:
     """Every road object's state at the start of `Road.act()` as arrays, in `LaneProjections` rows:
@@ -21,11 +31,26 @@ class TrafficFrame:
         objects = projections.objects
         self.projections, self.lanes = projections, lanes
         self.position = projections.position
-        self.heading = np.array([o.heading for o in objects], dtype=float)
-        self.speed = np.array([o.speed for o in objects], dtype=float)
-        self.target_speed = np.array([getattr(o, "target_speed", 0) for o in objects], dtype=float)
-        self.is_vehicle = np.array([isinstance(o, Vehicle) for o in objects], dtype=bool)
-        self.lane = np.array([lanes.row.get(o.lane_index, 0) for o in objects], dtype=int)
+        lane_row = lanes.row
+        self.heading, self.speed, self.target_speed, is_vehicle, lane = (
+            np.array(
+                [
+                    (
+                        o.heading,
+                        o.speed,
+                        getattr(o, "target_speed", 0),
+                        _is_vehicle(type(o)),
+                        lane_row.get(o.lane_index, 0),
+                    )
+                    for o in objects
+                ],
+                dtype=float,
+            )
+            .reshape(-1, 5)
+            .T.copy()
+        )
+        self.is_vehicle = is_vehicle.astype(bool)
+        self.lane = lane.astype(int)
         self.direction = np.stack([np.cos(self.heading), np.sin(self.heading)], axis=1)
         self.velocity = self.speed[:, None] * self.direction
         self.s, self.r = lanes.along(self.position), lanes.across(self.position)

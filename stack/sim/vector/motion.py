@@ -36,19 +36,29 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
         if v.crashed:
             v.action["steering"] = 0
             v.action["acceleration"] = -1.0 * v.speed
-    speed = np.array([v.speed for v in movers], dtype=float)
-    steering = np.array([float(v.action["steering"]) for v in movers], dtype=float)
-    acceleration = np.array([float(v.action["acceleration"]) for v in movers], dtype=float)
-    max_speed = np.array([v.MAX_SPEED for v in movers], dtype=float)
-    min_speed = np.array([v.MIN_SPEED for v in movers], dtype=float)
+    speed, steering, acceleration, max_speed, min_speed, x, y, heading, length = np.array(
+        [
+            (
+                v.speed,
+                v.action["steering"],
+                v.action["acceleration"],
+                v.MAX_SPEED,
+                v.MIN_SPEED,
+                v.position[0],
+                v.position[1],
+                v.heading,
+                v.LENGTH,
+            )
+            for v in movers
+        ],
+        dtype=float,
+    ).T.copy()
     too_fast, too_slow = speed > max_speed, speed < min_speed
     slow_down, speed_up = 1.0 * (max_speed - speed), 1.0 * (min_speed - speed)
     acceleration = np.where(too_fast & (slow_down < acceleration), slow_down, acceleration)
     acceleration = np.where(~too_fast & too_slow & (speed_up > acceleration), speed_up, acceleration)
 
-    position = np.array([v.position for v in movers], dtype=float)
-    heading = np.array([v.heading for v in movers], dtype=float)
-    length = np.array([v.LENGTH for v in movers], dtype=float)
+    position = np.stack([x, y], axis=1)
     beta = np.arctan(1 / 2 * np.tan(steering))
     position[:, 0] += speed * np.cos(heading + beta) * dt
     position[:, 1] += speed * np.sin(heading + beta) * dt
@@ -60,25 +70,39 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
     heading = heading + speed * np.sin(beta) / (length / 2) * dt
     speed = speed + acceleration * dt
     rows = lanes.closest(position, heading).tolist()
-    states = zip(heading.tolist(), speed.tolist(), acceleration.tolist(), steering.tolist(), strict=True)
-    for v, xy, (h, u, a, steer), row in zip(movers, position, states, rows, strict=True):
-        v.action["steering"], v.action["acceleration"] = steer, a
+    states = zip(
+        heading.tolist(), speed.tolist(), acceleration.tolist(), steering.tolist(), rows, strict=True
+    )
+    indices, table = lanes.indices, lanes.lanes
+    for v, xy, (h, u, a, steer, row) in zip(movers, position, states, strict=True):
+        action = v.action
+        action["steering"], action["acceleration"] = steer, a
         v.position[:] = xy
         v.heading, v.speed = h, u
-        v.lane_index, v.lane = lanes.indices[row], lanes.lanes[row]
+        v.lane_index, v.lane = indices[row], table[row]
         if record_history:
             v.history.appendleft(v.create_from(v))
 
 
-def separated(vehicles: list[Vehicle], pairs: np.ndarray, dt: float) -> np.ndarray:
+class Footprints:
+    """Every vehicle's centre (x, y) [m], heading [rad], speed [m/s], length, width and diagonal [m]."""
+
+    def __init__(self, vehicles: list[Vehicle]) -> None:
+        self.x, self.y, self.heading, self.speed, self.length, self.width, self.diagonal = np.array(
+            [
+                (v.position[0], v.position[1], v.heading, v.speed, v.LENGTH, v.WIDTH, v.diagonal)
+                for v in vehicles
+            ],
+            dtype=float,
+        ).T.copy()
+
+
+def separated(vehicles: Footprints, pairs: np.ndarray, dt: float) -> np.ndarray:
     """For each pair (i, j) of `pairs`, whether their rectangles, swept by their relative
     displacement over `dt`, are apart by `SEPARATION_MARGIN` along one of their own axes: there
     highway-env's separating-axis test finds the same gap, so neither impact nor crash follows."""
-    x, y = np.array([v.position for v in vehicles], dtype=float).T
-    heading = np.array([v.heading for v in vehicles], dtype=float)
-    speed = np.array([v.speed for v in vehicles], dtype=float)
-    half_length = np.array([v.LENGTH for v in vehicles], dtype=float) / 2
-    half_width = np.array([v.WIDTH for v in vehicles], dtype=float) / 2
+    x, y, heading, speed = vehicles.x, vehicles.y, vehicles.heading, vehicles.speed
+    half_length, half_width = vehicles.length / 2, vehicles.width / 2
     cos, sin = np.cos(heading), np.sin(heading)
     a, b = pairs[:, 0], pairs[:, 1]
     axis_x = np.stack([cos[a], -sin[a], cos[b], -sin[b]])

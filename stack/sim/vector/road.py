@@ -27,11 +27,16 @@ from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import RoadObject
 
-from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections
+from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections, broad_phase
 from stack.sim.traffic import ScenarioTraffic
 from stack.sim.vector.frame import TrafficFrame
-from stack.sim.vector.lanes import LaneTable, not_zero, wrap_to_pi
-from stack.sim.vector.motion import move, separated, steps_like_vehicle
+from stack.sim.vector.lanes import LaneTable, clip, not_zero, wrap_to_pi
+from stack.sim.vector.motion import Footprints, move, separated, steps_like_vehicle
+
+
+def _plain_velocity(cls: type) -> bool:
+    """Whether objects of `cls` move along their heading at their speed (the vectorised kinematics)."""
+    return cls.velocity is Vehicle.velocity or cls.velocity is RoadObject.velocity  # type: ignore[attr-defined]
 
 
 class VectorRoad(FastRoad):
@@ -46,10 +51,7 @@ class VectorRoad(FastRoad):
         assert lanes is not True
         if lanes is None or self.neighbour_vehicles_connected_lanes:
             return None
-        plain = all(
-            type(o).velocity is Vehicle.velocity or type(o).velocity is RoadObject.velocity
-            for o in self.vehicles
-        )
+        plain = all(map(_plain_velocity, {type(o) for o in self.vehicles}))
         return lanes if plain else None
 
     def act(self) -> None:
@@ -61,7 +63,9 @@ class VectorRoad(FastRoad):
         try:
             frame = TrafficFrame(projections, lanes)
             drivers = [v for v in self.vehicles if type(v) is IDMVehicle and not v.crashed]
-            at_lane_end = self._at_lane_end(drivers, frame)
+            rows = projections.row
+            me = np.array([rows[id(v)] for v in drivers], dtype=int)
+            at_lane_end = self._at_lane_end(drivers, me, frame)
             decisions = self._mobil(
                 [
                     v
@@ -89,16 +93,15 @@ class VectorRoad(FastRoad):
                     ):
                         vehicle.change_lane_policy()
             if drivers:
-                self._drive(drivers, frame)
+                self._drive(drivers, me, frame)
         finally:
             self._projections = None
 
     @staticmethod
-    def _at_lane_end(drivers: list[IDMVehicle], frame: TrafficFrame) -> set[int]:
-        """ids of the drivers for which `follow_road` moves on to the next lane."""
+    def _at_lane_end(drivers: list[IDMVehicle], me: np.ndarray, frame: TrafficFrame) -> set[int]:
+        """ids of the drivers (in rows `me`) for which `follow_road` moves on to the next lane."""
         if not drivers:
             return set()
-        me = np.array([frame.row(v) for v in drivers])
         target = np.array([frame.lanes.row[v.target_lane_index] for v in drivers])
         ends = frame.s[me] > frame.lanes.length[target] - StraightLane.VEHICLE_LENGTH / 2
         return {id(drivers[i]) for i in np.flatnonzero(ends)}
@@ -112,7 +115,8 @@ class VectorRoad(FastRoad):
         ]
         if not pairs:
             return decisions
-        me = np.array([frame.row(v) for v, _ in pairs])
+        rows = frame.projections.row
+        me = np.array([rows[id(v)] for v, _ in pairs])
         sides = np.array([frame.lanes.row[side] for _, side in pairs])
         reachable = frame.lanes.reachable(sides, frame.s[me], frame.r[sides, me])
         if not reachable.any():
@@ -139,26 +143,25 @@ class VectorRoad(FastRoad):
                 decisions[id(v)] = side
         return decisions
 
-    def _drive(self, drivers: list[IDMVehicle], frame: TrafficFrame) -> None:
-        """`IDMVehicle.act`'s steering and IDM acceleration of every driver, after its decisions."""
+    def _drive(self, drivers: list[IDMVehicle], me: np.ndarray, frame: TrafficFrame) -> None:
+        """`IDMVehicle.act`'s steering and IDM acceleration of every driver (in rows `me`), after its
+        decisions."""
         lanes = frame.lanes
-        me = np.array([frame.row(v) for v in drivers])
         heading, speed = frame.heading[me], frame.speed[me]
-        length = np.array([v.LENGTH for v in drivers], dtype=float)
-        target = np.array([lanes.row[v.target_lane_index] for v in drivers])
+        target_row, length, delta, jam = np.array(
+            [(lanes.row[v.target_lane_index], v.LENGTH, v.DELTA, v.DISTANCE_WANTED) for v in drivers],
+            dtype=float,
+        ).T.copy()
+        target = target_row.astype(int)
         changing = frame.lane[me] != target
 
         r_target = frame.r[target, me]
-        heading_command = np.arcsin(np.clip(-IDMVehicle.KP_LATERAL * r_target / not_zero(speed), -1, 1))
-        heading_ref = lanes.heading[target] + np.clip(heading_command, -np.pi / 4, np.pi / 4)
+        heading_command = np.arcsin(clip(-IDMVehicle.KP_LATERAL * r_target / not_zero(speed), 1))
+        heading_ref = lanes.heading[target] + clip(heading_command, np.pi / 4)
         heading_rate = IDMVehicle.KP_HEADING * wrap_to_pi(heading_ref - heading)
-        slip = np.arcsin(np.clip(length / 2 / not_zero(speed) * heading_rate, -1, 1))
-        steering = np.clip(
-            np.arctan(2 * np.tan(slip)), -IDMVehicle.MAX_STEERING_ANGLE, IDMVehicle.MAX_STEERING_ANGLE
-        )
+        slip = np.arcsin(clip(length / 2 / not_zero(speed) * heading_rate, 1))
+        steering = clip(np.arctan(2 * np.tan(slip)), IDMVehicle.MAX_STEERING_ANGLE)
 
-        delta = np.array([v.DELTA for v in drivers], dtype=float)
-        jam = np.array([v.DISTANCE_WANTED for v in drivers], dtype=float)
         own_front, _ = frame.neighbours(me, frame.lane[me])
         acceleration = frame.idm(me, own_front, delta, jam)
         if changing.any():
@@ -166,7 +169,7 @@ class VectorRoad(FastRoad):
             target_front, _ = frame.neighbours(me[movers], target[movers])
             on_target = frame.idm(me[movers], target_front, delta[movers], jam[movers])
             acceleration[movers] = np.where(on_target < acceleration[movers], on_target, acceleration[movers])
-        acceleration = np.clip(acceleration, -IDMVehicle.ACC_MAX, IDMVehicle.ACC_MAX)
+        acceleration = clip(acceleration, IDMVehicle.ACC_MAX)
         for v, steer, accel in zip(drivers, steering, acceleration, strict=True):
             v.action = {"steering": steer, "acceleration": accel}
 
@@ -185,16 +188,15 @@ class VectorRoad(FastRoad):
             move(movers, lanes, dt, self.record_history)
         self._collide(dt)
 
-    def _collision_candidates(self, dt: float) -> dict[int, list[int]]:
+    def _collision_pairs(self, dt: float) -> np.ndarray:
         """The broad phase's pairs less those `separated` proves apart."""
-        pairs = np.array(
-            [(i, j) for i, later in super()._collision_candidates(dt).items() for j in later], dtype=int
-        ).reshape(-1, 2)
-        kept: dict[int, list[int]] = {}
+        if len(self.vehicles) < 2:
+            return super()._collision_pairs(dt)
+        state = Footprints(self.vehicles)
+        pairs = broad_phase(state.x, state.y, state.diagonal, state.speed, dt)
         if len(pairs):
-            for i, j in pairs[~separated(self.vehicles, pairs, dt)].tolist():
-                kept.setdefault(i, []).append(j)
-        return kept
+            pairs = pairs[~separated(state, pairs, dt)]
+        return pairs
 
 
 class VectorHighwayEnv(ScenarioTraffic):
