@@ -38,14 +38,15 @@ LaneIndex = tuple[str, str, int]
 """highway-env's lane index: (from node, to node, lane id)."""
 
 
-_LANDMARK: dict[type, bool] = {}
+_SUBCLASS: dict[tuple[type, type], bool] = {}
 
 
-def _is_landmark(cls: type) -> bool:
-    """`isinstance(o, Landmark)` by the object's type, remembered per type."""
-    known = _LANDMARK.get(cls)
+def is_kind(cls: type, base: type) -> bool:
+    """`issubclass(cls, base)`, remembered: `isinstance` by an object's type, for every object of
+    every frame."""
+    known = _SUBCLASS.get((cls, base))
     if known is None:
-        known = _LANDMARK[cls] = issubclass(cls, Landmark)
+        known = _SUBCLASS[cls, base] = issubclass(cls, base)
     return known
 
 
@@ -54,7 +55,7 @@ class LaneProjections:
 
     def __init__(self, road: Road) -> None:
         self.road = road
-        self.objects = [o for o in road.vehicles + road.objects if not _is_landmark(type(o))]
+        self.objects = [o for o in road.vehicles + road.objects if not is_kind(type(o), Landmark)]
         self.row = {id(o): i for i, o in enumerate(self.objects)}
         self.position = np.array([o.position for o in self.objects], dtype=float).reshape(-1, 2)
         self.lanes: dict[LaneIndex, tuple[list[float], list[int]]] = {}

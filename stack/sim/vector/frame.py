@@ -8,18 +8,8 @@ from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import RoadObject
 
-from stack.sim.fast_road import LaneProjections
+from stack.sim.fast_road import LaneProjections, is_kind
 from stack.sim.vector.lanes import LaneTable, not_zero
-
-_VEHICLE: dict[type, bool] = {}
-
-
-def _is_vehicle(cls: type) -> bool:
-    """`isinstance(o, Vehicle)` by the object's type, remembered per type."""
-    known = _VEHICLE.get(cls)
-    if known is None:
-        known = _VEHICLE[cls] = issubclass(cls, Vehicle)
-    return known
 
 
 class TrafficFrame:
@@ -39,7 +29,7 @@ class TrafficFrame:
                         o.heading,
                         o.speed,
                         getattr(o, "target_speed", 0),
-                        _is_vehicle(type(o)),
+                        is_kind(type(o), Vehicle),
                         lane_row.get(o.lane_index, 0),
                     )
                     for o in objects
