@@ -218,10 +218,10 @@ class FastRoad(Road):
         count = len(self.vehicles)
         if count < 2:
             return np.empty((0, 2), dtype=int)
-        x, y, diagonal, speed = np.array(
-            [(v.position[0], v.position[1], v.diagonal, v.speed) for v in self.vehicles], dtype=float
-        ).T.copy()
-        return broad_phase(x, y, diagonal, speed, dt)
+        vehicles = self.vehicles
+        x, y = np.array([v.position for v in vehicles], dtype=float).T.copy()
+        diagonal = np.array([v.diagonal for v in vehicles], dtype=float)
+        return broad_phase(x, y, diagonal, np.array([v.speed for v in vehicles], dtype=float), dt)
 
 
 def broad_phase(

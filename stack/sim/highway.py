@@ -169,11 +169,9 @@ def snapshot(road: Road, ego: Vehicle, time: float, lanes_count: int | None = No
     start, end, _ = ego.lane_index
     lanes = tuple(road.network.graph[start][end])[:lanes_count]
     reference = lanes[0]
-    columns = np.array(
-        [(v.position[0], v.position[1], v.heading, v.speed, v.LENGTH, v.WIDTH) for v in vehicles], dtype=float
-    ).T.copy()
-    position = columns[:2].T.copy()
-    heading, speed = columns[2], columns[3]
+    position = np.array([v.position for v in vehicles], dtype=float)
+    heading = np.array([v.heading for v in vehicles], dtype=float)
+    speed = np.array([v.speed for v in vehicles], dtype=float)
     s, d = _lane_frame(reference, position)
     lateral_speed, yaw_rate = _body_rates(ego)
     return WorldState(
@@ -184,8 +182,8 @@ def snapshot(road: Road, ego: Vehicle, time: float, lanes_count: int | None = No
         speed=speed,
         velocity=speed[:, None] * np.stack([np.cos(heading), np.sin(heading)], axis=1),
         lane=np.array([v.lane_index[2] if v.lane_index else -1 for v in vehicles]),
-        length=columns[4],
-        width=columns[5],
+        length=np.array([v.LENGTH for v in vehicles], dtype=float),
+        width=np.array([v.WIDTH for v in vehicles], dtype=float),
         s=s,
         d=d,
         crashed=np.array([v.crashed for v in vehicles], dtype=bool),

@@ -22,25 +22,11 @@ class TrafficFrame:
         self.projections, self.lanes = projections, lanes
         self.position = projections.position
         lane_row = lanes.row
-        self.heading, self.speed, self.target_speed, is_vehicle, lane = (
-            np.array(
-                [
-                    (
-                        o.heading,
-                        o.speed,
-                        getattr(o, "target_speed", 0),
-                        is_kind(type(o), Vehicle),
-                        lane_row.get(o.lane_index, 0),
-                    )
-                    for o in objects
-                ],
-                dtype=float,
-            )
-            .reshape(-1, 5)
-            .T.copy()
-        )
-        self.is_vehicle = is_vehicle.astype(bool)
-        self.lane = lane.astype(int)
+        self.heading = np.array([o.heading for o in objects], dtype=float)
+        self.speed = np.array([o.speed for o in objects], dtype=float)
+        self.target_speed = np.array([getattr(o, "target_speed", 0) for o in objects], dtype=float)
+        self.is_vehicle = np.array([is_kind(type(o), Vehicle) for o in objects], dtype=bool)
+        self.lane = np.array([lane_row.get(o.lane_index, 0) for o in objects], dtype=int)
         self.direction = np.stack([np.cos(self.heading), np.sin(self.heading)], axis=1)
         self.velocity = self.speed[:, None] * self.direction
         self.s, self.r = lanes.along(self.position), lanes.across(self.position)

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from operator import attrgetter
+
 import numpy as np
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
@@ -36,29 +39,17 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
         if v.crashed:
             v.action["steering"] = 0
             v.action["acceleration"] = -1.0 * v.speed
-    speed, steering, acceleration, max_speed, min_speed, x, y, heading, length = np.array(
-        [
-            (
-                v.speed,
-                v.action["steering"],
-                v.action["acceleration"],
-                v.MAX_SPEED,
-                v.MIN_SPEED,
-                v.position[0],
-                v.position[1],
-                v.heading,
-                v.LENGTH,
-            )
-            for v in movers
-        ],
-        dtype=float,
-    ).T.copy()
+    speed, max_speed, min_speed, heading, length = (
+        column(movers, name) for name in ("speed", "MAX_SPEED", "MIN_SPEED", "heading", "LENGTH")
+    )
+    steering = np.array([v.action["steering"] for v in movers], dtype=float)
+    acceleration = np.array([v.action["acceleration"] for v in movers], dtype=float)
     too_fast, too_slow = speed > max_speed, speed < min_speed
     slow_down, speed_up = 1.0 * (max_speed - speed), 1.0 * (min_speed - speed)
     acceleration = np.where(too_fast & (slow_down < acceleration), slow_down, acceleration)
     acceleration = np.where(~too_fast & too_slow & (speed_up > acceleration), speed_up, acceleration)
 
-    position = np.stack([x, y], axis=1)
+    position = np.array([v.position for v in movers], dtype=float)
     beta = np.arctan(1 / 2 * np.tan(steering))
     position[:, 0] += speed * np.cos(heading + beta) * dt
     position[:, 1] += speed * np.sin(heading + beta) * dt
@@ -88,13 +79,15 @@ class Footprints:
     """Every vehicle's centre (x, y) [m], heading [rad], speed [m/s], length, width and diagonal [m]."""
 
     def __init__(self, vehicles: list[Vehicle]) -> None:
-        self.x, self.y, self.heading, self.speed, self.length, self.width, self.diagonal = np.array(
-            [
-                (v.position[0], v.position[1], v.heading, v.speed, v.LENGTH, v.WIDTH, v.diagonal)
-                for v in vehicles
-            ],
-            dtype=float,
-        ).T.copy()
+        self.x, self.y = np.array([v.position for v in vehicles], dtype=float).T.copy()
+        self.heading, self.speed, self.length, self.width, self.diagonal = (
+            column(vehicles, name) for name in ("heading", "speed", "LENGTH", "WIDTH", "diagonal")
+        )
+
+
+def column(objects: Sequence[object], name: str) -> np.ndarray:
+    """The attribute `name` of every object, as floats."""
+    return np.array(list(map(attrgetter(name), objects)), dtype=float)
 
 
 def separated(vehicles: Footprints, pairs: np.ndarray, dt: float) -> np.ndarray:
