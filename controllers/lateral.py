@@ -42,7 +42,7 @@ import numpy as np
 from controllers.bicycle import CORNERING_STIFFNESS, LENGTH, MASS, SLIP_GRADIENT, YAW_POLE_SPEED
 from controllers.config import PIDGains
 from controllers.pid import PID
-from records import EgoState, PlantName, Reference
+from records import EgoState, PlantName, Reference, clip
 
 MIN_SPEED = 1.0
 """Below this speed [m/s] the lateral law is evaluated at MIN_SPEED, avoiding division by ~0."""
@@ -122,7 +122,7 @@ class LateralPID:
         course = math.asin(max(-1.0, min(1.0, lateral_speed / v)))
         road_rate = state.curvature * v / (1 - state.curvature * state.d)
         feedforward_rate = reference.d_ddot / v + road_rate
-        slip = math.asin(float(np.clip(LENGTH / 2 * feedforward_rate / v, -0.5, 0.5)))
+        slip = math.asin(clip(LENGTH / 2 * feedforward_rate / v, -0.5, 0.5))
         if self.model == "dynamic":
             slip -= SLIP_GRADIENT * v * feedforward_rate
         heading_error = course - slip - state.heading
@@ -134,14 +134,12 @@ class LateralPID:
             previous = yaw_rate if self.last_yaw_rate is None else self.last_yaw_rate
             self.last_yaw_rate = yaw_rate
             yaw_rate += v / YAW_POLE_SPEED * (yaw_rate - previous) / dt
-        beta = math.asin(float(np.clip(LENGTH / 2 * yaw_rate / v, -0.7, 0.7)))
+        beta = math.asin(clip(LENGTH / 2 * yaw_rate / v, -0.7, 0.7))
         step = gains.steering_rate * dt
-        steering = float(
-            np.clip(
-                math.atan(2 * math.tan(beta)),
-                max(-gains.max_steering, self.last_steering - step),
-                min(gains.max_steering, self.last_steering + step),
-            )
+        steering = clip(
+            math.atan(2 * math.tan(beta)),
+            max(-gains.max_steering, self.last_steering - step),
+            min(gains.max_steering, self.last_steering + step),
         )
         self.last_steering = steering
         return steering

@@ -118,40 +118,46 @@ class WorldState:
         """(closest vehicle ahead, closest vehicle behind) of the ego among those whose footprint
         reaches into `lane`; ahead/behind by centre position along the road.
 
-        Every lane's pair is found at once, on the first query, and kept with the snapshot (which,
+        Every lane's rows are found at once, on the first query, and kept with the snapshot (which,
         like every record, is never changed once made)."""
-        table = self.__dict__.get("_neighbours")
-        if table is None:
-            table = self.__dict__["_neighbours"] = self._neighbour_table()
-        if -len(table) <= lane < len(table):
-            return table[lane]
-        return self._neighbours_of(lane)
+        cache = self.__dict__.get("_neighbours")
+        if cache is None:
+            cache = self.__dict__["_neighbours"] = {}
+        found = cache.get(lane)
+        if found is None:
+            found = cache[lane] = self._neighbours_from_table(lane)
+        return found
 
-    def _neighbour_table(self) -> list[tuple[Neighbour | None, Neighbour | None]]:
-        """`_neighbours_of` every lane, as array operations over all lanes and vehicles."""
+    def _neighbours_from_table(self, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
+        if "_neighbour_table" not in self.__dict__:
+            self.__dict__["_neighbour_table"] = self._neighbour_rows()
+        table = self.__dict__["_neighbour_table"]
         lanes = len(self.lane_offsets)
+        if table is None or not -lanes <= lane < lanes:
+            return self._neighbours_of(lane)
+        rows, found, gap, speed = table
+        ahead, behind = (
+            Neighbour(gap[rows[side][lane]], speed[rows[side][lane]]) if found[side][lane] else None
+            for side in (0, 1)
+        )
+        return ahead, behind
+
+    def _neighbour_rows(self) -> tuple[list[list[int]], list[list[bool]], list[float], list[float]] | None:
+        """For each side (ahead, behind) and lane, the row (among the others) `_neighbours_of`
+        picks and whether there is one, with every other vehicle's gap and speed; as array
+        operations over all lanes at once (None where an infinite distance could tie with the
+        fill value, then `_neighbours_of` answers)."""
         if self.count < 2:
-            return [(None, None)] * lanes
+            return None
         rel_s = self.s[1:] - self.s[0]
         distance = np.abs(rel_s)
-        gap = (distance - (self.length[1:] + self.length[0]) / 2).tolist()
-        speed = self.speed[1:].tolist()
+        if np.isinf(distance).any():
+            return None
         in_lane = np.abs(self.d[1:] - self.lane_offsets[:, None]) < (self.lane_width + self.width[1:]) / 2
-        every_lane = np.arange(lanes)
-        sides: list[list[Neighbour | None]] = []
-        for side in (rel_s > 0, rel_s <= 0):
-            candidates = in_lane & side
-            rows = np.argmin(np.where(candidates, distance, np.inf), axis=1)
-            found = candidates.any(axis=1)
-            if not np.array_equal(candidates[every_lane, rows], found):
-                return [self._neighbours_of(lane) for lane in range(lanes)]
-            sides.append(
-                [
-                    Neighbour(gap[row], speed[row]) if has else None
-                    for row, has in zip(rows.tolist(), found.tolist(), strict=True)
-                ]
-            )
-        return list(zip(sides[0], sides[1], strict=True))
+        candidates = in_lane[None, :, :] & np.stack([rel_s > 0, rel_s <= 0])[:, None, :]
+        rows = np.where(candidates, distance, np.inf).argmin(axis=2)
+        gap = distance - (self.length[1:] + self.length[0]) / 2
+        return rows.tolist(), candidates.any(axis=2).tolist(), gap.tolist(), self.speed[1:].tolist()
 
     def _neighbours_of(self, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
         rel_s = self.s[1:] - self.s[0]
