@@ -61,14 +61,16 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
     heading = heading + speed * np.sin(beta) / (length / 2) * dt
     speed = speed + acceleration * dt
     rows = lanes.closest(position, heading).tolist()
+    x, y = position.T.tolist()
     states = zip(
-        heading.tolist(), speed.tolist(), acceleration.tolist(), steering.tolist(), rows, strict=True
+        x, y, heading.tolist(), speed.tolist(), acceleration.tolist(), steering.tolist(), rows, strict=True
     )
     indices, table = lanes.indices, lanes.lanes
-    for v, xy, (h, u, a, steer, row) in zip(movers, position, states, strict=True):
+    for v, (x_, y_, h, u, a, steer, row) in zip(movers, states, strict=True):
         action = v.action
         action["steering"], action["acceleration"] = steer, a
-        v.position[:] = xy
+        xy = v.position
+        xy[0], xy[1] = x_, y_
         v.heading, v.speed = h, u
         v.lane_index, v.lane = indices[row], table[row]
         if record_history:

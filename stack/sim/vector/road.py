@@ -51,7 +51,7 @@ class VectorRoad(FastRoad):
         assert lanes is not True
         if lanes is None or self.neighbour_vehicles_connected_lanes:
             return None
-        plain = all(map(_plain_velocity, {type(o) for o in self.vehicles}))
+        plain = all(map(_plain_velocity, set(map(type, self.vehicles))))
         return lanes if plain else None
 
     def act(self) -> None:
