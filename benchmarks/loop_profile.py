@@ -21,28 +21,32 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-COMPONENTS: list[tuple[str, str, str, str]] = [
-    # (label, module, owner ("" for a module function), attribute)
-    ("tick", "stack.core.closed_loop", "ClosedLoop", "tick"),
-    ("  env step (adapter)", "stack.sim.highway", "HighwayAdapter", "step"),
-    ("    road act (traffic decisions, IDM)", "stack.sim.vector.road", "VectorRoad", "act"),
-    ("    road step (kinematics, collisions)", "stack.sim.vector.road", "VectorRoad", "step"),
-    ("    world snapshot", "stack.sim.highway", "", "snapshot"),
-    ("  controller", "controllers.tracker", "SteeringTracker", "step"),
-    ("  maneuver reference", "controllers.maneuver", "Maneuver", "reference"),
-    ("  emergency braking", "controllers.emergency", "EmergencyBraking", "apply"),
-    ("  metrics recorder", "stack.core.metrics", "EpisodeRecorder", "record"),
-    ("  safety monitor", "stack.core.safety_metrics", "SafetyMonitor", "record"),
-    ("perception (grid)", "stack.core.closed_loop", "ClosedLoop", "perceive"),
-    ("start-up: env reset", "stack.core.closed_loop", "ClosedLoop", "reset"),
+COMPONENTS = [
+    line.split(" = ")
+    for line in """\
+tick = stack.core.closed_loop:ClosedLoop.tick
+  env step (adapter) = stack.sim.highway:HighwayAdapter.step
+    road act (traffic decisions, IDM) = stack.sim.vector.road:VectorRoad.act
+    road step (kinematics, collisions) = stack.sim.vector.road:VectorRoad.step
+    world snapshot = stack.sim.highway:snapshot
+  controller = controllers.tracker:SteeringTracker.step
+  maneuver reference = controllers.maneuver:Maneuver.reference
+  emergency braking = controllers.emergency:EmergencyBraking.apply
+  metrics recorder = stack.core.metrics:EpisodeRecorder.record
+  safety monitor = stack.core.safety_metrics:SafetyMonitor.record
+perception (grid) = stack.core.closed_loop:ClosedLoop.perceive
+start-up: env reset = stack.core.closed_loop:ClosedLoop.reset""".splitlines()
 ]
+"""(label, module:[Owner.]attribute): indentation nests a component in the one above."""
 
 
 def instrument(spent: collections.Counter[str]) -> None:
     """Wrap every component's entry point so that its CPU time adds up in `spent`."""
     import importlib
 
-    for label, module_name, owner_name, attribute in COMPONENTS:
+    for label, where in COMPONENTS:
+        module_name, path = where.split(":")
+        owner_name, _, attribute = path.rpartition(".")
         module = importlib.import_module(module_name)
         owner: Any = getattr(module, owner_name) if owner_name else module
         original = getattr(owner, attribute, None)
