@@ -55,7 +55,9 @@ class LaneProjections:
 
     def __init__(self, road: Road) -> None:
         self.road = road
-        self.objects = [o for o in road.vehicles + road.objects if not is_kind(type(o), Landmark)]
+        candidates = road.vehicles + road.objects
+        landmarks = {cls for cls in set(map(type, candidates)) if is_kind(cls, Landmark)}
+        self.objects = [o for o in candidates if type(o) not in landmarks] if landmarks else candidates
         self.row = {id(o): i for i, o in enumerate(self.objects)}
         self.position = np.array([o.position for o in self.objects], dtype=float).reshape(-1, 2)
         self.lanes: dict[LaneIndex, tuple[list[float], list[int]]] = {}

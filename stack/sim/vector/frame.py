@@ -25,7 +25,11 @@ class TrafficFrame:
         self.heading = np.array([o.heading for o in objects], dtype=float)
         self.speed = np.array([o.speed for o in objects], dtype=float)
         self.target_speed = np.array([getattr(o, "target_speed", 0) for o in objects], dtype=float)
-        self.is_vehicle = np.array([is_kind(type(o), Vehicle) for o in objects], dtype=bool)
+        kinds = {cls: is_kind(cls, Vehicle) for cls in set(map(type, objects))}
+        if all(kinds.values()):
+            self.is_vehicle = np.ones(len(objects), dtype=bool)
+        else:
+            self.is_vehicle = np.array([kinds[type(o)] for o in objects], dtype=bool)
         self.lane = np.array([lane_row.get(o.lane_index, 0) for o in objects], dtype=int)
         self.direction = np.stack([np.cos(self.heading), np.sin(self.heading)], axis=1)
         self.velocity = self.speed[:, None] * self.direction
