@@ -80,12 +80,21 @@ class TrafficFrame:
         does."""
         acceleration = np.zeros(len(ego))
         valid = (ego >= 0) & self.is_vehicle[ego]
-        if not valid.any():
+        every = bool(valid.all())
+        if not every and not valid.any():
             return acceleration
-        e, f, delta, distance_wanted = ego[valid], front[valid], delta[valid], distance_wanted[valid]
+        e, f = (ego, front) if every else (ego[valid], front[valid])
+        if not every:
+            delta, distance_wanted = delta[valid], distance_wanted[valid]
         speed = self.speed[e]
         limit = self.lanes.speed_limit[self.lane[e]]
-        desired = np.where(np.isnan(limit), self.target_speed[e], np.clip(self.target_speed[e], 0, limit))
+        target = self.target_speed[e]
+        if self.lanes.limited:
+            # np.clip(target, 0, limit) as two ufuncs; a -0 target (the only tie with the bound 0
+            # that could keep its sign) gives the same IDM term, as not_zero maps both zeros alike
+            desired = np.minimum(np.maximum(target, 0.0), limit)
+        else:
+            desired = np.where(np.isnan(limit), target, np.clip(target, 0, limit))
         free = IDMVehicle.COMFORT_ACC_MAX * (
             1 - np.power(np.maximum(speed, 0) / np.abs(not_zero(desired)), delta)
         )
@@ -98,5 +107,7 @@ class TrafficFrame:
             desired_gap = jam + led_speed * IDMVehicle.TIME_WANTED + led_speed * closing / (2 * np.sqrt(ab))
             gap = self.s[f] - self.s[e]
             free[led] -= IDMVehicle.COMFORT_ACC_MAX * np.power(desired_gap / not_zero(gap), 2)
+        if every:
+            return free
         acceleration[valid] = free
         return acceleration

@@ -55,6 +55,8 @@ class LaneTable:
         self.speed_limit = np.array(
             [np.nan if lane.speed_limit is None else lane.speed_limit for lane in self.lanes], dtype=float
         )
+        self.limited = not bool(np.isnan(self.speed_limit).any())
+        """Every lane has a speed limit."""
 
     @staticmethod
     def fit(network: RoadNetwork) -> LaneTable | None:

@@ -33,12 +33,15 @@ def steps_like_vehicle(cls: type) -> bool:
 
 def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: bool) -> None:
     """`Vehicle.step(dt)` of every mover: clip, integrate, apply impacts, find the lane."""
-    for v in movers:
+    impacted = []
+    for i, v in enumerate(movers):
         if type(v).step is IDMVehicle.step:
             v.timer += dt
         if v.crashed:
             v.action["steering"] = 0
             v.action["acceleration"] = -1.0 * v.speed
+        if v.impact is not None:
+            impacted.append(i)
     speed, max_speed, min_speed, heading, length = (
         column(movers, name) for name in ("speed", "MAX_SPEED", "MIN_SPEED", "heading", "LENGTH")
     )
@@ -53,11 +56,11 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
     beta = np.arctan(1 / 2 * np.tan(steering))
     position[:, 0] += speed * np.cos(heading + beta) * dt
     position[:, 1] += speed * np.sin(heading + beta) * dt
-    for i, v in enumerate(movers):
-        if v.impact is not None:
-            position[i] += v.impact
-            v.crashed = True
-            v.impact = None
+    for i in impacted:
+        v = movers[i]
+        position[i] += v.impact
+        v.crashed = True
+        v.impact = None
     heading = heading + speed * np.sin(beta) / (length / 2) * dt
     speed = speed + acceleration * dt
     rows = lanes.closest(position, heading).tolist()
