@@ -35,14 +35,17 @@ loop on that plant (poles and margins at 10, 22, 35 m/s in the tests and docs/ar
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-import control
 import numpy as np
 
 from controllers.bicycle import CORNERING_STIFFNESS, LENGTH, MASS, SLIP_GRADIENT, YAW_POLE_SPEED
 from controllers.config import PIDGains
 from controllers.pid import PID
 from records import EgoState, PlantName, Reference, clip
+
+if TYPE_CHECKING:  # python-control (and scipy under it) loads only for the loop analyses below
+    import control
 
 MIN_SPEED = 1.0
 """Below this speed [m/s] the lateral law is evaluated at MIN_SPEED, avoiding division by ~0."""
@@ -69,6 +72,8 @@ def scheduled_gains(gains: PIDGains, speed: float) -> tuple[float, float, float]
 
 def closed_loop(gains: PIDGains, speed: float = 25.0) -> control.StateSpace:
     """The linearised lateral loop above, input d_ref, output d (for poles and step_info)."""
+    import control
+
     (kp, ki, kh), v = scheduled_gains(gains, speed), speed
     # states: d, psi, z (= integral of d_ref - d)
     a = np.array([[0.0, v, 0.0], [-kh * kp / v, -kh, kh * ki / v], [-1.0, 0.0, 0.0]])
@@ -81,6 +86,8 @@ def dynamic_loop(gains: PIDGains, speed: float) -> control.TransferFunction:
     the lateral error), for poles of 1 + L and margins. With the lead the yaw rate follows its
     command exactly; the lateral speed keeps its own pole at -2 C / (m v):
     v_y' = -2C/(m v) v_y - v r + C/m delta, delta = L/v (1 + tau s) r_cmd, d' = v psi + v_y."""
+    import control
+
     s, v = control.tf("s"), speed
     kp, ki, kh = gains.kp_lateral, gains.ki_lateral, gains.kp_heading
     lead = (LENGTH / v) * (1 + v / YAW_POLE_SPEED * s)
