@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -101,10 +102,11 @@ class WorldState:
 
     def ego_state(self) -> EgoState:
         """The ego in the reference lane's frame, where `d` is measured, with that lane's curvature."""
-        cached = self.__dict__.get("_ego_state")
+        kept = _kept(self)
+        cached = kept.get("ego_state")
         if cached is None:
             s, reference = float(self.s[0]), self.lanes[0]
-            cached = self.__dict__["_ego_state"] = EgoState(
+            cached = kept["ego_state"] = EgoState(
                 d=float(self.d[0]),
                 heading=float(self.heading[0]) - reference.heading_at(s),
                 speed=float(self.speed[0]),
@@ -118,20 +120,22 @@ class WorldState:
         """(closest vehicle ahead, closest vehicle behind) of the ego among those whose footprint
         reaches into `lane`; ahead/behind by centre position along the road.
 
-        Every lane's rows are found at once, on the first query, and kept with the snapshot (which,
-        like every record, is never changed once made)."""
-        cache = self.__dict__.get("_neighbours")
+        Every lane's rows are found at once, on the first query, and kept for the snapshot (which,
+        like every record, is never changed once made) while it lives."""
+        kept = _kept(self)
+        cache = kept.get("neighbours")
         if cache is None:
-            cache = self.__dict__["_neighbours"] = {}
+            cache = kept["neighbours"] = {}
         found = cache.get(lane)
         if found is None:
             found = cache[lane] = self._neighbours_from_table(lane)
         return found
 
     def _neighbours_from_table(self, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
-        if "_neighbour_table" not in self.__dict__:
-            self.__dict__["_neighbour_table"] = self._neighbour_rows()
-        table = self.__dict__["_neighbour_table"]
+        kept = _kept(self)
+        if "table" not in kept:
+            kept["table"] = self._neighbour_rows()
+        table = kept["table"]
         lanes = len(self.lane_offsets)
         if table is None or not -lanes <= lane < lanes:
             return self._neighbours_of(lane)
@@ -177,3 +181,17 @@ class WorldState:
         """For each lane in `lanes`, the closest vehicle ahead reaching into it (none if nobody)."""
         ahead = (self.neighbours(lane)[0] for lane in lanes)
         return tuple(leader for leader in ahead if leader is not None)
+
+
+_KEPT: dict[int, dict[str, Any]] = {}
+"""What a `WorldState` derived once (ego state, neighbours), by the snapshot's id while it lives.
+Kept beside the record, not in it, so its `__dict__` stays its fields (`type(w)(**w.__dict__)`,
+`dataclasses.replace`, pickling and copies see none of it)."""
+
+
+def _kept(world: WorldState) -> dict[str, Any]:
+    kept = _KEPT.get(id(world))
+    if kept is None:
+        kept = _KEPT[id(world)] = {}
+        weakref.finalize(world, _KEPT.pop, id(world), None)
+    return kept

@@ -100,3 +100,12 @@ def test_a_process_keeps_a_bounded_number_of_envs():
         config = build_config({"planner": {"agent": "keep-lane"}}, highway__vehicles_count=5 + vehicles)
         assert episodes.kept_adapter(config) is episodes.kept_adapter(config)
     assert len(episodes._adapters) == episodes.KEPT_PER_PROCESS
+
+
+def test_what_a_snapshot_derived_stays_out_of_its_fields():
+    world = scene(3, (0.0, 1), [(10.0, 4.0), (-8.0, 0.0)])
+    ahead = world.neighbours(1)[0]
+    world.ego_state()
+    moved = type(world)(**{**world.__dict__, "s": world.s + np.array([0.0, 5.0, 0.0])})
+    assert set(world.__dict__) == {f.name for f in dataclasses.fields(world)}
+    assert moved.neighbours(1)[0].gap == ahead.gap + 5.0
