@@ -31,6 +31,9 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/cli_startup.py
 	$(BIN)/python benchmarks/hostile_inputs.py
 	$(BIN)/python benchmarks/loop_rate.py
+	$(BIN)/python benchmarks/loop_rate.py --cpu
+	$(BIN)/python benchmarks/loop_profile.py
+	$(BIN)/python benchmarks/loop_profile.py --scenario overtaking
 	$(BIN)/python benchmarks/sim_speed.py
 	$(BIN)/python benchmarks/oracle_cost.py
 	$(BIN)/python benchmarks/feasible_spawns.py

@@ -1,6 +1,13 @@
-"""Control-tick rate of the closed loop next to highway-env's bare frame rate on the same config.
+"""Control-tick rate of the closed loop next to highway-env's bare frame rate on the same config,
+and the CPU cost of whole seeded episodes per backend.
 
     .venv/bin/python benchmarks/loop_rate.py [--episodes 3] [--config configs/highway.yaml]
+    .venv/bin/python benchmarks/loop_rate.py --cpu [--episodes 3] [--scenario highway-v0] [--agent mobil]
+
+With `--cpu`: the CPU time (process time) of `run_episode` on the same seeded `--duration`-s
+episodes of `--agent` with `--backend stock` and the default `vector`, the backends alternating
+episode by episode (so machine load hits them alike), as ms per frame and the ratio; the episodes'
+results must be identical on both.
 
 Bare: `env.step` with a constant action on stock highway-v0 set up as the adapter sets it
 (ContinuousAction, one frame per step, the cheap observation) and with highway-env's default
@@ -53,11 +60,53 @@ def loop_rate(run_config, seeds: range) -> float:
     return statistics.median(rates)
 
 
+def episode_cpu(scenario: str, agent: str, episodes: int, duration: float) -> None:
+    """CPU ms per frame of the same seeded episodes on the stock and the vector backend."""
+    from stack.core.config import build_config
+    from stack.core.episodes import run_episode
+    from stack.core.metrics import TIMING_FIELDS
+
+    configs = {
+        backend: build_config(
+            {"planner": {"agent": agent}, "sim": {"backend": backend}, "seed": 0},
+            scenario=scenario,
+            highway__duration=duration,
+        )
+        for backend in ("stock", "vector")
+    }
+    for config in configs.values():
+        run_episode(config, episodes)  # imports, caches and the process's env warmed up
+    cpu = dict.fromkeys(configs, 0.0)
+    frames = 0
+    for episode in range(episodes):
+        rows = {}
+        for backend, config in configs.items():
+            start = time.process_time()
+            result = run_episode(config, episode)
+            cpu[backend] += time.process_time() - start
+            rows[backend] = {k: v for k, v in result.row().items() if k not in TIMING_FIELDS}
+        assert rows["stock"] == rows["vector"], f"episode {episode}: the backends drove different episodes"
+        frames += result.steps
+    print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}")
+    print(f"{episodes} x {duration:g}-s {agent} episodes on {scenario}, {frames} frames")
+    print("| backend | CPU s | ms per frame | ratio |\n|---|---|---|---|")
+    for backend in cpu:
+        ratio = cpu["stock"] / cpu[backend]
+        print(f"| {backend} | {cpu[backend]:.2f} | {1e3 * cpu[backend] / frames:.3f} | {ratio:.1f}x |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--config", default="configs/highway.yaml")
     parser.add_argument("--episodes", type=int, default=3)
+    parser.add_argument("--cpu", action="store_true", help="CPU per frame of whole episodes, stock vs vector")
+    parser.add_argument("--scenario", default="highway-v0")
+    parser.add_argument("--agent", default="mobil")
+    parser.add_argument("--duration", type=float, default=15.0, help="episode length [s] with --cpu")
     args = parser.parse_args()
+    if args.cpu:
+        episode_cpu(args.scenario, args.agent, args.episodes, args.duration)
+        return
     config = load_config(args.config)
     seeds = range(args.episodes)
     stack_env = env_config(config.highway)

@@ -6,6 +6,8 @@ on one core, measured in one sitting.
 Each scene is stepped `--frames` physics frames with a constant action (ContinuousAction, one frame
 per step, the stack's cheap observation) for seeds 0..runs-1, the three backends alternating seed by
 seed so that machine load hits them alike; the figures are median frames/s and the ratios to stock.
+The last column steps the vector road the way the closed loop does (`HighwayAdapter.step`: no
+reward, observation or info dict, which the stack does not read), snapshot included.
 """
 
 from __future__ import annotations
@@ -14,13 +16,15 @@ import argparse
 import platform
 import statistics
 import time
+from collections.abc import Callable
 
 import gymnasium as gym
 import numpy as np
 
+from records import Actuation
 from stack.core.config import HighwayConfig, build_config
 from stack.sim.envs import FAST_HIGHWAY, HIGHWAY, VECTOR_HIGHWAY
-from stack.sim.highway import env_config
+from stack.sim.highway import HighwayAdapter, env_config
 
 BACKENDS = {"stock": HIGHWAY, "fast": FAST_HIGHWAY, "vector": VECTOR_HIGHWAY}
 SCENES = {
@@ -35,12 +39,27 @@ def frames_per_second(env_id: str, highway: HighwayConfig, seed: int, frames: in
     env = gym.make(env_id, config={**env_config(highway), "duration": 1e6}, disable_env_checker=True)
     env.reset(seed=seed)
     action = np.zeros(2)
-    start = time.perf_counter()
-    for _ in range(frames):
-        env.step(action)
-    rate = frames / (time.perf_counter() - start)
+    rate = timed(lambda: env.step(action), frames)
     env.close()
     return rate
+
+
+def stack_frames_per_second(highway: HighwayConfig, seed: int, frames: int) -> float:
+    """Frames/s of the vector road stepped through the stack's adapter (snapshot included)."""
+    adapter = HighwayAdapter(highway.model_copy(update={"duration": 1e6}), "vector")
+    adapter.reset(seed)
+    actuation = Actuation(0.0, 0.0)
+    rate = timed(lambda: adapter.step(actuation), frames)
+    adapter.close()
+    return rate
+
+
+def timed(step: Callable[[], object], frames: int) -> float:
+    """Calls of `step` per second over `frames` calls."""
+    start = time.perf_counter()
+    for _ in range(frames):
+        step()
+    return frames / (time.perf_counter() - start)
 
 
 def main() -> None:
@@ -49,15 +68,19 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=300)
     args = parser.parse_args()
     print(f"{platform.processor() or platform.machine()}, Python {platform.python_version()}")
-    print("| scene | stock frames/s | fast frames/s | vector frames/s | fast / stock | vector / stock |")
-    print("|---|---|---|---|---|---|")
+    print(
+        "| scene | stock frames/s | fast frames/s | vector frames/s | fast / stock | vector / stock "
+        "| vector, stack step / stock |"
+    )
+    print("|---|---|---|---|---|---|---|")
     for name, highway in SCENES.items():
-        rates: dict[str, list[float]] = {backend: [] for backend in BACKENDS}
+        rates: dict[str, list[float]] = {backend: [] for backend in (*BACKENDS, "stack")}
         for seed in range(args.runs):
             for backend, env_id in BACKENDS.items():
                 rates[backend].append(frames_per_second(env_id, highway, seed, args.frames))
-        stock, fast, vector = (statistics.median(rates[b]) for b in BACKENDS)
-        ratios = f"{fast / stock:.1f}x | {vector / stock:.1f}x"
+            rates["stack"].append(stack_frames_per_second(highway, seed, args.frames))
+        stock, fast, vector, stack = (statistics.median(rates[b]) for b in rates)
+        ratios = f"{fast / stock:.1f}x | {vector / stock:.1f}x | {stack / stock:.1f}x ({stack:.0f})"
         print(f"| {name} | {stock:.0f} | {fast:.0f} | {vector:.0f} | {ratios} |", flush=True)
 
 

@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 from controllers.pid import PID
-from records import Neighbour
+from records import Neighbour, clip
 
 
 class AdaptiveCruise:
@@ -44,4 +42,4 @@ class AdaptiveCruise:
             desired_gap = self.standstill_gap + self.time_gap * speed
             closing = speed - leader.speed
             command = min(command, self.KP_GAP * (leader.gap - desired_gap) - self.KP_CLOSING * closing)
-        return float(np.clip(command, -self.comfort_deceleration, self.max_acceleration))
+        return clip(command, -self.comfort_deceleration, self.max_acceleration)

@@ -35,14 +35,17 @@ loop on that plant (poles and margins at 10, 22, 35 m/s in the tests and docs/ar
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-import control
 import numpy as np
 
 from controllers.bicycle import CORNERING_STIFFNESS, LENGTH, MASS, SLIP_GRADIENT, YAW_POLE_SPEED
 from controllers.config import PIDGains
 from controllers.pid import PID
-from records import EgoState, PlantName, Reference
+from records import EgoState, PlantName, Reference, clip
+
+if TYPE_CHECKING:  # python-control (and scipy under it) loads only for the loop analyses below
+    import control
 
 MIN_SPEED = 1.0
 """Below this speed [m/s] the lateral law is evaluated at MIN_SPEED, avoiding division by ~0."""
@@ -69,6 +72,8 @@ def scheduled_gains(gains: PIDGains, speed: float) -> tuple[float, float, float]
 
 def closed_loop(gains: PIDGains, speed: float = 25.0) -> control.StateSpace:
     """The linearised lateral loop above, input d_ref, output d (for poles and step_info)."""
+    import control
+
     (kp, ki, kh), v = scheduled_gains(gains, speed), speed
     # states: d, psi, z (= integral of d_ref - d)
     a = np.array([[0.0, v, 0.0], [-kh * kp / v, -kh, kh * ki / v], [-1.0, 0.0, 0.0]])
@@ -81,6 +86,8 @@ def dynamic_loop(gains: PIDGains, speed: float) -> control.TransferFunction:
     the lateral error), for poles of 1 + L and margins. With the lead the yaw rate follows its
     command exactly; the lateral speed keeps its own pole at -2 C / (m v):
     v_y' = -2C/(m v) v_y - v r + C/m delta, delta = L/v (1 + tau s) r_cmd, d' = v psi + v_y."""
+    import control
+
     s, v = control.tf("s"), speed
     kp, ki, kh = gains.kp_lateral, gains.ki_lateral, gains.kp_heading
     lead = (LENGTH / v) * (1 + v / YAW_POLE_SPEED * s)
@@ -122,7 +129,7 @@ class LateralPID:
         course = math.asin(max(-1.0, min(1.0, lateral_speed / v)))
         road_rate = state.curvature * v / (1 - state.curvature * state.d)
         feedforward_rate = reference.d_ddot / v + road_rate
-        slip = math.asin(float(np.clip(LENGTH / 2 * feedforward_rate / v, -0.5, 0.5)))
+        slip = math.asin(clip(LENGTH / 2 * feedforward_rate / v, -0.5, 0.5))
         if self.model == "dynamic":
             slip -= SLIP_GRADIENT * v * feedforward_rate
         heading_error = course - slip - state.heading
@@ -134,14 +141,12 @@ class LateralPID:
             previous = yaw_rate if self.last_yaw_rate is None else self.last_yaw_rate
             self.last_yaw_rate = yaw_rate
             yaw_rate += v / YAW_POLE_SPEED * (yaw_rate - previous) / dt
-        beta = math.asin(float(np.clip(LENGTH / 2 * yaw_rate / v, -0.7, 0.7)))
+        beta = math.asin(clip(LENGTH / 2 * yaw_rate / v, -0.7, 0.7))
         step = gains.steering_rate * dt
-        steering = float(
-            np.clip(
-                math.atan(2 * math.tan(beta)),
-                max(-gains.max_steering, self.last_steering - step),
-                min(gains.max_steering, self.last_steering + step),
-            )
+        steering = clip(
+            math.atan(2 * math.tan(beta)),
+            max(-gains.max_steering, self.last_steering - step),
+            min(gains.max_steering, self.last_steering + step),
         )
         self.last_steering = steering
         return steering

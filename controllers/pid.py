@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
+from records import clip
 
 
 class PID:
@@ -44,9 +44,9 @@ class PID:
         saturated_low = unclamped < self.low and error < 0
         if not (saturated_high or saturated_low):
             self.integral = candidate
-        output = float(np.clip(proportional_part + self.integral, self.low, self.high))
+        output = clip(proportional_part + self.integral, self.low, self.high)
         if self.output is not None:
             step = self.rate_limit * dt
-            output = float(np.clip(output, self.output - step, self.output + step))
+            output = clip(output, self.output - step, self.output + step)
         self.output = output
         return output

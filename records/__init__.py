@@ -32,7 +32,7 @@ from records.names import (
     one_of,
     unknown_name,
 )
-from records.tick import N_ACTIONS, Actuation, Command, LateralProfile, Reference
+from records.tick import N_ACTIONS, Actuation, Command, LateralProfile, Reference, clip
 from records.world import EgoState, Lane, Neighbour, WorldState, lane_curvature
 
 __all__ = [
@@ -66,6 +66,7 @@ __all__ = [
     "Reference",
     "WorldState",
     "child_seed",
+    "clip",
     "drawn_seed",
     "lane_code_bits",
     "SIDE_LANES_SEEN",

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -101,15 +102,19 @@ class WorldState:
 
     def ego_state(self) -> EgoState:
         """The ego in the reference lane's frame, where `d` is measured, with that lane's curvature."""
-        s, reference = float(self.s[0]), self.lanes[0]
-        return EgoState(
-            d=float(self.d[0]),
-            heading=float(self.heading[0]) - reference.heading_at(s),
-            speed=float(self.speed[0]),
-            curvature=lane_curvature(reference, s),
-            lateral_speed=self.ego_lateral_speed,
-            yaw_rate=self.ego_yaw_rate,
-        )
+        kept = _kept(self)
+        cached = kept.get("ego_state")
+        if cached is None:
+            s, reference = float(self.s[0]), self.lanes[0]
+            cached = kept["ego_state"] = EgoState(
+                d=float(self.d[0]),
+                heading=float(self.heading[0]) - reference.heading_at(s),
+                speed=float(self.speed[0]),
+                curvature=lane_curvature(reference, s),
+                lateral_speed=self.ego_lateral_speed,
+                yaw_rate=self.ego_yaw_rate,
+            )
+        return cached
 
     def lateral_extent(self) -> np.ndarray:
         """Each other vehicle's footprint width across the road [m]: its rectangle turned by its
@@ -120,7 +125,54 @@ class WorldState:
 
     def neighbours(self, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
         """(closest vehicle ahead, closest vehicle behind) of the ego among those whose footprint
-        (`lateral_extent`) reaches into `lane`; ahead/behind by centre position along the road."""
+        (`lateral_extent`) reaches into `lane`; ahead/behind by centre position along the road.
+
+        Every lane's rows are found at once, on the first query, and kept for the snapshot (which,
+        like every record, is never changed once made) while it lives."""
+        kept = _kept(self)
+        cache = kept.get("neighbours")
+        if cache is None:
+            cache = kept["neighbours"] = {}
+        found = cache.get(lane)
+        if found is None:
+            found = cache[lane] = self._neighbours_from_table(lane)
+        return found
+
+    def _neighbours_from_table(self, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
+        kept = _kept(self)
+        if "table" not in kept:
+            kept["table"] = self._neighbour_rows()
+        table = kept["table"]
+        lanes = len(self.lane_offsets)
+        if table is None or not -lanes <= lane < lanes:
+            return self._neighbours_of(lane)
+        rows, found, gap, speed = table
+        ahead, behind = (
+            Neighbour(gap[rows[side][lane]], speed[rows[side][lane]]) if found[side][lane] else None
+            for side in (0, 1)
+        )
+        return ahead, behind
+
+    def _neighbour_rows(self) -> tuple[list[list[int]], list[list[bool]], list[float], list[float]] | None:
+        """For each side (ahead, behind) and lane, the row (among the others) `_neighbours_of`
+        picks and whether there is one, with every other vehicle's gap and speed; as array
+        operations over all lanes at once (None where an infinite distance could tie with the
+        fill value, then `_neighbours_of` answers)."""
+        if self.count < 2:
+            return None
+        rel_s = self.s[1:] - self.s[0]
+        distance = np.abs(rel_s)
+        if np.isinf(distance).any():
+            return None
+        in_lane = (
+            np.abs(self.d[1:] - self.lane_offsets[:, None]) < (self.lane_width + self.lateral_extent()) / 2
+        )
+        candidates = in_lane[None, :, :] & np.stack([rel_s > 0, rel_s <= 0])[:, None, :]
+        rows = np.where(candidates, distance, np.inf).argmin(axis=2)
+        gap = distance - (self.length[1:] + self.length[0]) / 2
+        return rows.tolist(), candidates.any(axis=2).tolist(), gap.tolist(), self.speed[1:].tolist()
+
+    def _neighbours_of(self, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
         rel_s = self.s[1:] - self.s[0]
         gap = np.abs(rel_s) - (self.length[1:] + self.length[0]) / 2
         in_lane = np.abs(self.d[1:] - self.lane_offsets[lane]) < (self.lane_width + self.lateral_extent()) / 2
@@ -138,3 +190,17 @@ class WorldState:
         """For each lane in `lanes`, the closest vehicle ahead reaching into it (none if nobody)."""
         ahead = (self.neighbours(lane)[0] for lane in lanes)
         return tuple(leader for leader in ahead if leader is not None)
+
+
+_KEPT: dict[int, dict[str, Any]] = {}
+"""What a `WorldState` derived once (ego state, neighbours), by the snapshot's id while it lives.
+Kept beside the record, not in it, so its `__dict__` stays its fields (`type(w)(**w.__dict__)`,
+`dataclasses.replace`, pickling and copies see none of it)."""
+
+
+def _kept(world: WorldState) -> dict[str, Any]:
+    kept = _KEPT.get(id(world))
+    if kept is None:
+        kept = _KEPT[id(world)] = {}
+        weakref.finalize(world, _KEPT.pop, id(world), None)
+    return kept

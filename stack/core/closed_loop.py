@@ -24,7 +24,6 @@ from records import Actuation, Command, GridConfig, WorldState
 from stack.core.config import RunConfig, grid_config
 from stack.core.metrics import EpisodeRecorder, EpisodeResult
 from stack.core.safety_metrics import SafetyMonitor
-from stack.core.video import command_text, video_frame
 
 SNAPSHOT_TIME_S = 10.0
 """Each episode keeps the (world, grid) of its first decision at or after this time [s]."""
@@ -190,6 +189,8 @@ class ClosedLoop:
 
     def frame(self) -> np.ndarray:
         """This tick's video frame: caption, road view, and the grid on the road's scale."""
+        from stack.core.video import command_text, video_frame  # matplotlib: loaded only for a video
+
         assert self.grid is not None, "frames are drawn after the first perceive()"
         config, world, maneuver = self.config, self.world, self.maneuver
         lane = f"lane {maneuver.lane}" + (f" -> {maneuver.target}" if maneuver.changing_lane else "")

@@ -2,16 +2,19 @@
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
 
 from planner.agents import Agent, decide
 from planner.factory import make_agent, model_label, model_path
-from records import child_seed
+from records import LEARNED_AGENTS, child_seed
 from stack.core.closed_loop import ClosedLoop, grid_config
 from stack.core.config import RunConfig, road_mismatch
 from stack.core.executors import completed
@@ -61,16 +64,73 @@ class RunResults:
 
 
 def run_episode(config: RunConfig, episode: int, frames: list[np.ndarray] | None = None) -> EpisodeResult:
-    """Episode `episode` of `config` (seed = config.seed + episode), with a fresh env and agent so
-    its result does not depend on which process runs it or what ran before; `frames`, when
-    given, collects the rendered frames."""
+    """Episode `episode` of `config` (seed = config.seed + episode); `frames`, when given, collects
+    the rendered frames. Its result does not depend on which process runs it or what ran before:
+    the env a process keeps for a config is reset with the episode's seed (highway-env then
+    rebuilds the road and reseeds every draw), and the learned agents it keeps are greedy,
+    stateless policies over a model file that has not changed since it was checked."""
     seed = child_seed(config.seed, episode)
-    agent = build_agent(config, seed)
-    with HighwayAdapter(
-        config.highway, config.sim.backend, render=frames is not None, plant=config.sim.plant
-    ) as adapter:
-        loop = ClosedLoop(config, adapter, frames, grid=agent.grid_config)
-        return run_agent_episode(loop, agent, episode, seed)
+    agent = kept_agent(config, seed)
+    if frames is not None:
+        with HighwayAdapter(
+            config.highway, config.sim.backend, render=True, plant=config.sim.plant
+        ) as adapter:
+            loop = ClosedLoop(config, adapter, frames, grid=agent.grid_config)
+            return run_agent_episode(loop, agent, episode, seed)
+    loop = ClosedLoop(config, kept_adapter(config), grid=agent.grid_config)
+    return run_agent_episode(loop, agent, episode, seed)
+
+
+KEPT_PER_PROCESS = 4
+"""Envs, and agents, a process keeps for the configs it ran last (a sweep's worker runs several)."""
+_adapters: OrderedDict[tuple[str, ...], HighwayAdapter] = OrderedDict()
+_agents: OrderedDict[tuple[object, ...], Agent] = OrderedDict()
+
+
+def kept_adapter(config: RunConfig) -> HighwayAdapter:
+    """This process's env for `config`'s road, backend and plant (made on first use)."""
+    key = (config.highway.model_dump_json(), config.sim.backend, config.sim.plant)
+    adapter = _adapters.get(key)
+    if adapter is None:
+        adapter = HighwayAdapter(config.highway, config.sim.backend, plant=config.sim.plant)
+        _keep(_adapters, key, adapter).close()
+    _adapters.move_to_end(key)
+    return adapter
+
+
+def kept_agent(config: RunConfig, seed: int) -> Agent:
+    """`build_agent(config, seed)`; a learned agent (or an oracle over one) comes from this
+    process's cache while its model file is unchanged: the seed does not reach it."""
+    planner = config.planner
+    learned = planner.agent if planner.agent != "oracle" else planner.oracle.base
+    path = model_path(learned, planner.model if planner.agent != "oracle" else None, config.scenario)
+    if learned not in LEARNED_AGENTS or path is None:
+        return build_agent(config, seed)
+    try:
+        stat = Path(path).stat()
+    except OSError:
+        return build_agent(config, seed)
+    road = config.model_dump_json(include={"planner", "perception", "highway", "scenario"})
+    key = (road, str(path), stat.st_mtime_ns, stat.st_size, stat.st_ino)
+    agent = _agents.get(key)
+    if agent is None:
+        agent = build_agent(config, seed)
+        _keep(_agents, key, agent)
+    _agents.move_to_end(key)
+    return agent
+
+
+def _keep(kept: OrderedDict, key: Any, value: Any) -> Any:
+    """Keep `value` under `key`, at most `KEPT_PER_PROCESS` entries; the one dropped (or a dummy)."""
+    kept[key] = value
+    if len(kept) > KEPT_PER_PROCESS:
+        return kept.popitem(last=False)[1]
+    return _Nothing()
+
+
+class _Nothing:
+    def close(self) -> None:
+        pass
 
 
 def run(

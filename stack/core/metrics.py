@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -146,6 +147,15 @@ class EpisodeRecorder:
         self.d_reference: list[float] = []
         self.steering: list[float] = []
         self._record_world(world)
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> EpisodeRecorder:
+        """A copy that records on independently: its containers hold numbers only, so copying the
+        containers is a deep copy (without visiting every number; the oracle copies the loop at
+        every branch)."""
+        copied = copy.copy(self)
+        copied.__dict__.update({name: copy.copy(value) for name, value in self.__dict__.items()})
+        memo[id(self)] = copied
+        return copied
 
     def record(self, world: WorldState, reference: Reference, actuation: Actuation) -> None:
         """One tick: what it tracked, what it commanded, and the world it led to."""

@@ -67,7 +67,7 @@ class Oracle(Policy):
             command, loop.perceived, loop.maneuver.lane
         ):
             return -math.inf
-        future = copy.deepcopy(loop, {id(loop.frames): None})
+        future = copy.deepcopy(loop, _shared(loop))
         future.act(command)
         if future.crashed:
             return -math.inf
@@ -80,3 +80,14 @@ class Oracle(Policy):
             grid = future.perceive()
             future.act(decide(self.base, grid.encode(self.base.encoding)))
         return -math.inf if future.crashed else float(future.world.s[0]) - start_s
+
+
+def _shared(loop: ClosedLoop) -> dict[int, object]:
+    """The deep copy's memo: the loop's frames left out, and what no step changes shared with the
+    copy rather than copied: the config and the world snapshots (records, never changed once made)."""
+    memo: dict[int, object] = {id(loop.frames): None, id(loop.config): loop.config}
+    snapshot = loop.snapshot[0] if loop.snapshot is not None else None
+    for world in (loop.world, loop.perceived, snapshot):
+        if world is not None:
+            memo[id(world)] = world
+    return memo

@@ -40,6 +40,8 @@ R157_TIME_GAP = ((7.2, 1.0), (10.0, 1.1), (20.0, 1.2), (30.0, 1.3), (40.0, 1.4),
 R157_MIN_SPEED_MPS = 7.2 / 3.6
 """The table starts at 7.2 km/h [m/s]."""
 
+_R157_KMH, _R157_GAP = (np.array(column, dtype=float) for column in zip(*R157_TIME_GAP, strict=True))
+
 AT_FAULT_KINDS = ("front", "stopped vehicle", "lane change", "off road")
 NOT_AT_FAULT_KINDS = ("ego stopped", "rear", "side swipe")
 
@@ -48,8 +50,7 @@ def r157_min_following_distance(speed: float) -> float:
     """d_min = v * t_front(v) [m] at `speed` [m/s]; 0 below 7.2 km/h, where R157 sets none."""
     if speed < R157_MIN_SPEED_MPS:
         return 0.0
-    kmh, gap = zip(*R157_TIME_GAP, strict=True)
-    return speed * float(np.interp(speed * 3.6, kmh, gap))
+    return speed * float(np.interp(speed * 3.6, _R157_KMH, _R157_GAP))
 
 
 def footprint_lateral_extent(world: WorldState) -> tuple[float, float]:
@@ -70,14 +71,22 @@ def road_edges(world: WorldState) -> tuple[float, float]:
 
 def departed(world: WorldState) -> bool:
     """A footprint corner lies more than DEPARTURE_TOLERANCE_M beyond the road edges."""
-    low, high = footprint_lateral_extent(world)
+    return _departed(world, footprint_lateral_extent(world))
+
+
+def _departed(world: WorldState, extent: tuple[float, float]) -> bool:
+    low, high = extent
     edge_low, edge_high = road_edges(world)
     return bool(low < edge_low - DEPARTURE_TOLERANCE_M or high > edge_high + DEPARTURE_TOLERANCE_M)
 
 
 def occupied_lanes(world: WorldState) -> tuple[int, ...]:
     """The lanes the ego's footprint reaches into."""
-    low, high = footprint_lateral_extent(world)
+    return _occupied_lanes(world, footprint_lateral_extent(world))
+
+
+def _occupied_lanes(world: WorldState, extent: tuple[float, float]) -> tuple[int, ...]:
+    low, high = extent
     half = world.lane_width / 2
     return tuple(
         lane for lane, centre in enumerate(world.lane_offsets) if low < centre + half and high > centre - half
@@ -139,9 +148,10 @@ class SafetyMonitor:
     def record(self, world: WorldState, changing_lane: bool) -> None:
         if world.crashed[0] and self.collision is None:
             self.collision = classify_collision(world, changing_lane)
-        self.road_departure = self.road_departure or departed(world)
+        extent = footprint_lateral_extent(world)
+        self.road_departure = self.road_departure or _departed(world, extent)
         v = float(world.speed[0])
-        for lane in occupied_lanes(world):
+        for lane in _occupied_lanes(world, extent):
             leader = world.neighbours(lane)[0]
             if leader is not None and leader.gap > 0 and v > leader.speed:
                 self.min_ttc_s = min(self.min_ttc_s, leader.gap / (v - leader.speed))

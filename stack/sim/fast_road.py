@@ -38,12 +38,26 @@ LaneIndex = tuple[str, str, int]
 """highway-env's lane index: (from node, to node, lane id)."""
 
 
+_SUBCLASS: dict[tuple[type, type], bool] = {}
+
+
+def is_kind(cls: type, base: type) -> bool:
+    """`issubclass(cls, base)`, remembered: `isinstance` by an object's type, for every object of
+    every frame."""
+    known = _SUBCLASS.get((cls, base))
+    if known is None:
+        known = _SUBCLASS[cls, base] = issubclass(cls, base)
+    return known
+
+
 class LaneProjections:
     """Per-frame cache: every road object projected on each queried lane."""
 
     def __init__(self, road: Road) -> None:
         self.road = road
-        self.objects = [o for o in road.vehicles + road.objects if not isinstance(o, Landmark)]
+        candidates = road.vehicles + road.objects
+        landmarks = {cls for cls in set(map(type, candidates)) if is_kind(cls, Landmark)}
+        self.objects = [o for o in candidates if type(o) not in landmarks] if landmarks else candidates
         self.row = {id(o): i for i, o in enumerate(self.objects)}
         self.position = np.array([o.position for o in self.objects], dtype=float).reshape(-1, 2)
         self.lanes: dict[LaneIndex, tuple[list[float], list[int]]] = {}
@@ -184,28 +198,57 @@ class FastRoad(Road):
         self._collide(dt)
 
     def _collide(self, dt: float) -> None:
-        """Stock's collision loop, over the broad phase's candidate pairs only."""
-        partners = self._collision_candidates(dt)
-        for i, vehicle in enumerate(self.vehicles):
-            for j in partners.get(i, ()):
-                vehicle.handle_collisions(self.vehicles[j], dt)
-            for other in self.objects:
+        """Stock's collision loop (each vehicle against the later vehicles, then the objects), over
+        the broad phase's candidate pairs only."""
+        vehicles, objects = self.vehicles, self.objects
+        pairs = self._collision_pairs(dt).tolist()
+        if not objects:
+            for i, j in pairs:
+                vehicles[i].handle_collisions(vehicles[j], dt)
+            return
+        k = 0
+        for i, vehicle in enumerate(vehicles):
+            while k < len(pairs) and pairs[k][0] == i:
+                vehicle.handle_collisions(vehicles[pairs[k][1]], dt)
+                k += 1
+            for other in objects:
                 vehicle.handle_collisions(other, dt)
 
-    def _collision_candidates(self, dt: float) -> dict[int, list[int]]:
-        """For each vehicle i, the later vehicles j > i (ascending, as the stock loop visits
-        them) that pass highway-env's spherical pre-check."""
-        partners: dict[int, list[int]] = {}
-        if len(self.vehicles) < 2:
-            return partners
-        position = np.array([v.position for v in self.vehicles], dtype=float)
-        diagonal = np.array([v.diagonal for v in self.vehicles], dtype=float)
-        speed = np.array([v.speed for v in self.vehicles], dtype=float)
-        distance = np.hypot(*(position[None, :, :] - position[:, None, :]).transpose(2, 0, 1))
-        reach = (diagonal[:, None] + diagonal[None, :]) / 2 + speed[:, None] * dt + BROAD_PHASE_MARGIN
-        for i, j in zip(*np.nonzero(np.triu(distance <= reach, k=1)), strict=True):
-            partners.setdefault(int(i), []).append(int(j))
-        return partners
+    def _collision_pairs(self, dt: float) -> np.ndarray:
+        """The pairs (i, j), i < j, of vehicles that pass highway-env's spherical pre-check, in the
+        order the stock loop visits them (by i, then j), as an (n, 2) array."""
+        count = len(self.vehicles)
+        if count < 2:
+            return np.empty((0, 2), dtype=int)
+        vehicles = self.vehicles
+        x, y = np.array([v.position for v in vehicles], dtype=float).T.copy()
+        diagonal = np.array([v.diagonal for v in vehicles], dtype=float)
+        return broad_phase(x, y, diagonal, np.array([v.speed for v in vehicles], dtype=float), dt)
+
+
+def broad_phase(
+    x: np.ndarray, y: np.ndarray, diagonal: np.ndarray, speed: np.ndarray, dt: float
+) -> np.ndarray:
+    """The pairs (i, j), i < j, of vehicles at (x, y) [m] of `diagonal` [m] and `speed` [m/s] within
+    highway-env's spherical pre-check distance over `dt` [s], by i then j, as an (n, 2) array."""
+    first, second = _upper_pairs(len(x))
+    distance = np.hypot(x[second] - x[first], y[second] - y[first])
+    reach = (diagonal[first] + diagonal[second]) / 2 + speed[first] * dt + BROAD_PHASE_MARGIN
+    near = np.flatnonzero(distance <= reach)
+    return np.stack([first[near], second[near]], axis=1)
+
+
+_UPPER_PAIRS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _upper_pairs(count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair (i, j), i < j < count, in row-major order (`np.triu_indices`), kept per count."""
+    pairs = _UPPER_PAIRS.get(count)
+    if pairs is None:
+        if len(_UPPER_PAIRS) > 64:
+            _UPPER_PAIRS.clear()
+        pairs = _UPPER_PAIRS[count] = np.triu_indices(count, k=1)
+    return pairs
 
 
 class FastHighwayEnv(ScenarioTraffic):

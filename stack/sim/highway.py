@@ -6,7 +6,9 @@ It creates highway-v0 with `ContinuousAction` and `policy_frequency == simulatio
 
 from __future__ import annotations
 
+import math
 import os
+import weakref
 from typing import cast
 
 os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")  # "dummy" makes highway-env skip drawing
@@ -54,7 +56,14 @@ def env_config(highway: HighwayConfig, plant: PlantName = "kinematic") -> dict:
 
 def to_env_action(actuation: Actuation) -> np.ndarray:
     """Physical [acceleration m/s^2, steering rad] -> ContinuousAction's normalised [-1, 1]^2."""
-    return np.clip([actuation.acceleration / MAX_ACCELERATION, actuation.steering / MAX_STEERING], -1.0, 1.0)
+    return np.array(
+        [_unit(actuation.acceleration / MAX_ACCELERATION), _unit(actuation.steering / MAX_STEERING)]
+    )
+
+
+def _unit(x: float) -> float:
+    """`x` clipped to [-1, 1] as `np.clip` clips it (NaN stays NaN)."""
+    return min(max(x, -1.0), 1.0)
 
 
 class HighwayAdapter:
@@ -77,6 +86,8 @@ class HighwayAdapter:
             render_mode="rgb_array" if render else None,
             disable_env_checker=True,
         )
+        self.road_env: AbstractEnv = self.env.unwrapped
+        self.renders = render
         self.terminated = False
         self.truncated = False
 
@@ -88,8 +99,20 @@ class HighwayAdapter:
         return self.snapshot()
 
     def step(self, actuation: Actuation) -> WorldState:
-        """Apply one actuation for one physics frame."""
-        _, _, self.terminated, self.truncated, _ = self.env.step(to_env_action(actuation))
+        """Apply one actuation for one physics frame.
+
+        Unless it renders, the env steps without the work whose result the stack discards: its
+        `step` is `time`, `_simulate`, observation, reward, the end flags and the info dict (which
+        computes the rewards again); only `time`, `_simulate` and the end flags change or read the
+        world, so the road evolves exactly as through `env.step`."""
+        action = to_env_action(actuation)
+        if self.renders:
+            _, _, self.terminated, self.truncated, _ = self.env.step(action)
+        else:
+            env = self.road_env
+            env.time += 1 / env.config["policy_frequency"]
+            env._simulate(action)
+            self.terminated, self.truncated = env._is_terminated(), env._is_truncated()
         return self.snapshot()
 
     @property
@@ -141,8 +164,8 @@ def snapshot(road: Road, ego: Vehicle, time: float, lanes_count: int | None = No
     lanes are driven (an exit lane that opens for a while is not)."""
     road_vehicles = road.vehicles
     ego_index = road_vehicles.index(ego)
-    order = [ego_index] + [i for i in range(len(road_vehicles)) if i != ego_index]
-    vehicles = [road_vehicles[i] for i in order]
+    order = [ego_index, *range(ego_index), *range(ego_index + 1, len(road_vehicles))]
+    vehicles = [ego, *road_vehicles[:ego_index], *road_vehicles[ego_index + 1 :]]
     start, end, _ = ego.lane_index
     lanes = tuple(road.network.graph[start][end])[:lanes_count]
     reference = lanes[0]
@@ -150,9 +173,7 @@ def snapshot(road: Road, ego: Vehicle, time: float, lanes_count: int | None = No
     heading = np.array([v.heading for v in vehicles], dtype=float)
     speed = np.array([v.speed for v in vehicles], dtype=float)
     s, d = _lane_frame(reference, position)
-    s_ego = float(s[0])
     lateral_speed, yaw_rate = _body_rates(ego)
-    lane_offsets = np.array([reference.local_coordinates(lane.position(s_ego, 0.0))[1] for lane in lanes])
     return WorldState(
         time=time,
         ids=np.array(order),
@@ -167,9 +188,41 @@ def snapshot(road: Road, ego: Vehicle, time: float, lanes_count: int | None = No
         d=d,
         crashed=np.array([v.crashed for v in vehicles], dtype=bool),
         lanes=lanes,
-        lane_offsets=lane_offsets,
+        lane_offsets=_lane_offsets(lanes, float(s[0])),
         ego_lateral_speed=lateral_speed,
         ego_yaw_rate=yaw_rate,
+    )
+
+
+_STEADY_OFFSETS: weakref.WeakKeyDictionary[AbstractLane, tuple[tuple[weakref.ref, ...], np.ndarray]] = (
+    weakref.WeakKeyDictionary()
+)
+"""Lane offsets that do not depend on s, by reference lane: (the lanes, the offsets)."""
+
+
+def _lane_offsets(lanes: tuple[AbstractLane, ...], s: float) -> np.ndarray:
+    """Lateral offset [m] of each lane's centre at `s` in the frame of `lanes[0]`. On straight lanes
+    whose axes are the coordinate axes every product is by 0 or +-1, so the offset is the same bits
+    at any finite s, and is computed once per set of lanes."""
+    reference = lanes[0]
+    steady = _STEADY_OFFSETS.get(reference)
+    if (
+        steady is not None
+        and math.isfinite(s)
+        and len(steady[0]) == len(lanes)
+        and all(ref() is lane for ref, lane in zip(steady[0], lanes, strict=True))
+    ):
+        return steady[1].copy()
+    offsets = np.array([reference.local_coordinates(lane.position(s, 0.0))[1] for lane in lanes])
+    if math.isfinite(s) and all(type(lane) is StraightLane and _on_axes(lane) for lane in lanes):
+        _STEADY_OFFSETS[reference] = (tuple(weakref.ref(lane) for lane in lanes), offsets.copy())
+    return offsets
+
+
+def _on_axes(lane: StraightLane) -> bool:
+    """Whether the lane's direction and its normal are coordinate axes (+-1 and 0 components)."""
+    return all(
+        sorted(np.abs(axis).tolist()) == [0.0, 1.0] for axis in (lane.direction, lane.direction_lateral)
     )
 
 

@@ -8,7 +8,7 @@ from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import RoadObject
 
-from stack.sim.fast_road import LaneProjections
+from stack.sim.fast_road import LaneProjections, is_kind
 from stack.sim.vector.lanes import LaneTable, not_zero
 
 
@@ -21,11 +21,16 @@ class TrafficFrame:
         objects = projections.objects
         self.projections, self.lanes = projections, lanes
         self.position = projections.position
+        lane_row = lanes.row
         self.heading = np.array([o.heading for o in objects], dtype=float)
         self.speed = np.array([o.speed for o in objects], dtype=float)
         self.target_speed = np.array([getattr(o, "target_speed", 0) for o in objects], dtype=float)
-        self.is_vehicle = np.array([isinstance(o, Vehicle) for o in objects], dtype=bool)
-        self.lane = np.array([lanes.row.get(o.lane_index, 0) for o in objects], dtype=int)
+        kinds = {cls: is_kind(cls, Vehicle) for cls in set(map(type, objects))}
+        if all(kinds.values()):
+            self.is_vehicle = np.ones(len(objects), dtype=bool)
+        else:
+            self.is_vehicle = np.array([kinds[type(o)] for o in objects], dtype=bool)
+        self.lane = np.array([lane_row.get(o.lane_index, 0) for o in objects], dtype=int)
         self.direction = np.stack([np.cos(self.heading), np.sin(self.heading)], axis=1)
         self.velocity = self.speed[:, None] * self.direction
         self.s, self.r = lanes.along(self.position), lanes.across(self.position)
@@ -75,12 +80,21 @@ class TrafficFrame:
         does."""
         acceleration = np.zeros(len(ego))
         valid = (ego >= 0) & self.is_vehicle[ego]
-        if not valid.any():
+        every = bool(valid.all())
+        if not every and not valid.any():
             return acceleration
-        e, f, delta, distance_wanted = ego[valid], front[valid], delta[valid], distance_wanted[valid]
+        e, f = (ego, front) if every else (ego[valid], front[valid])
+        if not every:
+            delta, distance_wanted = delta[valid], distance_wanted[valid]
         speed = self.speed[e]
         limit = self.lanes.speed_limit[self.lane[e]]
-        desired = np.where(np.isnan(limit), self.target_speed[e], np.clip(self.target_speed[e], 0, limit))
+        target = self.target_speed[e]
+        if self.lanes.limited:
+            # np.clip(target, 0, limit) as two ufuncs; a -0 target (the only tie with the bound 0
+            # that could keep its sign) gives the same IDM term, as not_zero maps both zeros alike
+            desired = np.minimum(np.maximum(target, 0.0), limit)
+        else:
+            desired = np.where(np.isnan(limit), target, np.clip(target, 0, limit))
         free = IDMVehicle.COMFORT_ACC_MAX * (
             1 - np.power(np.maximum(speed, 0) / np.abs(not_zero(desired)), delta)
         )
@@ -93,5 +107,7 @@ class TrafficFrame:
             desired_gap = jam + led_speed * IDMVehicle.TIME_WANTED + led_speed * closing / (2 * np.sqrt(ab))
             gap = self.s[f] - self.s[e]
             free[led] -= IDMVehicle.COMFORT_ACC_MAX * np.power(desired_gap / not_zero(gap), 2)
+        if every:
+            return free
         acceleration[valid] = free
         return acceleration

@@ -19,6 +19,12 @@ def not_zero(x: np.ndarray) -> np.ndarray:
     return np.where(np.abs(x) > NOT_ZERO, x, np.where(x >= 0, NOT_ZERO, -NOT_ZERO))
 
 
+def clip(x: np.ndarray, bound: float) -> np.ndarray:
+    """`np.clip(x, -bound, bound)` for a `bound` > 0, as two ufuncs: the same bits (NaN stays NaN;
+    no tie with a bound of the other sign of zero can arise), without `np.clip`'s dispatch."""
+    return np.minimum(np.maximum(x, -bound), bound)
+
+
 def wrap_to_pi(x: np.ndarray) -> np.ndarray:
     return ((x + np.pi) % (2 * np.pi)) - np.pi
 
@@ -49,6 +55,8 @@ class LaneTable:
         self.speed_limit = np.array(
             [np.nan if lane.speed_limit is None else lane.speed_limit for lane in self.lanes], dtype=float
         )
+        self.limited = not bool(np.isnan(self.speed_limit).any())
+        """Every lane has a speed limit."""
 
     @staticmethod
     def fit(network: RoadNetwork) -> LaneTable | None:

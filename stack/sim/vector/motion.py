@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from operator import attrgetter
+
 import numpy as np
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
@@ -30,55 +33,74 @@ def steps_like_vehicle(cls: type) -> bool:
 
 def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: bool) -> None:
     """`Vehicle.step(dt)` of every mover: clip, integrate, apply impacts, find the lane."""
-    for v in movers:
+    impacted = []
+    for i, v in enumerate(movers):
         if type(v).step is IDMVehicle.step:
             v.timer += dt
         if v.crashed:
             v.action["steering"] = 0
             v.action["acceleration"] = -1.0 * v.speed
-    speed = np.array([v.speed for v in movers], dtype=float)
-    steering = np.array([float(v.action["steering"]) for v in movers], dtype=float)
-    acceleration = np.array([float(v.action["acceleration"]) for v in movers], dtype=float)
-    max_speed = np.array([v.MAX_SPEED for v in movers], dtype=float)
-    min_speed = np.array([v.MIN_SPEED for v in movers], dtype=float)
+        if v.impact is not None:
+            impacted.append(i)
+    speed, max_speed, min_speed, heading, length = (
+        column(movers, name) for name in ("speed", "MAX_SPEED", "MIN_SPEED", "heading", "LENGTH")
+    )
+    steering = np.array([v.action["steering"] for v in movers], dtype=float)
+    acceleration = np.array([v.action["acceleration"] for v in movers], dtype=float)
     too_fast, too_slow = speed > max_speed, speed < min_speed
     slow_down, speed_up = 1.0 * (max_speed - speed), 1.0 * (min_speed - speed)
     acceleration = np.where(too_fast & (slow_down < acceleration), slow_down, acceleration)
     acceleration = np.where(~too_fast & too_slow & (speed_up > acceleration), speed_up, acceleration)
 
     position = np.array([v.position for v in movers], dtype=float)
-    heading = np.array([v.heading for v in movers], dtype=float)
-    length = np.array([v.LENGTH for v in movers], dtype=float)
     beta = np.arctan(1 / 2 * np.tan(steering))
     position[:, 0] += speed * np.cos(heading + beta) * dt
     position[:, 1] += speed * np.sin(heading + beta) * dt
-    for i, v in enumerate(movers):
-        if v.impact is not None:
-            position[i] += v.impact
-            v.crashed = True
-            v.impact = None
+    for i in impacted:
+        v = movers[i]
+        position[i] += v.impact
+        v.crashed = True
+        v.impact = None
     heading = heading + speed * np.sin(beta) / (length / 2) * dt
     speed = speed + acceleration * dt
     rows = lanes.closest(position, heading).tolist()
-    states = zip(heading.tolist(), speed.tolist(), acceleration.tolist(), steering.tolist(), strict=True)
-    for v, xy, (h, u, a, steer), row in zip(movers, position, states, rows, strict=True):
-        v.action["steering"], v.action["acceleration"] = steer, a
-        v.position[:] = xy
+    x, y = position.T.tolist()
+    states = zip(
+        x, y, heading.tolist(), speed.tolist(), acceleration.tolist(), steering.tolist(), rows, strict=True
+    )
+    indices, table = lanes.indices, lanes.lanes
+    for v, (x_, y_, h, u, a, steer, row) in zip(movers, states, strict=True):
+        action = v.action
+        action["steering"], action["acceleration"] = steer, a
+        xy = v.position
+        xy[0], xy[1] = x_, y_
         v.heading, v.speed = h, u
-        v.lane_index, v.lane = lanes.indices[row], lanes.lanes[row]
+        v.lane_index, v.lane = indices[row], table[row]
         if record_history:
             v.history.appendleft(v.create_from(v))
 
 
-def separated(vehicles: list[Vehicle], pairs: np.ndarray, dt: float) -> np.ndarray:
+class Footprints:
+    """Every vehicle's centre (x, y) [m], heading [rad], speed [m/s], length, width and diagonal [m]."""
+
+    def __init__(self, vehicles: list[Vehicle]) -> None:
+        self.x, self.y = np.array([v.position for v in vehicles], dtype=float).T.copy()
+        self.heading, self.speed, self.length, self.width, self.diagonal = (
+            column(vehicles, name) for name in ("heading", "speed", "LENGTH", "WIDTH", "diagonal")
+        )
+
+
+def column(objects: Sequence[object], name: str) -> np.ndarray:
+    """The attribute `name` of every object, as floats."""
+    return np.array(list(map(attrgetter(name), objects)), dtype=float)
+
+
+def separated(vehicles: Footprints, pairs: np.ndarray, dt: float) -> np.ndarray:
     """For each pair (i, j) of `pairs`, whether their rectangles, swept by their relative
     displacement over `dt`, are apart by `SEPARATION_MARGIN` along one of their own axes: there
     highway-env's separating-axis test finds the same gap, so neither impact nor crash follows."""
-    x, y = np.array([v.position for v in vehicles], dtype=float).T
-    heading = np.array([v.heading for v in vehicles], dtype=float)
-    speed = np.array([v.speed for v in vehicles], dtype=float)
-    half_length = np.array([v.LENGTH for v in vehicles], dtype=float) / 2
-    half_width = np.array([v.WIDTH for v in vehicles], dtype=float) / 2
+    x, y, heading, speed = vehicles.x, vehicles.y, vehicles.heading, vehicles.speed
+    half_length, half_width = vehicles.length / 2, vehicles.width / 2
     cos, sin = np.cos(heading), np.sin(heading)
     a, b = pairs[:, 0], pairs[:, 1]
     axis_x = np.stack([cos[a], -sin[a], cos[b], -sin[b]])

@@ -27,11 +27,16 @@ from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import RoadObject
 
-from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections
+from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections, broad_phase
 from stack.sim.traffic import ScenarioTraffic
 from stack.sim.vector.frame import TrafficFrame
-from stack.sim.vector.lanes import LaneTable, not_zero, wrap_to_pi
-from stack.sim.vector.motion import move, separated, steps_like_vehicle
+from stack.sim.vector.lanes import LaneTable, clip, not_zero, wrap_to_pi
+from stack.sim.vector.motion import Footprints, column, move, separated, steps_like_vehicle
+
+
+def _plain_velocity(cls: type) -> bool:
+    """Whether objects of `cls` move along their heading at their speed (the vectorised kinematics)."""
+    return cls.velocity is Vehicle.velocity or cls.velocity is RoadObject.velocity  # type: ignore[attr-defined]
 
 
 class VectorRoad(FastRoad):
@@ -46,10 +51,7 @@ class VectorRoad(FastRoad):
         assert lanes is not True
         if lanes is None or self.neighbour_vehicles_connected_lanes:
             return None
-        plain = all(
-            type(o).velocity is Vehicle.velocity or type(o).velocity is RoadObject.velocity
-            for o in self.vehicles
-        )
+        plain = all(map(_plain_velocity, set(map(type, self.vehicles))))
         return lanes if plain else None
 
     def act(self) -> None:
@@ -61,19 +63,12 @@ class VectorRoad(FastRoad):
         try:
             frame = TrafficFrame(projections, lanes)
             drivers = [v for v in self.vehicles if type(v) is IDMVehicle and not v.crashed]
-            at_lane_end = self._at_lane_end(drivers, frame)
-            decisions = self._mobil(
-                [
-                    v
-                    for v in drivers
-                    if id(v) not in at_lane_end
-                    and v.enable_lane_change
-                    and v.lane_index == v.target_lane_index
-                    and v.LANE_CHANGE_DELAY < v.timer
-                    and not v.route
-                ],
-                frame,
-            )
+            if drivers:
+                plan = Drivers(drivers, frame)
+                at_lane_end = plan.at_lane_end()
+                decisions = self._mobil(plan, [id(v) not in at_lane_end for v in drivers])
+            else:
+                at_lane_end, decisions = set(), {}
             for vehicle in self.vehicles:
                 if type(vehicle) is not IDMVehicle or vehicle.crashed:
                     vehicle.act()
@@ -89,44 +84,55 @@ class VectorRoad(FastRoad):
                     ):
                         vehicle.change_lane_policy()
             if drivers:
-                self._drive(drivers, frame)
+                self._drive(plan)
         finally:
             self._projections = None
 
-    @staticmethod
-    def _at_lane_end(drivers: list[IDMVehicle], frame: TrafficFrame) -> set[int]:
-        """ids of the drivers for which `follow_road` moves on to the next lane."""
-        if not drivers:
-            return set()
-        me = np.array([frame.row(v) for v in drivers])
-        target = np.array([frame.lanes.row[v.target_lane_index] for v in drivers])
-        ends = frame.s[me] > frame.lanes.length[target] - StraightLane.VEHICLE_LENGTH / 2
-        return {id(drivers[i]) for i in np.flatnonzero(ends)}
-
-    def _mobil(self, due: list[IDMVehicle], frame: TrafficFrame) -> dict[int, LaneIndex | None]:
-        """`change_lane_policy`'s outcome for drivers due to decide, keyed by id: the side lane MOBIL
-        picks (the last one that passes, as stock overwrites), or None to keep the lane."""
-        decisions: dict[int, LaneIndex | None] = {id(v): None for v in due}
-        pairs = [
-            (v, side) for v in due if abs(v.speed) >= 1 for side in self.network.side_lanes(v.lane_index)
+    def _mobil(self, plan: Drivers, free: list[bool]) -> dict[int, LaneIndex | None]:
+        """`change_lane_policy`'s outcome for the drivers due to decide (not `free` ones: those that
+        follow the road onto the next lane), keyed by id: the side lane MOBIL picks (the last one
+        that passes, as stock overwrites), or None to keep the lane. Also evaluates every driver's
+        IDM acceleration behind its own leader (`plan.own_acceleration`), in the same array call."""
+        frame, drivers = plan.frame, plan.drivers
+        due = [
+            k
+            for k, v in enumerate(drivers)
+            if free[k]
+            and v.enable_lane_change
+            and v.lane_index == v.target_lane_index
+            and v.LANE_CHANGE_DELAY < v.timer
+            and not v.route
         ]
+        decisions: dict[int, LaneIndex | None] = {id(drivers[k]): None for k in due}
+        pairs = [
+            (k, side)
+            for k in due
+            if abs(drivers[k].speed) >= 1
+            for side in self.network.side_lanes(drivers[k].lane_index)
+        ]
+        own = plan.me, plan.own_front, plan.delta, plan.jam
+        if pairs:
+            index = np.array([k for k, _ in pairs], dtype=int)
+            sides = np.array([frame.lanes.row[side] for _, side in pairs], dtype=int)
+            me = plan.me[index]
+            reachable = frame.lanes.reachable(sides, frame.s[me], frame.r[sides, me])
+            pairs = [pair for pair, keep in zip(pairs, reachable.tolist(), strict=True) if keep]
+            index, sides, me = index[reachable], sides[reachable], me[reachable]
         if not pairs:
+            plan.own_acceleration = frame.idm(*own)
             return decisions
-        me = np.array([frame.row(v) for v, _ in pairs])
-        sides = np.array([frame.lanes.row[side] for _, side in pairs])
-        reachable = frame.lanes.reachable(sides, frame.s[me], frame.r[sides, me])
-        if not reachable.any():
-            return decisions
-        candidates = [pair for pair, keep in zip(pairs, reachable.tolist(), strict=True) if keep]
-        me, sides = me[reachable], sides[reachable]
         new_front, new_rear = frame.neighbours(me, sides)
-        own_front, own_rear = frame.neighbours(me, frame.lane[me])
-        delta = np.tile(np.array([v.DELTA for v, _ in candidates], dtype=float), 6)
-        jam = np.tile(np.array([v.DISTANCE_WANTED for v, _ in candidates], dtype=float), 6)
-        egos = np.concatenate([new_rear, new_rear, me, me, own_rear, own_rear])
-        leaders = np.concatenate([new_front, me, new_front, own_front, me, own_front])
-        a = frame.idm(egos, leaders, delta, jam).reshape(6, -1)
-        new_rear_a, new_rear_pred_a, self_pred_a, self_a, own_rear_a, own_rear_pred_a = a
+        own_front, own_rear = plan.own_front[index], plan.own_rear[index]
+        blocks = 6
+        delta = np.concatenate([np.tile(plan.delta[index], blocks), plan.delta])
+        jam = np.concatenate([np.tile(plan.jam[index], blocks), plan.jam])
+        egos = np.concatenate([new_rear, new_rear, me, me, own_rear, own_rear, plan.me])
+        leaders = np.concatenate([new_front, me, new_front, own_front, me, own_front, plan.own_front])
+        a = frame.idm(egos, leaders, delta, jam)
+        plan.own_acceleration = a[blocks * len(me) :]
+        new_rear_a, new_rear_pred_a, self_pred_a, self_a, own_rear_a, own_rear_pred_a = a[
+            : blocks * len(me)
+        ].reshape(blocks, -1)
         gain = (
             self_pred_a
             - self_a
@@ -134,39 +140,34 @@ class VectorRoad(FastRoad):
         )
         unsafe = new_rear_pred_a < -IDMVehicle.LANE_CHANGE_MAX_BRAKING_IMPOSED
         accept = ~unsafe & ~(gain < IDMVehicle.LANE_CHANGE_MIN_ACC_GAIN)
-        for (v, side), yes in zip(candidates, accept.tolist(), strict=True):
+        for (k, side), yes in zip(pairs, accept.tolist(), strict=True):
             if yes:
-                decisions[id(v)] = side
+                decisions[id(drivers[k])] = side
         return decisions
 
-    def _drive(self, drivers: list[IDMVehicle], frame: TrafficFrame) -> None:
+    @staticmethod
+    def _drive(plan: Drivers) -> None:
         """`IDMVehicle.act`'s steering and IDM acceleration of every driver, after its decisions."""
+        frame, drivers, me = plan.frame, plan.drivers, plan.me
         lanes = frame.lanes
-        me = np.array([frame.row(v) for v in drivers])
         heading, speed = frame.heading[me], frame.speed[me]
-        length = np.array([v.LENGTH for v in drivers], dtype=float)
-        target = np.array([lanes.row[v.target_lane_index] for v in drivers])
+        target = np.array([lanes.row[v.target_lane_index] for v in drivers], dtype=int)
         changing = frame.lane[me] != target
 
         r_target = frame.r[target, me]
-        heading_command = np.arcsin(np.clip(-IDMVehicle.KP_LATERAL * r_target / not_zero(speed), -1, 1))
-        heading_ref = lanes.heading[target] + np.clip(heading_command, -np.pi / 4, np.pi / 4)
+        heading_command = np.arcsin(clip(-IDMVehicle.KP_LATERAL * r_target / not_zero(speed), 1))
+        heading_ref = lanes.heading[target] + clip(heading_command, np.pi / 4)
         heading_rate = IDMVehicle.KP_HEADING * wrap_to_pi(heading_ref - heading)
-        slip = np.arcsin(np.clip(length / 2 / not_zero(speed) * heading_rate, -1, 1))
-        steering = np.clip(
-            np.arctan(2 * np.tan(slip)), -IDMVehicle.MAX_STEERING_ANGLE, IDMVehicle.MAX_STEERING_ANGLE
-        )
+        slip = np.arcsin(clip(plan.length / 2 / not_zero(speed) * heading_rate, 1))
+        steering = clip(np.arctan(2 * np.tan(slip)), IDMVehicle.MAX_STEERING_ANGLE)
 
-        delta = np.array([v.DELTA for v in drivers], dtype=float)
-        jam = np.array([v.DISTANCE_WANTED for v in drivers], dtype=float)
-        own_front, _ = frame.neighbours(me, frame.lane[me])
-        acceleration = frame.idm(me, own_front, delta, jam)
+        acceleration = plan.own_acceleration
         if changing.any():
             movers = np.flatnonzero(changing)
             target_front, _ = frame.neighbours(me[movers], target[movers])
-            on_target = frame.idm(me[movers], target_front, delta[movers], jam[movers])
+            on_target = frame.idm(me[movers], target_front, plan.delta[movers], plan.jam[movers])
             acceleration[movers] = np.where(on_target < acceleration[movers], on_target, acceleration[movers])
-        acceleration = np.clip(acceleration, -IDMVehicle.ACC_MAX, IDMVehicle.ACC_MAX)
+        acceleration = clip(acceleration, IDMVehicle.ACC_MAX)
         for v, steer, accel in zip(drivers, steering, acceleration, strict=True):
             v.action = {"steering": steer, "acceleration": accel}
 
@@ -185,16 +186,38 @@ class VectorRoad(FastRoad):
             move(movers, lanes, dt, self.record_history)
         self._collide(dt)
 
-    def _collision_candidates(self, dt: float) -> dict[int, list[int]]:
+    def _collision_pairs(self, dt: float) -> np.ndarray:
         """The broad phase's pairs less those `separated` proves apart."""
-        pairs = np.array(
-            [(i, j) for i, later in super()._collision_candidates(dt).items() for j in later], dtype=int
-        ).reshape(-1, 2)
-        kept: dict[int, list[int]] = {}
+        if len(self.vehicles) < 2:
+            return super()._collision_pairs(dt)
+        state = Footprints(self.vehicles)
+        pairs = broad_phase(state.x, state.y, state.diagonal, state.speed, dt)
         if len(pairs):
-            for i, j in pairs[~separated(self.vehicles, pairs, dt)].tolist():
-                kept.setdefault(i, []).append(j)
-        return kept
+            pairs = pairs[~separated(state, pairs, dt)]
+        return pairs
+
+
+class Drivers:
+    """The IDM drivers of a frame: their rows, constants, and their own lane's front and rear."""
+
+    own_acceleration: np.ndarray
+    """IDM acceleration [m/s^2] behind the own lane's leader, per driver (set by `_mobil`)."""
+
+    def __init__(self, drivers: list[IDMVehicle], frame: TrafficFrame) -> None:
+        self.drivers, self.frame = drivers, frame
+        rows, lane_row = frame.projections.row, frame.lanes.row
+        self.me = np.array([rows[id(v)] for v in drivers], dtype=int)
+        self.target = np.array([lane_row[v.target_lane_index] for v in drivers], dtype=int)
+        self.length, self.delta, self.jam = (
+            column(drivers, name) for name in ("LENGTH", "DELTA", "DISTANCE_WANTED")
+        )
+        self.own_front, self.own_rear = frame.neighbours(self.me, frame.lane[self.me])
+
+    def at_lane_end(self) -> set[int]:
+        """ids of the drivers for which `follow_road` moves on to the next lane."""
+        frame = self.frame
+        ends = frame.s[self.me] > frame.lanes.length[self.target] - StraightLane.VEHICLE_LENGTH / 2
+        return {id(self.drivers[i]) for i in np.flatnonzero(ends)}
 
 
 class VectorHighwayEnv(ScenarioTraffic):
