@@ -66,7 +66,9 @@ def print_summary(summaries: dict[ScenarioKind, dict[str, Any]], console: Consol
     console.print(table)
     for kind, s in summaries.items():
         for failure in s["failure_points"]:
-            console.print(f"failure ({kind}): replay with  {failure['replay']}", highlight=False)
+            console.print(
+                f"failure ({kind}): replay with  {failure['replay']}", highlight=False, soft_wrap=True
+            )
 
 
 def plot_map(kind: ScenarioKind, points: list[Assessed], title: str, path: Path) -> None:
