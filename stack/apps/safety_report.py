@@ -77,10 +77,11 @@ def plot_map(kind: ScenarioKind, points: list[Assessed], title: str, path: Path)
     units = dict(PARAMETERS[kind])
     axes_values = [sorted({p.point.parameters[name] for p in points}) for name in names]
     panel_names, panel_values = names[2:], axes_values[2:]
-    rows = panel_values[0] if panel_names else [None]
-    columns = panel_values[1] if len(panel_names) > 1 else [None]
+    rows: list[float | None] = list(panel_values[0]) if len(panel_names) > 1 else [None]
+    columns: list[float | None] = list(panel_values[-1]) if panel_names else [None]
+    width = max(9.0, 2.6 * len(columns) + 1.5)
     figure, grid = plt.subplots(
-        len(rows), len(columns), figsize=(2.6 * len(columns) + 1.5, 2.3 * len(rows) + 1.2), squeeze=False
+        len(rows), len(columns), figsize=(width, 2.4 * len(rows) + 1.6), squeeze=False
     )
     lookup = {p.point.values: OUTCOMES.index(p.outcome) for p in points}
     x_values, y_values = axes_values[0], axes_values[1]
@@ -96,7 +97,7 @@ def plot_map(kind: ScenarioKind, points: list[Assessed], title: str, path: Path)
         axis.set_yticks(range(len(y_values)), [f"{y:g}" for y in y_values], fontsize=7)
         label = [
             f"{n} = {v:g} {units[n]}"
-            for n, v in zip(panel_names, (row, column), strict=False)
+            for n, v in zip(panel_names, (row, column) if len(panel_names) > 1 else (column,), strict=False)
             if v is not None
         ]
         axis.set_title(", ".join(label), fontsize=8)
@@ -109,8 +110,8 @@ def plot_map(kind: ScenarioKind, points: list[Assessed], title: str, path: Path)
         handles=[Patch(color=c, label=o) for c, o in zip(COLOURS, OUTCOMES, strict=True)],
         loc="lower center",
         ncol=4,
-        fontsize=8,
+        fontsize=9,
     )
-    figure.tight_layout(rect=(0, 0.05, 1, 0.95))
+    figure.tight_layout(rect=(0, 0.06, 1, 0.94))
     save_figure(figure, path, 110)
     plt.close(figure)
