@@ -186,19 +186,44 @@ def test_safety_cli_writes_summary_csv_and_maps(tmp_path, tiny_grids):
     assert (out / "config.yaml").is_file()
 
 
-def test_safety_cli_replays_a_point_as_a_video(tmp_path):
-    out = tmp_path / "replay"
-    arguments = [
-        "safety",
-        "--scenario",
-        "cut-in",
-        "--point",
-        "speed=20,relative_speed=4,gap=10,lateral_speed=1",
-    ]
-    result = CliRunner().invoke(app, [*arguments, "--video", "--out", str(out)])
+NEVER_BRAKES = [
+    "--agent",
+    "keep-lane",
+    "--set",
+    "controller.comfort_decel_mps2=0.01",
+    "--set",
+    "controller.emergency_decel_mps2=0.01",
+    "--set",
+    "controller.emergency_ttc_s=0",
+]
+"""A stack that never brakes (and never changes lane) in CLI options."""
+
+
+def test_safety_cli_lists_failures_with_a_replay_command_that_writes_a_video(tmp_path, tiny_grids):
+    out = tmp_path / "never"
+    result = CliRunner().invoke(
+        app,
+        [
+            "safety",
+            "--scenario",
+            "lead-braking",
+            "--quick",
+            *NEVER_BRAKES,
+            "--out",
+            str(out),
+            "--no-progress",
+        ],
+    )
     assert result.exit_code == 0, result.output
-    assert (out / "safety_cut-in.gif").stat().st_size > 10_000
-    assert json.loads((out / "point.json").read_text())["outcome"] == "avoided by both"
+    failures = json.loads((out / "summary.json").read_text())["scenarios"]["lead-braking"]["failure_points"]
+    assert [(f["speed"], f["deceleration"]) for f in failures] == [(20.0, 3.0)]
+    replay = failures[0]["replay"]
+    assert replay in result.output.replace("\n", "")
+    command = replay.split()[1:] + ["--out", str(tmp_path / "replay")]
+    result = CliRunner().invoke(app, command)
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "replay" / "safety_lead-braking.gif").stat().st_size > 10_000
+    assert json.loads((tmp_path / "replay" / "point.json").read_text())["outcome"] == "failure"
 
 
 @pytest.mark.parametrize(

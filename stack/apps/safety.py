@@ -23,12 +23,10 @@ from stack.core.safety_assessment import Assessed, assess, drive_reference, driv
 from stack.sim.safety_scenarios import PARAMETERS, Point, ScenarioKind, grid
 
 
-def replay_command(config: RunConfig) -> str:
-    """The command that replays a point as a video, with `{kind}` and `{point}` to fill."""
-    return (
-        f"drivestack safety --scenario {{kind}} --point {{point}} --agent {config.planner.agent} "
-        f"--controller {config.controller.type} --plant {config.sim.plant} --video"
-    )
+def replay_command(out: Path) -> str:
+    """The command that replays a point of the run in `out` as a video (the stack its config.yaml
+    resolved), with `{kind}` and `{point}` to fill."""
+    return f"drivestack safety --config {out / 'config.yaml'} --scenario {{kind}} --point {{point}} --video"
 
 
 def assess_and_report(
@@ -57,7 +55,7 @@ def assess_and_report(
             interrupted = True
     results = [done[index] for index in sorted(done)]
     summaries = {
-        kind: summary(kind, [r for r in results if r.point.kind == kind], replay_command(config))
+        kind: summary(kind, [r for r in results if r.point.kind == kind], replay_command(out))
         for kind in kinds
     }
     meta = {
