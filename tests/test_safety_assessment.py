@@ -120,23 +120,28 @@ def test_a_stack_that_never_brakes_fails_points_the_reference_driver_passes():
 
 
 REGRESSIONS = [
-    "lead-braking speed=36.11,time_gap=2.5,deceleration=5",
-    "cut-in speed=13.89,relative_speed=6,gap=10,lateral_speed=0.5",
-    "cut-in speed=19.44,relative_speed=6,gap=10,lateral_speed=0.5",
-    "cut-out speed=22.22,distance=100,lateral_speed=1",
-    "cut-out speed=27.78,distance=200,lateral_speed=0.5",
-    "cut-out speed=36.11,distance=200,lateral_speed=1.5",
+    "pid kinematic lead-braking speed=36.11,time_gap=2.5,deceleration=5",
+    "pid kinematic cut-in speed=13.89,relative_speed=6,gap=10,lateral_speed=0.5",
+    "pid kinematic cut-in speed=19.44,relative_speed=6,gap=10,lateral_speed=0.5",
+    "pid kinematic cut-out speed=22.22,distance=100,lateral_speed=1",
+    "pid kinematic cut-out speed=27.78,distance=200,lateral_speed=0.5",
+    "pid kinematic cut-out speed=36.11,distance=200,lateral_speed=1.5",
+    "mpc dynamic lead-braking speed=5.56,time_gap=1,deceleration=2",
+    "mpc dynamic cut-out speed=8.33,distance=30,lateral_speed=1",
 ]
-"""Failures of the default stack (ddqn + pid, kinematic plant) found by the first full grid: a
-braking leader seen too late, a slow car cutting in beside the ego braked for instead of passed,
-and a stationary car hidden by a leader that was leaving the lane."""
+"""Failures of the default agent (ddqn) found by the full grids: a braking leader seen too late,
+a slow car cutting in beside the ego braked for instead of passed, a stationary car hidden by a
+leader that was leaving the lane (PID, kinematic plant); the MPC on its dynamic model creeping
+into a stopped leader at crawl speed (dynamic plant)."""
 
 
 @pytest.mark.parametrize("case", REGRESSIONS)
 def test_failures_found_on_the_way_stay_avoided(case):
-    kind, text = case.split()
-    point = parse_point(kind, text)
-    assessed = assess((build_config({"planner": {"agent": "ddqn"}}), point))
+    controller, plant, kind, text = case.split()
+    config = build_config(
+        {"planner": {"agent": "ddqn"}, "controller": {"type": controller}, "sim": {"plant": plant}}
+    )
+    assessed = assess((config, parse_point(kind, text)))
     assert not assessed.reference.collided and not assessed.stack.collided
 
 
