@@ -28,7 +28,7 @@ import time
 import casadi as ca
 import numpy as np
 
-from controllers.bicycle import LENGTH
+from controllers.bicycle import LENGTH, YAW_POLE_SPEED
 from controllers.config import MPCSettings
 from controllers.mpc_problem import build_problem
 from controllers.tracker import Controller
@@ -42,8 +42,17 @@ def steady_steering(state: EgoState) -> float:
     return math.atan(LENGTH * state.yaw_rate / max(state.speed, 1.0))
 
 
+RK4_STABLE = 2.785
+"""RK4's stability limit on the real axis, |lambda dt|."""
+
+
 class MPCTracker:
-    """Runtime wrapper: warm start, status, solve time, fallback. Same verb as the PID tracker."""
+    """Runtime wrapper: warm start, status, solve time, fallback. Same verb as the PID tracker.
+
+    Below `crawl_speed` the dynamic model's one RK4 step per stage is unstable (its yaw pole
+    -YAW_POLE_SPEED / v times dt leaves RK4's stability region: 3.7 m/s at 15 Hz), so its
+    predictions cannot be trusted to brake: there the MPC never accelerates beyond the adaptive
+    cruise (it crept into a stopped leader before, found by `drivestack safety`)."""
 
     recording: list[tuple[ca.DM, ...]] | None = None
     """When a list, every solve's arguments are appended to it (to replay a run offline)."""
@@ -54,6 +63,8 @@ class MPCTracker:
         self.problem = build_problem(settings, dt)
         self.solver = self.problem.solver
         self.fallback = fallback
+        dynamic = settings.model == "dynamic"
+        self.crawl_speed = YAW_POLE_SPEED * dt / RK4_STABLE if dynamic else 0.0
         self.fallbacks = 0
         self.slow_solves = 0
         self.solve_times: list[float] = []
@@ -123,6 +134,8 @@ class MPCTracker:
         self.slow_solves += self.solve_time * 1e3 > self.settings.max_solve_ms
         if success and w is not None:
             acceleration, steering = problem.first_input(w)
+            if state.speed < self.crawl_speed:
+                acceleration = min(acceleration, backup.acceleration)
             command = Actuation(acceleration=acceleration, steering=steering)
         else:
             self.fallbacks += 1

@@ -34,6 +34,17 @@ class Neighbour:
 
     gap: float
     speed: float
+    vehicle: int = -1
+    """Which vehicle (its id in the world), so a tracker can follow it from tick to tick."""
+
+
+LEAVING_M = 1.0
+"""A leader whose centre is farther than this from the lane's centre is leaving (or entering) the
+lane, and no longer hides the vehicle ahead of it [m]."""
+
+
+SIDE_MARGIN_M = 0.3
+"""Lateral room a passed vehicle must still have to the ego's side when the ego is by [m]."""
 
 
 @dataclass(frozen=True)
@@ -181,15 +192,49 @@ class WorldState:
             candidates = np.flatnonzero(in_lane & side)
             if candidates.size:
                 row = candidates[np.argmin(np.abs(rel_s[candidates]))]
-                found.append(Neighbour(float(gap[row]), float(self.speed[row + 1])))
+                found.append(Neighbour(float(gap[row]), float(self.speed[row + 1]), int(self.ids[row + 1])))
             else:
                 found.append(None)
         return found[0], found[1]
 
+    def passed_before_reached(self, row: int, margin: float = SIDE_MARGIN_M) -> bool:
+        """Whether the ego's rear passes the front of the vehicle in `row` (slower, beside or ahead)
+        before that vehicle, at its lateral speed towards the ego, comes within `margin` [m] of
+        the ego's side (its turned footprint, `lateral_extent`); both keep their speeds. Never
+        while it is already that close sideways."""
+        rel_s, closing = float(self.s[row] - self.s[0]), float(self.speed[0] - self.speed[row])
+        clear_s = (rel_s + (self.length[0] + self.length[row]) / 2) / closing
+        lane_heading = self.lanes[0].heading_at(float(self.s[row]))
+        towards = math.copysign(1.0, float(self.d[0] - self.d[row]))
+        lateral = towards * float(self.speed[row]) * math.sin(float(self.heading[row]) - lane_heading)
+        reach = float(self.width[0] + self.lateral_extent()[row - 1]) / 2
+        side_gap = abs(float(self.d[row] - self.d[0])) - reach - margin
+        if side_gap <= 0:
+            return False
+        return lateral <= 0 or clear_s < side_gap / lateral
+
     def leaders(self, lanes: tuple[int, ...]) -> tuple[Neighbour, ...]:
-        """For each lane in `lanes`, the closest vehicle ahead reaching into it (none if nobody)."""
-        ahead = (self.neighbours(lane)[0] for lane in lanes)
-        return tuple(leader for leader in ahead if leader is not None)
+        """For each lane in `lanes`, the closest vehicle ahead reaching into it (none if nobody) and,
+        while that one is leaving or entering the lane (centre more than `LEAVING_M` off the lane's
+        centre), the next one ahead that it no longer hides, and so on: a cut-out reveals the car
+        beyond at once. A slower vehicle entering the lane that the ego passes before it reaches
+        the ego's side (`passed_before_reached`) is not followed: braking for it would only keep
+        the two side by side for longer."""
+        rel_s = self.s[1:] - self.s[0]
+        gap = rel_s - (self.length[1:] + self.length[0]) / 2
+        extent = self.lateral_extent()
+        found: list[Neighbour] = []
+        for lane in lanes:
+            offset = np.abs(self.d[1:] - self.lane_offsets[lane])
+            in_lane = (offset < (self.lane_width + extent) / 2) & (rel_s > 0)
+            off_centre = in_lane & (offset > LEAVING_M) & (self.speed[1:] < self.speed[0])
+            for row in np.flatnonzero(off_centre):
+                in_lane[row] = not self.passed_before_reached(int(row) + 1)
+            for row in sorted(np.flatnonzero(in_lane), key=lambda r: rel_s[r]):
+                found.append(Neighbour(float(gap[row]), float(self.speed[row + 1]), int(self.ids[row + 1])))
+                if offset[row] <= LEAVING_M:
+                    break
+        return tuple(found)
 
 
 _KEPT: dict[int, dict[str, Any]] = {}

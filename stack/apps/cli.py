@@ -195,6 +195,61 @@ def compare(
 
 
 @app.command()
+def safety(
+    scenario: str = typer.Option("all", help="lead-braking | cut-in | cut-out | all (docs/safety.md)."),
+    agent: str | None = typer.Option(None, help=f"Decision agent (overrides planner.agent); {PLUGIN_HELP}"),
+    controller: str | None = typer.Option(None, help=f"Controller (controller.type); {PLUGIN_HELP}"),
+    plant: str | None = typer.Option(None, help=PLANT_HELP),
+    quick: bool = typer.Option(False, "--quick", help="Coarse grids: all three types in a few minutes."),
+    point: str | None = typer.Option(
+        None, help="Replay one point of --scenario: NAME=VALUE,... (as printed)."
+    ),
+    video: bool = typer.Option(False, "--video", help="With --point: save the stack's drive as a GIF."),
+    config: Path | None = typer.Option(None, "--config", "-c", help="YAML run config (its stack)."),
+    sets: list[str] = typer.Option([], "--set", help=SET_HELP),
+    out: Path | None = typer.Option(None, help="Results folder (default: runs/safety-<time>)."),
+    jobs: int = JOBS_OPTION,
+    ray: str | None = RAY_OPTION,
+    progress: bool = typer.Option(True, help="Show a progress bar."),
+) -> None:
+    """UN R157-style safety assessment: lead braking, cut-in, cut-out grids against the careful driver."""
+    from stack.sim.safety_scenarios import SCENARIO_KINDS, parse_point
+
+    kinds = cast(Any, chosen("--scenario", scenario, SCENARIO_KINDS))
+    if video and point is None:
+        fail("--video: replays one point; name it with --point")
+    chosen_point = None
+    if point is not None:
+        if len(kinds) != 1:
+            fail("--point: name one --scenario (lead-braking, cut-in or cut-out) for the point")
+        try:
+            chosen_point = parse_point(kinds[0], point)
+        except ValueError as error:
+            fail(f"--point: {error}")
+    cfg = configured(config, sets, planner__agent=agent, controller__type=controller, sim__plant=plant)
+    if cfg.highway.lanes_count < 3:
+        fail(f"highway.lanes_count: the safety scenarios need 3 or more lanes, got {cfg.highway.lanes_count}")
+    plugins_or_fail([cfg], ["--agent" if agent else "planner.agent"])
+    from stack.core.episodes import build_agent
+
+    try:
+        build_agent(cfg, cfg.seed)
+    except ValueError as error:
+        fail(str(error))
+    ray_or_fail(ray)
+    from stack.apps.training import check_jobs
+
+    check_jobs(jobs)
+    folder = claimed_for("safety", out, f"{kinds}{quick}{point}{video}", cfg)
+    from stack.apps.safety import assess_and_report, replay
+
+    if chosen_point is not None:
+        until_interrupted(lambda: replay(cfg, chosen_point, video, folder))
+    else:
+        until_interrupted(lambda: assess_and_report(cfg, kinds, quick, folder, jobs, progress, ray))
+
+
+@app.command()
 def scenarios() -> None:
     """The named worlds `--scenario` takes, one line each."""
     from stack.sim import scenarios as named

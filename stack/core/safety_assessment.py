@@ -1,0 +1,136 @@
+"""One point of the safety assessment: the full stack and the reference driver (R157's careful and
+competent driver, `stack.core.reference_driver`) each drive the same scenario on the same plant.
+
+Outcome of a point (the stack's collision vs the reference's):
+- `avoided by both`;
+- `avoided only by the stack`: the reference collides, the stack does not;
+- `failure`: preventable (the reference avoids it) but the stack collides;
+- `unpreventable`: both collide.
+Besides collisions each drive reports its minimum time to collision [s], minimum gap to a vehicle
+ahead in its path [m], peak deceleration [m/s^2] and the time below R157's minimum following
+distance [s] (a fourth criterion, not a collision).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from records import PlantName
+from stack.core.closed_loop import ClosedLoop
+from stack.core.config import RunConfig
+from stack.core.episodes import agent_step, build_agent
+from stack.core.reference_driver import CarefulDriver
+from stack.core.safety_metrics import SafetyMonitor
+from stack.sim.safety_scenarios import Point, build
+from stack.sim.scripted_road import ScriptedRoad
+
+OUTCOMES = ("avoided by both", "avoided only by the stack", "failure", "unpreventable")
+"""The four outcomes, in the order the maps' colours and the summary list them."""
+
+
+@dataclass(frozen=True)
+class Drive:
+    """How one driver did on one point (see the module docstring; units there)."""
+
+    collided: bool
+    min_ttc_s: float
+    min_gap_m: float
+    peak_deceleration: float
+    time_below_min_distance_s: float
+    emergency_brakings: int = 0
+
+
+@dataclass(frozen=True)
+class Assessed:
+    """One point: the stack's drive and the reference driver's."""
+
+    point: Point
+    stack: Drive
+    reference: Drive
+
+    @property
+    def outcome(self) -> str:
+        if self.stack.collided:
+            return OUTCOMES[3] if self.reference.collided else OUTCOMES[2]
+        return OUTCOMES[1] if self.reference.collided else OUTCOMES[0]
+
+    def row(self) -> dict[str, object]:
+        """The point's row of safety.csv: scenario, parameters, outcome, then both drives."""
+        stack = {f"stack_{k}": _rounded(v) for k, v in asdict(self.stack).items()}
+        reference = {f"reference_{k}": _rounded(v) for k, v in asdict(self.reference).items()}
+        reference.pop("reference_emergency_brakings")
+        return (
+            {"scenario": self.point.kind, **self.point.parameters, "outcome": self.outcome}
+            | stack
+            | reference
+        )
+
+
+def _rounded(value: object) -> object:
+    return round(value, 3) if isinstance(value, float) else value
+
+
+def point_config(config: RunConfig, point: Point) -> RunConfig:
+    """`config` with the ego's set speed at the point's speed (it cruises there)."""
+    controller = config.controller.model_copy(update={"set_speed_mps": point.parameters["speed"]})
+    return config.model_copy(update={"controller": controller})
+
+
+def plant_for(config: RunConfig, point: Point, plant: PlantName | None = None) -> ScriptedRoad:
+    return build(point, config.highway.lanes_count, plant or config.sim.plant, config.dt)
+
+
+def peak_deceleration(speeds: list[float], dt: float) -> float:
+    """Largest drop in speed per second between two ticks [m/s^2] (0 if it never slowed)."""
+    if len(speeds) < 2:
+        return 0.0
+    return float(max(0.0, -np.min(np.diff(speeds)) / dt))
+
+
+def drive_reference(config: RunConfig, point: Point) -> Drive:
+    """The careful and competent driver on `point`, on `config`'s plant."""
+    road = plant_for(config, point)
+    world = road.reset()
+    driver, monitor = CarefulDriver(), SafetyMonitor(road.dt)
+    speeds = [float(world.speed[0])]
+    while not road.done:
+        world = road.step(driver.step(world, road.dt))
+        monitor.record(world, False)
+        speeds.append(float(world.speed[0]))
+    return Drive(
+        road.crashed,
+        monitor.min_ttc_s,
+        road.min_gap_m,
+        peak_deceleration(speeds, road.dt),
+        monitor.time_below_min_distance_s,
+    )
+
+
+def drive_stack(config: RunConfig, point: Point, frames: list[np.ndarray] | None = None) -> Drive:
+    """The full stack (perception, agent, safety layer, maneuver, controller, emergency braking)
+    on `point`; `frames`, when given, collects video frames."""
+    config = point_config(config, point)
+    road = plant_for(config, point)
+    road.rendering = frames is not None
+    agent = build_agent(config, config.seed)
+    loop = ClosedLoop(config, road, frames, grid=agent.grid_config)
+    loop.reset(config.seed)
+    while not loop.done:
+        agent_step(loop, agent)
+    monitor = loop.monitor
+    return Drive(
+        loop.crashed,
+        monitor.min_ttc_s,
+        road.min_gap_m,
+        peak_deceleration(loop.recorder.speed, road.dt),
+        monitor.time_below_min_distance_s,
+        loop.emergency.activations,
+    )
+
+
+def assess(task: tuple[RunConfig, Point]) -> Assessed:
+    """Both drives of one point (a task for `stack.core.executors.completed`)."""
+    config, point = task
+    return Assessed(point, drive_stack(config, point), drive_reference(config, point))

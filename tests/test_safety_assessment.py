@@ -1,0 +1,247 @@
+"""`drivestack safety`: the reference driver against hand-computed stopping distances, each
+scenario's geometry, an assessment that can fail (a stack that never brakes), the failures found
+on the way kept as regression points, and a CLI smoke run on a tiny grid."""
+
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from controllers.emergency import EmergencyBraking
+from records import Actuation, Neighbour
+from stack.apps.cli import app
+from stack.core.config import build_config
+from stack.core.reference_driver import CarefulDriver, stopping_distance
+from stack.core.safety_assessment import assess, drive_reference
+from stack.sim import safety_scenarios
+from stack.sim.safety_scenarios import LENGTH, Point, build, grid, parse_point
+from stack.sim.scripted_road import EGO_START_S, Actor, ScriptedRoad
+
+DT = 1 / 15
+
+
+def test_stopping_distance_matches_the_hand_computation():
+    # 20 m/s: 1.15 s of delay (23 m), a 0.6 s ramp to 5 m/s^2 (20 * 0.6 - 5 * 0.6^2 / 6 = 11.7 m,
+    # leaving 20 - 1.5 = 18.5 m/s), then 18.5^2 / (2 * 5) = 34.225 m at full braking
+    assert stopping_distance(20.0, 1.15, 0.6, 5.0) == pytest.approx(23.0 + 11.7 + 34.225)
+    # 36.1 m/s: 41.515 + (21.66 - 0.3) + 34.6^2 / 10
+    assert stopping_distance(36.1, 1.15, 0.6, 5.0) == pytest.approx(41.515 + 21.36 + 119.716)
+
+
+class Stationary:
+    """A script with nothing to start: one stationary vehicle far ahead."""
+
+    def update(self, time, ego_s, actors):
+        pass
+
+    def settled(self, actors):
+        return True
+
+
+@pytest.mark.parametrize("plant", ["kinematic", "dynamic"])
+@pytest.mark.parametrize("speed", [10.0, 20.0, 36.1])
+def test_careful_driver_stops_in_the_hand_computed_distance(plant, speed):
+    road = ScriptedRoad(4, 1, speed, [Actor(EGO_START_S + 900.0, 4.0, 0.0)], Stationary(), plant, DT, 60.0)
+    world = road.reset()
+    driver = CarefulDriver()
+    driver.risk_at = 0.0
+    while world.speed[0] > 0:
+        world = road.step(driver.step(world, DT))
+    travelled = road.ego_s - EGO_START_S
+    # the control ticks sample the delay and the ramp (up to a tick late) and the plant integrates
+    # position before speed (forward Euler, v dt / 2 farther): at most 1.5 v dt beyond
+    expected = stopping_distance(speed, 1.15, 0.6, 5.0)
+    assert expected <= travelled <= expected + 1.5 * speed * DT
+
+
+def hold_speed(point: Point):
+    """`point`'s plant with the ego holding its speed; returns the plant after the script played."""
+    road = build(point, 4, "kinematic", DT)
+    road.reset()
+    while not road.script.settled(road.actors) and road.ticks < 600:
+        road.step(Actuation(0.0, 0.0))
+    return road
+
+
+def test_lead_braking_leader_brakes_at_the_given_gap_and_deceleration():
+    road = hold_speed(Point("lead-braking", (25.0, 1.2, 6.0)))
+    assert road.script.started_at == pytest.approx(safety_scenarios.BRAKE_AT_S)
+    assert road.script.gap_at_start == pytest.approx(1.2 * 25.0)
+    assert road.actors[0].braking == 6.0 and road.actors[0].speed == 0.0
+
+
+@pytest.mark.parametrize("relative_speed", [0.0, 4.0])
+def test_cut_in_starts_at_the_given_gap_and_ends_in_the_ego_lane(relative_speed):
+    road = build(Point("cut-in", (30.0, relative_speed, 12.0, 1.5)), 4, "kinematic", DT)
+    road.reset()
+    while road.script.started_at is None:
+        road.step(Actuation(0.0, 0.0))
+    assert road.script.gap_at_start == pytest.approx(12.0, abs=relative_speed * DT + 1e-9)
+    cutter = road.actors[0]
+    assert cutter.d == pytest.approx(8.0) and cutter.speed == 30.0 - relative_speed
+    road.step(Actuation(0.0, 0.0))
+    assert 8.0 - cutter.d == pytest.approx(1.5 * DT)
+    while not road.script.settled(road.actors):
+        road.step(Actuation(0.0, 0.0))
+    assert cutter.d == 4.0
+
+
+def test_cut_out_reveals_a_stationary_vehicle_at_the_given_distance():
+    road = build(Point("cut-out", (30.0, 120.0, 2.0)), 4, "kinematic", DT)
+    road.reset()
+    while road.script.started_at is None:
+        road.step(Actuation(0.0, 0.0))
+    assert road.script.gap_at_start == pytest.approx(120.0, abs=30.0 * DT)
+    leader, stationary = road.actors
+    assert leader.s - road.ego_s - LENGTH == pytest.approx(1.5 * 30.0 + 8.0)
+    assert (stationary.speed, stationary.d, leader.target_d) == (0.0, 4.0, 8.0)
+
+
+def test_grids_hold_at_least_500_points_per_type_and_parse_back():
+    for kind in safety_scenarios.SCENARIO_KINDS:
+        points = grid(kind)
+        assert len(points) >= 500
+        assert parse_point(kind, points[7].text) == points[7]
+    with pytest.raises(ValueError, match="missing gap"):
+        parse_point("cut-in", "speed=20,relative_speed=2,lateral_speed=1")
+
+
+def test_a_stack_that_never_brakes_fails_points_the_reference_driver_passes():
+    config = build_config(
+        {
+            "planner": {"agent": "keep-lane"},
+            "controller": {"comfort_decel_mps2": 0.01, "emergency_decel_mps2": 0.01, "emergency_ttc_s": 0.0},
+        }
+    )
+    for point in (Point("lead-braking", (20.0, 2.0, 4.0)), Point("cut-out", (15.0, 60.0, 2.0))):
+        assessed = assess((config, point))
+        assert assessed.stack.collided and not assessed.reference.collided
+        assert assessed.outcome == "failure"
+
+
+REGRESSIONS = [
+    "pid kinematic lead-braking speed=36.11,time_gap=2.5,deceleration=5",
+    "pid kinematic cut-in speed=13.89,relative_speed=6,gap=10,lateral_speed=0.5",
+    "pid kinematic cut-in speed=19.44,relative_speed=6,gap=10,lateral_speed=0.5",
+    "pid kinematic cut-out speed=22.22,distance=100,lateral_speed=1",
+    "pid kinematic cut-out speed=27.78,distance=200,lateral_speed=0.5",
+    "pid kinematic cut-out speed=36.11,distance=200,lateral_speed=1.5",
+    "mpc dynamic lead-braking speed=5.56,time_gap=1,deceleration=2",
+    "mpc dynamic cut-out speed=8.33,distance=30,lateral_speed=1",
+]
+"""Failures of the default agent (ddqn) found by the full grids: a braking leader seen too late,
+a slow car cutting in beside the ego braked for instead of passed, a stationary car hidden by a
+leader that was leaving the lane (PID, kinematic plant); the MPC on its dynamic model creeping
+into a stopped leader at crawl speed (dynamic plant)."""
+
+
+@pytest.mark.parametrize("case", REGRESSIONS)
+def test_failures_found_on_the_way_stay_avoided(case):
+    controller, plant, kind, text = case.split()
+    config = build_config(
+        {"planner": {"agent": "ddqn"}, "controller": {"type": controller}, "sim": {"plant": plant}}
+    )
+    assessed = assess((config, parse_point(kind, text)))
+    assert not assessed.reference.collided and not assessed.stack.collided
+
+
+def test_braking_leader_triggers_emergency_braking_before_the_constant_speed_prediction():
+    brake = EmergencyBraking(5.0, 3.0, 1.0)
+    cruise = Actuation(-3.0, 0.0)
+    for tick in range(3):
+        leader = Neighbour(gap=90.0, speed=36.0 - 5.0 * DT * tick, vehicle=7)
+        acted = brake.apply(cruise, 36.0, (leader,), DT)
+    assert acted.acceleration == -5.0 and brake.activations == 1
+    assert not EmergencyBraking(5.0, 3.0, 1.0).needed(36.0, (leader,))
+
+
+def test_leaving_leader_no_longer_hides_the_vehicle_beyond():
+    road = build(Point("cut-out", (20.0, 60.0, 2.0)), 4, "kinematic", DT)
+    world = road.reset()
+    assert len(world.leaders((1,))) == 1
+    while road.actors[0].d < 5.5:
+        world = road.step(Actuation(0.0, 0.0))
+    assert [leader.speed for leader in world.leaders((1,))] == [20.0, 0.0]
+
+
+def test_reference_driver_on_a_lead_braking_point_it_cannot_avoid():
+    config = build_config({})
+    assert drive_reference(config, Point("lead-braking", (36.11, 0.8, 8.0))).collided
+
+
+@pytest.fixture
+def tiny_grids(monkeypatch):
+    monkeypatch.setitem(safety_scenarios.QUICK_GRIDS, "lead-braking", ((20.0,), (1.0,), (3.0, 8.0)))
+    monkeypatch.setitem(safety_scenarios.QUICK_GRIDS, "cut-in", ((20.0,), (4.0,), (10.0,), (1.0,)))
+    monkeypatch.setitem(safety_scenarios.QUICK_GRIDS, "cut-out", ((20.0,), (40.0,), (2.0,)))
+
+
+def test_safety_cli_writes_summary_csv_and_maps(tmp_path, tiny_grids):
+    out = tmp_path / "safety"
+    result = CliRunner().invoke(app, ["safety", "--quick", "--out", str(out), "--no-progress"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["agent"] == "ddqn" and summary["grid"] == "quick"
+    lead = summary["scenarios"]["lead-braking"]
+    assert lead["points"] == 2 and lead["failures"] == 0
+    rows = (out / "safety.csv").read_text().splitlines()
+    assert len(rows) == 1 + 4 and "outcome" in rows[0] and "stack_min_ttc_s" in rows[0]
+    for kind in safety_scenarios.SCENARIO_KINDS:
+        assert (out / f"safety_{kind}.png").stat().st_size > 10_000
+    assert (out / "config.yaml").is_file()
+
+
+NEVER_BRAKES = [
+    "--agent",
+    "keep-lane",
+    "--set",
+    "controller.comfort_decel_mps2=0.01",
+    "--set",
+    "controller.emergency_decel_mps2=0.01",
+    "--set",
+    "controller.emergency_ttc_s=0",
+]
+"""A stack that never brakes (and never changes lane) in CLI options."""
+
+
+def test_safety_cli_lists_failures_with_a_replay_command_that_writes_a_video(tmp_path, tiny_grids):
+    out = tmp_path / "never"
+    result = CliRunner().invoke(
+        app,
+        [
+            "safety",
+            "--scenario",
+            "lead-braking",
+            "--quick",
+            *NEVER_BRAKES,
+            "--out",
+            str(out),
+            "--no-progress",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    failures = json.loads((out / "summary.json").read_text())["scenarios"]["lead-braking"]["failure_points"]
+    assert [(f["speed"], f["deceleration"]) for f in failures] == [(20.0, 3.0)]
+    replay = failures[0]["replay"]
+    assert replay in result.output.replace("\n", "")
+    command = replay.split()[1:] + ["--out", str(tmp_path / "replay")]
+    result = CliRunner().invoke(app, command)
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "replay" / "safety_lead-braking.gif").stat().st_size > 10_000
+    assert json.loads((tmp_path / "replay" / "point.json").read_text())["outcome"] == "failure"
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        (["--point", "speed=20"], "--point: name one --scenario"),
+        (["--video"], "--video: replays one point"),
+        (["--scenario", "cut-in", "--point", "speed=20,gap=3"], "--point: missing"),
+        (["--scenario", "swerve"], "--scenario: unknown 'swerve'"),
+        (["--set", "highway.lanes_count=2"], "need 3 or more lanes"),
+    ],
+)
+def test_safety_cli_refuses_bad_input_in_one_line(tmp_path, arguments, message):
+    result = CliRunner().invoke(app, ["safety", *arguments, "--out", str(tmp_path / "x")])
+    assert result.exit_code == 2 and message in result.output, result.output
+    assert not (tmp_path / "x").exists()
