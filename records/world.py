@@ -200,17 +200,17 @@ class WorldState:
     def passed_before_reached(self, row: int, margin: float = SIDE_MARGIN_M) -> bool:
         """Whether the ego's rear passes the front of the vehicle in `row` (slower, beside or ahead)
         before that vehicle, at its lateral speed towards the ego, comes within `margin` [m] of
-        the ego's side (its turned footprint, `lateral_extent`); both keep their speeds. Never
-        while it is already that close sideways."""
+        the ego's side; both keep their speeds. Never while its turned footprint
+        (`lateral_extent`: a car nosing into the lane) is already that close sideways."""
         rel_s, closing = float(self.s[row] - self.s[0]), float(self.speed[0] - self.speed[row])
         clear_s = (rel_s + (self.length[0] + self.length[row]) / 2) / closing
         lane_heading = self.lanes[0].heading_at(float(self.s[row]))
         towards = math.copysign(1.0, float(self.d[0] - self.d[row]))
         lateral = towards * float(self.speed[row]) * math.sin(float(self.heading[row]) - lane_heading)
-        reach = float(self.width[0] + self.lateral_extent()[row - 1]) / 2
-        side_gap = abs(float(self.d[row] - self.d[0])) - reach - margin
-        if side_gap <= 0:
+        apart = abs(float(self.d[row] - self.d[0])) - float(self.width[0]) / 2 - margin
+        if apart - float(self.lateral_extent()[row - 1]) / 2 <= 0:
             return False
+        side_gap = apart - float(self.width[row]) / 2
         return lateral <= 0 or clear_s < side_gap / lateral
 
     def leaders(self, lanes: tuple[int, ...]) -> tuple[Neighbour, ...]:
