@@ -157,16 +157,19 @@ class WorldState:
         lanes = len(self.lane_offsets)
         if table is None or not -lanes <= lane < lanes:
             return self._neighbours_of(lane)
-        rows, found, gap, speed = table
+        rows, found, gap, speed, ids = table
         ahead, behind = (
-            Neighbour(gap[rows[side][lane]], speed[rows[side][lane]]) if found[side][lane] else None
+            Neighbour(gap[row], speed[row], ids[row]) if found[side][lane] else None
             for side in (0, 1)
+            for row in (rows[side][lane],)
         )
         return ahead, behind
 
-    def _neighbour_rows(self) -> tuple[list[list[int]], list[list[bool]], list[float], list[float]] | None:
+    def _neighbour_rows(
+        self,
+    ) -> tuple[list[list[int]], list[list[bool]], list[float], list[float], list[int]] | None:
         """For each side (ahead, behind) and lane, the row (among the others) `_neighbours_of`
-        picks and whether there is one, with every other vehicle's gap and speed; as array
+        picks and whether there is one, with every other vehicle's gap, speed and id; as array
         operations over all lanes at once (None where an infinite distance could tie with the
         fill value, then `_neighbours_of` answers)."""
         if self.count < 2:
@@ -181,7 +184,8 @@ class WorldState:
         candidates = in_lane[None, :, :] & np.stack([rel_s > 0, rel_s <= 0])[:, None, :]
         rows = np.where(candidates, distance, np.inf).argmin(axis=2)
         gap = distance - (self.length[1:] + self.length[0]) / 2
-        return rows.tolist(), candidates.any(axis=2).tolist(), gap.tolist(), self.speed[1:].tolist()
+        found = candidates.any(axis=2).tolist()
+        return rows.tolist(), found, gap.tolist(), self.speed[1:].tolist(), self.ids[1:].tolist()
 
     def _neighbours_of(self, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
         rel_s = self.s[1:] - self.s[0]
