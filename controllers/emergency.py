@@ -37,9 +37,9 @@ class EmergencyBraking:
     ) -> bool:
         """Whether some leader needs more than comfort braking, or is within the trigger TTC [s].
         A leader braking at `braking[vehicle]` [m/s^2] (above BRAKING_SEEN_MPS2 on two ticks running,
-        so a one-tick dip is not braking) also needs it when
-        the ego cannot stop at comfort deceleration within the gap plus the leader's own stopping
-        distance (the constant-speed prediction alone sees a hard-braking leader too late)."""
+        so a one-tick dip is not braking) also needs it when the ego cannot stop at comfort
+        deceleration within the gap plus the leader's own stopping distance (the constant-speed
+        prediction alone sees a hard-braking leader too late)."""
         for leader in leaders:
             closing = speed - leader.speed
             if closing <= 0:

@@ -126,7 +126,7 @@ class LateralPID:
         self.lateral.high = v * math.sin(MAX_COURSE)
         self.lateral.low = -self.lateral.high
         lateral_speed = self.lateral.update(reference.d - state.d, dt, feedforward=reference.d_dot)
-        course = math.asin(max(-1.0, min(1.0, lateral_speed / v)))
+        course = math.asin(clip(lateral_speed / v, -1.0, 1.0))
         road_rate = state.curvature * v / (1 - state.curvature * state.d)
         feedforward_rate = reference.d_ddot / v + road_rate
         slip = math.asin(clip(LENGTH / 2 * feedforward_rate / v, -0.5, 0.5))

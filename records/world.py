@@ -130,9 +130,15 @@ class WorldState:
     def lateral_extent(self) -> np.ndarray:
         """Each other vehicle's footprint width across the road [m]: its rectangle turned by its
         heading relative to the lane at the ego (a car nosing into a lane at 30 deg reaches 2.4 m
-        further across than its width says)."""
-        heading = self.heading[1:] - self.lanes[0].heading_at(float(self.s[0]))
-        return np.abs(self.length[1:] * np.sin(heading)) + np.abs(self.width[1:] * np.cos(heading))
+        further across than its width says); computed once per snapshot (`leaders`, every lane's
+        neighbours and each merging car's check read it)."""
+        kept = _kept(self)
+        extent = kept.get("lateral_extent")
+        if extent is None:
+            heading = self.heading[1:] - self.lanes[0].heading_at(float(self.s[0]))
+            extent = np.abs(self.length[1:] * np.sin(heading)) + np.abs(self.width[1:] * np.cos(heading))
+            kept["lateral_extent"] = extent
+        return extent
 
     def neighbours(self, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
         """(closest vehicle ahead, closest vehicle behind) of the ego among those whose footprint
