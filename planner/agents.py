@@ -12,7 +12,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from records import N_ACTIONS, Command, Encoding, GridConfig
+from records import MAX_LANES, N_ACTIONS, Command, Encoding, GridConfig
 
 Action = np.ndarray | np.integer
 """An action index of `Command`, or one per row of a batch of observations."""
@@ -96,21 +96,28 @@ class FreeGapAgent(Policy):
 
     def _decode(self, observation: np.ndarray) -> tuple[np.ndarray, int]:
         """(presence grid, ego row) from a paper state."""
-        rows = self.grid.rows(self.lanes)
-        size = rows * self.grid.cells
-        expected = size + self.grid.lane_code_size(self.lanes)
         observation = np.asarray(observation).reshape(-1)
-        if observation.size != expected:
-            raise ValueError(
-                f"rule agent expected a paper state of {expected} values "
-                f"({rows} rows x {self.grid.cells} cells + lane code), got {observation.size}"
-            )
+        rows = self.grid.rows(self._lanes_seen(observation.size))
+        size = rows * self.grid.cells
         if self.grid.lanes == "absolute":
             bits = observation[size:].astype(int)
             ego_row = int(sum(bit << (len(bits) - 1 - i) for i, bit in enumerate(bits)))
         else:
             ego_row = self.grid.lateral_reach
         return observation[:size].reshape(rows, self.grid.cells), ego_row
+
+    def _lanes_seen(self, size: int) -> int:
+        """The lane count of the road a paper state of `size` values shows (with absolute rows it
+        varies from road to road, e.g. in the `random` scenario); ValueError if none fits."""
+        for lanes in (self.lanes, *range(1, MAX_LANES + 1)):
+            if self.grid.rows(lanes) * self.grid.cells + self.grid.lane_code_size(lanes) == size:
+                return lanes
+        rows = self.grid.rows(self.lanes)
+        expected = rows * self.grid.cells + self.grid.lane_code_size(self.lanes)
+        raise ValueError(
+            f"rule agent expected a paper state of {expected} values "
+            f"({rows} rows x {self.grid.cells} cells + lane code), got {size}"
+        )
 
     def free_cells(self, cells: np.ndarray) -> np.ndarray:
         """Per lane, free cells ahead of the ego's column (cells_ahead when all clear)."""

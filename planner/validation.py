@@ -11,7 +11,7 @@ once; the model is kept whenever a long validation beats the best long score.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -22,8 +22,18 @@ from records import child_seed
 
 
 @dataclass(frozen=True)
+class WorldScore:
+    """How one world of a validation went: its `episodes`, collision rate and mean speed [m/s]."""
+
+    episodes: int
+    collision_rate: float
+    mean_speed: float
+
+
+@dataclass(frozen=True)
 class Validation:
-    """One validation run: at `step`, over `episodes` episodes."""
+    """One validation run: at `step`, over `episodes` episodes; `worlds` splits them by the world
+    (scenario) each episode drew, for a training mix."""
 
     step: int
     period: str
@@ -32,25 +42,73 @@ class Validation:
     mean_return: float
     mean_speed: float
     improved: bool
+    worlds: dict[str, WorldScore] = field(default_factory=dict)
+
+    @classmethod
+    def from_json(cls, entry: dict[str, Any]) -> Validation:
+        worlds = {name: WorldScore(**score) for name, score in entry.get("worlds", {}).items()}
+        return cls(**{**entry, "worlds": worlds})
+
+    def line(self) -> str:
+        """One line for the progress display: the whole score, then each world's speed [m/s]."""
+        worlds = " · ".join(
+            f"{name} {score.mean_speed:.1f}"
+            + (f" ({score.collision_rate:.0%} crashed)" if score.collision_rate else "")
+            for name, score in sorted(self.worlds.items())
+        )
+        return (
+            f"step {self.step} {self.period} validation, {self.episodes} episodes: "
+            f"{self.collision_rate:.1%} collisions, return {self.mean_return:.2f}, {self.mean_speed:.2f} m/s"
+            + (f" | {worlds}" if len(self.worlds) > 1 else "")
+            + (" (kept)" if self.improved and self.period == "long" else "")
+        )
 
 
-def validate(predict: Callable, env: gym.Env, episodes: int, seed: int) -> tuple[float, float, float]:
-    """(collision rate, mean return, mean speed [m/s]) of greedy `predict` over seeded episodes."""
+@dataclass(frozen=True)
+class Score:
+    """What `validate` measured: collision rate, mean return, mean speed [m/s], and per world."""
+
+    collision_rate: float
+    mean_return: float
+    mean_speed: float
+    worlds: dict[str, WorldScore]
+
+
+def validate(predict: Callable, env: gym.Env, episodes: int, seed: int) -> Score:
+    """The score of greedy `predict` over seeded episodes of `env`; an env that names the world of
+    each episode (`world_name`, as `HierarchicalHighwayEnv` with a training mix) is scored per world
+    too."""
     crashes, returns, speeds = 0, [], []
+    by_world: dict[str, tuple[list[bool], list[float]]] = {}
     for episode in range(episodes):
         observation, _ = env.reset(seed=child_seed(seed, episode))
+        world = str(getattr(env.unwrapped, "world_name", ""))
         total, done = 0.0, False
         info: dict[str, Any] = {}
+        episode_speeds = []
         while not done:
             action, _ = predict(observation, deterministic=True)
             observation, reward, terminated, truncated, info = env.step(action)
             total += float(reward)
             if "speed" in info:
-                speeds.append(info["speed"])
+                episode_speeds.append(info["speed"])
             done = terminated or truncated
-        crashes += bool(info.get("crashed", False))
+        crashed = bool(info.get("crashed", False))
+        crashes += crashed
         returns.append(total)
-    return crashes / episodes, float(np.mean(returns)), float(np.mean(speeds)) if speeds else float("nan")
+        speeds += episode_speeds
+        world_crashes, world_speeds = by_world.setdefault(world, ([], []))
+        world_crashes.append(crashed)
+        world_speeds += episode_speeds
+    worlds = {
+        name: WorldScore(
+            len(crashed), float(np.mean(crashed)), float(np.mean(speed)) if speed else float("nan")
+        )
+        for name, (crashed, speed) in by_world.items()
+        if name
+    }
+    mean_speed = float(np.mean(speeds)) if speeds else float("nan")
+    return Score(crashes / episodes, float(np.mean(returns)), mean_speed, worlds)
 
 
 class RealTimeValidation(BaseCallback):
@@ -114,19 +172,29 @@ class RealTimeValidation(BaseCallback):
 
     def run_validation(self, period: str, episodes: int) -> Validation:
         """Validate now; `improved` in the result means it beat the best score of its period."""
-        collision_rate, mean_return, mean_speed = validate(self.model.predict, self.env, episodes, self.seed)
-        score = (-collision_rate, mean_return)
+        measured = validate(self.model.predict, self.env, episodes, self.seed)
+        score = (-measured.collision_rate, measured.mean_return)
         best = self.best[period]
         improved = best is None or score > best
         result = Validation(
-            self.num_timesteps, period, episodes, collision_rate, mean_return, mean_speed, improved
+            self.num_timesteps,
+            period,
+            episodes,
+            measured.collision_rate,
+            measured.mean_return,
+            measured.mean_speed,
+            improved,
+            measured.worlds,
         )
         self.history.append(result)
         logger = getattr(self.model, "logger", None)
         if logger is not None:
-            logger.record("validation/collision_rate", collision_rate)
-            logger.record("validation/mean_return", mean_return)
-            logger.record("validation/mean_speed", mean_speed)
+            logger.record("validation/collision_rate", measured.collision_rate)
+            logger.record("validation/mean_return", measured.mean_return)
+            logger.record("validation/mean_speed", measured.mean_speed)
+            for name, world in measured.worlds.items():
+                logger.record(f"validation/{name}/mean_speed", world.mean_speed)
+                logger.record(f"validation/{name}/collision_rate", world.collision_rate)
         if improved:
             self.best[period] = score
             if period == "long":
@@ -142,7 +210,7 @@ class RealTimeValidation(BaseCallback):
 
     @staticmethod
     def restore(state: dict) -> tuple[list[Validation], dict[str, tuple[float, float] | None]]:
-        history = [Validation(**entry) for entry in state.get("history", [])]
+        history = [Validation.from_json(entry) for entry in state.get("history", [])]
         best = state.get("best")
         best = best if isinstance(best, dict) else {}  # checkpoints before per-period bests: restart them
 

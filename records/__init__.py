@@ -7,7 +7,7 @@ the grid an agent is shown (`GridConfig`), and what flows through one control ti
 Import from `records` itself; the submodules only keep each part short.
 """
 
-from records.grid import EGO_HEADING_SCALE, MAX_SPEED, SIDE_LANES_SEEN, GridConfig, lane_code_bits
+from records.grid import EGO_HEADING_SCALE, MAX_LANES, MAX_SPEED, SIDE_LANES_SEEN, GridConfig, lane_code_bits
 from records.names import (
     AGENT_NAMES,
     BACKENDS,
@@ -69,6 +69,7 @@ __all__ = [
     "clip",
     "drawn_seed",
     "lane_code_bits",
+    "MAX_LANES",
     "SIDE_LANES_SEEN",
     "EGO_HEADING_SCALE",
     "lane_curvature",

@@ -66,6 +66,10 @@ class GridConfig(BaseModel):
         return lane_code_bits(lanes_count) if self.lane_code == "binary" else 2
 
 
+MAX_LANES = 10
+"""Most lanes a road may have."""
+
+
 def lane_code_bits(lanes: int) -> int:
     """Bits of the binary ego-lane code (the paper's encoding)."""
     return max(1, math.ceil(math.log2(lanes)))

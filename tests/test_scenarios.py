@@ -196,3 +196,55 @@ def test_a_scenario_gives_the_same_summaries_on_one_or_two_processes():
     serial, parallel = run(config, progress=False, jobs=1), run(config, progress=False, jobs=2)
     assert outcome(serial.summary) == outcome(parallel.summary)
     assert [e.trace for e in serial.episodes] == [e.trace for e in parallel.episodes]
+
+
+def test_random_traffic_draws_a_seeded_world_per_episode_from_its_ranges():
+    config = build_config({}, scenario="random")
+    assert config.highway.lane_counts == (3, 4, 5)
+    ranges = config.highway.random_traffic
+    assert ranges is not None
+    lanes, trucks_changing = set(), set()
+    with HighwayAdapter(config.highway, "vector") as adapter:
+        for seed in range(12):
+            world = adapter.reset(seed=seed)
+            drawn = adapter.env.unwrapped.config
+            lanes.add(world.lanes_count)
+            assert world.lanes_count == drawn["lanes_count"]
+            assert ranges.vehicles_density[0] <= drawn["vehicles_density"] <= ranges.vehicles_density[1]
+            classes = {kind["name"]: kind for kind in drawn["traffic"]["classes"]}
+            car = classes["car"]["speed_mps"]
+            assert ranges.car_speed_mps[0] <= car[0] <= ranges.car_speed_mps[1]
+            if "truck" in classes:
+                truck = classes["truck"]
+                trucks_changing.add(truck["changes_lane"])
+                assert truck["speed_mps"][1] <= car[1] and truck["speed_mps"][0] >= 2.0
+            moving = world.speed > 0 if "incident" in drawn["traffic"] else slice(None)
+            assert np.all(world.speed[moving] == drawn["traffic"]["spawn_speed_mps"])
+            again = adapter.reset(seed=seed)
+            np.testing.assert_array_equal(world.position, again.position)
+    assert lanes == {3, 4, 5} and trucks_changing == {True, False}
+
+
+def test_random_traffic_spawns_are_feasible_and_every_agent_drives_any_lane_count():
+    config = build_config(
+        {"episodes": 12, "seed": 31, "planner": {"agent": "rule"}}, scenario="random", highway__duration=3
+    )
+    assert config.perception.lanes == "absolute", "the rule agent reads the lane count off its state"
+    summary = run(config, progress=False).summary
+    assert summary["collisions"] == 0 and summary["road_departures"] == 0
+
+
+@pytest.mark.parametrize(
+    "random_traffic, message",
+    [
+        ({"lanes_count": [5, 3]}, "random_traffic.lanes_count"),
+        ({"truck_share": [0.2, 1.5]}, "random_traffic.truck_share"),
+        ({"incident_probability": -0.1}, "random_traffic.incident_probability"),
+    ],
+)
+def test_bad_random_traffic_is_refused_in_one_line(random_traffic, message):
+    with pytest.raises(ConfigError, match=message) as error:
+        build_config({"highway": {"random_traffic": random_traffic}}, "cfg.yaml")
+    assert "\n" not in str(error.value)
+    with pytest.raises(ConfigError, match="random_traffic: draws the traffic"):
+        build_config({"highway": {"random_traffic": {}, "initial_lane_id": 1}}, "cfg.yaml")

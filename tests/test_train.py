@@ -1,5 +1,6 @@
 """Training: the validation callback, checkpoints and resume, the env, the CLI smoke run."""
 
+import dataclasses
 import json
 import types
 from pathlib import Path
@@ -14,7 +15,7 @@ from typer.testing import CliRunner
 
 from planner.learned import load_agent
 from planner.model_file import load_model
-from planner.validation import RealTimeValidation
+from planner.validation import RealTimeValidation, Validation
 from stack.apps.cli import app
 from stack.apps.train import Trainer
 from stack.core.config import build_config
@@ -377,3 +378,34 @@ def test_a_run_starts_from_init_model_and_refuses_one_that_does_not_fit(tmp_path
         result = CliRunner().invoke(app, ["train", "-c", str(config), "--out", str(tmp_path / "o")])
         assert result.exit_code == 2 and message in result.output, result.output
         assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+
+
+def test_validation_scores_every_world_of_a_mix_and_shows_it():
+    from planner.validation import validate
+
+    data = {
+        **TINY,
+        "perception": {**TINY["perception"], "lane_code": "sides"},
+        "train": {**TINY["train"], "scenarios": {"lanes-3": 1.0, "random": 1.0}},
+    }
+    env = gym.make(HIERARCHICAL_HIGHWAY, config=data)
+    score = validate(lambda observation, deterministic: (1, None), env, 6, seed=3)
+    assert set(score.worlds) == {"lanes-3", "random"}
+    assert sum(world.episodes for world in score.worlds.values()) == 6
+    assert all(world.mean_speed > 0 for world in score.worlds.values())
+    validation = Validation(
+        10, "long", 6, score.collision_rate, score.mean_return, score.mean_speed, True, score.worlds
+    )
+    line = validation.line()
+    assert "lanes-3" in line and "random" in line and "(kept)" in line
+    assert Validation.from_json(json.loads(json.dumps(dataclasses.asdict(validation)))) == validation
+
+
+def test_training_on_roads_of_several_lane_counts_needs_an_encoding_of_one_size(tmp_path):
+    config = tmp_path / "random.yaml"
+    config.write_text(yaml.safe_dump({**TINY, "perception": {"lanes": "absolute"}}))
+    result = CliRunner().invoke(
+        app, ["train", "-c", str(config), "--scenario", "random", "--out", str(tmp_path / "o")]
+    )
+    assert result.exit_code == 2 and "has a different size on random (lane counts [3, 4, 5])" in result.output
+    assert not (tmp_path / "o").exists()

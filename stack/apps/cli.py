@@ -308,6 +308,11 @@ def train(
         options = {"scenario": scenario, "train__algorithm": agent, "train__envs": envs, "seed": seed}
         cfg = configured(config or TRAIN_CONFIG, sets, None, train__steps=steps, sim__plant=plant, **options)
     check_memory(cfg)
+    if not cfg.train.scenarios:
+        try:
+            cfg.check_one_encoding({cfg.scenario or "highway": cfg.highway}, "perception.lanes")
+        except ValueError as error:
+            fail(str(error))
     check_init_model(cfg)
     owner, resuming = training_owner(cfg), resume is not None
     folder = claimed(resume or out, f"train-{cfg.train.algorithm}", owner, resuming, restart=False)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import asdict
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,7 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ProgressBarCallback
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import SubprocVecEnv
+from tqdm import tqdm
 
 from planner.learned import export_q_network, save_q_table
 from planner.model_file import CHECKPOINT, ModelFileError, load_checkpoint, save_model
@@ -117,9 +119,7 @@ class Trainer:
 
     def _improved(self, save: SaveModel) -> Callable[[Any, Validation], None]:
         def on_improvement(model: Any, validation: Validation) -> None:
-            save(
-                model, self.out / BEST, {**self.metadata(validation.step), "validation": validation.__dict__}
-            )
+            save(model, self.out / BEST, {**self.metadata(validation.step), "validation": asdict(validation)})
 
         return on_improvement
 
@@ -135,8 +135,16 @@ class Trainer:
             self._improved(save),
             self.history,
             self.best,
-            self.on_validation,
+            self._heard,
         )
+
+    def _heard(self, validation: Validation) -> None:
+        """Show every validation (per world for a training mix) above the progress bar, then pass
+        it on to `on_validation`."""
+        if self.progress:
+            tqdm.write(validation.line())
+        if self.on_validation is not None:
+            self.on_validation(validation)
 
     # --- DDQN / DQN -------------------------------------------------------------------------
     def _train_dqn(self) -> int:

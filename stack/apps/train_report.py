@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import asdict
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -50,11 +51,11 @@ def write_training_summary(
         "network": config.train.network,
         "target_steps": config.train.steps,
         **run,
-        "best_validation": kept[-1].__dict__ if kept else None,
+        "best_validation": asdict(kept[-1]) if kept else None,
         "validations": len(history),
         "best_model": str(best) if best.is_file() else None,
         "training_curve": "training_curve.png" if history else "not drawn: no validation ran yet",
     }
     write_json(out / "summary.json", summary)
-    write_json(out / "validation.json", [v.__dict__ for v in history])
+    write_json(out / "validation.json", [asdict(v) for v in history])
     return summary

@@ -88,21 +88,27 @@ class RunConfig(Strict):
 
     @model_validator(mode="after")
     def _one_encoding_for_the_mix(self) -> RunConfig:
-        if len(self.train.scenarios) < 2:
-            return self
+        self.check_one_encoding(
+            {name: HighwayConfig(**scenarios.road(name)) for name in self.train.scenarios}
+        )
+        return self
+
+    def check_one_encoding(self, roads: dict[str, HighwayConfig], key: str = "train.scenarios") -> None:
+        """ValueError (one line, blaming `key`) unless `train.encoding` has one size on every lane
+        count of the named `roads` (one observation space for every training episode)."""
+        lanes = {(name, count) for name, road in roads.items() for count in road.lane_counts}
+        if len(lanes) < 2:
+            return
         grid = OccupancyGridBuilder(
             GridConfig(**self.perception.model_dump(exclude={"sensor", "control_on_ground_truth"}))
         )
-        default = HighwayConfig().lanes_count
-        lanes = {name: int(scenarios.road(name).get("lanes_count", default)) for name in self.train.scenarios}
-        sizes = {name: grid.space(self.train.encoding, count).shape for name, count in lanes.items()}
+        sizes = {(name, count): grid.space(self.train.encoding, count).shape for name, count in lanes}
         if len(set(sizes.values())) > 1:
             raise ValueError(
-                f"train.scenarios: the {self.train.encoding} encoding has a different size on "
-                f"{' and '.join(sorted(sizes))} (lane counts {sorted(set(lanes.values()))}); use "
-                "perception lanes: ego with lane_code: sides"
+                f"{key}: the {self.train.encoding} encoding has a different size on "
+                f"{' and '.join(sorted({name for name, _ in sizes}))} (lane counts "
+                f"{sorted({count for _, count in lanes})}); use perception lanes: ego with lane_code: sides"
             )
-        return self
 
     @property
     def dt(self) -> float:

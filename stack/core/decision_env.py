@@ -45,6 +45,7 @@ class HierarchicalHighwayEnv(gym.Env):
         self.render_mode = render_mode
         mix = config.train.scenarios
         self.worlds = [in_scenario(config, name) for name in mix] if mix else [config]
+        self.world_names = list(mix) if mix else [config.scenario or "configured"]
         self.shares = np.array(list(mix.values()) if mix else [1.0]) / sum(mix.values() or [1.0])
         self.adapters = [
             HighwayAdapter(
@@ -74,6 +75,7 @@ class HierarchicalHighwayEnv(gym.Env):
         self.episode = EpisodeRecord(generator_state, [])
         world = int(self.np_random.choice(len(self.loops), p=self.shares)) if len(self.loops) > 1 else 0
         self.adapter, self.loop = self.adapters[world], self.loops[world]
+        self.world_name = self.world_names[world]
         self.loop.reset(drawn_seed(self.np_random, TRAINING_SEED_FLOOR))
 
     def episode_record(self) -> EpisodeRecord:

@@ -147,7 +147,7 @@ class HighwayAdapter:
     def snapshot(self) -> WorldState:
         """Copy the road into a `WorldState` (row 0 = ego, others in road order)."""
         env: AbstractEnv = self.env.unwrapped
-        return snapshot(env.road, env.vehicle, float(env.time), self.config.lanes_count)
+        return snapshot(env.road, env.vehicle, float(env.time), int(env.config["lanes_count"]))
 
 
 def world_state(env: gym.Env) -> WorldState:

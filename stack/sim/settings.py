@@ -7,7 +7,7 @@ from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from records import BACKENDS, PLANTS, ROADS, Backend, PlantName, RoadName, one_of
+from records import BACKENDS, MAX_LANES, PLANTS, ROADS, Backend, PlantName, RoadName, one_of
 
 MAX_CLASS_BOUND = 60.0
 """Largest desired speed [m/s] and length [m] of a traffic vehicle class (the spawn speed's bound)."""
@@ -83,6 +83,64 @@ class TrafficConfig(BaseModel):
         return classes
 
 
+def _ordered_pair(bounds: tuple[float, float], low: float, high: float) -> tuple[float, float]:
+    if not all(low <= bound <= high for bound in bounds):
+        raise ValueError(f"must lie in [{low:g}, {high:g}], got {list(bounds)}")
+    return _ordered_range(bounds)
+
+
+class RandomTrafficConfig(BaseModel):
+    """Traffic drawn anew for every episode from the env's seeded generator (`stack.sim.traffic`), so
+    that no single named world is what an agent sees: the lane count, the number of vehicles per
+    lane and highway-env's density, a share of trucks that keep to the two right lanes or (with
+    `trucks_change_lane`) change lane like cars, a car speed range `car_spread_mps` wide whose
+    lower bound is drawn from `car_speed_mps`, trucks slower than cars by `truck_slower_mps`, every
+    vehicle spawned at the trucks' mid speed, the ego's place in the traffic, and, with
+    `incident_probability`, a stopped car 150-350 m ahead in a random lane."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    lanes_count: tuple[int, int] = Field((3, 5), description="lane counts drawn from [low, high]")
+    vehicles_per_lane: tuple[float, float] = (8.0, 20.0)
+    vehicles_density: tuple[float, float] = (0.6, 2.5)
+    truck_share: tuple[float, float] = (0.0, 0.6)
+    trucks_change_lane: float = Field(0.3, ge=0, le=1, description="probability that trucks change lane")
+    car_speed_mps: tuple[float, float] = Field(
+        (6.0, 26.0), description="the cars' lowest desired speed [m/s]"
+    )
+    car_spread_mps: tuple[float, float] = Field((3.0, 8.0), description="the cars' speed range [m/s]")
+    truck_slower_mps: tuple[float, float] = Field((2.0, 10.0), description="how much slower trucks are [m/s]")
+    ego_position: tuple[float, float] = Field((0.0, 0.7), description="the traffic's fraction behind the ego")
+    incident_probability: float = Field(0.15, ge=0, le=1)
+
+    @field_validator("lanes_count")
+    @classmethod
+    def _lanes(cls, bounds: tuple[int, int]) -> tuple[int, int]:
+        if not 2 <= bounds[0] <= bounds[1] <= MAX_LANES:
+            raise ValueError(f"must be [low, high] with 2 <= low <= high <= {MAX_LANES}, got {list(bounds)}")
+        return bounds
+
+    @field_validator("vehicles_per_lane")
+    @classmethod
+    def _per_lane(cls, bounds: tuple[float, float]) -> tuple[float, float]:
+        return _ordered_pair(bounds, 0.0, 50.0)
+
+    @field_validator("vehicles_density")
+    @classmethod
+    def _density(cls, bounds: tuple[float, float]) -> tuple[float, float]:
+        return _ordered_pair(bounds, 0.1, 10.0)
+
+    @field_validator("truck_share", "ego_position")
+    @classmethod
+    def _fraction(cls, bounds: tuple[float, float]) -> tuple[float, float]:
+        return _ordered_pair(bounds, 0.0, 1.0)
+
+    @field_validator("car_speed_mps", "car_spread_mps", "truck_slower_mps")
+    @classmethod
+    def _speeds(cls, bounds: tuple[float, float]) -> tuple[float, float]:
+        return _ordered_pair(bounds, 0.0, MAX_CLASS_BOUND / 2)
+
+
 class HighwayConfig(BaseModel):
     """The section handed to highway-env (`gym.make("highway-v0" or "exit-v0", config=...)`):
     which `road`, highway-env's own keys, and `traffic` (heterogeneous traffic, `stack.sim.traffic`,
@@ -91,7 +149,7 @@ class HighwayConfig(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
     road: Annotated[RoadName, one_of("road", ROADS)] = "highway"
-    lanes_count: int = Field(4, ge=1, le=10)
+    lanes_count: int = Field(4, ge=1, le=MAX_LANES)
     vehicles_count: int = Field(50, ge=0, le=500)
     vehicles_density: float = Field(1.0, gt=0, le=10)
     duration: float = Field(40.0, gt=0, le=3600, description="episode length [s]")
@@ -99,12 +157,27 @@ class HighwayConfig(BaseModel):
     ego_spacing: float = Field(2.0, gt=0, le=20, description="ratio of the ego's spawn gap to the default")
     initial_lane_id: int | None = Field(None, ge=0, le=9, description="the ego's spawn lane (None: random)")
     traffic: TrafficConfig | None = None
+    random_traffic: RandomTrafficConfig | None = Field(
+        None, description="traffic (and lane count) drawn for every episode; replaces traffic"
+    )
+
+    @property
+    def lane_counts(self) -> tuple[int, ...]:
+        """Every lane count an episode of this road can have."""
+        if self.random_traffic is None:
+            return (self.lanes_count,)
+        low, high = self.random_traffic.lanes_count
+        return tuple(range(low, high + 1))
 
     @model_validator(mode="after")
     def _keys_the_road_uses(self) -> HighwayConfig:
-        if self.road == "exit" and self.traffic is not None:
+        if self.road == "exit" and (self.traffic is not None or self.random_traffic is not None):
             raise ValueError(
                 "traffic: the exit road spawns its own traffic; vehicle classes need road: highway"
+            )
+        if self.random_traffic is not None and (self.traffic is not None or self.initial_lane_id is not None):
+            raise ValueError(
+                "random_traffic: draws the traffic and the ego's lane; remove traffic and initial_lane_id"
             )
         if self.road == "exit" and self.initial_lane_id is not None:
             raise ValueError("initial_lane_id: the exit road always starts the ego in lane 0")

@@ -117,8 +117,68 @@ def _place_incident(env: HighwayEnv, incident: dict[str, Any]) -> None:
     env.road.vehicles.append(stopped)
 
 
+INCIDENT_AHEAD_M = (150.0, 350.0)
+"""Where a random world's stopped car stands ahead of the ego at spawn [m]."""
+INCIDENT_LENGTH_M = 5.0
+"""A random world's stopped car's length [m]."""
+
+
+def random_traffic(rng: np.random.Generator, ranges: dict[str, Any]) -> dict[str, Any]:
+    """highway-env config keys (`lanes_count`, `vehicles_count`, `vehicles_density`, `traffic`) of
+    one world drawn from `ranges` (a `RandomTrafficConfig` as data)."""
+
+    def draw(key: str) -> float:
+        return float(rng.uniform(*ranges[key]))
+
+    lanes = int(rng.integers(ranges["lanes_count"][0], ranges["lanes_count"][1] + 1))
+    car_low = draw("car_speed_mps")
+    car_speeds = [car_low, car_low + draw("car_spread_mps")]
+    slower = draw("truck_slower_mps")
+    truck_speeds = [max(speed - slower, 2.0) for speed in car_speeds]
+    trucks_change_lane = bool(rng.random() < ranges["trucks_change_lane"])
+    truck_share = draw("truck_share")
+    car: dict[str, Any] = {
+        "name": "car",
+        "share": 1.0 - truck_share,
+        "speed_mps": car_speeds,
+        "length_m": [4.5, 5.0],
+    }
+    truck: dict[str, Any] = {
+        "name": "truck",
+        "share": truck_share,
+        "speed_mps": truck_speeds,
+        "length_m": [10.0, 12.0],
+        "lanes": None if trucks_change_lane else [lanes - 2, lanes - 1],
+        "changes_lane": trucks_change_lane,
+    }
+    traffic: dict[str, Any] = {
+        "classes": [kind for kind in (car, truck) if kind["share"] > 0],
+        "ego_position": draw("ego_position"),
+        "spawn_speed_mps": sum(truck_speeds) / 2,
+    }
+    if rng.random() < ranges["incident_probability"]:
+        traffic["incident"] = {
+            "lane": int(rng.integers(lanes)),
+            "ahead_m": float(rng.uniform(*INCIDENT_AHEAD_M)),
+            "length_m": INCIDENT_LENGTH_M,
+        }
+    return {
+        "lanes_count": lanes,
+        "vehicles_count": round(lanes * draw("vehicles_per_lane")),
+        "vehicles_density": draw("vehicles_density"),
+        "traffic": traffic,
+    }
+
+
 class ScenarioTraffic(HighwayEnv):
-    """highway-v0 whose `_create_vehicles` reads `config["traffic"]` (see the module docstring)."""
+    """highway-v0 whose `_create_vehicles` reads `config["traffic"]` (see the module docstring), and
+    whose `_reset` draws the road's traffic first when `config["random_traffic"]` is set."""
+
+    def _reset(self) -> None:
+        ranges = self.config.get("random_traffic")
+        if ranges:
+            self.config.update(random_traffic(self.np_random, ranges))
+        super()._reset()
 
     def _create_highway_env_vehicles(self) -> None:
         """highway-env's own `_create_vehicles` (the ego at 25 m/s behind all the traffic, the same
