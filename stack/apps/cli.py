@@ -20,7 +20,6 @@ from stack.apps.options import (
     TRAIN_CONFIG,
     VARIANT_HELP,
     VERSION_OPTION,
-    checked_run,
     chosen,
     configured,
     fail,
@@ -30,6 +29,7 @@ from stack.apps.options import (
     until_interrupted,
 )
 from stack.apps.plugin_checks import agent_name_or_fail, plugins_or_fail
+from stack.apps.preflight import checked_run
 from stack.apps.training import (
     check_init_model,
     check_memory,
