@@ -3,6 +3,7 @@
 name, no module grows past a sitting's reading."""
 
 import ast
+import math
 from pathlib import Path
 
 import pytest
@@ -145,13 +146,20 @@ def test_every_registered_name_has_an_implementation():
     from controllers.config import ControllerConfig
     from controllers.tracker import make_controller
     from perception.grid import OccupancyGridBuilder
-    from records import BACKENDS, CONTROLLER_NAMES, ENCODINGS, ROADS, GridConfig
+    from records import BACKENDS, CONTROLLER_NAMES, ENCODINGS, ROADS, EgoState, GridConfig, Reference
     from stack.sim.highway import ENV_IDS
     from tests.helpers import scene
 
     assert tuple(ENV_IDS) == ROADS and all(tuple(ids) == BACKENDS for ids in ENV_IDS.values())
+    state, reference = EgoState(d=0.3, heading=0.01, speed=25.0), Reference(1.0, 0.5, 0.0, set_speed=25.0)
+    laws = set()
     for name in CONTROLLER_NAMES:
-        assert callable(make_controller(ControllerConfig(type=name), 1 / 15).step)
+        controller = make_controller(ControllerConfig(type=name), 1 / 15)
+        actuation = controller.step(state, reference)
+        assert math.isfinite(actuation.steering) and math.isfinite(actuation.acceleration), name
+        assert len(controller.solve_times) == 1, name
+        laws.add((type(controller), type(getattr(controller, "lateral", None))))
+    assert len(laws) == len(CONTROLLER_NAMES), "two controller names build the same controller"
     builder = OccupancyGridBuilder(GridConfig())
     grid = builder.build(scene(3, (0.0, 1), [(15.0, 4.0)]))
     for encoding in ENCODINGS:
