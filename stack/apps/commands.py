@@ -12,7 +12,6 @@ from rich.console import Console
 
 from records.plugins import AGENT_GROUP, SPEC_FORMS
 from stack.apps.options import fail, ray_or_fail
-from stack.apps.training import check_memory
 
 SWEEP_RAY_HELP = (
     "Where the trials run: a local Ray instance (default), auto (the cluster `ray start` made) or HOST:PORT."
@@ -31,6 +30,7 @@ def sweep(
     """Training runs over a grid or random space of seeds, hyper-parameters, scenarios (Ray Tune)."""
     if (config is None) == (resume is None):
         fail("sweep: expected --config SWEEP.yaml for a new sweep or --resume DIR to continue one")
+    from stack.apps.training import check_memory
     from stack.core.config import ConfigError
     from stack.core.sweep_config import SWEEP_FILE, load_sweep, trial_config
 
