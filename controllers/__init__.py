@@ -8,7 +8,7 @@ from typing import Any
 _PUBLIC = {
     "ControllerConfig": "controllers.config",
     "Maneuver": "controllers.maneuver",
-    "Controller": "controllers.tracker",
+    "Controller": "controllers.protocol",
     "make_controller": "controllers.tracker",
 }
 __all__ = list(_PUBLIC)

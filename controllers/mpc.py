@@ -31,7 +31,7 @@ import numpy as np
 from controllers.bicycle import LENGTH, YAW_POLE_SPEED
 from controllers.config import MPCSettings
 from controllers.mpc_problem import build_problem
-from controllers.tracker import Controller
+from controllers.protocol import Controller
 from records import Actuation, EgoState, Reference
 
 

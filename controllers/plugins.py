@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from controllers.config import ControllerConfig
-from controllers.tracker import Controller
+from controllers.protocol import Controller
 from records import PlantName
 from records.plugins import CONTROLLER_GROUP, PluginError, construct, load_class
 

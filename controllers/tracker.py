@@ -1,5 +1,6 @@
-"""Controllers behind one verb, `step(state, reference) -> Actuation`, built by name: PID, MPC, the
-classic trackers (pure pursuit, Stanley, LQR) or a plug-in (`records.plugins`)."""
+"""Controllers behind one verb, `step(state, reference) -> Actuation` (the `Controller` protocol),
+built by name: PID, MPC, the classic trackers (pure pursuit, Stanley, LQR) or a plug-in
+(`records.plugins`)."""
 
 from __future__ import annotations
 
@@ -9,19 +10,8 @@ from typing import Protocol
 from controllers.config import ControllerConfig, PIDGains
 from controllers.cruise import AdaptiveCruise
 from controllers.lateral import LateralPID
+from controllers.protocol import Controller
 from records import CONTROLLER_NAMES, Actuation, EgoState, PlantName, Reference
-
-
-class Controller(Protocol):
-    """Steering and throttle for one control tick of a fixed period. `solve_times` [s] holds the
-    computing time of every step; `fallbacks` counts steps that fell back to a simpler law."""
-
-    fallbacks: int
-    solve_times: list[float]
-
-    def reset(self) -> None: ...
-
-    def step(self, state: EgoState, reference: Reference) -> Actuation: ...
 
 
 class LateralLaw(Protocol):

@@ -4,36 +4,52 @@
 below `stack`. It holds plain data: the world snapshot (`WorldState`), the decision (`Command`),
 the grid an agent is shown (`GridConfig`), and what flows through one control tick (`EgoState`,
 `Reference`, `Actuation`). Behaviour stays in the layers; only small derived views live here.
-Import from `records` itself; the submodules only keep each part short.
+Import from `records` itself; the submodules only keep each part short, and each is imported on
+the first use of one of its names (numpy and pydantic with them), so `records.plugins` alone stays
+light for the command line's option texts.
 """
 
-from records.grid import EGO_HEADING_SCALE, MAX_LANES, MAX_SPEED, SIDE_LANES_SEEN, GridConfig, lane_code_bits
-from records.names import (
-    AGENT_NAMES,
-    BACKENDS,
-    CONTROLLER_NAMES,
-    ENCODINGS,
-    LEARNED_AGENTS,
-    PLANTS,
-    POLICY_NAMES,
-    ROADS,
-    SEED_LIMIT,
-    TRAINING_SEED_FLOOR,
-    AgentName,
-    Backend,
-    ControllerName,
-    Encoding,
-    LearnedAgentName,
-    PlantName,
-    PolicyName,
-    RoadName,
-    child_seed,
-    drawn_seed,
-    one_of,
-    unknown_name,
-)
-from records.tick import N_ACTIONS, Actuation, Command, LateralProfile, Reference, clip
-from records.world import EgoState, Lane, Neighbour, WorldState, lane_curvature
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
+SUBMODULES = ("records.names", "records.tick", "records.world", "records.grid")
+"""Where the public names live, searched in this order on a name's first use."""
+
+if TYPE_CHECKING:
+    from records.grid import (
+        EGO_HEADING_SCALE,
+        MAX_LANES,
+        MAX_SPEED,
+        SIDE_LANES_SEEN,
+        GridConfig,
+        lane_code_bits,
+    )
+    from records.names import (
+        AGENT_NAMES,
+        BACKENDS,
+        CONTROLLER_NAMES,
+        ENCODINGS,
+        LEARNED_AGENTS,
+        PLANTS,
+        POLICY_NAMES,
+        ROADS,
+        SEED_LIMIT,
+        TRAINING_SEED_FLOOR,
+        AgentName,
+        Backend,
+        ControllerName,
+        Encoding,
+        LearnedAgentName,
+        PlantName,
+        PolicyName,
+        RoadName,
+        child_seed,
+        drawn_seed,
+        one_of,
+        unknown_name,
+    )
+    from records.tick import N_ACTIONS, Actuation, Command, LateralProfile, Reference, clip
+    from records.world import EgoState, Lane, Neighbour, WorldState, lane_curvature
 
 __all__ = [
     "AGENT_NAMES",
@@ -76,3 +92,13 @@ __all__ = [
     "one_of",
     "unknown_name",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """A public name, imported from its submodule on first use and kept here."""
+    if name in __all__:
+        for module in map(import_module, SUBMODULES):
+            if hasattr(module, name):
+                globals()[name] = value = getattr(module, name)
+                return value
+    raise AttributeError(f"module 'records' has no attribute {name!r}")

@@ -12,9 +12,10 @@ import inspect
 import re
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from pydantic import BeforeValidator
+if TYPE_CHECKING:
+    from pydantic import BeforeValidator
 
 AGENT_GROUP = "drivestack.agents"
 CONTROLLER_GROUP = "drivestack.controllers"
@@ -156,6 +157,8 @@ def checked_name(kind: str, builtins: tuple[str, ...], group: str, value: object
 
 def plugin_name(kind: str, builtins: tuple[str, ...], group: str) -> BeforeValidator:
     """A pydantic validator for a field that takes what `checked_name` accepts."""
+    from pydantic import BeforeValidator
+
     return BeforeValidator(lambda value: checked_name(kind, builtins, group, value))
 
 

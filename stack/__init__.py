@@ -8,7 +8,8 @@ The public API, imported on first use so `import stack` stays light:
 - `run(config)` -> `RunResults` (every episode of a config) and `run_episode(config, episode)`;
 - `world_state(env)` -> `WorldState` of any highway-env env, for `perception.OccupancyGridBuilder`.
 
-Importing `stack` registers its gymnasium envs (`drivestack/VectorHighway-v0`, ...).
+Importing `stack` registers its gymnasium envs (`drivestack/VectorHighway-v0`, ...), without
+importing gymnasium itself: at once if it is imported, else when it is.
 """
 
 import os
@@ -17,9 +18,9 @@ from typing import Any
 
 os.environ.setdefault("MPLBACKEND", "Agg")  # figures are written to files; chosen here, once
 
-from stack.sim.envs import register_envs  # noqa: E402
+from stack.sim.envs import register_when_imported  # noqa: E402
 
-register_envs()
+register_when_imported()
 
 _PUBLIC = {
     "load_config": "stack.core.config",

@@ -1,7 +1,9 @@
 """The import rules of docs/architecture.md, read from the source: the layers share only `records`,
-`stack` imports downwards (apps -> core -> sim), no module grows past a sitting's reading."""
+`stack` imports downwards (apps -> core -> sim), no import circle closes, no two classes share a
+name, no module grows past a sitting's reading."""
 
 import ast
+import math
 from pathlib import Path
 
 import pytest
@@ -28,6 +30,86 @@ def project_imports(path: Path) -> set[str]:
             names = [node.module]
         found |= {name for name in names if name.split(".")[0] in PROJECT}
     return found
+
+
+def module_name(path: Path) -> str:
+    """The dotted name `path` is imported as (a package by its folder)."""
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Each project module -> the project modules it imports, at module level, under TYPE_CHECKING
+    and inside functions alike; `from a import b` counts `a.b` when that is a module, else `a`."""
+    paths = {module_name(path): path for package in PROJECT for path in modules(package)}
+
+    def module_of(name: str) -> str | None:
+        while name not in paths and "." in name:
+            name = name.rpartition(".")[0]
+        return name if name in paths else None
+
+    graph = {}
+    for name, path in paths.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        targets = []
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                targets += [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    anchor = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                    base = f"{anchor}.{base}".rstrip(".")
+                targets += [f"{base}.{alias.name}" for alias in node.names]
+        graph[name] = {found for target in targets if (found := module_of(target)) not in (None, name)}
+    return graph
+
+
+def first_circle(graph: dict[str, set[str]]) -> list[str] | None:
+    """Modules that import each other round a circle (the first back to the start), or None."""
+    done: set[str] = set()
+    path: list[str] = []
+
+    def visit(name: str) -> list[str] | None:
+        path.append(name)
+        for other in sorted(graph[name]):
+            if other in path:
+                return path[path.index(other) :] + [other]
+            if other not in done and (circle := visit(other)):
+                return circle
+        done.add(path.pop())
+        return None
+
+    for name in sorted(graph):
+        if name not in done and (circle := visit(name)):
+            return circle
+    return None
+
+
+def test_the_import_graph_sees_every_kind_of_import():
+    graph = import_graph()
+    assert "controllers.protocol" in graph["controllers.mpc"]
+    assert "stack.core.ray_tasks" in graph["stack.core.executors"]
+    assert "stack.apps.track_record" in graph["stack.apps.track_report"]
+    assert "perception.features" in graph["perception.grid"]
+    assert first_circle({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == ["a", "b", "c", "a"]
+    assert first_circle({"a": {"b"}, "b": set(), "c": {"a", "b"}}) is None
+
+
+def test_no_import_circle():
+    circle = first_circle(import_graph())
+    assert circle is None, "import circle: " + " -> ".join(circle or [])
+
+
+def test_no_two_classes_share_a_name():
+    defined: dict[str, list[str]] = {}
+    for package in PROJECT:
+        for path in modules(package):
+            for node in ast.parse(path.read_text()).body:
+                if isinstance(node, ast.ClassDef):
+                    defined.setdefault(node.name, []).append(module_name(path))
+    shared = {name: where for name, where in defined.items() if len(where) > 1}
+    assert not shared, f"classes of one name in several modules: {shared}"
 
 
 @pytest.mark.parametrize("layer", LAYERS)
@@ -64,13 +146,20 @@ def test_every_registered_name_has_an_implementation():
     from controllers.config import ControllerConfig
     from controllers.tracker import make_controller
     from perception.grid import OccupancyGridBuilder
-    from records import BACKENDS, CONTROLLER_NAMES, ENCODINGS, ROADS, GridConfig
+    from records import BACKENDS, CONTROLLER_NAMES, ENCODINGS, ROADS, EgoState, GridConfig, Reference
     from stack.sim.highway import ENV_IDS
     from tests.helpers import scene
 
     assert tuple(ENV_IDS) == ROADS and all(tuple(ids) == BACKENDS for ids in ENV_IDS.values())
+    state, reference = EgoState(d=0.3, heading=0.01, speed=25.0), Reference(1.0, 0.5, 0.0, set_speed=25.0)
+    laws = set()
     for name in CONTROLLER_NAMES:
-        assert callable(make_controller(ControllerConfig(type=name), 1 / 15).step)
+        controller = make_controller(ControllerConfig(type=name), 1 / 15)
+        actuation = controller.step(state, reference)
+        assert math.isfinite(actuation.steering) and math.isfinite(actuation.acceleration), name
+        assert len(controller.solve_times) == 1, name
+        laws.add((type(controller), type(getattr(controller, "lateral", None))))
+    assert len(laws) == len(CONTROLLER_NAMES), "two controller names build the same controller"
     builder = OccupancyGridBuilder(GridConfig())
     grid = builder.build(scene(3, (0.0, 1), [(15.0, 4.0)]))
     for encoding in ENCODINGS:

@@ -3,6 +3,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import yaml
 from typer.testing import CliRunner
 
@@ -93,6 +94,24 @@ def test_module_entry_point_shows_help():
         [sys.executable, "-m", "stack", "run", "--help"], capture_output=True, text=True, check=True
     )
     assert "--episodes" in completed.stdout
+
+
+@pytest.mark.parametrize("arguments", [["--help"], ["run", "--help"]])
+def test_help_imports_none_of_the_heavy_libraries(arguments):
+    """`python -m stack --help` (and `drivestack --help`) answers without numpy, gymnasium, torch or
+    highway-env: each command imports what it needs when it runs."""
+    probe = (
+        "import runpy, sys\n"
+        f"sys.argv = ['stack', *{arguments!r}]\n"
+        "try:\n"
+        "    runpy.run_module('stack', run_name='__main__', alter_sys=True)\n"
+        "except SystemExit as stop:\n"
+        "    assert not stop.code, stop.code\n"
+        "print(sorted({'numpy', 'gymnasium', 'torch', 'highway_env'} & set(sys.modules)))\n"
+    )
+    completed = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=ROOT)
+    assert completed.returncode == 0 and "Usage" in completed.stdout, completed.stdout + completed.stderr
+    assert completed.stdout.rstrip().endswith("\n[]"), completed.stdout[-200:]
 
 
 def test_compare_runs_every_agent_on_the_same_episodes(tmp_path):

@@ -23,10 +23,17 @@ def test_the_public_api_is_exported():
     import perception
     import planner
     import stack
+    from stack.core.config import load_config
+    from stack.core.episodes import run_episode
+    from stack.sim.highway import world_state
 
     assert {"OccupancyGridBuilder", "GridConfig", "WorldState"} <= set(perception.__all__)
     assert {"make_agent", "load_agent", "decide"} <= set(planner.__all__)
     assert {"make_controller", "ControllerConfig"} <= set(controllers.__all__)
-    assert callable(stack.run_episode) and callable(stack.world_state) and callable(stack.load_config)
+    exported = (stack.run_episode, stack.world_state, stack.load_config)
+    assert exported == (run_episode, world_state, load_config)
+    for package in (controllers, perception, planner, stack):
+        for name in package.__all__:
+            assert getattr(package, name).__name__ == name, f"{package.__name__}.{name}"
     with pytest.raises(AttributeError):
         stack.nothing_here  # noqa: B018

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from stack.apps.cli import app
-from stack.core.config import ConfigError, RunConfig, build_config, load_config
+from stack.core.config import ConfigError, build_config, config_text, load_config
 
 SECTIONS = {
     "highway": ["lanes_count", "vehicles_count", "vehicles_density", "duration", "traffic", "road"],
@@ -47,13 +47,15 @@ configs = st.dictionaries(st.sampled_from(KEYS), values, max_size=4) | st.builds
 
 
 def one_line_or_valid(load) -> None:
+    """`load()` refuses in one line, or gives a config whose resolved YAML (a results folder's
+    config.yaml, which `--resume` reads) loads back to the same config."""
     try:
         config = load()
     except ConfigError as error:
         message = str(error)
         assert "\n" not in message and len(message) <= 300, message[:400]
         return
-    assert isinstance(config, RunConfig)
+    assert build_config(yaml.safe_load(config_text(config)), "config.yaml") == config
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -149,7 +151,9 @@ sweep_spaces = st.dictionaries(
     st.sampled_from(["mean_return", "collision_rate"]) | values,
 )
 def test_any_sweep_file_loads_or_is_one_line(tmp_path_factory, space, samples, metric):
-    from stack.core.sweep_config import SweepFile, load_sweep
+    """A sweep file is refused in one line, or every trial it can start (each grid value, choice
+    and range end) loads: no trial fails on its config an hour later."""
+    from stack.core.sweep_config import candidates, load_sweep, trial_config
 
     folder = tmp_path_factory.mktemp("sweep")
     (folder / "base.yaml").write_text("episodes: 1\n")
@@ -160,4 +164,7 @@ def test_any_sweep_file_loads_or_is_one_line(tmp_path_factory, space, samples, m
     except ConfigError as error:
         assert "\n" not in str(error) and len(str(error)) <= 300, str(error)[:400]
         return
-    assert isinstance(sweep, SweepFile) and base.is_file()
+    assert sweep.metric == metric
+    for key, values in sweep.space.items():
+        for value in candidates(values):
+            trial_config(base, sweep.fixed, {key: value})

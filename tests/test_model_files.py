@@ -134,3 +134,46 @@ def test_encrypted_or_oddly_compressed_members_are_refused(tmp_path):
     path.write_bytes(bytes(raw))
     with pytest.raises(ModelFileError, match="encrypted or compressed in an unknown way"):
         load_agent(path)
+
+
+def test_a_model_that_does_not_fit_the_road_is_refused_alike_everywhere(tmp_path):
+    """A model on the paper's state (every road lane, binary lane code) sized for 4 lanes, on a
+    2-lane road: `run` (from the metadata, before torch), the agent as built, `train.init_model`
+    and `export` (the file says 2 lanes) refuse it with the one message of `check_road_fit`."""
+    from typer.testing import CliRunner
+
+    from perception.grid import OccupancyGridBuilder
+    from records import GridConfig
+    from stack.apps.cli import app
+    from stack.apps.export import export_sb3
+    from stack.apps.train_model import initial_model
+    from stack.core.config import build_config
+    from stack.core.episodes import build_agent
+    from tests.test_cli import tiny_config_file
+
+    arrays, metadata = shipped()
+    grid = {**metadata["grid"], "lanes": "absolute", "lane_code": "binary", "features": []}
+    builder = OccupancyGridBuilder(GridConfig(**grid))
+    size, given = (int(builder.space("observation", lanes).shape[0]) for lanes in (4, 2))
+    arrays["0.weight"] = np.zeros((arrays["0.weight"].shape[0], size), dtype=arrays["0.weight"].dtype)
+    model = tmp_path / "paper-4-lanes.npz"
+    save_model(model, arrays, {**metadata, "grid": grid, "observation_size": size, "lanes_count": 2})
+    expected = (
+        f"{model}: expects observations of {size} values; its observation grid gives {given} "
+        "on this 2-lane road"
+    )
+
+    options = ["--agent", "ddqn", "--model", str(model), "--set", "highway.lanes_count=2"]
+    config = str(tiny_config_file(tmp_path))
+    result = CliRunner().invoke(app, ["run", "-c", config, *options, "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2 and result.output.strip().endswith(expected), result.output
+    road = {"highway": {"lanes_count": 2}, "perception": grid}
+    with pytest.raises(ModelFileError) as built:
+        build_agent(build_config({**road, "planner": {"agent": "ddqn", "model": str(model)}}), 0)
+    train = {"init_model": str(model), "network": metadata["network"], "encoding": "observation"}
+    with pytest.raises(ModelFileError) as started:
+        initial_model(build_config({**road, "train": train}))
+    with pytest.raises(ModelFileError) as exported:
+        export_sb3(model, tmp_path / "sb3.zip")
+    refusals = [str(built.value), str(started.value), str(exported.value)]
+    assert refusals == [expected, f"train.init_model: {expected}", expected]

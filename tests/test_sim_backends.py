@@ -2,12 +2,15 @@
 bit for bit (positions, headings, speeds, lane and target lane indices, crash flags)."""
 
 import functools
+import subprocess
+import sys
 
 import gymnasium as gym
 import numpy as np
 import pytest
 
 from stack.core.config import ConfigError, HighwayConfig, build_config
+from stack.sim import envs
 from stack.sim.envs import FAST_HIGHWAY, VECTOR_HIGHWAY
 from stack.sim.highway import HighwayAdapter, env_config
 from stack.sim.vector.lanes import LaneTable
@@ -168,3 +171,23 @@ def test_vector_backend_matches_stock_on_sparse_roads(lanes, vehicles):
     assert_identical(
         HighwayConfig(lanes_count=lanes, vehicles_count=vehicles), seed=5, frames=120, backend="vector"
     )
+
+
+@pytest.mark.parametrize("order", ["stack, gymnasium", "gymnasium, stack"])
+def test_importing_stack_registers_its_envs_whether_gymnasium_comes_first_or_later(order):
+    """`import stack` registers the envs without importing gymnasium (the CLI starts light): at once
+    when gymnasium is there, else as gymnasium is imported."""
+    probe = (
+        f"import sys, {order}\n"
+        "print(sorted(name for name in gymnasium.registry if name.startswith('drivestack/')))"
+    )
+    completed = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    ids = [envs.HIGHWAY, envs.FAST_HIGHWAY, envs.VECTOR_HIGHWAY, envs.FAST_HIGHWAY_FAST, envs.FAST_EXIT]
+    assert completed.stdout.strip() == str(sorted([*ids, envs.HIERARCHICAL_HIGHWAY, envs.DEEPCARS]))
+    alone = subprocess.run(
+        [sys.executable, "-c", "import sys, stack; print('gymnasium' in sys.modules)"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert alone.stdout.strip() == "False"

@@ -20,7 +20,6 @@ from stack.apps.options import (
     TRAIN_CONFIG,
     VARIANT_HELP,
     VERSION_OPTION,
-    checked_run,
     chosen,
     configured,
     fail,
@@ -30,13 +29,7 @@ from stack.apps.options import (
     until_interrupted,
 )
 from stack.apps.plugin_checks import agent_name_or_fail, plugins_or_fail
-from stack.apps.training import (
-    check_init_model,
-    check_memory,
-    resumed_training,
-    train_or_fail,
-    training_owner,
-)
+from stack.apps.preflight import checked_run
 
 PLUGIN_HELP = f"a plug-in class: {SPEC_FORMS} (docs/plugins.md)."
 RESUME_HELP = "Finish the interrupted run in --out (same arguments): its finished episodes are kept."
@@ -301,6 +294,14 @@ def train(
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Train a decision agent inside the closed loop, keeping the best model by real-time validation."""
+    from stack.apps.training import (
+        check_init_model,
+        check_memory,
+        resumed_training,
+        train_or_fail,
+        training_owner,
+    )
+
     if resume is not None:
         given = {"--agent": agent, "--config": config, "--envs": envs, "--plant": plant, "--seed": seed}
         cfg = resumed_training(resume, sets, steps, given | {"--scenario": scenario, "--out": out})

@@ -12,10 +12,7 @@ from rich.console import Console
 
 from records.plugins import AGENT_GROUP, SPEC_FORMS
 from stack.apps.options import fail, ray_or_fail
-from stack.apps.training import check_memory
 
-SWEEP_FILE = "sweep.yaml"
-"""The sweep file a sweep folder keeps (`--resume` reads it)."""
 SWEEP_RAY_HELP = (
     "Where the trials run: a local Ray instance (default), auto (the cluster `ray start` made) or HOST:PORT."
 )
@@ -33,12 +30,13 @@ def sweep(
     """Training runs over a grid or random space of seeds, hyper-parameters, scenarios (Ray Tune)."""
     if (config is None) == (resume is None):
         fail("sweep: expected --config SWEEP.yaml for a new sweep or --resume DIR to continue one")
+    from stack.apps.training import check_memory
+    from stack.core.config import ConfigError
+    from stack.core.sweep_config import SWEEP_FILE, load_sweep, trial_config
+
     spec = resume / SWEEP_FILE if resume is not None else config or Path(SWEEP_FILE)
     if resume is not None and not spec.is_file():
         fail(f"--resume: {resume} is not a sweep folder (no {SWEEP_FILE})")
-    from stack.core.config import ConfigError
-    from stack.core.sweep_config import load_sweep, trial_config
-
     try:
         sweep_file, base = load_sweep(spec)
     except ConfigError as error:

@@ -19,6 +19,7 @@ from planner.model_file import ModelFileError
 from records import N_ACTIONS, GridConfig
 from stack.apps.folders import check_destination
 from stack.apps.train_model import warm_start
+from stack.core.model_fit import check_road_fit
 
 
 class _Spaces(gym.Env):
@@ -38,13 +39,9 @@ def export_sb3(model: Path, out: Path) -> Path:
     agent = load_agent(model, expected_algorithms=("ddqn", "dqn"))
     if not isinstance(agent, LearnedAgent):
         raise ModelFileError(f"{model}: a Q-table has no SB3 counterpart; export a DDQN or DQN model")
-    lanes = int(agent.metadata.get("lanes_count", 4))
-    space = OccupancyGridBuilder(GridConfig(**agent.metadata["grid"])).space(agent.encoding, lanes)
-    if space.shape != (agent.observation_size,):
-        raise ModelFileError(
-            f"{model}: its {agent.encoding} encoding has {space.shape[0]} values on {lanes} lanes, "
-            f"its network takes {agent.observation_size}"
-        )
+    lanes, grid = int(agent.metadata.get("lanes_count", 4)), GridConfig(**agent.metadata["grid"])
+    check_road_fit(model, grid, agent.encoding, agent.observation_size, lanes)
+    space = OccupancyGridBuilder(grid).space(agent.encoding, lanes)
     sb3 = DQN(
         "MlpPolicy",
         _Spaces(space),

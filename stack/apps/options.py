@@ -123,54 +123,6 @@ def parsed_sets(sets: list[str]) -> dict[str, object]:
     return values
 
 
-def checked_run(
-    configs: list[RunConfig], out: Path | None, prefix: str, resuming: bool = False, jobs: int = 1
-) -> Path:
-    """The results folder of a run of `configs`, after checking (one line, exit 2, before any
-    work) each agent's model file with numpy alone, then the location, then each agent as built
-    for its road (this imports torch), then taking the folder for this command
-    (`stack.apps.folders.claimed`; `prefix` names the command)."""
-    from planner.factory import model_path
-    from planner.model_check import checked_model
-    from records import GridConfig
-    from stack.core.config import road_mismatch
-
-    for config in configs:
-        try:
-            if (path := model_path(config.planner.agent, config.planner.model, config.scenario)) is not None:
-                _, metadata = checked_model(path, (config.planner.agent,))
-                if metadata["kind"] == "mlp" and (
-                    why := road_mismatch(
-                        path,
-                        GridConfig(**metadata["grid"]),
-                        metadata["encoding"],
-                        metadata["observation_size"],
-                        config.highway.lanes_count,
-                    )
-                ):
-                    fail(why)
-        except ValueError as error:
-            fail(str(error))
-    from stack.apps.folders import claimed, location
-    from stack.apps.resume import run_owner
-    from stack.apps.training import check_jobs
-
-    check_jobs(jobs)
-    folder = location(out, prefix)
-    from stack.core.owner import refusal
-
-    if why := refusal(folder, run_owner(configs, prefix), resuming):
-        fail(why)
-    from stack.core.episodes import build_agent
-
-    for config in configs:
-        try:
-            build_agent(config, config.seed)
-        except ValueError as error:
-            fail(str(error))
-    return claimed(folder, prefix, run_owner(configs, prefix), resuming)
-
-
 def ray_or_fail(address: str | None) -> None:
     """With `--ray`, connect now (see `stack.core.ray_tasks.connect`), so a missing Ray or an
     unreachable address is one line before any work."""

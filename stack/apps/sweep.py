@@ -20,10 +20,9 @@ from typing import Any
 import yaml
 
 from planner.validation import Validation
-from stack.apps.commands import SWEEP_FILE
 from stack.apps.sweep_report import TRIALS, report
 from stack.core.config import write_config
-from stack.core.sweep_config import SweepFile, trial_config
+from stack.core.sweep_config import SWEEP_FILE, SweepFile, trial_config
 
 BASE, TUNE = "config.yaml", "tune"
 SCORE = "score"

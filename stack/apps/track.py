@@ -16,7 +16,7 @@ MPC fallbacks.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +28,7 @@ from controllers.config import ControllerConfig
 from controllers.tracker import make_controller
 from records import CONTROLLER_NAMES, PLANTS, Command, PlantName
 from records.plugins import CONTROLLER_GROUP, entry_points, label
+from stack.apps.track_record import TrackedLaneChange
 from stack.apps.track_report import plot_maneuvers, print_tracking, speed_label
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import RunConfig, write_config
@@ -56,33 +57,6 @@ MAX_CHANGE_S = 60.0
 """The longest a lane change is followed [s] (one slowed down by a braking car takes longer than planned)."""
 Speeds = tuple[float, float]
 """(speed at the start, the cruise's set speed) [m/s]; equal for a maneuver at constant speed."""
-
-
-@dataclass(frozen=True)
-class Maneuver(Tracking):
-    """One lane change: which, how it tracked (`Tracking`), the controller's time per tick [ms] and
-    fallbacks, whether it `started` at all (not below the minimum lane-change speed: then the
-    record is lane keeping); it starts at `speed` and the cruise's set speed is `end_speed` [m/s]
-    (a maneuver that brakes or accelerates while it changes lane when they differ); `trace` holds
-    the time series used by the plots."""
-
-    controller: str
-    road: str
-    plant: str
-    speed: float
-    direction: str
-    end_speed: float
-    solve_ms_p50: float
-    solve_ms_p95: float
-    fallbacks: int
-    started: bool = True
-    trace: dict[str, list[float]] = field(default_factory=dict)
-
-    def record(self) -> dict:
-        """The flat record of tracking.json: which maneuver first, then its figures."""
-        figures = {k: v for k, v in asdict(self).items() if k != "trace"}
-        which = ("controller", "road", "plant", "speed", "end_speed", "direction")
-        return {**{k: figures.pop(k) for k in which}, **figures}
 
 
 def controller_names(value: str) -> list[str]:
@@ -114,7 +88,7 @@ def run_maneuver(
     direction: str,
     duration: float,
     dt: float,
-) -> Maneuver:
+) -> TrackedLaneChange:
     """One lane change to the `direction` ("left" or "right") at `speeds` [m/s], or starting at
     `speeds[0]` with the cruise set to `speeds[1]`, in the closed loop: lane keeping for LEAD_IN_S,
     the change (however long the car's speed makes it), lane keeping for SETTLE_S."""
@@ -148,7 +122,7 @@ def run_maneuver(
     metrics: Tracking = tracking(time, d, d_reference, heading, speed_trace, dt)
     solve_ms = np.array(loop.controller.solve_times) * 1e3
     lateral_acceleration, jerk = lateral_series(heading, speed_trace, dt)
-    return Maneuver(
+    return TrackedLaneChange(
         controller=label(controller_name),
         road=road_kind,
         plant=plant,
@@ -171,7 +145,7 @@ def run_maneuver(
     )
 
 
-def _run_maneuver(arguments: tuple) -> Maneuver:
+def _run_maneuver(arguments: tuple) -> TrackedLaneChange:
     """`run_maneuver` on one tuple of arguments (a task for `completed`)."""
     return run_maneuver(*arguments)
 
@@ -226,7 +200,7 @@ def track(
     plants: tuple[PlantName, ...] = PLANTS,
     progress: Callable[[], object] | None = None,
     ray: str | None = None,
-) -> list[Maneuver]:
+) -> list[TrackedLaneChange]:
     """All maneuvers, in a fixed order whatever ran them (here, or Ray tasks at address `ray`);
     writes out/tracking.json and one figure per road, plant and speed (the left change, all
     controllers overlaid). Ctrl-C keeps and writes the maneuvers finished (none: it is raised)."""
@@ -240,7 +214,7 @@ def track(
         for speed in speeds_on(road_kind, speeds)
         for direction in ("left", "right")
     ]
-    done: dict[int, Maneuver] = {}
+    done: dict[int, TrackedLaneChange] = {}
     try:
         for index, maneuver in completed(_run_maneuver, chosen, ray=ray):
             done[index] = maneuver
@@ -256,7 +230,7 @@ def track(
 
 
 def write_tracking(
-    maneuvers: list[Maneuver],
+    maneuvers: list[TrackedLaneChange],
     out: Path,
     roads: tuple[RoadKind, ...],
     plants: tuple[PlantName, ...],

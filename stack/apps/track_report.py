@@ -15,7 +15,7 @@ from rich.table import Table
 from stack.core.files import save_figure
 
 if TYPE_CHECKING:
-    from stack.apps.track import Maneuver
+    from stack.apps.track_record import TrackedLaneChange
 
 COLUMNS = (
     "controller",
@@ -93,7 +93,7 @@ def markdown_table(records: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def print_tracking(maneuvers: list[Maneuver]) -> None:
+def print_tracking(maneuvers: list[TrackedLaneChange]) -> None:
     table = Table(title="lane changes (worst of left and right)")
     for column in COLUMNS:
         table.add_column(column, justify="right")
@@ -102,7 +102,7 @@ def print_tracking(maneuvers: list[Maneuver]) -> None:
     Console(width=170).print(table)
 
 
-def plot_maneuvers(maneuvers: list[Maneuver], path: Path) -> None:
+def plot_maneuvers(maneuvers: list[TrackedLaneChange], path: Path) -> None:
     """Lateral offset and reference, tracking error, steering, a_y and jerk of the maneuvers of
     one road, plant and speed. highway-env's built-in change, whose error is metres where the
     others' are centimetres, is drawn in the offset panel only and on its own error axis."""

@@ -26,9 +26,10 @@ from planner.model_file import CHECKPOINT, ModelFileError
 from planner.networks import net_arch
 from records import N_ACTIONS
 from stack.core.closed_loop import grid_config
-from stack.core.config import RunConfig, road_mismatch
+from stack.core.config import RunConfig
 from stack.core.decision_env import HierarchicalHighwayEnv
 from stack.core.interrupts import note_stop
+from stack.core.model_fit import check_road_fit
 
 ALGORITHMS: dict[str, type[DQN]] = {"ddqn": DoubleDQN, "dqn": DQN}
 
@@ -172,9 +173,8 @@ def initial_model(config: RunConfig) -> LearnedAgent | None:
     for field, their, our in zip(("encoding", "grid", "hidden layers"), theirs, ours, strict=True):
         if their != our:
             raise ModelFileError(f"train.init_model: {path} has {field} {their}, this run needs {our}")
-    lanes = config.highway.lanes_count
-    if why := road_mismatch(path, grid, agent.encoding, agent.observation_size, lanes):
-        raise ModelFileError(f"train.init_model: {why}")
+    lanes = config.highway.lane_counts
+    check_road_fit(path, grid, agent.encoding, agent.observation_size, lanes, "train.init_model")
     return agent
 
 

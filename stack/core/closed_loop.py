@@ -16,7 +16,8 @@ import numpy as np
 
 from controllers.emergency import EmergencyBraking
 from controllers.maneuver import Maneuver
-from controllers.tracker import Controller, make_controller
+from controllers.protocol import Controller
+from controllers.tracker import make_controller
 from perception.grid import OccupancyGrid, OccupancyGridBuilder
 from perception.sensor import SensorModel
 from planner.safety import SafetyLayer

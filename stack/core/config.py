@@ -16,7 +16,7 @@ from controllers.config import ControllerConfig
 from perception.grid import OccupancyGridBuilder
 from perception.sensor import SensorConfig
 from planner.safety import SafetyConfig
-from records import AGENT_NAMES, SEED_LIMIT, Encoding, GridConfig
+from records import AGENT_NAMES, SEED_LIMIT, GridConfig
 from records.plugins import AGENT_GROUP, plugin_name
 from stack.core.config_checks import boolean_mismatch
 from stack.core.files import write_text
@@ -248,13 +248,3 @@ def load_config(path: Path | str, labels: dict[str, str] | None = None, **overri
 def grid_config(config: RunConfig) -> GridConfig:
     """The perception grid `config` asks for (its `perception` section without the sensor)."""
     return GridConfig(**config.perception.model_dump(exclude={"sensor", "control_on_ground_truth"}))
-
-
-def road_mismatch(
-    model: Path | str, grid: GridConfig, encoding: Encoding, size: int, lanes: int
-) -> str | None:
-    """Why a model that expects `size` observation values, seen through `grid` with `encoding`,
-    cannot drive a road of `lanes` lanes (None when it can)."""
-    given = int(OccupancyGridBuilder(grid).space(encoding, lanes).shape[0])
-    why = f"{model}: expects observations of {size} values; its {encoding} grid gives {given}"
-    return None if given == size else f"{why} on this {lanes}-lane road"

@@ -16,9 +16,10 @@ from planner.agents import Agent, decide
 from planner.factory import make_agent, model_label, model_path
 from records import LEARNED_AGENTS, child_seed
 from stack.core.closed_loop import ClosedLoop, grid_config
-from stack.core.config import RunConfig, road_mismatch
+from stack.core.config import RunConfig
 from stack.core.executors import completed
 from stack.core.metrics import EpisodeResult, summarize
+from stack.core.model_fit import check_road_fit
 from stack.core.oracle import Oracle
 from stack.sim.highway import HighwayAdapter
 
@@ -33,8 +34,8 @@ def build_agent(config: RunConfig, seed: int) -> Agent:
     agent = make_agent(planner.agent, lanes, grid_config(config), seed, path or planner.model)
     expected = getattr(agent, "observation_size", None)
     grid = agent.grid_config or grid_config(config)
-    if expected is not None and (why := road_mismatch(path or "", grid, agent.encoding, expected, lanes)):
-        raise ValueError(why)
+    if expected is not None:
+        check_road_fit(path or "", grid, agent.encoding, expected, config.highway.lane_counts)
     return agent
 
 

@@ -17,6 +17,8 @@ from itertools import islice
 from multiprocessing import get_context
 from typing import TypeVar
 
+from stack.core.machine import usable_cpus
+
 Item = TypeVar("Item")
 Result = TypeVar("Result")
 
@@ -44,14 +46,6 @@ def completed(
             yield index, task(item)
     else:
         yield from _pool_completed(task, items, jobs)
-
-
-def usable_cpus() -> int:
-    """The CPUs this process may run on: the most processes `jobs` starts, and a local Ray
-    instance's task slots."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
 
 
 def _pool_completed(

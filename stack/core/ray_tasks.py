@@ -15,7 +15,7 @@ from contextlib import contextmanager
 from types import ModuleType
 from typing import Any, TypeVar
 
-from stack.core.executors import usable_cpus
+from stack.core.machine import usable_cpus
 
 Item = TypeVar("Item")
 Result = TypeVar("Result")

@@ -27,6 +27,8 @@ from pydantic import Field, ValidationError, field_validator
 from stack.core.config import ConfigError, RunConfig, load_config, one_line, read_mapping
 from stack.core.train_config import Strict
 
+SWEEP_FILE = "sweep.yaml"
+"""The sweep file a sweep folder keeps (`--resume` reads it)."""
 METRICS = {"mean_return": "max", "mean_speed": "max", "collision_rate": "min"}
 """Trial metrics (a kept model's long validation) and whether higher or lower is better."""
 RANGES = ("uniform", "loguniform", "randint")
