@@ -179,6 +179,8 @@ def compare(
         seed=seed,
     )
     plugins_or_fail(configs, ["--agents"] * len(configs))
+    if baseline is not None:  # as the configs name it: a file plug-in by its absolute path
+        baseline = configs[names.index(baseline)].planner.agent
     ray_or_fail(ray)
     done = resumed(configs, out, "compare") if resume else None
     folder = checked_run(configs, out, "compare", resume, jobs)
