@@ -227,3 +227,34 @@ def test_a_ray_address_where_something_else_listens_is_refused_within_seconds():
     finally:
         http_server.shutdown()
         silent.close()
+
+
+@pytest.mark.parametrize(
+    ("arguments", "expected"),
+    [
+        (
+            ["safety", "--scenario", "lead-braking", "--point", "speed=20,time_gap=1e308,deceleration=4"],
+            "time_gap",
+        ),
+        (
+            [
+                "safety",
+                "--scenario",
+                "cut-in",
+                "--point",
+                "speed=20,relative_speed=1e9,gap=10,lateral_speed=1",
+            ],
+            "relative_speed",
+        ),
+        (
+            ["safety", "--scenario", "cut-out", "--point", "speed=20,distance=10,lateral_speed=nan"],
+            "lateral_speed",
+        ),
+        (["reproduce", "deepcars", "--quick", "--seed", "-1"], "--seed"),
+        (["reproduce", "deepcars", "--quick", "--seed", str(2**40)], "--seed"),
+    ],
+)
+def test_numbers_given_as_options_are_bounded_before_any_work(tmp_path, arguments, expected):
+    result = CliRunner().invoke(app, [*arguments, "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2 and expected in result.output, result.output
+    assert "Traceback" not in result.output and not (tmp_path / "out").exists()

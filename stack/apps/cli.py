@@ -267,10 +267,14 @@ def reproduce_deepcars(
     out: Path | None = typer.Option(None, help="Results folder (default: runs/deepcars-<time>)."),
 ) -> None:
     """The paper's DeepCars table: tabular Q-learning, DQN and DDQN per network size, baselines."""
+    from records import SEED_LIMIT
     from stack.apps.reproduce import reproduce_and_report
     from stack.deepcars.spec import VARIANTS
 
     variants = chosen("--variant", variant, VARIANTS)
+    largest = SEED_LIMIT - 1_000_000
+    if not 0 <= seed <= largest:
+        fail(f"--seed: expected 0 to {largest} (its streams add up to 10,000 to it), got {seed}")
     folder = claimed_for("reproduce deepcars", out, f"{quick}{variants}{seed}")
     until_interrupted(lambda: reproduce_and_report(folder, quick, seed, variants))
 
