@@ -11,8 +11,9 @@ import typer
 
 from records.plugins import SPEC_FORMS
 from stack.apps.commands import agents, controllers, export, sweep
-from stack.apps.folders import claimed, claimed_for, resumed
+from stack.apps.folders import claimed, claimed_for, episodes_kept, resumed
 from stack.apps.options import (
+    AGAIN,
     JOBS_OPTION,
     PLANT_HELP,
     RAY_OPTION,
@@ -96,7 +97,9 @@ def run(
     folder = checked_run(cfgs, out, "run", resume, jobs)
     from stack.apps.run import run_and_report
 
-    until_interrupted(lambda: run_and_report(cfgs, folder, video, jobs, progress, ray, done))
+    until_interrupted(
+        lambda: run_and_report(cfgs, folder, video, jobs, progress, ray, done), lambda: episodes_kept(folder)
+    )
 
 
 @app.command()
@@ -131,7 +134,8 @@ def track(
     ray_or_fail(ray)
     folder = claimed_for("track", out, f"{names}{plants}{speed_list}", cfg)
     until_interrupted(
-        lambda: track_and_report(names, speed_list, cfg, folder, progress, cast(Any, plants), ray)
+        lambda: track_and_report(names, speed_list, cfg, folder, progress, cast(Any, plants), ray),
+        lambda: f"the table above holds every maneuver measured; {AGAIN}",
     )
 
 
@@ -184,7 +188,10 @@ def compare(
     folder = checked_run(configs, out, "compare", resume, jobs)
     from stack.apps.compare import compare_and_report
 
-    until_interrupted(lambda: compare_and_report(configs, folder, jobs, progress, baseline, ray, done))
+    until_interrupted(
+        lambda: compare_and_report(configs, folder, jobs, progress, baseline, ray, done),
+        lambda: episodes_kept(folder),
+    )
 
 
 @app.command()
