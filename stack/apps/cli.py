@@ -33,6 +33,10 @@ from stack.apps.plugin_checks import agent_name_or_fail, plugins_or_fail
 from stack.apps.preflight import checked_run
 
 PLUGIN_HELP = f"a plug-in class: {SPEC_FORMS} (docs/plugins.md)."
+ADOPT_HELP = (
+    "With --resume: take over a training folder made before folders recorded their owner, once its "
+    "config.yaml agrees with the run's model files, checkpoint and summary."
+)
 RESUME_HELP = "Finish the interrupted run in --out (same arguments): its finished episodes are kept."
 
 app = typer.Typer(
@@ -302,6 +306,7 @@ def train(
     resume: Path | None = typer.Option(
         None, help="Continue the run in this folder from its last checkpoint."
     ),
+    adopt: bool = typer.Option(False, "--adopt", help=ADOPT_HELP),
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Train a decision agent inside the closed loop, keeping the best model by real-time validation."""
@@ -315,7 +320,9 @@ def train(
 
     if resume is not None:
         given = {"--agent": agent, "--config": config, "--envs": envs, "--plant": plant, "--seed": seed}
-        cfg = resumed_training(resume, sets, steps, given | {"--scenario": scenario, "--out": out})
+        cfg = resumed_training(resume, sets, steps, given | {"--scenario": scenario, "--out": out}, adopt)
+    elif adopt:
+        fail("--adopt: has no effect without --resume DIR (it takes over a folder made before owner records)")
     else:
         options = {"scenario": scenario, "train__algorithm": agent, "train__envs": envs, "seed": seed}
         cfg = configured(config or TRAIN_CONFIG, sets, None, train__steps=steps, sim__plant=plant, **options)

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 from planner.model_file import CHECKPOINT as CHECKPOINT_FILE
 from stack.apps.options import AGAIN, cannot_write, configured, fail
-from stack.core.owner import Owner, fingerprint, owner_of
+from stack.core.owner import MARKER, Owner, fingerprint, owner_of
 
 if TYPE_CHECKING:
     from stack.core.config import RunConfig
@@ -188,11 +188,12 @@ def training_owner(config: RunConfig) -> Owner:
 
 
 def resumed_training(
-    folder: Path, sets: list[str], steps: int | None, given: Mapping[str, object]
+    folder: Path, sets: list[str], steps: int | None, given: Mapping[str, object], adopt: bool = False
 ) -> RunConfig:
     """The config `train --resume folder` goes on with: the run's own, `--steps` grown; a one-line
     error (exit 2) for an option that would have no effect (`given`, by option name), a `--set`
-    that changes anything, fewer steps, a folder that is not an interrupted training run."""
+    that changes anything, fewer steps, a folder that is not an interrupted training run, and a
+    folder without an owner record unless `adopt` (`stack.apps.adoption`)."""
     if unused := next((option for option, value in given.items() if value is not None), None):
         fail(f"{unused}: has no effect with --resume; {RESUME_ONLY_STEPS}")
     found = owner_of(folder)
@@ -200,6 +201,14 @@ def resumed_training(
         fail(f"--resume: {folder} holds the results of `{found.command}`, not a training run")
     if not (folder / "config.yaml").is_file() or (found is None and not (folder / CHECKPOINT_FILE).is_file()):
         fail(f"--resume: {folder} is not a training run folder (no config.yaml and checkpoint.npz)")
+    if found is None and not adopt:
+        fail(
+            f"--resume: {folder} records no owner (made before {MARKER} existed); if its config.yaml is "
+            "the one it was trained with, add --adopt: it is checked against the run's files, then the "
+            "run goes on"
+        )
+    if found is not None and adopt:
+        fail(f"--adopt: {folder} already records its owner; resume without --adopt")
     from stack.core.config_checks import first_change
 
     stored = configured(folder / "config.yaml", [])
@@ -211,6 +220,11 @@ def resumed_training(
         fail(f"--set {key}: the run in {folder} was trained with {was!r}, not {asked!r}; {RESUME_ONLY_STEPS}")
     if config.train.steps < stored.train.steps:
         fail(f"--steps: expected at least {stored.train.steps} (the run's budget); {RESUME_ONLY_STEPS}")
+    if adopt:
+        from stack.apps.adoption import adoption_refusal
+
+        if why := adoption_refusal(folder, stored):
+            fail(why)
     if (
         (done := checkpoint_steps(folder)) is not None
         and done >= config.train.steps
