@@ -131,6 +131,10 @@ def test_sweep_picks_the_planted_best_trial(tmp_path, local_ray):
         assert len(list(csv.DictReader(handle))) == 4
     for name in ("best_model.npz", "sweep.png", "trials.md", "config.yaml"):
         assert (out / name).is_file(), name
+    trial = next((out / "trials").iterdir())
+    assert json.loads((trial / ".drivestack-owner.json").read_text())["command"] == "sweep trial"
+    refused = invoke("train", "--resume", str(trial))
+    assert refused.exit_code == 2 and "holds the results of `sweep trial`" in refused.output
 
     resumed = invoke("sweep", "--resume", str(out), "--no-progress")
     assert resumed.exit_code == 0, resumed.output
