@@ -19,7 +19,7 @@ from typing import Any
 
 import yaml
 
-from planner.validation import Validation
+from planner.scores import Validation
 from stack.apps.sweep_report import TRIALS, report
 from stack.core.config import write_config
 from stack.core.sweep_config import SWEEP_FILE, SweepFile, trial_config
@@ -57,7 +57,7 @@ def train_trial(params: dict[str, Any], folder: Path, metric: str) -> None:
     base config, resumed from that folder's checkpoint when an earlier attempt left one."""
     from ray import tune
 
-    from stack.apps.train import Trainer
+    from stack.training.trainer import Trainer
 
     out = folder / TRIALS / tune.get_context().get_trial_id()
     kept = math.nan
@@ -70,8 +70,9 @@ def train_trial(params: dict[str, Any], folder: Path, metric: str) -> None:
 
     config = trial_config(folder / BASE, {}, params)
     summary = Trainer(config, out, progress=False, on_validation=heard).run()
-    best = summary["best_validation"]
-    tune.report({"step": summary["steps"], SCORE: best[metric] if best else math.nan, "finished": True})
+    best = summary.best_validation
+    score = getattr(best, metric) if best is not None else math.nan
+    tune.report({"step": summary.steps, SCORE: score, "finished": True})
 
 
 def tuner(sweep: SweepFile, folder: Path, resume: bool, progress: bool) -> Any:

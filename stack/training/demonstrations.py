@@ -23,6 +23,7 @@ from stack.core.config import RunConfig, grid_config
 from stack.core.decision_env import HierarchicalHighwayEnv
 from stack.core.executors import completed
 from stack.core.oracle import Oracle
+from stack.training.summary import DemonstrationsUsed
 
 
 def expert_policy(world: RunConfig, expert_name: str) -> Callable[[ClosedLoop], int]:
@@ -98,16 +99,11 @@ def start_from_demonstrations(
     validation.validate_start(model)
 
 
-def demonstrations_summary(config: RunConfig, model: object) -> dict[str, dict]:
-    """`{"demonstrations": {expert, episodes, transitions}}` for a run's summary, when it learnt
-    from some (else empty)."""
+def demonstrations_used(config: RunConfig, model: object) -> DemonstrationsUsed | None:
+    """The demonstrations a run learnt from, for its summary (None when it learnt from none)."""
     settings, demonstrations = config.train.demonstrations, getattr(model, "demonstrations", None)
     if settings is None or demonstrations is None:
-        return {}
-    return {
-        "demonstrations": {
-            "expert": settings.expert,
-            "episodes": settings.episodes,
-            "transitions": len(demonstrations),
-        }
-    }
+        return None
+    return DemonstrationsUsed(
+        expert=settings.expert, episodes=settings.episodes, transitions=len(demonstrations)
+    )
