@@ -3,7 +3,6 @@ decision MDP the learner trains in, on training seeds of their own stream, sprea
 
 from __future__ import annotations
 
-import copy
 import multiprocessing
 import signal
 from collections.abc import Callable
@@ -28,19 +27,12 @@ from stack.training.summary import DemonstrationsUsed
 
 def expert_policy(world: RunConfig, expert_name: str) -> Callable[[ClosedLoop], int]:
     """The expert, built once for a loop of `world`, as a function of the loop's state to its
-    decision: the oracle plans on copies of the loop whose rollouts perceive on its base agent's
-    grid, a policy decides on its own view of what the controllers act on (the sensor's report)."""
+    decision: the oracle plans on copies of the loop (whose rollouts perceive on its base agent's
+    grid), a policy decides on its own view of what the controllers act on (the sensor's report)."""
     lanes, grid = world.highway.lanes_count, grid_config(world)
     if expert_name == "oracle":
         oracle = Oracle.for_road(world.planner.oracle, lanes, grid, world.scenario)
-        base_view = OccupancyGridBuilder(oracle.grid_config or grid)
-
-        def plan(loop: ClosedLoop) -> int:
-            seen_as_its_base_sees = copy.copy(loop)
-            seen_as_its_base_sees.builder = base_view
-            return oracle.plan(seen_as_its_base_sees).value
-
-        return plan
+        return lambda loop: oracle.plan(loop).value
     expert = make_agent(expert_name, lanes, grid)
     view = OccupancyGridBuilder(expert.grid_config or grid)
     return lambda loop: decide(expert, view.build(loop.perceived).encode(expert.encoding)).value
