@@ -18,7 +18,6 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -27,7 +26,8 @@ from perception.grid import OccupancyGridBuilder  # noqa: E402
 from planner.factory import SHIPPED_MODELS  # noqa: E402
 from planner.model_file import FORMAT, save_model  # noqa: E402
 from records import GridConfig  # noqa: E402
-from tests.test_hostile_inputs import BOMB  # noqa: E402
+from stack.core.owner import MARKER  # noqa: E402
+from tests.test_hostile_inputs import BOMB, owned_training_folder  # noqa: E402
 from tests.test_model_files import metadata_bytes, npy, shipped, with_metadata, write  # noqa: E402
 
 LIMIT_S, LIMIT_MB, LIMIT_CHARS = 5.0, 400.0, 300
@@ -78,11 +78,15 @@ def encrypted(path: Path) -> None:
     path.write_bytes(bytes(raw))
 
 
-def checkpoint_folder(content: bytes) -> Callable[[Path], None]:
+def checkpoint_folder(content: bytes, owned: bool = True) -> Callable[[Path], None]:
+    """A training folder holding `content` as its checkpoint, with its owner record or (not
+    `owned`) as made before folders kept one."""
+
     def build(folder: Path) -> None:
-        folder.mkdir()
-        (folder / "config.yaml").write_text(yaml.safe_dump({"train": {"steps": 10}}))
+        owned_training_folder(folder, {"train": {"steps": 10}})
         (folder / "checkpoint.npz").write_bytes(content)
+        if not owned:
+            (folder / MARKER).unlink()
 
     return build
 
@@ -165,6 +169,14 @@ def cases(folder: Path) -> dict[str, list[str]]:
     ):
         checkpoint_folder(content)(run := folder / name.replace(" ", "-"))
         found[f"train --resume from {name}"] = ["train", "--resume", str(run), "--no-progress"]
+    checkpoint_folder(b"", owned=False)(old := folder / "no-owner-record")
+    found["train --resume a folder without owner record"] = ["train", "--resume", str(old)]
+    found["train --resume --adopt a folder whose checkpoint is empty"] = [
+        "train",
+        "--resume",
+        str(old),
+        "--adopt",
+    ]
     found["unknown scenario"] = ["run", "--scenario", "moon"]
     four_lane_paper_model(paper := folder / "paper-4-lanes.npz")
     found["a 4-lane paper-state model on a 2-lane road"] = [

@@ -1,4 +1,5 @@
-"""Controller gains and limits, validated when the config loads (negative or NaN values refused)."""
+"""Controller gains and limits, validated when the config loads: every number has a range (negative,
+NaN, infinite or absurdly large values refused), so a config that validates drives."""
 
 from __future__ import annotations
 
@@ -20,6 +21,17 @@ MPC_SOLVERS: tuple[MPCSolver, ...] = get_args(MPCSolver)
 VehicleModel = Literal["plant", "kinematic", "dynamic"]
 """The bicycle a controller's model assumes; `plant`: the one simulated (`sim.plant`)."""
 
+MAX_GAIN = 100.0
+"""Upper bound of every feedback gain [1/s, 1/s^2]: far beyond any stable loop at 15 Hz, far below
+where the commands overflow before they are clipped."""
+MAX_STEERING_RATE = 10.0
+"""Upper bound of every steering rate limit [rad/s] (a full lock-to-lock swing in 0.16 s)."""
+MAX_WEIGHT = 1e6
+"""Upper bound of every MPC cost weight (cost per squared unit of its term; the defaults reach 2000)."""
+MIN_BRYSON_SCALE = 1e-3
+"""Smallest Bryson scale of the LQR [m or rad]: its weight 1/scale^2 stays finite and the Riccati
+equation solvable."""
+
 
 class _Settings(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
@@ -28,14 +40,14 @@ class _Settings(BaseModel):
 class PIDGains(_Settings):
     """Cascaded lateral PID and longitudinal speed PI (see controllers.lateral for the design)."""
 
-    kp_lateral: float = Field(2.0, gt=0, description="lateral position gain [1/s]")
-    ki_lateral: float = Field(0.6, ge=0, description="lateral integral gain [1/s^2]")
-    kp_heading: float = Field(6.0, gt=0, description="heading gain [1/s]")
+    kp_lateral: float = Field(2.0, gt=0, le=MAX_GAIN, description="lateral position gain [1/s]")
+    ki_lateral: float = Field(0.6, ge=0, le=MAX_GAIN, description="lateral integral gain [1/s^2]")
+    kp_heading: float = Field(6.0, gt=0, le=MAX_GAIN, description="heading gain [1/s]")
     model: VehicleModel = Field("plant", description="the bicycle the feedforward inverts")
-    steering_rate: float = Field(0.5, gt=0, description="steering rate limit [rad/s]")
+    steering_rate: float = Field(0.5, gt=0, le=MAX_STEERING_RATE, description="steering rate limit [rad/s]")
     max_steering: float = Field(math.pi / 4, gt=0, le=math.pi / 4, description="steering limit [rad]")
-    kp_speed: float = Field(0.6, gt=0, description="speed gain [1/s]")
-    ki_speed: float = Field(0.05, ge=0, description="speed integral gain [1/s^2]")
+    kp_speed: float = Field(0.6, gt=0, le=MAX_GAIN, description="speed gain [1/s]")
+    ki_speed: float = Field(0.05, ge=0, le=MAX_GAIN, description="speed integral gain [1/s^2]")
     max_acceleration: float = Field(2.0, gt=0, le=5, description="largest commanded acceleration [m/s^2]")
 
 
@@ -48,71 +60,83 @@ class MPCSettings(_Settings):
 
     model: VehicleModel = Field("plant", description="the prediction model")
     solver: Annotated[MPCSolver, one_of("MPC solver", MPC_SOLVERS)] = "rti"
-    mass: float = Field(1.0, gt=0, description="dynamic model mass [kg]")
-    yaw_inertia: float = Field(29 / 12, gt=0, description="dynamic model yaw inertia [kg m^2]")
-    cornering_stiffness_front: float = Field(30.0, gt=0, description="front axle [N/rad]")
-    cornering_stiffness_rear: float = Field(30.0, gt=0, description="rear axle [N/rad]")
+    mass: float = Field(1.0, ge=1e-3, le=1e5, description="dynamic model mass [kg]")
+    yaw_inertia: float = Field(29 / 12, ge=1e-3, le=1e6, description="dynamic model yaw inertia [kg m^2]")
+    cornering_stiffness_front: float = Field(30.0, ge=1e-3, le=1e7, description="front axle [N/rad]")
+    cornering_stiffness_rear: float = Field(30.0, ge=1e-3, le=1e7, description="rear axle [N/rad]")
     horizon: int = Field(16, ge=1, le=200, description="steps at the control rate (16: 1.07 s at 15 Hz)")
-    weight_lateral: float = Field(200.0, ge=0)
-    weight_heading: float = Field(20.0, ge=0)
-    weight_speed: float = Field(1.0, ge=0)
-    weight_acceleration: float = Field(0.1, ge=0)
-    weight_steering: float = Field(1.0, ge=0)
-    weight_steering_rate: float = Field(2000.0, ge=0)
-    weight_jerk: float = Field(1.0, ge=0)
+    weight_lateral: float = Field(200.0, ge=0, le=MAX_WEIGHT)
+    weight_heading: float = Field(20.0, ge=0, le=MAX_WEIGHT)
+    weight_speed: float = Field(1.0, ge=0, le=MAX_WEIGHT)
+    weight_acceleration: float = Field(0.1, ge=0, le=MAX_WEIGHT)
+    weight_steering: float = Field(1.0, ge=0, le=MAX_WEIGHT)
+    weight_steering_rate: float = Field(2000.0, ge=0, le=MAX_WEIGHT)
+    weight_jerk: float = Field(1.0, ge=0, le=MAX_WEIGHT)
     max_steering: float = Field(math.pi / 4, gt=0, le=math.pi / 4, description="[rad]")
-    max_steering_rate: float = Field(0.5, gt=0, description="soft comfort bound [rad/s]")
+    max_steering_rate: float = Field(
+        0.5, gt=0, le=MAX_STEERING_RATE, description="soft comfort bound [rad/s]"
+    )
     max_lateral_acceleration: float = Field(
-        2.0, gt=0, description="soft comfort bound on v psi' relative to the lane [m/s^2]"
+        2.0, gt=0, le=20, description="soft comfort bound on v psi' relative to the lane [m/s^2]"
     )
     weight_slack: float = Field(
-        1e6, gt=0, description="quadratic penalty on comfort-bound violations (slack^2)"
+        1e6, gt=0, le=1e9, description="quadratic penalty on comfort-bound violations (slack^2)"
     )
     max_acceleration: float = Field(2.0, gt=0, le=5, description="[m/s^2]")
     max_deceleration: float = Field(5.0, gt=0, le=5, description="[m/s^2]")
     max_solve_ms: float = Field(
         50.0,
         gt=0,
+        le=60_000,
         description="solves slower than this are counted as slow (reported, never a fallback) [ms]",
     )
     max_iterations: int = Field(
-        50, ge=1, description="a solve that has not converged in this many iterations falls back"
+        50, ge=1, le=10_000, description="a solve that has not converged in this many iterations falls back"
     )
     max_qp_iterations: int = Field(
-        200, ge=1, description="qrqp's active-set iterations per QP (rti and sqp), beyond which it fails"
+        200,
+        ge=1,
+        le=100_000,
+        description="qrqp's active-set iterations per QP (rti and sqp), beyond which it fails",
     )
 
 
 class SteeringLimits(_Settings):
     """The steering limits every classic tracker applies (the PID's defaults)."""
 
-    steering_rate: float = Field(0.5, gt=0, description="steering rate limit [rad/s]")
+    steering_rate: float = Field(0.5, gt=0, le=MAX_STEERING_RATE, description="steering rate limit [rad/s]")
     max_steering: float = Field(math.pi / 4, gt=0, le=math.pi / 4, description="steering limit [rad]")
 
 
 class PurePursuitSettings(SteeringLimits):
     """Pure pursuit (controllers.pure_pursuit): the look-ahead distance grows with the speed."""
 
-    lookahead_time: float = Field(0.4, gt=0, description="look-ahead distance per speed [s]")
-    min_lookahead: float = Field(4.0, gt=0, description="shortest look-ahead distance [m]")
+    lookahead_time: float = Field(0.4, gt=0, le=10, description="look-ahead distance per speed [s]")
+    min_lookahead: float = Field(4.0, ge=0.5, le=200, description="shortest look-ahead distance [m]")
 
 
 class StanleyGains(SteeringLimits):
     """Stanley (controllers.stanley): cross-track gain, its low-speed softening, yaw-rate damping."""
 
-    gain: float = Field(3.0, gt=0, description="cross-track gain k [1/s]")
-    softening: float = Field(2.0, gt=0, description="k_soft, added to the speed [m/s]")
-    yaw_damping: float = Field(0.0, ge=0, description="steering per yaw-rate error [s]")
+    gain: float = Field(3.0, gt=0, le=MAX_GAIN, description="cross-track gain k [1/s]")
+    softening: float = Field(2.0, gt=0, le=100, description="k_soft, added to the speed [m/s]")
+    yaw_damping: float = Field(0.0, ge=0, le=10, description="steering per yaw-rate error [s]")
 
 
 class LQRSettings(SteeringLimits):
     """LQR on the lateral error dynamics (controllers.lqr), weights by Bryson's rule: each state or
     input is divided by the largest value it should take."""
 
-    max_lateral_error: float = Field(0.05, gt=0, description="Bryson scale of the lateral error [m]")
-    max_heading_error: float = Field(0.02, gt=0, description="Bryson scale of the heading error [rad]")
-    max_slip: float = Field(0.01, gt=0, description="Bryson scale of the slip-angle correction [rad]")
-    speed_step: float = Field(1.0, gt=0, le=10, description="spacing of the gain schedule [m/s]")
+    max_lateral_error: float = Field(
+        0.05, ge=MIN_BRYSON_SCALE, le=10, description="Bryson scale of the lateral error [m]"
+    )
+    max_heading_error: float = Field(
+        0.02, ge=MIN_BRYSON_SCALE, le=1.5, description="Bryson scale of the heading error [rad]"
+    )
+    max_slip: float = Field(
+        0.01, ge=MIN_BRYSON_SCALE, le=1.5, description="Bryson scale of the slip-angle correction [rad]"
+    )
+    speed_step: float = Field(1.0, ge=0.1, le=10, description="spacing of the gain schedule [m/s]")
 
 
 class ControllerConfig(_Settings):
@@ -129,10 +153,10 @@ class ControllerConfig(_Settings):
     pure_pursuit: PurePursuitSettings = PurePursuitSettings()
     stanley: StanleyGains = StanleyGains()
     lqr: LQRSettings = LQRSettings()
-    lane_change_duration_s: float = Field(5.0, gt=0, description="[s]")
+    lane_change_duration_s: float = Field(5.0, ge=0.5, le=60, description="nominal lane-change duration [s]")
     set_speed_mps: float = Field(30.0, gt=0, le=40, description="[m/s]")
-    time_gap_s: float = Field(1.5, ge=0, description="[s]")
-    standstill_gap_m: float = Field(8.0, ge=0, description="[m]")
+    time_gap_s: float = Field(1.5, ge=0, le=10, description="adaptive cruise time gap [s]")
+    standstill_gap_m: float = Field(8.0, ge=0, le=100, description="adaptive cruise gap at standstill [m]")
     comfort_decel_mps2: float = Field(3.0, gt=0, le=5, description="[m/s^2]")
     lane_change_max_course_deg: float = Field(
         12.0, gt=0, le=25, description="course a lane change's reference may ask for [deg]"

@@ -11,12 +11,14 @@ import dataclasses
 import math
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from records import WorldState
 
 PHANTOM_ID_BASE = 1_000_000
 """Ids of false-positive detections start here, so they never collide with real vehicles."""
+MAX_RANGE_M = 10_000.0
+"""Longest finite sensor range [m]; `.inf` (the default) is unlimited."""
 
 
 class SensorConfig(BaseModel):
@@ -24,7 +26,9 @@ class SensorConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    range_m: float = Field(math.inf, gt=0, description="vehicles farther than this (|ds|) are not seen [m]")
+    range_m: float = Field(
+        math.inf, gt=0, description="vehicles farther than this (|ds|) are not seen [m]; .inf: unlimited"
+    )
     position_noise_m: float = Field(0.0, ge=0, le=100, description="std of Gaussian noise on s and d [m]")
     miss_probability: float = Field(0.0, ge=0, le=1, description="chance a vehicle is not detected")
     false_positives: float = Field(
@@ -33,6 +37,13 @@ class SensorConfig(BaseModel):
     false_positive_range_m: float = Field(
         60.0, gt=0, le=1000, description="phantoms appear within +-this of the ego [m]"
     )
+
+    @field_validator("range_m")
+    @classmethod
+    def _finite_or_unlimited(cls, range_m: float) -> float:
+        if math.isfinite(range_m) and range_m > MAX_RANGE_M:
+            raise ValueError(f"must be at most {MAX_RANGE_M:g} m, or .inf (unlimited), got {range_m:g}")
+        return range_m
 
     @property
     def enabled(self) -> bool:

@@ -122,6 +122,8 @@ class FreeGapAgent(Policy):
     def free_cells(self, cells: np.ndarray) -> np.ndarray:
         """Per lane, free cells ahead of the ego's column (cells_ahead when all clear)."""
         ahead = cells[:, self.grid.ego_column + 1 :] > 0
+        if ahead.shape[1] == 0:
+            return np.full(cells.shape[0], self.grid.cells_ahead)
         return np.where(ahead.any(axis=1), np.argmax(ahead, axis=1), self.grid.cells_ahead)
 
     def gap_is_safe(self, cells: np.ndarray, row: int) -> bool:

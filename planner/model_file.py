@@ -39,7 +39,7 @@ class ModelFileError(ValueError):
 
 def save_model(path: Path | str, arrays: dict[str, np.ndarray], metadata: dict) -> Path:
     """Write arrays + metadata atomically (a temporary file renamed over `path`; removed on any
-    error, so a full disk keeps no half file)."""
+    error, so a full disk keeps no half file; an OSError names `path`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     payload = {f"array/{name}": np.asarray(value) for name, value in arrays.items()}
@@ -50,6 +50,8 @@ def save_model(path: Path | str, arrays: dict[str, np.ndarray], metadata: dict) 
             # numpy's stub matches **payload against savez's `allow_pickle: bool` (no key is named that)
             np.savez(handle, **payload)  # type: ignore[arg-type]
         temporary.replace(path)
+    except OSError as error:
+        raise OSError(error.errno, error.strerror or str(error), str(path)) from error
     finally:
         temporary.unlink(missing_ok=True)
     return path

@@ -17,19 +17,24 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from records import Command, Neighbour, WorldState
 
+MAX_GAP_M = 200.0
+"""Largest gap the safety layer may ask for [m]: beyond any sensor's reach on a highway."""
+MAX_TIME_S = 60.0
+"""Largest time gap or time to collision it may ask for [s]."""
+
 
 class SafetyConfig(BaseModel):
-    """Gaps in m, time gaps and TTCs in s."""
+    """Gaps in m, time gaps and TTCs in s, each bounded (`MAX_GAP_M`, `MAX_TIME_S`)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     enabled: bool = True
-    min_gap_m: float = Field(6.0, ge=0)
-    front_time_gap_s: float = Field(0.8, ge=0)
-    rear_time_gap_s: float = Field(0.8, ge=0)
-    min_ttc_s: float = Field(4.0, ge=0)
-    abort_gap_m: float = Field(2.0, ge=0)
-    abort_ttc_s: float = Field(1.5, ge=0)
+    min_gap_m: float = Field(6.0, ge=0, le=MAX_GAP_M, description="smallest gap to change into [m]")
+    front_time_gap_s: float = Field(0.8, ge=0, le=MAX_TIME_S, description="to the car ahead [s]")
+    rear_time_gap_s: float = Field(0.8, ge=0, le=MAX_TIME_S, description="for the car behind [s]")
+    min_ttc_s: float = Field(4.0, ge=0, le=MAX_TIME_S, description="smallest time to collision [s]")
+    abort_gap_m: float = Field(2.0, ge=0, le=MAX_GAP_M, description="gap that aborts a change [m]")
+    abort_ttc_s: float = Field(1.5, ge=0, le=MAX_TIME_S, description="TTC that aborts a change [s]")
 
 
 def _ttc(gap: float, closing: float) -> float:

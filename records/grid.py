@@ -19,9 +19,9 @@ class GridConfig(BaseModel):
     """The occupancy grid an agent decides on (built by `perception.grid`). Lengths in m, speeds
     in m/s, times in s."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
-    cell_length: float = Field(5.0, gt=0, allow_inf_nan=False, description="cell length [m]")
+    cell_length: float = Field(5.0, ge=0.5, le=50, description="cell length [m]")
     cells_ahead: int = Field(9, ge=1, le=200, description="line of sight in cells, the ego's own included")
     cells_behind: int = Field(4, ge=0, le=200)
     lanes: Literal["absolute", "ego"] = "absolute"
@@ -30,8 +30,8 @@ class GridConfig(BaseModel):
     features: tuple[Literal["relative_speed", "ttc", "ego_speed", "ego_lateral"], ...] = Field(
         (), max_length=4, description="optional features, each at most once"
     )
-    speed_scale: float = Field(20.0, gt=0, description="relative speed giving feature 1 [m/s]")
-    ttc_horizon: float = Field(10.0, gt=0, description="time-to-collision giving feature 1 [s]")
+    speed_scale: float = Field(20.0, ge=0.1, le=100, description="relative speed giving feature 1 [m/s]")
+    ttc_horizon: float = Field(10.0, ge=0.1, le=100, description="time-to-collision giving feature 1 [s]")
     lane_code: Literal["binary", "sides"] = Field(
         "binary",
         description="where the ego is: its lane index in binary (the paper's; its size grows with the "

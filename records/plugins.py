@@ -11,6 +11,7 @@ import importlib.util
 import inspect
 import re
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -170,6 +171,43 @@ def label(value: str) -> str:
     return value
 
 
+def short_labels(values: Sequence[str]) -> list[str]:
+    """What figures and tables show for each of `values`: a built-in or entry-point name as it is,
+    a plug-in by its class name, lengthened from the end of its path (`file.py:Class`,
+    `folder/file.py:Class`, ..., for a module `module:Class`, `package.module:Class`, ...) only
+    as far as it takes to tell it from the others; the results files keep the full names."""
+    depths = [0] * len(values)
+    while True:
+        shown = [_shortened(value, depth) for value, depth in zip(values, depths, strict=True)]
+        owners: dict[str, set[str]] = {}
+        for text, value in zip(shown, values, strict=True):
+            owners.setdefault(text, set()).add(value)
+        longer = [
+            index
+            for index, text in enumerate(shown)
+            if len(owners[text]) > 1 and _shortened(values[index], depths[index] + 1) != text
+        ]
+        if not longer:
+            return shown
+        for index in longer:
+            depths[index] += 1
+
+
+def _shortened(value: str, depth: int) -> str:
+    """`value`'s class name after the last `depth` parts of its module path or file path."""
+    if not is_spec(value):
+        return value
+    module, _, name = value.rpartition(":")
+    parts = Path(module).parts if module.endswith(".py") else tuple(module.split("."))
+    if depth == 0:
+        return name
+    if depth >= len(parts):
+        return value
+    return f"{('/' if module.endswith('.py') else '.').join(parts[-depth:])}:{name}"
+
+
 def file_safe(value: str) -> str:
-    """`label(value)` with every character a file name may not hold replaced by `_`."""
-    return re.sub(r"[^\w.-]", "_", label(value))
+    """`label(value)` with every character a file name may not hold replaced by `_`; a plug-in's
+    with a digest of its full name after it, so two files of one name stay apart."""
+    digest = f"-{hashlib.sha1(value.encode()).hexdigest()[:8]}" if is_spec(value) else ""
+    return re.sub(r"[^\w.-]", "_", label(value)) + digest

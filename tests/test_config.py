@@ -44,7 +44,10 @@ def test_overrides_replace_file_values(tmp_path):
             "planner.agent: unknown agent 'genius'; available: ddqn, dqn, tabular, rule",
         ),
         ({"controller": {"type": "lqr2"}}, "controller.type: unknown controller 'lqr2'"),
-        ({"perception": {"cell_length": 0}}, "perception.cell_length: Input should be greater than 0"),
+        (
+            {"perception": {"cell_length": 0}},
+            "perception.cell_length: Input should be greater than or equal to 0.5",
+        ),
     ],
 )
 def test_bad_values_fail_with_one_line_naming_the_key(tmp_path, data, expected):

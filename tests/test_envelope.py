@@ -245,18 +245,17 @@ def test_lane_keeping_from_standstill_on_both_plants(plant):
     assert drift.max() < 0.05
 
 
-def test_track_runs_lane_changes_whose_speed_changes_and_refuses_below_the_minimum_speed(tmp_path):
-    from stack.apps.track import parse_speeds, track
+def test_track_runs_lane_changes_whose_speed_changes_and_refuses_below_the_minimum_speed():
+    from stack.apps.track import measure, parse_speeds
 
     assert parse_speeds("3,20-5") == [(3.0, 3.0), (20.0, 5.0)]
     with pytest.raises(ValueError, match="A-B"):
         parse_speeds("20-5-3")
-    maneuvers = track(
+    maneuvers = measure(
         ["pid"],
         [(2.0, 2.0), (20.0, 5.0), (3.0, 15.0)],
         5.0,
         ControllerConfig(),
-        tmp_path,
         roads=("straight",),
         plants=("kinematic",),
     )

@@ -20,7 +20,11 @@ from tests.test_train import TINY
 
 def snapshot(folder: Path) -> dict[str, bytes]:
     """Every file of `folder` with its bytes (the lock file aside: it only names the last writer)."""
-    return {p.name: p.read_bytes() for p in sorted(folder.iterdir()) if p.name != ".drivestack.lock"}
+    return {
+        p.name: p.read_bytes()
+        for p in sorted(folder.iterdir())
+        if p.is_file() and p.name != ".drivestack.lock"
+    }
 
 
 def finished_run(tmp_path: Path, *options: str) -> tuple[Path, list[str]]:
@@ -117,3 +121,46 @@ def test_a_fresh_training_into_a_training_folder_is_refused(tmp_path):
         ["train", "-c", str(source), "--out", str(folder)], "already holds the results of `train`"
     )
     assert snapshot(folder) == before
+
+
+def test_train_resume_of_a_folder_without_an_owner_record_is_refused_unless_adopted(tmp_path):
+    """A training folder from before owner records: refused with the way on; `--adopt` takes it
+    over once config.yaml agrees with what the run's files recorded."""
+    source = tmp_path / "tiny-train.yaml"
+    source.write_text(yaml.safe_dump({**TINY, "train": {**TINY["train"], "steps": 20}}))
+    folder = tmp_path / "old"
+    trained = CliRunner().invoke(app, ["train", "-c", str(source), "--out", str(folder), "--no-progress"])
+    assert trained.exit_code == 0, trained.output
+    (folder / MARKER).unlink()
+    before, config = snapshot(folder), folder / "config.yaml"
+    one_line_refusal(
+        ["train", "--resume", str(folder)],
+        f"records no owner (made before {MARKER} existed); if its config.yaml is the one it was "
+        "trained with, add --adopt",
+    )
+    one_line_refusal(["train", "-c", str(source), "--adopt"], "--adopt: has no effect without --resume")
+    text = config.read_text()
+    for changed, expected in (
+        (text.replace("learning_rate: 0.0005", "learning_rate: 0.001"), "checkpoint.npz learning rate was"),
+        (text.replace("network: '16'", "network: 16x16"), "best.npz network was trained with '16'"),
+        (
+            text.replace("seed: 1\n", "seed: 2\n", 1),
+            "best.npz seed was trained with 1, but config.yaml says 2",
+        ),
+    ):
+        config.write_text(changed)
+        one_line_refusal(["train", "--resume", str(folder), "--adopt"], expected)
+    config.write_text(text)
+    (folder / "episodes.csv").write_text("episode\n")
+    one_line_refusal(
+        ["train", "--resume", str(folder), "--adopt"], "holds episodes.csv, which no training run"
+    )
+    (folder / "episodes.csv").unlink()
+    assert snapshot(folder) == before
+    adopted = CliRunner().invoke(
+        app, ["train", "--resume", str(folder), "--adopt", "--steps", "30", "--no-progress"]
+    )
+    assert adopted.exit_code == 0, adopted.output
+    assert json.loads((folder / "summary.json").read_text())["steps"] == 30
+    assert json.loads((folder / MARKER).read_text())["command"] == "train"
+    one_line_refusal(["train", "--resume", str(folder), "--adopt"], "already records its owner")

@@ -1,5 +1,7 @@
 """Hostile configs and locations: one line, exit 2, before any work (issue: hardening)."""
 
+from pathlib import Path
+
 import pytest
 import yaml
 from typer.testing import CliRunner
@@ -89,12 +91,25 @@ def test_demonstrations_larger_than_memory_are_refused_before_any_episode(tmp_pa
     assert not (tmp_path / "t").exists()
 
 
+def owned_training_folder(folder: Path, config: dict) -> None:
+    """`folder` as `train` starts it: its config.yaml and its owner record."""
+    import json
+    from dataclasses import asdict
+
+    from stack.apps.training import training_owner
+    from stack.core.config import load_config
+    from stack.core.owner import MARKER
+
+    folder.mkdir()
+    (folder / "config.yaml").write_text(yaml.safe_dump(config))
+    (folder / MARKER).write_text(json.dumps(asdict(training_owner(load_config(folder / "config.yaml")))))
+
+
 def test_resume_from_a_broken_or_foreign_checkpoint_is_one_line(tmp_path):
     from planner.factory import SHIPPED_MODELS
 
     folder = tmp_path / "run"
-    folder.mkdir()
-    (folder / "config.yaml").write_text(yaml.safe_dump({"train": {"steps": 10}, "highway": {"duration": 2}}))
+    owned_training_folder(folder, {"train": {"steps": 10}, "highway": {"duration": 2}})
     (folder / "checkpoint.npz").write_bytes(SHIPPED_MODELS["ddqn"].read_bytes())
     one_line_refusal(["train", "--resume", str(folder), "--no-progress"], "not a training checkpoint")
     (folder / "checkpoint.npz").write_bytes(SHIPPED_MODELS["ddqn"].read_bytes()[:5000])

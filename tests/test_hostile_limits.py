@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 
 from planner import model_file
 from stack.apps.cli import app
+from stack.core.config import RunConfig
 from stack.core.train_config import TrainConfig
 from stack.sim.settings import HighwayConfig
 from tests.test_cli import tiny_config_file
@@ -101,12 +102,24 @@ def numeric_fields(model: type[BaseModel], prefix: str = "") -> typing.Iterator[
             yield f"{prefix}{name}", field
 
 
-@pytest.mark.parametrize("section", [HighwayConfig, TrainConfig])
-def test_every_number_of_the_world_and_training_is_bounded(section):
+BOUNDED_BY_VALIDATOR = {"perception.sensor.range_m"}
+"""Numbers whose range a validator checks (the sensor range: finite up to 10 km, or .inf)."""
+
+
+@pytest.mark.parametrize("section", [HighwayConfig, TrainConfig, RunConfig])
+def test_every_number_of_every_section_is_bounded_on_both_sides(section):
+    def bounded(field: object, kinds: tuple) -> bool:
+        metadata = field.metadata  # type: ignore[attr-defined]
+        return any(isinstance(m, kinds) for m in metadata)
+
     unbounded = [
         key
         for key, field in numeric_fields(section)
-        if not any(isinstance(m, annotated_types.Le | annotated_types.Lt) for m in field.metadata)
+        if key not in BOUNDED_BY_VALIDATOR
+        and not (
+            bounded(field, annotated_types.Le | annotated_types.Lt)
+            and bounded(field, annotated_types.Ge | annotated_types.Gt)
+        )
     ]
     assert unbounded == []
 
@@ -120,6 +133,27 @@ def test_every_number_of_the_world_and_training_is_bounded(section):
         ("perception.control_on_ground_truth=1", "expected true or false, got a number (1)"),
         ("control_rate_hz=20", "--set control_rate_hz: control_rate_hz: must equal"),
         ("train.validation.seed=10000000000000000000000", "train.validation.seed: Input should be less"),
+        ("controller.pid.kp_lateral=1e308", "controller.pid.kp_lateral: Input should be less than or equal"),
+        ("controller.mpc.weight_lateral=.nan", "controller.mpc.weight_lateral: Input should be a finite"),
+        ("controller.lane_change_duration_s=1e-300", "controller.lane_change_duration_s: Input should be"),
+        ("controller.lqr.speed_step=1e-9", "controller.lqr.speed_step: Input should be greater than or"),
+        ("controller.time_gap_s=1e308", "controller.time_gap_s: Input should be less than or equal to 10"),
+        ("planner.safety.min_gap_m=1e308", "planner.safety.min_gap_m: Input should be less than or equal"),
+        ("planner.safety.min_ttc_s=.inf", "planner.safety.min_ttc_s: Input should be a finite number"),
+        ("planner.oracle.margin_m=-1", "planner.oracle.margin_m: Input should be greater than or equal"),
+        ("perception.speed_scale=1e-300", "perception.speed_scale: Input should be greater than or equal"),
+        ("perception.ttc_horizon=.inf", "perception.ttc_horizon: Input should be a finite number"),
+        ("perception.sensor.range_m=1e308", "perception.sensor.range_m: must be at most 10000 m, or .inf"),
+        ("train.scenarios={overtaking: 1e308}", "train.scenarios: scenario 'overtaking': the share must be"),
+        (
+            "train.reward.speed_range=[true, 30]",
+            "train.reward.speed_range.0: expected a number, got a boolean",
+        ),
+        ("train.scenarios={overtaking: yes}", "train.scenarios.overtaking: expected a number, got a boolean"),
+        (
+            "highway.traffic={classes: [{name: a, share: on, speed_mps: [20, 30]}]}",
+            "--set highway.traffic: highway.traffic.classes.0.share: expected a number, got a boolean",
+        ),
     ],
 )
 def test_mistyped_or_unbounded_values_are_refused_naming_the_option(tmp_path, setting, expected):
@@ -193,3 +227,34 @@ def test_a_ray_address_where_something_else_listens_is_refused_within_seconds():
     finally:
         http_server.shutdown()
         silent.close()
+
+
+@pytest.mark.parametrize(
+    ("arguments", "expected"),
+    [
+        (
+            ["safety", "--scenario", "lead-braking", "--point", "speed=20,time_gap=1e308,deceleration=4"],
+            "time_gap",
+        ),
+        (
+            [
+                "safety",
+                "--scenario",
+                "cut-in",
+                "--point",
+                "speed=20,relative_speed=1e9,gap=10,lateral_speed=1",
+            ],
+            "relative_speed",
+        ),
+        (
+            ["safety", "--scenario", "cut-out", "--point", "speed=20,distance=10,lateral_speed=nan"],
+            "lateral_speed",
+        ),
+        (["reproduce", "deepcars", "--quick", "--seed", "-1"], "--seed"),
+        (["reproduce", "deepcars", "--quick", "--seed", str(2**40)], "--seed"),
+    ],
+)
+def test_numbers_given_as_options_are_bounded_before_any_work(tmp_path, arguments, expected):
+    result = CliRunner().invoke(app, [*arguments, "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2 and expected in result.output, result.output
+    assert "Traceback" not in result.output and not (tmp_path / "out").exists()

@@ -160,7 +160,7 @@ def test_any_sweep_file_loads_or_is_one_line(tmp_path_factory, space, samples, m
     data = {"config": "base.yaml", "space": space, "samples": samples, "metric": metric}
     (folder / "sweep.yaml").write_text(json.dumps(data, default=str))
     try:
-        sweep, base = load_sweep(folder / "sweep.yaml")
+        sweep, base, _ = load_sweep(folder / "sweep.yaml")
     except ConfigError as error:
         assert "\n" not in str(error) and len(str(error)) <= 300, str(error)[:400]
         return

@@ -115,6 +115,14 @@ def test_rule_agent_reads_the_side_lanes_code():
         assert decide(agent, observation) is Command.LEFT
 
 
+def test_rule_agent_that_sees_no_cell_ahead_keeps_its_lane():
+    grid = GRID.model_copy(update={"cells_ahead": 1})
+    agent = make_agent("rule", 3, grid)
+    blocked = scene(3, (0.0, 1), [(15.0, 4.0), (40.0, 8.0)])
+    observation = OccupancyGridBuilder(grid).build(blocked).encode(agent.encoding)
+    assert decide(agent, observation) is Command.STAY
+
+
 def test_mobil_changes_lane_for_a_gain_and_respects_the_new_follower():
     agent = MobilAgent(GRID)
     slow_leader = scene(3, (0.0, 1), [(15.0, 4.0)], speed=25.0, other_speed=15.0)

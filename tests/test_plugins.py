@@ -53,6 +53,7 @@ def test_a_file_agent_runs_beside_a_builtin_and_a_module_agent_in_compare(user_f
     assert run.exit_code == 0, run.output
     rows = json.loads((tmp_path / "run" / "beside.json").read_text())
     assert rows[0]["agent"] == f"{user_files}/my_agent.py:LeftWhenBlocked"
+    assert "summary: LeftWhenBlocked + pid" in run.output and "\n| LeftWhenBlocked | 1 |" in run.output
     compare = invoke(
         "compare",
         "--agents",
@@ -66,6 +67,64 @@ def test_a_file_agent_runs_beside_a_builtin_and_a_module_agent_in_compare(user_f
     assert compare.exit_code == 0, compare.output
     agents = [row["agent"] for row in json.loads((tmp_path / "cmp" / "comparison.json").read_text())]
     assert agents == ["my_agent:LeftWhenBlocked", "keep-lane"]
+    assert "\n| LeftWhenBlocked | 1 |" in compare.output
+
+
+def test_compare_shows_plug_ins_by_class_name_and_names_them_in_full_in_its_files(
+    user_files, tmp_path, monkeypatch
+):
+    """Two files of one name with one class name, the baseline given relative to the working
+    directory, a module controller: the figure and the tables tell them apart by the folder, the
+    files name them in full."""
+    (user_files / "other").mkdir()
+    shutil.copy(user_files / "my_agent.py", user_files / "other" / "my_agent.py")
+    monkeypatch.chdir(user_files)
+    figures = []
+    monkeypatch.setattr("stack.apps.compare.save_figure", lambda figure, path, dpi: figures.append(figure))
+    agents = ["my_agent.py:LeftWhenBlocked", "other/my_agent.py:LeftWhenBlocked"]
+    common = ["--episodes", "1", "--set", "controller.type=my_controller:HeadingPD", *TINY]
+    out = tmp_path / "cmp"
+    compare = invoke(
+        "compare", "--agents", ",".join(agents), "--baseline", agents[0], *common, "--out", str(out)
+    )
+    assert compare.exit_code == 0, compare.output
+    shown = ["user/my_agent.py:LeftWhenBlocked", "other/my_agent.py:LeftWhenBlocked"]
+    assert f"speed - {shown[0]} m/s" in compare.output
+    assert all(f"\n| {name} | 1 |" in compare.output for name in shown), compare.output
+    rows = json.loads((out / "comparison.json").read_text())
+    full = [f"{user_files}/{agent}" for agent in agents]
+    assert [row["agent"] for row in rows] == full and rows[1]["baseline"] == full[0]
+    assert rows[1]["controller"] == "my_controller:HeadingPD" and "difference" in rows[1]
+    (figure,) = figures
+    figure.canvas.draw()
+    for axis in figure.axes:
+        assert [tick.get_text() for tick in axis.get_xticklabels()] == shown
+    assert "controller HeadingPD" in figure.texts[0].get_text()
+    assert shown[0] in figure.axes[-1].get_title()
+
+
+@pytest.mark.parametrize(
+    "names, shown",
+    [
+        (["/u/a.py:Mine", "mobil"], ["Mine", "mobil"]),
+        (["/u/a.py:Mine", "/u/b.py:Mine", "/v/b.py:Mine"], ["a.py:Mine", "u/b.py:Mine", "v/b.py:Mine"]),
+        (
+            ["pkg.agents:Mine", "other.agents:Mine", "x:Mine"],
+            ["pkg.agents:Mine", "other.agents:Mine", "x:Mine"],
+        ),
+        (["pkg.agents:Mine", "pkg.more:Mine"], ["agents:Mine", "more:Mine"]),
+        (["x:rule", "rule"], ["x:rule", "rule"]),
+        (["/u/a.py:Mine", "/u/a.py:Mine"], ["Mine", "Mine"]),
+    ],
+)
+def test_short_labels_lengthen_a_class_name_only_as_far_as_it_takes(names, shown):
+    assert plugins.short_labels(names) == shown
+
+
+def test_two_plug_ins_of_one_file_name_keep_apart_journals():
+    names = ["/u/agent.py:Mine", "/v/agent.py:Mine", "u.agent:Mine", "mobil"]
+    assert len({plugins.file_safe(name) for name in names}) == 4
+    assert plugins.file_safe("mobil") == "mobil"
 
 
 @pytest.mark.slow

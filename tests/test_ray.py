@@ -1,11 +1,14 @@
-"""`--ray` and `drivestack sweep` on a local 2-CPU Ray instance: the same summaries as `--jobs 1`, a
-sweep that picks its planted best trial, and bad input (no Ray, an unreachable address, a bad sweep
-file) as one line with exit code 2 before any work."""
+"""`--ray` and `drivestack sweep` on a local 2-CPU Ray instance: the same summaries as `--jobs 1`,
+plug-ins from outside the repository as with `--jobs 2`, a sweep that picks its planted best trial,
+and bad input (no Ray, an unreachable address, a bad sweep file) as one line with exit code 2
+before any work."""
 
 import csv
 import json
+import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import yaml
@@ -14,9 +17,12 @@ from typer.testing import CliRunner
 from stack.apps.cli import app
 from stack.apps.options import bare_ray_as_local
 from stack.core.metrics import outcome
+from stack.core.ray_tasks import import_path, worker_call
 from tests.test_train import TINY
 
 ray = pytest.importorskip("ray")
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 TINY_RUN = ["--set", "highway.duration=4", "--set", "highway.vehicles_count=10", "--no-progress"]
 TINY_TRAINING = {
@@ -41,6 +47,12 @@ def invoke(*arguments: str):
     return CliRunner().invoke(app, list(arguments))
 
 
+def episode_rows(path) -> list[dict]:
+    """The episodes of a results folder's episodes.csv without their timing fields."""
+    with path.open() as handle:
+        return [outcome(row) for row in csv.DictReader(handle)]
+
+
 def sweep_file(tmp_path, space: dict, **extra) -> str:
     """A sweep over `space` of trials of 20 steps: a short validation promoted to a long one at
     step 10, a long one at 20."""
@@ -58,6 +70,45 @@ def test_compare_on_ray_gives_the_summaries_of_one_job(tmp_path, local_ray):
     assert local.exit_code == 0 and remote.exit_code == 0, remote.output
     rows = [json.loads((tmp_path / name / "comparison.json").read_text()) for name in ("local", "ray")]
     assert [outcome(row) for row in rows[0]] == [outcome(row) for row in rows[1]]
+
+
+@pytest.mark.slow
+def test_plug_ins_from_outside_the_repository_give_the_same_results_on_ray(tmp_path, local_ray, monkeypatch):
+    """An agent in a file and a controller as a module, both in a folder outside the repository
+    that only this process has on its import path (not the working directory nor PYTHONPATH the
+    Ray workers get), the agent beside a built-in: the same episodes with `--jobs 2` and `--ray`."""
+    folder = tmp_path / "user"
+    folder.mkdir()
+    shutil.copy(EXAMPLES / "plugin_agent.py", folder / "file_agent.py")
+    shutil.copy(EXAMPLES / "plugin_controller.py", folder / "ray_user_controller.py")
+    monkeypatch.syspath_prepend(str(folder))
+    monkeypatch.delitem(sys.modules, "ray_user_controller", raising=False)
+    agents = f"{folder}/file_agent.py:LeftWhenBlocked,mobil"
+    controller = ["--set", "controller.type=ray_user_controller:HeadingPD"]
+    common = ["compare", "--agents", agents, *controller, "--episodes", "2", *TINY_RUN]
+    jobs = invoke(*common, "--jobs", "2", "--out", str(tmp_path / "jobs"))
+    remote = invoke(*common, "--ray", "local", "--out", str(tmp_path / "ray"))
+    assert jobs.exit_code == 0 and remote.exit_code == 0, remote.output
+    rows = [json.loads((tmp_path / name / "comparison.json").read_text()) for name in ("jobs", "ray")]
+    assert [outcome(row) for row in rows[0]] == [outcome(row) for row in rows[1]]
+    assert [row["agent"] for row in rows[1]] == agents.split(",")
+    assert {row["controller"] for row in rows[1]} == {"ray_user_controller:HeadingPD"}
+    episodes = [episode_rows(tmp_path / name / "episodes.csv") for name in ("jobs", "ray")]
+    assert episodes[0] == episodes[1] and len(episodes[0]) == 4
+
+    single = ["run", "--agent", "mobil", "--controller", "ray_user_controller:HeadingPD", "--episodes", "2"]
+    run = invoke(*single, *TINY_RUN, "--ray", "local", "--out", str(tmp_path / "run"))
+    assert run.exit_code == 0, run.output
+    mobil = [{k: v for k, v in row.items() if k != "agent"} for row in episodes[0][2:]]
+    assert episode_rows(tmp_path / "run" / "episodes.csv") == mobil
+
+
+def test_a_ray_task_appends_the_import_path_entries_its_worker_lacks(monkeypatch):
+    monkeypatch.setattr(sys, "path", ["/worker/own", "/shared"])
+    seen = worker_call(lambda item: (item, list(sys.path)), 7, ["/driver/first", "/shared", "/driver/last"])
+    assert seen == (7, ["/worker/own", "/shared", "/driver/first", "/driver/last"])
+    monkeypatch.setattr(sys, "path", ["", "relative"])
+    assert import_path() == [str(Path.cwd()), str(Path.cwd() / "relative")]
 
 
 def test_track_on_ray_keeps_the_maneuver_order(tmp_path, local_ray):
@@ -83,6 +134,10 @@ def test_sweep_picks_the_planted_best_trial(tmp_path, local_ray):
         assert len(list(csv.DictReader(handle))) == 4
     for name in ("best_model.npz", "sweep.png", "trials.md", "config.yaml"):
         assert (out / name).is_file(), name
+    trial = next((out / "trials").iterdir())
+    assert json.loads((trial / ".drivestack-owner.json").read_text())["command"] == "sweep trial"
+    refused = invoke("train", "--resume", str(trial))
+    assert refused.exit_code == 2 and "holds the results of `sweep trial`" in refused.output
 
     resumed = invoke("sweep", "--resume", str(out), "--no-progress")
     assert resumed.exit_code == 0, resumed.output

@@ -11,8 +11,9 @@ import typer
 
 from records.plugins import SPEC_FORMS
 from stack.apps.commands import agents, controllers, export, sweep
-from stack.apps.folders import claimed, claimed_for, resumed
+from stack.apps.folders import claimed, claimed_for, episodes_kept, resumed
 from stack.apps.options import (
+    AGAIN,
     JOBS_OPTION,
     PLANT_HELP,
     RAY_OPTION,
@@ -32,6 +33,10 @@ from stack.apps.plugin_checks import agent_name_or_fail, plugins_or_fail
 from stack.apps.preflight import checked_run
 
 PLUGIN_HELP = f"a plug-in class: {SPEC_FORMS} (docs/plugins.md)."
+ADOPT_HELP = (
+    "With --resume: take over a training folder made before folders recorded their owner, once its "
+    "config.yaml agrees with the run's model files, checkpoint and summary."
+)
 RESUME_HELP = "Finish the interrupted run in --out (same arguments): its finished episodes are kept."
 
 app = typer.Typer(
@@ -96,7 +101,9 @@ def run(
     folder = checked_run(cfgs, out, "run", resume, jobs)
     from stack.apps.run import run_and_report
 
-    until_interrupted(lambda: run_and_report(cfgs, folder, video, jobs, progress, ray, done))
+    until_interrupted(
+        lambda: run_and_report(cfgs, folder, video, jobs, progress, ray, done), lambda: episodes_kept(folder)
+    )
 
 
 @app.command()
@@ -131,7 +138,8 @@ def track(
     ray_or_fail(ray)
     folder = claimed_for("track", out, f"{names}{plants}{speed_list}", cfg)
     until_interrupted(
-        lambda: track_and_report(names, speed_list, cfg, folder, progress, cast(Any, plants), ray)
+        lambda: track_and_report(names, speed_list, cfg, folder, progress, cast(Any, plants), ray),
+        lambda: f"the table above holds every maneuver measured; {AGAIN}",
     )
 
 
@@ -179,12 +187,17 @@ def compare(
         seed=seed,
     )
     plugins_or_fail(configs, ["--agents"] * len(configs))
+    if baseline is not None:  # as the configs name it: a file plug-in by its absolute path
+        baseline = configs[names.index(baseline)].planner.agent
     ray_or_fail(ray)
     done = resumed(configs, out, "compare") if resume else None
     folder = checked_run(configs, out, "compare", resume, jobs)
     from stack.apps.compare import compare_and_report
 
-    until_interrupted(lambda: compare_and_report(configs, folder, jobs, progress, baseline, ray, done))
+    until_interrupted(
+        lambda: compare_and_report(configs, folder, jobs, progress, baseline, ray, done),
+        lambda: episodes_kept(folder),
+    )
 
 
 @app.command()
@@ -267,10 +280,14 @@ def reproduce_deepcars(
     out: Path | None = typer.Option(None, help="Results folder (default: runs/deepcars-<time>)."),
 ) -> None:
     """The paper's DeepCars table: tabular Q-learning, DQN and DDQN per network size, baselines."""
+    from records import SEED_LIMIT
     from stack.apps.reproduce import reproduce_and_report
     from stack.deepcars.spec import VARIANTS
 
     variants = chosen("--variant", variant, VARIANTS)
+    largest = SEED_LIMIT - 1_000_000
+    if not 0 <= seed <= largest:
+        fail(f"--seed: expected 0 to {largest} (its streams add up to 10,000 to it), got {seed}")
     folder = claimed_for("reproduce deepcars", out, f"{quick}{variants}{seed}")
     until_interrupted(lambda: reproduce_and_report(folder, quick, seed, variants))
 
@@ -291,6 +308,7 @@ def train(
     resume: Path | None = typer.Option(
         None, help="Continue the run in this folder from its last checkpoint."
     ),
+    adopt: bool = typer.Option(False, "--adopt", help=ADOPT_HELP),
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Train a decision agent inside the closed loop, keeping the best model by real-time validation."""
@@ -304,7 +322,9 @@ def train(
 
     if resume is not None:
         given = {"--agent": agent, "--config": config, "--envs": envs, "--plant": plant, "--seed": seed}
-        cfg = resumed_training(resume, sets, steps, given | {"--scenario": scenario, "--out": out})
+        cfg = resumed_training(resume, sets, steps, given | {"--scenario": scenario, "--out": out}, adopt)
+    elif adopt:
+        fail("--adopt: has no effect without --resume DIR (it takes over a folder made before owner records)")
     else:
         options = {"scenario": scenario, "train__algorithm": agent, "train__envs": envs, "seed": seed}
         cfg = configured(config or TRAIN_CONFIG, sets, None, train__steps=steps, sim__plant=plant, **options)

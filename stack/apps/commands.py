@@ -4,14 +4,13 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import typer
 from rich.console import Console
 
 from records.plugins import AGENT_GROUP, SPEC_FORMS
-from stack.apps.options import fail, ray_or_fail
+from stack.apps.options import AGAIN, fail, ray_or_fail, until_interrupted
 
 SWEEP_RAY_HELP = (
     "Where the trials run: a local Ray instance (default), auto (the cluster `ray start` made) or HOST:PORT."
@@ -30,27 +29,64 @@ def sweep(
     """Training runs over a grid or random space of seeds, hyper-parameters, scenarios (Ray Tune)."""
     if (config is None) == (resume is None):
         fail("sweep: expected --config SWEEP.yaml for a new sweep or --resume DIR to continue one")
-    from stack.apps.training import check_memory
+    if resume is not None and out is not None:
+        fail("--out: has no effect with --resume; the sweep goes on in its own folder")
+    from stack.apps.training import check_init_model, check_memory
     from stack.core.config import ConfigError
-    from stack.core.sweep_config import SWEEP_FILE, load_sweep, trial_config
+    from stack.core.sweep_config import SWEEP_FILE, load_sweep
 
     spec = resume / SWEEP_FILE if resume is not None else config or Path(SWEEP_FILE)
     if resume is not None and not spec.is_file():
         fail(f"--resume: {resume} is not a sweep folder (no {SWEEP_FILE})")
     try:
-        sweep_file, base = load_sweep(spec)
+        sweep_file, base, trials = load_sweep(spec)
     except ConfigError as error:
         fail(str(error))
-    check_memory(trial_config(base, sweep_file.fixed, {}))
-    ray_or_fail(ray or "local")
+    for trial in trials:
+        check_memory(trial)
+        check_init_model(trial)
     from stack.apps.folders import claimed, location
-    from stack.core.owner import Owner
+    from stack.core.owner import Owner, refusal
 
-    folder = claimed(location(resume or out, "sweep"), "sweep", Owner("sweep", ""), resume is not None, False)
+    folder, owner = location(resume or out, "sweep"), Owner("sweep", "")
+    if why := refusal(folder, owner, resume is not None, restart=False):
+        fail(why)
+    envs = max(trial.train.envs for trial in trials)
+    if ray in (None, "local"):
+        from stack.core.machine import usable_cpus
+
+        trial_cpus_or_fail(envs, usable_cpus(), "this machine")
+    ray_or_fail(ray or "local")
+    if ray not in (None, "local"):
+        trial_cpus_or_fail(envs, largest_node_cpus(), "the largest Ray node")
+    folder = claimed(folder, "sweep", owner, resume is not None, restart=False)
     from stack.apps.sweep import sweep_and_report
 
-    if sweep_and_report(sweep_file, base, folder, resume is not None, progress):
-        sys.exit(130)
+    until_interrupted(
+        lambda: sweep_and_report(sweep_file, base, folder, resume is not None, progress),
+        lambda: (
+            f"the trials finished are kept: free space, then `drivestack sweep --resume {folder}`"
+            if (folder / SWEEP_FILE).is_file()
+            else AGAIN
+        ),
+    )
+
+
+def trial_cpus_or_fail(envs: int, cpus: float, where: str) -> None:
+    """Refuse, before any trial, trials that step more environments (one CPU each) than `where`
+    has CPUs (`cpus`): Ray Tune would wait for them forever."""
+    if envs > cpus:
+        fail(
+            f"train.envs: a trial steps {envs} environments, one CPU each, but {where} has {cpus:g} "
+            "CPUs; no trial would ever start"
+        )
+
+
+def largest_node_cpus() -> float:
+    """The CPUs of the largest live node of the connected Ray cluster."""
+    import ray
+
+    return max((node["Resources"].get("CPU", 0) for node in ray.nodes() if node.get("Alive")), default=0)
 
 
 def export(

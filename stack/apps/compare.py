@@ -1,7 +1,8 @@
 """`drivestack compare`: several agents on the same seeded episodes; every metric with its 95 %
 confidence interval and, with a baseline, the paired difference to it (`stack.core.statistics`).
 Writes comparison.json, comparison.png and episodes.csv (every agent's episodes, for pairings the
-table does not show) and prints one markdown table."""
+table does not show) and prints one markdown table. The figure and the tables show a plug-in by its
+class name (`records.plugins.short_labels`); the files name it in full."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from typing import Any
 import matplotlib.pyplot as plt
 from matplotlib.axes import Axes
 
+from records.plugins import short_labels
 from stack.apps.resume import started
 from stack.core.config import RunConfig
 from stack.core.episodes import RunResults, run
@@ -146,21 +148,31 @@ def write_comparison(rows: list[dict[str, Any]], out: Path) -> None:
     with_difference = "difference" in rows[0]
     panels = len(PANELS) + with_difference
     figure, axes = plt.subplots(1, panels, figsize=(4.2 * panels, 4.2))
-    names = [row["agent"] for row in rows]
+    names = shown(rows)
     for axis, (metric, label, scale) in zip(axes, PANELS, strict=False):
         _bars(axis, names, [[scale * v for v in row["intervals"][metric]] for row in rows], label)
     if with_difference:
         values = [row["difference"]["mean_speed"] for row in rows]
-        _bars(axes[-1], names, values, f"mean speed - {rows[0]['baseline']} [m/s], paired")
+        _bars(axes[-1], names, values, f"mean speed - {shown_baseline(rows)} [m/s], paired")
         axes[-1].axhline(0.0, color="black", lw=0.8)
     first = rows[0]
     figure.suptitle(
         f"{first['scenario'] or 'config'}: {first['episodes']} seeded episodes from seed {first['seed']}, "
-        f"controller {first['controller']} (bars: 95 % confidence intervals)"
+        f"controller {short_labels([first['controller']])[0]} (bars: 95 % confidence intervals)"
     )
     figure.tight_layout()
     save_figure(figure, out / "comparison.png", dpi=100)
     plt.close(figure)
+
+
+def shown(rows: list[dict[str, Any]]) -> list[str]:
+    """The agents of `rows` as the figure and the tables name them (`short_labels`)."""
+    return short_labels([row["agent"] for row in rows])
+
+
+def shown_baseline(rows: list[dict[str, Any]]) -> str:
+    """The baseline of `rows` (one of their agents) as the figure and the tables name it."""
+    return dict(zip((row["agent"] for row in rows), shown(rows), strict=True))[rows[0]["baseline"]]
 
 
 def _bars(axis: Axes, names: list[str], intervals: list[list[float]], label: str) -> None:
@@ -199,15 +211,15 @@ def markdown(rows: list[dict[str, Any]]) -> str:
         "| agent | episodes | collision rate % | accuracy % | mean speed m/s | lane changes / ep "
         "| masked / ep | aborted / ep |"
     )
-    baseline = rows[0].get("baseline")
+    baseline = shown_baseline(rows) if rows[0].get("baseline") else None
     if baseline:
         header += f" speed - {baseline} m/s | collision rate - {baseline} % |"
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
-    for row in rows:
+    for row, name in zip(rows, shown(rows), strict=True):
         ci = row["intervals"]
         accuracy = "n/a" if row["accuracy"] is None else f"{row['accuracy']:.2f}"
         line = (
-            f"| {row['agent']} | {row['episodes']} | {_cell(ci['collision_rate'], 100, 1)} | {accuracy} | "
+            f"| {name} | {row['episodes']} | {_cell(ci['collision_rate'], 100, 1)} | {accuracy} | "
             f"{_cell(ci['mean_speed'])} | {_cell(ci['lane_changes'])} | {_cell(ci['masked_commands'])} | "
             f"{_cell(ci['aborted_changes'])} |"
         )
@@ -228,10 +240,10 @@ def safety_markdown(rows: list[dict[str, Any]]) -> str:
         "| below R157 d_min s / ep | emergency brakings / ep |"
     )
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
-    for row in rows:
+    for row, name in zip(rows, shown(rows), strict=True):
         ci = row["intervals"]
         lines.append(
-            f"| {row['agent']} | {_cell(ci['at_fault_rate'], 100, 1)} | {row['not_at_fault_collisions']} | "
+            f"| {name} | {_cell(ci['at_fault_rate'], 100, 1)} | {row['not_at_fault_collisions']} | "
             f"{_cell(ci['road_departure_rate'], 100, 1)} | {row['min_ttc_s']:.2f} | "
             f"{_cell(ci['time_below_min_distance_s'])} | {_cell(ci['emergency_brakings'])} |"
         )

@@ -98,6 +98,21 @@ def check_destination(out: Path) -> None:
         raise ValueError(f"--sb3: {out.parent} is not writable")
 
 
+def episodes_kept(folder: Path) -> str:
+    """What a run or comparison in `folder` kept when a results file could not be written (a full
+    disk, a folder made read-only), and how to go on."""
+    from stack.apps.options import AGAIN
+    from stack.core.files import JOURNAL
+
+    journals = sorted(path.name for path in folder.glob(f"*.{JOURNAL}"))
+    if not journals or not (folder / "config.yaml").is_file():
+        return AGAIN
+    return (
+        f"the episodes finished are kept in {', '.join(journals)}: free space, then the same "
+        "command with --resume finishes the run"
+    )
+
+
 def resumed(configs: list[RunConfig], out: Path | None, command: str) -> dict[str, list[EpisodeResult]]:
     """`--resume`: the episodes the interrupted run in `out` finished, per agent (`resumable`)."""
     from stack.apps.resume import resumable

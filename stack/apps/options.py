@@ -163,21 +163,40 @@ def _print_version(value: bool) -> None:
         raise typer.Exit()
 
 
-def until_interrupted(work: Callable[[], bool]) -> None:
+AGAIN = "free space (or make the folder writable) and run the command again"
+"""What to do after a write failure when nothing that finished was kept."""
+
+
+def until_interrupted(work: Callable[[], bool], kept: Callable[[], str] = lambda: AGAIN) -> None:
     """Run `work`, which returns True when Ctrl-C cut it short with its finished part written, and
-    exit 130 then; one line (and exit 130) when it was cut before anything finished."""
+    exit 130 then; one line (and exit 130) when it was cut before anything finished. A results
+    file that cannot be written (a full disk, a read-only folder) is one line (exit 2) saying
+    what was kept and how to go on (`kept`)."""
+    from stack.core.files import write_failure
+
     try:
         interrupted = work()
     except KeyboardInterrupt:
         print("interrupted before anything finished; nothing written", file=sys.stderr)
         sys.exit(130)
+    except OSError as error:
+        if not write_failure(error):
+            raise
+        fail(f"{cannot_write(error)}; {kept()}")
     if interrupted:
         sys.exit(130)
 
 
+def cannot_write(error: OSError) -> str:
+    """`cannot write FILE (why)` for a write failure."""
+    where = f" {error.filename}" if error.filename else ""
+    return f"cannot write{where} ({error.strerror or error})"
+
+
 def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
-    """Run the CLI `app`; a failure nobody foresaw is one line pointing at `--debug` (which shows
-    the traceback) instead of a traceback."""
+    """Run the CLI `app`; a file that cannot be written (a full disk, a read-only folder) is one
+    line (exit 2), a failure nobody foresaw one line pointing at `--debug` (which shows the
+    traceback) instead of a traceback."""
     arguments = bare_ray_as_local(list(sys.argv[1:] if arguments is None else arguments))
     debug = "--debug" in arguments
     if debug:
@@ -191,8 +210,13 @@ def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
             sys.exit(130)
         raise
     except Exception as error:  # noqa: BLE001 - the last line of defence, deliberately broad
+        from stack.core.files import write_failure
+
         if debug:
             raise
+        if write_failure(error):
+            print(f"error: {cannot_write(error)}", file=sys.stderr)
+            sys.exit(2)
         message = str(error).splitlines()[0][:200] if str(error) else ""
         print(
             f"internal error: {type(error).__name__}: {message} (run with --debug for the traceback)",

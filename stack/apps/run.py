@@ -12,6 +12,7 @@ from rich.console import Console
 from rich.table import Table
 
 from perception.plot import plot_grid_over_road
+from records.plugins import short_labels
 from stack.apps.compare import comparison, markdown
 from stack.apps.resume import started
 from stack.core.closed_loop import VIDEO_FRAME_TICKS
@@ -119,7 +120,7 @@ def plot_traces(episodes: list[EpisodeResult], path: Path, summary: dict) -> Non
     traced = [episode for episode in episodes if episode.trace]
     resumed = f" ({len(traced)} traced: those run after --resume)" if len(traced) < len(episodes) else ""
     figure.suptitle(
-        f"{summary['agent']} + {summary['controller']}, {summary.get('scenario') or 'configured world'}, "
+        f"{agent_and_controller(summary)}, {summary.get('scenario') or 'configured world'}, "
         f"{summary.get('plant', 'kinematic')} plant: {len(episodes)} episodes, seeds {first}-{last}{resumed}"
     )
     if len(traced) <= FEW_EPISODES:
@@ -150,6 +151,11 @@ def plot_traces(episodes: list[EpisodeResult], path: Path, summary: dict) -> Non
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
+
+
+def agent_and_controller(summary: dict) -> str:
+    """`agent + controller` of a run's summary, a plug-in by its class name (`short_labels`)."""
+    return " + ".join(short_labels([summary["agent"]]) + short_labels([summary["controller"]]))
 
 
 def print_tables(summary: dict, episodes: list[EpisodeResult], console: Console | None = None) -> None:
@@ -186,7 +192,7 @@ def print_tables(summary: dict, episodes: list[EpisodeResult], console: Console 
             f"{e.peak_lat_jerk:.2f}",
         )
     console.print(table)
-    overview = Table(title=f"summary: {summary['agent']} + {summary['controller']}")
+    overview = Table(title=f"summary: {agent_and_controller(summary)}")
     overview.add_column("metric")
     overview.add_column("value", justify="right")
     accuracy = summary["accuracy"]

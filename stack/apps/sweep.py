@@ -22,6 +22,8 @@ import yaml
 from planner.scores import Validation
 from stack.apps.sweep_report import TRIALS, report
 from stack.core.config import write_config
+from stack.core.files import write_text
+from stack.core.owner import Owner, claim, fingerprint
 from stack.core.sweep_config import SWEEP_FILE, SweepFile, trial_config
 
 BASE, TUNE = "config.yaml", "tune"
@@ -34,7 +36,7 @@ def prepare(sweep: SweepFile, base: Path, folder: Path) -> None:
     file pointing at it as sweep.yaml."""
     write_config(trial_config(base, sweep.fixed, {}), folder / BASE, "the base config of every trial")
     spec = sweep.model_dump(mode="json") | {"config": BASE, "fixed": {}}
-    (folder / SWEEP_FILE).write_text(yaml.safe_dump(spec, sort_keys=False))
+    write_text(folder / SWEEP_FILE, yaml.safe_dump(spec, sort_keys=False))
 
 
 def tune_space(sweep: SweepFile) -> dict[str, Any]:
@@ -52,9 +54,14 @@ def tune_space(sweep: SweepFile) -> dict[str, Any]:
     return space
 
 
+TRIAL = "sweep trial"
+"""The owner a trial's run folder records: `train --resume` refuses it, the sweep resumes it."""
+
+
 def train_trial(params: dict[str, Any], folder: Path, metric: str) -> None:
     """One Tune trial: a training run in folder/trials/<trial id> with `params` over the sweep's
-    base config, resumed from that folder's checkpoint when an earlier attempt left one."""
+    base config, resumed from that folder's checkpoint when an earlier attempt left one. The trial
+    owns and locks its folder while it trains (`stack.core.owner`)."""
     from ray import tune
 
     from stack.training.trainer import Trainer
@@ -69,7 +76,9 @@ def train_trial(params: dict[str, Any], folder: Path, metric: str) -> None:
             tune.report({"step": validation.step, SCORE: kept, "validation": getattr(validation, metric)})
 
     config = trial_config(folder / BASE, {}, params)
-    summary = Trainer(config, out, progress=False, on_validation=heard).run()
+    owner = Owner(TRIAL, fingerprint(yaml.safe_dump(params, sort_keys=True)))
+    with claim(out, owner, resuming=True):
+        summary = Trainer(config, out, progress=False, on_validation=heard).run()
     best = summary.best_validation
     score = getattr(best, metric) if best is not None else math.nan
     tune.report({"step": summary.steps, SCORE: score, "finished": True})

@@ -5,7 +5,6 @@ as best_model.npz, and summary.json."""
 
 from __future__ import annotations
 
-import csv
 import json
 import shutil
 from pathlib import Path
@@ -13,6 +12,7 @@ from typing import Any
 
 import matplotlib.pyplot as plt
 
+from stack.core.files import replacing, save_figure, write_csv, write_json, write_text
 from stack.core.sweep_config import SweepFile
 from stack.training.summary import TrainSummary
 
@@ -84,7 +84,7 @@ def plot_sweep(
     bars.tick_params(axis="x", rotation=30)
     figure.suptitle(f"sweep: {len(rows)} trials, metric {metric} of the long real-time validation")
     figure.tight_layout()
-    figure.savefig(folder / "sweep.png", dpi=100)
+    save_figure(figure, folder / "sweep.png", dpi=100)
     plt.close(figure)
 
 
@@ -94,16 +94,14 @@ def report(sweep: SweepFile, folder: Path, trials: list[tuple[dict, dict, object
     rows = [trial_row(sweep, folder, params, metrics, error) for params, metrics, error in trials]
     rows.sort(key=lambda row: row["trial"])
     best = best_row(rows, sweep.mode)
-    with (folder / "trials.csv").open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(folder / "trials.csv", rows)
     table = markdown(rows, best)
-    (folder / "trials.md").write_text(table)
+    write_text(folder / "trials.md", table)
     plot_sweep(rows, best, folder, sweep)
     best_model = folder / TRIALS / best["trial"] / "best.npz" if best else None
     if best_model and best_model.is_file():
-        shutil.copyfile(best_model, folder / "best_model.npz")
+        with replacing(folder / "best_model.npz") as copy:
+            shutil.copyfile(best_model, copy)
     unfinished = any(row["status"] != "finished" for row in rows)
     summary = {
         "metric": sweep.metric,
@@ -114,7 +112,7 @@ def report(sweep: SweepFile, folder: Path, trials: list[tuple[dict, dict, object
         "best": best,
         "best_model": "best_model.npz" if (folder / "best_model.npz").is_file() else None,
     }
-    (folder / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    write_json(folder / "summary.json", summary)
     print(table, end="")
     print(f"results: {folder}" + (" (unfinished trials: continue with --resume)" if unfinished else ""))
     return unfinished

@@ -16,6 +16,7 @@ MPC fallbacks.
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextlib import closing
 from dataclasses import asdict
 from pathlib import Path
 
@@ -160,8 +161,9 @@ def track_and_report(
     ray: str | None = None,
 ) -> bool:
     """Every maneuver (here, or as Ray tasks at address `ray`) with a progress bar, then the table
-    and where the results are; True when Ctrl-C cut it short (the maneuvers finished are written;
-    none finished: KeyboardInterrupt)."""
+    (before the files: a folder that cannot be written loses no figure measured), the files and
+    where they are; True when Ctrl-C cut it short (the maneuvers finished are written; none
+    finished: KeyboardInterrupt)."""
     builtin_runs = 1 if "kinematic" in plants else 0
     total = (
         sum(len(speeds_on(road, speeds)) for road in ROADS)
@@ -169,42 +171,39 @@ def track_and_report(
         * sum(builtin_runs if n == "builtin" else len(plants) for n in controllers)
     )
     with tqdm(total=total, unit="maneuver", disable=not progress) as bar:
-        maneuvers = track(
+        maneuvers = measure(
             controllers,
             speeds,
             config.controller.lane_change_duration_s,
             config.controller,
-            out,
             config.dt,
             plants=plants,
             progress=lambda: bar.update(1),
             ray=ray,
         )
-    with deferred(interrupt_after=False):
-        write_config(config, out / "config.yaml", "the resolved config of this run (its controller section)")
     print_tracking(maneuvers)
+    with deferred(interrupt_after=False):
+        write_tracking(maneuvers, out, ROADS, plants, speeds)
+        write_config(config, out / "config.yaml", "the resolved config of this run (its controller section)")
     interrupted = len(maneuvers) < total
     stopped = f" (interrupted: the {len(maneuvers)} of {total} maneuvers finished)"
     Console().print(f"results: {out}" + (stopped if interrupted else ""))
     return interrupted
 
 
-def track(
+def measure(
     controllers: list[str],
     speeds: list[Speeds],
     duration: float,
     config: ControllerConfig,
-    out: Path,
     dt: float = 1 / 15,
     roads: tuple[RoadKind, ...] = ROADS,
     plants: tuple[PlantName, ...] = PLANTS,
     progress: Callable[[], object] | None = None,
     ray: str | None = None,
 ) -> list[TrackedLaneChange]:
-    """All maneuvers, in a fixed order whatever ran them (here, or Ray tasks at address `ray`);
-    writes out/tracking.json and one figure per road, plant and speed (the left change, all
-    controllers overlaid). Ctrl-C keeps and writes the maneuvers finished (none: it is raised)."""
-    out.mkdir(parents=True, exist_ok=True)
+    """All maneuvers, in a fixed order whatever ran them (here, or Ray tasks at address `ray`).
+    Ctrl-C keeps the maneuvers finished (none: it is raised)."""
     chosen = [
         (name, config, road_kind, plant, speed, direction, duration, dt)
         for road_kind in roads
@@ -216,17 +215,15 @@ def track(
     ]
     done: dict[int, TrackedLaneChange] = {}
     try:
-        for index, maneuver in completed(_run_maneuver, chosen, ray=ray):
-            done[index] = maneuver
-            if progress:
-                progress()
+        with closing(completed(_run_maneuver, chosen, ray=ray)) as maneuvers_coming:
+            for index, maneuver in maneuvers_coming:
+                done[index] = maneuver
+                if progress:
+                    progress()
     except KeyboardInterrupt:
         if not done:
             raise
-    maneuvers = [done[index] for index in sorted(done)]
-    with deferred(interrupt_after=False):
-        write_tracking(maneuvers, out, roads, plants, speeds)
-    return maneuvers
+    return [done[index] for index in sorted(done)]
 
 
 def write_tracking(
@@ -237,6 +234,7 @@ def write_tracking(
     speeds: list[Speeds],
 ) -> None:
     """out/tracking.json and one figure per road, plant and speed that has a maneuver."""
+    out.mkdir(parents=True, exist_ok=True)
     write_json(out / "tracking.json", [m.record() for m in maneuvers])
     for road_kind in roads:
         for plant in plants:

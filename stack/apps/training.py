@@ -12,9 +12,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from planner.model_file import CHECKPOINT as CHECKPOINT_FILE
-from stack.apps.options import configured, fail
+from stack.apps.options import AGAIN, cannot_write, configured, fail
 from stack.core.machine import available_memory_bytes
-from stack.core.owner import Owner, fingerprint, owner_of
+from stack.core.owner import MARKER, Owner, fingerprint, owner_of
 
 if TYPE_CHECKING:
     from stack.core.config import RunConfig
@@ -81,6 +81,7 @@ def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:
     """Train (or resume) in `folder` and print the outcome; True when a signal stopped it (its
     checkpoint written: resumable). A signal while the env processes start stops before training;
     signals after training only wait for the files. A dead env process ends it in one line."""
+    from stack.core.files import write_failure
     from stack.core.interrupts import deferred, received
     from stack.training.envs import EnvWorkerDied
     from stack.training.trainer import Trainer
@@ -97,8 +98,25 @@ def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:
         except EnvWorkerDied as error:
             print(f"error: {error}", file=sys.stderr)
             sys.exit(1)
+        except OSError as error:
+            if not write_failure(error):
+                raise
+            fail(f"{cannot_write(error)}; {training_kept(folder, config)}")
         report(summary, folder)
     return summary.interrupted or received()
+
+
+def training_kept(folder: Path, config: RunConfig) -> str:
+    """What a training run in `folder` kept when a file could not be written, and how to go on."""
+    if not (folder / "config.yaml").is_file():
+        return AGAIN
+    resume = f"free space, then `drivestack train --resume {folder}`"
+    steps = checkpoint_steps(folder, failing=False)
+    if steps is None:
+        return f"no checkpoint was written yet: {resume} starts it again"
+    if steps >= config.train.steps:
+        return f"its {steps} steps are trained and checkpointed: {resume} writes the files still missing"
+    return f"its last checkpoint (step {steps}) is kept: {resume} goes on from it"
 
 
 def report(summary: TrainSummary, folder: Path) -> None:
@@ -126,11 +144,12 @@ def training_owner(config: RunConfig) -> Owner:
 
 
 def resumed_training(
-    folder: Path, sets: list[str], steps: int | None, given: Mapping[str, object]
+    folder: Path, sets: list[str], steps: int | None, given: Mapping[str, object], adopt: bool = False
 ) -> RunConfig:
     """The config `train --resume folder` goes on with: the run's own, `--steps` grown; a one-line
     error (exit 2) for an option that would have no effect (`given`, by option name), a `--set`
-    that changes anything, fewer steps, a folder that is not an interrupted training run."""
+    that changes anything, fewer steps, a folder that is not an interrupted training run, and a
+    folder without an owner record unless `adopt` (`stack.apps.adoption`)."""
     if unused := next((option for option, value in given.items() if value is not None), None):
         fail(f"{unused}: has no effect with --resume; {RESUME_ONLY_STEPS}")
     found = owner_of(folder)
@@ -138,6 +157,14 @@ def resumed_training(
         fail(f"--resume: {folder} holds the results of `{found.command}`, not a training run")
     if not (folder / "config.yaml").is_file() or (found is None and not (folder / CHECKPOINT_FILE).is_file()):
         fail(f"--resume: {folder} is not a training run folder (no config.yaml and checkpoint.npz)")
+    if found is None and not adopt:
+        fail(
+            f"--resume: {folder} records no owner (made before {MARKER} existed); if its config.yaml is "
+            "the one it was trained with, add --adopt: it is checked against the run's files, then the "
+            "run goes on"
+        )
+    if found is not None and adopt:
+        fail(f"--adopt: {folder} already records its owner; resume without --adopt")
     from stack.core.config_checks import first_change
 
     stored = configured(folder / "config.yaml", [])
@@ -149,7 +176,16 @@ def resumed_training(
         fail(f"--set {key}: the run in {folder} was trained with {was!r}, not {asked!r}; {RESUME_ONLY_STEPS}")
     if config.train.steps < stored.train.steps:
         fail(f"--steps: expected at least {stored.train.steps} (the run's budget); {RESUME_ONLY_STEPS}")
-    if (done := checkpoint_steps(folder)) is not None and done >= config.train.steps:
+    if adopt:
+        from stack.apps.adoption import adoption_refusal
+
+        if why := adoption_refusal(folder, stored):
+            fail(why)
+    if (
+        (done := checkpoint_steps(folder)) is not None
+        and done >= config.train.steps
+        and finished(folder, done)
+    ):
         fail(
             f"--resume: {folder} finished its {done} steps; nothing to resume "
             f"(--steps above {done} trains it further)"
@@ -157,9 +193,21 @@ def resumed_training(
     return config
 
 
-def checkpoint_steps(folder: Path) -> int | None:
+def finished(folder: Path, steps: int) -> bool:
+    """Whether `folder`'s summary.json is that of a run finished at `steps` (a run whose last files
+    could not be written, a full disk, lacks it: `--resume` writes them, training nothing)."""
+    from stack.training.summary import TrainSummary
+
+    try:
+        summary = TrainSummary.from_json(json.loads((folder / "summary.json").read_bytes()))
+        return summary.steps >= steps and summary.interrupted is False
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+
+
+def checkpoint_steps(folder: Path, failing: bool = True) -> int | None:
     """The steps the checkpoint in `folder` holds (None without one); a one-line error for a
-    file that is not a checkpoint."""
+    file that is not a checkpoint (None instead, without `failing`)."""
     from planner.model_file import ModelFileError, load_checkpoint
     from stack.training.checkpoint import checkpoint_steps as steps_done
 
@@ -169,6 +217,9 @@ def checkpoint_steps(folder: Path) -> int | None:
         _, metadata = load_checkpoint(folder / CHECKPOINT_FILE, arrays=False)
         return steps_done(metadata)
     except ModelFileError as error:
-        fail(str(error))
+        if failing:
+            fail(str(error))
     except (KeyError, TypeError, ValueError):
-        fail(f"{folder / CHECKPOINT_FILE}: not a training checkpoint (no step count)")
+        if failing:
+            fail(f"{folder / CHECKPOINT_FILE}: not a training checkpoint (no step count)")
+    return None

@@ -45,7 +45,7 @@ class OracleConfig(Strict):
 
     depth: int = Field(2, ge=1, le=3)
     horizon_s: float = Field(30.0, gt=0, le=60)
-    margin_m: float = Field(0.0, ge=0)
+    margin_m: float = Field(0.0, ge=0, le=100, description="lane-change margin [m]")
     base: Literal["keep-lane", "mobil", "rule", "ddqn"] = "ddqn"
 
 
@@ -144,12 +144,20 @@ def one_line(error: ValidationError, source: str, labels: dict[str, str]) -> str
     first = error.errors()[0]
     key = ".".join(str(part) for part in first["loc"])
     message = first["msg"].removeprefix("Value error, ")
-    source = labels.get(key or message.split(":", 1)[0], source)
+    source = label_for(labels, key or message.split(":", 1)[0], source)
     if first["type"] == "extra_forbidden":
         message = "unknown key"
     elif first["type"] != "value_error" and not isinstance(first.get("input"), dict):
         message = f"{message} (got {repr(first.get('input'))[:MAX_QUOTE]})"
     return printable(f"{source}: {key}: {message}" if key else f"{source}: {message}")
+
+
+def label_for(labels: dict[str, str], key: str, source: str) -> str:
+    """What to name for an error at dotted `key`: the label of the key or of the nearest section
+    holding it (`--set highway.traffic=...` for `highway.traffic.classes.0.share`), else `source`."""
+    parts = key.split(".")
+    found = (labels.get(".".join(parts[:end])) for end in range(len(parts), 0, -1))
+    return next((label for label in found if label is not None), source)
 
 
 def printable(message: str, limit: int = 300) -> str:
@@ -210,7 +218,7 @@ def build_config(
             _set_dotted(data, key, value, labels.get(key, source))
     if mismatch := boolean_mismatch(RunConfig, data):
         key, message = mismatch
-        raise ConfigError(printable(f"{labels.get(key, source)}: {key}: {message}"))
+        raise ConfigError(printable(f"{label_for(labels, key, source)}: {key}: {message}"))
     try:
         return RunConfig.model_validate(data)
     except ValidationError as error:
@@ -229,6 +237,8 @@ def read_mapping(path: Path | str) -> dict[str, Any]:
         data = yaml.load(path.read_text(encoding="utf-8"), Loader=_NoAliasLoader) or {}
     except UnicodeDecodeError:
         raise ConfigError(f"{path}: not UTF-8 text") from None
+    except OSError as error:
+        raise ConfigError(f"{path}: cannot read ({error.strerror})") from None
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark else ""

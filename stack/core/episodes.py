@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
+from contextlib import closing
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -148,7 +149,7 @@ def run(
     or `ray`. With `video`, episode 0 (unless done) runs here and keeps its frames. `done` are
     episodes an earlier run of `config` finished: they count as they are and are not run again.
     Ctrl-C keeps the finished episodes (`summary["interrupted"]`); `on_finished` sees each as it
-    finishes."""
+    finishes (if it raises, the episodes still running are stopped before the error goes on)."""
     frames: list[np.ndarray] = []
     results: dict[int, EpisodeResult] = {episode.episode: episode for episode in done}
     pending = [episode for episode in range(config.episodes) if episode not in results]
@@ -165,8 +166,9 @@ def run(
     try:
         if video and pending and pending[0] == 0:
             finished(run_episode(config, pending.pop(0), frames))
-        for _, result in completed(partial(run_episode, config), pending, jobs, ray):
-            finished(result)
+        with closing(completed(partial(run_episode, config), pending, jobs, ray)) as results_coming:
+            for _, result in results_coming:
+                finished(result)
     except KeyboardInterrupt:
         interrupted = True
     finally:

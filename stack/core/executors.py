@@ -11,7 +11,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from itertools import islice
 from multiprocessing import get_context
@@ -34,7 +34,7 @@ PR_SET_PDEATHSIG = 1
 
 def completed(
     task: Callable[[Item], Result], items: Sequence[Item], jobs: int = 1, ray: str | None = None
-) -> Iterator[tuple[int, Result]]:
+) -> Generator[tuple[int, Result], None, None]:
     """(index, task(item)) for every item, in completion order: with `ray` (`local`, `auto` or
     HOST:PORT) as Ray tasks, else over `jobs` spawned processes (1: one after the other, here)."""
     if ray is not None:

@@ -7,12 +7,13 @@ per finished episode and syncs it to disk, so even a killed run keeps every fini
 from __future__ import annotations
 
 import csv
+import errno
 import json
 import os
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, BinaryIO, TypeGuard
 
 from stack.core.interrupts import deferred
 
@@ -22,14 +23,34 @@ if TYPE_CHECKING:
     from stack.core.metrics import EpisodeResult
 
 
+WRITE_ERRORS = frozenset(
+    {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG, errno.EIO}
+)
+"""Why writing a file fails on a sound system: a full disk or quota, a read-only or forbidden
+place, a file too large, a failing device."""
+
+
+class WriteFailed(OSError):
+    """A results file that could not be written (`filename`: the file, `strerror`: why). What it
+    would have replaced is left as it was and no temporary file is left behind."""
+
+
+def write_failure(error: BaseException) -> TypeGuard[OSError]:
+    """Whether `error` is a file that could not be written for one of `WRITE_ERRORS`."""
+    return isinstance(error, OSError) and (isinstance(error, WriteFailed) or error.errno in WRITE_ERRORS)
+
+
 @contextmanager
 def replacing(path: Path) -> Iterator[Path]:
     """A temporary path beside `path` (same suffix, for writers that go by it) that becomes `path`
-    once the block ends without error; on error it is removed and `path` is left as it was."""
+    once the block ends without error; on error it is removed and `path` is left as it was (an
+    OSError is raised as `WriteFailed` naming `path`)."""
     temporary = path.with_name(f".{path.stem}.partial{path.suffix}")
     try:
         yield temporary
         os.replace(temporary, path)
+    except OSError as error:
+        raise WriteFailed(error.errno, error.strerror or str(error), str(path)) from error
     finally:
         temporary.unlink(missing_ok=True)
 
@@ -69,13 +90,23 @@ class EpisodeJournal:
         self.path = path
 
     def record(self, episode: EpisodeResult) -> None:
-        row = episode.row()
+        """Append `episode`'s line; a line that cannot be written whole is cut off again, so the
+        journal holds the lines before it (`WriteFailed`)."""
+        line = (json.dumps(episode.row()) + "\n").encode()
         with deferred():
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            with self.path.open("a") as handle:
-                handle.write(json.dumps(row) + "\n")
-                handle.flush()
-                os.fsync(handle.fileno())
+            try:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                with self.path.open("ab", buffering=0) as handle:
+                    start = handle.seek(0, os.SEEK_END)
+                    try:
+                        _write_all(handle, line)
+                        os.fsync(handle.fileno())
+                    except OSError:
+                        with suppress(OSError):
+                            os.ftruncate(handle.fileno(), start)
+                        raise
+            except OSError as error:
+                raise WriteFailed(error.errno, error.strerror or str(error), str(self.path)) from error
 
     def lines(self, max_bytes: int) -> list[dict[str, Any] | None]:
         """Each line journaled so far as its JSON object, or None where a line is not one (not
@@ -97,6 +128,16 @@ class EpisodeJournal:
 
     def discard(self) -> None:
         self.path.unlink(missing_ok=True)
+
+
+def _write_all(handle: BinaryIO, data: bytes) -> None:
+    """All of `data` through the unbuffered `handle`: a write to a filling disk may take part of
+    it before the next one fails."""
+    while data:
+        count = handle.write(data)
+        if not count:
+            raise OSError(errno.EIO, os.strerror(errno.EIO))
+        data = data[count:]
 
 
 def _json_object(line: bytes) -> dict[str, Any] | None:

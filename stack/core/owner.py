@@ -5,7 +5,8 @@ A second command, a second writer at the same time, or a `--resume` with another
 two runs' files in one folder; they are refused in one line before anything is written. A fresh
 command may take an empty folder, or start over in a folder the same command with the same config
 made (`restart`); any other non-empty folder is refused. Folders made before markers existed carry
-none: `--resume` judges them by their files (the caller's checks)."""
+none: `run` and `compare --resume` take one whose config.yaml is exactly theirs, `train --resume`
+only with `--adopt` (`stack.apps.adoption`)."""
 
 from __future__ import annotations
 

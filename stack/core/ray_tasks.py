@@ -1,7 +1,10 @@
 """Ray Core behind `--ray`: connect once (a local instance started for the run, `auto` for the
 cluster `ray start` made, or HOST:PORT), then one task per work item. Ray is an optional extra and
 is imported only here, when a command asks for it. Workers import this package by name: on a
-cluster, drivestack must be installed on every node."""
+cluster, drivestack must be installed on every node. Each task carries this process's import path
+(`sys.path`), and the worker appends the entries it lacks before the task runs: a plug-in
+(docs/plugins.md) the command imported, from wherever it did, imports on the workers as it does in
+`--jobs` processes, on every node where the same folders exist."""
 
 from __future__ import annotations
 
@@ -146,9 +149,18 @@ def _stderr_silenced() -> Iterator[None]:
         os.close(saved)
 
 
-def _call(task: Callable[[Item], Result], item: Item) -> Result:
-    """The Ray task: `task` (shared once through the object store) on one item."""
+def worker_call(task: Callable[[Item], Result], item: Item, path: Sequence[str]) -> Result:
+    """The Ray task: `task` (shared once through the object store) on one item, after appending to
+    this worker's `sys.path` the entries of the driver's `path` it lacks (`import_path`). Ray gives
+    its workers the driver's working directory and, on this machine, its environment (PYTHONPATH),
+    but not folders a program added to sys.path; the entries a worker has keep their precedence."""
+    sys.path.extend([entry for entry in dict.fromkeys(path) if entry not in sys.path])
     return task(item)
+
+
+def import_path() -> list[str]:
+    """This process's `sys.path`, each entry absolute (`""`, the working directory, included)."""
+    return [os.path.abspath(entry) for entry in sys.path]
 
 
 def ray_completed(
@@ -157,9 +169,9 @@ def ray_completed(
     """(index, task(item)) as the Ray tasks finish, one CPU each; the tasks not finished when the
     iterator is closed (Ctrl-C) are cancelled."""
     ray = connect(address)
-    remote = ray.remote(num_cpus=1, max_retries=0)(_call)
-    shared = ray.put(task)
-    indices = {remote.remote(shared, item): index for index, item in enumerate(items)}
+    remote = ray.remote(num_cpus=1, max_retries=0)(worker_call)
+    shared, path = ray.put(task), ray.put(import_path())
+    indices = {remote.remote(shared, item, path): index for index, item in enumerate(items)}
     pending = list(indices)
     try:
         while pending:

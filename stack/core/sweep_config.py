@@ -13,18 +13,24 @@
     concurrent: null                  # trials at once (default: as many as the CPUs hold)
 
 Every key and every candidate value (grid values, range bounds, choices) is checked against the
-base config before any trial starts, so a typo is one line, not a failed trial an hour later.
+base config before any trial starts, so a typo is one line, not a failed trial an hour later; a
+boolean is not a number, a random range over an integer key is `randint`, and a sweep holds at most
+`MAX_TRIALS` trials.
 """
 
 from __future__ import annotations
 
+import math
 import re
+import types
+import typing
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, ValidationError, field_validator
+from pydantic import BaseModel, Field, ValidationError, field_validator
 
-from stack.core.config import ConfigError, RunConfig, load_config, one_line, read_mapping
+from stack.core.config import ConfigError, RunConfig, load_config, one_line, printable, read_mapping
+from stack.core.config_checks import boolean_mismatch
 from stack.core.train_config import Strict
 
 SWEEP_FILE = "sweep.yaml"
@@ -36,12 +42,16 @@ RANGES = ("uniform", "loguniform", "randint")
 DISTRIBUTIONS = (*RANGES, "choice")
 DOTTED_KEY = re.compile(r"[A-Za-z_][\w-]*(\.[A-Za-z_][\w-]*)*")
 """A config key as `--set` takes it (`stack.apps.options.SET_KEY`)."""
+MAX_VALUES = 1_000
+"""Most values one grid list or choice may hold."""
+MAX_TRIALS = 10_000
+"""Most trials a sweep may ask for (grid points x samples)."""
 
 
 class SweepFile(Strict):
     config: Path
     fixed: dict[str, Any] = {}
-    space: dict[str, list[Any] | dict[str, list[Any]]] = Field(min_length=1)
+    space: dict[str, list[Any] | dict[str, list[Any]]] = Field(min_length=1, max_length=100)
     samples: int = Field(1, ge=1, le=10_000)
     metric: Literal["mean_return", "mean_speed", "collision_rate"] = "mean_return"
     concurrent: int | None = Field(None, ge=1, le=1024)
@@ -78,7 +88,14 @@ class SweepFile(Strict):
                     raise ValueError(f"{key}: expected a non-empty list of values, got []")
             else:
                 _check_distribution(key, values)
+            if len(candidates(values)) > MAX_VALUES:
+                raise ValueError(f"{key}: at most {MAX_VALUES} values, got {len(candidates(values))}")
         return space
+
+    @property
+    def trials(self) -> int:
+        """How many trials the sweep asks for: every grid point, `samples` times."""
+        return self.samples * math.prod(len(v) for v in self.space.values() if isinstance(v, list))
 
     @property
     def mode(self) -> str:
@@ -120,21 +137,49 @@ def trial_config(base: Path, fixed: dict[str, Any], params: dict[str, Any]) -> R
     return load_config(base, **overrides)
 
 
-def load_sweep(path: Path) -> tuple[SweepFile, Path]:
-    """The sweep file at `path` and its base config's path, every key and candidate value checked;
-    ConfigError (one line naming the file and key) otherwise."""
+def load_sweep(path: Path) -> tuple[SweepFile, Path, list[RunConfig]]:
+    """The sweep file at `path`, its base config's path and the trial configs every key's every
+    candidate value gives (the base first), all checked; ConfigError (one line naming the file and
+    key) otherwise."""
+    data = read_mapping(path)
+    if mismatch := boolean_mismatch(SweepFile, data):
+        raise ConfigError(printable(f"{path}: {mismatch[0]}: {mismatch[1]}"))
     try:
-        sweep = SweepFile.model_validate(read_mapping(path))
+        sweep = SweepFile.model_validate(data)
     except ValidationError as error:
         raise ConfigError(one_line(error, str(path), {})) from None
+    if sweep.trials > MAX_TRIALS:
+        raise ConfigError(f"{path}: space: {sweep.trials} trials; a sweep holds at most {MAX_TRIALS}")
     base = sweep.config if sweep.config.is_absolute() else path.parent / sweep.config
     if not base.is_file():
         raise ConfigError(f"{path}: config: no such training config {base}")
     fixed = {key.replace(".", "__"): value for key, value in sweep.fixed.items()}
     labels = {key: f"{path}: fixed" for key in sweep.fixed}
-    load_config(base, labels, **fixed)
+    configs = [load_config(base, labels, **fixed)]
     for key, values in sweep.space.items():
         labels[key] = f"{path}: space"
+        if isinstance(values, dict) and "randint" not in values and "choice" not in values:
+            if integer_key(key):
+                raise ConfigError(
+                    f"{path}: space: {key}: an integer; draw it with randint or list its values"
+                )
         for value in candidates(values):
-            load_config(base, labels, **{**fixed, key.replace(".", "__"): value})
-    return sweep, base
+            configs.append(load_config(base, labels, **{**fixed, key.replace(".", "__"): value}))
+    return sweep, base, configs
+
+
+def integer_key(dotted: str) -> bool:
+    """Whether the config key `dotted` takes integers only (a uniform draw would be fractional)."""
+    kind: Any = RunConfig
+    for part in dotted.split("."):
+        if isinstance(kind, type) and issubclass(kind, BaseModel) and part in kind.model_fields:
+            kind = kind.model_fields[part].annotation
+        elif typing.get_origin(kind) is dict:
+            kind = typing.get_args(kind)[1]
+        else:
+            return False
+        union = typing.get_origin(kind) in (typing.Union, types.UnionType)
+        kinds = typing.get_args(kind) if union else (kind,)
+        kind = next((k for k in kinds if isinstance(k, type) and issubclass(k, BaseModel)), kind)
+    kinds = typing.get_args(kind) or (kind,)
+    return int in kinds and float not in kinds

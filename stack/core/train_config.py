@@ -16,6 +16,9 @@ MAX_STEPS = 1_000_000_000
 """Upper bound of every step count and period [environment steps] (the largest `train.steps`)."""
 MAX_SPEED_RANGE = 100.0
 """Upper end of the reward's speed range [m/s]."""
+MAX_SHARE = 1e6
+"""Largest share of a scenario in `train.scenarios` (shares are relative: they are divided by their
+sum, which must stay finite)."""
 MAX_REWARD = 1_000.0
 """Upper bound of every reward term and loss weight, by magnitude: well past any useful value,
 far from where float32 arithmetic overflows."""
@@ -125,8 +128,10 @@ class TrainConfig(Strict):
         for name, share in mix.items():
             if name not in scenarios.names():
                 raise ValueError(unknown_name("scenario", name, scenarios.names()))
-            if not share > 0 or share == float("inf"):
-                raise ValueError(f"scenario {name!r}: the share must be a positive number, got {share}")
+            if not 0 < share <= MAX_SHARE:
+                raise ValueError(
+                    f"scenario {name!r}: the share must be a number in (0, {MAX_SHARE:g}], got {share}"
+                )
         return mix
 
     @field_validator("init_model")

@@ -44,6 +44,17 @@ PARAMETERS: dict[ScenarioKind, tuple[tuple[str, str], ...]] = {
     "cut-out": (("speed", "m/s"), ("distance", "m"), ("lateral_speed", "m/s")),
 }
 """Each scenario's parameters (name, unit), in the order a point lists them."""
+LIMITS = {
+    "speed": 40.0,
+    "time_gap": 10.0,
+    "deceleration": 10.0,
+    "relative_speed": 40.0,
+    "gap": 500.0,
+    "lateral_speed": 5.0,
+    "distance": 500.0,
+}
+"""The largest value of each parameter a point may take (in its unit; the smallest is 0, the
+speed's just above): the full grids and well past them, a bounded scenario."""
 SPEEDS = tuple(round(kmh * KMH, 2) for kmh in (20, 30, 40, 50, 60, 70, 80, 100, 115, 130))
 GRIDS: dict[ScenarioKind, tuple[tuple[float, ...], ...]] = {
     "lead-braking": (SPEEDS, (0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0, 2.5), (2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0)),
@@ -107,10 +118,11 @@ def parse_point(kind: ScenarioKind, text: str) -> Point:
             raise ValueError(f"{name}: expected a number, got {value!r}") from None
     if missing := [name for name in names if name not in given]:
         raise ValueError(f"missing {', '.join(missing)} for {kind}")
-    if any(not np.isfinite(v) or v < 0 for v in given.values()):
-        raise ValueError(f"every value must be a finite number >= 0, got {text!r}")
-    if not 0 < given["speed"] <= 40:
-        raise ValueError(f"speed must be in (0, 40] m/s, got {given['speed']:g}")
+    for name, unit in PARAMETERS[kind]:
+        number, positive = given[name], name == "speed"
+        if not (0 < number if positive else 0 <= number) or not number <= LIMITS[name]:
+            low = "(0" if positive else "[0"
+            raise ValueError(f"{name} must be in {low}, {LIMITS[name]:g}] {unit}, got {number:g}")
     return Point(kind, tuple(given[name] for name in names))
 
 
