@@ -20,10 +20,10 @@ from pathlib import Path
 from typing import Any
 
 from stack.apps.compare import differences
-from stack.apps.train import BEST, Trainer
 from stack.core.config import RunConfig, load_config
 from stack.core.episodes import run
 from stack.core.files import write_text
+from stack.training.trainer import BEST, Trainer
 
 VARIANTS: dict[str, dict[str, Any]] = {
     "paper": {"features": [], "lanes": "absolute", "lane_code": "binary", "lateral_reach": 1},

@@ -16,8 +16,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from stack.apps.train import Trainer
 from stack.core.config import load_config
+from stack.training.trainer import Trainer
 
 VARIANTS = [("fast", 1), ("vector", 1), ("vector", 2)]
 

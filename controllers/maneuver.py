@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 from controllers.reference import QuinticProfile, WarpedProfile, drivable_duration, lane_change, lane_keeping
 from records import Command, Reference, WorldState
@@ -15,6 +16,13 @@ AbortRule = Callable[[WorldState, int], bool]
 
 def never_abort(world: WorldState, target: int) -> bool:
     return False
+
+
+@dataclass(frozen=True)
+class ManeuverCounts:
+    """What the maneuver did in an episode: the lane changes it started (an aborted one included)."""
+
+    lane_changes: int
 
 
 class Maneuver:
@@ -52,6 +60,10 @@ class Maneuver:
     @property
     def changing_lane(self) -> bool:
         return self.target != self.lane
+
+    @property
+    def counts(self) -> ManeuverCounts:
+        return ManeuverCounts(self.lane_changes)
 
     def command(self, command: Command, world: WorldState, start_time: float | None = None) -> bool:
         """Start the lane change `command` asks for, now or, planned ahead, at `start_time` [s]

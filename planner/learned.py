@@ -3,6 +3,7 @@ model file, behind the same `predict` as every other agent."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ from torch import nn
 from planner.agents import Action, Policy
 from planner.model_check import checked_model
 from planner.model_file import save_model
+from planner.model_metadata import ModelMetadata
 from planner.tabular import QLearning
 from records import N_ACTIONS, Encoding, GridConfig
 
@@ -26,13 +28,14 @@ def q_network(observation_size: int, actions: int, hidden: list[int]) -> nn.Sequ
 class LearnedAgent(Policy):
     """Greedy agent over a Q-network; `grid_config` and `encoding` say what it must be shown."""
 
-    def __init__(self, network: nn.Sequential, metadata: dict, source: str = "model") -> None:
+    def __init__(self, network: nn.Sequential, metadata: ModelMetadata, source: str = "model") -> None:
+        assert metadata.observation_size is not None, "a Q-network's metadata names its input size"
         self.network = network.eval()
         self.metadata = metadata
         self.source = source
-        self.observation_size = int(metadata["observation_size"])
-        self.encoding: Encoding = metadata["encoding"]
-        self.grid_config = GridConfig(**metadata["grid"])
+        self.observation_size = metadata.observation_size
+        self.encoding: Encoding = metadata.encoding
+        self.grid_config: GridConfig = metadata.grid
 
     def q_values(self, observation: np.ndarray) -> np.ndarray:
         batch = np.asarray(observation, dtype=np.float32).reshape(-1, self.observation_size)
@@ -44,7 +47,8 @@ class LearnedAgent(Policy):
         if size % self.observation_size:
             raise ValueError(
                 f"{self.source} expects observations of {self.observation_size} values "
-                f"({self.encoding} encoding of grid {self.metadata['grid']}), got {size}"
+                f"({self.encoding} encoding of grid {self.grid_config.model_dump(mode='json')}), "
+                f"got {size}"
             )
         actions = self.q_values(observation).argmax(axis=1)
         return actions[0] if np.asarray(observation).ndim == 1 else actions
@@ -55,11 +59,11 @@ class TabularAgent(Policy):
 
     encoding: Encoding = "tabular"
 
-    def __init__(self, table: np.ndarray, metadata: dict, source: str = "model") -> None:
+    def __init__(self, table: np.ndarray, metadata: ModelMetadata, source: str = "model") -> None:
         self.table = table
         self.metadata = metadata
         self.source = source
-        self.grid_config = GridConfig(**metadata["grid"])
+        self.grid_config: GridConfig = metadata.grid
 
     def choose(self, observation: np.ndarray) -> Action:
         index = tuple(np.asarray(observation, dtype=np.int64).reshape(-1))
@@ -73,17 +77,16 @@ class TabularAgent(Policy):
         return np.int64(np.argmax(self.table[index]))
 
 
-def export_q_network(model: DQN, path: Path | str, metadata: dict) -> Path:
-    """Save an SB3 (Double) DQN's online Q-network weights with `metadata`."""
+def export_q_network(model: DQN, path: Path | str, metadata: ModelMetadata) -> Path:
+    """Save an SB3 (Double) DQN's online Q-network weights with `metadata` (of kind `mlp`)."""
     state = model.policy.q_net.q_net.state_dict()
-    return save_model(
-        path, {k: v.detach().cpu().numpy() for k, v in state.items()}, {"kind": "mlp", **metadata}
-    )
+    weights = {k: v.detach().cpu().numpy() for k, v in state.items()}
+    return save_model(path, weights, replace(metadata, kind="mlp").to_json())
 
 
-def save_q_table(agent: QLearning, path: Path | str, metadata: dict) -> Path:
-    """Save a tabular Q-learner's table with `metadata`."""
-    return save_model(path, {"q_table": agent.table}, {"kind": "qtable", **metadata})
+def save_q_table(agent: QLearning, path: Path | str, metadata: ModelMetadata) -> Path:
+    """Save a tabular Q-learner's table with `metadata` (of kind `qtable`)."""
+    return save_model(path, {"q_table": agent.table}, replace(metadata, kind="qtable").to_json())
 
 
 def load_agent(
@@ -93,9 +96,10 @@ def load_agent(
     algorithm, encoding, grid and action count the loop can use, network sizes within bounds and
     the arrays' shapes equal to the ones those sizes give, every weight finite."""
     arrays, metadata = checked_model(path, expected_algorithms)
-    if metadata["kind"] == "qtable":
+    if metadata.kind == "qtable":
         return TabularAgent(arrays["q_table"].astype(np.float64), metadata, str(path))
-    sizes = [int(metadata["observation_size"]), *map(int, metadata["hidden"]), N_ACTIONS]
+    assert metadata.observation_size is not None, "checked_model checks a Q-network's input size"
+    sizes = [metadata.observation_size, *metadata.hidden, N_ACTIONS]
     network = q_network(sizes[0], N_ACTIONS, sizes[1:-1])
     network.load_state_dict({k: th.as_tensor(v, dtype=th.float32) for k, v in arrays.items()}, strict=True)
     return LearnedAgent(network, metadata, str(path))

@@ -11,6 +11,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from planner.model_file import ModelFileError, load_model
+from planner.model_metadata import ModelMetadata
 from records import ENCODINGS, N_ACTIONS, GridConfig
 
 MAX_INPUTS = 100_000
@@ -21,7 +22,7 @@ MAX_WIDTH, MAX_LAYERS = 4096, 8
 
 def checked_model(
     path: Path | str, expected_algorithms: tuple[str, ...] | None = None
-) -> tuple[dict[str, np.ndarray], dict]:
+) -> tuple[dict[str, np.ndarray], ModelMetadata]:
     """(arrays, metadata) of `path`, refused with one line (ModelFileError) unless an agent can be
     built from them."""
     arrays, metadata = load_model(path)
@@ -40,7 +41,7 @@ def checked_model(
             raise ModelFileError(
                 f"{path}: expected one q_table array whose last axis has {N_ACTIONS} actions"
             )
-        return arrays, metadata
+        return arrays, ModelMetadata.from_json(metadata)
     sizes = [int(metadata["observation_size"]), *map(int, metadata["hidden"]), N_ACTIONS]
     expected: dict[str, tuple[int, ...]] = {}
     for layer, (inputs, outputs) in enumerate(zip(sizes[:-1], sizes[1:], strict=True)):
@@ -48,7 +49,7 @@ def checked_model(
     actual = {name: value.shape for name, value in arrays.items()}
     if actual != expected:
         raise ModelFileError(f"{path}: model arrays do not match its metadata (expected {expected})"[:300])
-    return arrays, metadata
+    return arrays, ModelMetadata.from_json(metadata)
 
 
 def _check_metadata(path: Path | str, metadata: dict) -> None:

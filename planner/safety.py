@@ -11,6 +11,7 @@ the margin that made it start.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -40,6 +41,15 @@ def _ttc(gap: float, closing: float) -> float:
     return math.inf if closing <= 0 else max(gap, 0.0) / closing
 
 
+@dataclass(frozen=True)
+class SafetyCounts:
+    """What the safety layer did in an episode: commands it `masked` (replaced by STAY) and lane
+    changes it `aborted`."""
+
+    masked: int
+    aborted: int
+
+
 class SafetyLayer:
     """Masks unsafe commands and flags lane changes to abort; counts both."""
 
@@ -47,6 +57,10 @@ class SafetyLayer:
         self.config = config
         self.masked = 0
         self.aborted = 0
+
+    @property
+    def counts(self) -> SafetyCounts:
+        return SafetyCounts(self.masked, self.aborted)
 
     def gap_is_safe(self, world: WorldState, lane: int, min_gap: float, min_ttc: float, strict: bool) -> bool:
         config = self.config

@@ -11,57 +11,15 @@ once; the model is kept whenever a long validation beats the best long score.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from planner.scores import Validation, WorldScore
 from records import child_seed
-
-
-@dataclass(frozen=True)
-class WorldScore:
-    """How one world of a validation went: its `episodes`, collision rate and mean speed [m/s]."""
-
-    episodes: int
-    collision_rate: float
-    mean_speed: float
-
-
-@dataclass(frozen=True)
-class Validation:
-    """One validation run: at `step`, over `episodes` episodes; `worlds` splits them by the world
-    (scenario) each episode drew, for a training mix."""
-
-    step: int
-    period: str
-    episodes: int
-    collision_rate: float
-    mean_return: float
-    mean_speed: float
-    improved: bool
-    worlds: dict[str, WorldScore] = field(default_factory=dict)
-
-    @classmethod
-    def from_json(cls, entry: dict[str, Any]) -> Validation:
-        worlds = {name: WorldScore(**score) for name, score in entry.get("worlds", {}).items()}
-        return cls(**{**entry, "worlds": worlds})
-
-    def line(self) -> str:
-        """One line for the progress display: the whole score, then each world's speed [m/s]."""
-        worlds = " · ".join(
-            f"{name} {score.mean_speed:.1f}"
-            + (f" ({score.collision_rate:.0%} crashed)" if score.collision_rate else "")
-            for name, score in sorted(self.worlds.items())
-        )
-        return (
-            f"step {self.step} {self.period} validation, {self.episodes} episodes: "
-            f"{self.collision_rate:.1%} collisions, return {self.mean_return:.2f}, {self.mean_speed:.2f} m/s"
-            + (f" | {worlds}" if len(self.worlds) > 1 else "")
-            + (" (kept)" if self.improved and self.period == "long" else "")
-        )
 
 
 @dataclass(frozen=True)
@@ -217,8 +175,3 @@ class RealTimeValidation(BaseCallback):
         return history, {
             period: tuple(best[period]) if best.get(period) else None for period in ("short", "long")
         }
-
-
-def kept_models(history: list[Validation]) -> list[Validation]:
-    """The validations of `history` whose model was kept (long ones that improved), in order."""
-    return [v for v in history if v.period == "long" and v.improved]

@@ -13,11 +13,12 @@ from perception.grid import OccupancyGridBuilder
 from planner.agents import decide
 from planner.ddqn import Demonstrations, DoubleDQN, margin_loss
 from planner.mobil import MobilAgent
-from stack.apps.demonstrations import collect_demonstrations, expert_episode, expert_policy
-from stack.apps.train import Trainer
 from stack.core.config import build_config, grid_config
 from stack.core.decision_env import HierarchicalHighwayEnv
 from stack.core.executors import completed
+from stack.training.demonstrations import collect_demonstrations, expert_episode, expert_policy
+from stack.training.summary import DemonstrationsUsed
+from stack.training.trainer import Trainer
 from tests.test_train import TINY
 
 
@@ -109,7 +110,7 @@ def test_a_run_with_demonstrations_validates_its_pretrained_model_first(tmp_path
     summary = trainer.run()
     assert [v.step for v in trainer.validation.history][:2] == [0, 10]
     assert trainer.validation.history[0].period == "long"
-    assert summary["demonstrations"] == {"expert": "mobil", "episodes": 2, "transitions": 10}
+    assert summary.demonstrations == DemonstrationsUsed(expert="mobil", episodes=2, transitions=10)
     assert len(trainer.model.demonstrations) == 10
 
 

@@ -1,9 +1,14 @@
+import dataclasses
+
 import numpy as np
+import pytest
 
 from planner.factory import make_agent
+from records import Command
 from stack.core.closed_loop import ClosedLoop, grid_config
 from stack.core.config import build_config
 from stack.core.episodes import run, run_agent_episode
+from stack.core.loop_records import LoopStatus
 from stack.core.metrics import outcome
 from stack.sim.highway import HighwayAdapter
 
@@ -96,3 +101,26 @@ def test_safety_and_cruise_act_on_the_perceived_world(tiny_config):
         ground.reset(1)
         assert ground.perceived is ground.world
     assert run(perceived, progress=False).summary != run(truth, progress=False).summary
+
+
+def test_a_tick_is_a_frozen_record_its_consumers_read_outside_it(tiny_config):
+    """`tick()` changes the world and returns what it did; `act` hands each record to the
+    recorder and the safety monitor; a fork plays on without moving the loop it came from."""
+    with HighwayAdapter(tiny_config.highway, tiny_config.sim.backend) as adapter:
+        loop = ClosedLoop(tiny_config, adapter)
+        start = loop.reset(1)
+        loop.perceive()
+        tick = loop.tick()
+        assert tick.world is loop.world and tick.world.time > start.time
+        assert (tick.lane, tick.target, tick.changing_lane) == (start.ego_lane, start.ego_lane, False)
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            tick.lane = 0  # type: ignore[misc]
+        assert loop.recorder.time == [start.time], "a tick alone is recorded by none of them"
+        future = loop.fork()
+        assert future.act(Command.STAY, ticks=3).ticks == 3 and future.world.time > loop.world.time
+        assert loop.world is tick.world, "the fork moved alone"
+        acted = loop.act(Command.STAY, ticks=3)
+        assert acted.ticks == 3 and len(loop.recorder.time) == 4
+        assert loop.status() == LoopStatus(False, float(loop.world.speed[0]), 0, 0, 0, 0)
+        result = loop.result(0)
+        assert result.steps == 3 and result.lane_changes == loop.status().lane_changes

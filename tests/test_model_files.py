@@ -146,9 +146,9 @@ def test_a_model_that_does_not_fit_the_road_is_refused_alike_everywhere(tmp_path
     from records import GridConfig
     from stack.apps.cli import app
     from stack.apps.export import export_sb3
-    from stack.apps.train_model import initial_model
     from stack.core.config import build_config
     from stack.core.episodes import build_agent
+    from stack.training.model import initial_model
     from tests.test_cli import tiny_config_file
 
     arrays, metadata = shipped()

@@ -129,8 +129,11 @@ def test_the_compiled_linearisation_equals_the_interpreted_one_bit_for_bit(monke
         assert np.array_equal(np.array(fast(x, u)), np.array(function(x, u)))
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(compiler() is None, reason="no C compiler on this machine")
 def test_a_machine_without_a_compiler_drives_exactly_the_same(monkeypatch, tmp_path: Path):
+    """A whole lane change, compiled and interpreted (slow: it compiles the MPC; the default suite
+    compares the compiled linearisation with the interpreted one bit for bit, above)."""
     monkeypatch.setenv("DRIVESTACK_CACHE", str(tmp_path))
     traces = []
     for setting in ("1", "0"):

@@ -1,5 +1,8 @@
 """Agents behind one protocol, Double DQN's target, the safe model file."""
 
+from dataclasses import replace
+from pathlib import Path
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -13,7 +16,8 @@ from planner.ddqn import DoubleDQN, double_q_target
 from planner.factory import HIGHWAY_ENV_TRAFFIC, SCENARIO_MODELS, SHIPPED_MODELS, make_agent
 from planner.learned import export_q_network, load_agent
 from planner.mobil import MobilAgent
-from planner.model_file import ModelFileError, save_model
+from planner.model_file import ModelFileError, load_model, save_model
+from planner.model_metadata import ModelMetadata
 from records import ENCODINGS, N_ACTIONS, POLICY_NAMES, Command
 from stack.apps.cli import app
 from tests.helpers import scene
@@ -45,17 +49,13 @@ def model_files(tmp_path):
     """A tiny DDQN, DQN and tabular model file for the learned agents."""
     grid = GRID.model_copy(update={"lanes": "ego", "features": ("relative_speed",)})
     size = OccupancyGridBuilder(grid).observation_space(3).shape[0]
-    metadata = {
-        "encoding": "observation",
-        "observation_size": size,
-        "actions": 3,
-        "hidden": [16],
-        "grid": grid.model_dump(mode="json"),
-    }
+    metadata = ModelMetadata(
+        kind="mlp", encoding="observation", observation_size=size, hidden=(16,), grid=grid
+    )
     files = {}
     for name, algorithm in (("ddqn", DoubleDQN), ("dqn", DQN)):
         files[name] = export_q_network(
-            tiny_dqn(size, algorithm), tmp_path / f"{name}.npz", {**metadata, "algorithm": name}
+            tiny_dqn(size, algorithm), tmp_path / f"{name}.npz", replace(metadata, algorithm=name)
         )
     table = np.random.default_rng(0).random((3, 9, 9, 9, 3))
     files["tabular"] = save_model(
@@ -152,14 +152,9 @@ def test_double_dqn_trains_and_its_weights_round_trip(tmp_path):
     path = export_q_network(
         model,
         tmp_path / "m.npz",
-        {
-            "algorithm": "ddqn",
-            "encoding": "observation",
-            "observation_size": 6,
-            "actions": 3,
-            "hidden": [16],
-            "grid": GRID.model_dump(mode="json"),
-        },
+        ModelMetadata(
+            kind="mlp", algorithm="ddqn", encoding="observation", observation_size=6, hidden=(16,), grid=GRID
+        ),
     )
     agent = load_agent(path)
     observations = np.random.default_rng(1).uniform(-1, 1, (20, 6)).astype(np.float32)
@@ -210,18 +205,18 @@ def test_crafted_and_truncated_model_files_are_refused(tmp_path, model_files):
 @pytest.mark.parametrize("algorithm", ["dqn", "tabular"])
 def test_every_learned_agent_ships_a_small_model(algorithm):
     agent = make_agent(algorithm, 4, GRID)
-    assert agent.metadata["algorithm"] == algorithm
+    assert agent.metadata.algorithm == algorithm
     assert SHIPPED_MODELS[algorithm].stat().st_size <= 2_000_000
 
 
 def test_shipped_default_model_loads_safely():
     agent = load_agent(SHIPPED_MODELS["ddqn"], expected_algorithms=("ddqn",))
-    assert agent.metadata["algorithm"] == "ddqn"
+    assert agent.metadata.algorithm == "ddqn"
     assert SHIPPED_MODELS["ddqn"].stat().st_size <= 2_000_000
-    assert agent.metadata["actions"] == N_ACTIONS
+    assert agent.metadata.actions == N_ACTIONS
     world = scene(4, (0.0, 1), [(15.0, 4.0), (30.0, 0.0)])
     observation = OccupancyGridBuilder(agent.grid_config).build(world).encode(agent.encoding)
-    assert observation.size == agent.metadata["observation_size"], "it reads the grid it declares"
+    assert observation.size == agent.metadata.observation_size, "it reads the grid it declares"
     assert decide(agent, observation) in tuple(Command)
 
 
@@ -251,8 +246,25 @@ def test_the_ddqn_picks_its_shipped_model_by_scenario(tmp_path):
         highway = make_agent("ddqn", 4, GRID, scenario=scenario)
         assert highway.source == str(SCENARIO_MODELS[("ddqn", "highway-v0")])
     assert SCENARIO_MODELS[("ddqn", "highway-v0")].stat().st_size <= 2_000_000
-    assert highway.metadata["grid"] == load_agent(SHIPPED_MODELS["ddqn"]).metadata["grid"]
+    assert highway.metadata.grid == load_agent(SHIPPED_MODELS["ddqn"]).metadata.grid
     for scenario in (None, "overtaking", "noisy", "exit"):
         assert make_agent("ddqn", 4, GRID, scenario=scenario).source == str(SHIPPED_MODELS["ddqn"])
     chosen = make_agent("ddqn", 4, GRID, model=SHIPPED_MODELS["ddqn"], scenario="highway-v0")
     assert chosen.source == str(SHIPPED_MODELS["ddqn"])
+
+
+@pytest.mark.parametrize(
+    "path", sorted(Path(SHIPPED_MODELS["ddqn"]).parent.glob("*.npz")), ids=lambda p: p.name
+)
+def test_every_shipped_model_s_metadata_reads_as_model_metadata_and_writes_its_keys_back(path):
+    _, stored = load_model(path, arrays=False)
+    metadata = ModelMetadata.from_json(stored)
+    assert metadata.kind in ("mlp", "qtable") and metadata.grid == GridConfig(**stored["grid"])
+    assert metadata.trained_steps is not None and metadata.validation is not None
+    assert metadata.validation.step == metadata.trained_steps, "the kept model's validation"
+    written = metadata.to_json()
+    assert list(written) == [key for key in stored if key != "format"], "the keys, in their order"
+    assert {**written, "validation": stored["validation"]} == {
+        k: v for k, v in stored.items() if k != "format"
+    }
+    assert ModelMetadata.from_json(written) == metadata

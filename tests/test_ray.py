@@ -54,7 +54,10 @@ def episode_rows(path) -> list[dict]:
 
 
 def sweep_file(tmp_path, space: dict, **extra) -> str:
-    (tmp_path / "base.yaml").write_text(yaml.safe_dump(TINY_TRAINING))
+    """A sweep over `space` of trials of 20 steps: a short validation promoted to a long one at
+    step 10, a long one at 20."""
+    base = {**TINY_TRAINING, "train": {**TINY_TRAINING["train"], "steps": 20}}
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(base))
     path = tmp_path / "sweep.yaml"
     path.write_text(yaml.safe_dump({"config": "base.yaml", "space": space, **extra}))
     return str(path)

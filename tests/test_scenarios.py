@@ -175,6 +175,8 @@ def test_run_and_train_take_a_scenario_from_the_cli(tmp_path):
             "keep-lane",
             "--episodes",
             "1",
+            "--set",
+            "highway.duration=5",
             "--no-progress",
             "--out",
             str(run_out),
@@ -182,8 +184,10 @@ def test_run_and_train_take_a_scenario_from_the_cli(tmp_path):
     )
     assert ran.exit_code == 0, ran.output
     assert json.loads((run_out / "summary.json").read_text())["scenario"] == "exit"
+    small = ["--envs", "1", "--set", "train.buffer_size=1000", "--set", "highway.duration=5"]
     trained = CliRunner().invoke(
-        app, ["train", "--scenario", "lanes-3", "--steps", "20", "--no-progress", "--out", str(train_out)]
+        app,
+        ["train", "--scenario", "lanes-3", "--steps", "20", *small, "--no-progress", "--out", str(train_out)],
     )
     assert trained.exit_code == 0, trained.output
     assert "scenario: lanes-3" in (train_out / "config.yaml").read_text()

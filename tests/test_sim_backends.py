@@ -75,7 +75,12 @@ def traffic_lane_changes(states: list[np.ndarray]) -> int:
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize(
     ("seed", "density", "vehicles", "frames"),
-    [(0, 1.0, 50, 200), (1, 1.0, 50, 200), (2, 2.0, 100, 120)],
+    [
+        (0, 1.0, 50, 200),
+        (1, 1.0, 50, 200),
+        # dense traffic, slow: the `dense` scenario below drives dense traffic in the default suite
+        pytest.param(2, 2.0, 100, 120, marks=pytest.mark.slow),
+    ],
 )
 def test_backend_matches_stock(backend, seed, density, vehicles, frames):
     highway = HighwayConfig(vehicles_count=vehicles, vehicles_density=density)
@@ -90,8 +95,11 @@ def test_the_short_runs_cover_crashes_and_traffic_lane_changes(backend):
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-@pytest.mark.parametrize("lanes", [2, 3, 5, 6])
+@pytest.mark.parametrize(
+    "lanes", [2, pytest.param(3, marks=pytest.mark.slow), pytest.param(5, marks=pytest.mark.slow), 6]
+)
 def test_backend_matches_stock_on_other_lane_counts(backend, lanes):
+    """The fewest and the most lanes (3 and 5, slow, lie between; 4 is every other test's road)."""
     highway = HighwayConfig(lanes_count=lanes, vehicles_count=30)
     assert_identical(highway, seed=lanes, frames=150, backend=backend)
 

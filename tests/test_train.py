@@ -17,10 +17,12 @@ from planner.learned import load_agent
 from planner.model_file import load_model
 from planner.validation import RealTimeValidation, Validation
 from stack.apps.cli import app
-from stack.apps.train import Trainer
 from stack.core.config import build_config
 from stack.core.decision_env import HierarchicalHighwayEnv
 from stack.sim.envs import HIERARCHICAL_HIGHWAY
+from stack.training.checkpoint import DqnCounters, TabularCounters, read_checkpoint
+from stack.training.summary import TrainSummary
+from stack.training.trainer import Trainer
 
 TINY = {
     "seed": 1,
@@ -144,16 +146,16 @@ def test_training_resumes_after_an_interruption(tmp_path, monkeypatch):
 
     monkeypatch.setattr(type(trainer.env.unwrapped), "step", step_then_interrupt)
     summary = trainer.run()
-    assert summary["interrupted"]
+    assert summary.interrupted
     _, checkpoint = load_model(out / "checkpoint.npz")
     done = checkpoint["counters"]["num_timesteps"]
     assert 10 <= done < 40
     monkeypatch.setattr(type(trainer.env.unwrapped), "step", real_step)
     resumed = Trainer.resume(out, steps=None, progress=False).run()
-    assert not resumed["interrupted"] and resumed["steps"] == 40
+    assert not resumed.interrupted and resumed.steps == 40
     history = json.loads((out / "validation.json").read_text())
     assert [v["step"] for v in history] == [10, 20, 30, 40], "validations before the interruption are kept"
-    assert load_agent(out / "final.npz").metadata["trained_steps"] == 40
+    assert load_agent(out / "final.npz").metadata.trained_steps == 40
 
 
 def test_train_cli_smoke_writes_best_model_and_curve(tmp_path):
@@ -172,11 +174,13 @@ def test_train_cli_smoke_writes_best_model_and_curve(tmp_path):
     ):
         assert (out / name).is_file(), name
     assert any(Path(out / "tensorboard").rglob("events.out.tfevents.*"))
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["steps"] == 40 and summary["validations"] == 5, (
+    written = json.loads((out / "summary.json").read_text())
+    summary = TrainSummary.from_json(written)
+    assert summary.to_json() == written and list(summary.to_json()) == list(written), "a JSON round-trip"
+    assert summary.steps == 40 and summary.validations == 5, (
         "short 10 (promoted: long 10), long 20, short 30, long 40"
     )
-    assert summary["best_validation"]["period"] == "long"
+    assert summary.best_validation is not None and summary.best_validation.period == "long"
 
     run = CliRunner().invoke(
         app,
@@ -209,8 +213,8 @@ def test_other_algorithms_train_too(tmp_path, algorithm):
         },
     }
     summary = Trainer(build_config(data), tmp_path / algorithm, progress=False).run()
-    assert summary["steps"] == 40
-    assert load_agent(tmp_path / algorithm / "best.npz").metadata["algorithm"] == algorithm
+    assert summary.steps == 40
+    assert load_agent(tmp_path / algorithm / "best.npz").metadata.algorithm == algorithm
 
 
 def test_parallel_environments_give_the_same_model_for_the_same_config(tmp_path):
@@ -220,7 +224,7 @@ def test_parallel_environments_give_the_same_model_for_the_same_config(tmp_path)
     runs = []
     for name in ("a", "b"):
         summary = Trainer(build_config(data), tmp_path / name, progress=False).run()
-        assert summary["steps"] == 40 and summary["validations"] == 5
+        assert summary.steps == 40 and summary.validations == 5
         runs.append(load_model(tmp_path / name / "final.npz")[0])
     assert runs[0].keys() == runs[1].keys()
     for key in runs[0]:
@@ -316,15 +320,19 @@ def test_a_stopped_and_resumed_run_ends_as_an_uninterrupted_one(
         monkeypatch.setattr(HierarchicalHighwayEnv, "step", step_then_signal)
     else:
         trainer.validation_env.step = types.MethodType(step_then_signal, trainer.validation_env)
-    assert trainer.run()["interrupted"]
-    stopped = load_model(tmp_path / "cut" / "checkpoint.npz", 2**31)[1]["counters"]
-    assert 0 < stopped["num_timesteps"] < 40
-    assert any(episode["actions"] for episode in stopped["episodes"]), "stopped mid-episode"
+    assert trainer.run().interrupted
+    counters = TabularCounters if algorithm == "tabular" else DqnCounters
+    stopped = read_checkpoint(load_model(tmp_path / "cut" / "checkpoint.npz", 2**31)[1], counters).counters
+    assert 0 < stopped.num_timesteps < 40
+    assert stopped.episodes is not None and any(episode.actions for episode in stopped.episodes), (
+        "stopped mid-episode"
+    )
     monkeypatch.setattr(HierarchicalHighwayEnv, "step", real_step)
     Trainer.resume(tmp_path / "cut", steps=None, progress=False).run()
     resumed_arrays, resumed = load_model(tmp_path / "cut" / "checkpoint.npz", 2**31)
-    for counter in ("num_timesteps", "n_updates", "buffer_pos", "episodes"):
-        assert resumed.get(counter) == whole.get(counter), counter
+    assert read_checkpoint(resumed, counters).counters == read_checkpoint(whole, counters).counters
+    checkpoint = read_checkpoint(resumed, counters).to_json()
+    assert checkpoint == {key: value for key, value in resumed.items() if key != "format"}, "a round-trip"
     assert resumed_arrays.keys() == whole_arrays.keys()
     for name, weights in whole_arrays.items():
         np.testing.assert_array_equal(resumed_arrays[name], weights, err_msg=name)
@@ -336,7 +344,7 @@ def test_no_empty_training_curve_is_drawn(tmp_path):
         "train": {**TINY["train"], "steps": 5, "validation": {"short_every": 100, "long_every": 200}},
     }
     summary = Trainer(build_config(data), tmp_path / "short", progress=False).run()
-    assert summary["validations"] == 0 and summary["training_curve"] == "not drawn: no validation ran yet"
+    assert summary.validations == 0 and summary.training_curve == "not drawn: no validation ran yet"
     assert not (tmp_path / "short" / "training_curve.png").exists()
 
 

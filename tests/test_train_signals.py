@@ -15,9 +15,9 @@ from typer.testing import CliRunner
 
 from planner.model_file import load_checkpoint
 from stack.apps.cli import app
-from stack.apps.train import Trainer
-from stack.apps.train_model import EnvWorkerDied
 from stack.core.config import build_config
+from stack.training.envs import EnvWorkerDied
+from stack.training.trainer import Trainer
 from tests.test_hostile_inputs import one_line_refusal
 from tests.test_train import TINY
 

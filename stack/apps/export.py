@@ -16,10 +16,10 @@ from stable_baselines3 import DQN
 from perception.grid import OccupancyGridBuilder
 from planner.learned import LearnedAgent, load_agent
 from planner.model_file import ModelFileError
-from records import N_ACTIONS, GridConfig
+from records import N_ACTIONS
 from stack.apps.folders import check_destination
-from stack.apps.train_model import warm_start
 from stack.core.model_fit import check_road_fit
+from stack.training.model import warm_start
 
 
 class _Spaces(gym.Env):
@@ -39,13 +39,14 @@ def export_sb3(model: Path, out: Path) -> Path:
     agent = load_agent(model, expected_algorithms=("ddqn", "dqn"))
     if not isinstance(agent, LearnedAgent):
         raise ModelFileError(f"{model}: a Q-table has no SB3 counterpart; export a DDQN or DQN model")
-    lanes, grid = int(agent.metadata.get("lanes_count", 4)), GridConfig(**agent.metadata["grid"])
+    lanes = 4 if agent.metadata.lanes_count is None else agent.metadata.lanes_count
+    grid = agent.grid_config
     check_road_fit(model, grid, agent.encoding, agent.observation_size, lanes)
     space = OccupancyGridBuilder(grid).space(agent.encoding, lanes)
     sb3 = DQN(
         "MlpPolicy",
         _Spaces(space),
-        policy_kwargs={"net_arch": list(agent.metadata["hidden"])},
+        policy_kwargs={"net_arch": list(agent.metadata.hidden)},
         device="cpu",
         verbose=0,
     )

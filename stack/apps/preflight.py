@@ -21,17 +21,15 @@ def checked_run(
     (`stack.apps.folders.claimed`; `prefix` names the command)."""
     from planner.factory import model_path
     from planner.model_check import checked_model
-    from records import GridConfig
     from stack.core.model_fit import check_road_fit
 
     for config in configs:
         try:
             if (path := model_path(config.planner.agent, config.planner.model, config.scenario)) is not None:
                 _, metadata = checked_model(path, (config.planner.agent,))
-                if metadata["kind"] == "mlp":
-                    grid, encoding = GridConfig(**metadata["grid"]), metadata["encoding"]
-                    size, lanes = metadata["observation_size"], config.highway.lane_counts
-                    check_road_fit(path, grid, encoding, size, lanes)
+                if metadata.kind == "mlp" and metadata.observation_size is not None:
+                    lanes = config.highway.lane_counts
+                    check_road_fit(path, metadata.grid, metadata.encoding, metadata.observation_size, lanes)
         except ValueError as error:
             fail(str(error))
     from stack.apps.folders import claimed, location

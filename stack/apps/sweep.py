@@ -19,7 +19,7 @@ from typing import Any
 
 import yaml
 
-from planner.validation import Validation
+from planner.scores import Validation
 from stack.apps.sweep_report import TRIALS, report
 from stack.core.config import write_config
 from stack.core.files import write_text
@@ -64,7 +64,7 @@ def train_trial(params: dict[str, Any], folder: Path, metric: str) -> None:
     owns and locks its folder while it trains (`stack.core.owner`)."""
     from ray import tune
 
-    from stack.apps.train import Trainer
+    from stack.training.trainer import Trainer
 
     out = folder / TRIALS / tune.get_context().get_trial_id()
     kept = math.nan
@@ -79,8 +79,9 @@ def train_trial(params: dict[str, Any], folder: Path, metric: str) -> None:
     owner = Owner(TRIAL, fingerprint(yaml.safe_dump(params, sort_keys=True)))
     with claim(out, owner, resuming=True):
         summary = Trainer(config, out, progress=False, on_validation=heard).run()
-    best = summary["best_validation"]
-    tune.report({"step": summary["steps"], SCORE: best[metric] if best else math.nan, "finished": True})
+    best = summary.best_validation
+    score = getattr(best, metric) if best is not None else math.nan
+    tune.report({"step": summary.steps, SCORE: score, "finished": True})
 
 
 def tuner(sweep: SweepFile, folder: Path, resume: bool, progress: bool) -> Any:

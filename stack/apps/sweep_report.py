@@ -14,6 +14,7 @@ import matplotlib.pyplot as plt
 
 from stack.core.files import replacing, save_figure, write_csv, write_json, write_text
 from stack.core.sweep_config import SweepFile
+from stack.training.summary import TrainSummary
 
 TRIALS = "trials"
 FIGURES = ("collision_rate", "mean_return", "mean_speed")
@@ -25,14 +26,15 @@ def trial_row(sweep: SweepFile, folder: Path, params: dict, metrics: dict, error
     unfinished trial has no summary yet: its steps are those Tune last heard of)."""
     trial = str(metrics.get("trial_id", "?"))
     summary_path = folder / TRIALS / trial / "summary.json"
-    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
-    best = summary.get("best_validation") or {}
+    summary = TrainSummary.from_json(json.loads(summary_path.read_text())) if summary_path.is_file() else None
+    best = summary.best_validation if summary is not None else None
     status = "error" if error else "finished" if metrics.get("finished") else "unfinished"
     row: dict[str, Any] = {"trial": trial, "status": status}
     row |= {key: params.get(key) for key in sweep.space}
-    row |= {"steps": summary.get("steps", metrics.get("step", 0)), "best_step": best.get("step")}
-    row |= {figure: best.get(figure) for figure in FIGURES}
-    return row | {"score": best.get(sweep.metric)}
+    row |= {"steps": summary.steps if summary is not None else metrics.get("step", 0)}
+    row |= {"best_step": best.step if best is not None else None}
+    row |= {figure: getattr(best, figure) if best is not None else None for figure in FIGURES}
+    return row | {"score": getattr(best, sweep.metric) if best is not None else None}
 
 
 def best_row(rows: list[dict[str, Any]], mode: str) -> dict[str, Any] | None:

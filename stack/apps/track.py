@@ -113,7 +113,7 @@ def run_maneuver(
     started = loop.maneuver.command(command, world, start_time=LEAD_IN_S)
     changing = loop.maneuver.profile.duration if started else duration
     loop.act(Command.STAY, ticks=round((LEAD_IN_S + changing) / dt))
-    while loop.maneuver.changing_lane and loop.world.time < LEAD_IN_S + MAX_CHANGE_S:
+    while loop.changing_lane and loop.world.time < LEAD_IN_S + MAX_CHANGE_S:
         loop.act(Command.STAY, ticks=1)
     loop.act(Command.STAY, ticks=round(SETTLE_S / dt))
     recorder = loop.recorder

@@ -1,10 +1,11 @@
-"""What `drivestack train` checks before any work (the replay buffer fits in memory, a checkpoint
-to resume is one) and prints after."""
+"""The `drivestack train` command around `stack.training`: what it checks before any work (the
+replay buffer fits in memory, the model it starts from fits the run, a run to resume is one), the
+owner of its folder, and what it prints after; and the memory check of `--jobs` episode processes
+that run, compare and safety make before any process starts."""
 
 from __future__ import annotations
 
 import json
-import math
 import sys
 from collections.abc import Mapping
 from pathlib import Path
@@ -12,69 +13,23 @@ from typing import TYPE_CHECKING
 
 from planner.model_file import CHECKPOINT as CHECKPOINT_FILE
 from stack.apps.options import AGAIN, cannot_write, configured, fail
+from stack.core.machine import available_memory_bytes
 from stack.core.owner import MARKER, Owner, fingerprint, owner_of
 
 if TYPE_CHECKING:
     from stack.core.config import RunConfig
+    from stack.training.summary import TrainSummary
 
 RESUME_ONLY_STEPS = "only --steps may change on resume (the run goes on as it was configured)"
-
-
-def transition_bytes(config: RunConfig) -> int:
-    """Memory one stored transition takes [bytes]: its observation and next observation (float32)
-    plus action, reward, done and timeout (or discount)."""
-    from perception.grid import OccupancyGridBuilder
-    from stack.core.config import grid_config
-
-    grid = OccupancyGridBuilder(grid_config(config))
-    size = math.prod(grid.space(config.train.encoding, config.highway.lanes_count).shape)
-    return 2 * 4 * size + 8 + 4 + 4 + 4
-
-
-def replay_buffer_bytes(config: RunConfig) -> int:
-    """Memory SB3's replay buffer takes for `config` [bytes]."""
-    return config.train.buffer_size * transition_bytes(config)
-
-
-def demonstrations_bytes(config: RunConfig) -> int:
-    """Memory `train.demonstrations` take at most while recorded [bytes]: every episode's decisions
-    (episode length / decision period), twice (the episodes and their concatenation)."""
-    if (demonstrations := config.train.demonstrations) is None:
-        return 0
-    decisions = math.ceil(config.highway.duration / config.decision_period_s)
-    return 2 * demonstrations.episodes * decisions * transition_bytes(config)
-
-
-def available_memory_bytes() -> int | None:
-    """MemAvailable of /proc/meminfo [bytes]; None where it cannot be read."""
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
 
 
 def check_memory(config: RunConfig) -> None:
     """Refuse, before anything is allocated, a replay buffer (with the demonstrations) that does not
     fit in memory."""
-    available = available_memory_bytes()
-    if config.train.algorithm == "tabular" or available is None:
-        return
-    buffer, demonstrations = replay_buffer_bytes(config), demonstrations_bytes(config)
-    if buffer > 0.8 * available:
-        fail(
-            f"train.buffer_size: {config.train.buffer_size} transitions need {buffer / 2**30:.1f} GB; "
-            f"{available / 2**30:.1f} GB of memory is available"
-        )
-    if buffer + demonstrations > 0.8 * available:
-        episodes = config.train.demonstrations.episodes  # type: ignore[union-attr]
-        fail(
-            f"train.demonstrations.episodes: {episodes} episodes need {demonstrations / 2**30:.1f} GB "
-            f"beside the replay buffer's {buffer / 2**30:.1f} GB; {available / 2**30:.1f} GB of memory "
-            "is available"
-        )
+    from stack.training.checks import memory_refusal
+
+    if refusal := memory_refusal(config, available_memory_bytes()):
+        fail(refusal)
 
 
 WORKER_BYTES = 450 * 2**20
@@ -101,7 +56,7 @@ def check_init_model(config: RunConfig) -> None:
     if config.train.init_model is None:
         return
     from planner.model_file import ModelFileError
-    from stack.apps.train_model import initial_model
+    from stack.training.model import initial_model
 
     try:
         initial_model(config)
@@ -126,10 +81,10 @@ def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:
     """Train (or resume) in `folder` and print the outcome; True when a signal stopped it (its
     checkpoint written: resumable). A signal while the env processes start stops before training;
     signals after training only wait for the files. A dead env process ends it in one line."""
-    from stack.apps.train import Trainer
-    from stack.apps.train_model import EnvWorkerDied
     from stack.core.files import write_failure
     from stack.core.interrupts import deferred, received
+    from stack.training.envs import EnvWorkerDied
+    from stack.training.trainer import Trainer
 
     try:
         with deferred():
@@ -148,7 +103,7 @@ def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:
                 raise
             fail(f"{cannot_write(error)}; {training_kept(folder, config)}")
         report(summary, folder)
-    return bool(summary["interrupted"]) or received()
+    return summary.interrupted or received()
 
 
 def training_kept(folder: Path, config: RunConfig) -> str:
@@ -164,19 +119,20 @@ def training_kept(folder: Path, config: RunConfig) -> str:
     return f"its last checkpoint (step {steps}) is kept: {resume} goes on from it"
 
 
-def report(summary: dict, folder: Path) -> None:
+def report(summary: TrainSummary, folder: Path) -> None:
     """The outcome of a training run on the terminal."""
-    best, interrupted = summary["best_validation"], bool(summary["interrupted"])
+    best = summary.best_validation
     found = (
         "no validation yet"
-        if not best
+        if best is None
         else (
-            f"best validation at step {best['step']}: collision rate {best['collision_rate']:.1%}, "
-            f"mean return {best['mean_return']:.2f}, mean speed {best['mean_speed']:.2f} m/s"
+            f"best validation at step {best.step}: collision rate {best.collision_rate:.1%}, "
+            f"mean return {best.mean_return:.2f}, mean speed {best.mean_speed:.2f} m/s"
         )
     )
-    print(f"{summary['algorithm']}: {summary['steps']} steps in {summary['wall_time_s']:.0f} s; {found}")
-    print(f"run folder: {folder}" + (" (interrupted: resume with --resume)" if interrupted else ""))
+    print(f"{summary.algorithm}: {summary.steps} steps in {summary.wall_time_s:.0f} s; {found}")
+    resumable = " (interrupted: resume with --resume)" if summary.interrupted else ""
+    print(f"run folder: {folder}{resumable}")
 
 
 def training_owner(config: RunConfig) -> Owner:
@@ -240,9 +196,11 @@ def resumed_training(
 def finished(folder: Path, steps: int) -> bool:
     """Whether `folder`'s summary.json is that of a run finished at `steps` (a run whose last files
     could not be written, a full disk, lacks it: `--resume` writes them, training nothing)."""
+    from stack.training.summary import TrainSummary
+
     try:
-        summary = json.loads((folder / "summary.json").read_bytes())
-        return summary["steps"] >= steps and summary["interrupted"] is False
+        summary = TrainSummary.from_json(json.loads((folder / "summary.json").read_bytes()))
+        return summary.steps >= steps and summary.interrupted is False
     except (OSError, ValueError, KeyError, TypeError):
         return False
 
@@ -251,12 +209,13 @@ def checkpoint_steps(folder: Path, failing: bool = True) -> int | None:
     """The steps the checkpoint in `folder` holds (None without one); a one-line error for a
     file that is not a checkpoint (None instead, without `failing`)."""
     from planner.model_file import ModelFileError, load_checkpoint
+    from stack.training.checkpoint import checkpoint_steps as steps_done
 
     if not (folder / CHECKPOINT_FILE).is_file():
         return None
     try:
         _, metadata = load_checkpoint(folder / CHECKPOINT_FILE, arrays=False)
-        return int(metadata["counters"]["num_timesteps"])
+        return steps_done(metadata)
     except ModelFileError as error:
         if failing:
             fail(str(error))

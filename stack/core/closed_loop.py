@@ -1,16 +1,20 @@
-"""One closed-loop episode as a steppable object, shared by `drivestack run`, `track` and the
-decision MDP.
+"""One closed-loop episode as a steppable object, shared by `drivestack run`, `track`, the safety
+assessment and the decision MDP.
 
 At a decision point: `grid = loop.perceive()`, the agent decides, `loop.act(command)` runs control
 ticks up to the next decision point. Each tick reads like do-mpc's loop: the maneuver gives the
-reference, the controller the actuation, the plant the next world.
+reference, the controller the actuation, the plant the next world; it returns a frozen `Tick`,
+which the metrics recorder, the safety monitor and the video consume outside the tick. Its face:
+`reset`, `perceive`, `act`, `tick`, the `world` (truth) and `perceived` (what the sensor reports)
+snapshots, `done` / `crashed`, `status()` and `result()`; for planners that look ahead, `permits`,
+`changing_lane` and `fork` (a copy to play the future on).
 """
 
 from __future__ import annotations
 
+import copy
 import math
-from dataclasses import dataclass
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -23,8 +27,12 @@ from perception.sensor import SensorModel
 from planner.safety import SafetyLayer
 from records import Actuation, Command, GridConfig, WorldState
 from stack.core.config import RunConfig, grid_config
+from stack.core.loop_records import Acted, LoopStatus, Tick
 from stack.core.metrics import EpisodeRecorder, EpisodeResult
 from stack.core.safety_metrics import SafetyMonitor
+
+if TYPE_CHECKING:
+    from stack.core.video import Video
 
 SNAPSHOT_TIME_S = 10.0
 """Each episode keeps the (world, grid) of its first decision at or after this time [s]."""
@@ -54,16 +62,6 @@ class Plant(Protocol):
     def render(self) -> np.ndarray: ...
 
     def render_scale(self) -> tuple[float, float]: ...
-
-
-@dataclass(frozen=True)
-class Acted:
-    """What one `act` did: control ticks run, whether the command was considered (False while a
-    lane change was still running), and the ego's mean speed over those ticks [m/s]."""
-
-    ticks: int
-    considered: bool
-    mean_speed: float
 
 
 class ClosedLoop:
@@ -113,6 +111,15 @@ class ClosedLoop:
         )
         self.monitor = SafetyMonitor(self.plant.dt)
         self.recorder = EpisodeRecorder(self.world)
+        self.video: Video | None = None
+        if self.frames is not None:
+            from stack.core.video import Video  # PIL and the grid pictures: loaded only for a video
+
+            title = (
+                f"{config.planner.agent} + {config.controller.type}, "
+                f"{config.scenario or 'configured world'}, seed {seed}"
+            )
+            self.video = Video(self.frames, self.plant, title, VIDEO_FRAME_TICKS)
         self.command: Command = Command.STAY
         self.applied: Command | None = Command.STAY
         self.grid: OccupancyGrid | None = None
@@ -159,83 +166,98 @@ class ClosedLoop:
             self.applied = self.safety.filter(command, self.perceived, self.maneuver.lane)
             if not self.maneuver.command(self.applied, self.world):
                 self.applied = Command.STAY
-        run = 0
+        speeds: list[float] = []
         while not self.done:
-            self.tick()
-            run += 1
+            tick = self.tick()
+            self.recorder.record(tick)
+            self.monitor.record(tick.world, tick.changing_lane)
+            if self.video is not None:
+                self.video.add(tick, self.grid, self.command, self.applied)
+            speeds.append(float(tick.world.speed[0]))
             completed = self.maneuver.update(self.world)
             if ticks is not None:
-                if run >= ticks:
+                if len(speeds) >= ticks:
                     break
-            elif completed or (not self.maneuver.changing_lane and run >= self.config.decision_ticks):
+            elif completed or (not self.maneuver.changing_lane and len(speeds) >= self.config.decision_ticks):
                 break
-        mean_speed = float(np.mean(self.recorder.speed[-run:])) if run else float(self.world.speed[0])
-        return Acted(run, considered, mean_speed)
+        mean_speed = float(np.mean(speeds)) if speeds else float(self.world.speed[0])
+        return Acted(len(speeds), considered, mean_speed)
 
-    def tick(self) -> None:
+    def tick(self) -> Tick:
+        """One control tick: reference, actuation (emergency braking last), one plant step and what
+        the sensor reports of the new world. `act` hands the record to the metrics recorder, the
+        safety monitor and the video; a tick run alone is recorded by none of them."""
         reference = self.maneuver.reference(self.perceived)
         state = self.world.ego_state()
         actuation = self.controller.step(state, reference)
         actuation = self.emergency.apply(actuation, state.speed, reference.leaders, self.plant.dt)
         self.world = self.plant.step(actuation)
         self.perceived = self._observe()
-        self.recorder.record(self.world, reference, actuation)
-        self.monitor.record(self.world, self.maneuver.changing_lane)
-        if (
-            self.frames is not None
-            and self.plant.rendering
-            and (len(self.recorder.speed) - 1) % VIDEO_FRAME_TICKS == 0
-        ):
-            self.frames.append(self.frame())
+        maneuver = self.maneuver
+        return Tick(reference, actuation, self.world, maneuver.lane, maneuver.target)
 
-    def frame(self) -> np.ndarray:
-        """This tick's video frame: caption, road view, and the grid on the road's scale."""
-        from stack.core.video import command_text, video_frame  # matplotlib: loaded only for a video
+    @property
+    def changing_lane(self) -> bool:
+        """A lane change runs: `act` ignores the next command until it ends."""
+        return self.maneuver.changing_lane
 
-        assert self.grid is not None, "frames are drawn after the first perceive()"
-        config, world, maneuver = self.config, self.world, self.maneuver
-        lane = f"lane {maneuver.lane}" + (f" -> {maneuver.target}" if maneuver.changing_lane else "")
-        lines = [
-            f"{config.planner.agent} + {config.controller.type}, {config.scenario or 'configured world'}, "
-            f"seed {self.seed}",
-            f"t = {world.time:5.1f} s   v = {world.speed[0]:5.2f} m/s   {lane}   "
-            + command_text(self.command, self.applied),
-        ]
-        road = self.plant.render()
-        return video_frame(road, self.grid, self.plant.render_scale(), world.lane_width, lines)
+    def permits(self, command: Command) -> bool:
+        """Whether the safety layer would pass `command` now (nothing is counted)."""
+        return self.safety.permits(command, self.perceived, self.maneuver.lane)
 
-    def status(self) -> dict[str, float | int | bool]:
-        """Counters so far: crashed, ego speed [m/s], passed cars, lane changes, masked and aborted
-        commands."""
-        return {
-            "crashed": self.crashed,
-            "speed": float(self.world.speed[0]),
-            "passed_cars": len(self.recorder.passed),
-            "lane_changes": self.maneuver.lane_changes,
-            "masked": self.safety.masked,
-            "aborted": self.safety.aborted,
-        }
+    def fork(self, view: OccupancyGridBuilder | None = None) -> ClosedLoop:
+        """A copy of the loop now, to play a future on (the simulator is deterministic, so the copy
+        foresees the other vehicles exactly): no video; what no step changes is shared rather than
+        copied (the config, the world snapshots: records, never changed once made; the grid
+        builder, stateless). `view` replaces the builder of the copy's grids (a planner whose
+        rollouts perceive as another agent does)."""
+        memo: dict[int, object] = {id(self.config): self.config, id(self.builder): view or self.builder}
+        memo |= {id(self.frames): None, id(self.video): None}
+        snapshot = self.snapshot[0] if self.snapshot is not None else None
+        for world in (self.world, self.perceived, snapshot):
+            if world is not None:
+                memo[id(world)] = world
+        return copy.deepcopy(self, memo)
+
+    def status(self) -> LoopStatus:
+        """The loop so far (see `LoopStatus`)."""
+        safety = self.safety.counts
+        return LoopStatus(
+            crashed=self.crashed,
+            speed=float(self.world.speed[0]),
+            passed_cars=len(self.recorder.passed),
+            lane_changes=self.maneuver.counts.lane_changes,
+            masked=safety.masked,
+            aborted=safety.aborted,
+        )
 
     def result(self, episode: int) -> EpisodeResult:
-        result = self.recorder.result(
-            episode,
-            self.seed,
-            self.crashed,
-            self.maneuver.lane_changes,
-            self.plant.dt,
-            masked=self.safety.masked,
-            aborted=self.safety.aborted,
-        )
-        monitor = self.monitor
-        result.road_departure = monitor.road_departure
-        result.collision_kind = monitor.collision.kind if monitor.collision else ""
-        result.at_fault_collision = monitor.collision is not None and monitor.collision.at_fault
-        result.min_ttc_s = monitor.min_ttc_s
-        result.time_below_min_distance_s = monitor.time_below_min_distance_s
-        result.emergency_brakings = self.emergency.activations
-        result.snapshot = self.snapshot
-        result.mpc_fallbacks = self.controller.fallbacks - self.fallbacks_before
+        """The episode's result, as its parts measured it so far."""
+        driven, monitor, safety = self.recorder.driven(self.plant.dt), self.monitor, self.safety.counts
         solve_ms = 1e3 * np.array(self.controller.solve_times[self.solves_before :])
-        if solve_ms.size:
-            result.solve_ms_p50, result.solve_ms_p95 = (float(t) for t in np.percentile(solve_ms, [50, 95]))
-        return result
+        p50, p95 = (float(t) for t in np.percentile(solve_ms, [50, 95])) if solve_ms.size else (0.0, 0.0)
+        return EpisodeResult(
+            episode=episode,
+            seed=self.seed,
+            steps=driven.steps,
+            duration_s=driven.duration_s,
+            crashed=self.crashed,
+            passed_cars=driven.passed_cars,
+            lane_changes=self.maneuver.counts.lane_changes,
+            mean_speed=driven.mean_speed,
+            peak_lat_accel=driven.peak_lat_accel,
+            peak_lat_jerk=driven.peak_lat_jerk,
+            masked_commands=safety.masked,
+            aborted_changes=safety.aborted,
+            mpc_fallbacks=self.controller.fallbacks - self.fallbacks_before,
+            road_departure=monitor.road_departure,
+            at_fault_collision=monitor.collision is not None and monitor.collision.at_fault,
+            collision_kind=monitor.collision.kind if monitor.collision else "",
+            min_ttc_s=monitor.min_ttc_s,
+            time_below_min_distance_s=monitor.time_below_min_distance_s,
+            emergency_brakings=self.emergency.activations,
+            solve_ms_p50=p50,
+            solve_ms_p95=p95,
+            trace=driven.trace,
+            snapshot=self.snapshot,
+        )

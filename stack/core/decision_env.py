@@ -18,9 +18,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from perception.grid import OccupancyGridBuilder
 from records import N_ACTIONS, TRAINING_SEED_FLOOR, Command, drawn_seed
 from stack.core.closed_loop import ClosedLoop
-from stack.core.config import RunConfig, build_config, in_scenario
+from stack.core.config import RunConfig, build_config, grid_config, in_scenario
 from stack.sim.highway import HighwayAdapter
 
 
@@ -58,7 +59,8 @@ class HierarchicalHighwayEnv(gym.Env):
         ]
         self.adapter, self.loop = self.adapters[0], self.loops[0]
         self.encoding = config.train.encoding
-        self.observation_space = self.loop.builder.space(self.encoding, config.highway.lanes_count)
+        builder = OccupancyGridBuilder(grid_config(self.worlds[0]))
+        self.observation_space = builder.space(self.encoding, config.highway.lanes_count)
         self.action_space = spaces.Discrete(N_ACTIONS)
 
     def _observe(self) -> np.ndarray:
@@ -69,7 +71,7 @@ class HierarchicalHighwayEnv(gym.Env):
     ) -> tuple[np.ndarray, dict[str, float | int | bool]]:
         super().reset(seed=seed)
         self._begin_episode(dict(self.np_random.bit_generator.state))
-        return self._observe(), self.loop.status()
+        return self._observe(), self.loop.status().info()
 
     def _begin_episode(self, generator_state: dict) -> None:
         self.episode = EpisodeRecord(generator_state, [])
@@ -112,7 +114,7 @@ class HierarchicalHighwayEnv(gym.Env):
 
         terminated = self.loop.crashed
         truncated = self.loop.done and not terminated
-        return self._observe(), float(reward), terminated, truncated, self.loop.status()
+        return self._observe(), float(reward), terminated, truncated, self.loop.status().info()
 
     def render(self) -> np.ndarray | None:
         return self.adapter.render() if self.render_mode == "rgb_array" else None

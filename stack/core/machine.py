@@ -1,9 +1,11 @@
-"""What this machine gives a run, asked in one place by the process pool (`stack.core.executors`)
-and a local Ray instance (`stack.core.ray_tasks`), which must not import each other."""
+"""What this machine gives a run, asked in one place: its CPUs (by the process pool,
+`stack.core.executors`, and a local Ray instance, `stack.core.ray_tasks`, which must not import
+each other) and its available memory (by the checks before a run)."""
 
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 
 def usable_cpus() -> int:
@@ -12,3 +14,14 @@ def usable_cpus() -> int:
     if hasattr(os, "sched_getaffinity"):
         return len(os.sched_getaffinity(0))
     return os.cpu_count() or 1
+
+
+def available_memory_bytes() -> int | None:
+    """MemAvailable of /proc/meminfo [bytes]; None where it cannot be read."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None

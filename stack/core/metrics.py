@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from perception.grid import OccupancyGrid
-from records import Actuation, Reference, WorldState
+from records import WorldState
+from stack.core.loop_records import Tick
 from stack.core.safety_metrics import TTC_CAP_S
 
 COMFORT_WINDOW_S = 0.5
@@ -133,6 +134,21 @@ class EpisodeResult:
         return cls(**row)
 
 
+@dataclass(frozen=True)
+class Driven:
+    """What the recorder measured of an episode: control ticks (`steps`), duration [s], passed
+    cars, the ego's mean speed [m/s], peak |lateral acceleration| [m/s^2] and jerk [m/s^3], and
+    the per-tick `trace` of time [s], speed [m/s] and lateral offset [m]."""
+
+    steps: int
+    duration_s: float
+    passed_cars: int
+    mean_speed: float
+    peak_lat_accel: float
+    peak_lat_jerk: float
+    trace: dict[str, list[float]]
+
+
 class EpisodeRecorder:
     """Collects what the metrics need: the world after every control tick (and at the start),
     and the reference and actuation of every tick."""
@@ -157,11 +173,11 @@ class EpisodeRecorder:
         memo[id(self)] = copied
         return copied
 
-    def record(self, world: WorldState, reference: Reference, actuation: Actuation) -> None:
+    def record(self, tick: Tick) -> None:
         """One tick: what it tracked, what it commanded, and the world it led to."""
-        self.d_reference.append(reference.d)
-        self.steering.append(actuation.steering)
-        self._record_world(world)
+        self.d_reference.append(tick.reference.d)
+        self.steering.append(tick.actuation.steering)
+        self._record_world(tick.world)
 
     def _record_world(self, world: WorldState) -> None:
         ahead = (world.s > world.s[0]).tolist()
@@ -174,30 +190,16 @@ class EpisodeRecorder:
         self.heading.append(float(world.heading[0]) - world.lanes[0].heading_at(float(world.s[0])))
         self.d.append(float(world.d[0]))
 
-    def result(
-        self,
-        episode: int,
-        seed: int,
-        crashed: bool,
-        lane_changes: int,
-        dt: float,
-        masked: int = 0,
-        aborted: int = 0,
-    ) -> EpisodeResult:
+    def driven(self, dt: float) -> Driven:
+        """What was recorded, measured (ticks `dt` seconds apart)."""
         peak_accel, peak_jerk = lateral_comfort(np.array(self.heading), np.array(self.speed), dt)
-        return EpisodeResult(
-            episode=episode,
-            seed=seed,
+        return Driven(
             steps=len(self.time) - 1,
             duration_s=self.time[-1] - self.time[0],
-            crashed=crashed,
             passed_cars=len(self.passed),
-            lane_changes=lane_changes,
             mean_speed=float(np.mean(self.speed)),
             peak_lat_accel=peak_accel,
             peak_lat_jerk=peak_jerk,
-            masked_commands=masked,
-            aborted_changes=aborted,
             trace={"time": self.time, "speed": self.speed, "d": self.d},
         )
 

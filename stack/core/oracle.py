@@ -11,15 +11,20 @@ agent there is and the tree adds what changing its next decisions gains with the
 reference ceiling for any agent on the same seeds, controllers and safety layer, though not an
 exhaustive optimum. It is slow: about 3^depth look-ahead rollouts per decision (the cost per episode
 is in BENCHMARKS.md).
+
+It is an agent, one of `drivestack agents`, but it lives here, beside the closed loop, rather than
+in `planner/` with the others: it plans on the loop itself (`ClosedLoop.fork`, `permits`,
+`changing_lane`), and the layers never import `stack`. The loop knows it only as an agent with a
+`plan(loop)` (`stack.core.episodes.agent_step`).
 """
 
 from __future__ import annotations
 
-import copy
 import math
 
 import numpy as np
 
+from perception.grid import OccupancyGridBuilder
 from planner.agents import Action, Agent, Policy, decide
 from planner.factory import make_agent
 from records import Command, Encoding, GridConfig
@@ -35,9 +40,11 @@ class Oracle(Policy):
     encoding: Encoding = "paper"
 
     def __init__(self, config: OracleConfig, base: Agent) -> None:
+        """The rollouts perceive as `base` does: on its own grid, if it has one."""
         self.config = config
         self.base = base
         self.grid_config: GridConfig | None = base.grid_config
+        self.view = OccupancyGridBuilder(base.grid_config) if base.grid_config is not None else None
 
     @classmethod
     def for_road(
@@ -52,7 +59,7 @@ class Oracle(Policy):
     def plan(self, loop: ClosedLoop) -> Command:
         """The root command whose best branch gets furthest without a crash."""
         start_s, start_time = float(loop.world.s[0]), loop.world.time
-        if not any(loop.safety.permits(c, loop.perceived, loop.maneuver.lane) for c in COMMANDS[1:]):
+        if not any(loop.permits(c) for c in COMMANDS[1:]):
             return Command.STAY
         values = [self._value(loop, command, self.config.depth, start_s, start_time) for command in COMMANDS]
         values[1:] = [value - self.config.margin_m for value in values[1:]]
@@ -63,11 +70,9 @@ class Oracle(Policy):
     ) -> float:
         """Best distance [m] from `start_s` after `command` and `depth - 1` more decisions; a
         command the safety layer would mask is worth nothing, decided before anything is copied."""
-        if not loop.maneuver.changing_lane and not loop.safety.permits(
-            command, loop.perceived, loop.maneuver.lane
-        ):
+        if not loop.changing_lane and not loop.permits(command):
             return -math.inf
-        future = copy.deepcopy(loop, _shared(loop))
+        future = loop.fork(self.view)
         future.act(command)
         if future.crashed:
             return -math.inf
@@ -80,14 +85,3 @@ class Oracle(Policy):
             grid = future.perceive()
             future.act(decide(self.base, grid.encode(self.base.encoding)))
         return -math.inf if future.crashed else float(future.world.s[0]) - start_s
-
-
-def _shared(loop: ClosedLoop) -> dict[int, object]:
-    """The deep copy's memo: the loop's frames left out, and what no step changes shared with the
-    copy rather than copied: the config and the world snapshots (records, never changed once made)."""
-    memo: dict[int, object] = {id(loop.frames): None, id(loop.config): loop.config}
-    snapshot = loop.snapshot[0] if loop.snapshot is not None else None
-    for world in (loop.world, loop.perceived, snapshot):
-        if world is not None:
-            memo[id(world)] = world
-    return memo

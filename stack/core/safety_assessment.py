@@ -20,7 +20,7 @@ import numpy as np
 from records import PlantName
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import RunConfig
-from stack.core.episodes import agent_step, build_agent
+from stack.core.episodes import build_agent, run_agent_episode
 from stack.core.reference_driver import CarefulDriver
 from stack.core.safety_metrics import SafetyMonitor
 from stack.sim.safety_scenarios import Point, build
@@ -116,17 +116,14 @@ def drive_stack(config: RunConfig, point: Point, frames: list[np.ndarray] | None
     road.rendering = frames is not None
     agent = build_agent(config, config.seed)
     loop = ClosedLoop(config, road, frames, grid=agent.grid_config)
-    loop.reset(config.seed)
-    while not loop.done:
-        agent_step(loop, agent)
-    monitor = loop.monitor
+    result = run_agent_episode(loop, agent, 0, config.seed)
     return Drive(
-        loop.crashed,
-        monitor.min_ttc_s,
+        result.crashed,
+        result.min_ttc_s,
         road.min_gap_m,
-        peak_deceleration(loop.recorder.speed, road.dt),
-        monitor.time_below_min_distance_s,
-        loop.emergency.activations,
+        peak_deceleration(result.trace["speed"], road.dt),
+        result.time_below_min_distance_s,
+        result.emergency_brakings,
     )
 
 

@@ -1,5 +1,6 @@
-"""One video frame of a closed-loop episode: a caption, highway-env's road view, and the grid the
-agent decides on drawn on the road view's scale under it.
+"""The video of a closed-loop episode, drawn from the loop's tick records outside the tick: each
+frame a caption, highway-env's road view, and the grid the agent decides on drawn on the road
+view's scale under it.
 
 The caption says what runs (agent, controller, world, seed) and the state at this tick: time [s],
 ego speed [m/s], lane, and the agent's current command with what became of it (passed, changed by
@@ -8,12 +9,15 @@ the safety layer, or ignored while a lane change runs).
 
 from __future__ import annotations
 
+from typing import Protocol
+
 import numpy as np
 from PIL import Image, ImageDraw
 
 from perception.grid import OccupancyGrid
 from perception.plot import TEXT, grid_panel
 from records import Command
+from stack.core.loop_records import Tick
 
 LINE_PX = 13
 """Height of one caption line [px]."""
@@ -50,3 +54,38 @@ def video_frame(
     width = road.shape[1]
     panel = grid_panel(grid, width, scale[0], scale[1], lane_width_m)
     return np.vstack([caption(width, lines), road[:, :, :3], panel])
+
+
+class RenderedRoad(Protocol):
+    """What the video draws from: a plant that renders its road (`stack.core.closed_loop.Plant`)."""
+
+    @property
+    def rendering(self) -> bool: ...
+
+    def render(self) -> np.ndarray: ...
+
+    def render_scale(self) -> tuple[float, float]: ...
+
+
+class Video:
+    """An episode's frames, appended to `frames`: every `every`-th tick (the `every`-th, the
+    2 `every`-th, ...) while the plant renders, drawn right after the tick, before the next."""
+
+    def __init__(self, frames: list[np.ndarray], plant: RenderedRoad, title: str, every: int) -> None:
+        """`title` is the caption's first line (what runs, in which world, on which seed)."""
+        self.frames, self.plant, self.title, self.every = frames, plant, title, every
+        self.ticks = 0
+
+    def add(self, tick: Tick, grid: OccupancyGrid | None, command: Command, applied: Command | None) -> None:
+        """Count `tick` and draw it when its frame is due: the state it led to, the agent's last
+        `command` and what became of it (`applied`), and the last decision's `grid`."""
+        self.ticks += 1
+        if self.ticks % self.every or not self.plant.rendering:
+            return
+        assert grid is not None, "frames are drawn after the first perceive()"
+        world = tick.world
+        lane = f"lane {tick.lane}" + (f" -> {tick.target}" if tick.changing_lane else "")
+        state = f"t = {world.time:5.1f} s   v = {world.speed[0]:5.2f} m/s   {lane}   "
+        lines = [self.title, state + command_text(command, applied)]
+        road = self.plant.render()
+        self.frames.append(video_frame(road, grid, self.plant.render_scale(), world.lane_width, lines))

@@ -1,13 +1,10 @@
-"""The model a training run builds and what it keeps of it: the env and the SB3 (Double) DQN from
-the config, the callback that checkpoints it, the metadata every model file carries."""
+"""The model a training run builds and what it keeps of it: the SB3 (Double) DQN from the config,
+the model it may start from, the callback that checkpoints it, the metadata every model file
+carries."""
 
 from __future__ import annotations
 
-import signal
-import sys
-import threading
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -16,29 +13,22 @@ import numpy as np
 import torch as th
 from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecEnv
 
 from planner.ddqn import DoubleDQN
 from planner.factory import model_path
 from planner.learned import LearnedAgent, load_agent
-from planner.model_file import CHECKPOINT, ModelFileError
+from planner.model_file import ModelFileError
+from planner.model_metadata import ModelMetadata
 from planner.networks import net_arch
 from records import N_ACTIONS
 from stack.core.closed_loop import grid_config
 from stack.core.config import RunConfig
 from stack.core.decision_env import HierarchicalHighwayEnv
-from stack.core.interrupts import note_stop
 from stack.core.model_fit import check_road_fit
+from stack.training.envs import StopTraining
 
 ALGORITHMS: dict[str, type[DQN]] = {"ddqn": DoubleDQN, "dqn": DQN}
-
-
-class StopTraining(Exception):
-    """Raised once a requested stop has its checkpoint written."""
-
-
-STOPPING = "stopping: the checkpoint is written after the current step (further signals wait for it)"
 
 
 class Checkpoints(BaseCallback):
@@ -67,40 +57,6 @@ class Checkpoints(BaseCallback):
 
     def _on_step(self) -> bool:
         return True
-
-
-@contextmanager
-def stop_signals(handler: Callable[[int, Any], None]) -> Iterator[None]:
-    """SIGINT and SIGTERM call `handler` inside the block (the command then exits 130, and says
-    that it stops); only in the main thread, where Python delivers signals (a sweep's trial trains
-    in a worker thread and Ray Tune stops it)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def noted(signum: int, frame: Any) -> None:
-        note_stop()
-        print(STOPPING, file=sys.stderr)
-        handler(signum, frame)
-
-    previous = {sig: signal.signal(sig, noted) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
-
-
-def monitored_env(config: RunConfig) -> Monitor:
-    """The training env (SB3's `Monitor` keeps episode returns for the logs)."""
-    return Monitor(HierarchicalHighwayEnv(config))
-
-
-def worker_env(config: RunConfig) -> Monitor:
-    """The training env in a worker process, deaf to Ctrl-C: the learner stops the run (with a
-    checkpoint) and closes the workers itself."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    return monitored_env(config)
 
 
 def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQN:
@@ -139,21 +95,24 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
     )
 
 
-def model_metadata(config: RunConfig, env: HierarchicalHighwayEnv, trained_steps: int) -> dict:
-    """What a model file says about the model: algorithm, encoding, sizes, grid, training."""
+def model_metadata(config: RunConfig, env: HierarchicalHighwayEnv, trained_steps: int) -> ModelMetadata:
+    """What a model file of this run says about its model: algorithm, encoding, sizes, grid,
+    training (its validation is added to the kept model's)."""
     train = config.train
-    return {
-        "algorithm": train.algorithm,
-        "encoding": train.encoding,
-        "observation_size": int(np.prod(env.observation_space.shape)),
-        "actions": N_ACTIONS,
-        "hidden": net_arch(train.network) if train.algorithm != "tabular" else [],
-        "network": train.network,
-        "grid": grid_config(config).model_dump(mode="json"),
-        "lanes_count": config.highway.lanes_count,
-        "trained_steps": trained_steps,
-        "seed": config.seed,
-    }
+    tabular = train.algorithm == "tabular"
+    return ModelMetadata(
+        kind="qtable" if tabular else "mlp",
+        algorithm=train.algorithm,
+        encoding=train.encoding,
+        observation_size=int(np.prod(env.observation_space.shape)),
+        actions=N_ACTIONS,
+        hidden=() if tabular else tuple(net_arch(train.network)),
+        network=train.network,
+        grid=grid_config(config),
+        lanes_count=config.highway.lanes_count,
+        trained_steps=trained_steps,
+        seed=config.seed,
+    )
 
 
 def initial_model(config: RunConfig) -> LearnedAgent | None:
@@ -167,7 +126,7 @@ def initial_model(config: RunConfig) -> LearnedAgent | None:
     assert path is not None, "init_model is refused for tabular runs"
     agent = load_agent(path, expected_algorithms=("ddqn", "dqn"))
     assert isinstance(agent, LearnedAgent), "DDQN / DQN files hold Q-networks"
-    theirs = (agent.encoding, agent.grid_config, list(agent.metadata["hidden"]))
+    theirs = (agent.encoding, agent.grid_config, list(agent.metadata.hidden))
     grid = grid_config(config)
     ours = (train.encoding, grid, net_arch(train.network))
     for field, their, our in zip(("encoding", "grid", "hidden layers"), theirs, ours, strict=True):
@@ -184,29 +143,3 @@ def warm_start(model: DQN, start: LearnedAgent) -> None:
     with th.no_grad():
         model.policy.q_net.q_net.load_state_dict(weights)
         model.policy.q_net_target.q_net.load_state_dict(weights)
-
-
-class EnvWorkerDied(RuntimeError):
-    """A training env worker process died; the message is one line for the user."""
-
-
-def worker_death(env: object, out: Path, error: BaseException) -> str:
-    """One line: that an env worker of `env` died, how, and what the run in `out` keeps."""
-    codes = [p.exitcode for p in getattr(env, "processes", []) if p.exitcode not in (None, 0)]
-    how = f" (exit code {codes[0]})" if codes else f" ({type(error).__name__})"
-    kept = (
-        f"its last checkpoint ({out / CHECKPOINT}) is kept: --resume {out} continues from it"
-        if (out / CHECKPOINT).is_file()
-        else "no checkpoint was written yet: start the run again"
-    )
-    return f"a training environment process died{how}; {kept}"
-
-
-def close_env(env: Monitor | VecEnv) -> None:
-    """Close `env` and its worker processes, also when one of them is dead."""
-    try:
-        env.close()
-    except (EOFError, OSError):
-        for process in getattr(env, "processes", []):
-            process.kill()
-            process.join(timeout=10)

@@ -1,4 +1,5 @@
-"""What a training run reports: `summary.json`, `validation.json` and the training curve."""
+"""What a training run reports: `summary.json` (a `TrainSummary`), `validation.json` and the
+training curve."""
 
 from __future__ import annotations
 
@@ -7,9 +8,10 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 
-from planner.validation import Validation, kept_models
+from planner.scores import Validation, kept_models
 from stack.core.config import RunConfig
 from stack.core.files import save_figure, write_json
+from stack.training.summary import NO_CURVE, DemonstrationsUsed, TrainSummary
 
 
 def plot_training_curve(history: list[Validation], path: Path, title: str) -> None:
@@ -36,26 +38,37 @@ def plot_training_curve(history: list[Validation], path: Path, title: str) -> No
 
 
 def write_training_summary(
-    config: RunConfig, out: Path, history: list[Validation], run: dict, best: Path
-) -> dict:
-    """`summary.json` (the run's `steps`, `wall_time_s`, `interrupted`, the best validation and
-    model), `validation.json` and `training_curve.png` in `out`; returns the summary."""
+    config: RunConfig,
+    out: Path,
+    history: list[Validation],
+    best: Path,
+    *,
+    steps: int,
+    wall_time_s: float,
+    interrupted: bool,
+    demonstrations: DemonstrationsUsed | None,
+) -> TrainSummary:
+    """`summary.json` (the best validation and model read off `history` and `best`), `validation.json`
+    and `training_curve.png` in `out`; returns the summary."""
     if history:
         train = config.train
         scenarios = ", ".join(train.scenarios) if train.scenarios else (config.scenario or "configured world")
         title = f"{train.algorithm} ({train.network}), seed {config.seed}: validation on {scenarios}"
         plot_training_curve(history, out / "training_curve.png", title)
     kept = kept_models(history)
-    summary = {
-        "algorithm": config.train.algorithm,
-        "network": config.train.network,
-        "target_steps": config.train.steps,
-        **run,
-        "best_validation": asdict(kept[-1]) if kept else None,
-        "validations": len(history),
-        "best_model": str(best) if best.is_file() else None,
-        "training_curve": "training_curve.png" if history else "not drawn: no validation ran yet",
-    }
-    write_json(out / "summary.json", summary)
+    summary = TrainSummary(
+        algorithm=config.train.algorithm,
+        network=config.train.network,
+        target_steps=config.train.steps,
+        steps=steps,
+        wall_time_s=wall_time_s,
+        interrupted=interrupted,
+        demonstrations=demonstrations,
+        best_validation=kept[-1] if kept else None,
+        validations=len(history),
+        best_model=str(best) if best.is_file() else None,
+        training_curve="training_curve.png" if history else NO_CURVE,
+    )
+    write_json(out / "summary.json", summary.to_json())
     write_json(out / "validation.json", [asdict(v) for v in history])
     return summary

@@ -1,11 +1,9 @@
-"""A training run's whole state as plain arrays and JSON counters, for checkpoints a resumed run
-continues from exactly as if never stopped: online and target Q-networks, Adam moments, the replay
-buffer, SB3's counters, the random generators and each env's episode under way (replayed on
-resume: the simulator is deterministic)."""
+"""A training run's whole state as plain arrays and typed counters (`stack.training.checkpoint`),
+for checkpoints a resumed run continues from exactly as if never stopped: online and target
+Q-networks, Adam moments, the replay buffer, SB3's counters, the random generators and each env's
+episode under way (replayed on resume: the simulator is deterministic)."""
 
 from __future__ import annotations
-
-from dataclasses import asdict
 
 import numpy as np
 import torch as th
@@ -16,14 +14,12 @@ from stable_baselines3.common.monitor import Monitor
 from planner.ddqn import Demonstrations, DoubleDQN
 from planner.tabular import QLearning
 from records import N_ACTIONS
-from stack.core.decision_env import EpisodeRecord
+from stack.training.checkpoint import DqnCounters, TabularCounters, generator_state
 
-MAX_EPISODE_DECISIONS = 100_000
-"""Most actions an episode record of a checkpoint may hold (an hour of driving at 25 per second)."""
 BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
 
 
-def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], dict]:
+def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], DqnCounters]:
     """(arrays, counters) of `model`, for a safe model file: networks, optimizer, replay buffer,
     the demonstrations learnt from, the counters SB3 schedules by, numpy's global generator
     (exploration and replay sampling draw from it), the action space's generator (random actions
@@ -43,23 +39,23 @@ def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], dict]:
     _, arrays["random/numpy_keys"], *numpy_random = np.random.get_state()
     env = model.get_env()
     assert env is not None, "a model in training has its env"
-    counters = {
-        "num_timesteps": int(model.num_timesteps),
-        "n_updates": int(model._n_updates),
-        "n_calls": int(model._n_calls),
-        "episode_num": int(model._episode_num),
-        "exploration_rate": float(model.exploration_rate),
-        "buffer_pos": int(buffer.pos),
-        "buffer_full": bool(buffer.full),
-        "param_groups": optimizer["param_groups"],
-        "numpy_random": [int(numpy_random[0]), int(numpy_random[1]), float(numpy_random[2])],
-        "action_space_random": model.action_space.np_random.bit_generator.state,
-        "episodes": [asdict(record) for record in env.env_method("episode_record")],
-    }
+    counters = DqnCounters(
+        num_timesteps=int(model.num_timesteps),
+        n_updates=int(model._n_updates),
+        n_calls=int(model._n_calls),
+        episode_num=int(model._episode_num),
+        exploration_rate=float(model.exploration_rate),
+        buffer_pos=int(buffer.pos),
+        buffer_full=bool(buffer.full),
+        param_groups=optimizer["param_groups"],
+        numpy_random=(int(numpy_random[0]), int(numpy_random[1]), float(numpy_random[2])),
+        action_space_random=dict(model.action_space.np_random.bit_generator.state),
+        episodes=tuple(env.env_method("episode_record")),
+    )
     return arrays, counters
 
 
-def restore_dqn_state(model: DQN, arrays: dict[str, np.ndarray], counters: dict) -> BaseCallback:
+def restore_dqn_state(model: DQN, arrays: dict[str, np.ndarray], counters: DqnCounters) -> BaseCallback:
     """Put the state `dqn_state` saved back into `model`. What SB3 resets when training starts (the
     episodes under way, the generators) is put back by the returned callback's training start.
     Raises KeyError / ValueError / TypeError / RuntimeError when the state does not fit `model`."""
@@ -69,16 +65,17 @@ def restore_dqn_state(model: DQN, arrays: dict[str, np.ndarray], counters: dict)
     for key, value in _prefixed(arrays, "optimizer/").items():
         index, name = key.split("/")
         state.setdefault(int(index), {})[name] = value
-    model.policy.optimizer.load_state_dict({"state": state, "param_groups": counters["param_groups"]})
+    model.policy.optimizer.load_state_dict({"state": state, "param_groups": counters.param_groups})
     buffer = model.replay_buffer
     assert buffer is not None, "SB3 builds the replay buffer with the model"
     for name, value in _prefixed(arrays, "buffer/").items():
         getattr(buffer, name)[...] = value.numpy()
-    buffer.pos, buffer.full = counters["buffer_pos"], counters["buffer_full"]
-    model.num_timesteps, model._n_updates = counters["num_timesteps"], counters["n_updates"]
-    model._episode_num = counters["episode_num"]
-    model._n_calls = counters.get("n_calls", 0)
-    model.exploration_rate = counters.get("exploration_rate", model.exploration_rate)
+    buffer.pos, buffer.full = counters.buffer_pos, counters.buffer_full
+    model.num_timesteps, model._n_updates = counters.num_timesteps, counters.n_updates
+    model._episode_num = counters.episode_num
+    model._n_calls = counters.n_calls or 0
+    if counters.exploration_rate is not None:
+        model.exploration_rate = counters.exploration_rate
     if isinstance(model, DoubleDQN) and (demonstrations := _prefixed(arrays, "demonstrations/")):
         size = int(np.prod(model.observation_space.shape))  # type: ignore[arg-type]
         model.demonstrations = Demonstrations.from_arrays(
@@ -93,17 +90,19 @@ class ContinueEpisodes(BaseCallback):
     transition. A checkpoint without them (written by an older drivestack) resumes with fresh
     episodes."""
 
-    def __init__(self, arrays: dict[str, np.ndarray], counters: dict, n_envs: int) -> None:
+    def __init__(self, arrays: dict[str, np.ndarray], counters: DqnCounters, n_envs: int) -> None:
         super().__init__()
-        self.exact = "episodes" in counters
-        if not self.exact:
+        self.exact = counters.episodes is not None
+        if counters.episodes is None:
             return
-        self.episodes = [episode_record(data) for data in counters["episodes"]]
+        self.episodes = counters.episodes
         if len(self.episodes) != n_envs:
             raise ValueError(f"{len(self.episodes)} episodes under way for {n_envs} envs")
-        self.numpy_random = ("MT19937", arrays["random/numpy_keys"], *counters["numpy_random"])
+        if counters.numpy_random is None or counters.action_space_random is None:
+            raise ValueError("episodes under way without the generators to replay them")
+        self.numpy_random = ("MT19937", arrays["random/numpy_keys"], *counters.numpy_random)
         np.random.RandomState().set_state(self.numpy_random)
-        self.action_space_random = generator_state(counters["action_space_random"])
+        self.action_space_random = generator_state(counters.action_space_random)
 
     def _on_training_start(self) -> None:
         if not self.exact:
@@ -123,40 +122,17 @@ class ContinueEpisodes(BaseCallback):
         return True
 
 
-def episode_record(data: object) -> EpisodeRecord:
-    """An `EpisodeRecord` from a checkpoint's JSON, checked (ValueError / TypeError otherwise)."""
-    if not isinstance(data, dict) or set(data) != {"generator_state", "actions"}:
-        raise ValueError("an episode record is not {generator_state, actions}")
-    actions = data["actions"]
-    if (
-        not isinstance(actions, list)
-        or len(actions) > MAX_EPISODE_DECISIONS
-        or not all(type(a) is int and 0 <= a < N_ACTIONS for a in actions)
-    ):
-        raise ValueError(f"episode actions are not a list of integers in [0, {N_ACTIONS})")
-    return EpisodeRecord(generator_state(data["generator_state"]), actions)
-
-
-def generator_state(state: dict) -> dict:
-    """`state` once a PCG64 generator accepts it (ValueError / TypeError otherwise): checked here,
-    before it reaches an env worker, where a bad one would end the process."""
-    np.random.Generator(np.random.PCG64()).bit_generator.state = state
-    return state
-
-
-def tabular_state(model: QLearning, env: Monitor) -> tuple[dict[str, np.ndarray], dict]:
+def tabular_state(model: QLearning, env: Monitor) -> tuple[dict[str, np.ndarray], TabularCounters]:
     """(arrays, counters) of a tabular learner: its table, steps, generator and episode under way."""
     episode = env.unwrapped.episode_record()  # type: ignore[attr-defined]
-    counters = {
-        "num_timesteps": model.steps,
-        "tabular_random": model.rng.bit_generator.state,
-        "episodes": [asdict(episode)],
-    }
+    counters = TabularCounters(
+        num_timesteps=model.steps, tabular_random=dict(model.rng.bit_generator.state), episodes=(episode,)
+    )
     return {"q_table": model.table}, counters
 
 
 def restore_tabular_state(
-    model: QLearning, env: Monitor, arrays: dict[str, np.ndarray], counters: dict
+    model: QLearning, env: Monitor, arrays: dict[str, np.ndarray], counters: TabularCounters
 ) -> np.ndarray | None:
     """Put `tabular_state` back into `model` and `env`; the observation to continue from (None for
     a checkpoint of an older drivestack, which continues with a fresh episode). Raises KeyError /
@@ -164,11 +140,13 @@ def restore_tabular_state(
     if arrays.get("q_table", np.empty(0)).shape != model.table.shape:
         raise ValueError("its q_table does not fit this run's table")
     model.table[...] = arrays["q_table"]
-    model.steps = counters["num_timesteps"]
-    if "episodes" not in counters:
+    model.steps = counters.num_timesteps
+    if counters.episodes is None:
         return None
-    (episode,) = [episode_record(data) for data in counters["episodes"]]
-    model.rng.bit_generator.state = counters["tabular_random"]
+    (episode,) = counters.episodes
+    if counters.tabular_random is None:
+        raise ValueError("an episode under way without the generator to replay it")
+    model.rng.bit_generator.state = counters.tabular_random
     env.reset()
     return env.unwrapped.replay_episode(episode)  # type: ignore[attr-defined]
 

@@ -3,7 +3,6 @@ decision MDP the learner trains in, on training seeds of their own stream, sprea
 
 from __future__ import annotations
 
-import copy
 import multiprocessing
 import signal
 from collections.abc import Callable
@@ -23,23 +22,17 @@ from stack.core.config import RunConfig, grid_config
 from stack.core.decision_env import HierarchicalHighwayEnv
 from stack.core.executors import completed
 from stack.core.oracle import Oracle
+from stack.training.summary import DemonstrationsUsed
 
 
 def expert_policy(world: RunConfig, expert_name: str) -> Callable[[ClosedLoop], int]:
     """The expert, built once for a loop of `world`, as a function of the loop's state to its
-    decision: the oracle plans on copies of the loop whose rollouts perceive on its base agent's
-    grid, a policy decides on its own view of what the controllers act on (the sensor's report)."""
+    decision: the oracle plans on copies of the loop (whose rollouts perceive on its base agent's
+    grid), a policy decides on its own view of what the controllers act on (the sensor's report)."""
     lanes, grid = world.highway.lanes_count, grid_config(world)
     if expert_name == "oracle":
         oracle = Oracle.for_road(world.planner.oracle, lanes, grid, world.scenario)
-        base_view = OccupancyGridBuilder(oracle.grid_config or grid)
-
-        def plan(loop: ClosedLoop) -> int:
-            seen_as_its_base_sees = copy.copy(loop)
-            seen_as_its_base_sees.builder = base_view
-            return oracle.plan(seen_as_its_base_sees).value
-
-        return plan
+        return lambda loop: oracle.plan(loop).value
     expert = make_agent(expert_name, lanes, grid)
     view = OccupancyGridBuilder(expert.grid_config or grid)
     return lambda loop: decide(expert, view.build(loop.perceived).encode(expert.encoding)).value
@@ -98,16 +91,11 @@ def start_from_demonstrations(
     validation.validate_start(model)
 
 
-def demonstrations_summary(config: RunConfig, model: object) -> dict[str, dict]:
-    """`{"demonstrations": {expert, episodes, transitions}}` for a run's summary, when it learnt
-    from some (else empty)."""
+def demonstrations_used(config: RunConfig, model: object) -> DemonstrationsUsed | None:
+    """The demonstrations a run learnt from, for its summary (None when it learnt from none)."""
     settings, demonstrations = config.train.demonstrations, getattr(model, "demonstrations", None)
     if settings is None or demonstrations is None:
-        return {}
-    return {
-        "demonstrations": {
-            "expert": settings.expert,
-            "episodes": settings.episodes,
-            "transitions": len(demonstrations),
-        }
-    }
+        return None
+    return DemonstrationsUsed(
+        expert=settings.expert, episodes=settings.episodes, transitions=len(demonstrations)
+    )

@@ -1,4 +1,5 @@
-"""`drivestack train`: the decision layer trained inside the full closed loop.
+"""The trainer behind `drivestack train` and `sweep`: the decision layer trained inside the full
+closed loop.
 
 DDQN / DQN run on stable-baselines3 with the paper's real-time validation (the best model is kept),
 TensorBoard logs and periodic checkpoints; tabular Q-learning runs on the tabular state. Every
@@ -10,11 +11,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import replace
 from functools import partial
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ProgressBarCallback
 from stable_baselines3.common.monitor import Monitor
@@ -23,33 +25,33 @@ from tqdm import tqdm
 
 from planner.learned import export_q_network, save_q_table
 from planner.model_file import CHECKPOINT, ModelFileError, load_checkpoint, save_model
+from planner.model_metadata import ModelMetadata
+from planner.scores import Validation
 from planner.tabular import QLearning
-from planner.validation import RealTimeValidation, Validation
+from planner.validation import RealTimeValidation
 from records import child_seed
-from stack.apps.demonstrations import demonstrations_summary, start_from_demonstrations
-from stack.apps.train_model import (
-    Checkpoints,
+from stack.core.config import RunConfig, load_config, write_config
+from stack.core.decision_env import HierarchicalHighwayEnv
+from stack.training.checkpoint import Checkpoint, DqnCounters, TabularCounters, read_checkpoint
+from stack.training.demonstrations import demonstrations_used, start_from_demonstrations
+from stack.training.envs import (
     EnvWorkerDied,
     StopTraining,
-    build_dqn,
     close_env,
-    initial_model,
-    model_metadata,
     monitored_env,
     stop_signals,
-    warm_start,
     worker_death,
     worker_env,
 )
-from stack.apps.train_report import write_training_summary
-from stack.apps.train_state import dqn_state, restore_dqn_state, restore_tabular_state, tabular_state
-from stack.core.config import RunConfig, load_config, write_config
-from stack.core.decision_env import HierarchicalHighwayEnv
+from stack.training.model import Checkpoints, build_dqn, initial_model, model_metadata, warm_start
+from stack.training.report import write_training_summary
+from stack.training.state import dqn_state, restore_dqn_state, restore_tabular_state, tabular_state
+from stack.training.summary import TrainSummary
 
 BEST = "best.npz"
 FINAL = "final.npz"
 
-SaveModel = Callable[[Any, Path, dict], Path]
+SaveModel = Callable[[Any, Path, ModelMetadata], Path]
 """`export_q_network` or `save_q_table`: (model, path, metadata) -> the file written."""
 
 
@@ -84,10 +86,10 @@ class Trainer:
         config = load_config(Path(out) / "config.yaml", train__steps=steps)
         return cls(config, out, progress)
 
-    def metadata(self, steps: int) -> dict:
+    def metadata(self, steps: int) -> ModelMetadata:
         return model_metadata(self.config, self.validation_env, steps)
 
-    def run(self) -> dict:
+    def run(self) -> TrainSummary:
         """Train to `train.steps`, or until SIGINT / SIGTERM (a checkpoint first), and write the
         summary; further signals only wait for the files. A dead env worker: `EnvWorkerDied`."""
         self.out.mkdir(parents=True, exist_ok=True)
@@ -119,7 +121,7 @@ class Trainer:
 
     def _improved(self, save: SaveModel) -> Callable[[Any, Validation], None]:
         def on_improvement(model: Any, validation: Validation) -> None:
-            save(model, self.out / BEST, {**self.metadata(validation.step), "validation": asdict(validation)})
+            save(model, self.out / BEST, replace(self.metadata(validation.step), validation=validation))
 
         return on_improvement
 
@@ -154,13 +156,14 @@ class Trainer:
         if resumed:
             arrays, metadata = self._checkpoint()
             try:
-                callbacks.append(restore_dqn_state(self.model, arrays, metadata["counters"]))
+                checkpoint = read_checkpoint(metadata, DqnCounters)
+                callbacks.append(restore_dqn_state(self.model, arrays, checkpoint.counters))
             except (KeyError, RuntimeError, ValueError, TypeError) as error:
                 message = str(error).splitlines()[0][:120] if str(error) else type(error).__name__
                 raise ModelFileError(
                     f"{self.out / CHECKPOINT}: does not fit this run's model ({message})"
                 ) from None
-            self._restore_common(metadata)
+            self._restore_common(checkpoint)
         elif self.start is not None:
             warm_start(self.model, self.start)
         self.validation = self._validation_callback(export_q_network)
@@ -197,10 +200,11 @@ class Trainer:
         if (self.out / CHECKPOINT).is_file():
             arrays, metadata = self._checkpoint()
             try:
-                observation = restore_tabular_state(self.model, self.env, arrays, metadata["counters"])
+                tabular = read_checkpoint(metadata, TabularCounters)
+                observation = restore_tabular_state(self.model, self.env, arrays, tabular.counters)
             except (KeyError, ValueError, TypeError) as error:
                 raise ModelFileError(f"{self.out / CHECKPOINT}: does not fit this run ({error})") from None
-            self._restore_common(metadata)
+            self._restore_common(tabular)
         validation = self._validation_callback(save_q_table)
         validation.model = self.model
 
@@ -219,13 +223,14 @@ class Trainer:
         return self._save_checkpoint()
 
     # --- shared -------------------------------------------------------------------------------
-    def _checkpoint(self) -> tuple[dict, dict]:
-        """The run's checkpoint, refused in one line (ModelFileError) unless it is one."""
+    def _checkpoint(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """The run's checkpoint file (arrays, metadata), refused in one line (ModelFileError)
+        unless it is one."""
         return load_checkpoint(self.out / CHECKPOINT)
 
-    def _restore_common(self, metadata: dict) -> None:
-        self.history, self.best = RealTimeValidation.restore(metadata["validation"])
-        self.elapsed_before = metadata.get("elapsed_s", 0.0)
+    def _restore_common(self, checkpoint: Checkpoint[DqnCounters] | Checkpoint[TabularCounters]) -> None:
+        self.history, self.best = RealTimeValidation.restore(checkpoint.validation)
+        self.elapsed_before = checkpoint.elapsed_s
 
     def _elapsed(self) -> float:
         return self.elapsed_before + time.perf_counter() - self.started
@@ -234,28 +239,33 @@ class Trainer:
         """Write everything needed to resume; returns the steps done."""
         if not hasattr(self, "model"):
             return 0
-        if isinstance(self.model, QLearning):
-            assert isinstance(self.env, Monitor), "tabular training steps one env"
-            arrays, counters = tabular_state(self.model, self.env)
-        else:
-            arrays, counters = dqn_state(self.model)
         validation = getattr(self, "validation", None)
         state = validation.state() if validation else {"best": None, "history": []}
-        save_model(
-            self.out / CHECKPOINT,
-            arrays,
-            {"kind": "checkpoint", "counters": counters, "validation": state, "elapsed_s": self._elapsed()},
-        )
-        return counters["num_timesteps"]
+        checkpoint: Checkpoint[DqnCounters] | Checkpoint[TabularCounters]
+        if isinstance(self.model, QLearning):
+            assert isinstance(self.env, Monitor), "tabular training steps one env"
+            arrays, tabular = tabular_state(self.model, self.env)
+            checkpoint = Checkpoint(tabular, state, self._elapsed())
+        else:
+            arrays, dqn = dqn_state(self.model)
+            checkpoint = Checkpoint(dqn, state, self._elapsed())
+        save_model(self.out / CHECKPOINT, arrays, checkpoint.to_json())
+        return checkpoint.counters.num_timesteps
 
-    def _finish(self, steps: int, interrupted: bool) -> dict:
+    def _finish(self, steps: int, interrupted: bool) -> TrainSummary:
         if steps and not interrupted:
             if isinstance(self.model, QLearning):
                 save_q_table(self.model, self.out / FINAL, self.metadata(steps))
             else:
                 export_q_network(self.model, self.out / FINAL, self.metadata(steps))
         history = self.validation.history if hasattr(self, "validation") else self.history
-        run: dict[str, object] = {"steps": steps, "wall_time_s": round(self._elapsed(), 1)}
-        run["interrupted"] = interrupted
-        run |= demonstrations_summary(self.config, getattr(self, "model", None))
-        return write_training_summary(self.config, self.out, history, run, self.out / BEST)
+        return write_training_summary(
+            self.config,
+            self.out,
+            history,
+            self.out / BEST,
+            steps=steps,
+            wall_time_s=round(self._elapsed(), 1),
+            interrupted=interrupted,
+            demonstrations=demonstrations_used(self.config, getattr(self, "model", None)),
+        )

@@ -1,0 +1,93 @@
+"""What a model file says about its model (`planner.model_file`'s JSON metadata member) as one
+typed record: written by the trainer, read by every loader, its JSON keys those of every file
+written so far (the shipped models and old run folders load as they are)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any, Literal
+
+from planner.scores import Validation
+from records import N_ACTIONS, Encoding, GridConfig
+
+ModelKind = Literal["mlp", "qtable"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class ModelMetadata:
+    """`kind` (a Q-network `mlp` or a Q-`qtable`), the `algorithm` that trained it, the
+    `encoding` and `grid` of the observations it takes (`observation_size` values), its `actions`
+    and `hidden` layer widths, the `network` size name, the `lanes_count` of the road it trained
+    on, the `trained_steps`, the training `seed` and the `validation` that kept it. Only `kind`,
+    `grid` and, for a Q-network, the sizes are needed to use it (`planner.model_check` checks
+    them); the rest describes where it came from and is None in a file that does not say."""
+
+    kind: ModelKind
+    algorithm: str | None = None
+    encoding: Encoding = "tabular"
+    observation_size: int | None = None
+    actions: int = N_ACTIONS
+    hidden: tuple[int, ...] = ()
+    network: str | None = None
+    grid: GridConfig
+    lanes_count: int | None = None
+    trained_steps: int | None = None
+    seed: int | None = None
+    validation: Validation | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The metadata member's keys in the order drivestack has always written them; a field
+        that is None is left out."""
+        data = {
+            "kind": self.kind,
+            "algorithm": self.algorithm,
+            "encoding": self.encoding,
+            "observation_size": self.observation_size,
+            "actions": self.actions,
+            "hidden": list(self.hidden),
+            "network": self.network,
+            "grid": self.grid.model_dump(mode="json"),
+            "lanes_count": self.lanes_count,
+            "trained_steps": self.trained_steps,
+            "seed": self.seed,
+            "validation": asdict(self.validation) if self.validation is not None else None,
+        }
+        return {key: value for key, value in data.items() if value is not None}
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> ModelMetadata:
+        """The record of metadata `planner.model_check` has checked (kind, encoding, grid and a
+        Q-network's sizes); a descriptive field of another type than its own reads as None."""
+        hidden = data.get("hidden")
+        return cls(
+            kind=data["kind"],
+            algorithm=_typed(data, "algorithm", str),
+            encoding=data.get("encoding", "tabular"),
+            observation_size=_typed(data, "observation_size", int),
+            actions=_typed(data, "actions", int) or N_ACTIONS,
+            hidden=tuple(hidden) if isinstance(hidden, list) and _all_int(hidden) else (),
+            network=_typed(data, "network", str),
+            grid=GridConfig.model_validate(data["grid"]),
+            lanes_count=_typed(data, "lanes_count", int),
+            trained_steps=_typed(data, "trained_steps", int),
+            seed=_typed(data, "seed", int),
+            validation=_validation(data.get("validation")),
+        )
+
+
+def _typed(data: dict[str, Any], key: str, kind: type) -> Any:
+    value = data.get(key)
+    return value if isinstance(value, kind) and not isinstance(value, bool) else None
+
+
+def _all_int(values: list[Any]) -> bool:
+    return all(isinstance(value, int) and not isinstance(value, bool) for value in values)
+
+
+def _validation(data: object) -> Validation | None:
+    if not isinstance(data, dict):
+        return None
+    try:
+        return Validation.from_json(data)
+    except (TypeError, ValueError, AttributeError):
+        return None

@@ -1,0 +1,60 @@
+"""What a training run checks before anything is allocated: that its replay buffer, and the
+demonstrations recorded beside it, fit in the memory there is (numbers only: the command that
+starts the run says it, `stack.apps.training`)."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from stack.core.config import RunConfig
+
+MEMORY_SHARE = 0.8
+"""The share of the available memory a run may plan to take."""
+
+
+def transition_bytes(config: RunConfig) -> int:
+    """Memory one stored transition takes [bytes]: its observation and next observation (float32)
+    plus action, reward, done and timeout (or discount)."""
+    from perception.grid import OccupancyGridBuilder
+    from stack.core.config import grid_config
+
+    grid = OccupancyGridBuilder(grid_config(config))
+    size = math.prod(grid.space(config.train.encoding, config.highway.lanes_count).shape)
+    return 2 * 4 * size + 8 + 4 + 4 + 4
+
+
+def replay_buffer_bytes(config: RunConfig) -> int:
+    """Memory SB3's replay buffer takes for `config` [bytes]."""
+    return config.train.buffer_size * transition_bytes(config)
+
+
+def demonstrations_bytes(config: RunConfig) -> int:
+    """Memory `train.demonstrations` take at most while recorded [bytes]: every episode's decisions
+    (episode length / decision period), twice (the episodes and their concatenation)."""
+    if (demonstrations := config.train.demonstrations) is None:
+        return 0
+    decisions = math.ceil(config.highway.duration / config.decision_period_s)
+    return 2 * demonstrations.episodes * decisions * transition_bytes(config)
+
+
+def memory_refusal(config: RunConfig, available: int | None) -> str | None:
+    """One line naming the key whose memory does not fit in `available` bytes (None: unknown),
+    or None when the run fits (a tabular run keeps no buffer)."""
+    if config.train.algorithm == "tabular" or available is None:
+        return None
+    buffer, demonstrations = replay_buffer_bytes(config), demonstrations_bytes(config)
+    if buffer > MEMORY_SHARE * available:
+        return (
+            f"train.buffer_size: {config.train.buffer_size} transitions need {buffer / 2**30:.1f} GB; "
+            f"{available / 2**30:.1f} GB of memory is available"
+        )
+    if buffer + demonstrations > MEMORY_SHARE * available:
+        episodes = config.train.demonstrations.episodes  # type: ignore[union-attr]
+        return (
+            f"train.demonstrations.episodes: {episodes} episodes need {demonstrations / 2**30:.1f} GB "
+            f"beside the replay buffer's {buffer / 2**30:.1f} GB; {available / 2**30:.1f} GB of memory "
+            "is available"
+        )
+    return None

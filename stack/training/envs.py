@@ -1,0 +1,88 @@
+"""The environments a training run steps and their processes: the monitored decision MDP, its
+worker processes, what ends them (SIGINT / SIGTERM with a checkpoint first, a dead worker) and
+how they are closed."""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import VecEnv
+
+from planner.model_file import CHECKPOINT
+from stack.core.config import RunConfig
+from stack.core.decision_env import HierarchicalHighwayEnv
+from stack.core.interrupts import note_stop
+
+
+class StopTraining(Exception):
+    """Raised once a requested stop has its checkpoint written."""
+
+
+STOPPING = "stopping: the checkpoint is written after the current step (further signals wait for it)"
+
+
+@contextmanager
+def stop_signals(handler: Callable[[int, Any], None]) -> Iterator[None]:
+    """SIGINT and SIGTERM call `handler` inside the block (the command then exits 130, and says
+    that it stops); only in the main thread, where Python delivers signals (a sweep's trial trains
+    in a worker thread and Ray Tune stops it)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def noted(signum: int, frame: Any) -> None:
+        note_stop()
+        print(STOPPING, file=sys.stderr)
+        handler(signum, frame)
+
+    previous = {sig: signal.signal(sig, noted) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def monitored_env(config: RunConfig) -> Monitor:
+    """The training env (SB3's `Monitor` keeps episode returns for the logs)."""
+    return Monitor(HierarchicalHighwayEnv(config))
+
+
+def worker_env(config: RunConfig) -> Monitor:
+    """The training env in a worker process, deaf to Ctrl-C: the learner stops the run (with a
+    checkpoint) and closes the workers itself."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return monitored_env(config)
+
+
+class EnvWorkerDied(RuntimeError):
+    """A training env worker process died; the message is one line for the user."""
+
+
+def worker_death(env: object, out: Path, error: BaseException) -> str:
+    """One line: that an env worker of `env` died, how, and what the run in `out` keeps."""
+    codes = [p.exitcode for p in getattr(env, "processes", []) if p.exitcode not in (None, 0)]
+    how = f" (exit code {codes[0]})" if codes else f" ({type(error).__name__})"
+    kept = (
+        f"its last checkpoint ({out / CHECKPOINT}) is kept: --resume {out} continues from it"
+        if (out / CHECKPOINT).is_file()
+        else "no checkpoint was written yet: start the run again"
+    )
+    return f"a training environment process died{how}; {kept}"
+
+
+def close_env(env: Monitor | VecEnv) -> None:
+    """Close `env` and its worker processes, also when one of them is dead."""
+    try:
+        env.close()
+    except (EOFError, OSError):
+        for process in getattr(env, "processes", []):
+            process.kill()
+            process.join(timeout=10)
