@@ -121,6 +121,8 @@ INCIDENT_AHEAD_M = (150.0, 350.0)
 """Where a random world's stopped car stands ahead of the ego at spawn [m]."""
 INCIDENT_LENGTH_M = 5.0
 """A random world's stopped car's length [m]."""
+SLOWEST_TRUCK_MPS = 2.0
+"""The lowest desired speed a random world's trucks are given [m/s]."""
 
 
 def random_traffic(rng: np.random.Generator, ranges: dict[str, Any]) -> dict[str, Any]:
@@ -134,7 +136,7 @@ def random_traffic(rng: np.random.Generator, ranges: dict[str, Any]) -> dict[str
     car_low = draw("car_speed_mps")
     car_speeds = [car_low, car_low + draw("car_spread_mps")]
     slower = draw("truck_slower_mps")
-    truck_speeds = [max(speed - slower, 2.0) for speed in car_speeds]
+    truck_speeds = [max(speed - slower, SLOWEST_TRUCK_MPS) for speed in car_speeds]
     trucks_change_lane = bool(rng.random() < ranges["trucks_change_lane"])
     truck_share = draw("truck_share")
     car: dict[str, Any] = {
