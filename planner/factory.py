@@ -15,21 +15,8 @@ SHIPPED_MODELS: dict[str, Path] = {name: MODELS / f"{name}.npz" for name in ("dd
 """The model each learned agent loads without --model, trained by
 `drivestack train --config configs/train/NAME.yaml` (NAME: ddqn, dqn, tabular)."""
 
-HIGHWAY_ENV_TRAFFIC = ("highway-v0", "dense", "lanes-3", "lanes-5")
-"""The scenarios that keep highway-env's own traffic (its spawn behind a platoon), only denser or on
-another lane count."""
-
-SCENARIO_MODELS: dict[tuple[str, str], Path] = {
-    ("ddqn", scenario): MODELS / "ddqn-highway.npz" for scenario in HIGHWAY_ENV_TRAFFIC
-}
-"""Shipped models that replace SHIPPED_MODELS on one scenario: (agent, scenario) -> file. The
-Double DQN's highway-v0 model (the mix model pre-trained on MOBIL's decisions and fine-tuned on
-highway-v0 by configs/train/ddqn-highway.yaml) drives all of highway-env's own traffic: on selection
-seeds it beat the mix model on each of those scenarios (BENCHMARKS.md)."""
-
-
 AGENT_DESCRIPTIONS: dict[str, str] = {
-    "ddqn": "Double DQN (the paper's best, the default); the shipped model (its own on highway-env's "
+    "ddqn": "Double DQN (the paper's best, the default); the shipped model (one for every road and "
     "traffic) unless --model",
     "dqn": "DQN; the shipped small model unless --model",
     "tabular": "tabular Q-learning on the paper's tabular state; the shipped table unless --model",
@@ -48,12 +35,11 @@ def make_agent(
     grid: GridConfig,
     seed: int = 0,
     model: Path | str | None = None,
-    scenario: str | None = None,
 ) -> Agent:
     """Build the agent `name` for a road of `lanes` lanes seen through `grid`; learned agents load
-    `model` (by default the shipped one, for `scenario` where one is shipped for it). Any other
-    name is a plug-in (`planner.plugins`), given `model` if it takes one."""
-    if (path := model_path(name, model, scenario)) is not None:
+    `model` (by default the shipped one). Any other name is a plug-in (`planner.plugins`), given
+    `model` if it takes one."""
+    if (path := model_path(name, model)) is not None:
         from planner.learned import load_agent
 
         return load_agent(path, expected_algorithms=(name,))
@@ -73,12 +59,12 @@ def make_agent(
     return plugin_agent(name, lanes, grid, seed, model)
 
 
-def model_path(name: str, model: Path | str | None, scenario: str | None = None) -> Path | None:
-    """The model file the agent `name` loads: `model`, else the one shipped for `scenario`, else
-    the shipped one (None for agents without a model)."""
+def model_path(name: str, model: Path | str | None) -> Path | None:
+    """The model file the agent `name` loads: `model`, else the shipped one (None for agents
+    without a model)."""
     if name not in LEARNED_AGENTS:
         return None
-    return Path(model or SCENARIO_MODELS.get((name, scenario or ""), SHIPPED_MODELS[name]))
+    return Path(model or SHIPPED_MODELS[name])
 
 
 def model_label(path: Path | None) -> str | None:

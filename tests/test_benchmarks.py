@@ -42,6 +42,7 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
     training = yaml.safe_load((ROOT / "configs" / "train" / "ddqn.yaml").read_text())
     training |= {"scenario": None, "highway": {"vehicles_count": 10, "duration": 3}}
     training["train"] |= {"envs": 1, "learning_starts": 10, "scenarios": {}, "checkpoint_every": 20}
+    del training["train"]["init_model"]
     training["train"]["validation"] |= {"short_every": 20, "short_episodes": 1, "long_episodes": 1}
     (tmp_path / "train.yaml").write_text(yaml.safe_dump(training))
     ablation = run(

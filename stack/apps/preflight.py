@@ -25,7 +25,7 @@ def checked_run(
 
     for config in configs:
         try:
-            if (path := model_path(config.planner.agent, config.planner.model, config.scenario)) is not None:
+            if (path := model_path(config.planner.agent, config.planner.model)) is not None:
                 _, metadata = checked_model(path, (config.planner.agent,))
                 if metadata.kind == "mlp" and metadata.observation_size is not None:
                     lanes = config.highway.lane_counts

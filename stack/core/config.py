@@ -251,8 +251,15 @@ def read_mapping(path: Path | str) -> dict[str, Any]:
 
 
 def load_config(path: Path | str, labels: dict[str, str] | None = None, **overrides: Any) -> RunConfig:
-    """Read a YAML run config, apply CLI overrides, validate; raise ConfigError on any problem."""
-    return build_config(read_mapping(path), str(path), labels, **overrides)
+    """Read a YAML run config, apply CLI overrides, validate; raise ConfigError on any problem. A
+    relative `train.init_model` in the file that names a file beside it is that file, so a packaged
+    training config finds its starting model from any working directory."""
+    data = read_mapping(path)
+    train = data.get("train")
+    if isinstance(train, dict) and isinstance(start := train.get("init_model"), str):
+        if (beside := Path(path).parent / start).is_file():
+            train["init_model"] = str(beside.resolve())
+    return build_config(data, str(path), labels, **overrides)
 
 
 def grid_config(config: RunConfig) -> GridConfig:

@@ -30,8 +30,8 @@ def build_agent(config: RunConfig, seed: int) -> Agent:
     for a missing, unsafe or mismatched model file."""
     planner, lanes = config.planner, config.highway.lanes_count
     if planner.agent == "oracle":
-        return Oracle.for_road(planner.oracle, lanes, grid_config(config), config.scenario)
-    path = model_path(planner.agent, planner.model, config.scenario)
+        return Oracle.for_road(planner.oracle, lanes, grid_config(config))
+    path = model_path(planner.agent, planner.model)
     agent = make_agent(planner.agent, lanes, grid_config(config), seed, path or planner.model)
     expected = getattr(agent, "observation_size", None)
     grid = agent.grid_config or grid_config(config)
@@ -105,7 +105,7 @@ def kept_agent(config: RunConfig, seed: int) -> Agent:
     process's cache while its model file is unchanged: the seed does not reach it."""
     planner = config.planner
     learned = planner.agent if planner.agent != "oracle" else planner.oracle.base
-    path = model_path(learned, planner.model if planner.agent != "oracle" else None, config.scenario)
+    path = model_path(learned, planner.model if planner.agent != "oracle" else None)
     if learned not in LEARNED_AGENTS or path is None:
         return build_agent(config, seed)
     try:
@@ -180,7 +180,7 @@ def run(
         ordered,
         scenario=config.scenario,
         agent=config.planner.agent,
-        model=model_label(model_path(config.planner.agent, config.planner.model, config.scenario)),
+        model=model_label(model_path(config.planner.agent, config.planner.model)),
         controller=config.controller.type,
         backend=config.sim.backend,
         plant=config.sim.plant,

@@ -91,7 +91,7 @@ def tracking(
     )
 
 
-@dataclass
+@dataclass(frozen=True)
 class EpisodeResult:
     """One closed-loop episode; `trace` holds per-tick time [s], speed [m/s] and lateral offset [m]."""
 

@@ -47,11 +47,9 @@ class Oracle(Policy):
         self.view = OccupancyGridBuilder(base.grid_config) if base.grid_config is not None else None
 
     @classmethod
-    def for_road(
-        cls, config: OracleConfig, lanes: int, grid: GridConfig, scenario: str | None = None
-    ) -> Oracle:
-        """The oracle whose base policy is `config.base` as built for this road and scenario."""
-        return cls(config, make_agent(config.base, lanes, grid, scenario=scenario))
+    def for_road(cls, config: OracleConfig, lanes: int, grid: GridConfig) -> Oracle:
+        """The oracle whose base policy is `config.base` as built for this road."""
+        return cls(config, make_agent(config.base, lanes, grid))
 
     def choose(self, observation: np.ndarray) -> Action:
         raise TypeError("the oracle plans on copies of the simulator: call plan(loop), not predict")

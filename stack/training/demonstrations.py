@@ -31,7 +31,7 @@ def expert_policy(world: RunConfig, expert_name: str) -> Callable[[ClosedLoop], 
     grid), a policy decides on its own view of what the controllers act on (the sensor's report)."""
     lanes, grid = world.highway.lanes_count, grid_config(world)
     if expert_name == "oracle":
-        oracle = Oracle.for_road(world.planner.oracle, lanes, grid, world.scenario)
+        oracle = Oracle.for_road(world.planner.oracle, lanes, grid)
         return lambda loop: oracle.plan(loop).value
     expert = make_agent(expert_name, lanes, grid)
     view = OccupancyGridBuilder(expert.grid_config or grid)
