@@ -51,15 +51,13 @@ def check_jobs(jobs: int) -> None:
 
 
 def check_init_model(config: RunConfig) -> None:
-    """Refuse, before the run folder exists, a `train.init_model` that does not fit the run (torch
-    and SB3 are imported only when there is one to check)."""
-    if config.train.init_model is None:
-        return
+    """Refuse, before the run folder exists and before torch is imported, a `train.init_model`
+    that does not fit the run."""
     from planner.model_file import ModelFileError
-    from stack.training.model import initial_model
+    from stack.core.model_fit import checked_start_model
 
     try:
-        initial_model(config)
+        checked_start_model(config)
     except ModelFileError as error:
         fail(str(error))
 

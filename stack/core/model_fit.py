@@ -1,14 +1,18 @@
 """Whether a Q-network model can drive a road: the one check of a model file against the road it is
 to drive, made by every command that takes a model (`run` and `compare` from the file's metadata
-before torch is imported, every agent as built, `train.init_model`, `export`)."""
+before torch is imported, every agent as built, `train.init_model` before torch too, `export`)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from perception.grid import OccupancyGridBuilder
+from planner.factory import model_path
+from planner.model_check import checked_model
 from planner.model_file import ModelFileError
+from planner.networks import net_arch
 from records import Encoding, GridConfig
+from stack.core.config import RunConfig, grid_config
 
 
 def check_road_fit(
@@ -31,3 +35,26 @@ def check_road_fit(
                 f"on this {count}-lane road"
             )
             raise ModelFileError(f"{option}: {why}" if option else why)
+
+
+def checked_start_model(config: RunConfig) -> Path | None:
+    """The DDQN / DQN file `train.init_model` names (`shipped`: the algorithm's shipped model), None
+    without one; refused (ModelFileError, one line) unless it takes this run's observations through
+    this run's network on every road of the run: from the file's metadata and arrays alone, before
+    torch is imported."""
+    train = config.train
+    if train.init_model is None:
+        return None
+    path = model_path(train.algorithm, None if train.init_model == "shipped" else train.init_model)
+    assert path is not None, "init_model is refused for tabular runs"
+    metadata = checked_model(path, ("ddqn", "dqn"))[1]
+    assert metadata.observation_size is not None, "DDQN / DQN files hold Q-networks"
+    grid = grid_config(config)
+    theirs = (metadata.encoding, metadata.grid, list(metadata.hidden))
+    ours = (train.encoding, grid, net_arch(train.network))
+    for field, their, our in zip(("encoding", "grid", "hidden layers"), theirs, ours, strict=True):
+        if their != our:
+            raise ModelFileError(f"train.init_model: {path} has {field} {their}, this run needs {our}")
+    lanes = config.highway.lane_counts
+    check_road_fit(path, grid, metadata.encoding, metadata.observation_size, lanes, "train.init_model")
+    return path

@@ -16,16 +16,14 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv
 
 from planner.ddqn import DoubleDQN
-from planner.factory import model_path
 from planner.learned import LearnedAgent, load_agent
-from planner.model_file import ModelFileError
 from planner.model_metadata import ModelMetadata
 from planner.networks import net_arch
 from records import N_ACTIONS
 from stack.core.closed_loop import grid_config
 from stack.core.config import RunConfig
 from stack.core.decision_env import HierarchicalHighwayEnv
-from stack.core.model_fit import check_road_fit
+from stack.core.model_fit import checked_start_model
 from stack.training.envs import StopTraining
 
 ALGORITHMS: dict[str, type[DQN]] = {"ddqn": DoubleDQN, "dqn": DQN}
@@ -116,24 +114,12 @@ def model_metadata(config: RunConfig, env: HierarchicalHighwayEnv, trained_steps
 
 
 def initial_model(config: RunConfig) -> LearnedAgent | None:
-    """The Q-network `train.init_model` names, checked against the run before any episode: a DDQN /
-    DQN file with this run's encoding, grid, observation size and hidden layers; ModelFileError
-    (one line) otherwise."""
-    train = config.train
-    if train.init_model is None:
+    """The Q-network `train.init_model` names, checked against the run before any episode
+    (`checked_start_model`); None without one."""
+    if (path := checked_start_model(config)) is None:
         return None
-    path = model_path(train.algorithm, None if train.init_model == "shipped" else train.init_model)
-    assert path is not None, "init_model is refused for tabular runs"
     agent = load_agent(path, expected_algorithms=("ddqn", "dqn"))
     assert isinstance(agent, LearnedAgent), "DDQN / DQN files hold Q-networks"
-    theirs = (agent.encoding, agent.grid_config, list(agent.metadata.hidden))
-    grid = grid_config(config)
-    ours = (train.encoding, grid, net_arch(train.network))
-    for field, their, our in zip(("encoding", "grid", "hidden layers"), theirs, ours, strict=True):
-        if their != our:
-            raise ModelFileError(f"train.init_model: {path} has {field} {their}, this run needs {our}")
-    lanes = config.highway.lane_counts
-    check_road_fit(path, grid, agent.encoding, agent.observation_size, lanes, "train.init_model")
     return agent
 
 
