@@ -4,11 +4,13 @@ the tiny networks' steps several times slower (a pre-training test: 45 s -> 4 s)
 test module imports torch; subprocesses inherit it. Results do not depend on it."""
 
 import os
+import signal
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import pytest
 
+from stack.core import interrupts
 from stack.core.config import build_config
 
 
@@ -19,3 +21,14 @@ def tiny_config():
         {"episodes": 1, "highway": {"vehicles_count": 15, "duration": 8}},
         "tiny",
     )
+
+
+@pytest.fixture
+def own_handlers():
+    """The test process's SIGINT and SIGTERM handlers and the interrupt state
+    (`stack.core.interrupts`), put back after a test that sends itself signals."""
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    yield
+    interrupts.catch_signals()
+    for sig, handler in saved.items():
+        signal.signal(sig, handler)

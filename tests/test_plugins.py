@@ -141,6 +141,38 @@ def test_a_relative_file_agent_gives_the_same_results_over_two_processes(user_fi
     assert first[0]["agent"] == f"{user_files}/my_agent.py:LeftWhenBlocked"
 
 
+WORKER_ONLY_FAILURE = """import multiprocessing
+import sys
+
+if multiprocessing.current_process().name != "MainProcess" or sys.argv[0].endswith("default_worker.py"):
+    raise ImportError("no module named 'lidar_driver' on this worker")
+
+"""
+
+
+PLUGIN_AGENT, PLUGIN_CONTROLLER = EXAMPLES / "plugin_agent.py", EXAMPLES / "plugin_controller.py"
+
+
+def fails_on_workers(folder: Path, example: Path = PLUGIN_AGENT, name: str = "LeftWhenBlocked") -> str:
+    """The spec of an example plug-in that imports here but raises on a `--jobs` process or a Ray
+    worker, as when a library it needs is missing there."""
+    path = folder / f"worker_fails_{example.stem}.py"
+    path.write_text(WORKER_ONLY_FAILURE + example.read_text())
+    return f"{path}:{name}"
+
+
+def test_a_plug_in_that_a_worker_process_cannot_load_is_one_line(tmp_path):
+    """Every plug-in is checked here before any episode; one that still fails where the episodes run
+    is one line naming it and why, exit code 2 (was: internal error, exit 1)."""
+    out = tmp_path / "out"
+    arguments = ["run", "--agent", fails_on_workers(tmp_path), "--episodes", "2", "--jobs", "2"]
+    result = invoke(*arguments, *TINY, "--out", str(out))
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: a worker could not load a plug-in"), lines
+    assert "LeftWhenBlocked: importing it failed: ImportError: no module named 'lidar_driver'" in lines[0]
+
+
 def test_a_file_controller_runs_in_run_and_track(user_files, tmp_path):
     spec = f"{user_files}/my_controller.py:HeadingPD"
     run = invoke(

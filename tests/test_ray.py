@@ -5,9 +5,12 @@ before any work."""
 
 import csv
 import json
+import os
 import shutil
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -16,8 +19,10 @@ from typer.testing import CliRunner
 
 from stack.apps.cli import app
 from stack.apps.options import bare_ray_as_local
+from stack.core import interrupts, ray_tasks
 from stack.core.metrics import outcome
-from stack.core.ray_tasks import import_path, worker_call
+from stack.core.ray_tasks import connect, import_path, worker_call
+from tests.test_plugins import PLUGIN_CONTROLLER, fails_on_workers
 from tests.test_train import TINY
 
 ray = pytest.importorskip("ray")
@@ -101,6 +106,58 @@ def test_plug_ins_from_outside_the_repository_give_the_same_results_on_ray(tmp_p
     assert run.exit_code == 0, run.output
     mobil = [{k: v for k, v in row.items() if k != "agent"} for row in episodes[0][2:]]
     assert episode_rows(tmp_path / "run" / "episodes.csv") == mobil
+
+
+def test_a_plug_in_that_a_ray_worker_cannot_load_is_one_line(tmp_path, local_ray):
+    """A plug-in checked here that raises on the Ray workers: the plug-in's one-line error, exit code
+    2, instead of the worker's traceback in a RayTaskError (exit 1)."""
+    arguments = ["run", "--agent", fails_on_workers(tmp_path), "--episodes", "2", *TINY_RUN]
+    result = invoke(*arguments, "--ray", "local", "--out", str(tmp_path / "out"))
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: a worker could not load a plug-in"), lines
+    assert "LeftWhenBlocked: importing it failed: ImportError: no module named 'lidar_driver'" in lines[0]
+
+
+@pytest.mark.slow
+def test_a_plug_in_controller_no_ray_worker_can_load_ends_compare_in_one_line(tmp_path):
+    """The command line as a user runs it (its own local Ray instance): every episode's task fails,
+    the first is the one line on stderr; Ray prints nothing of the others (its unhandled errors)."""
+    controller = fails_on_workers(tmp_path, PLUGIN_CONTROLLER, "HeadingPD")
+    arguments = ["compare", "--agents", "keep-lane,mobil", "--set", f"controller.type={controller}"]
+    done = subprocess.run(
+        [sys.executable, "-m", "stack", *arguments, "--episodes", "2", *TINY_RUN, "--ray", "local"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+        env={name: value for name, value in os.environ.items() if name not in ray_tasks.QUIET},
+    )
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith("error: a worker could not load a plug-in") and done.stderr.count("\n") == 1
+    assert "HeadingPD: importing it failed: ImportError: no module named 'lidar_driver'" in done.stderr
+
+
+def test_a_stop_while_ray_starts_waits_for_the_start_then_stops_the_command(monkeypatch, own_handlers):
+    """A SIGTERM while `ray.init` runs meets the command's handler, not the one Ray installs (an exit
+    wherever the signal finds it, whose half-started core worker then crashed the exit): the stop
+    waits for the start, then ends the command like any stop (KeyboardInterrupt)."""
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(ray_tasks, "watch_descendants", lambda: None)
+    started = []
+
+    def stopped_while_starting(**_):
+        ray._private.utils.set_sigterm_handler(lambda *_: sys.exit(15))  # as ray.init does
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.1)
+        started.append(True)
+
+    monkeypatch.setattr(ray, "init", stopped_while_starting)
+    interrupts.catch_signals()
+    with pytest.raises(KeyboardInterrupt):
+        connect("local")
+    assert started == [True] and interrupts.received()
+    assert signal.getsignal(signal.SIGTERM) is interrupts._handler
 
 
 def test_a_ray_task_appends_the_import_path_entries_its_worker_lacks(monkeypatch):

@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 from stack.apps import track as track_module
 from stack.apps.cli import app
 from stack.apps.run import undrawn
-from stack.core import episodes, executors, interrupts
+from stack.core import episodes, executors, interrupts, watchdog
 from stack.core.files import EpisodeJournal, replacing, write_text
 from stack.core.metrics import outcome
 from tests.test_cli import tiny_config_file
@@ -163,6 +163,14 @@ def alive(pid: int) -> bool:
         return False
 
 
+def outliving(pids: list[int], within_s: float = 10) -> list[int]:
+    """The processes of `pids` still alive `within_s` seconds from now (or as soon as none is)."""
+    deadline = time.monotonic() + within_s
+    while any(alive(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return [pid for pid in pids if alive(pid)]
+
+
 def started_with_workers(arguments: list[str], journal: Path, **popen: object) -> subprocess.Popen:
     """`drivestack ARGUMENTS` started, returned once `journal` holds an episode (its workers run)."""
     process = subprocess.Popen(
@@ -184,10 +192,7 @@ def test_pool_workers_end_when_their_driver_is_killed(tmp_path):
     assert workers, "the run has its pool"
     process.kill()
     process.communicate(timeout=30)
-    deadline = time.monotonic() + 10
-    while any(alive(worker) for worker in workers) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert not any(alive(worker) for worker in workers)
+    assert not outliving(workers)
 
 
 def test_ctrl_c_on_a_terminal_during_jobs_shows_no_worker_traceback(tmp_path):
@@ -258,3 +263,50 @@ def test_episodes_are_submitted_as_workers_free_up(monkeypatch):
     next(results)
     assert len(submitted) <= 2 * executors.QUEUED_PER_WORKER + 1
     results.close()
+
+
+def test_work_that_stops_itself_is_asked_once_and_later_signals_wait(own_handlers, capsys):
+    """`sweep`'s stop of Ray Tune's loop: the first signal asks the work to stop, later ones only say
+    so; before the work can be asked, or after a stop that waited, the stop is a KeyboardInterrupt."""
+    interrupts.catch_signals()
+    asked = []
+    with interrupts.stopped_by(lambda: asked.append(1) or True):
+        os.kill(os.getpid(), signal.SIGTERM)
+        os.kill(os.getpid(), signal.SIGINT)
+        os.kill(os.getpid(), signal.SIGTERM)
+    assert asked == [1] and interrupts.received()
+    assert capsys.readouterr().err == f"{interrupts.STOPPING}\n" * 2
+    interrupts.catch_signals()
+    with pytest.raises(KeyboardInterrupt), interrupts.stopped_by(lambda: False):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)
+    assert signal.getsignal(signal.SIGTERM) is interrupts._handler
+    interrupts.catch_signals()
+    with interrupts.deferred(interrupt_after=False):
+        os.kill(os.getpid(), signal.SIGINT)
+        with pytest.raises(KeyboardInterrupt), interrupts.stopped_by(lambda: asked.append(2) or True):
+            pass
+    assert asked == [1] and interrupts.received()
+
+
+ORPHANS = """
+import subprocess, sys, time
+from stack.core.watchdog import watch_descendants
+watch_descendants()
+shell = subprocess.Popen(["sh", "-c", "sleep 600 & echo $!; wait"], stdout=subprocess.PIPE, text=True)
+print(shell.pid, shell.stdout.readline().strip(), flush=True)
+time.sleep(600)
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="reads /proc")
+def test_the_watchdog_ends_what_a_killed_command_started():
+    """A command killed by SIGKILL leaves processes that do not end with it (Ray's agents wait a
+    minute for their dead GCS): the watchdog it started kills them, here a shell and its child."""
+    process = subprocess.Popen([sys.executable, "-c", ORPHANS], stdout=subprocess.PIPE, text=True)
+    started = [int(pid) for pid in process.stdout.readline().split()]
+    assert len(started) == 2 and all(alive(pid) for pid in started)
+    time.sleep(1.5 * watchdog.PERIOD_S)
+    process.kill()
+    process.communicate(timeout=30)
+    assert not outliving(started)

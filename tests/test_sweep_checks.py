@@ -3,6 +3,7 @@ could never run and a folder it may not write are one line (exit 2) before Ray s
 anything is written."""
 
 import json
+from types import SimpleNamespace
 
 import pytest
 import yaml
@@ -89,3 +90,27 @@ def test_a_sweep_trial_folder_is_not_resumed_as_a_training_run(tmp_path):
     one_line_refusal(
         ["train", "--resume", str(trial)], "holds the results of `sweep trial`, not a training run"
     )
+
+
+class Grid(list):
+    """A stand-in for Tune's ResultGrid: its results, and Tune's records of the trials beside them."""
+
+
+def test_a_trial_stopped_before_it_reported_keeps_its_parameters_and_id():
+    """A sweep stopped while a trial had not yet reported: Tune's Result of it has no parameters and
+    no metrics (the report read `None.get`); they come from Tune's record of the trial."""
+    from stack.apps.sweep import tune_trials
+
+    reported = SimpleNamespace(metrics={"trial_id": "t_00000", "step": 40, "finished": True}, error=None)
+    stopped = SimpleNamespace(metrics={}, error=None)
+    grid = Grid([reported, stopped])
+    grid._experiment_analysis = SimpleNamespace(
+        trials=[
+            SimpleNamespace(config={"train.steps": 40}, trial_id="t_00000"),
+            SimpleNamespace(config={"train.steps": 600}, trial_id="t_00001"),
+        ]
+    )
+    assert tune_trials(grid) == [
+        ({"train.steps": 40}, reported.metrics, None),
+        ({"train.steps": 600}, {"trial_id": "t_00001"}, None),
+    ]

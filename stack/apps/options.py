@@ -167,11 +167,17 @@ AGAIN = "free space (or make the folder writable) and run the command again"
 """What to do after a write failure when nothing that finished was kept."""
 
 
+WORKER_PLUGIN = "a worker could not load a plug-in that loaded here (docs/plugins.md, Processes and Ray)"
+"""Said before the plug-in's own error when it fails in a `--jobs` process or on a Ray worker: the
+command checked every plug-in before any work, so only the worker's machine or environment differs."""
+
+
 def until_interrupted(work: Callable[[], bool], kept: Callable[[], str] = lambda: AGAIN) -> None:
     """Run `work`, which returns True when Ctrl-C cut it short with its finished part written, and
     exit 130 then; one line (and exit 130) when it was cut before anything finished. A results
     file that cannot be written (a full disk, a read-only folder) is one line (exit 2) saying
-    what was kept and how to go on (`kept`)."""
+    what was kept and how to go on (`kept`); so is a plug-in that a worker could not load."""
+    from records.plugins import PluginError
     from stack.core.files import write_failure
 
     try:
@@ -183,6 +189,8 @@ def until_interrupted(work: Callable[[], bool], kept: Callable[[], str] = lambda
         if not write_failure(error):
             raise
         fail(f"{cannot_write(error)}; {kept()}")
+    except PluginError as error:
+        fail(f"{WORKER_PLUGIN}: {error}")
     if interrupted:
         sys.exit(130)
 

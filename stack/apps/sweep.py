@@ -12,8 +12,10 @@ report of `stack.apps.sweep_report`.
 
 from __future__ import annotations
 
+import logging
 import math
 import os
+import signal
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +25,7 @@ from planner.scores import Validation
 from stack.apps.sweep_report import TRIALS, report
 from stack.core.config import write_config
 from stack.core.files import write_text
+from stack.core.interrupts import deferred, received, stopped_by
 from stack.core.owner import Owner, claim, fingerprint
 from stack.core.sweep_config import SWEEP_FILE, SweepFile, trial_config
 
@@ -85,18 +88,21 @@ def train_trial(params: dict[str, Any], folder: Path, metric: str) -> None:
 
 
 def tuner(sweep: SweepFile, folder: Path, resume: bool, progress: bool) -> Any:
-    """Tune's Tuner for the sweep in `folder`: new, or restored from folder/tune. Without
-    `progress`, Tune's console output is off (its new output engine ignores verbose=0)."""
+    """Tune's Tuner for the sweep in `folder`: new, or restored from folder/tune (new when the sweep
+    was stopped before Tune saved its state). Without `progress`, Tune's console output is off (its
+    new output engine ignores verbose=0). Tune leaves SIGINT to the command (`stop_tune`)."""
     if not progress:
         os.environ["RAY_AIR_NEW_OUTPUT"] = "0"
+    os.environ["TUNE_DISABLE_SIGINT_HANDLER"] = "1"
     from ray import tune
 
     trainable = tune.with_resources(
         tune.with_parameters(train_trial, folder=folder.resolve(), metric=sweep.metric),
         {"cpu": trial_config(folder / BASE, {}, {}).train.envs},
     )
-    if resume:
-        return tune.Tuner.restore(str((folder / TUNE).resolve()), trainable, restart_errored=True)
+    state = str((folder / TUNE).resolve())
+    if resume and tune.Tuner.can_restore(state):
+        return tune.Tuner.restore(state, trainable, restart_errored=True)
     return tune.Tuner(
         trainable,
         param_space=tune_space(sweep),
@@ -113,11 +119,46 @@ def tuner(sweep: SweepFile, folder: Path, resume: bool, progress: bool) -> Any:
     )
 
 
+def stop_tune() -> bool:
+    """Ask Ray Tune's loop to stop as its own stop signal does (the handler it installs for SIGUSR1
+    while `fit` runs): the running trials end, their run folders keep their last checkpoints, the
+    experiment state is saved and `--resume` continues the unfinished trials. False before Tune
+    listens. Tune's log lines about the stop are silenced: the report says it."""
+    handler = signal.getsignal(signal.SIGUSR1)
+    if not callable(handler):
+        return False
+    logging.getLogger("ray.tune").setLevel(logging.CRITICAL)
+    handler(signal.SIGUSR1, None)
+    return True
+
+
 def sweep_and_report(sweep: SweepFile, base: Path, folder: Path, resume: bool, progress: bool) -> bool:
     """Run (or continue) the sweep in `folder` and write its report; True when trials are left
-    unfinished (interrupted: `--resume` continues)."""
-    if not resume:
-        prepare(sweep, base, folder)
-    results = tuner(sweep, folder, resume, progress).fit()
-    trials = [(result.config, result.metrics or {}, result.error) for result in results]
-    return report(sweep, folder, trials)
+    unfinished (interrupted: `--resume` continues). The first SIGINT or SIGTERM stops Tune's loop
+    (`stop_tune`), or the sweep before any trial when it comes before Tune listens; the others
+    only wait for the report."""
+    usr1 = signal.getsignal(signal.SIGUSR1)
+    with deferred(interrupt_after=False):
+        try:
+            if not resume:
+                prepare(sweep, base, folder)
+            with stopped_by(stop_tune):
+                results = tuner(sweep, folder, resume, progress).fit()
+        except KeyboardInterrupt:
+            print(f"interrupted before Tune ran the trials: `drivestack sweep --resume {folder}` runs them")
+            return True
+        finally:
+            if usr1 is not None:  # Tune leaves its handler installed
+                signal.signal(signal.SIGUSR1, usr1)
+        return report(sweep, folder, tune_trials(results)) or received()
+
+
+def tune_trials(results: Any) -> list[tuple[dict, dict, object]]:
+    """(parameters, last metrics, error) of every trial in Tune's ResultGrid. A trial stopped before
+    it reported (or started) has neither in its Result: its parameters and id come from Tune's
+    record of the trial (the grid's private list of them, in the same order; Ray is pinned)."""
+    records = results._experiment_analysis.trials
+    return [
+        (record.config, result.metrics or {"trial_id": record.trial_id}, result.error)
+        for result, record in zip(results, records, strict=True)
+    ]

@@ -114,5 +114,6 @@ def report(sweep: SweepFile, folder: Path, trials: list[tuple[dict, dict, object
     }
     write_json(folder / "summary.json", summary)
     print(table, end="")
-    print(f"results: {folder}" + (" (unfinished trials: continue with --resume)" if unfinished else ""))
+    resume = f" (unfinished trials: `drivestack sweep --resume {folder}` continues them)"
+    print(f"results: {folder}" + (resume if unfinished else ""))
     return unfinished

@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import signal
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from types import FrameType
 
 _received = 0
 _deferring = 0
 _pending = False
+STOPPING = "stopping: writing what is finished first"
 
 
 def catch_signals() -> None:
@@ -53,7 +54,7 @@ def _handler(signum: int, frame: FrameType | None) -> None:
         raise KeyboardInterrupt
     if _received == 1:
         _pending = True
-    print("stopping: writing what is finished first", file=sys.stderr)
+    print(STOPPING, file=sys.stderr)
 
 
 @contextmanager
@@ -71,3 +72,35 @@ def deferred(interrupt_after: bool = True) -> Iterator[None]:
         _pending = False
         if interrupt_after:
             raise KeyboardInterrupt
+
+
+@contextmanager
+def stopped_by(stop: Callable[[], bool]) -> Iterator[None]:
+    """For work that stops itself cleanly when asked (Ray Tune's loop): inside the block the first
+    SIGINT or SIGTERM calls `stop`, which returns False when the work cannot be asked yet (the
+    signal then raises KeyboardInterrupt, as outside); later signals only say that the command
+    stops. A stop that waits (`deferred`) is raised at once: the work never starts."""
+    if _pending:
+        raise KeyboardInterrupt
+
+    def asked(signum: int, frame: FrameType | None) -> None:
+        global _received
+        _received += 1
+        if _received > 1:
+            print(STOPPING, file=sys.stderr)
+        elif not stop():
+            raise KeyboardInterrupt
+
+    with handled_by(asked):
+        yield
+
+
+@contextmanager
+def handled_by(handler: Callable[[int, FrameType | None], None]) -> Iterator[None]:
+    """SIGINT and SIGTERM call `handler` inside the block; the handlers before it are put back after."""
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)

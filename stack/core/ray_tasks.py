@@ -18,7 +18,9 @@ from contextlib import contextmanager
 from types import ModuleType
 from typing import Any, TypeVar
 
+from stack.core.interrupts import deferred
 from stack.core.machine import usable_cpus
+from stack.core.watchdog import watch_descendants
 
 Item = TypeVar("Item")
 Result = TypeVar("Result")
@@ -35,8 +37,17 @@ class RayUnavailable(ValueError):
     """Ray cannot run the work: not installed, or no cluster at the address; one line for the user."""
 
 
+QUIET = {"RAY_DISABLE_FAILURE_SIGNAL_HANDLER": "1", "RAY_IGNORE_UNHANDLED_ERRORS": "1"}
+"""Set before Ray is imported (unless already set): Ray's C++ core installs no crash handler in this
+process, which would take SIGTERM over from the command (a crash report and SIGABRT instead of the
+finished work kept and exit 130), and Ray logs no traceback for the failed tasks whose results the
+command no longer reads (it reports the first failure in one line and cancels the rest)."""
+
+
 def ray_module() -> ModuleType:
     """The `ray` package, or RayUnavailable saying how to install it."""
+    for name, value in QUIET.items():
+        os.environ.setdefault(name, value)
     try:
         import ray
     except ImportError:
@@ -106,7 +117,8 @@ def started_cluster() -> str:
 
 def connect(address: str) -> ModuleType:
     """Ray, initialised for `address` (see module doc); an instance already initialised in this
-    process is reused. Raises RayUnavailable before any work."""
+    process is reused. Raises RayUnavailable before any work. A stop while Ray starts waits for
+    its start (`_no_ray_sigterm_handler`), then raises KeyboardInterrupt."""
     ray = ray_module()
     check_address(address)
     if ray.is_initialized():
@@ -118,10 +130,11 @@ def connect(address: str) -> ModuleType:
     }
     if address == LOCAL:
         options["num_cpus"] = usable_cpus()
+        watch_descendants()
     else:
         options["address"] = address
     try:
-        with _stderr_silenced():
+        with _stderr_silenced(), deferred(), _no_ray_sigterm_handler(ray):
             ray.init(**options)
     except (
         ConnectionError,
@@ -132,6 +145,21 @@ def connect(address: str) -> ModuleType:
         hint = "" if address == LOCAL else f"; {AUTH_HINT}"
         raise RayUnavailable(f"--ray {address}: {message}{hint}") from None
     return ray
+
+
+@contextmanager
+def _no_ray_sigterm_handler(ray: ModuleType) -> Iterator[None]:
+    """Inside the block Ray installs no SIGTERM handler: `ray.init` installs two, which exit (with
+    code 15, or 1 after killing Ray's processes) wherever the signal finds the command, and a start
+    cut short leaves Ray's core worker running, which crashes the exit. So the command's handlers
+    stay (`stack.core.interrupts`) and Ray's own exit handler ends its processes."""
+    utils = ray._private.utils
+    install = utils.set_sigterm_handler
+    utils.set_sigterm_handler = lambda handler: None
+    try:
+        yield
+    finally:
+        utils.set_sigterm_handler = install
 
 
 @contextmanager
@@ -177,7 +205,20 @@ def ray_completed(
         while pending:
             done, pending = ray.wait(pending, num_returns=1)
             for ref in done:
-                yield indices[ref], ray.get(ref)
+                yield indices[ref], task_result(ray, ref)
     finally:
         for ref in pending:
             ray.cancel(ref, force=True)
+
+
+def task_result(ray: ModuleType, ref: Any) -> Any:
+    """The result of the finished task `ref`; the exception it raised as itself, as from a `--jobs`
+    process (a plug-in that fails on the worker is then one line: `PluginError`). Ray's
+    RayTaskError, whose message is the worker's traceback, is its cause (`--debug` shows it)."""
+    try:
+        return ray.get(ref)
+    except ray.exceptions.RayTaskError as error:
+        cause = error.cause
+        if isinstance(cause, Exception) and not isinstance(cause, ray.exceptions.RayError):
+            raise cause from error
+        raise

@@ -18,7 +18,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from planner.model_file import CHECKPOINT
 from stack.core.config import RunConfig
 from stack.core.decision_env import HierarchicalHighwayEnv
-from stack.core.interrupts import note_stop
+from stack.core.interrupts import handled_by, note_stop
 
 
 class StopTraining(Exception):
@@ -42,12 +42,8 @@ def stop_signals(handler: Callable[[int, Any], None]) -> Iterator[None]:
         print(STOPPING, file=sys.stderr)
         handler(signum, frame)
 
-    previous = {sig: signal.signal(sig, noted) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
+    with handled_by(noted):
         yield
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
 
 
 def monitored_env(config: RunConfig) -> Monitor:
