@@ -310,3 +310,21 @@ def test_the_watchdog_ends_what_a_killed_command_started():
     process.kill()
     process.communicate(timeout=30)
     assert not outliving(started)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_stop_while_the_command_line_is_imported_ends_it_with_130_before_any_work(tmp_path, sig):
+    """The entry point holds signals from its first line: a stop that comes while the CLI is still
+    being imported (here: sent right after the hold, before the import) ends the command with exit
+    130, no traceback and no folder, instead of SIGTERM's default exit 143."""
+    out = tmp_path / "out"
+    probe = (
+        "import os, signal, sys\nimport stack.__main__ as entry\n"
+        "entry.hold_signals()\n"
+        f"os.kill(os.getpid(), {int(sig)})\n"
+        f"sys.argv = ['drivestack', 'run', '--episodes', '1', '--out', {str(out)!r}]\n"
+        "entry.main()\n"
+    )
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 130, result.stderr
+    assert "Traceback" not in result.stderr and not out.exists()

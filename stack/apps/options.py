@@ -209,7 +209,8 @@ def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
     debug = "--debug" in arguments
     if debug:
         arguments.remove("--debug")
-    catch_signals()
+    if catch_signals():
+        sys.exit(130)
     try:
         app(arguments, prog_name="drivestack")
     except SystemExit as done:

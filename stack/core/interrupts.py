@@ -16,15 +16,32 @@ from types import FrameType
 _received = 0
 _deferring = 0
 _pending = False
+_held = False
 STOPPING = "stopping: writing what is finished first"
 
 
-def catch_signals() -> None:
-    """Install the handler for SIGINT and SIGTERM (the CLI does, once, before any command)."""
-    global _received, _pending
+def hold_signals() -> None:
+    """SIGINT and SIGTERM only noted until `catch_signals`: the `drivestack` entry point calls this
+    first, so a stop while the command line is still being imported ends the command with exit 130
+    before it does anything (not with SIGTERM's default exit 143, or a traceback from the import)."""
+
+    def noted(signum: int, frame: FrameType | None) -> None:
+        global _held
+        _held = True
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, noted)
+
+
+def catch_signals() -> bool:
+    """Install the handler for SIGINT and SIGTERM (the CLI does, once, before any command); whether
+    a stop came while they were held (`hold_signals`): the command then does nothing."""
+    global _received, _pending, _held
     _received, _pending = 0, False
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _handler)
+    held, _held = _held, False
+    return held
 
 
 def ignore_signals() -> None:
