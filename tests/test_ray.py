@@ -180,6 +180,7 @@ def test_track_on_ray_keeps_the_maneuver_order(tmp_path, local_ray):
     assert figures("local") == figures("ray")
 
 
+@pytest.mark.slow
 def test_sweep_picks_the_planted_best_trial(tmp_path, local_ray):
     spec = sweep_file(tmp_path, {"train.reward.alive": [1.0, 1.5, 2.0, PLANTED_BEST]})
     out = tmp_path / "sweep"

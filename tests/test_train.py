@@ -217,6 +217,7 @@ def test_other_algorithms_train_too(tmp_path, algorithm):
     assert load_agent(tmp_path / algorithm / "best.npz").metadata.algorithm == algorithm
 
 
+@pytest.mark.slow
 def test_parallel_environments_give_the_same_model_for_the_same_config(tmp_path):
     """`--envs 2`: two processes step the env; the same config, seed and N give the same weights,
     and checkpoints and validations still come at every multiple of their period."""
