@@ -18,6 +18,8 @@ _deferring = 0
 _pending = False
 _held = False
 STOPPING = "stopping: writing what is finished first"
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+"""The stops a command handles (a terminal's Ctrl-C, a kill)."""
 
 
 def hold_signals() -> None:
@@ -29,7 +31,7 @@ def hold_signals() -> None:
         global _held
         _held = True
 
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in SIGNALS:
         signal.signal(sig, noted)
 
 
@@ -38,7 +40,7 @@ def catch_signals() -> bool:
     a stop came while they were held (`hold_signals`): the command then does nothing."""
     global _received, _pending, _held
     _received, _pending = 0, False
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in SIGNALS:
         signal.signal(sig, _handler)
     held, _held = _held, False
     return held
@@ -48,7 +50,7 @@ def ignore_signals() -> None:
     """SIGINT and SIGTERM ignored from now on: the command's work is done and its exit code set.
     (At exit Python puts the default action back for signals it handles, so a signal during the
     interpreter's teardown would otherwise end the process with -SIGTERM instead of its code.)"""
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in SIGNALS:
         signal.signal(sig, signal.SIG_IGN)
 
 
@@ -115,7 +117,7 @@ def stopped_by(stop: Callable[[], bool]) -> Iterator[None]:
 @contextmanager
 def handled_by(handler: Callable[[int, FrameType | None], None]) -> Iterator[None]:
     """SIGINT and SIGTERM call `handler` inside the block; the handlers before it are put back after."""
-    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    previous = {sig: signal.signal(sig, handler) for sig in SIGNALS}
     try:
         yield
     finally:
