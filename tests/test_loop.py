@@ -8,8 +8,9 @@ from records import Command
 from stack.core.closed_loop import ClosedLoop, grid_config
 from stack.core.config import build_config
 from stack.core.episodes import run, run_agent_episode
-from stack.core.loop_records import LoopStatus
+from stack.core.loop_records import LoopStatus, SolveStatistics
 from stack.core.metrics import outcome
+from stack.sim.empty_road import EmptyRoad
 from stack.sim.highway import HighwayAdapter
 
 LANE_CHANGE = {"seed": 2, "highway": {"vehicles_count": 20, "duration": 8}, "perception": {"cells_ahead": 9}}
@@ -124,3 +125,21 @@ def test_a_tick_is_a_frozen_record_its_consumers_read_outside_it(tiny_config):
         assert loop.status() == LoopStatus(False, float(loop.world.speed[0]), 0, 0, 0, 0)
         result = loop.result(0)
         assert result.steps == 3 and result.lane_changes == loop.status().lane_changes
+
+
+def test_a_scripted_lane_change_is_read_through_the_loops_face():
+    """`start_lane_change` plans a change past the safety layer (None when the maneuver refuses
+    it); `traces()` and `solve_statistics()` read what the loop recorded, as `drivestack track` does."""
+    config = build_config({})
+    loop = ClosedLoop(config, EmptyRoad("straight", "kinematic", 20.0, config.dt))
+    loop.reset(0)
+    assert loop.solve_statistics() == SolveStatistics(p50_ms=0.0, p95_ms=0.0, fallbacks=0)
+    assert loop.start_lane_change(Command.STAY, at_time=1.0) is None
+    assert loop.start_lane_change(Command.LEFT, at_time=1.0) == config.controller.lane_change_duration_s
+    loop.act(Command.STAY, ticks=30)
+    traces = loop.traces()
+    assert loop.changing_lane and traces.time[-1] == pytest.approx(2.0)
+    assert len(traces.time) == len(traces.d) == 31 and len(traces.d_reference) == len(traces.steering) == 30
+    assert traces.d[-1] < traces.d[0], "moving towards the lane on the left"
+    solves = loop.solve_statistics()
+    assert solves.fallbacks == 0 and 0.0 < solves.p50_ms <= solves.p95_ms

@@ -20,7 +20,6 @@ from contextlib import closing
 from dataclasses import asdict
 from pathlib import Path
 
-import numpy as np
 from pydantic import ValidationError
 from rich.console import Console
 from tqdm import tqdm
@@ -108,20 +107,18 @@ def run_maneuver(
         }
     )
     loop = ClosedLoop(run_config, road, controller=BuiltinDriver(road) if builtin else None)
-    world = loop.reset(seed=0)
+    loop.reset(seed=0)
     command = Command.LEFT if direction == "left" else Command.RIGHT
-    started = loop.maneuver.command(command, world, start_time=LEAD_IN_S)
-    changing = loop.maneuver.profile.duration if started else duration
+    planned = loop.start_lane_change(command, at_time=LEAD_IN_S)
+    changing = duration if planned is None else planned
     loop.act(Command.STAY, ticks=round((LEAD_IN_S + changing) / dt))
     while loop.changing_lane and loop.world.time < LEAD_IN_S + MAX_CHANGE_S:
         loop.act(Command.STAY, ticks=1)
     loop.act(Command.STAY, ticks=round(SETTLE_S / dt))
-    recorder = loop.recorder
-    time, d = np.array(recorder.time[:-1]), np.array(recorder.d[:-1])
-    heading, speed_trace = np.array(recorder.heading[:-1]), np.array(recorder.speed[:-1])
-    d_reference = np.array(recorder.d_reference)
+    traces, solves = loop.traces(), loop.solve_statistics()
+    time, d = traces.time[:-1], traces.d[:-1]
+    heading, speed_trace, d_reference = traces.heading[:-1], traces.speed[:-1], traces.d_reference
     metrics: Tracking = tracking(time, d, d_reference, heading, speed_trace, dt)
-    solve_ms = np.array(loop.controller.solve_times) * 1e3
     lateral_acceleration, jerk = lateral_series(heading, speed_trace, dt)
     return TrackedLaneChange(
         controller=label(controller_name),
@@ -131,15 +128,15 @@ def run_maneuver(
         end_speed=end_speed,
         direction=direction,
         **asdict(metrics),
-        solve_ms_p50=float(np.percentile(solve_ms, 50)),
-        solve_ms_p95=float(np.percentile(solve_ms, 95)),
-        fallbacks=loop.controller.fallbacks,
-        started=started,
+        solve_ms_p50=solves.p50_ms,
+        solve_ms_p95=solves.p95_ms,
+        fallbacks=solves.fallbacks,
+        started=planned is not None,
         trace={
             "time": time.tolist(),
             "d": (d - d[0]).tolist(),
             "d_ref": (d_reference - d[0]).tolist(),
-            "steering": recorder.steering,
+            "steering": traces.steering.tolist(),
             "lat_accel": [0.0, *lateral_acceleration.tolist()],
             "lat_jerk": [0.0, 0.0, *jerk.tolist()],
         },

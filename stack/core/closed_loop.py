@@ -6,8 +6,9 @@ ticks up to the next decision point. Each tick reads like do-mpc's loop: the man
 reference, the controller the actuation, the plant the next world; it returns a frozen `Tick`,
 which the metrics recorder, the safety monitor and the video consume outside the tick. Its face:
 `reset`, `perceive`, `act`, `tick`, the `world` (truth) and `perceived` (what the sensor reports)
-snapshots, `done` / `crashed`, `status()` and `result()`; for planners that look ahead, `permits`,
-`changing_lane` and `fork` (a copy to play the future on).
+snapshots, `done` / `crashed`, `status()`, `traces()`, `solve_statistics()` and `result()`; for
+planners that look ahead, `permits`, `changing_lane` and `fork` (a copy to play the future on); for a
+scripted maneuver, `start_lane_change`.
 """
 
 from __future__ import annotations
@@ -27,8 +28,8 @@ from perception.sensor import SensorModel
 from planner.safety import SafetyLayer
 from records import Actuation, Command, GridConfig, WorldState
 from stack.core.config import RunConfig, grid_config
-from stack.core.loop_records import Acted, LoopStatus, Tick
-from stack.core.metrics import EpisodeRecorder, EpisodeResult
+from stack.core.loop_records import Acted, LoopStatus, SolveStatistics, Tick
+from stack.core.metrics import EpisodeRecorder, EpisodeResult, Traces
 from stack.core.safety_metrics import SafetyMonitor
 
 if TYPE_CHECKING:
@@ -201,6 +202,14 @@ class ClosedLoop:
         """A lane change runs: `act` ignores the next command until it ends."""
         return self.maneuver.changing_lane
 
+    def start_lane_change(self, command: Command, at_time: float) -> float | None:
+        """Plan the lane change `command` to start at `at_time` [s], past the safety layer and the
+        decision points (a scripted maneuver, as `drivestack track` drives): its planned duration
+        [s], or None when the maneuver refuses it (STAY, off the road, below its minimum speed)."""
+        if not self.maneuver.command(command, self.world, start_time=at_time):
+            return None
+        return self.maneuver.profile.duration
+
     def permits(self, command: Command) -> bool:
         """Whether the safety layer would pass `command` now (nothing is counted)."""
         return self.safety.permits(command, self.perceived, self.maneuver.lane)
@@ -231,11 +240,20 @@ class ClosedLoop:
             aborted=safety.aborted,
         )
 
+    def traces(self) -> Traces:
+        """The episode's series so far, tick by tick (see `Traces`)."""
+        return self.recorder.traces()
+
+    def solve_statistics(self) -> SolveStatistics:
+        """The controller's time per tick and fallbacks this episode (see `SolveStatistics`)."""
+        solve_ms = 1e3 * np.array(self.controller.solve_times[self.solves_before :])
+        p50, p95 = (float(t) for t in np.percentile(solve_ms, [50, 95])) if solve_ms.size else (0.0, 0.0)
+        return SolveStatistics(p50, p95, self.controller.fallbacks - self.fallbacks_before)
+
     def result(self, episode: int) -> EpisodeResult:
         """The episode's result, as its parts measured it so far."""
         driven, monitor, safety = self.recorder.driven(self.plant.dt), self.monitor, self.safety.counts
-        solve_ms = 1e3 * np.array(self.controller.solve_times[self.solves_before :])
-        p50, p95 = (float(t) for t in np.percentile(solve_ms, [50, 95])) if solve_ms.size else (0.0, 0.0)
+        solves = self.solve_statistics()
         return EpisodeResult(
             episode=episode,
             seed=self.seed,
@@ -249,15 +267,15 @@ class ClosedLoop:
             peak_lat_jerk=driven.peak_lat_jerk,
             masked_commands=safety.masked,
             aborted_changes=safety.aborted,
-            mpc_fallbacks=self.controller.fallbacks - self.fallbacks_before,
+            mpc_fallbacks=solves.fallbacks,
             road_departure=monitor.road_departure,
             at_fault_collision=monitor.collision is not None and monitor.collision.at_fault,
             collision_kind=monitor.collision.kind if monitor.collision else "",
             min_ttc_s=monitor.min_ttc_s,
             time_below_min_distance_s=monitor.time_below_min_distance_s,
             emergency_brakings=self.emergency.activations,
-            solve_ms_p50=p50,
-            solve_ms_p95=p95,
+            solve_ms_p50=solves.p50_ms,
+            solve_ms_p95=solves.p95_ms,
             trace=driven.trace,
             snapshot=self.snapshot,
         )

@@ -1,6 +1,7 @@
 """What the closed loop (`stack.core.closed_loop`) hands out: the record of one control tick, of one
-`act`, and its status at a decision point. Frozen records, so whoever consumes them (the metrics
-recorder, the safety monitor, the video, the training MDP) reads them without changing the loop."""
+`act`, its status at a decision point and its controller's solve statistics. Frozen records, so
+whoever consumes them (the metrics recorder, the safety monitor, the video, the training MDP) reads
+them without changing the loop."""
 
 from __future__ import annotations
 
@@ -58,3 +59,13 @@ class LoopStatus:
             "masked": self.masked,
             "aborted": self.aborted,
         }
+
+
+@dataclass(frozen=True)
+class SolveStatistics:
+    """The controller's computing time per control tick of an episode, median and 95th percentile
+    [ms] (0 before the first tick), and the ticks on which it fell back to a simpler law."""
+
+    p50_ms: float
+    p95_ms: float
+    fallbacks: int

@@ -149,6 +149,21 @@ class Driven:
     trace: dict[str, list[float]]
 
 
+@dataclass(frozen=True)
+class Traces:
+    """What the recorder recorded, as arrays (copies): the ego's `time` [s], lateral offset `d`
+    [m], `heading` relative to its lane [rad] and `speed` [m/s] at the start and after every
+    control tick (one sample more than ticks), and the reference's `d_reference` [m] and the
+    commanded `steering` [rad] of every tick."""
+
+    time: np.ndarray
+    d: np.ndarray
+    heading: np.ndarray
+    speed: np.ndarray
+    d_reference: np.ndarray
+    steering: np.ndarray
+
+
 class EpisodeRecorder:
     """Collects what the metrics need: the world after every control tick (and at the start),
     and the reference and actuation of every tick."""
@@ -189,6 +204,17 @@ class EpisodeRecorder:
         self.speed.append(float(world.speed[0]))
         self.heading.append(float(world.heading[0]) - world.lanes[0].heading_at(float(world.s[0])))
         self.d.append(float(world.d[0]))
+
+    def traces(self) -> Traces:
+        """Everything recorded so far, as arrays (see `Traces`)."""
+        return Traces(
+            time=np.array(self.time),
+            d=np.array(self.d),
+            heading=np.array(self.heading),
+            speed=np.array(self.speed),
+            d_reference=np.array(self.d_reference),
+            steering=np.array(self.steering),
+        )
 
     def driven(self, dt: float) -> Driven:
         """What was recorded, measured (ticks `dt` seconds apart)."""
