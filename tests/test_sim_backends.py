@@ -13,6 +13,7 @@ from stack.core.config import ConfigError, HighwayConfig, build_config
 from stack.sim import envs
 from stack.sim.envs import FAST_HIGHWAY, VECTOR_HIGHWAY
 from stack.sim.highway import HighwayAdapter, env_config
+from stack.sim.traffic import TrafficVehicle
 from stack.sim.vector.lanes import LaneTable
 from stack.sim.vector.road import VectorRoad
 
@@ -25,6 +26,14 @@ def ramming(frame: int) -> np.ndarray:
     return np.array([1.0, 0.02 * np.sin(frame / 15.0)])
 
 
+def braking(frame: int) -> np.ndarray:
+    """An ego that brakes gently to a stop: the traffic behind queues up to a standstill."""
+    return np.array([-0.3, 0.0])
+
+
+DRIVERS = {"ramming": ramming, "braking": braking}
+
+
 def state(vehicle) -> list[float]:
     target = getattr(vehicle, "target_lane_index", vehicle.lane_index)
     return [
@@ -34,21 +43,24 @@ def state(vehicle) -> list[float]:
         vehicle.lane_index[2],
         target[2],
         vehicle.crashed,
+        type(vehicle) is TrafficVehicle,
     ]
 
 
-def trajectory(env_id: str, highway: HighwayConfig, seed: int, frames: int) -> list[np.ndarray]:
-    return _trajectory(env_id, highway.model_dump_json(), seed, frames)
+def trajectory(
+    env_id: str, highway: HighwayConfig, seed: int, frames: int, driver: str = "ramming"
+) -> list[np.ndarray]:
+    return _trajectory(env_id, highway.model_dump_json(), seed, frames, driver)
 
 
 @functools.cache
-def _trajectory(env_id: str, highway_json: str, seed: int, frames: int) -> list[np.ndarray]:
+def _trajectory(env_id: str, highway_json: str, seed: int, frames: int, driver: str) -> list[np.ndarray]:
     highway = HighwayConfig.model_validate_json(highway_json)
     env = gym.make(env_id, config=env_config(highway), disable_env_checker=True)
     env.reset(seed=seed)
     states = []
     for frame in range(frames):
-        _, _, _, truncated, _ = env.step(ramming(frame))
+        _, _, _, truncated, _ = env.step(DRIVERS[driver](frame))
         states.append(np.array([state(v) for v in env.unwrapped.road.vehicles]))
         if truncated:
             break
@@ -57,10 +69,10 @@ def _trajectory(env_id: str, highway_json: str, seed: int, frames: int) -> list[
 
 
 def assert_identical(
-    highway: HighwayConfig, seed: int, frames: int, backend: str = "fast"
+    highway: HighwayConfig, seed: int, frames: int, backend: str = "fast", driver: str = "ramming"
 ) -> list[np.ndarray]:
-    stock = trajectory("drivestack/Highway-v0", highway, seed, frames)
-    other = trajectory(BACKENDS[backend], highway, seed, frames)
+    stock = trajectory("drivestack/Highway-v0", highway, seed, frames, driver)
+    other = trajectory(BACKENDS[backend], highway, seed, frames, driver)
     assert len(other) == len(stock)
     for frame, (a, b) in enumerate(zip(stock, other, strict=True)):
         np.testing.assert_array_equal(b, a, err_msg=f"{backend}, frame {frame}")
@@ -112,6 +124,18 @@ def test_vector_backend_matches_stock_on_the_scenarios(scenario):
         build_config({}, scenario=scenario).highway, seed=11, frames=150, backend="vector"
     )
     assert traffic_lane_changes(states) > 0
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_traffic_queues_to_a_standstill_without_reversing_alike_on_every_backend(backend):
+    """Behind a stopped car and a braking ego, the `incident` traffic queues up to speed 0 and stays
+    there (stock highway-env's vehicles reverse there, down to -40 m/s), on every backend alike."""
+    states = assert_identical(
+        build_config({}, scenario="incident").highway, seed=0, frames=300, backend=backend, driver="braking"
+    )
+    speeds = np.concatenate([s[s[:, -1] == 1, 3] for s in states])
+    assert speeds.min() >= 0.0
+    assert np.count_nonzero(speeds == 0.0) > 100
 
 
 @pytest.mark.slow

@@ -28,6 +28,7 @@ from records import BACKENDS, Actuation, Backend, PlantName, RoadName, WorldStat
 from stack.sim.envs import FAST_EXIT, FAST_HIGHWAY, HIGHWAY, VECTOR_HIGHWAY
 from stack.sim.plant import stabilised
 from stack.sim.settings import HighwayConfig
+from stack.sim.traffic import TRAFFIC_VEHICLE
 
 ENV_IDS: dict[RoadName, dict[Backend, str]] = {
     "highway": {"vector": VECTOR_HIGHWAY, "fast": FAST_HIGHWAY, "stock": HIGHWAY},
@@ -44,9 +45,10 @@ MAX_STEERING = ContinuousAction.STEERING_RANGE[1]
 
 def env_config(highway: HighwayConfig, plant: PlantName = "kinematic") -> dict:
     """The highway-env config for a closed-loop run: continuous action (on highway-env's dynamic
-    bicycle for the `dynamic` plant), one frame per step."""
+    bicycle for the `dynamic` plant), one frame per step, traffic that stops instead of reversing."""
     return {
         **highway.model_dump(mode="json", exclude={"road"}),
+        "other_vehicles_type": TRAFFIC_VEHICLE,
         "policy_frequency": highway.simulation_frequency,
         "action": {"type": "ContinuousAction", "dynamical": plant == "dynamic"},
         # The stack reads the road itself; the cheapest observation keeps highway-env's work minimal.

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from highway_env import utils
 from highway_env.envs.highway_env import HighwayEnv
+from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
 EGO_SPAWN_SPEED = 25.0
@@ -29,6 +30,29 @@ EGO_SPAWN_SPEED = 25.0
 IDM_JAM_CLEARANCE = 5.0
 """highway-env's IDM jam distance is 5 m + the vehicle's length (centre to centre); scaled with each
 vehicle's own length, a truck stopped behind a truck keeps its 5 m instead of overlapping it [m]."""
+
+
+class TrafficVehicle(IDMVehicle):
+    """highway-env's IDM + MOBIL vehicle that stops where stock's drives backwards. Closer to its
+    leader than its jam distance, the IDM keeps braking at a standstill, and stock's vehicle then
+    reverses (down to `MIN_SPEED`, -40 m/s): in a queue it backs into the car behind, and one that
+    was changing lane swings its nose further into the next lane as it goes. Here a frame's braking
+    ends at speed 0 [m/s] (to float rounding, ~1e-16 m/s); everything else is stock."""
+
+    def stop_at_standstill(self, dt: float) -> None:
+        """Limit this frame's braking so that `dt` [s] of it ends at speed 0 at the lowest."""
+        if not self.crashed:
+            self.action["acceleration"] = max(float(self.action["acceleration"]), -self.speed / dt)
+
+    def step(self, dt: float) -> None:
+        self.stop_at_standstill(dt)
+        super().step(dt)
+
+
+TRAFFIC_VEHICLE = f"{TrafficVehicle.__module__}.{TrafficVehicle.__qualname__}"
+"""The `other_vehicles_type` the stack's roads are filled with."""
+IDM_DRIVERS = (IDMVehicle, TrafficVehicle)
+"""Vehicle classes driven by highway-env's IDM + MOBIL `act`, unchanged."""
 
 
 SPAWN_TIME_GAP_S = 0.5

@@ -9,6 +9,7 @@ import numpy as np
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
+from stack.sim.traffic import TrafficVehicle
 from stack.sim.vector.lanes import LaneTable
 
 SEPARATION_MARGIN = 1e-6
@@ -19,12 +20,13 @@ _KINEMATIC: dict[type, bool] = {}
 
 
 def steps_like_vehicle(cls: type) -> bool:
-    """Whether `cls.step` is highway-env's kinematic `Vehicle.step` (with `IDMVehicle`'s timer)."""
+    """Whether `cls.step` is highway-env's kinematic `Vehicle.step` (with `IDMVehicle`'s timer, and
+    `TrafficVehicle`'s stop at a standstill)."""
     known = _KINEMATIC.get(cls)
     if known is None:
         known = _KINEMATIC[cls] = (
             issubclass(cls, Vehicle)
-            and getattr(cls, "step", None) in (Vehicle.step, IDMVehicle.step)
+            and getattr(cls, "step", None) in (Vehicle.step, IDMVehicle.step, TrafficVehicle.step)
             and getattr(cls, "clip_actions", None) is Vehicle.clip_actions
             and getattr(cls, "on_state_update", None) is Vehicle.on_state_update
         )
@@ -35,8 +37,11 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
     """`Vehicle.step(dt)` of every mover: clip, integrate, apply impacts, find the lane."""
     impacted = []
     for i, v in enumerate(movers):
-        if type(v).step is IDMVehicle.step:
-            v.timer += dt
+        step = type(v).step
+        if step is TrafficVehicle.step:
+            v.stop_at_standstill(dt)  # type: ignore[attr-defined]
+        if step is not Vehicle.step:
+            v.timer += dt  # type: ignore[attr-defined]
         if v.crashed:
             v.action["steering"] = 0
             v.action["acceleration"] = -1.0 * v.speed

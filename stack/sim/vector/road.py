@@ -28,7 +28,7 @@ from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import RoadObject
 
 from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections, broad_phase
-from stack.sim.traffic import ScenarioTraffic
+from stack.sim.traffic import IDM_DRIVERS, ScenarioTraffic
 from stack.sim.vector.frame import TrafficFrame
 from stack.sim.vector.lanes import LaneTable, clip, not_zero, wrap_to_pi
 from stack.sim.vector.motion import Footprints, column, move, separated, steps_like_vehicle
@@ -62,7 +62,7 @@ class VectorRoad(FastRoad):
         self._projections = projections = LaneProjections(self)
         try:
             frame = TrafficFrame(projections, lanes)
-            drivers = [v for v in self.vehicles if type(v) is IDMVehicle and not v.crashed]
+            drivers = [v for v in self.vehicles if type(v) in IDM_DRIVERS and not v.crashed]
             if drivers:
                 plan = Drivers(drivers, frame)
                 at_lane_end = plan.at_lane_end()
@@ -70,7 +70,7 @@ class VectorRoad(FastRoad):
             else:
                 at_lane_end, decisions = set(), {}
             for vehicle in self.vehicles:
-                if type(vehicle) is not IDMVehicle or vehicle.crashed:
+                if type(vehicle) not in IDM_DRIVERS or vehicle.crashed:
                     vehicle.act()
                 elif id(vehicle) in decisions:
                     vehicle.timer = 0
