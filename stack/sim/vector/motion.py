@@ -35,16 +35,15 @@ def steps_like_vehicle(cls: type) -> bool:
 
 def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: bool) -> None:
     """`Vehicle.step(dt)` of every mover: clip, integrate, apply impacts, find the lane."""
-    impacted = []
+    impacted, stops = [], []
     for i, v in enumerate(movers):
         step = type(v).step
-        if step is TrafficVehicle.step:
-            v.stop_at_standstill(dt)  # type: ignore[attr-defined]
         if step is not Vehicle.step:
             v.timer += dt  # type: ignore[attr-defined]
         if v.crashed:
             v.action["steering"] = 0
             v.action["acceleration"] = -1.0 * v.speed
+        stops.append(step is TrafficVehicle.step and not v.crashed)
         if v.impact is not None:
             impacted.append(i)
     speed, max_speed, min_speed, heading, length = (
@@ -52,6 +51,8 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
     )
     steering = np.array([v.action["steering"] for v in movers], dtype=float)
     acceleration = np.array([v.action["acceleration"] for v in movers], dtype=float)
+    if any(stops):
+        acceleration = np.where(stops, np.maximum(acceleration, -speed / dt), acceleration)
     too_fast, too_slow = speed > max_speed, speed < min_speed
     slow_down, speed_up = 1.0 * (max_speed - speed), 1.0 * (min_speed - speed)
     acceleration = np.where(too_fast & (slow_down < acceleration), slow_down, acceleration)
