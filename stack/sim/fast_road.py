@@ -197,11 +197,11 @@ class FastRoad(Road):
             vehicle.step(dt)
         self._collide(dt)
 
-    def _collide(self, dt: float) -> None:
+    def _collide(self, dt: float, candidates: np.ndarray | None = None) -> None:
         """Stock's collision loop (each vehicle against the later vehicles, then the objects), over
-        the broad phase's candidate pairs only."""
+        the broad phase's candidate pairs only (`_collision_pairs`, unless given)."""
         vehicles, objects = self.vehicles, self.objects
-        pairs = self._collision_pairs(dt).tolist()
+        pairs = (self._collision_pairs(dt) if candidates is None else candidates).tolist()
         if not objects:
             for i, j in pairs:
                 vehicles[i].handle_collisions(vehicles[j], dt)

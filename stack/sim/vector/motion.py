@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from operator import attrgetter
 
 import numpy as np
@@ -33,22 +34,21 @@ def steps_like_vehicle(cls: type) -> bool:
     return known
 
 
-def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: bool) -> None:
-    """`Vehicle.step(dt)` of every mover: clip, integrate, apply impacts, find the lane."""
+def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: bool) -> Footprints:
+    """`Vehicle.step(dt)` of every mover: clip, integrate, apply impacts, find the lane. Returns
+    the movers' footprints after the step."""
     impacted, stops = [], []
     for i, v in enumerate(movers):
         step = type(v).step
         if step is not Vehicle.step:
-            v.timer += dt  # type: ignore[attr-defined]
+            v.timer += dt
         if v.crashed:
             v.action["steering"] = 0
             v.action["acceleration"] = -1.0 * v.speed
         stops.append(step is TrafficVehicle.step and not v.crashed)
         if v.impact is not None:
             impacted.append(i)
-    speed, max_speed, min_speed, heading, length = (
-        column(movers, name) for name in ("speed", "MAX_SPEED", "MIN_SPEED", "heading", "LENGTH")
-    )
+    speed, max_speed, min_speed, heading, length, width, diagonal = columns(movers, _MOVER_STATE)
     steering = np.array([v.action["steering"] for v in movers], dtype=float)
     acceleration = np.array([v.action["acceleration"] for v in movers], dtype=float)
     if any(stops):
@@ -84,21 +84,36 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
         v.lane_index, v.lane = indices[row], table[row]
         if record_history:
             v.history.appendleft(v.create_from(v))
+    x, y = position.T.copy()
+    return Footprints(x, y, heading, speed, length, width, diagonal)
 
 
+_MOVER_STATE = attrgetter("speed", "MAX_SPEED", "MIN_SPEED", "heading", "LENGTH", "WIDTH", "diagonal")
+_FOOTPRINT = attrgetter("heading", "speed", "LENGTH", "WIDTH", "diagonal")
+
+
+@dataclass(frozen=True)
 class Footprints:
-    """Every vehicle's centre (x, y) [m], heading [rad], speed [m/s], length, width and diagonal [m]."""
+    """Vehicles' centres (x, y) [m], headings [rad], speeds [m/s], lengths, widths and diagonals [m]."""
 
-    def __init__(self, vehicles: list[Vehicle]) -> None:
-        self.x, self.y = np.array([v.position for v in vehicles], dtype=float).T.copy()
-        self.heading, self.speed, self.length, self.width, self.diagonal = (
-            column(vehicles, name) for name in ("heading", "speed", "LENGTH", "WIDTH", "diagonal")
-        )
+    x: np.ndarray
+    y: np.ndarray
+    heading: np.ndarray
+    speed: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+    diagonal: np.ndarray
+
+    @staticmethod
+    def of(vehicles: list[Vehicle]) -> Footprints:
+        x, y = np.array([v.position for v in vehicles], dtype=float).T.copy()
+        return Footprints(x, y, *columns(vehicles, _FOOTPRINT))
 
 
-def column(objects: Sequence[object], name: str) -> np.ndarray:
-    """The attribute `name` of every object, as floats."""
-    return np.array(list(map(attrgetter(name), objects)), dtype=float)
+def columns(objects: Sequence[object], attributes: attrgetter) -> np.ndarray:
+    """The `attributes` of every object, as floats: one contiguous row per attribute (numpy's
+    transcendental ufuncs give the bits of their scalar calls on contiguous arrays)."""
+    return np.array(list(map(attributes, objects)), dtype=float).reshape(len(objects), -1).T.copy()
 
 
 def separated(vehicles: Footprints, pairs: np.ndarray, dt: float) -> np.ndarray:

@@ -21,6 +21,8 @@ other lanes (a curved exit, `neighbour_vehicles_connected_lanes`) run as `FastRo
 
 from __future__ import annotations
 
+from operator import attrgetter
+
 import numpy as np
 from highway_env.road.lane import StraightLane
 from highway_env.vehicle.behavior import IDMVehicle
@@ -31,7 +33,7 @@ from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections, broad_phas
 from stack.sim.traffic import IDM_DRIVERS, ScenarioTraffic
 from stack.sim.vector.frame import TrafficFrame
 from stack.sim.vector.lanes import LaneTable, clip, not_zero, wrap_to_pi
-from stack.sim.vector.motion import Footprints, column, move, separated, steps_like_vehicle
+from stack.sim.vector.motion import Footprints, columns, move, separated, steps_like_vehicle
 
 
 def _plain_velocity(cls: type) -> bool:
@@ -182,19 +184,28 @@ class VectorRoad(FastRoad):
                 movers.append(vehicle)
             else:
                 vehicle.step(dt)
-        if movers:
-            move(movers, lanes, dt, self.record_history)
-        self._collide(dt)
+        moved = move(movers, lanes, dt, self.record_history) if movers else None
+        if moved is None or len(movers) < len(self.vehicles) or len(movers) < 2:
+            self._collide(dt)
+        else:
+            self._collide(dt, _close_pairs(moved, dt))
 
     def _collision_pairs(self, dt: float) -> np.ndarray:
         """The broad phase's pairs less those `separated` proves apart."""
         if len(self.vehicles) < 2:
             return super()._collision_pairs(dt)
-        state = Footprints(self.vehicles)
-        pairs = broad_phase(state.x, state.y, state.diagonal, state.speed, dt)
-        if len(pairs):
-            pairs = pairs[~separated(state, pairs, dt)]
-        return pairs
+        return _close_pairs(Footprints.of(self.vehicles), dt)
+
+
+def _close_pairs(vehicles: Footprints, dt: float) -> np.ndarray:
+    """The broad phase's pairs of `vehicles` less those `separated` proves apart."""
+    pairs = broad_phase(vehicles.x, vehicles.y, vehicles.diagonal, vehicles.speed, dt)
+    if len(pairs):
+        pairs = pairs[~separated(vehicles, pairs, dt)]
+    return pairs
+
+
+_DRIVER_CONSTANTS = attrgetter("LENGTH", "DELTA", "DISTANCE_WANTED")
 
 
 class Drivers:
@@ -208,9 +219,7 @@ class Drivers:
         rows, lane_row = frame.projections.row, frame.lanes.row
         self.me = np.array([rows[id(v)] for v in drivers], dtype=int)
         self.target = np.array([lane_row[v.target_lane_index] for v in drivers], dtype=int)
-        self.length, self.delta, self.jam = (
-            column(drivers, name) for name in ("LENGTH", "DELTA", "DISTANCE_WANTED")
-        )
+        self.length, self.delta, self.jam = columns(drivers, _DRIVER_CONSTANTS)
         self.own_front, self.own_rear = frame.neighbours(self.me, frame.lane[self.me])
 
     def at_lane_end(self) -> set[int]:
