@@ -4,11 +4,13 @@ neighbour search for many vehicles at once, and its IDM acceleration evaluated r
 from __future__ import annotations
 
 import numpy as np
+from highway_env.road.lane import StraightLane
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import RoadObject
 
-from stack.sim.fast_road import LaneProjections, is_kind
+from stack.sim.fast_road import NEIGHBOUR_MARGIN, LaneProjections, is_kind
+from stack.sim.vector.kernels import lane_order, neighbour_rows
 from stack.sim.vector.lanes import LaneTable, not_zero
 
 
@@ -33,19 +35,16 @@ class TrafficFrame:
         self.lane = np.array([lane_row.get(o.lane_index, 0) for o in objects], dtype=int)
         self.direction = np.stack([np.cos(self.heading), np.sin(self.heading)], axis=1)
         self.velocity = self.speed[:, None] * self.direction
-        self.s, self.r = lanes.along(self.position), lanes.across(self.position)
-
-        count = len(objects)
-        self.order = np.lexsort((np.arange(count), self.s))
-        self.sorted_s = self.s[self.order]
-        self.tied = bool(np.any(self.sorted_s[1:] == self.sorted_s[:-1]))
-        on = lanes.on_lane(self.s, self.r)[:, self.order]
-        position = np.arange(count)
-        after = np.where(on, position, count)
-        self.next_on = np.minimum.accumulate(after[:, ::-1], axis=1)[:, ::-1]
-        self.next_on = np.concatenate([self.next_on, np.full((len(on), 1), count)], axis=1)
-        before = np.maximum.accumulate(np.where(on, position, -1), axis=1)
-        self.last_before = np.concatenate([np.full((len(on), 1), -1), before], axis=1)
+        self.s, self.r, self.order, self.sorted_s, self.tied, self.next_on, self.last_before = lane_order(
+            np.ascontiguousarray(self.position),
+            lanes.start,
+            lanes.direction,
+            lanes.lateral,
+            lanes.length,
+            lanes.half_width,
+            StraightLane.VEHICLE_LENGTH,
+            NEIGHBOUR_MARGIN,
+        )
 
     def row(self, vehicle: RoadObject | None) -> int:
         """The object's row, -1 for none."""
@@ -64,12 +63,9 @@ class TrafficFrame:
                 np.array([self.row(front) for front, _ in pairs], dtype=int),
                 np.array([self.row(rear) for _, rear in pairs], dtype=int),
             )
-        count = len(self.order)
-        order = np.append(self.order, -1)
-        start = np.searchsorted(self.sorted_s, self.s[me], side="left")
-        ahead = self.next_on[lane_rows, start]
-        ahead = np.where(order[ahead] == me, self.next_on[lane_rows, np.minimum(ahead + 1, count)], ahead)
-        return order[ahead], order[self.last_before[lane_rows, start]]
+        return neighbour_rows(
+            me, lane_rows, self.s, self.order, self.sorted_s, self.next_on, self.last_before
+        )
 
     def idm(
         self, ego: np.ndarray, front: np.ndarray, delta: np.ndarray, distance_wanted: np.ndarray

@@ -1,4 +1,4 @@
-"""`Vehicle.step` for many vehicles at once, and the collision pairs that cannot touch."""
+"""`Vehicle.step` for many vehicles at once, and the footprints it leaves."""
 
 from __future__ import annotations
 
@@ -12,10 +12,6 @@ from highway_env.vehicle.kinematics import Vehicle
 
 from stack.sim.traffic import TrafficVehicle
 from stack.sim.vector.lanes import LaneTable
-
-SEPARATION_MARGIN = 1e-6
-"""Distance [m] by which two swept rectangles must be apart on one of their axes before the narrow
-phase is skipped; float rounding differences with stock's own projections are below 1e-10 m."""
 
 _KINEMATIC: dict[type, bool] = {}
 
@@ -114,30 +110,3 @@ def columns(objects: Sequence[object], attributes: attrgetter) -> np.ndarray:
     """The `attributes` of every object, as floats: one contiguous row per attribute (numpy's
     transcendental ufuncs give the bits of their scalar calls on contiguous arrays)."""
     return np.array(list(map(attributes, objects)), dtype=float).reshape(len(objects), -1).T.copy()
-
-
-def separated(vehicles: Footprints, pairs: np.ndarray, dt: float) -> np.ndarray:
-    """For each pair (i, j) of `pairs`, whether their rectangles, swept by their relative
-    displacement over `dt`, are apart by `SEPARATION_MARGIN` along one of their own axes: there
-    highway-env's separating-axis test finds the same gap, so neither impact nor crash follows."""
-    x, y, heading, speed = vehicles.x, vehicles.y, vehicles.heading, vehicles.speed
-    half_length, half_width = vehicles.length / 2, vehicles.width / 2
-    cos, sin = np.cos(heading), np.sin(heading)
-    a, b = pairs[:, 0], pairs[:, 1]
-    axis_x = np.stack([cos[a], -sin[a], cos[b], -sin[b]])
-    axis_y = np.stack([sin[a], cos[a], sin[b], cos[b]])
-
-    def extent(k: np.ndarray) -> np.ndarray:
-        along = np.abs(cos[k] * axis_x + sin[k] * axis_y)
-        across = np.abs(-sin[k] * axis_x + cos[k] * axis_y)
-        return half_length[k] * along + half_width[k] * across
-
-    centre_a, centre_b = x[a] * axis_x + y[a] * axis_y, x[b] * axis_x + y[b] * axis_y
-    sweep = (
-        (speed[a] * cos[a] - speed[b] * cos[b]) * axis_x + (speed[a] * sin[a] - speed[b] * sin[b]) * axis_y
-    ) * dt
-    min_a = centre_a - extent(a) + np.minimum(sweep, 0)
-    max_a = centre_a + extent(a) + np.maximum(sweep, 0)
-    min_b, max_b = centre_b - extent(b), centre_b + extent(b)
-    gap = np.where(min_a < min_b, min_b - max_a, min_a - max_b)
-    return np.any(gap > SEPARATION_MARGIN, axis=0)

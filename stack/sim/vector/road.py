@@ -29,11 +29,12 @@ from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import RoadObject
 
-from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections, broad_phase
+from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections
 from stack.sim.traffic import IDM_DRIVERS, ScenarioTraffic
 from stack.sim.vector.frame import TrafficFrame
+from stack.sim.vector.kernels import close_pairs
 from stack.sim.vector.lanes import LaneTable, clip, not_zero, wrap_to_pi
-from stack.sim.vector.motion import Footprints, columns, move, separated, steps_like_vehicle
+from stack.sim.vector.motion import Footprints, columns, move, steps_like_vehicle
 
 
 def _plain_velocity(cls: type) -> bool:
@@ -188,21 +189,13 @@ class VectorRoad(FastRoad):
         if moved is None or len(movers) < len(self.vehicles) or len(movers) < 2:
             self._collide(dt)
         else:
-            self._collide(dt, _close_pairs(moved, dt))
+            self._collide(dt, close_pairs(moved, dt))
 
     def _collision_pairs(self, dt: float) -> np.ndarray:
-        """The broad phase's pairs less those `separated` proves apart."""
+        """The pairs `close_pairs` keeps."""
         if len(self.vehicles) < 2:
             return super()._collision_pairs(dt)
-        return _close_pairs(Footprints.of(self.vehicles), dt)
-
-
-def _close_pairs(vehicles: Footprints, dt: float) -> np.ndarray:
-    """The broad phase's pairs of `vehicles` less those `separated` proves apart."""
-    pairs = broad_phase(vehicles.x, vehicles.y, vehicles.diagonal, vehicles.speed, dt)
-    if len(pairs):
-        pairs = pairs[~separated(vehicles, pairs, dt)]
-    return pairs
+        return close_pairs(Footprints.of(self.vehicles), dt)
 
 
 _DRIVER_CONSTANTS = attrgetter("LENGTH", "DELTA", "DISTANCE_WANTED")

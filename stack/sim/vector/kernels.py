@@ -1,0 +1,178 @@
+"""Compiled (numba) kernels of the vector road, for work whose result does not depend on float
+rounding, so that it may be computed in any operation order and with any math library: the
+collision pairs that could touch (`close_pairs`). Physics stays in numpy, whose transcendental
+ufuncs give stock highway-env's bits."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from stack.sim.fast_road import BROAD_PHASE_MARGIN
+from stack.sim.vector.motion import Footprints
+
+SEPARATION_MARGIN = 1e-6
+"""Distance [m] by which two swept rectangles must be apart on one of their axes before the narrow
+phase is skipped; float rounding differences with stock's own projections are below 1e-10 m."""
+
+
+def close_pairs(vehicles: Footprints, dt: float) -> np.ndarray:
+    """The pairs (i, j), i < j, by i then j, as an (n, 2) array, that pass highway-env's spherical
+    pre-check over `dt` [s] (with `BROAD_PHASE_MARGIN`) and whose rectangles, swept by their
+    relative displacement over `dt`, are not apart by `SEPARATION_MARGIN` along one of their own
+    axes (there stock's separating-axis test finds the same gap: neither impact nor crash): the
+    candidates of stock's polygon test, a superset of the pairs it finds touching."""
+    return _close_pairs(
+        vehicles.x,
+        vehicles.y,
+        vehicles.heading,
+        vehicles.speed,
+        vehicles.length,
+        vehicles.width,
+        vehicles.diagonal,
+        dt,
+        BROAD_PHASE_MARGIN,
+        SEPARATION_MARGIN,
+    )
+
+
+@njit(cache=True, nogil=True)
+def _close_pairs(
+    x: np.ndarray,
+    y: np.ndarray,
+    heading: np.ndarray,
+    speed: np.ndarray,
+    length: np.ndarray,
+    width: np.ndarray,
+    diagonal: np.ndarray,
+    dt: float,
+    broad_margin: float,
+    separation_margin: float,
+) -> np.ndarray:  # pragma: no cover - compiled; covered through close_pairs
+    count = x.shape[0]
+    cos = np.cos(heading)
+    sin = np.sin(heading)
+    pairs = np.empty((max(count * (count - 1) // 2, 1), 2), dtype=np.int64)
+    found = 0
+    axis_x = np.empty(4)
+    axis_y = np.empty(4)
+    for a in range(count):
+        for b in range(a + 1, count):
+            reach = (diagonal[a] + diagonal[b]) / 2 + speed[a] * dt + broad_margin
+            if math.sqrt((x[b] - x[a]) ** 2 + (y[b] - y[a]) ** 2) > reach:
+                continue
+            axis_x[0], axis_y[0] = cos[a], sin[a]
+            axis_x[1], axis_y[1] = -sin[a], cos[a]
+            axis_x[2], axis_y[2] = cos[b], sin[b]
+            axis_x[3], axis_y[3] = -sin[b], cos[b]
+            apart = False
+            for k in range(4):
+                ax, ay = axis_x[k], axis_y[k]
+                extent_a = length[a] / 2 * abs(cos[a] * ax + sin[a] * ay) + width[a] / 2 * abs(
+                    -sin[a] * ax + cos[a] * ay
+                )
+                extent_b = length[b] / 2 * abs(cos[b] * ax + sin[b] * ay) + width[b] / 2 * abs(
+                    -sin[b] * ax + cos[b] * ay
+                )
+                centre_a = x[a] * ax + y[a] * ay
+                centre_b = x[b] * ax + y[b] * ay
+                relative_x = speed[a] * cos[a] - speed[b] * cos[b]
+                relative_y = speed[a] * sin[a] - speed[b] * sin[b]
+                sweep = (relative_x * ax + relative_y * ay) * dt
+                min_a = centre_a - extent_a + min(sweep, 0.0)
+                max_a = centre_a + extent_a + max(sweep, 0.0)
+                min_b, max_b = centre_b - extent_b, centre_b + extent_b
+                gap = min_b - max_a if min_a < min_b else min_a - max_b
+                if gap > separation_margin:
+                    apart = True
+                    break
+            if not apart:
+                pairs[found, 0] = a
+                pairs[found, 1] = b
+                found += 1
+    return pairs[:found]
+
+
+@njit(cache=True, nogil=True)
+def lane_order(
+    position: np.ndarray,
+    start: np.ndarray,
+    direction: np.ndarray,
+    lateral: np.ndarray,
+    length: np.ndarray,
+    half_width: np.ndarray,
+    vehicle_length: float,
+    margin: float,
+) -> tuple[
+    np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool, np.ndarray, np.ndarray
+]:  # pragma: no cover - compiled; covered through TrafficFrame
+    """`TrafficFrame`'s lane coordinates and search tables of objects at `position` (n, 2) [m] on
+    parallel straight lanes (`start` (L, 2) [m], the shared unit `direction`, unit `lateral` (L, 2),
+    `length` and `half_width` [m]): s (n,) and r (L, n) [m], computed in `LaneTable.along` and
+    `LaneTable.across`'s operation order (the same bits); the order by s (ties by row), the sorted
+    s and whether two tie; per lane and sorted position p, the first position >= p (n if none)
+    and the last position < p (-1 if none) of an object `LaneTable.on_lane` counts on it, exact
+    comparisons all."""
+    count, lanes = position.shape[0], start.shape[0]
+    s = np.empty(count)
+    r = np.empty((lanes, count))
+    for i in range(count):
+        s[i] = (position[i, 0] - start[0, 0]) * direction[0] + (position[i, 1] - start[0, 1]) * direction[1]
+        for lane in range(lanes):
+            dx, dy = position[i, 0] - start[lane, 0], position[i, 1] - start[lane, 1]
+            r[lane, i] = dx * lateral[lane, 0] + dy * lateral[lane, 1]
+    order = np.argsort(s, kind="mergesort")
+    sorted_s = s[order]
+    tied = False
+    for p in range(1, count):
+        tied = tied or sorted_s[p] == sorted_s[p - 1]
+    next_on = np.empty((lanes, count + 1), dtype=np.int64)
+    last_before = np.empty((lanes, count + 1), dtype=np.int64)
+    for lane in range(lanes):
+        low, high = -vehicle_length, length[lane] + vehicle_length
+        reach = half_width[lane] + margin
+        following = count
+        next_on[lane, count] = count
+        for p in range(count - 1, -1, -1):
+            i = order[p]
+            if low <= s[i] and s[i] < high and abs(r[lane, i]) <= reach:
+                following = p
+            next_on[lane, p] = following
+        preceding = -1
+        last_before[lane, 0] = -1
+        for p in range(count):
+            i = order[p]
+            if low <= s[i] and s[i] < high and abs(r[lane, i]) <= reach:
+                preceding = p
+            last_before[lane, p + 1] = preceding
+    return s, r, order, sorted_s, tied, next_on, last_before
+
+
+@njit(cache=True, nogil=True)
+def neighbour_rows(
+    me: np.ndarray,
+    lane_rows: np.ndarray,
+    s: np.ndarray,
+    order: np.ndarray,
+    sorted_s: np.ndarray,
+    next_on: np.ndarray,
+    last_before: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled; covered through TrafficFrame
+    """Rows of the (front, rear) of the objects in rows `me`, each on its lane of `lane_rows`, from
+    `lane_order`'s tables of a frame without ties in s: front the first object on the lane at
+    s_v >= s other than itself, rear the last at s_v < s (-1 for none)."""
+    count = order.shape[0]
+    front = np.empty(me.shape[0], dtype=np.int64)
+    rear = np.empty(me.shape[0], dtype=np.int64)
+    for k in range(me.shape[0]):
+        lane = lane_rows[k]
+        start = np.searchsorted(sorted_s, s[me[k]], side="left")
+        ahead = next_on[lane, start]
+        if ahead < count and order[ahead] == me[k]:
+            ahead = next_on[lane, min(ahead + 1, count)]
+        behind = last_before[lane, start]
+        front[k] = order[ahead] if ahead < count else -1
+        rear[k] = order[behind] if behind >= 0 else -1
+    return front, rear
