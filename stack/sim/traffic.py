@@ -117,16 +117,14 @@ def _spawn_other(env: HighwayEnv, classes: list[dict[str, Any]], spawn_speed: fl
 
 def _place_incident(env: HighwayEnv, incident: dict[str, Any]) -> None:
     """A stopped vehicle `incident["ahead_m"]` ahead of the ego in `incident["lane"]`; the traffic
-    vehicles it would overlap, or that could not stop behind it, leave the road."""
+    vehicles it would overlap, or that could not stop behind it, leave the road. A plain kinematic
+    `Vehicle` with no action: it stays where it is (an IDM vehicle with target speed 0 would not:
+    highway-env's IDM treats 0 as 0.01 m/s and pulls away from standstill at 3 m/s^2)."""
     ego = env.vehicle
     lane_index = (*ego.lane_index[:2], int(incident["lane"]))
     lane = env.road.network.get_lane(lane_index)
     s_stop = lane.local_coordinates(ego.position)[0] + float(incident["ahead_m"])
-    stopped = utils.class_from_path(env.config["other_vehicles_type"])(
-        env.road, lane.position(s_stop, 0.0), lane.heading_at(s_stop), 0.0
-    )
-    stopped.target_speed = 0.0
-    stopped.enable_lane_change = False
+    stopped = Vehicle(env.road, lane.position(s_stop, 0.0), lane.heading_at(s_stop), 0.0)
     stopped.LENGTH = float(incident["length_m"])
     stopped.diagonal = float(np.sqrt(stopped.LENGTH**2 + stopped.WIDTH**2))
 

@@ -24,6 +24,7 @@ def steps_like_vehicle(cls: type) -> bool:
         known = _KINEMATIC[cls] = (
             issubclass(cls, Vehicle)
             and getattr(cls, "step", None) in (Vehicle.step, IDMVehicle.step, TrafficVehicle.step)
+            and getattr(cls, "stop_at_standstill", None) in (None, TrafficVehicle.stop_at_standstill)
             and getattr(cls, "clip_actions", None) is Vehicle.clip_actions
             and getattr(cls, "on_state_update", None) is Vehicle.on_state_update
         )
@@ -36,7 +37,7 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
     impacted, stops = [], []
     for i, v in enumerate(movers):
         step = type(v).step
-        if step is not Vehicle.step:
+        if step in (IDMVehicle.step, TrafficVehicle.step):
             v.timer += dt
         if v.crashed:
             v.action["steering"] = 0
@@ -48,7 +49,8 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
     steering = np.array([v.action["steering"] for v in movers], dtype=float)
     acceleration = np.array([v.action["acceleration"] for v in movers], dtype=float)
     if any(stops):
-        acceleration = np.where(stops, np.maximum(acceleration, -speed / dt), acceleration)
+        standstill = -speed / dt
+        acceleration = np.where(np.array(stops) & (standstill > acceleration), standstill, acceleration)
     too_fast, too_slow = speed > max_speed, speed < min_speed
     slow_down, speed_up = 1.0 * (max_speed - speed), 1.0 * (min_speed - speed)
     acceleration = np.where(too_fast & (slow_down < acceleration), slow_down, acceleration)

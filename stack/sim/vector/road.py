@@ -10,7 +10,12 @@ vehicles, in the stock operation order:
   the MOBIL evaluation due every 1 s, the abort of a contested change) still run per vehicle in the
   stock order, since one vehicle's decision is read by the next one's; then the steering controller
   and the IDM accelerations (own lane and target lane) of all of them at once;
-- step: clipping, the kinematic bicycle, impacts and the closest lane of every vehicle at once.
+- step: clipping, the kinematic bicycle, impacts and the closest lane of every vehicle at once, then
+  stock's collision test on the pairs that could touch (`kernels.close_pairs`).
+
+The work whose result cannot depend on rounding runs as numba kernels (`stack.sim.vector.kernels`):
+lane coordinates (exact on these lanes), the frame's order and neighbour search (comparisons) and
+the collision candidates (a filter with a margin).
 
 Identity rests on three facts checked in `tests/test_sim_backends.py`: numpy's transcendental ufuncs
 give the same bits for an array as for each of its elements; `np.vecdot` computes a 2-vector dot
@@ -186,10 +191,10 @@ class VectorRoad(FastRoad):
             else:
                 vehicle.step(dt)
         moved = move(movers, lanes, dt, self.record_history) if movers else None
-        if moved is None or len(movers) < len(self.vehicles) or len(movers) < 2:
-            self._collide(dt)
-        else:
+        if moved is not None and len(movers) == len(self.vehicles) >= 2:
             self._collide(dt, close_pairs(moved, dt))
+        else:
+            self._collide(dt)
 
     def _collision_pairs(self, dt: float) -> np.ndarray:
         """The pairs `close_pairs` keeps."""
