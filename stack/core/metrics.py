@@ -149,12 +149,12 @@ class Driven:
     trace: dict[str, list[float]]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Traces:
     """What the recorder recorded, as arrays (copies): the ego's `time` [s], lateral offset `d`
-    [m], `heading` relative to its lane [rad] and `speed` [m/s] at the start and after every
-    control tick (one sample more than ticks), and the reference's `d_reference` [m] and the
-    commanded `steering` [rad] of every tick."""
+    [m], `heading` relative to the road's first lane at its position [rad] and `speed` [m/s] at
+    the start and after every control tick (one sample more than ticks), and the reference's
+    `d_reference` [m] and the commanded `steering` [rad] of every tick."""
 
     time: np.ndarray
     d: np.ndarray

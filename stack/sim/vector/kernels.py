@@ -1,7 +1,9 @@
-"""Compiled (numba) kernels of the vector road, for work whose result does not depend on float
-rounding, so that it may be computed in any operation order and with any math library: the
-collision pairs that could touch (`close_pairs`). Physics stays in numpy, whose transcendental
-ufuncs give stock highway-env's bits."""
+"""Compiled (numba) kernels of the vector road, for work whose result cannot depend on float
+rounding: the collision pairs that could touch (`close_pairs`: a filter with a margin, so any math
+library will do), and the frame's lane coordinates, order and neighbour search (`lane_order`,
+`neighbour_rows`: exact products by 0 or +-1 on axis-aligned lanes, sums and comparisons, in
+numpy's operation order). Physics stays in numpy, whose transcendental ufuncs give stock
+highway-env's bits."""
 
 from __future__ import annotations
 
@@ -63,6 +65,8 @@ def _close_pairs(
             reach = (diagonal[a] + diagonal[b]) / 2 + speed[a] * dt + broad_margin
             if math.sqrt((x[b] - x[a]) ** 2 + (y[b] - y[a]) ** 2) > reach:
                 continue
+            relative_x = speed[a] * cos[a] - speed[b] * cos[b]
+            relative_y = speed[a] * sin[a] - speed[b] * sin[b]
             axis_x[0], axis_y[0] = cos[a], sin[a]
             axis_x[1], axis_y[1] = -sin[a], cos[a]
             axis_x[2], axis_y[2] = cos[b], sin[b]
@@ -78,8 +82,6 @@ def _close_pairs(
                 )
                 centre_a = x[a] * ax + y[a] * ay
                 centre_b = x[b] * ax + y[b] * ay
-                relative_x = speed[a] * cos[a] - speed[b] * cos[b]
-                relative_y = speed[a] * sin[a] - speed[b] * sin[b]
                 sweep = (relative_x * ax + relative_y * ay) * dt
                 min_a = centre_a - extent_a + min(sweep, 0.0)
                 max_a = centre_a + extent_a + max(sweep, 0.0)

@@ -9,7 +9,7 @@ import numpy as np
 from highway_env.road.lane import StraightLane
 from highway_env.road.road import RoadNetwork
 
-from stack.sim.fast_road import NEIGHBOUR_MARGIN, LaneIndex
+from stack.sim.fast_road import LaneIndex
 
 NOT_ZERO = 1e-2
 """highway-env's `utils.not_zero` threshold [same unit as the value]."""
@@ -80,13 +80,6 @@ class LaneTable:
         """Lateral coordinate r [m] of each position (columns) on each lane (rows)."""
         delta = position[None, :, :] - self.start[:, None, :]
         return delta[..., 0] * self.lateral[:, 0, None] + delta[..., 1] * self.lateral[:, 1, None]
-
-    def on_lane(self, s: np.ndarray, r: np.ndarray) -> np.ndarray:
-        """highway-env's `on_lane(margin=1)` of each object (columns) on each lane (rows), the test
-        `Road.neighbour_vehicles` applies."""
-        vehicle_length = StraightLane.VEHICLE_LENGTH
-        inside = (-vehicle_length <= s) & (s < self.length[:, None] + vehicle_length)
-        return (np.abs(r) <= self.half_width[:, None] + NEIGHBOUR_MARGIN) & inside
 
     def reachable(self, rows: np.ndarray, s: np.ndarray, r: np.ndarray) -> np.ndarray:
         """highway-env's `is_reachable_from` of lanes `rows` for objects at (s, r) on them."""

@@ -90,7 +90,7 @@ _MOVER_STATE = attrgetter("speed", "MAX_SPEED", "MIN_SPEED", "heading", "LENGTH"
 _FOOTPRINT = attrgetter("heading", "speed", "LENGTH", "WIDTH", "diagonal")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Footprints:
     """Vehicles' centres (x, y) [m], headings [rad], speeds [m/s], lengths, widths and diagonals [m]."""
 
@@ -104,6 +104,7 @@ class Footprints:
 
     @staticmethod
     def of(vehicles: list[Vehicle]) -> Footprints:
+        """The footprints of `vehicles` as they stand."""
         x, y = np.array([v.position for v in vehicles], dtype=float).T.copy()
         return Footprints(x, y, *columns(vehicles, _FOOTPRINT))
 
