@@ -54,8 +54,7 @@ FULL_BANDWIDTH_SPEED = 10.0
 MAX_COURSE = math.pi / 6
 """The course command's limit relative to the lane [rad]: the outer loop's lateral-speed output is
 limited to +-v sin(MAX_COURSE), and its integrator clamps there (no windup at crawl speed, where a
-lane change's reference asks for at most `Maneuver.max_course`, 12 deg by default, and the return
-from a change given up at most `ABORT_COURSE`, 25 deg)."""
+lane change's reference asks for at most `Maneuver.max_course`, 12 deg by default)."""
 
 
 def bandwidth_scale(speed: float) -> float:

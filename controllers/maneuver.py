@@ -10,14 +10,6 @@ from dataclasses import dataclass
 from controllers.reference import QuinticProfile, WarpedProfile, drivable_duration, lane_change, lane_keeping
 from records import Command, Reference, WorldState
 
-ABORT_COURSE = math.radians(25.0)
-"""Largest course [rad] the return to the origin lane may take when a lane change is given up.
-Wider than a change's own limit (`Maneuver.max_course`): an abort is an evasive move, and at the
-crawl speeds where the limit binds (the ego braking behind a stopped car while the gap beside it
-closes) a 12-degree return covers 0.2 m per metre driven and can stall straddling the lane line,
-where the closing car hits it. 25 degrees is within the lateral controller's own course limit
-(`controllers.lateral.MAX_COURSE`, 30 degrees)."""
-
 AbortRule = Callable[[WorldState, int], bool]
 """(world, target lane) -> True when a lane change towards that lane must be given up."""
 
@@ -43,8 +35,7 @@ class Maneuver:
     quintic's peak lateral speed stays within v tan(`max_course`) (`drivable_duration`); when the
     ego slows down during the change, the profile's clock slows with it (`WarpedProfile`, rate =
     v tan(max_course) / peak lateral speed, at most 1), so the course it asks for never exceeds
-    `max_course` and a car that stops holds its lateral position until it moves again. An aborted
-    change returns to its lane within `abort_course` instead (`ABORT_COURSE`)."""
+    `max_course` and a car that stops holds its lateral position until it moves again."""
 
     def __init__(
         self,
@@ -54,15 +45,12 @@ class Maneuver:
         should_abort: AbortRule = never_abort,
         min_speed: float = 0.0,
         max_course: float = math.radians(12.0),
-        abort_course: float = ABORT_COURSE,
     ) -> None:
         self.duration = duration
         self.set_speed = set_speed
         self.should_abort = should_abort
         self.min_speed = min_speed
         self.max_course = max_course
-        self.abort_course = abort_course
-        self.course = max_course
         self.lane = world.ego_lane
         self.target = self.lane
         self.profile = lane_keeping(float(world.lane_offsets[self.lane]), world.time)
@@ -99,7 +87,6 @@ class Maneuver:
             v0=d_dot,
         )
         self.clock = WarpedProfile(self.profile)
-        self.course = self.max_course
         self.target = target
         self.lane_changes += 1
         return True
@@ -121,7 +108,7 @@ class Maneuver:
         peak = self.profile.peak_lateral_speed
         if peak == 0.0:
             return 1.0
-        return min(1.0, max(speed, 0.0) * math.tan(self.course) / peak)
+        return min(1.0, max(speed, 0.0) * math.tan(self.max_course) / peak)
 
     def update(self, world: WorldState) -> bool:
         """Advance the state machine; True on the tick a lane change completes."""
@@ -132,8 +119,7 @@ class Maneuver:
 
     def _abort(self, world: WorldState) -> None:
         """Give up the lane change: a new quintic from the current lateral state back to the
-        origin lane's centre, over half the lane-change duration, slowed by the car's speed within
-        `abort_course`."""
+        origin lane's centre, over half the lane-change duration."""
         _, d_dot, d_ddot = self.clock.sample(world.time)
         self.target = self.lane
         self.profile = QuinticProfile(
@@ -145,7 +131,6 @@ class Maneuver:
             a0=d_ddot,
         )
         self.clock = WarpedProfile(self.profile)
-        self.course = self.abort_course
 
     def _crossed(self, world: WorldState) -> bool:
         """The ego's centre has left the origin lane."""

@@ -10,7 +10,7 @@ from controllers.config import ControllerConfig, PIDGains
 from controllers.cruise import AdaptiveCruise
 from controllers.emergency import EmergencyBraking
 from controllers.lateral import MAX_COURSE, LateralPID
-from controllers.maneuver import ABORT_COURSE, Maneuver
+from controllers.maneuver import Maneuver
 from controllers.reference import QuinticProfile, WarpedProfile, drivable_duration
 from records import Actuation, Command, EgoState, Neighbour, Reference
 from stack.core.config import ConfigError, build_config
@@ -23,7 +23,7 @@ from stack.core.safety_metrics import (
     r157_min_following_distance,
 )
 from stack.sim.plant import StableBicycleVehicle, substeps
-from tests.helpers import LANE_WIDTH, scene
+from tests.helpers import scene
 
 DT = 1 / 15
 COURSE = math.radians(12.0)
@@ -71,42 +71,6 @@ def test_maneuver_slows_its_reference_with_the_car_and_refuses_below_the_minimum
     assert maneuver.changing_lane
     stopped = maneuver.reference(type(world)(**{**with_speed(world, 0.0).__dict__, "time": 60.0}))
     assert stopped.d_dot == 0.0
-
-
-def moment(world, time, speed, d):
-    """`world` at `time` [s] with the ego at `speed` [m/s] and lateral offset `d` [m]."""
-    ego_d = world.d.copy()
-    ego_d[0] = d
-    return type(world)(**{**with_speed(world, speed).__dict__, "time": time, "d": ego_d})
-
-
-@pytest.mark.parametrize(("abort_course", "back_in_lane"), [(COURSE, False), (ABORT_COURSE, True)])
-def test_a_change_given_up_at_crawl_speed_is_back_in_its_lane_before_the_car_stops(
-    abort_course, back_in_lane
-):
-    """The ego brakes from 6 m/s to a stop at 3 m/s^2 (6 m) behind a stopped car; its change to
-    the left is given up with the centre 1.0 m out (it drifts on to 1.5 m as the return starts from
-    the change's lateral speed): at the lane change's own 12-degree limit the return stalls astride
-    the lane line, at `ABORT_COURSE` the footprint (2 m wide) is back in one lane when the car
-    stops."""
-    world = scene(3, (0.0, 1), speed=6.0)
-    give_up = {"now": False}
-    maneuver = Maneuver(
-        world, 5.0, 30.0, lambda *_: give_up["now"], max_course=COURSE, abort_course=abort_course
-    )
-    assert maneuver.command(Command.LEFT, world)
-    d, speed, tick = world.d[0], 6.0, 0
-    while abs(d - world.d[0]) < 1.0:
-        d = maneuver.reference(moment(world, tick * DT, speed, d)).d
-        tick += 1
-    give_up["now"] = True
-    while speed > 0.0:
-        speed = max(speed - 3.0 * DT, 0.0)
-        d = maneuver.reference(moment(world, tick * DT, speed, d)).d
-        give_up["now"] = False
-        tick += 1
-    assert not maneuver.changing_lane
-    assert bool(abs(d - world.d[0]) <= LANE_WIDTH / 2 - 1.0) is back_in_lane
 
 
 def test_lateral_pid_course_command_has_an_explicit_limit_and_no_windup():
