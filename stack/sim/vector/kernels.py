@@ -40,6 +40,16 @@ def close_pairs(vehicles: Footprints, dt: float) -> np.ndarray:
     )
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _half_extent(
+    length: float, width: float, cos: float, sin: float, axis_x: float, axis_y: float
+) -> float:  # pragma: no cover - compiled; covered through close_pairs
+    """Half the extent [m] of a `length` x `width` rectangle, heading (cos, sin), along a unit axis."""
+    along = abs(cos * axis_x + sin * axis_y)
+    across = abs(-sin * axis_x + cos * axis_y)
+    return length / 2 * along + width / 2 * across
+
+
 @njit(cache=True, nogil=True)
 def _close_pairs(
     x: np.ndarray,
@@ -74,12 +84,8 @@ def _close_pairs(
             apart = False
             for k in range(4):
                 ax, ay = axis_x[k], axis_y[k]
-                extent_a = length[a] / 2 * abs(cos[a] * ax + sin[a] * ay) + width[a] / 2 * abs(
-                    -sin[a] * ax + cos[a] * ay
-                )
-                extent_b = length[b] / 2 * abs(cos[b] * ax + sin[b] * ay) + width[b] / 2 * abs(
-                    -sin[b] * ax + cos[b] * ay
-                )
+                extent_a = _half_extent(length[a], width[a], cos[a], sin[a], ax, ay)
+                extent_b = _half_extent(length[b], width[b], cos[b], sin[b], ax, ay)
                 centre_a = x[a] * ax + y[a] * ay
                 centre_b = x[b] * ax + y[b] * ay
                 sweep = (relative_x * ax + relative_y * ay) * dt
@@ -115,8 +121,9 @@ def lane_order(
     `length` and `half_width` [m]): s (n,) and r (L, n) [m], computed in `LaneTable.along` and
     `LaneTable.across`'s operation order (the same bits); the order by s (ties by row), the sorted
     s and whether two tie; per lane and sorted position p, the first position >= p (n if none)
-    and the last position < p (-1 if none) of an object `LaneTable.on_lane` counts on it, exact
-    comparisons all."""
+    and the last position < p (-1 if none) of an object on the lane as `Road.neighbour_vehicles`
+    counts it (highway-env's `on_lane` with a lateral `margin` [m], `vehicle_length` [m] beyond both
+    ends), exact comparisons all."""
     count, lanes = position.shape[0], start.shape[0]
     s = np.empty(count)
     r = np.empty((lanes, count))
@@ -132,21 +139,23 @@ def lane_order(
         tied = tied or sorted_s[p] == sorted_s[p - 1]
     next_on = np.empty((lanes, count + 1), dtype=np.int64)
     last_before = np.empty((lanes, count + 1), dtype=np.int64)
+    on = np.empty(count, dtype=np.bool_)
     for lane in range(lanes):
         low, high = -vehicle_length, length[lane] + vehicle_length
         reach = half_width[lane] + margin
+        for p in range(count):
+            i = order[p]
+            on[p] = low <= s[i] and s[i] < high and abs(r[lane, i]) <= reach
         following = count
         next_on[lane, count] = count
         for p in range(count - 1, -1, -1):
-            i = order[p]
-            if low <= s[i] and s[i] < high and abs(r[lane, i]) <= reach:
+            if on[p]:
                 following = p
             next_on[lane, p] = following
         preceding = -1
         last_before[lane, 0] = -1
         for p in range(count):
-            i = order[p]
-            if low <= s[i] and s[i] < high and abs(r[lane, i]) <= reach:
+            if on[p]:
                 preceding = p
             last_before[lane, p + 1] = preceding
     return s, r, order, sorted_s, tied, next_on, last_before
