@@ -169,6 +169,12 @@ def test_hitting_a_stopped_vehicle_and_leaving_the_road_are_at_fault():
     d[0] = 11.5
     off = type(off)(**{**off.__dict__, "position": position, "d": d})
     assert departed(off) and occupied_lanes(off) == ()
+    watch = SafetyMonitor(DT)
+    watch.record_departure(world)
+    assert not watch.road_departure
+    watch.record_departure(off)
+    watch.record_departure(world)
+    assert watch.road_departure and watch.collision is None, "a look-ahead records the departure alone"
     collision = classify_collision(crash(off), False)
     assert (collision.kind, collision.at_fault) == ("off road", True)
 

@@ -119,6 +119,7 @@ def test_a_tick_is_a_frozen_record_its_consumers_read_outside_it(tiny_config):
         assert loop.recorder.time == [start.time], "a tick alone is recorded by none of them"
         future = loop.fork()
         assert future.act(Command.STAY, ticks=3).ticks == 3 and future.world.time > loop.world.time
+        assert future.traces().time.size == 1, "a fork records no metrics"
         assert loop.world is tick.world, "the fork moved alone"
         acted = loop.act(Command.STAY, ticks=3)
         assert acted.ticks == 3 and len(loop.recorder.time) == 4

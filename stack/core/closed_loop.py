@@ -112,6 +112,7 @@ class ClosedLoop:
         )
         self.monitor = SafetyMonitor(self.plant.dt)
         self.recorder = EpisodeRecorder(self.world)
+        self.recording = True
         self.video: Video | None = None
         if self.frames is not None:
             from stack.core.video import Video  # PIL and the grid pictures: loaded only for a video
@@ -170,8 +171,11 @@ class ClosedLoop:
         speeds: list[float] = []
         while not self.done:
             tick = self.tick()
-            self.recorder.record(tick)
-            self.monitor.record(tick.world, tick.changing_lane)
+            if self.recording:
+                self.recorder.record(tick)
+                self.monitor.record(tick.world, tick.changing_lane)
+            else:
+                self.monitor.record_departure(tick.world)
             if self.video is not None:
                 self.video.add(tick, self.grid, self.command, self.applied)
             speeds.append(float(tick.world.speed[0]))
@@ -216,17 +220,21 @@ class ClosedLoop:
 
     def fork(self, view: OccupancyGridBuilder | None = None) -> ClosedLoop:
         """A copy of the loop now, to play a future on (the simulator is deterministic, so the copy
-        foresees the other vehicles exactly): no video; what no step changes is shared rather than
-        copied (the config, the world snapshots: records, never changed once made; the grid
-        builder, stateless). `view` replaces the builder of the copy's grids (a planner whose
-        rollouts perceive as another agent does)."""
+        foresees the other vehicles exactly). It records no video and no metrics (its `traces` end
+        at the fork) but the road departure, which ends its episode (`done`). What no step changes
+        is shared rather than copied (the config, the world snapshots: records, never changed once
+        made; the grid builder, stateless; the metrics recorder, which the copy never writes).
+        `view` replaces the builder of the copy's grids (a planner whose rollouts perceive as
+        another agent does)."""
         memo: dict[int, object] = {id(self.config): self.config, id(self.builder): view or self.builder}
-        memo |= {id(self.frames): None, id(self.video): None}
+        memo |= {id(self.frames): None, id(self.video): None, id(self.recorder): self.recorder}
         snapshot = self.snapshot[0] if self.snapshot is not None else None
         for world in (self.world, self.perceived, snapshot):
             if world is not None:
                 memo[id(world)] = world
-        return copy.deepcopy(self, memo)
+        future = copy.deepcopy(self, memo)
+        future.recording = False
+        return future
 
     def status(self) -> LoopStatus:
         """The loop so far (see `LoopStatus`)."""

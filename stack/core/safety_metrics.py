@@ -145,6 +145,10 @@ class SafetyMonitor:
         self.road_departure = False
         self.collision: Collision | None = None
 
+    def record_departure(self, world: WorldState) -> None:
+        """Only whether the ego left the road in `world` (what ends an episode early)."""
+        self.road_departure = self.road_departure or departed(world)
+
     def record(self, world: WorldState, changing_lane: bool) -> None:
         if world.crashed[0] and self.collision is None:
             self.collision = classify_collision(world, changing_lane)
