@@ -16,7 +16,12 @@ from planner.mobil import MobilAgent
 from stack.core.config import build_config, grid_config
 from stack.core.decision_env import HierarchicalHighwayEnv
 from stack.core.executors import completed
-from stack.training.demonstrations import collect_demonstrations, expert_episode, expert_policy
+from stack.training.demonstrations import (
+    collect_demonstrations,
+    demonstration_worlds,
+    expert_episode,
+    expert_policy,
+)
 from stack.training.summary import DemonstrationsUsed
 from stack.training.trainer import Trainer
 from tests.test_train import TINY
@@ -165,3 +170,30 @@ def test_recording_workers_leave_ctrl_c_to_the_learner():
         assert not deaf_after_an_expert_episode(3), "in the learner's own process Ctrl-C still stops the run"
     finally:
         signal.signal(signal.SIGINT, inherited)
+
+
+def test_demonstrations_come_from_their_own_worlds_when_named():
+    """`demonstrations.scenarios` is the mix the expert drives (the learner's own mix otherwise):
+    MOBIL demonstrated in a jam starts at a jam's speed, not at highway-v0's 25 m/s."""
+    demonstrations = {"episodes": 2, "scenarios": {"jam": 1.0}}
+    config = build_config({**TINY, "train": {**TINY["train"], "demonstrations": demonstrations}})
+    assert config.train.scenarios == {}
+    world = demonstration_worlds(config)
+    assert world.train.scenarios == {"jam": 1.0} and HierarchicalHighwayEnv(world).world_names == ["jam"]
+    speed_column = OccupancyGridBuilder(grid_config(config)).observation_space(3).shape[0] - 3
+    recorded = collect_demonstrations(config, progress=False).observations[:, speed_column]
+    highway = expert_episode(config, "mobil", 200_001).observations[:, speed_column]
+    assert recorded.max() < 0.5 < highway[0], "ego speed / MAX_SPEED: a jam's crawl, highway-v0's 25 m/s"
+
+
+@pytest.mark.parametrize(
+    ("mix", "message"),
+    [
+        ({"nowhere": 1.0}, "unknown scenario 'nowhere'"),
+        ({"lanes-3": 1.0, "lanes-5": 1.0}, "train.demonstrations.scenarios: the observation encoding"),
+    ],
+)
+def test_demonstration_worlds_are_checked_as_the_training_mix_is(mix, message):
+    demonstrations = {"scenarios": mix}
+    with pytest.raises(ValueError, match=message):
+        build_config({**TINY, "train": {**TINY["train"], "demonstrations": demonstrations}})

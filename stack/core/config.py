@@ -88,9 +88,11 @@ class RunConfig(Strict):
 
     @model_validator(mode="after")
     def _one_encoding_for_the_mix(self) -> RunConfig:
-        self.check_one_encoding(
-            {name: HighwayConfig(**scenarios.road(name)) for name in self.train.scenarios}
-        )
+        roads = {name: HighwayConfig(**scenarios.road(name)) for name in self.train.scenarios}
+        self.check_one_encoding(roads)
+        if (demonstrations := self.train.demonstrations) is not None and demonstrations.scenarios:
+            roads |= {name: HighwayConfig(**scenarios.road(name)) for name in demonstrations.scenarios}
+            self.check_one_encoding(roads, "train.demonstrations.scenarios")
         return self
 
     def check_one_encoding(self, roads: dict[str, HighwayConfig], key: str = "train.scenarios") -> None:

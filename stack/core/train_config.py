@@ -81,6 +81,28 @@ class DemonstrationConfig(Strict):
     margin: float = Field(0.8, ge=0, le=MAX_REWARD)
     margin_weight: float = Field(1.0, ge=0, le=MAX_REWARD)
     seed: int = Field(200_000, ge=0, le=SEED_LIMIT - 1_000_000)
+    scenarios: dict[str, float] = Field(
+        default_factory=dict,
+        description="the worlds the expert drives, with their shares (empty: the training mix): "
+        "demonstrations only where the expert is the one to copy",
+    )
+
+    @field_validator("scenarios")
+    @classmethod
+    def _known_scenarios(cls, mix: dict[str, float]) -> dict[str, float]:
+        return checked_mix(mix)
+
+
+def checked_mix(mix: dict[str, float]) -> dict[str, float]:
+    """`mix` unless a name is no scenario or a share is outside (0, MAX_SHARE] (ValueError)."""
+    for name, share in mix.items():
+        if name not in scenarios.names():
+            raise ValueError(unknown_name("scenario", name, scenarios.names()))
+        if not 0 < share <= MAX_SHARE:
+            raise ValueError(
+                f"scenario {name!r}: the share must be a number in (0, {MAX_SHARE:g}], got {share}"
+            )
+    return mix
 
 
 class TrainConfig(Strict):
@@ -125,14 +147,7 @@ class TrainConfig(Strict):
     @field_validator("scenarios")
     @classmethod
     def _known_scenarios(cls, mix: dict[str, float]) -> dict[str, float]:
-        for name, share in mix.items():
-            if name not in scenarios.names():
-                raise ValueError(unknown_name("scenario", name, scenarios.names()))
-            if not 0 < share <= MAX_SHARE:
-                raise ValueError(
-                    f"scenario {name!r}: the share must be a number in (0, {MAX_SHARE:g}], got {share}"
-                )
-        return mix
+        return checked_mix(mix)
 
     @field_validator("init_model")
     @classmethod

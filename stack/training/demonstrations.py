@@ -62,14 +62,25 @@ def expert_episode(config: RunConfig, expert_name: str, seed: int) -> Demonstrat
     )
 
 
+def demonstration_worlds(config: RunConfig) -> RunConfig:
+    """`config` with `train.demonstrations.scenarios` as its world mix, if it names one."""
+    demonstrations = config.train.demonstrations
+    if demonstrations is None or not demonstrations.scenarios:
+        return config
+    return config.model_copy(
+        update={"train": config.train.model_copy(update={"scenarios": demonstrations.scenarios})}
+    )
+
+
 def collect_demonstrations(config: RunConfig, progress: bool = True) -> Demonstrations:
     """`train.demonstrations.episodes` expert episodes over `train.envs` processes, in seed order
-    (the result does not depend on the number of processes)."""
+    (the result does not depend on the number of processes), in the worlds of
+    `train.demonstrations.scenarios` (by default the training mix)."""
     demonstrations = config.train.demonstrations
     assert demonstrations is not None, "the run names no demonstrations"
     seeds = [child_seed(demonstrations.seed, k) for k in range(demonstrations.episodes)]
     episodes: dict[int, Demonstrations] = {}
-    task = partial(expert_episode, config, demonstrations.expert)
+    task = partial(expert_episode, demonstration_worlds(config), demonstrations.expert)
     with tqdm(total=len(seeds), unit="episode", desc="demonstrations", disable=not progress) as bar:
         for index, episode in completed(task, seeds, config.train.envs):
             episodes[index] = episode
