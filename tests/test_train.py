@@ -391,7 +391,8 @@ def test_a_run_starts_from_init_model_and_refuses_one_that_does_not_fit(tmp_path
 
 def test_a_config_names_its_starting_model_beside_it_from_any_working_directory(tmp_path, monkeypatch):
     """A relative `train.init_model` naming a file beside the config file is that file (the shipped
-    two-stage config starts from `ddqn-stage1.npz` beside it, also from an installed wheel)."""
+    config starts from `ddqn-stage2.npz` beside it, which started from `ddqn-stage1.npz`, also from
+    an installed wheel)."""
     from stack.core.config import load_config
 
     folder = tmp_path / "configs"
@@ -400,8 +401,9 @@ def test_a_config_names_its_starting_model_beside_it_from_any_working_directory(
     (folder / "train.yaml").write_text(yaml.safe_dump({"train": {"init_model": "start.npz"}}))
     monkeypatch.chdir(tmp_path)
     assert load_config("configs/train.yaml").train.init_model == str(folder / "start.npz")
-    shipped = Path(__file__).parents[1] / "configs" / "train" / "ddqn.yaml"
-    assert Path(load_config(shipped).train.init_model).samefile(shipped.parent / "ddqn-stage1.npz")
+    shipped = Path(__file__).parents[1] / "configs" / "train"
+    for config, start in (("ddqn.yaml", "ddqn-stage2.npz"), ("ddqn-stage2.yaml", "ddqn-stage1.npz")):
+        assert Path(load_config(shipped / config).train.init_model).samefile(shipped / start)
 
 
 def test_validation_scores_every_world_of_a_mix_and_shows_it():
