@@ -191,6 +191,7 @@ def test_demonstrations_come_from_their_own_worlds_when_named():
     [
         ({"nowhere": 1.0}, "unknown scenario 'nowhere'"),
         ({"lanes-3": 1.0, "lanes-5": 1.0}, "train.demonstrations.scenarios: the observation encoding"),
+        ({"lanes-5": 1.0}, "lanes-5 and the configured road"),
     ],
 )
 def test_demonstration_worlds_are_checked_as_the_training_mix_is(mix, message):

@@ -91,8 +91,9 @@ class RunConfig(Strict):
         roads = {name: HighwayConfig(**scenarios.road(name)) for name in self.train.scenarios}
         self.check_one_encoding(roads)
         if (demonstrations := self.train.demonstrations) is not None and demonstrations.scenarios:
-            roads |= {name: HighwayConfig(**scenarios.road(name)) for name in demonstrations.scenarios}
-            self.check_one_encoding(roads, "train.demonstrations.scenarios")
+            learner = roads or {self.scenario or "the configured road": self.highway}
+            demonstrated = {name: HighwayConfig(**scenarios.road(name)) for name in demonstrations.scenarios}
+            self.check_one_encoding(learner | demonstrated, "train.demonstrations.scenarios")
         return self
 
     def check_one_encoding(self, roads: dict[str, HighwayConfig], key: str = "train.scenarios") -> None:
