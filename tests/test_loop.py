@@ -137,6 +137,7 @@ def test_a_scripted_lane_change_is_read_through_the_loops_face():
     assert loop.solve_statistics() == SolveStatistics(p50_ms=0.0, p95_ms=0.0, fallbacks=0)
     assert loop.start_lane_change(Command.STAY, at_time=1.0) is None
     assert loop.start_lane_change(Command.LEFT, at_time=1.0) == config.controller.lane_change_duration_s
+    assert loop.start_lane_change(Command.RIGHT, at_time=2.0) is None, "a change is planned already"
     loop.act(Command.STAY, ticks=30)
     traces = loop.traces()
     assert loop.changing_lane and traces.time[-1] == pytest.approx(2.0)
@@ -144,3 +145,8 @@ def test_a_scripted_lane_change_is_read_through_the_loops_face():
     assert traces.d[-1] < traces.d[0], "moving towards the lane on the left"
     solves = loop.solve_statistics()
     assert solves.fallbacks == 0 and 0.0 < solves.p50_ms <= solves.p95_ms
+    later = ClosedLoop(config, EmptyRoad("straight", "kinematic", 20.0, config.dt))
+    later.reset(0)
+    later.act(Command.STAY, ticks=15)
+    assert later.start_lane_change(Command.LEFT, at_time=0.5) is None, "a start before now"
+    assert not later.changing_lane and later.start_lane_change(Command.LEFT, at_time=1.5) is not None

@@ -209,7 +209,10 @@ class ClosedLoop:
     def start_lane_change(self, command: Command, at_time: float) -> float | None:
         """Plan the lane change `command` to start at `at_time` [s], past the safety layer and the
         decision points (a scripted maneuver, as `drivestack track` drives): its planned duration
-        [s], or None when the maneuver refuses it (STAY, off the road, below its minimum speed)."""
+        [s], or None when it is refused: STAY, a target off the road, below the maneuver's minimum
+        speed, while another change runs, or a start before now."""
+        if self.maneuver.changing_lane or at_time < self.world.time:
+            return None
         if not self.maneuver.command(command, self.world, start_time=at_time):
             return None
         return self.maneuver.profile.duration
