@@ -69,11 +69,13 @@ class Maneuver:
         """Start the lane change `command` asks for, now or, planned ahead, at `start_time` [s]
         (the reference holds the lane until then, so a controller with preview sees it coming),
         from where the reference is now (its offset and lateral speed), so the reference stays
-        smooth whatever the car's own tracking error; False when it is STAY, off the road or the
-        ego is slower than `min_speed`."""
+        smooth whatever the car's own tracking error; False when it is STAY, off the road, the
+        ego is slower than `min_speed`, a lane change runs already or `start_time` is past."""
         target = self.lane + command.lane_shift
         speed = float(world.speed[0])
         if command is Command.STAY or not 0 <= target < world.lanes_count or speed < self.min_speed:
+            return False
+        if self.changing_lane or (start_time is not None and start_time < world.time):
             return False
         d, d_dot, _ = self.clock.sample(world.time)
         distance = float(world.lane_offsets[target]) - d

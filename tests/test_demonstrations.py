@@ -179,8 +179,13 @@ def test_demonstrations_come_from_their_own_worlds_when_named():
     config = build_config({**TINY, "train": {**TINY["train"], "demonstrations": demonstrations}})
     assert config.train.scenarios == {}
     world = demonstration_worlds(config)
-    assert world.train.scenarios == {"jam": 1.0} and HierarchicalHighwayEnv(world).world_names == ["jam"]
-    speed_column = OccupancyGridBuilder(grid_config(config)).observation_space(3).shape[0] - 3
+    env = HierarchicalHighwayEnv(world)
+    assert world.train.scenarios == {"jam": 1.0} and env.world_names == ["jam"]
+    env.close()
+    lane_code_and_speed = 3  # the observation ends with the ego's speed, then the lane code's 2 bits
+    speed_column = (
+        OccupancyGridBuilder(grid_config(config)).observation_space(3).shape[0] - lane_code_and_speed
+    )
     recorded = collect_demonstrations(config, progress=False).observations[:, speed_column]
     highway = expert_episode(config, "mobil", 200_001).observations[:, speed_column]
     assert recorded.max() < 0.5 < highway[0], "ego speed / MAX_SPEED: a jam's crawl, highway-v0's 25 m/s"
@@ -198,3 +203,10 @@ def test_demonstration_worlds_are_checked_as_the_training_mix_is(mix, message):
     demonstrations = {"scenarios": mix}
     with pytest.raises(ValueError, match=message):
         build_config({**TINY, "train": {**TINY["train"], "demonstrations": demonstrations}})
+
+
+def test_a_run_s_own_road_is_checked_even_when_its_scenario_is_demonstrated():
+    """The run's road (`lanes-3` made 5 lanes wide) is not the demonstrated `lanes-3`."""
+    data = {**TINY, "train": {**TINY["train"], "demonstrations": {"scenarios": {"lanes-3": 1.0}}}}
+    with pytest.raises(ValueError, match=r"lanes-3 and lanes-3 \(the run's road\) \(lane counts \[3, 5\]\)"):
+        build_config(data, scenario="lanes-3", highway__lanes_count=5)

@@ -246,8 +246,8 @@ def test_lane_keeping_from_standstill_on_both_plants(plant):
     loop = ClosedLoop(config, road)
     start = loop.reset(0)
     loop.act(Command.STAY, ticks=round(15 / DT))
-    drift = np.abs(np.array(loop.recorder.d) - start.d[0])
-    assert loop.recorder.speed[-1] == pytest.approx(8.0, abs=0.3)
+    drift = np.abs(loop.traces().d - start.d[0])
+    assert loop.traces().speed[-1] == pytest.approx(8.0, abs=0.3)
     assert drift.max() < 0.05
 
 

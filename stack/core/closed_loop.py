@@ -111,8 +111,7 @@ class ClosedLoop:
             control.emergency_decel_mps2, control.comfort_decel_mps2, control.emergency_ttc_s
         )
         self.monitor = SafetyMonitor(self.plant.dt)
-        self.recorder = EpisodeRecorder(self.world)
-        self.recording = True
+        self.recorder: EpisodeRecorder | None = EpisodeRecorder(self.world)
         self.video: Video | None = None
         if self.frames is not None:
             from stack.core.video import Video  # PIL and the grid pictures: loaded only for a video
@@ -171,7 +170,7 @@ class ClosedLoop:
         speeds: list[float] = []
         while not self.done:
             tick = self.tick()
-            if self.recording:
+            if self.recorder is not None:
                 self.recorder.record(tick)
                 self.monitor.record(tick.world, tick.changing_lane)
             else:
@@ -211,8 +210,6 @@ class ClosedLoop:
         decision points (a scripted maneuver, as `drivestack track` drives): its planned duration
         [s], or None when it is refused: STAY, a target off the road, below the maneuver's minimum
         speed, while another change runs, or a start before now."""
-        if self.maneuver.changing_lane or at_time < self.world.time:
-            return None
         if not self.maneuver.command(command, self.world, start_time=at_time):
             return None
         return self.maneuver.profile.duration
@@ -223,21 +220,24 @@ class ClosedLoop:
 
     def fork(self, view: OccupancyGridBuilder | None = None) -> ClosedLoop:
         """A copy of the loop now, to play a future on (the simulator is deterministic, so the copy
-        foresees the other vehicles exactly). It records no video and no metrics (its `traces` end
-        at the fork) but the road departure, which ends its episode (`done`). What no step changes
-        is shared rather than copied (the config, the world snapshots: records, never changed once
-        made; the grid builder, stateless; the metrics recorder, which the copy never writes).
-        `view` replaces the builder of the copy's grids (a planner whose rollouts perceive as
-        another agent does)."""
+        foresees the other vehicles exactly). It records no video and no metrics, only the road
+        departure that ends its episode (`done`): its `status`, `traces` and `result` are refused
+        (read them on the loop it came from). What no step changes is shared rather than copied
+        (the config, the world snapshots: records, never changed once made; the grid builder,
+        stateless). `view` replaces the builder of the copy's grids (a planner whose rollouts
+        perceive as another agent does)."""
         memo: dict[int, object] = {id(self.config): self.config, id(self.builder): view or self.builder}
-        memo |= {id(self.frames): None, id(self.video): None, id(self.recorder): self.recorder}
+        memo |= {id(self.frames): None, id(self.video): None, id(self.recorder): None}
         snapshot = self.snapshot[0] if self.snapshot is not None else None
         for world in (self.world, self.perceived, snapshot):
             if world is not None:
                 memo[id(world)] = world
-        future = copy.deepcopy(self, memo)
-        future.recording = False
-        return future
+        return copy.deepcopy(self, memo)
+
+    def _recorded(self) -> EpisodeRecorder:
+        if self.recorder is None:
+            raise RuntimeError("a fork records no metrics: read them on the loop it came from")
+        return self.recorder
 
     def status(self) -> LoopStatus:
         """The loop so far (see `LoopStatus`)."""
@@ -245,7 +245,7 @@ class ClosedLoop:
         return LoopStatus(
             crashed=self.crashed,
             speed=float(self.world.speed[0]),
-            passed_cars=len(self.recorder.passed),
+            passed_cars=len(self._recorded().passed),
             lane_changes=self.maneuver.counts.lane_changes,
             masked=safety.masked,
             aborted=safety.aborted,
@@ -253,7 +253,7 @@ class ClosedLoop:
 
     def traces(self) -> Traces:
         """The episode's series so far, tick by tick (see `Traces`)."""
-        return self.recorder.traces()
+        return self._recorded().traces()
 
     def solve_statistics(self) -> SolveStatistics:
         """The controller's time per tick and fallbacks this episode (see `SolveStatistics`)."""
@@ -263,7 +263,7 @@ class ClosedLoop:
 
     def result(self, episode: int) -> EpisodeResult:
         """The episode's result, as its parts measured it so far."""
-        driven, monitor, safety = self.recorder.driven(self.plant.dt), self.monitor, self.safety.counts
+        driven, monitor, safety = self._recorded().driven(self.plant.dt), self.monitor, self.safety.counts
         solves = self.solve_statistics()
         return EpisodeResult(
             episode=episode,

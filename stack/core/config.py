@@ -88,12 +88,14 @@ class RunConfig(Strict):
 
     @model_validator(mode="after")
     def _one_encoding_for_the_mix(self) -> RunConfig:
-        roads = {name: HighwayConfig(**scenarios.road(name)) for name in self.train.scenarios}
+        roads = named_roads(self.train.scenarios)
         self.check_one_encoding(roads)
         if (demonstrations := self.train.demonstrations) is not None and demonstrations.scenarios:
-            learner = roads or {self.scenario or "the configured road": self.highway}
-            demonstrated = {name: HighwayConfig(**scenarios.road(name)) for name in demonstrations.scenarios}
-            self.check_one_encoding(learner | demonstrated, "train.demonstrations.scenarios")
+            own = f"{self.scenario} (the run's road)" if self.scenario else "the configured road"
+            learner = {f"{name} (trained)": road for name, road in roads.items()} or {own: self.highway}
+            self.check_one_encoding(
+                learner | named_roads(demonstrations.scenarios), "train.demonstrations.scenarios"
+            )
         return self
 
     def check_one_encoding(self, roads: dict[str, HighwayConfig], key: str = "train.scenarios") -> None:
@@ -188,6 +190,11 @@ def config_text(config: RunConfig, comment: str = "") -> str:
 
 def write_config(config: RunConfig, path: Path, comment: str = "") -> None:
     write_text(path, config_text(config, comment))
+
+
+def named_roads(mix: dict[str, float]) -> dict[str, HighwayConfig]:
+    """The road of each scenario of `mix`, by name."""
+    return {name: HighwayConfig(**scenarios.road(name)) for name in mix}
 
 
 def in_scenario(config: RunConfig, name: str) -> RunConfig:

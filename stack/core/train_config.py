@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from planner.networks import NET_ARCHS
 from records import ENCODINGS, LEARNED_AGENTS, SEED_LIMIT, Encoding, LearnedAgentName, one_of, unknown_name
@@ -17,8 +17,8 @@ MAX_STEPS = 1_000_000_000
 MAX_SPEED_RANGE = 100.0
 """Upper end of the reward's speed range [m/s]."""
 MAX_SHARE = 1e6
-"""Largest share of a scenario in `train.scenarios` (shares are relative: they are divided by their
-sum, which must stay finite)."""
+"""Largest share of a scenario in a mix (`train.scenarios`, `train.demonstrations.scenarios`; shares
+are relative: they are divided by their sum, which must stay finite)."""
 MAX_REWARD = 1_000.0
 """Upper bound of every reward term and loss weight, by magnitude: well past any useful value,
 far from where float32 arithmetic overflows."""
@@ -63,36 +63,6 @@ class ValidationConfig(Strict):
     seed: int = Field(100_000, ge=0, le=SEED_LIMIT - 1_000_000)
 
 
-EXPERTS = ("mobil", "rule", "oracle")
-"""Agents whose decisions can be demonstrations: the classical baselines and the oracle."""
-
-
-class DemonstrationConfig(Strict):
-    """DQfD (Hester et al., 2018): `episodes` training episodes driven by `expert` (seeded from
-    `seed`, a stream of its own) are recorded with n-step returns; `pretrain_steps` gradient steps
-    on them alone precede the first episode of training, and afterwards `share` of every batch is
-    drawn from them. On those rows a large-margin loss (weight `margin_weight`) keeps the expert's
-    action `margin` above the others."""
-
-    expert: Annotated[str, one_of("expert", EXPERTS)] = "mobil"
-    episodes: int = Field(200, ge=1, le=100_000)
-    pretrain_steps: int = Field(10_000, ge=0, le=10_000_000)
-    share: float = Field(0.25, ge=0, lt=1)
-    margin: float = Field(0.8, ge=0, le=MAX_REWARD)
-    margin_weight: float = Field(1.0, ge=0, le=MAX_REWARD)
-    seed: int = Field(200_000, ge=0, le=SEED_LIMIT - 1_000_000)
-    scenarios: dict[str, float] = Field(
-        default_factory=dict,
-        description="the worlds the expert drives, with their shares (empty: the training mix): "
-        "demonstrations only where the expert is the one to copy",
-    )
-
-    @field_validator("scenarios")
-    @classmethod
-    def _known_scenarios(cls, mix: dict[str, float]) -> dict[str, float]:
-        return checked_mix(mix)
-
-
 def checked_mix(mix: dict[str, float]) -> dict[str, float]:
     """`mix` unless a name is no scenario or a share is outside (0, MAX_SHARE] (ValueError)."""
     for name, share in mix.items():
@@ -105,13 +75,43 @@ def checked_mix(mix: dict[str, float]) -> dict[str, float]:
     return mix
 
 
+ScenarioMix = Annotated[dict[str, float], AfterValidator(checked_mix)]
+"""Named scenarios with their shares (relative weights)."""
+
+
+EXPERTS = ("mobil", "rule", "oracle")
+"""Agents whose decisions can be demonstrations: the classical baselines and the oracle."""
+
+
+class DemonstrationConfig(Strict):
+    """DQfD (Hester et al., 2018): `episodes` training episodes driven by `expert` (seeded from
+    `seed`, a stream of its own) are recorded with n-step returns; `pretrain_steps` gradient steps
+    on them alone precede the first episode of training, and afterwards `share` of every batch is
+    drawn from them. On those rows a large-margin loss (weight `margin_weight`) keeps the expert's
+    action `margin` above the others. The expert drives the worlds of `scenarios` (by default the
+    training mix): an expert worth copying on some worlds only demonstrates there."""
+
+    expert: Annotated[str, one_of("expert", EXPERTS)] = "mobil"
+    episodes: int = Field(200, ge=1, le=100_000)
+    pretrain_steps: int = Field(10_000, ge=0, le=10_000_000)
+    share: float = Field(0.25, ge=0, lt=1)
+    margin: float = Field(0.8, ge=0, le=MAX_REWARD)
+    margin_weight: float = Field(1.0, ge=0, le=MAX_REWARD)
+    seed: int = Field(200_000, ge=0, le=SEED_LIMIT - 1_000_000)
+    scenarios: ScenarioMix = Field(
+        default_factory=dict,
+        description="the worlds the expert drives, with their shares (empty: the training mix): "
+        "demonstrations only where the expert is the one to copy",
+    )
+
+
 class TrainConfig(Strict):
     """`drivestack train`: algorithm, budget, network, SB3 hyper-parameters, reward, validation."""
 
     algorithm: Annotated[LearnedAgentName, one_of("algorithm", LEARNED_AGENTS)] = "ddqn"
     steps: int = Field(50_000, ge=1, le=MAX_STEPS)
     envs: int = Field(1, ge=1, le=64, description="environments stepped in parallel processes (DDQN / DQN)")
-    scenarios: dict[str, float] = Field(
+    scenarios: ScenarioMix = Field(
         default_factory=dict,
         description="a mix of named scenarios with their shares: each training and validation "
         "episode draws its world from it (empty: the run's own world)",
@@ -143,11 +143,6 @@ class TrainConfig(Strict):
     demonstrations: DemonstrationConfig | None = Field(
         None, description="an expert's episodes to pre-train on and keep learning from (ddqn only)"
     )
-
-    @field_validator("scenarios")
-    @classmethod
-    def _known_scenarios(cls, mix: dict[str, float]) -> dict[str, float]:
-        return checked_mix(mix)
 
     @field_validator("init_model")
     @classmethod

@@ -1,5 +1,6 @@
 """An expert's demonstrations for DQfD-style training (`train.demonstrations`): recorded in the
-decision MDP the learner trains in, on training seeds of their own stream, spread over processes."""
+decision MDP the learner trains in (in the worlds of `train.demonstrations.scenarios` when it names
+some), on training seeds of their own stream, spread over processes."""
 
 from __future__ import annotations
 
@@ -108,5 +109,8 @@ def demonstrations_used(config: RunConfig, model: object) -> DemonstrationsUsed 
     if settings is None or demonstrations is None:
         return None
     return DemonstrationsUsed(
-        expert=settings.expert, episodes=settings.episodes, transitions=len(demonstrations)
+        expert=settings.expert,
+        episodes=settings.episodes,
+        transitions=len(demonstrations),
+        scenarios=tuple(settings.scenarios),
     )

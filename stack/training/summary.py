@@ -13,11 +13,13 @@ NO_CURVE = "not drawn: no validation ran yet"
 
 @dataclass(frozen=True, kw_only=True)
 class DemonstrationsUsed:
-    """The expert a run learnt from first, its episodes and the transitions they gave."""
+    """The expert a run learnt from first, its episodes, the transitions they gave and the worlds
+    it drove (named scenarios; empty: the training mix)."""
 
     expert: str
     episodes: int
     transitions: int
+    scenarios: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -70,9 +72,14 @@ class TrainSummary:
             steps=data["steps"],
             wall_time_s=data["wall_time_s"],
             interrupted=data["interrupted"],
-            demonstrations=DemonstrationsUsed(**demonstrations) if demonstrations else None,
+            demonstrations=_demonstrations(demonstrations) if demonstrations else None,
             best_validation=Validation.from_json(best) if best else None,
             validations=data["validations"],
             best_model=data["best_model"],
             training_curve=data["training_curve"],
         )
+
+
+def _demonstrations(data: dict[str, Any]) -> DemonstrationsUsed:
+    """`DemonstrationsUsed` from its JSON (a summary written before worlds were recorded has none)."""
+    return DemonstrationsUsed(**{**data, "scenarios": tuple(data.get("scenarios", ()))})
