@@ -51,7 +51,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--seed", type=int, default=1000)
     parser.add_argument("--variants", default=",".join(VARIANTS))
-    parser.add_argument("--config", default="configs/train/ddqn.yaml")
+    parser.add_argument("--config", default="configs/train/ddqn-stage1.yaml")
     parser.add_argument("--out", type=Path, default=Path("runs/ablation"))
     args = parser.parse_args()
     evaluation = {"episodes": args.episodes, "seed": args.seed, "scenario": "overtaking"}

@@ -26,7 +26,7 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--steps", type=int, default=1500)
     parser.add_argument("--scenario", default="overtaking")
-    parser.add_argument("--config", default="configs/train/ddqn.yaml")
+    parser.add_argument("--config", default="configs/train/ddqn-stage1.yaml")
     args = parser.parse_args()
     print(f"{platform.machine()}, Python {platform.python_version()}, scenario {args.scenario}")
     print("| backend | envs | env steps/s | vs fast, 1 env |")
