@@ -117,6 +117,7 @@ def test_a_stopped_comparison_keeps_the_agents_run_so_far_and_resume_finishes_it
 
 
 def test_a_second_signal_waits_for_the_results_being_written(monkeypatch):
+    monkeypatch.setattr(interrupts, "_raised", False)
     monkeypatch.setattr(interrupts, "_received", 0)
     with interrupts.deferred(interrupt_after=False):
         interrupts._handler(signal.SIGTERM, None)
@@ -128,6 +129,28 @@ def test_a_second_signal_waits_for_the_results_being_written(monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         monkeypatch.setattr(interrupts, "_received", 0)
         interrupts._handler(signal.SIGINT, None)
+
+
+def test_a_stop_lost_in_a_finalizer_still_ends_the_work_at_the_next_item(monkeypatch):
+    """A first signal whose KeyboardInterrupt lands in a finalizer is printed and ignored by Python;
+    `completed` raises it again before the next item, so the episodes stop there."""
+    monkeypatch.setattr(interrupts, "_raised", False)
+    monkeypatch.setattr(interrupts, "_received", 0)
+
+    class Stopped:
+        def __del__(self):
+            interrupts._handler(signal.SIGTERM, None)
+
+    def episode(item):
+        Stopped()
+        return item
+
+    ran = []
+    with pytest.raises(KeyboardInterrupt):
+        for _, result in executors.completed(episode, [0, 1, 2]):
+            ran.append(result)
+    assert ran == [0], "the episode the stop was lost in finished; none started after it"
+    assert interrupts.received()
 
 
 def test_a_file_is_written_whole_or_left_as_it_was(tmp_path):

@@ -17,6 +17,7 @@ from itertools import islice
 from multiprocessing import get_context
 from typing import TypeVar
 
+from stack.core.interrupts import raise_if_stopped
 from stack.core.machine import usable_cpus
 
 Item = TypeVar("Item")
@@ -43,6 +44,7 @@ def completed(
         yield from ray_completed(task, items, ray)
     elif jobs <= 1 or len(items) <= 1:
         for index, item in enumerate(items):
+            raise_if_stopped()
             yield index, task(item)
     else:
         yield from _pool_completed(task, items, jobs)
@@ -69,6 +71,7 @@ def _pool_completed(
         for index, item in islice(queue, QUEUED_PER_WORKER * workers):
             running[pool.submit(task, item)] = index
         while running:
+            raise_if_stopped()
             done, _ = wait(running, return_when=FIRST_COMPLETED)
             for future in done:
                 index = running.pop(future)

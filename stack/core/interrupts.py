@@ -17,6 +17,7 @@ _received = 0
 _deferring = 0
 _pending = False
 _held = False
+_raised = False
 STOPPING = "stopping: writing what is finished first"
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 """The stops a command handles (a terminal's Ctrl-C, a kill)."""
@@ -38,8 +39,8 @@ def hold_signals() -> None:
 def catch_signals() -> bool:
     """Install the handler for SIGINT and SIGTERM (the CLI does, once, before any command); whether
     a stop came while they were held (`hold_signals`): the command then does nothing."""
-    global _received, _pending, _held
-    _received, _pending = 0, False
+    global _received, _pending, _held, _raised
+    _received, _pending, _raised = 0, False, False
     for sig in SIGNALS:
         signal.signal(sig, _handler)
     held, _held = _held, False
@@ -66,11 +67,26 @@ def note_stop() -> None:
     _received = max(_received, 1)
 
 
+def raise_if_stopped() -> None:
+    """KeyboardInterrupt again if a stop was raised before. Python ignores an exception raised in a
+    finalizer or a `__del__` (it prints "Exception ignored"), so the first signal's KeyboardInterrupt
+    is lost when it lands in one; work that runs item by item calls this before each item, so that
+    stop still ends the work there."""
+    if _raised:
+        raise KeyboardInterrupt
+
+
+def _interrupt() -> None:
+    global _raised
+    _raised = True
+    raise KeyboardInterrupt
+
+
 def _handler(signum: int, frame: FrameType | None) -> None:
     global _received, _pending
     _received += 1
     if _received == 1 and not _deferring:
-        raise KeyboardInterrupt
+        _interrupt()
     if _received == 1:
         _pending = True
     print(STOPPING, file=sys.stderr)
@@ -90,7 +106,7 @@ def deferred(interrupt_after: bool = True) -> Iterator[None]:
     if _pending and not _deferring:
         _pending = False
         if interrupt_after:
-            raise KeyboardInterrupt
+            _interrupt()
 
 
 @contextmanager
