@@ -46,6 +46,7 @@ def assert_not_blank(folder) -> list[str]:
     return names
 
 
+@pytest.mark.slow
 def test_every_results_figure_has_a_title_labels_and_content(tmp_path, inspected_figures):
     config = str(tiny_config_file(tmp_path))
     runner = CliRunner()
