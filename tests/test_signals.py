@@ -288,6 +288,20 @@ def test_episodes_are_submitted_as_workers_free_up(monkeypatch):
     results.close()
 
 
+def test_work_in_parts_starts_its_workers_once_and_ends_them_on_leaving(monkeypatch):
+    monkeypatch.setattr(executors, "usable_cpus", lambda: 2)
+    worker_pid = os.readlink
+    with executors.shared_workers():
+        first = {int(pid) for _, pid in executors.completed(worker_pid, ["/proc/self"] * 6, jobs=2)}
+        second = {int(pid) for _, pid in executors.completed(worker_pid, ["/proc/self"] * 6, jobs=2)}
+        assert second <= first and os.getpid() not in first
+    for pid in first:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    alone = {int(pid) for _, pid in executors.completed(worker_pid, ["/proc/self"] * 4, jobs=2)}
+    assert not first & alone
+
+
 def test_work_that_stops_itself_is_asked_once_and_later_signals_wait(own_handlers, capsys):
     """`sweep`'s stop of Ray Tune's loop: the first signal asks the work to stop, later ones only say
     so; before the work can be asked, or after a stop that waited, the stop is a KeyboardInterrupt."""

@@ -133,7 +133,9 @@ def test_vector_backend_matches_stock_on_the_scenarios(scenario):
     assert traffic_lane_changes(states) > 0
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize(
+    "backend", [pytest.param(b, marks=pytest.mark.slow) if b == "fast" else b for b in BACKENDS]
+)
 def test_traffic_queues_to_a_standstill_without_reversing_alike_on_every_backend(backend):
     """Behind a stopped car (which stays exactly where it is) and a braking ego, the `incident`
     traffic queues up to speed 0 and stays there (stock highway-env's vehicles reverse there, down

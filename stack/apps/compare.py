@@ -16,6 +16,7 @@ from records.plugins import short_labels
 from stack.apps.resume import started
 from stack.core.config import RunConfig
 from stack.core.episodes import RunResults, run
+from stack.core.executors import shared_workers
 from stack.core.files import EpisodeJournal, save_figure, write_csv, write_json
 from stack.core.interrupts import deferred
 from stack.core.metrics import EpisodeResult
@@ -84,18 +85,26 @@ def compare(
     (`stack.apps.resume.resumable`). Ctrl-C stops the comparison: the agents run so far are
     returned (the last one with the episodes it finished); none raises KeyboardInterrupt."""
     runs: list[RunResults] = []
-    for config, journal in zip(configs, journals, strict=True):
-        finished = (done or {}).get(config.planner.agent, [])
-        try:
-            runs.append(
-                run(config, progress=progress, jobs=jobs, ray=ray, on_finished=journal.record, done=finished)
-            )
-        except KeyboardInterrupt:
-            if not runs:
-                raise
-            break
-        if runs[-1].summary["interrupted"]:
-            break
+    with shared_workers():
+        for config, journal in zip(configs, journals, strict=True):
+            finished = (done or {}).get(config.planner.agent, [])
+            try:
+                runs.append(
+                    run(
+                        config,
+                        progress=progress,
+                        jobs=jobs,
+                        ray=ray,
+                        on_finished=journal.record,
+                        done=finished,
+                    )
+                )
+            except KeyboardInterrupt:
+                if not runs:
+                    raise
+                break
+            if runs[-1].summary["interrupted"]:
+                break
     return runs
 
 

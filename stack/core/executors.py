@@ -13,6 +13,7 @@ import threading
 import time
 from collections.abc import Callable, Generator, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from contextlib import contextmanager
 from itertools import islice
 from multiprocessing import get_context
 from typing import TypeVar
@@ -31,6 +32,27 @@ WATCH_PERIOD_S = 1.0
 
 PR_SET_PDEATHSIG = 1
 """prctl option: the signal a process gets when its parent dies (linux/prctl.h)."""
+
+_kept_pools: dict[int, ProcessPoolExecutor] | None = None
+"""Within `shared_workers`: the pools made so far, by worker count, for the next `completed`."""
+
+
+@contextmanager
+def shared_workers() -> Iterator[None]:
+    """Within it, `completed` keeps its pool of workers for the next call with as many workers, so
+    work in several parts (a comparison's agents) starts its processes once; they end on leaving.
+    Results do not change: a worker keeps nothing that an item's result depends on."""
+    global _kept_pools
+    if _kept_pools is not None:
+        yield
+        return
+    _kept_pools = {}
+    try:
+        yield
+    finally:
+        pools, _kept_pools = _kept_pools, None
+        for pool in pools.values():
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 def completed(
@@ -59,12 +81,7 @@ def _pool_completed(
     workers are ended at once instead of finishing their items."""
     workers = min(jobs, usable_cpus(), len(items))
     queue = iter(enumerate(items))
-    pool = ProcessPoolExecutor(
-        max_workers=workers,
-        mp_context=get_context("spawn"),
-        initializer=_worker_start,
-        initargs=(os.getpid(),),
-    )
+    pool = _pool(workers)
     running: dict[Future[Result], int] = {}
     finished = False
     try:
@@ -82,7 +99,25 @@ def _pool_completed(
     finally:
         if not finished:
             _end_workers(pool)
-        pool.shutdown(wait=True, cancel_futures=True)
+            if _kept_pools is not None:
+                _kept_pools.pop(workers, None)
+        if not finished or _kept_pools is None:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _pool(workers: int) -> ProcessPoolExecutor:
+    """A pool of `workers` spawned processes: the one `shared_workers` kept, or a new one."""
+    pool = None if _kept_pools is None else _kept_pools.get(workers)
+    if pool is None:
+        pool = ProcessPoolExecutor(
+            max_workers=workers,
+            mp_context=get_context("spawn"),
+            initializer=_worker_start,
+            initargs=(os.getpid(),),
+        )
+        if _kept_pools is not None:
+            _kept_pools[workers] = pool
+    return pool
 
 
 def _end_workers(pool: ProcessPoolExecutor) -> None:
