@@ -1,25 +1,54 @@
 """Training throughput: environment steps per second of `drivestack train` (DDQN, the shipped
 config), on the `fast` and `vector` backends with 1 and 2 environments, in one sitting.
 
-    .venv/bin/python benchmarks/train_rate.py [--steps 1500] [--scenario overtaking]
+    .venv/bin/python benchmarks/train_rate.py [--steps 1500] [--scenario overtaking] [--profile]
 
 Each variant trains `--steps` steps (the first 500 fill the buffer, then one gradient step per
 transition) with validation and checkpoints out of the way; the figure is steps / wall seconds,
-process start-up of the parallel environments included.
+process start-up of the parallel environments included. With `--profile`, the `vector, 2 envs`
+variant alone, its wall time split between waiting for the env processes' steps, handing them
+the actions, the gradient steps, the start-up (env processes, model) and the rest.
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
+import functools
 import platform
 import tempfile
 import time
 from pathlib import Path
 
+from stable_baselines3.common.vec_env import SubprocVecEnv
+
+from planner.ddqn import DoubleDQN
 from stack.core.config import load_config
 from stack.training.trainer import Trainer
 
 VARIANTS = [("fast", 1), ("vector", 1), ("vector", 2)]
+COMPONENTS = {
+    "waiting for the env processes' steps": (SubprocVecEnv, "step_wait"),
+    "handing the env processes the actions": (SubprocVecEnv, "step_async"),
+    "gradient steps (DoubleDQN.train)": (DoubleDQN, "train"),
+    "start-up (env processes, model, warm start)": (Trainer, "__init__"),
+}
+"""Label: (owner, method) whose wall time the profile adds up."""
+
+
+def instrument(spent: collections.Counter[str]) -> None:
+    """Wrap every component's method so that its wall time adds up in `spent`."""
+    for label, (owner, name) in COMPONENTS.items():
+        original = getattr(owner, name)
+
+        def timed(*args, _original=original, _label=label, **kwargs):
+            start = time.perf_counter()
+            try:
+                return _original(*args, **kwargs)
+            finally:
+                spent[_label] += time.perf_counter() - start
+
+        setattr(owner, name, functools.wraps(original)(timed))
 
 
 def main() -> None:
@@ -27,12 +56,16 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=1500)
     parser.add_argument("--scenario", default="overtaking")
     parser.add_argument("--config", default="configs/train/ddqn-stage1.yaml")
+    parser.add_argument("--profile", action="store_true", help="where the wall time of 2 envs goes")
     args = parser.parse_args()
     print(f"{platform.machine()}, Python {platform.python_version()}, scenario {args.scenario}")
+    spent: collections.Counter[str] = collections.Counter()
+    if args.profile:
+        instrument(spent)
     print("| backend | envs | env steps/s | vs fast, 1 env |")
     print("|---|---|---|---|")
     baseline = None
-    for backend, envs in VARIANTS:
+    for backend, envs in VARIANTS[-1:] if args.profile else VARIANTS:
         never = 10 * args.steps
         config = load_config(
             args.config,
@@ -48,9 +81,15 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as out:
             start = time.perf_counter()
             Trainer(config, Path(out), progress=False).run()
-            rate = args.steps / (time.perf_counter() - start)
+            wall = time.perf_counter() - start
+        rate = args.steps / wall
         baseline = baseline or rate
         print(f"| {backend} | {envs} | {rate:.1f} | {rate / baseline:.2f}x |", flush=True)
+    if args.profile:
+        print(f"\n| component (wall, {args.steps} steps) | s | ms per env step | share |\n|---|---|---|---|")
+        for label, seconds in [*spent.items(), ("rest", wall - sum(spent.values()))]:
+            per_step, share = 1e3 * seconds / args.steps, 100 * seconds / wall
+            print(f"| {label} | {seconds:.1f} | {per_step:.2f} | {share:.0f} % |")
 
 
 if __name__ == "__main__":

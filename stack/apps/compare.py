@@ -80,10 +80,11 @@ def compare(
     done: dict[str, list[EpisodeResult]] | None = None,
 ) -> list[RunResults]:
     """One run per config (one config per agent, the same episodes and seeds), over `jobs`
-    processes or as Ray tasks at address `ray`, each finished episode recorded in its agent's
-    journal as it finishes; `done` holds each agent's episodes an interrupted comparison finished
-    (`stack.apps.resume.resumable`). Ctrl-C stops the comparison: the agents run so far are
-    returned (the last one with the episodes it finished); none raises KeyboardInterrupt."""
+    processes (started once for all the agents) or as Ray tasks at address `ray`, each finished
+    episode recorded in its agent's journal as it finishes; `done` holds each agent's episodes an
+    interrupted comparison finished (`stack.apps.resume.resumable`). Ctrl-C stops the comparison:
+    the agents run so far are returned (the last one with the episodes it finished); none raises
+    KeyboardInterrupt."""
     runs: list[RunResults] = []
     with shared_workers():
         for config, journal in zip(configs, journals, strict=True):
