@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -290,16 +291,29 @@ def test_episodes_are_submitted_as_workers_free_up(monkeypatch):
 
 def test_work_in_parts_starts_its_workers_once_and_ends_them_on_leaving(monkeypatch):
     monkeypatch.setattr(executors, "usable_cpus", lambda: 2)
-    worker_pid = os.readlink
-    with executors.shared_workers():
-        first = {int(pid) for _, pid in executors.completed(worker_pid, ["/proc/self"] * 6, jobs=2)}
-        second = {int(pid) for _, pid in executors.completed(worker_pid, ["/proc/self"] * 6, jobs=2)}
-        assert second <= first and os.getpid() not in first
-    for pid in first:
-        with pytest.raises(ProcessLookupError):
+    pools = []
+    monkeypatch.setattr(
+        executors, "ProcessPoolExecutor", lambda **kw: pools.append(ProcessPoolExecutor(**kw)) or pools[-1]
+    )
+
+    def workers(count):
+        return {int(pid) for _, pid in executors.completed(os.readlink, ["/proc/self"] * count, jobs=2)}
+
+    def alive(pid):
+        try:
             os.kill(pid, 0)
-    alone = {int(pid) for _, pid in executors.completed(worker_pid, ["/proc/self"] * 4, jobs=2)}
-    assert not first & alone
+        except ProcessLookupError:
+            return False
+        return True
+
+    with executors.shared_workers():
+        first = workers(6)
+        assert all(map(alive, first)), "kept for the next part"
+        second = workers(6)
+        assert len(pools) == 1 and os.getpid() not in first | second
+    assert not any(map(alive, first | second)), "ended on leaving"
+    alone = workers(4)
+    assert len(pools) == 2 and not any(map(alive, alone)), "without it, each call has its own pool"
 
 
 def test_work_that_stops_itself_is_asked_once_and_later_signals_wait(own_handlers, capsys):
