@@ -14,41 +14,24 @@ from __future__ import annotations
 
 import argparse
 import collections
-import functools
 import platform
 import tempfile
 import time
 from pathlib import Path
 
-from stable_baselines3.common.vec_env import SubprocVecEnv
+from loop_profile import instrument
 
-from planner.ddqn import DoubleDQN
 from stack.core.config import load_config
 from stack.training.trainer import Trainer
 
 VARIANTS = [("fast", 1), ("vector", 1), ("vector", 2)]
-COMPONENTS = {
-    "waiting for the env processes' steps": (SubprocVecEnv, "step_wait"),
-    "handing the env processes the actions": (SubprocVecEnv, "step_async"),
-    "gradient steps (DoubleDQN.train)": (DoubleDQN, "train"),
-    "start-up (env processes, model, warm start)": (Trainer, "__init__"),
-}
-"""Label: (owner, method) whose wall time the profile adds up."""
-
-
-def instrument(spent: collections.Counter[str]) -> None:
-    """Wrap every component's method so that its wall time adds up in `spent`."""
-    for label, (owner, name) in COMPONENTS.items():
-        original = getattr(owner, name)
-
-        def timed(*args, _original=original, _label=label, **kwargs):
-            start = time.perf_counter()
-            try:
-                return _original(*args, **kwargs)
-            finally:
-                spent[_label] += time.perf_counter() - start
-
-        setattr(owner, name, functools.wraps(original)(timed))
+COMPONENTS = [
+    ["waiting for the env processes' steps", "stable_baselines3.common.vec_env:SubprocVecEnv.step_wait"],
+    ["handing the env processes the actions", "stable_baselines3.common.vec_env:SubprocVecEnv.step_async"],
+    ["gradient steps (DoubleDQN.train)", "planner.ddqn:DoubleDQN.train"],
+    ["start-up (env processes, model, warm start)", "stack.training.trainer:Trainer.__init__"],
+]
+"""(label, module:Owner.method) whose wall time the profile adds up."""
 
 
 def main() -> None:
@@ -61,7 +44,7 @@ def main() -> None:
     print(f"{platform.machine()}, Python {platform.python_version()}, scenario {args.scenario}")
     spent: collections.Counter[str] = collections.Counter()
     if args.profile:
-        instrument(spent)
+        instrument(spent, COMPONENTS, time.perf_counter_ns)
     print("| backend | envs | env steps/s | vs fast, 1 env |")
     print("|---|---|---|---|")
     baseline = None
@@ -87,7 +70,8 @@ def main() -> None:
         print(f"| {backend} | {envs} | {rate:.1f} | {rate / baseline:.2f}x |", flush=True)
     if args.profile:
         print(f"\n| component (wall, {args.steps} steps) | s | ms per env step | share |\n|---|---|---|---|")
-        for label, seconds in [*spent.items(), ("rest", wall - sum(spent.values()))]:
+        seconds_in = {label: ns / 1e9 for label, ns in spent.items()}
+        for label, seconds in [*seconds_in.items(), ("rest", wall - sum(seconds_in.values()))]:
             per_step, share = 1e3 * seconds / args.steps, 100 * seconds / wall
             print(f"| {label} | {seconds:.1f} | {per_step:.2f} | {share:.0f} % |")
 
