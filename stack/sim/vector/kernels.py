@@ -8,12 +8,15 @@ highway-env's bits."""
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
 
 from stack.sim.fast_road import BROAD_PHASE_MARGIN
-from stack.sim.vector.motion import Footprints
+
+if TYPE_CHECKING:
+    from stack.sim.vector.motion import Footprints
 
 SEPARATION_MARGIN = 1e-6
 """Distance [m] by which two swept rectangles must be apart on one of their axes before the narrow
@@ -104,6 +107,61 @@ def _close_pairs(
 
 
 @njit(cache=True, nogil=True)
+def _lane_coordinates(
+    position: np.ndarray, start: np.ndarray, direction: np.ndarray, lateral: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled; covered through its callers
+    """Longitudinal s (n,) [m], the same on every lane, and lateral r (L, n) [m] coordinates of
+    objects at `position` (n, 2) on lanes starting at `start` (L, 2), level along the shared unit
+    `direction`, with unit `lateral` directions (L, 2); as highway-env's `local_coordinates`
+    computes them (exact: every product is by 0 or +-1)."""
+    count, lanes = position.shape[0], start.shape[0]
+    s = np.empty(count)
+    r = np.empty((lanes, count))
+    for i in range(count):
+        s[i] = (position[i, 0] - start[0, 0]) * direction[0] + (position[i, 1] - start[0, 1]) * direction[1]
+        for lane in range(lanes):
+            dx, dy = position[i, 0] - start[lane, 0], position[i, 1] - start[lane, 1]
+            r[lane, i] = dx * lateral[lane, 0] + dy * lateral[lane, 1]
+    return s, r
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _maximum_zero(x: float) -> float:  # pragma: no cover - compiled; covered through closest_lanes
+    """`np.maximum(x, 0)`: NaN stays NaN."""
+    return x if x >= 0 or x != x else 0.0
+
+
+@njit(cache=True, nogil=True)
+def closest_lanes(
+    position: np.ndarray,
+    heading: np.ndarray,
+    start: np.ndarray,
+    direction: np.ndarray,
+    lateral: np.ndarray,
+    length: np.ndarray,
+    lane_heading: np.ndarray,
+) -> np.ndarray:  # pragma: no cover - compiled; covered through LaneTable.closest
+    """Row of each object's closest lane by highway-env's `distance_with_heading` (|r| + the
+    distance beyond either end + |heading difference wrapped to [-pi, pi)|), the first on ties
+    and the first NaN if any, as numpy's `argmin`: sums, comparisons and a float modulo, each in
+    numpy's operation order (the same bits). Lanes as in `lane_order`, headings [rad]."""
+    s, r = _lane_coordinates(position, start, direction, lateral)
+    rows = np.zeros(position.shape[0], dtype=np.int64)
+    for i in range(position.shape[0]):
+        best = np.inf
+        for lane in range(start.shape[0]):
+            angle = abs(((heading[i] - lane_heading[lane] + np.pi) % (2 * np.pi)) - np.pi)
+            distance = abs(r[lane, i]) + _maximum_zero(s[i] - length[lane]) + _maximum_zero(0 - s[i])
+            distance = distance + angle
+            if distance != distance:
+                rows[i] = lane
+                break
+            if lane == 0 or distance < best:
+                rows[i], best = lane, distance
+    return rows
+
+
+@njit(cache=True, nogil=True)
 def lane_order(
     position: np.ndarray,
     start: np.ndarray,
@@ -118,20 +176,13 @@ def lane_order(
 ]:  # pragma: no cover - compiled; covered through TrafficFrame
     """`TrafficFrame`'s lane coordinates and search tables of objects at `position` (n, 2) [m] on
     parallel straight lanes (`start` (L, 2) [m], the shared unit `direction`, unit `lateral` (L, 2),
-    `length` and `half_width` [m]): s (n,) and r (L, n) [m], computed in `LaneTable.along` and
-    `LaneTable.across`'s operation order (the same bits); the order by s (ties by row), the sorted
-    s and whether two tie; per lane and sorted position p, the first position >= p (n if none)
-    and the last position < p (-1 if none) of an object on the lane as `Road.neighbour_vehicles`
-    counts it (highway-env's `on_lane` with a lateral `margin` [m], `vehicle_length` [m] beyond both
-    ends), exact comparisons all."""
+    `length` and `half_width` [m]): s (n,) and r (L, n) [m] (`_lane_coordinates`); the order by
+    s (ties by row), the sorted s and whether two tie; per lane and sorted position p, the first
+    position >= p (n if none) and the last position < p (-1 if none) of an object on the lane as
+    `Road.neighbour_vehicles` counts it (highway-env's `on_lane` with a lateral `margin` [m],
+    `vehicle_length` [m] beyond both ends), exact comparisons all."""
     count, lanes = position.shape[0], start.shape[0]
-    s = np.empty(count)
-    r = np.empty((lanes, count))
-    for i in range(count):
-        s[i] = (position[i, 0] - start[0, 0]) * direction[0] + (position[i, 1] - start[0, 1]) * direction[1]
-        for lane in range(lanes):
-            dx, dy = position[i, 0] - start[lane, 0], position[i, 1] - start[lane, 1]
-            r[lane, i] = dx * lateral[lane, 0] + dy * lateral[lane, 1]
+    s, r = _lane_coordinates(position, start, direction, lateral)
     order = np.argsort(s, kind="mergesort")
     sorted_s = s[order]
     tied = False

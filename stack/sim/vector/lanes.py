@@ -10,6 +10,7 @@ from highway_env.road.lane import StraightLane
 from highway_env.road.road import RoadNetwork
 
 from stack.sim.fast_road import LaneIndex
+from stack.sim.vector.kernels import closest_lanes
 
 NOT_ZERO = 1e-2
 """highway-env's `utils.not_zero` threshold [same unit as the value]."""
@@ -71,16 +72,6 @@ class LaneTable:
         axes = all(_unit_axis(lane.direction) and _unit_axis(lane.direction_lateral) for lane in lanes)
         return LaneTable(network) if parallel and axes and len(level) == 1 else None
 
-    def along(self, position: np.ndarray) -> np.ndarray:
-        """Longitudinal coordinate s [m] of each position, the same on every lane."""
-        delta = position - self.start[0]
-        return delta[:, 0] * self.direction[0] + delta[:, 1] * self.direction[1]
-
-    def across(self, position: np.ndarray) -> np.ndarray:
-        """Lateral coordinate r [m] of each position (columns) on each lane (rows)."""
-        delta = position[None, :, :] - self.start[:, None, :]
-        return delta[..., 0] * self.lateral[:, 0, None] + delta[..., 1] * self.lateral[:, 1, None]
-
     def reachable(self, rows: np.ndarray, s: np.ndarray, r: np.ndarray) -> np.ndarray:
         """highway-env's `is_reachable_from` of lanes `rows` for objects at (s, r) on them."""
         near = np.abs(r) <= 2 * (2 * self.half_width[rows])
@@ -89,7 +80,6 @@ class LaneTable:
 
     def closest(self, position: np.ndarray, heading: np.ndarray) -> np.ndarray:
         """Row of each vehicle's closest lane by highway-env's `distance_with_heading` (first on ties)."""
-        s, r = self.along(position), self.across(position)
-        angle = np.abs(wrap_to_pi(heading[None, :] - self.heading[:, None]))
-        distance = np.abs(r) + np.maximum(s - self.length[:, None], 0) + np.maximum(0 - s, 0) + angle
-        return np.argmin(distance, axis=0)
+        position = np.ascontiguousarray(position)
+        start, direction, lateral = self.start, self.direction, self.lateral
+        return closest_lanes(position, heading, start, direction, lateral, self.length, self.heading)

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from operator import attrgetter
+from typing import Any
 
 import numpy as np
 from highway_env.vehicle.behavior import IDMVehicle
@@ -36,41 +37,49 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
     the movers' footprints after the step."""
     impacted, stops = [], []
     for i, v in enumerate(movers):
-        step = type(v).step
-        if step in (IDMVehicle.step, TrafficVehicle.step):
+        timed, stopping = _STEP_KIND.get(type(v)) or _step_kind(type(v))
+        if timed:
             v.timer += dt
         if v.crashed:
             v.action["steering"] = 0
             v.action["acceleration"] = -1.0 * v.speed
-        stops.append(step is TrafficVehicle.step and not v.crashed)
+        elif stopping:
+            stops.append(i)
         if v.impact is not None:
             impacted.append(i)
-    speed, max_speed, min_speed, heading, length, width, diagonal = columns(movers, _MOVER_STATE)
-    steering = np.array([v.action["steering"] for v in movers], dtype=float)
-    acceleration = np.array([v.action["acceleration"] for v in movers], dtype=float)
-    if any(stops):
+    state = columns(movers, _MOVER_STATE)
+    speed, max_speed, min_speed, heading, length, width, diagonal, x, y, steering, acceleration = state
+    if stops:
         standstill = -speed / dt
-        acceleration = np.where(np.array(stops) & (standstill > acceleration), standstill, acceleration)
+        stopping = np.zeros(len(movers), dtype=bool)
+        stopping[stops] = True
+        acceleration = np.where(stopping & (standstill > acceleration), standstill, acceleration)
     too_fast, too_slow = speed > max_speed, speed < min_speed
     slow_down, speed_up = 1.0 * (max_speed - speed), 1.0 * (min_speed - speed)
     acceleration = np.where(too_fast & (slow_down < acceleration), slow_down, acceleration)
     acceleration = np.where(~too_fast & too_slow & (speed_up > acceleration), speed_up, acceleration)
 
-    position = np.array([v.position for v in movers], dtype=float)
     beta = np.arctan(1 / 2 * np.tan(steering))
-    position[:, 0] += speed * np.cos(heading + beta) * dt
-    position[:, 1] += speed * np.sin(heading + beta) * dt
+    x += speed * np.cos(heading + beta) * dt
+    y += speed * np.sin(heading + beta) * dt
     for i in impacted:
         v = movers[i]
-        position[i] += v.impact
+        x[i] += v.impact[0]
+        y[i] += v.impact[1]
         v.crashed = True
         v.impact = None
     heading = heading + speed * np.sin(beta) / (length / 2) * dt
     speed = speed + acceleration * dt
-    rows = lanes.closest(position, heading).tolist()
-    x, y = position.T.tolist()
+    rows = lanes.closest(np.stack([x, y], axis=1), heading).tolist()
     states = zip(
-        x, y, heading.tolist(), speed.tolist(), acceleration.tolist(), steering.tolist(), rows, strict=True
+        x.tolist(),
+        y.tolist(),
+        heading.tolist(),
+        speed.tolist(),
+        acceleration.tolist(),
+        steering.tolist(),
+        rows,
+        strict=True,
     )
     indices, table = lanes.indices, lanes.lanes
     for v, (x_, y_, h, u, a, steer, row) in zip(movers, states, strict=True):
@@ -82,11 +91,38 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
         v.lane_index, v.lane = indices[row], table[row]
         if record_history:
             v.history.appendleft(v.create_from(v))
-    x, y = position.T.copy()
     return Footprints(x, y, heading, speed, length, width, diagonal)
 
 
-_MOVER_STATE = attrgetter("speed", "MAX_SPEED", "MIN_SPEED", "heading", "LENGTH", "WIDTH", "diagonal")
+_STEP_KIND: dict[type, tuple[bool, bool]] = {}
+
+
+def _step_kind(cls: type) -> tuple[bool, bool]:
+    """Whether `cls.step` advances `IDMVehicle`'s lane-change timer, and whether it stops at a
+    standstill (`TrafficVehicle`)."""
+    step = cls.step  # type: ignore[attr-defined]
+    kind = _STEP_KIND[cls] = (step in (IDMVehicle.step, TrafficVehicle.step), step is TrafficVehicle.step)
+    return kind
+
+
+def _mover_state(v: Vehicle) -> tuple[float, ...]:
+    action, position = v.action, v.position
+    return (
+        v.speed,
+        v.MAX_SPEED,
+        v.MIN_SPEED,
+        v.heading,
+        v.LENGTH,
+        v.WIDTH,
+        v.diagonal,
+        position[0],
+        position[1],
+        action["steering"],
+        action["acceleration"],
+    )
+
+
+_MOVER_STATE = _mover_state
 _FOOTPRINT = attrgetter("heading", "speed", "LENGTH", "WIDTH", "diagonal")
 
 
@@ -109,7 +145,7 @@ class Footprints:
         return Footprints(x, y, *columns(vehicles, _FOOTPRINT))
 
 
-def columns(objects: Sequence[object], attributes: attrgetter) -> np.ndarray:
+def columns(objects: Sequence[object], attributes: Callable[[Any], Any]) -> np.ndarray:
     """The `attributes` of every object, as floats: one contiguous row per attribute (numpy's
     transcendental ufuncs give the bits of their scalar calls on contiguous arrays)."""
     return np.array(list(map(attributes, objects)), dtype=float).reshape(len(objects), -1).T.copy()

@@ -77,21 +77,28 @@ class VectorRoad(FastRoad):
                 decisions = self._mobil(plan, [id(v) not in at_lane_end for v in drivers])
             else:
                 at_lane_end, decisions = set(), {}
+            retargeted = []
+            k = -1
             for vehicle in self.vehicles:
                 if type(vehicle) not in IDM_DRIVERS or vehicle.crashed:
                     vehicle.act()
-                elif id(vehicle) in decisions:
+                    continue
+                k += 1
+                if id(vehicle) in decisions:
                     vehicle.timer = 0
-                    vehicle.target_lane_index = decisions[id(vehicle)] or vehicle.target_lane_index
-                else:
-                    if id(vehicle) in at_lane_end:
-                        vehicle.follow_road()
-                    if vehicle.enable_lane_change and (
-                        vehicle.lane_index != vehicle.target_lane_index
-                        or vehicle.LANE_CHANGE_DELAY < vehicle.timer
-                    ):
-                        vehicle.change_lane_policy()
+                    if decisions[id(vehicle)]:
+                        vehicle.target_lane_index = decisions[id(vehicle)]
+                        retargeted.append(k)
+                    continue
+                if id(vehicle) in at_lane_end:
+                    vehicle.follow_road()
+                    retargeted.append(k)
+                due = vehicle.LANE_CHANGE_DELAY < vehicle.timer
+                if vehicle.enable_lane_change and (due or vehicle.lane_index != vehicle.target_lane_index):
+                    vehicle.change_lane_policy()
+                    retargeted.append(k)
             if drivers:
+                plan.retarget(retargeted)
                 self._drive(plan)
         finally:
             self._projections = None
@@ -105,10 +112,10 @@ class VectorRoad(FastRoad):
         due = [
             k
             for k, v in enumerate(drivers)
-            if free[k]
+            if v.LANE_CHANGE_DELAY < v.timer
+            and free[k]
             and v.enable_lane_change
             and v.lane_index == v.target_lane_index
-            and v.LANE_CHANGE_DELAY < v.timer
             and not v.route
         ]
         decisions: dict[int, LaneIndex | None] = {id(drivers[k]): None for k in due}
@@ -132,8 +139,8 @@ class VectorRoad(FastRoad):
         new_front, new_rear = frame.neighbours(me, sides)
         own_front, own_rear = plan.own_front[index], plan.own_rear[index]
         blocks = 6
-        delta = np.concatenate([np.tile(plan.delta[index], blocks), plan.delta])
-        jam = np.concatenate([np.tile(plan.jam[index], blocks), plan.jam])
+        delta = np.concatenate([plan.delta[index]] * blocks + [plan.delta])
+        jam = np.concatenate([plan.jam[index]] * blocks + [plan.jam])
         egos = np.concatenate([new_rear, new_rear, me, me, own_rear, own_rear, plan.me])
         leaders = np.concatenate([new_front, me, new_front, own_front, me, own_front, plan.own_front])
         a = frame.idm(egos, leaders, delta, jam)
@@ -158,8 +165,7 @@ class VectorRoad(FastRoad):
         """`IDMVehicle.act`'s steering and IDM acceleration of every driver, after its decisions."""
         frame, drivers, me = plan.frame, plan.drivers, plan.me
         lanes = frame.lanes
-        heading, speed = frame.heading[me], frame.speed[me]
-        target = np.array([lanes.row[v.target_lane_index] for v in drivers], dtype=int)
+        heading, speed, target = frame.heading[me], frame.speed[me], plan.target
         changing = frame.lane[me] != target
 
         r_target = frame.r[target, me]
@@ -219,6 +225,12 @@ class Drivers:
         self.target = np.array([lane_row[v.target_lane_index] for v in drivers], dtype=int)
         self.length, self.delta, self.jam = columns(drivers, _DRIVER_CONSTANTS)
         self.own_front, self.own_rear = frame.neighbours(self.me, frame.lane[self.me])
+
+    def retarget(self, drivers: list[int]) -> None:
+        """Re-read the target lanes of `drivers` (positions in `self.drivers`) after their decisions."""
+        lane_row = self.frame.lanes.row
+        for k in drivers:
+            self.target[k] = lane_row[self.drivers[k].target_lane_index]
 
     def at_lane_end(self) -> set[int]:
         """ids of the drivers for which `follow_road` moves on to the next lane."""
