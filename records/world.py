@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
+from numba import njit
 
 
 class Lane(Protocol):
@@ -175,23 +176,18 @@ class WorldState:
         self,
     ) -> tuple[list[list[int]], list[list[bool]], list[float], list[float], list[int]] | None:
         """For each side (ahead, behind) and lane, the row (among the others) `_neighbours_of`
-        picks and whether there is one, with every other vehicle's gap, speed and id; as array
-        operations over all lanes at once (None where an infinite distance could tie with the
-        fill value, then `_neighbours_of` answers)."""
+        picks and whether there is one, with every other vehicle's gap, speed and id; every lane in
+        one compiled pass (None where a distance is infinite, then `_neighbours_of` answers)."""
         if self.count < 2:
             return None
         rel_s = self.s[1:] - self.s[0]
-        distance = np.abs(rel_s)
-        if np.isinf(distance).any():
+        reach = (self.lane_width + self.lateral_extent()) / 2
+        nearest = _nearest_in_lanes(rel_s, np.ascontiguousarray(self.d[1:]), self.lane_offsets, reach)
+        if nearest is None:
             return None
-        in_lane = (
-            np.abs(self.d[1:] - self.lane_offsets[:, None]) < (self.lane_width + self.lateral_extent()) / 2
-        )
-        candidates = in_lane[None, :, :] & np.stack([rel_s > 0, rel_s <= 0])[:, None, :]
-        rows = np.where(candidates, distance, np.inf).argmin(axis=2)
-        gap = distance - (self.length[1:] + self.length[0]) / 2
-        found = candidates.any(axis=2).tolist()
-        return rows.tolist(), found, gap.tolist(), self.speed[1:].tolist(), self.ids[1:].tolist()
+        rows, found = nearest
+        gap = np.abs(rel_s) - (self.length[1:] + self.length[0]) / 2
+        return rows.tolist(), found.tolist(), gap.tolist(), self.speed[1:].tolist(), self.ids[1:].tolist()
 
     def _neighbours_of(self, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
         rel_s = self.s[1:] - self.s[0]
@@ -245,6 +241,31 @@ class WorldState:
                 if offset[row] <= LEAVING_M:
                     break
         return tuple(found)
+
+
+@njit(cache=True, nogil=True)
+def _nearest_in_lanes(
+    rel_s: np.ndarray, d: np.ndarray, lane_offsets: np.ndarray, reach: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:  # pragma: no cover - compiled; covered through neighbours
+    """For each side (ahead: rel_s > 0, behind: rel_s <= 0) and lane, the row of the vehicle nearest
+    the ego along the road (the first on ties) among those reaching into the lane (|d - offset| <
+    reach), and whether there is one: vehicles at rel_s [m] along the road and d [m] across it,
+    each reaching `reach` [m] from its centre; None if a distance is infinite. Comparisons only."""
+    lanes, count = lane_offsets.shape[0], rel_s.shape[0]
+    rows = np.zeros((2, lanes), dtype=np.int64)
+    found = np.zeros((2, lanes), dtype=np.bool_)
+    for k in range(count):
+        if np.isinf(rel_s[k]):
+            return None
+    for lane in range(lanes):
+        best = np.full(2, np.inf)
+        for k in range(count):
+            if not abs(d[k] - lane_offsets[lane]) < reach[k]:
+                continue
+            side = 0 if rel_s[k] > 0 else 1 if rel_s[k] <= 0 else -1
+            if side >= 0 and (not found[side, lane] or abs(rel_s[k]) < best[side]):
+                rows[side, lane], found[side, lane], best[side] = k, True, abs(rel_s[k])
+    return rows, found
 
 
 _KEPT: dict[int, dict[str, Any]] = {}

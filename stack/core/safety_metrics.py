@@ -65,8 +65,8 @@ def footprint_lateral_extent(world: WorldState) -> tuple[float, float]:
 
 def road_edges(world: WorldState) -> tuple[float, float]:
     """(lowest, highest) lateral coordinate [m] of the drivable area: the outer edges of the outer lanes."""
-    half = world.lane_width / 2
-    return float(np.min(world.lane_offsets)) - half, float(np.max(world.lane_offsets)) + half
+    half, offsets = world.lane_width / 2, world.lane_offsets.tolist()
+    return min(offsets) - half, max(offsets) + half
 
 
 def departed(world: WorldState) -> bool:
@@ -89,7 +89,9 @@ def _occupied_lanes(world: WorldState, extent: tuple[float, float]) -> tuple[int
     low, high = extent
     half = world.lane_width / 2
     return tuple(
-        lane for lane, centre in enumerate(world.lane_offsets) if low < centre + half and high > centre - half
+        lane
+        for lane, centre in enumerate(world.lane_offsets.tolist())
+        if low < centre + half and high > centre - half
     )
 
 

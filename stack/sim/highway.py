@@ -29,6 +29,7 @@ from stack.sim.envs import FAST_EXIT, FAST_HIGHWAY, HIGHWAY, VECTOR_HIGHWAY
 from stack.sim.plant import stabilised
 from stack.sim.settings import HighwayConfig
 from stack.sim.traffic import TRAFFIC_VEHICLE
+from stack.sim.vector.motion import columns
 
 ENV_IDS: dict[RoadName, dict[Backend, str]] = {
     "highway": {"vector": VECTOR_HIGHWAY, "fast": FAST_HIGHWAY, "stock": HIGHWAY},
@@ -172,8 +173,9 @@ def snapshot(road: Road, ego: Vehicle, time: float, lanes_count: int | None = No
     lanes = tuple(road.network.graph[start][end])[:lanes_count]
     reference = lanes[0]
     position = np.array([v.position for v in vehicles], dtype=float)
-    heading = np.array([v.heading for v in vehicles], dtype=float)
-    speed = np.array([v.speed for v in vehicles], dtype=float)
+    heading, speed, length, width, crashed, lane = columns(vehicles, _vehicle_state)
+    velocity = np.empty((len(vehicles), 2))
+    velocity[:, 0], velocity[:, 1] = speed * np.cos(heading), speed * np.sin(heading)
     s, d = _lane_frame(reference, position)
     lateral_speed, yaw_rate = _body_rates(ego)
     return WorldState(
@@ -182,17 +184,31 @@ def snapshot(road: Road, ego: Vehicle, time: float, lanes_count: int | None = No
         position=position,
         heading=heading,
         speed=speed,
-        velocity=speed[:, None] * np.stack([np.cos(heading), np.sin(heading)], axis=1),
-        lane=np.array([v.lane_index[2] if v.lane_index else -1 for v in vehicles]),
-        length=np.array([v.LENGTH for v in vehicles], dtype=float),
-        width=np.array([v.WIDTH for v in vehicles], dtype=float),
+        velocity=velocity,
+        lane=lane.astype(int),
+        length=length,
+        width=width,
         s=s,
         d=d,
-        crashed=np.array([v.crashed for v in vehicles], dtype=bool),
+        crashed=crashed.astype(bool),
         lanes=lanes,
         lane_offsets=_lane_offsets(lanes, float(s[0])),
         ego_lateral_speed=lateral_speed,
         ego_yaw_rate=yaw_rate,
+    )
+
+
+def _vehicle_state(vehicle: Vehicle) -> tuple[float, float, float, float, bool, int]:
+    """What a snapshot keeps of a vehicle besides its position: heading [rad], speed [m/s], length
+    and width [m], whether it crashed, its lane id (-1 off the road)."""
+    lane_index = vehicle.lane_index
+    return (
+        vehicle.heading,
+        vehicle.speed,
+        vehicle.LENGTH,
+        vehicle.WIDTH,
+        vehicle.crashed,
+        lane_index[2] if lane_index else -1,
     )
 
 

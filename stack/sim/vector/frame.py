@@ -12,6 +12,7 @@ from highway_env.vehicle.objects import RoadObject
 from stack.sim.fast_road import NEIGHBOUR_MARGIN, LaneProjections, is_kind
 from stack.sim.vector.kernels import lane_order, neighbour_rows
 from stack.sim.vector.lanes import LaneTable, not_zero
+from stack.sim.vector.motion import columns
 
 
 class TrafficFrame:
@@ -24,16 +25,18 @@ class TrafficFrame:
         self.projections, self.lanes = projections, lanes
         self.position = projections.position
         lane_row = lanes.row
-        self.heading = np.array([o.heading for o in objects], dtype=float)
-        self.speed = np.array([o.speed for o in objects], dtype=float)
-        self.target_speed = np.array([getattr(o, "target_speed", 0) for o in objects], dtype=float)
+
+        def state(o: RoadObject) -> tuple[float, float, float, int]:
+            return o.heading, o.speed, getattr(o, "target_speed", 0), lane_row.get(o.lane_index, 0)
+
+        self.heading, self.speed, self.target_speed, lane = columns(objects, state)
+        self.lane = lane.astype(int)
         kinds = {cls: is_kind(cls, Vehicle) for cls in set(map(type, objects))}
         if all(kinds.values()):
             self.is_vehicle = np.ones(len(objects), dtype=bool)
         else:
             self.is_vehicle = np.array([kinds[type(o)] for o in objects], dtype=bool)
-        self.lane = np.array([lane_row.get(o.lane_index, 0) for o in objects], dtype=int)
-        self.direction = np.stack([np.cos(self.heading), np.sin(self.heading)], axis=1)
+        self.direction = np.array((np.cos(self.heading), np.sin(self.heading))).T
         self.velocity = self.speed[:, None] * self.direction
         self.s, self.r, self.order, self.sorted_s, self.tied, self.next_on, self.last_before = lane_order(
             np.ascontiguousarray(self.position),

@@ -51,9 +51,9 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
     speed, max_speed, min_speed, heading, length, width, diagonal, x, y, steering, acceleration = state
     if stops:
         standstill = -speed / dt
-        stopping = np.zeros(len(movers), dtype=bool)
-        stopping[stops] = True
-        acceleration = np.where(stopping & (standstill > acceleration), standstill, acceleration)
+        stops_here = np.zeros(len(movers), dtype=bool)
+        stops_here[stops] = True
+        acceleration = np.where(stops_here & (standstill > acceleration), standstill, acceleration)
     too_fast, too_slow = speed > max_speed, speed < min_speed
     slow_down, speed_up = 1.0 * (max_speed - speed), 1.0 * (min_speed - speed)
     acceleration = np.where(too_fast & (slow_down < acceleration), slow_down, acceleration)
