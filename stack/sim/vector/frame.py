@@ -10,8 +10,8 @@ from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import RoadObject
 
 from stack.sim.fast_road import NEIGHBOUR_MARGIN, LaneProjections, is_kind
-from stack.sim.vector.kernels import lane_order, neighbour_rows
-from stack.sim.vector.lanes import LaneTable, not_zero
+from stack.sim.vector.kernels import idm_accelerations, idm_gap_ratios, idm_inputs, lane_order, neighbour_rows
+from stack.sim.vector.lanes import LaneTable
 from stack.sim.vector.motion import columns
 
 
@@ -36,7 +36,8 @@ class TrafficFrame:
             self.is_vehicle = np.ones(len(objects), dtype=bool)
         else:
             self.is_vehicle = np.array([kinds[type(o)] for o in objects], dtype=bool)
-        self.direction = np.array((np.cos(self.heading), np.sin(self.heading))).T
+        self.direction = np.array((np.cos(self.heading), np.sin(self.heading))).T.copy()
+        self.speed_limit = lanes.speed_limit[self.lane]
         self.velocity = self.speed[:, None] * self.direction
         self.s, self.r, self.order, self.sorted_s, self.tied, self.next_on, self.last_before = lane_order(
             np.ascontiguousarray(self.position),
@@ -77,36 +78,26 @@ class TrafficFrame:
         evaluating IDM vehicle of exponent `delta` and jam distance `distance_wanted` [m]; rows -1
         stand for no vehicle (0 without ego); the gap is measured along the ego's lane, as stock
         does."""
-        acceleration = np.zeros(len(ego))
-        valid = (ego >= 0) & self.is_vehicle[ego]
-        every = bool(valid.all())
-        if not every and not valid.any():
-            return acceleration
-        e, f = (ego, front) if every else (ego[valid], front[valid])
-        if not every:
-            delta, distance_wanted = delta[valid], distance_wanted[valid]
-        speed = self.speed[e]
-        limit = self.lanes.speed_limit[self.lane[e]]
-        target = self.target_speed[e]
-        if self.lanes.limited:
-            # np.clip(target, 0, limit) as two ufuncs; a -0 target (the only tie with the bound 0
-            # that could keep its sign) gives the same IDM term, as not_zero maps both zeros alike
-            desired = np.minimum(np.maximum(target, 0.0), limit)
-        else:
-            desired = np.where(np.isnan(limit), target, np.clip(target, 0, limit))
-        free = IDMVehicle.COMFORT_ACC_MAX * (
-            1 - np.power(np.maximum(speed, 0) / np.abs(not_zero(desired)), delta)
+        speed, velocity, direction = self.speed, self.velocity, self.direction
+        valid, base, led, relative, heading, gap, led_speed = idm_inputs(
+            ego,
+            front,
+            self.is_vehicle,
+            speed,
+            self.target_speed,
+            self.speed_limit,
+            self.s,
+            velocity,
+            direction,
         )
-        led = f >= 0
-        if led.any():
-            e, f, led_speed, jam = e[led], f[led], speed[led], distance_wanted[led]
-            relative = np.ascontiguousarray(self.velocity[e] - self.velocity[f])
-            closing = np.vecdot(relative, np.ascontiguousarray(self.direction[e]))
-            ab = -IDMVehicle.COMFORT_ACC_MAX * IDMVehicle.COMFORT_ACC_MIN
-            desired_gap = jam + led_speed * IDMVehicle.TIME_WANTED + led_speed * closing / (2 * np.sqrt(ab))
-            gap = self.s[f] - self.s[e]
-            free[led] -= IDMVehicle.COMFORT_ACC_MAX * np.power(desired_gap / not_zero(gap), 2)
-        if every:
-            return free
-        acceleration[valid] = free
-        return acceleration
+        free_power = np.power(base, delta[valid])
+        closing = np.vecdot(relative, heading)
+        time_wanted, a_max = IDMVehicle.TIME_WANTED, IDMVehicle.COMFORT_ACC_MAX
+        ratio = idm_gap_ratios(
+            closing, gap, led_speed, distance_wanted, valid, led, time_wanted, _BRAKING_TERM
+        )
+        return idm_accelerations(len(ego), valid, free_power, led, np.power(ratio, 2), a_max)
+
+
+_BRAKING_TERM = 2 * np.sqrt(-IDMVehicle.COMFORT_ACC_MAX * IDMVehicle.COMFORT_ACC_MIN)
+"""2 sqrt(a b) [m/s^2] of IDM's desired gap, as highway-env computes it."""

@@ -18,6 +18,8 @@ from stack.sim.fast_road import BROAD_PHASE_MARGIN
 if TYPE_CHECKING:
     from stack.sim.vector.motion import Footprints
 
+NOT_ZERO = 1e-2
+"""highway-env's `utils.not_zero` threshold [same unit as the value]."""
 SEPARATION_MARGIN = 1e-6
 """Distance [m] by which two swept rectangles must be apart on one of their axes before the narrow
 phase is skipped; float rounding differences with stock's own projections are below 1e-10 m."""
@@ -238,3 +240,112 @@ def neighbour_rows(
         front[k] = order[ahead] if ahead < count else -1
         rear[k] = order[behind] if behind >= 0 else -1
     return front, rear
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _maximum(a: float, b: float) -> float:  # pragma: no cover - compiled
+    """`np.maximum(a, b)`: NaN in `a` stays."""
+    return a if a >= b or a != a else b
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _minimum(a: float, b: float) -> float:  # pragma: no cover - compiled
+    """`np.minimum(a, b)`: NaN in `a` stays."""
+    return a if a <= b or a != a else b
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _not_zero(x: float) -> float:  # pragma: no cover - compiled
+    """highway-env's `utils.not_zero`: +-`NOT_ZERO` for values closer to 0 (NaN gives -NOT_ZERO)."""
+    return x if abs(x) > NOT_ZERO else (NOT_ZERO if x >= 0 else -NOT_ZERO)
+
+
+@njit(cache=True, nogil=True)
+def idm_inputs(
+    ego: np.ndarray,
+    front: np.ndarray,
+    is_vehicle: np.ndarray,
+    speed: np.ndarray,
+    target_speed: np.ndarray,
+    speed_limit: np.ndarray,
+    s: np.ndarray,
+    velocity: np.ndarray,
+    direction: np.ndarray,
+) -> tuple[
+    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray
+]:  # pragma: no cover - compiled; covered through TrafficFrame.idm
+    """The rounding-exact parts of IDM for evaluating rows `ego` behind rows `front` (-1: none):
+    the valid rows (an ego that is a vehicle); for each, the free-road base max(v, 0) / |desired
+    speed| (the target speed clipped to [0, the lane's `speed_limit`], NaN: none), whether it is
+    led; for each led one, the relative velocity and the ego's heading direction (for the
+    closing speed's dot product, which numpy rounds its own way), the gap in s [m], its speed."""
+    valid = np.empty(ego.shape[0], dtype=np.int64)
+    count = 0
+    for k in range(ego.shape[0]):
+        if ego[k] >= 0 and is_vehicle[ego[k]]:
+            valid[count] = k
+            count += 1
+    valid = valid[:count]
+    base = np.empty(count)
+    led = np.zeros(count, dtype=np.bool_)
+    for i in range(count):
+        e = ego[valid[i]]
+        limit, target = speed_limit[e], target_speed[e]
+        desired = target if limit != limit else _minimum(_maximum(target, 0.0), limit)
+        base[i] = _maximum(speed[e], 0.0) / abs(_not_zero(desired))
+        led[i] = front[valid[i]] >= 0
+    led_count = int(led.sum())
+    relative, heading = np.empty((led_count, 2)), np.empty((led_count, 2))
+    gap, led_speed = np.empty(led_count), np.empty(led_count)
+    j = 0
+    for i in range(count):
+        if led[i]:
+            e, f = ego[valid[i]], front[valid[i]]
+            for axis in range(2):
+                relative[j, axis] = velocity[e, axis] - velocity[f, axis]
+                heading[j, axis] = direction[e, axis]
+            gap[j], led_speed[j] = s[f] - s[e], speed[e]
+            j += 1
+    return valid, base, led, relative, heading, gap, led_speed
+
+
+@njit(cache=True, nogil=True)
+def idm_gap_ratios(
+    closing: np.ndarray,
+    gap: np.ndarray,
+    led_speed: np.ndarray,
+    distance_wanted: np.ndarray,
+    valid: np.ndarray,
+    led: np.ndarray,
+    time_wanted: float,
+    braking_term: float,
+) -> np.ndarray:  # pragma: no cover - compiled; covered through TrafficFrame.idm
+    """Desired gap / gap of each led row of `idm_inputs`: the desired gap d0 + v T + v dv /
+    `braking_term` (2 sqrt(a b)), in highway-env's operation order, `distance_wanted` d0 [m] by
+    the evaluating row."""
+    ratio = np.empty(gap.shape[0])
+    j = 0
+    for i in range(valid.shape[0]):
+        if led[i]:
+            v = led_speed[j]
+            desired = distance_wanted[valid[i]] + v * time_wanted + v * closing[j] / braking_term
+            ratio[j] = desired / _not_zero(gap[j])
+            j += 1
+    return ratio
+
+
+@njit(cache=True, nogil=True)
+def idm_accelerations(
+    rows: int, valid: np.ndarray, free_power: np.ndarray, led: np.ndarray, gap_power: np.ndarray, a_max: float
+) -> np.ndarray:  # pragma: no cover - compiled; covered through TrafficFrame.idm
+    """IDM's a_max (1 - (v / v0)^delta) - a_max (s* / s)^2 per evaluating row from the powers numpy
+    computed, 0 for rows without a valid ego."""
+    acceleration = np.zeros(rows)
+    j = 0
+    for i in range(valid.shape[0]):
+        a = a_max * (1 - free_power[i])
+        if led[i]:
+            a = a - a_max * gap_power[j]
+            j += 1
+        acceleration[valid[i]] = a
+    return acceleration

@@ -10,10 +10,7 @@ from highway_env.road.lane import StraightLane
 from highway_env.road.road import RoadNetwork
 
 from stack.sim.fast_road import LaneIndex
-from stack.sim.vector.kernels import closest_lanes
-
-NOT_ZERO = 1e-2
-"""highway-env's `utils.not_zero` threshold [same unit as the value]."""
+from stack.sim.vector.kernels import NOT_ZERO, closest_lanes
 
 
 def not_zero(x: np.ndarray) -> np.ndarray:
