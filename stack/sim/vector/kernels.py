@@ -349,3 +349,41 @@ def idm_accelerations(
             j += 1
         acceleration[valid[i]] = a
     return acceleration
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _clip(x: float, bound: float) -> float:  # pragma: no cover - compiled
+    """`lanes.clip`: np.minimum(np.maximum(x, -bound), bound)."""
+    return _minimum(_maximum(x, -bound), bound)
+
+
+@njit(cache=True, nogil=True)
+def lateral_command_sines(
+    r_target: np.ndarray, speed: np.ndarray, kp_lateral: float
+) -> np.ndarray:  # pragma: no cover - compiled; covered through VectorRoad
+    """The sine of `IDMVehicle.steering_control`'s heading command, -kp r / v clipped to [-1, 1],
+    per driver at lateral offset `r_target` [m] from its target lane's centre and `speed` [m/s]."""
+    sine = np.empty(r_target.shape[0])
+    for i in range(r_target.shape[0]):
+        sine[i] = _clip(-kp_lateral * r_target[i] / _not_zero(speed[i]), 1.0)
+    return sine
+
+
+@njit(cache=True, nogil=True)
+def slip_sines(
+    heading_command: np.ndarray,
+    lane_heading: np.ndarray,
+    heading: np.ndarray,
+    length: np.ndarray,
+    speed: np.ndarray,
+    kp_heading: float,
+) -> np.ndarray:  # pragma: no cover - compiled; covered through VectorRoad
+    """The sine of `steering_control`'s slip angle per driver, from its heading command [rad]: the
+    heading rate kp (lane heading + command clipped to +-pi/4 - heading, wrapped to [-pi, pi)) times
+    L / 2 / v, clipped to [-1, 1]; in highway-env's operation order."""
+    sine = np.empty(heading.shape[0])
+    for i in range(heading.shape[0]):
+        reference = lane_heading[i] + _clip(heading_command[i], np.pi / 4)
+        rate = kp_heading * (((reference - heading[i] + np.pi) % (2 * np.pi)) - np.pi)
+        sine[i] = _clip(length[i] / 2 / _not_zero(speed[i]) * rate, 1.0)
+    return sine

@@ -10,21 +10,13 @@ from highway_env.road.lane import StraightLane
 from highway_env.road.road import RoadNetwork
 
 from stack.sim.fast_road import LaneIndex
-from stack.sim.vector.kernels import NOT_ZERO, closest_lanes
-
-
-def not_zero(x: np.ndarray) -> np.ndarray:
-    return np.where(np.abs(x) > NOT_ZERO, x, np.where(x >= 0, NOT_ZERO, -NOT_ZERO))
+from stack.sim.vector.kernels import closest_lanes
 
 
 def clip(x: np.ndarray, bound: float) -> np.ndarray:
     """`np.clip(x, -bound, bound)` for a `bound` > 0, as two ufuncs: the same bits (NaN stays NaN;
     no tie with a bound of the other sign of zero can arise), without `np.clip`'s dispatch."""
     return np.minimum(np.maximum(x, -bound), bound)
-
-
-def wrap_to_pi(x: np.ndarray) -> np.ndarray:
-    return ((x + np.pi) % (2 * np.pi)) - np.pi
 
 
 def _unit_axis(vector: np.ndarray) -> bool:

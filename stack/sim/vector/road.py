@@ -37,8 +37,8 @@ from highway_env.vehicle.objects import RoadObject
 from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections
 from stack.sim.traffic import IDM_DRIVERS, ScenarioTraffic
 from stack.sim.vector.frame import TrafficFrame
-from stack.sim.vector.kernels import close_pairs
-from stack.sim.vector.lanes import LaneTable, clip, not_zero, wrap_to_pi
+from stack.sim.vector.kernels import close_pairs, lateral_command_sines, slip_sines
+from stack.sim.vector.lanes import LaneTable, clip
 from stack.sim.vector.motion import Footprints, columns, move, steps_like_vehicle
 
 
@@ -168,11 +168,11 @@ class VectorRoad(FastRoad):
         heading, speed, target = frame.heading[me], frame.speed[me], plan.target
         changing = frame.lane[me] != target
 
-        r_target = frame.r[target, me]
-        heading_command = np.arcsin(clip(-IDMVehicle.KP_LATERAL * r_target / not_zero(speed), 1))
-        heading_ref = lanes.heading[target] + clip(heading_command, np.pi / 4)
-        heading_rate = IDMVehicle.KP_HEADING * wrap_to_pi(heading_ref - heading)
-        slip = np.arcsin(clip(plan.length / 2 / not_zero(speed) * heading_rate, 1))
+        heading_command = np.arcsin(lateral_command_sines(frame.r[target, me], speed, IDMVehicle.KP_LATERAL))
+        lane_heading = lanes.heading[target]
+        slip = np.arcsin(
+            slip_sines(heading_command, lane_heading, heading, plan.length, speed, IDMVehicle.KP_HEADING)
+        )
         steering = clip(np.arctan(2 * np.tan(slip)), IDMVehicle.MAX_STEERING_ANGLE)
 
         acceleration = plan.own_acceleration
