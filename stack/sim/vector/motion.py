@@ -35,25 +35,19 @@ def steps_like_vehicle(cls: type) -> bool:
 def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: bool) -> Footprints:
     """`Vehicle.step(dt)` of every mover: clip, integrate, apply impacts, find the lane. Returns
     the movers' footprints after the step."""
-    impacted, stops = [], []
-    for i, v in enumerate(movers):
-        timed, stopping = _STEP_KIND.get(type(v)) or _step_kind(type(v))
-        if timed:
-            v.timer += dt
-        if v.crashed:
-            v.action["steering"] = 0
-            v.action["acceleration"] = -1.0 * v.speed
-        elif stopping:
-            stops.append(i)
-        if v.impact is not None:
-            impacted.append(i)
-    state = columns(movers, _MOVER_STATE)
-    speed, max_speed, min_speed, heading, length, width, diagonal, x, y, steering, acceleration = state
-    if stops:
+    kinds = {cls: _STEP_KIND.get(cls) or _step_kind(cls) for cls in set(map(type, movers))}
+    state = columns(movers, _mover_state)
+    speed, max_speed, min_speed, heading, length, width, diagonal, x, y, steering, acceleration = state[:11]
+    crashed, impacted = state[11] != 0, np.flatnonzero(state[12]).tolist()
+    if crashed.any():
+        steering = np.where(crashed, 0.0, steering)
+        acceleration = np.where(crashed, -1.0 * speed, acceleration)
+    if any(stopping for _, stopping in kinds.values()):
+        stops = ~crashed
+        if not all(stopping for _, stopping in kinds.values()):
+            stops &= np.array([kinds[type(v)][1] for v in movers])
         standstill = -speed / dt
-        stops_here = np.zeros(len(movers), dtype=bool)
-        stops_here[stops] = True
-        acceleration = np.where(stops_here & (standstill > acceleration), standstill, acceleration)
+        acceleration = np.where(stops & (standstill > acceleration), standstill, acceleration)
     too_fast, too_slow = speed > max_speed, speed < min_speed
     slow_down, speed_up = 1.0 * (max_speed - speed), 1.0 * (min_speed - speed)
     acceleration = np.where(too_fast & (slow_down < acceleration), slow_down, acceleration)
@@ -91,6 +85,9 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
         v.lane_index, v.lane = indices[row], table[row]
         if record_history:
             v.history.appendleft(v.create_from(v))
+    timed = movers if all(timed for timed, _ in kinds.values()) else [v for v in movers if kinds[type(v)][0]]
+    for v in timed:
+        v.timer += dt
     return Footprints(x, y, heading, speed, length, width, diagonal)
 
 
@@ -119,6 +116,8 @@ def _mover_state(v: Vehicle) -> tuple[float, ...]:
         position[1],
         action["steering"],
         action["acceleration"],
+        v.crashed,
+        v.impact is not None,
     )
 
 

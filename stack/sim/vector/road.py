@@ -190,12 +190,16 @@ class VectorRoad(FastRoad):
         if lanes is None:
             super().step(dt)
             return
-        movers = []
-        for vehicle in self.vehicles:
-            if steps_like_vehicle(type(vehicle)):
-                movers.append(vehicle)
-            else:
-                vehicle.step(dt)
+        kinds = {cls: steps_like_vehicle(cls) for cls in set(map(type, self.vehicles))}
+        if all(kinds.values()):
+            movers = list(self.vehicles)
+        else:
+            movers = []
+            for vehicle in self.vehicles:
+                if kinds[type(vehicle)]:
+                    movers.append(vehicle)
+                else:
+                    vehicle.step(dt)
         moved = move(movers, lanes, dt, self.record_history) if movers else None
         if moved is not None and len(movers) == len(self.vehicles) >= 2:
             self._collide(dt, close_pairs(moved, dt))
