@@ -26,8 +26,6 @@ other lanes (a curved exit, `neighbour_vehicles_connected_lanes`) run as `FastRo
 
 from __future__ import annotations
 
-from operator import attrgetter
-
 import numpy as np
 from highway_env.road.lane import StraightLane
 from highway_env.vehicle.behavior import IDMVehicle
@@ -70,55 +68,57 @@ class VectorRoad(FastRoad):
         self._projections = projections = LaneProjections(self)
         try:
             frame = TrafficFrame(projections, lanes)
-            drivers = [v for v in self.vehicles if type(v) in IDM_DRIVERS and not v.crashed]
-            if drivers:
-                plan = Drivers(drivers, frame)
-                at_lane_end = plan.at_lane_end()
-                decisions = self._mobil(plan, [id(v) not in at_lane_end for v in drivers])
-            else:
-                at_lane_end, decisions = set(), {}
+            drivers, places, others = [], [], []
+            for place, vehicle in enumerate(self.vehicles):
+                if type(vehicle) in IDM_DRIVERS and not vehicle.crashed:
+                    drivers.append(vehicle)
+                    places.append(place)
+                else:
+                    others.append((place, -1))
+            if not drivers:
+                for vehicle in self.vehicles:
+                    vehicle.act()
+                return
+            plan = Drivers(drivers, frame)
+            at_lane_end = plan.at_lane_end()
+            decisions = self._mobil(plan, ~at_lane_end)
+            may_change = plan.enable_lane_change & (plan.timer_due | ~plan.on_target)
+            acting = set(decisions).union(np.flatnonzero(at_lane_end | may_change).tolist())
             retargeted = []
-            k = -1
-            for vehicle in self.vehicles:
-                if type(vehicle) not in IDM_DRIVERS or vehicle.crashed:
+            for place, k in sorted(others + [(places[k], k) for k in acting]):
+                vehicle = self.vehicles[place]
+                if k < 0:
                     vehicle.act()
                     continue
-                k += 1
-                if id(vehicle) in decisions:
+                if k in decisions:
                     vehicle.timer = 0
-                    if decisions[id(vehicle)]:
-                        vehicle.target_lane_index = decisions[id(vehicle)]
+                    if decisions[k]:
+                        vehicle.target_lane_index = decisions[k]
                         retargeted.append(k)
                     continue
-                if id(vehicle) in at_lane_end:
+                if at_lane_end[k]:
                     vehicle.follow_road()
                     retargeted.append(k)
                 due = vehicle.LANE_CHANGE_DELAY < vehicle.timer
                 if vehicle.enable_lane_change and (due or vehicle.lane_index != vehicle.target_lane_index):
                     vehicle.change_lane_policy()
                     retargeted.append(k)
-            if drivers:
-                plan.retarget(retargeted)
-                self._drive(plan)
+            plan.retarget(retargeted)
+            self._drive(plan)
         finally:
             self._projections = None
 
-    def _mobil(self, plan: Drivers, free: list[bool]) -> dict[int, LaneIndex | None]:
-        """`change_lane_policy`'s outcome for the drivers due to decide (not `free` ones: those that
-        follow the road onto the next lane), keyed by id: the side lane MOBIL picks (the last one
-        that passes, as stock overwrites), or None to keep the lane. Also evaluates every driver's
-        IDM acceleration behind its own leader (`plan.own_acceleration`), in the same array call."""
+    def _mobil(self, plan: Drivers, free: np.ndarray) -> dict[int, LaneIndex | None]:
+        """`change_lane_policy`'s outcome for the drivers due to decide (not those not `free`: they
+        follow the road onto the next lane), keyed by their position in `plan.drivers`: the side
+        lane MOBIL picks (the last one that passes, as stock overwrites), or None to keep the lane.
+        Also evaluates every driver's IDM acceleration behind its own leader
+        (`plan.own_acceleration`), in the same array call."""
         frame, drivers = plan.frame, plan.drivers
-        due = [
-            k
-            for k, v in enumerate(drivers)
-            if v.LANE_CHANGE_DELAY < v.timer
-            and free[k]
-            and v.enable_lane_change
-            and v.lane_index == v.target_lane_index
-            and not v.route
-        ]
-        decisions: dict[int, LaneIndex | None] = {id(drivers[k]): None for k in due}
+        due = np.flatnonzero(
+            plan.timer_due & free & plan.enable_lane_change & plan.on_target & ~plan.routed
+        ).tolist()
+        decisions: dict[int, LaneIndex | None] = dict.fromkeys(due)
         pairs = [
             (k, side)
             for k in due
@@ -157,7 +157,7 @@ class VectorRoad(FastRoad):
         accept = ~unsafe & ~(gain < IDMVehicle.LANE_CHANGE_MIN_ACC_GAIN)
         for (k, side), yes in zip(pairs, accept.tolist(), strict=True):
             if yes:
-                decisions[id(drivers[k])] = side
+                decisions[k] = side
         return decisions
 
     @staticmethod
@@ -213,11 +213,21 @@ class VectorRoad(FastRoad):
         return close_pairs(Footprints.of(self.vehicles), dt)
 
 
-_DRIVER_CONSTANTS = attrgetter("LENGTH", "DELTA", "DISTANCE_WANTED")
+def _driver_state(vehicle: IDMVehicle) -> tuple[float, ...]:
+    return (
+        vehicle.LENGTH,
+        vehicle.DELTA,
+        vehicle.DISTANCE_WANTED,
+        vehicle.LANE_CHANGE_DELAY < vehicle.timer,
+        vehicle.enable_lane_change,
+        vehicle.lane_index == vehicle.target_lane_index,
+        bool(vehicle.route),
+    )
 
 
 class Drivers:
-    """The IDM drivers of a frame: their rows, constants, and their own lane's front and rear."""
+    """The IDM drivers of a frame: their rows, constants, lane-change state, and their own lane's
+    front and rear."""
 
     own_acceleration: np.ndarray
     """IDM acceleration [m/s^2] behind the own lane's leader, per driver (set by `_mobil`)."""
@@ -227,7 +237,10 @@ class Drivers:
         rows, lane_row = frame.projections.row, frame.lanes.row
         self.me = np.array([rows[id(v)] for v in drivers], dtype=int)
         self.target = np.array([lane_row[v.target_lane_index] for v in drivers], dtype=int)
-        self.length, self.delta, self.jam = columns(drivers, _DRIVER_CONSTANTS)
+        self.length, self.delta, self.jam, *flags = columns(drivers, _driver_state)
+        self.timer_due, self.enable_lane_change, self.on_target, self.routed = (flag != 0 for flag in flags)
+        """Per driver: its lane-change timer is past `LANE_CHANGE_DELAY`; it may change lane; it is in
+        its target lane; it follows a route."""
         self.own_front, self.own_rear = frame.neighbours(self.me, frame.lane[self.me])
 
     def retarget(self, drivers: list[int]) -> None:
@@ -236,11 +249,10 @@ class Drivers:
         for k in drivers:
             self.target[k] = lane_row[self.drivers[k].target_lane_index]
 
-    def at_lane_end(self) -> set[int]:
-        """ids of the drivers for which `follow_road` moves on to the next lane."""
+    def at_lane_end(self) -> np.ndarray:
+        """Per driver, whether `follow_road` moves it on to the next lane."""
         frame = self.frame
-        ends = frame.s[self.me] > frame.lanes.length[self.target] - StraightLane.VEHICLE_LENGTH / 2
-        return {id(self.drivers[i]) for i in np.flatnonzero(ends)}
+        return frame.s[self.me] > frame.lanes.length[self.target] - StraightLane.VEHICLE_LENGTH / 2
 
 
 class VectorHighwayEnv(ScenarioTraffic):
