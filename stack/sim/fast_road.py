@@ -18,6 +18,7 @@ trajectories are identical; `tests/test_fast_road.py` checks it frame by frame.
 from __future__ import annotations
 
 from bisect import bisect_left
+from functools import cached_property
 
 import numpy as np
 from highway_env.envs.exit_env import ExitEnv
@@ -58,9 +59,15 @@ class LaneProjections:
         candidates = road.vehicles + road.objects
         landmarks = {cls for cls in set(map(type, candidates)) if is_kind(cls, Landmark)}
         self.objects = [o for o in candidates if type(o) not in landmarks] if landmarks else candidates
-        self.row = {id(o): i for i, o in enumerate(self.objects)}
+        self.vehicles_first = not landmarks
+        """Whether the road's vehicles are the first rows, in road order (no landmark left out)."""
         self.position = np.array([o.position for o in self.objects], dtype=float).reshape(-1, 2)
         self.lanes: dict[LaneIndex, tuple[list[float], list[int]]] = {}
+
+    @cached_property
+    def row(self) -> dict[int, int]:
+        """Each object's row, by its id."""
+        return {id(o): i for i, o in enumerate(self.objects)}
 
     def sorted_on_lane(self, lane_index: LaneIndex) -> tuple[list[float], list[int]]:
         """The objects highway-env counts as on `lane_index`'s lane, sorted by (s, row): their s

@@ -79,7 +79,7 @@ class VectorRoad(FastRoad):
                 for vehicle in self.vehicles:
                     vehicle.act()
                 return
-            plan = Drivers(drivers, frame)
+            plan = Drivers(drivers, places, frame)
             at_lane_end = plan.at_lane_end()
             decisions = self._mobil(plan, ~at_lane_end)
             may_change = plan.enable_lane_change & (plan.timer_due | ~plan.on_target)
@@ -232,10 +232,14 @@ class Drivers:
     own_acceleration: np.ndarray
     """IDM acceleration [m/s^2] behind the own lane's leader, per driver (set by `_mobil`)."""
 
-    def __init__(self, drivers: list[IDMVehicle], frame: TrafficFrame) -> None:
+    def __init__(self, drivers: list[IDMVehicle], places: list[int], frame: TrafficFrame) -> None:
+        """`places`: the drivers' places in the road's vehicles."""
         self.drivers, self.frame = drivers, frame
-        rows, lane_row = frame.projections.row, frame.lanes.row
-        self.me = np.array([rows[id(v)] for v in drivers], dtype=int)
+        projections, lane_row = frame.projections, frame.lanes.row
+        if projections.vehicles_first:
+            self.me = np.array(places, dtype=int)
+        else:
+            self.me = np.array([projections.row[id(v)] for v in drivers], dtype=int)
         self.target = np.array([lane_row[v.target_lane_index] for v in drivers], dtype=int)
         self.length, self.delta, self.jam, *flags = columns(drivers, _driver_state)
         self.timer_due, self.enable_lane_change, self.on_target, self.routed = (flag != 0 for flag in flags)
