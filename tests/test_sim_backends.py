@@ -16,9 +16,8 @@ from stack.sim import envs
 from stack.sim.envs import FAST_HIGHWAY, VECTOR_HIGHWAY
 from stack.sim.highway import HighwayAdapter, env_config
 from stack.sim.traffic import TrafficVehicle
-from stack.sim.vector.kernels import close_pairs
 from stack.sim.vector.lanes import LaneTable
-from stack.sim.vector.motion import Footprints
+from stack.sim.vector.motion import Footprints, close_pairs
 from stack.sim.vector.road import VectorRoad
 
 BACKENDS = {"fast": FAST_HIGHWAY, "vector": VECTOR_HIGHWAY}
@@ -265,3 +264,63 @@ def test_close_pairs_keep_every_pair_highway_env_finds_touching_or_about_to():
     assert touching > 100
     assert missed == 0
     assert kept < 2 * touching
+
+
+def test_the_closest_lane_kernel_picks_numpys_lane_on_every_input():
+    """`LaneTable.closest` (compiled) against highway-env's `distance_with_heading` minimum as numpy
+    computes it: on the lane boundaries, at headings of +-pi and beyond, off both road ends, with
+    NaN and infinite inputs (numpy's argmin: the first minimum, the first NaN)."""
+    table = LaneTable(RoadNetwork.straight_road_network(4, length=1000))
+    rng = np.random.default_rng(3)
+
+    def numpy_closest(position: np.ndarray, heading: np.ndarray) -> np.ndarray:
+        s = (position[:, 0] - table.start[0, 0]) * table.direction[0] + (
+            position[:, 1] - table.start[0, 1]
+        ) * table.direction[1]
+        delta = position[None, :, :] - table.start[:, None, :]
+        r = delta[..., 0] * table.lateral[:, 0, None] + delta[..., 1] * table.lateral[:, 1, None]
+        angle = np.abs(((heading[None, :] - table.heading[:, None] + np.pi) % (2 * np.pi)) - np.pi)
+        distance = np.abs(r) + np.maximum(s - table.length[:, None], 0) + np.maximum(0 - s, 0) + angle
+        return np.argmin(distance, axis=0)
+
+    for case in range(300):
+        count = int(rng.integers(1, 40))
+        lateral = [rng.uniform(-6, 18, count), np.round(rng.uniform(-6, 18, count) * 2) / 2][case % 2]
+        position = np.stack([rng.uniform(-50, 1050, count), lateral], axis=1)
+        heading = [rng.uniform(-10, 10, count), np.full(count, np.pi), np.full(count, -np.pi)][case % 3]
+        if case % 10 == 0:
+            position[0, int(rng.integers(2))] = np.nan
+            heading[-1] = np.inf
+        with np.errstate(invalid="ignore"):
+            expected = numpy_closest(position, heading)
+        np.testing.assert_array_equal(table.closest(position, heading), expected, err_msg=f"case {case}")
+
+
+def test_a_frames_idm_is_highway_envs_bit_for_bit():
+    """`TrafficFrame.idm` (compiled arithmetic around numpy's powers and dot products) against
+    `IDMVehicle.acceleration` for every vehicle behind every other, and without a leader or an ego,
+    on dense traffic after some frames (lane changes under way, speed limits on)."""
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    from stack.sim.fast_road import LaneProjections
+    from stack.sim.vector.frame import TrafficFrame
+
+    highway = build_config({}, scenario="dense").highway
+    env = gym.make(VECTOR_HIGHWAY, config=env_config(highway), disable_env_checker=True)
+    env.reset(seed=5)
+    for frame in range(40):
+        env.step(braking(frame))
+    road = env.unwrapped.road
+    frame = TrafficFrame(LaneProjections(road), LaneTable.fit(road.network))
+    objects = frame.projections.objects
+    judge = next(v for v in objects if isinstance(v, IDMVehicle))
+    rows = np.arange(-1, len(objects))
+    ego, front = (grid.ravel() for grid in np.meshgrid(rows, rows, indexing="ij"))
+    delta, jam = np.full(len(ego), judge.DELTA), np.full(len(ego), judge.DISTANCE_WANTED)
+    expected = [
+        judge.acceleration(objects[e] if e >= 0 else None, objects[f] if f >= 0 else None)
+        for e, f in zip(ego.tolist(), front.tolist(), strict=True)
+    ]
+    got = frame.idm(ego, front, delta, jam)
+    np.testing.assert_array_equal(got.view(np.uint64), np.array(expected, dtype=float).view(np.uint64))
+    env.close()

@@ -1,22 +1,18 @@
-"""Compiled (numba) kernels of the vector road, for work whose result cannot depend on float
-rounding: the collision pairs that could touch (`close_pairs`: a filter with a margin, so any math
-library will do), and the frame's lane coordinates, order and neighbour search (`lane_order`,
-`neighbour_rows`: exact products by 0 or +-1 on axis-aligned lanes, sums and comparisons, in
-numpy's operation order). Physics stays in numpy, whose transcendental ufuncs give stock
-highway-env's bits."""
+"""Compiled (numba) kernels of the vector road. Two kinds of work: that whose result cannot depend
+on float rounding (the collision pairs that could touch, `close_pair_rows`: a filter with a margin,
+so any math library will do), and the arithmetic numba computes to numpy's bits: the frame's lane
+coordinates, order and neighbour search, the closest lane, and IDM's and the steering controller's
+sums, products, divisions, comparisons and float modulo around numpy's transcendental calls, each
+in numpy's operation order (numba contracts no multiply-add; `tests/test_sim_backends.py` checks
+the bits). numpy's tan, arctan, arcsin, power and dot product stay in numpy: its SVML loops round
+differently from libm, which compiled code would call."""
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
-
-from stack.sim.fast_road import BROAD_PHASE_MARGIN
-
-if TYPE_CHECKING:
-    from stack.sim.vector.motion import Footprints
 
 NOT_ZERO = 1e-2
 """highway-env's `utils.not_zero` threshold [same unit as the value]."""
@@ -25,30 +21,10 @@ SEPARATION_MARGIN = 1e-6
 phase is skipped; float rounding differences with stock's own projections are below 1e-10 m."""
 
 
-def close_pairs(vehicles: Footprints, dt: float) -> np.ndarray:
-    """The pairs (i, j), i < j, by i then j, as an (n, 2) array, that pass highway-env's spherical
-    pre-check over `dt` [s] (with `BROAD_PHASE_MARGIN`) and whose rectangles, swept by their
-    relative displacement over `dt`, are not apart by `SEPARATION_MARGIN` along one of their own
-    axes (there stock's separating-axis test finds the same gap: neither impact nor crash): the
-    candidates of stock's polygon test, a superset of the pairs it finds touching."""
-    return _close_pairs(
-        vehicles.x,
-        vehicles.y,
-        vehicles.heading,
-        vehicles.speed,
-        vehicles.length,
-        vehicles.width,
-        vehicles.diagonal,
-        dt,
-        BROAD_PHASE_MARGIN,
-        SEPARATION_MARGIN,
-    )
-
-
 @njit(cache=True, nogil=True, inline="always")
 def _half_extent(
     length: float, width: float, cos: float, sin: float, axis_x: float, axis_y: float
-) -> float:  # pragma: no cover - compiled; covered through close_pairs
+) -> float:  # pragma: no cover - compiled; covered through motion.close_pairs
     """Half the extent [m] of a `length` x `width` rectangle, heading (cos, sin), along a unit axis."""
     along = abs(cos * axis_x + sin * axis_y)
     across = abs(-sin * axis_x + cos * axis_y)
@@ -56,7 +32,7 @@ def _half_extent(
 
 
 @njit(cache=True, nogil=True)
-def _close_pairs(
+def close_pair_rows(
     x: np.ndarray,
     y: np.ndarray,
     heading: np.ndarray,
@@ -67,7 +43,7 @@ def _close_pairs(
     dt: float,
     broad_margin: float,
     separation_margin: float,
-) -> np.ndarray:  # pragma: no cover - compiled; covered through close_pairs
+) -> np.ndarray:  # pragma: no cover - compiled; covered through motion.close_pairs
     count = x.shape[0]
     cos = np.cos(heading)
     sin = np.sin(heading)

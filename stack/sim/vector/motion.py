@@ -11,7 +11,9 @@ import numpy as np
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
+from stack.sim.fast_road import BROAD_PHASE_MARGIN
 from stack.sim.traffic import TrafficVehicle
+from stack.sim.vector.kernels import SEPARATION_MARGIN, close_pair_rows
 from stack.sim.vector.lanes import LaneTable
 
 _KINEMATIC: dict[type, bool] = {}
@@ -148,3 +150,23 @@ def columns(objects: Sequence[object], attributes: Callable[[Any], Any]) -> np.n
     """The `attributes` of every object, as floats: one contiguous row per attribute (numpy's
     transcendental ufuncs give the bits of their scalar calls on contiguous arrays)."""
     return np.array(list(map(attributes, objects)), dtype=float).reshape(len(objects), -1).T.copy()
+
+
+def close_pairs(vehicles: Footprints, dt: float) -> np.ndarray:
+    """The pairs (i, j), i < j, by i then j, as an (n, 2) array, that pass highway-env's spherical
+    pre-check over `dt` [s] (with `BROAD_PHASE_MARGIN`) and whose rectangles, swept by their
+    relative displacement over `dt`, are not apart by `SEPARATION_MARGIN` along one of their own
+    axes (there stock's separating-axis test finds the same gap: neither impact nor crash): the
+    candidates of stock's polygon test, a superset of the pairs it finds touching."""
+    return close_pair_rows(
+        vehicles.x,
+        vehicles.y,
+        vehicles.heading,
+        vehicles.speed,
+        vehicles.length,
+        vehicles.width,
+        vehicles.diagonal,
+        dt,
+        BROAD_PHASE_MARGIN,
+        SEPARATION_MARGIN,
+    )

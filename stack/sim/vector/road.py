@@ -11,7 +11,7 @@ vehicles, in the stock operation order:
   stock order, since one vehicle's decision is read by the next one's; then the steering controller
   and the IDM accelerations (own lane and target lane) of all of them at once;
 - step: clipping, the kinematic bicycle, impacts and the closest lane of every vehicle at once, then
-  stock's collision test on the pairs that could touch (`kernels.close_pairs`).
+  stock's collision test on the pairs that could touch (`motion.close_pairs`).
 
 The work whose result cannot depend on rounding runs as numba kernels (`stack.sim.vector.kernels`):
 lane coordinates (exact on these lanes), the frame's order and neighbour search (comparisons) and
@@ -35,9 +35,9 @@ from highway_env.vehicle.objects import RoadObject
 from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections
 from stack.sim.traffic import IDM_DRIVERS, ScenarioTraffic
 from stack.sim.vector.frame import TrafficFrame
-from stack.sim.vector.kernels import close_pairs, lateral_command_sines, slip_sines
+from stack.sim.vector.kernels import lateral_command_sines, slip_sines
 from stack.sim.vector.lanes import LaneTable, clip
-from stack.sim.vector.motion import Footprints, columns, move, steps_like_vehicle
+from stack.sim.vector.motion import Footprints, close_pairs, columns, move, steps_like_vehicle
 
 
 def _plain_velocity(cls: type) -> bool:
