@@ -13,8 +13,35 @@ from stack.core.config import HighwayConfig, build_config
 from stack.core.episodes import run_episode
 from stack.core.metrics import TIMING_FIELDS
 from stack.sim.fast_road import FastRoad
-from stack.sim.highway import HighwayAdapter
+from stack.sim.highway import HighwayAdapter, snapshot
 from tests.helpers import scene
+
+
+def test_the_snapshot_from_the_moved_frame_is_the_snapshot_from_the_vehicles():
+    """After a vector step the adapter reads the vehicles' state from the arrays the step computed:
+    every field of every frame is the bits of the snapshot read off the vehicles, crashes and all."""
+    adapter = HighwayAdapter(build_config({}, scenario="dense").highway.model_copy(update={"duration": 10}))
+    adapter.reset(seed=1)
+    env, taken = adapter.road_env, []
+    take_moved = env.road.take_moved
+    env.road.take_moved = lambda: taken.append(take_moved()) or taken[-1]
+    for frame in range(150):
+        stepped = adapter.step(Actuation(5.0, 0.0))
+        assert taken[-1] is not None and taken[-1].vehicles == env.road.vehicles
+        read = snapshot(env.road, env.vehicle, float(env.time), adapter.config.lanes_count)
+        for field in dataclasses.fields(stepped):
+            a, b = getattr(stepped, field.name), getattr(read, field.name)
+            if isinstance(a, np.ndarray):
+                assert a.dtype == b.dtype and a.shape == b.shape, field.name
+                np.testing.assert_array_equal(
+                    a.view(np.uint8), b.view(np.uint8), err_msg=f"{field.name} {frame}"
+                )
+            else:
+                assert a == b, field.name
+        if adapter.done:
+            break
+    assert stepped.crashed.any()
+    assert len(taken) == frame + 1
 
 
 def test_the_adapter_step_leaves_the_road_as_env_step_does():

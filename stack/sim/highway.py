@@ -29,7 +29,7 @@ from stack.sim.envs import FAST_EXIT, FAST_HIGHWAY, HIGHWAY, VECTOR_HIGHWAY
 from stack.sim.plant import stabilised
 from stack.sim.settings import HighwayConfig
 from stack.sim.traffic import TRAFFIC_VEHICLE
-from stack.sim.vector.motion import columns
+from stack.sim.vector.motion import Moved, columns
 
 ENV_IDS: dict[RoadName, dict[Backend, str]] = {
     "highway": {"vector": VECTOR_HIGHWAY, "fast": FAST_HIGHWAY, "stock": HIGHWAY},
@@ -109,14 +109,15 @@ class HighwayAdapter:
         computes the rewards again); only `time`, `_simulate` and the end flags change or read the
         world, so the road evolves exactly as through `env.step`."""
         action = to_env_action(actuation)
+        env = self.road_env
         if self.renders:
             _, _, self.terminated, self.truncated, _ = self.env.step(action)
         else:
-            env = self.road_env
             env.time += 1 / env.config["policy_frequency"]
             env._simulate(action)
             self.terminated, self.truncated = env._is_terminated(), env._is_truncated()
-        return self.snapshot()
+        take_moved = getattr(env.road, "take_moved", None)
+        return self.snapshot(take_moved() if take_moved is not None else None)
 
     @property
     def done(self) -> bool:
@@ -147,10 +148,11 @@ class HighwayAdapter:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def snapshot(self) -> WorldState:
-        """Copy the road into a `WorldState` (row 0 = ego, others in road order)."""
+    def snapshot(self, moved: Moved | None = None) -> WorldState:
+        """Copy the road into a `WorldState` (row 0 = ego, others in road order); `moved`: where the
+        step just taken left the vehicles, if the road says."""
         env: AbstractEnv = self.env.unwrapped
-        return snapshot(env.road, env.vehicle, float(env.time), int(env.config["lanes_count"]))
+        return snapshot(env.road, env.vehicle, float(env.time), int(env.config["lanes_count"]), moved)
 
 
 def world_state(env: gym.Env) -> WorldState:
@@ -160,11 +162,15 @@ def world_state(env: gym.Env) -> WorldState:
     return snapshot(road_env.road, road_env.vehicle, float(road_env.time))
 
 
-def snapshot(road: Road, ego: Vehicle, time: float, lanes_count: int | None = None) -> WorldState:
+def snapshot(
+    road: Road, ego: Vehicle, time: float, lanes_count: int | None = None, moved: Moved | None = None
+) -> WorldState:
     """The road at `time` [s] as a `WorldState`: row 0 = `ego`, the others in road order, in the
     frame of lane 0 of the ego's road segment, which continues across straight segments, so the
     vehicles of the segments ahead and behind are seen too. Only the segment's first `lanes_count`
-    lanes are driven (an exit lane that opens for a while is not)."""
+    lanes are driven (an exit lane that opens for a while is not). `moved`: the road's vehicles
+    where the frame just stepped left them (their state as arrays already, read instead of the
+    vehicles when they are still the road's)."""
     road_vehicles = road.vehicles
     ego_index = road_vehicles.index(ego)
     order = [ego_index, *range(ego_index), *range(ego_index + 1, len(road_vehicles))]
@@ -172,15 +178,23 @@ def snapshot(road: Road, ego: Vehicle, time: float, lanes_count: int | None = No
     start, end, _ = ego.lane_index
     lanes = tuple(road.network.graph[start][end])[:lanes_count]
     reference = lanes[0]
-    position = np.array([v.position for v in vehicles], dtype=float)
-    heading, speed, length, width, crashed, lane = columns(vehicles, _vehicle_state)
+    ids = np.array(order)
+    if moved is not None and moved.vehicles == road_vehicles:
+        footprints = moved.footprints
+        position = np.stack([footprints.x[ids], footprints.y[ids]], axis=1)
+        heading, speed = footprints.heading[ids], footprints.speed[ids]
+        length, width, lane = footprints.length[ids], footprints.width[ids], moved.lane_id[ids]
+        crashed = np.array([v.crashed for v in vehicles], dtype=float)
+    else:
+        position = np.array([v.position for v in vehicles], dtype=float)
+        heading, speed, length, width, crashed, lane = columns(vehicles, _vehicle_state)
     velocity = np.empty((len(vehicles), 2))
     velocity[:, 0], velocity[:, 1] = speed * np.cos(heading), speed * np.sin(heading)
     s, d = _lane_frame(reference, position)
     lateral_speed, yaw_rate = _body_rates(ego)
     return WorldState(
         time=time,
-        ids=np.array(order),
+        ids=ids,
         position=position,
         heading=heading,
         speed=speed,

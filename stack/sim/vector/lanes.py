@@ -35,6 +35,7 @@ class LaneTable:
                     self.indices.append((_from, _to, _id))
                     self.lanes.append(lane)
         self.row = {index: i for i, index in enumerate(self.indices)}
+        self.lane_id = np.array([index[2] for index in self.indices], dtype=int)
         self.start = np.array([lane.start for lane in self.lanes], dtype=float)
         self.direction = np.array(self.lanes[0].direction, dtype=float)
         self.lateral = np.array([lane.direction_lateral for lane in self.lanes], dtype=float)

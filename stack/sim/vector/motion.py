@@ -34,9 +34,9 @@ def steps_like_vehicle(cls: type) -> bool:
     return known
 
 
-def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: bool) -> Footprints:
+def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: bool) -> Moved:
     """`Vehicle.step(dt)` of every mover: clip, integrate, apply impacts, find the lane. Returns
-    the movers' footprints after the step."""
+    where the movers ended."""
     kinds = {cls: _STEP_KIND.get(cls) or _step_kind(cls) for cls in set(map(type, movers))}
     state = columns(movers, _mover_state)
     speed, max_speed, min_speed, heading, length, width, diagonal, x, y, steering, acceleration = state[:11]
@@ -90,7 +90,7 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
     timed = movers if all(timed for timed, _ in kinds.values()) else [v for v in movers if kinds[type(v)][0]]
     for v in timed:
         v.timer += dt
-    return Footprints(x, y, heading, speed, length, width, diagonal)
+    return Moved(movers, Footprints(x, y, heading, speed, length, width, diagonal), lanes.lane_id[rows])
 
 
 _STEP_KIND: dict[type, tuple[bool, bool]] = {}
@@ -144,6 +144,16 @@ class Footprints:
         """The footprints of `vehicles` as they stand."""
         x, y = np.array([v.position for v in vehicles], dtype=float).T.copy()
         return Footprints(x, y, *columns(vehicles, _FOOTPRINT))
+
+
+@dataclass(frozen=True, eq=False)
+class Moved:
+    """Vehicles that a frame moved, and where they ended: their footprints and lane ids (the last
+    item of their lane index)."""
+
+    vehicles: list[Vehicle]
+    footprints: Footprints
+    lane_id: np.ndarray
 
 
 def columns(objects: Sequence[object], attributes: Callable[[Any], Any]) -> np.ndarray:

@@ -37,7 +37,7 @@ from stack.sim.traffic import IDM_DRIVERS, ScenarioTraffic
 from stack.sim.vector.frame import TrafficFrame
 from stack.sim.vector.kernels import lateral_command_sines, slip_sines
 from stack.sim.vector.lanes import LaneTable, clip
-from stack.sim.vector.motion import Footprints, close_pairs, columns, move, steps_like_vehicle
+from stack.sim.vector.motion import Footprints, Moved, close_pairs, columns, move, steps_like_vehicle
 
 
 def _plain_velocity(cls: type) -> bool:
@@ -49,6 +49,8 @@ class VectorRoad(FastRoad):
     """A `FastRoad` whose IDM/MOBIL traffic and kinematics run as array operations (module docstring)."""
 
     _lanes: LaneTable | None | bool = False
+    moved: Moved | None = None
+    """Where the last step left every vehicle (`take_moved`)."""
 
     def _lane_table(self) -> LaneTable | None:
         if self._lanes is False:
@@ -201,10 +203,18 @@ class VectorRoad(FastRoad):
                 else:
                     vehicle.step(dt)
         moved = move(movers, lanes, dt, self.record_history) if movers else None
-        if moved is not None and len(movers) == len(self.vehicles) >= 2:
-            self._collide(dt, close_pairs(moved, dt))
+        self.moved = moved if moved is not None and len(movers) == len(self.vehicles) else None
+        if self.moved is not None and len(movers) >= 2:
+            self._collide(dt, close_pairs(self.moved.footprints, dt))
         else:
             self._collide(dt)
+
+    def take_moved(self) -> Moved | None:
+        """Where the last frame's step left every vehicle, if it moved them all, once: read right
+        after the step (collisions change crash flags and impacts only), before anything else can
+        move a vehicle."""
+        moved, self.moved = self.moved, None
+        return moved
 
     def _collision_pairs(self, dt: float) -> np.ndarray:
         """The pairs `close_pairs` keeps."""
