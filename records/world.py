@@ -234,9 +234,9 @@ class WorldState:
             offset = np.abs(self.d[1:] - self.lane_offsets[lane])
             in_lane = (offset < (self.lane_width + extent) / 2) & (rel_s > 0)
             off_centre = in_lane & (offset > LEAVING_M) & (self.speed[1:] < self.speed[0])
-            for row in np.flatnonzero(off_centre):
+            for row in off_centre.nonzero()[0]:
                 in_lane[row] = not self.passed_before_reached(int(row) + 1)
-            for row in sorted(np.flatnonzero(in_lane), key=lambda r: rel_s[r]):
+            for row in sorted(in_lane.nonzero()[0], key=lambda r: rel_s[r]):
                 found.append(Neighbour(float(gap[row]), float(self.speed[row + 1]), int(self.ids[row + 1])))
                 if offset[row] <= LEAVING_M:
                     break

@@ -293,7 +293,8 @@ def test_the_closest_lane_kernel_picks_numpys_lane_on_every_input():
             heading[-1] = np.inf
         with np.errstate(invalid="ignore"):
             expected = numpy_closest(position, heading)
-        np.testing.assert_array_equal(table.closest(position, heading), expected, err_msg=f"case {case}")
+        x, y = position.T.copy()
+        np.testing.assert_array_equal(table.closest(x, y, heading), expected, err_msg=f"case {case}")
 
 
 def test_a_frames_idm_is_highway_envs_bit_for_bit():

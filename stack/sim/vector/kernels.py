@@ -86,19 +86,19 @@ def close_pair_rows(
 
 @njit(cache=True, nogil=True)
 def _lane_coordinates(
-    position: np.ndarray, start: np.ndarray, direction: np.ndarray, lateral: np.ndarray
+    x: np.ndarray, y: np.ndarray, start: np.ndarray, direction: np.ndarray, lateral: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled; covered through its callers
     """Longitudinal s (n,) [m], the same on every lane, and lateral r (L, n) [m] coordinates of
-    objects at `position` (n, 2) on lanes starting at `start` (L, 2), level along the shared unit
+    objects at (`x`, `y`) [m] on lanes starting at `start` (L, 2), level along the shared unit
     `direction`, with unit `lateral` directions (L, 2); as highway-env's `local_coordinates`
     computes them (exact: every product is by 0 or +-1)."""
-    count, lanes = position.shape[0], start.shape[0]
+    count, lanes = x.shape[0], start.shape[0]
     s = np.empty(count)
     r = np.empty((lanes, count))
     for i in range(count):
-        s[i] = (position[i, 0] - start[0, 0]) * direction[0] + (position[i, 1] - start[0, 1]) * direction[1]
+        s[i] = (x[i] - start[0, 0]) * direction[0] + (y[i] - start[0, 1]) * direction[1]
         for lane in range(lanes):
-            dx, dy = position[i, 0] - start[lane, 0], position[i, 1] - start[lane, 1]
+            dx, dy = x[i] - start[lane, 0], y[i] - start[lane, 1]
             r[lane, i] = dx * lateral[lane, 0] + dy * lateral[lane, 1]
     return s, r
 
@@ -111,7 +111,8 @@ def _maximum_zero(x: float) -> float:  # pragma: no cover - compiled; covered th
 
 @njit(cache=True, nogil=True)
 def closest_lanes(
-    position: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
     heading: np.ndarray,
     start: np.ndarray,
     direction: np.ndarray,
@@ -123,9 +124,9 @@ def closest_lanes(
     distance beyond either end + |heading difference wrapped to [-pi, pi)|), the first on ties
     and the first NaN if any, as numpy's `argmin`: sums, comparisons and a float modulo, each in
     numpy's operation order (the same bits). Lanes as in `lane_order`, headings [rad]."""
-    s, r = _lane_coordinates(position, start, direction, lateral)
-    rows = np.zeros(position.shape[0], dtype=np.int64)
-    for i in range(position.shape[0]):
+    s, r = _lane_coordinates(x, y, start, direction, lateral)
+    rows = np.zeros(x.shape[0], dtype=np.int64)
+    for i in range(x.shape[0]):
         best = np.inf
         for lane in range(start.shape[0]):
             angle = abs(((heading[i] - lane_heading[lane] + np.pi) % (2 * np.pi)) - np.pi)
@@ -160,7 +161,7 @@ def lane_order(
     `Road.neighbour_vehicles` counts it (highway-env's `on_lane` with a lateral `margin` [m],
     `vehicle_length` [m] beyond both ends), exact comparisons all."""
     count, lanes = position.shape[0], start.shape[0]
-    s, r = _lane_coordinates(position, start, direction, lateral)
+    s, r = _lane_coordinates(position[:, 0], position[:, 1], start, direction, lateral)
     order = np.argsort(s, kind="mergesort")
     sorted_s = s[order]
     tied = False

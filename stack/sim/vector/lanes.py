@@ -68,8 +68,8 @@ class LaneTable:
         ahead = (0 <= s) & (s < self.length[rows] + StraightLane.VEHICLE_LENGTH)
         return ~self.forbidden[rows] & near & ahead
 
-    def closest(self, position: np.ndarray, heading: np.ndarray) -> np.ndarray:
-        """Row of each vehicle's closest lane by highway-env's `distance_with_heading` (first on ties)."""
-        position = np.ascontiguousarray(position)
+    def closest(self, x: np.ndarray, y: np.ndarray, heading: np.ndarray) -> np.ndarray:
+        """Row of each vehicle's closest lane by highway-env's `distance_with_heading` (first on ties),
+        vehicles at (x, y) [m] heading `heading` [rad]."""
         start, direction, lateral = self.start, self.direction, self.lateral
-        return closest_lanes(position, heading, start, direction, lateral, self.length, self.heading)
+        return closest_lanes(x, y, heading, start, direction, lateral, self.length, self.heading)

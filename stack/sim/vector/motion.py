@@ -40,7 +40,7 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
     kinds = {cls: _STEP_KIND.get(cls) or _step_kind(cls) for cls in set(map(type, movers))}
     state = columns(movers, _mover_state)
     speed, max_speed, min_speed, heading, length, width, diagonal, x, y, steering, acceleration = state[:11]
-    crashed, impacted = state[11] != 0, np.flatnonzero(state[12]).tolist()
+    crashed, impacted = state[11] != 0, state[12].nonzero()[0].tolist()
     if crashed.any():
         steering = np.where(crashed, 0.0, steering)
         acceleration = np.where(crashed, -1.0 * speed, acceleration)
@@ -66,7 +66,7 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
         v.impact = None
     heading = heading + speed * np.sin(beta) / (length / 2) * dt
     speed = speed + acceleration * dt
-    rows = lanes.closest(np.stack([x, y], axis=1), heading).tolist()
+    rows = lanes.closest(x, y, heading).tolist()
     states = zip(
         x.tolist(),
         y.tolist(),

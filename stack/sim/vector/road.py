@@ -85,7 +85,7 @@ class VectorRoad(FastRoad):
             at_lane_end = plan.at_lane_end()
             decisions = self._mobil(plan, ~at_lane_end)
             may_change = plan.enable_lane_change & (plan.timer_due | ~plan.on_target)
-            acting = set(decisions).union(np.flatnonzero(at_lane_end | may_change).tolist())
+            acting = set(decisions).union((at_lane_end | may_change).nonzero()[0].tolist())
             retargeted = []
             for place, k in sorted(others + [(places[k], k) for k in acting]):
                 vehicle = self.vehicles[place]
@@ -117,9 +117,8 @@ class VectorRoad(FastRoad):
         Also evaluates every driver's IDM acceleration behind its own leader
         (`plan.own_acceleration`), in the same array call."""
         frame, drivers = plan.frame, plan.drivers
-        due = np.flatnonzero(
-            plan.timer_due & free & plan.enable_lane_change & plan.on_target & ~plan.routed
-        ).tolist()
+        due = (plan.timer_due & free & plan.enable_lane_change & plan.on_target & ~plan.routed).nonzero()[0]
+        due = due.tolist()
         decisions: dict[int, LaneIndex | None] = dict.fromkeys(due)
         pairs = [
             (k, side)
@@ -179,7 +178,7 @@ class VectorRoad(FastRoad):
 
         acceleration = plan.own_acceleration
         if changing.any():
-            movers = np.flatnonzero(changing)
+            movers = changing.nonzero()[0]
             target_front, _ = frame.neighbours(me[movers], target[movers])
             on_target = frame.idm(me[movers], target_front, plan.delta[movers], plan.jam[movers])
             acceleration[movers] = np.where(on_target < acceleration[movers], on_target, acceleration[movers])
