@@ -364,3 +364,64 @@ def slip_sines(
         rate = kp_heading * (((reference - heading[i] + np.pi) % (2 * np.pi)) - np.pi)
         sine[i] = _clip(length[i] / 2 / _not_zero(speed[i]) * rate, 1.0)
     return sine
+
+
+@njit(cache=True, nogil=True)
+def clipped_actions(
+    speed: np.ndarray,
+    max_speed: np.ndarray,
+    min_speed: np.ndarray,
+    steering: np.ndarray,
+    acceleration: np.ndarray,
+    crashed: np.ndarray,
+    stops: np.ndarray,
+    dt: float,
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled; covered through motion.move
+    """Steering [rad] and acceleration [m/s^2] as `Vehicle.clip_actions` leaves them: a crashed
+    vehicle brakes to a stop, straight; one that `stops` (`TrafficVehicle`) brakes no harder than
+    to a standstill within `dt` [s]; none accelerates beyond its speed range."""
+    count = speed.shape[0]
+    clipped_steering, clipped_acceleration = steering.copy(), acceleration.copy()
+    for i in range(count):
+        a = acceleration[i]
+        if crashed[i]:
+            clipped_steering[i], a = 0.0, -1.0 * speed[i]
+        elif stops[i]:
+            standstill = -speed[i] / dt
+            if standstill > a:
+                a = standstill
+        if speed[i] > max_speed[i]:
+            slow_down = 1.0 * (max_speed[i] - speed[i])
+            if slow_down < a:
+                a = slow_down
+        elif speed[i] < min_speed[i]:
+            speed_up = 1.0 * (min_speed[i] - speed[i])
+            if speed_up > a:
+                a = speed_up
+        clipped_acceleration[i] = a
+    return clipped_steering, clipped_acceleration
+
+
+@njit(cache=True, nogil=True)
+def integrated(
+    x: np.ndarray,
+    y: np.ndarray,
+    heading: np.ndarray,
+    speed: np.ndarray,
+    acceleration: np.ndarray,
+    length: np.ndarray,
+    course_cos: np.ndarray,
+    course_sin: np.ndarray,
+    slip_sin: np.ndarray,
+    dt: float,
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled; covered through motion.move
+    """`Vehicle.step`'s kinematic bicycle over `dt` [s] from the cosine and sine of each course
+    (heading + slip) and the slip's sine, which numpy computes: moves (x, y) [m] in place, returns
+    the new headings [rad] and speeds [m/s]; in highway-env's operation order."""
+    new_heading, new_speed = np.empty(x.shape[0]), np.empty(x.shape[0])
+    for i in range(x.shape[0]):
+        x[i] += speed[i] * course_cos[i] * dt
+        y[i] += speed[i] * course_sin[i] * dt
+        new_heading[i] = heading[i] + speed[i] * slip_sin[i] / (length[i] / 2) * dt
+        new_speed[i] = speed[i] + acceleration[i] * dt
+    return new_heading, new_speed

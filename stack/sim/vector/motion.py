@@ -13,7 +13,7 @@ from highway_env.vehicle.kinematics import Vehicle
 
 from stack.sim.fast_road import BROAD_PHASE_MARGIN
 from stack.sim.traffic import TrafficVehicle
-from stack.sim.vector.kernels import SEPARATION_MARGIN, close_pair_rows
+from stack.sim.vector.kernels import SEPARATION_MARGIN, clipped_actions, close_pair_rows, integrated
 from stack.sim.vector.lanes import LaneTable
 
 _KINEMATIC: dict[type, bool] = {}
@@ -41,31 +41,24 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
     state = columns(movers, _mover_state)
     speed, max_speed, min_speed, heading, length, width, diagonal, x, y, steering, acceleration = state[:11]
     crashed, impacted = state[11] != 0, state[12].nonzero()[0].tolist()
-    if crashed.any():
-        steering = np.where(crashed, 0.0, steering)
-        acceleration = np.where(crashed, -1.0 * speed, acceleration)
-    if any(stopping for _, stopping in kinds.values()):
-        stops = ~crashed
-        if not all(stopping for _, stopping in kinds.values()):
-            stops &= np.array([kinds[type(v)][1] for v in movers])
-        standstill = -speed / dt
-        acceleration = np.where(stops & (standstill > acceleration), standstill, acceleration)
-    too_fast, too_slow = speed > max_speed, speed < min_speed
-    slow_down, speed_up = 1.0 * (max_speed - speed), 1.0 * (min_speed - speed)
-    acceleration = np.where(too_fast & (slow_down < acceleration), slow_down, acceleration)
-    acceleration = np.where(~too_fast & too_slow & (speed_up > acceleration), speed_up, acceleration)
-
+    if len(kinds) == 1:
+        stops = np.full(len(movers), next(iter(kinds.values()))[1])
+    else:
+        stops = np.array([kinds[type(v)][1] for v in movers])
+    steering, acceleration = clipped_actions(
+        speed, max_speed, min_speed, steering, acceleration, crashed, stops, dt
+    )
     beta = np.arctan(1 / 2 * np.tan(steering))
-    x += speed * np.cos(heading + beta) * dt
-    y += speed * np.sin(heading + beta) * dt
+    course = heading + beta
+    heading, speed = integrated(
+        x, y, heading, speed, acceleration, length, np.cos(course), np.sin(course), np.sin(beta), dt
+    )
     for i in impacted:
         v = movers[i]
         x[i] += v.impact[0]
         y[i] += v.impact[1]
         v.crashed = True
         v.impact = None
-    heading = heading + speed * np.sin(beta) / (length / 2) * dt
-    speed = speed + acceleration * dt
     rows = lanes.closest(x, y, heading).tolist()
     states = zip(
         x.tolist(),
