@@ -13,7 +13,8 @@ from highway_env.vehicle.kinematics import Vehicle
 
 from stack.sim.fast_road import BROAD_PHASE_MARGIN
 from stack.sim.traffic import TrafficVehicle
-from stack.sim.vector.kernels import SEPARATION_MARGIN, clipped_actions, close_pair_rows, integrated
+from stack.sim.vector.dynamics import clipped_actions, integrated
+from stack.sim.vector.kernels import SEPARATION_MARGIN, close_pair_rows
 from stack.sim.vector.lanes import LaneTable
 
 _KINEMATIC: dict[type, bool] = {}
@@ -116,7 +117,6 @@ def _mover_state(v: Vehicle) -> tuple[float, ...]:
     )
 
 
-_MOVER_STATE = _mover_state
 _FOOTPRINT = attrgetter("heading", "speed", "LENGTH", "WIDTH", "diagonal")
 
 

@@ -3,24 +3,26 @@ frame at once, with trajectories identical to stock.
 
 A `FastRoad` frame still runs highway-env's per-vehicle Python: `IDMVehicle.act` (IDM, the steering
 controller) and `Vehicle.step` (kinematic integration, closest-lane search). `VectorRoad` keeps
-highway-env's vehicle objects, and computes the continuous parts as array operations over the
-vehicles, in the stock operation order:
+highway-env's vehicle objects, reads their state into arrays once per frame and once per step, and
+computes the continuous parts as array operations over the vehicles, in the stock operation order:
 
-- act: each `IDMVehicle`'s discrete decisions (`follow_road` at a lane's end, `change_lane_policy`:
-  the MOBIL evaluation due every 1 s, the abort of a contested change) still run per vehicle in the
-  stock order, since one vehicle's decision is read by the next one's; then the steering controller
-  and the IDM accelerations (own lane and target lane) of all of them at once;
+- act: the discrete decisions of the `IDMVehicle`s that act this frame (`follow_road` at a lane's
+  end, `change_lane_policy`: the MOBIL evaluation due every 1 s, the abort of a contested change) run
+  per vehicle in the stock order, since one vehicle's decision is read by the next one's; MOBIL's
+  incentive and safety of the due ones, the steering controller and the IDM accelerations (own lane
+  and target lane) of all of them at once;
 - step: clipping, the kinematic bicycle, impacts and the closest lane of every vehicle at once, then
   stock's collision test on the pairs that could touch (`motion.close_pairs`).
 
-The work whose result cannot depend on rounding runs as numba kernels (`stack.sim.vector.kernels`):
-lane coordinates (exact on these lanes), the frame's order and neighbour search (comparisons) and
-the collision candidates (a filter with a margin).
+The arithmetic runs as numba kernels (`stack.sim.vector.kernels` for the geometry,
+`stack.sim.vector.dynamics` for the vehicles) between numpy's transcendental calls and dot products,
+which stay in numpy (highway-env's bits).
 
-Identity rests on three facts checked in `tests/test_sim_backends.py`: numpy's transcendental ufuncs
+Identity rests on four facts checked in `tests/test_sim_backends.py`: numpy's transcendental ufuncs
 give the same bits for an array as for each of its elements; `np.vecdot` computes a 2-vector dot
 product exactly as `np.dot` (which, through BLAS, rounds differently from `a0*b0 + a1*b1`); lane
-coordinates on lanes whose direction is axis-aligned are exact in any operation order. Roads with
+coordinates on lanes whose direction is axis-aligned are exact in any operation order; numba's sums,
+products, divisions and float modulo are numpy's (no contraction into multiply-adds). Roads with
 other lanes (a curved exit, `neighbour_vehicles_connected_lanes`) run as `FastRoad`.
 """
 
@@ -34,8 +36,8 @@ from highway_env.vehicle.objects import RoadObject
 
 from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections
 from stack.sim.traffic import IDM_DRIVERS, ScenarioTraffic
+from stack.sim.vector.dynamics import lateral_command_sines, slip_sines
 from stack.sim.vector.frame import TrafficFrame
-from stack.sim.vector.kernels import lateral_command_sines, slip_sines
 from stack.sim.vector.lanes import LaneTable, clip
 from stack.sim.vector.motion import Footprints, Moved, close_pairs, columns, move, steps_like_vehicle
 
@@ -117,8 +119,8 @@ class VectorRoad(FastRoad):
         Also evaluates every driver's IDM acceleration behind its own leader
         (`plan.own_acceleration`), in the same array call."""
         frame, drivers = plan.frame, plan.drivers
-        due = (plan.timer_due & free & plan.enable_lane_change & plan.on_target & ~plan.routed).nonzero()[0]
-        due = due.tolist()
+        deciding = plan.timer_due & free & plan.enable_lane_change & plan.on_target & ~plan.routed
+        due = deciding.nonzero()[0].tolist()
         decisions: dict[int, LaneIndex | None] = dict.fromkeys(due)
         pairs = [
             (k, side)
