@@ -1,23 +1,55 @@
 """Cost of the oracle's two-decision search per episode on the `fast` and the `vector` backend, in one
 sitting, with a check that both drive the same episode.
 
-    .venv/bin/python benchmarks/oracle_cost.py [--seeds 0,1] [--scenario overtaking]
+    .venv/bin/python benchmarks/oracle_cost.py [--seeds 0,1] [--scenario overtaking] [--profile]
 
 CPU seconds (process time) of whole 40-s episodes of `--agent oracle`, the backends alternating
 seed by seed; the episode summaries must be identical, since both backends are bit-identical to stock.
+With `--profile`, the first seed's episode on `vector` alone, after a 2-s episode in the same process
+(imports and compiled kernels loaded), its CPU time split between the search's parts.
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
 import dataclasses
 import json
 import platform
 import time
 
+from loop_profile import instrument
+
 from stack.core.config import build_config
 from stack.core.episodes import run_episode
 from stack.core.metrics import TIMING_FIELDS
+
+COMPONENTS = [
+    ["search (`Oracle.plan`)", "stack.core.oracle:Oracle.plan"],
+    ["copies of the loop (`ClosedLoop.fork`)", "stack.core.closed_loop:ClosedLoop.fork"],
+    ["control ticks (the rollouts' and the episode's)", "stack.core.closed_loop:ClosedLoop.tick"],
+    ["base agent's decisions (Q-network)", "planner.learned:LearnedAgent.choose"],
+    ["grids the base agent sees", "perception.grid:OccupancyGridBuilder.build"],
+]
+"""(label, module:Owner.method) whose CPU time the profile adds up; all but the first run inside it."""
+
+
+def profile(scenario: str, seed: int, duration: float) -> None:
+    """CPU seconds of one oracle episode by part, the parts nested in the search."""
+    config = {"planner": {"agent": "oracle"}, "sim": {"backend": "vector"}, "seed": seed}
+    run_episode(build_config(config, scenario=scenario, highway__duration=2.0), 1)
+    spent: collections.Counter[str] = collections.Counter()
+    instrument(spent, COMPONENTS)
+    start = time.process_time()
+    run_episode(build_config(config, scenario=scenario, highway__duration=duration), 0)
+    whole = time.process_time() - start
+    print(
+        f"{platform.machine()}, Python {platform.python_version()}, {scenario}, seed {seed}, {duration:g} s"
+    )
+    print("| part | CPU s | share |\n|---|---|---|")
+    print(f"| whole episode | {whole:.2f} | 100 % |")
+    for label, _ in COMPONENTS:
+        print(f"| {label} | {spent[label] / 1e9:.2f} | {100 * spent[label] / 1e9 / whole:.0f} % |")
 
 
 def main() -> None:
@@ -25,8 +57,12 @@ def main() -> None:
     parser.add_argument("--seeds", default="0,1")
     parser.add_argument("--scenario", default="overtaking")
     parser.add_argument("--duration", type=float, default=40.0, help="episode length [s]")
+    parser.add_argument("--profile", action="store_true", help="the first seed's episode by part")
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
+    if args.profile:
+        profile(args.scenario, seeds[0], args.duration)
+        return
     print(
         f"{platform.machine()}, Python {platform.python_version()}, scenario {args.scenario}, seeds {seeds}"
     )
