@@ -8,7 +8,8 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
-from numba import njit
+
+from records.compiled import Kernel
 
 
 class Lane(Protocol):
@@ -228,22 +229,23 @@ class WorldState:
         the two side by side for longer."""
         rel_s = self.s[1:] - self.s[0]
         gap = rel_s - (self.length[1:] + self.length[0]) / 2
-        extent = self.lateral_extent()
+        reach, d, ahead = (self.lane_width + self.lateral_extent()) / 2, self.d[1:], rel_s > 0
+        slower = self.speed[1:] < self.speed[0]
         found: list[Neighbour] = []
         for lane in lanes:
-            offset = np.abs(self.d[1:] - self.lane_offsets[lane])
-            in_lane = (offset < (self.lane_width + extent) / 2) & (rel_s > 0)
-            off_centre = in_lane & (offset > LEAVING_M) & (self.speed[1:] < self.speed[0])
-            for row in off_centre.nonzero()[0]:
-                in_lane[row] = not self.passed_before_reached(int(row) + 1)
-            for row in sorted(in_lane.nonzero()[0], key=lambda r: rel_s[r]):
+            offset = np.abs(d - self.lane_offsets[lane])
+            in_lane = (offset < reach) & ahead
+            for row in (in_lane & (offset > LEAVING_M) & slower).nonzero()[0].tolist():
+                in_lane[row] = not self.passed_before_reached(row + 1)
+            rows = in_lane.nonzero()[0]
+            for row in rows[np.argsort(rel_s[rows], kind="stable")].tolist():
                 found.append(Neighbour(float(gap[row]), float(self.speed[row + 1]), int(self.ids[row + 1])))
                 if offset[row] <= LEAVING_M:
                     break
         return tuple(found)
 
 
-@njit(cache=True, nogil=True)
+@Kernel
 def _nearest_in_lanes(
     rel_s: np.ndarray, d: np.ndarray, lane_offsets: np.ndarray, reach: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray] | None:  # pragma: no cover - compiled; covered through neighbours

@@ -379,3 +379,38 @@ def test_a_stop_while_the_command_line_is_imported_ends_it_with_130_before_any_w
     result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
     assert result.returncode == 130, result.stderr
     assert "Traceback" not in result.stderr and not out.exists()
+
+
+def test_a_stop_inside_a_compiled_kernel_call_is_a_keyboard_interrupt():
+    """numba's dispatcher turns a KeyboardInterrupt raised by the signal handler during a call into
+    SystemErrors ("returned a result with an exception set") caused by it: `Kernel` raises the
+    KeyboardInterrupt, so the episode loops stop and keep what is finished; other errors pass."""
+    from records.compiled import Kernel
+
+    def doubled(x: float) -> float:
+        return 2 * x
+
+    kernel = Kernel(doubled)
+    assert kernel(2.0) == 4.0 and kernel.__name__ == "doubled"
+
+    def interrupted(*args: object) -> None:
+        try:
+            try:
+                raise KeyboardInterrupt
+            except KeyboardInterrupt as stop:
+                raise SystemError(
+                    "<function _numba_unpickle> returned a result with an exception set"
+                ) from stop
+        except SystemError as unpickling:
+            raise SystemError("CPUDispatcher returned a result with an exception set") from unpickling
+
+    kernel.compiled = interrupted
+    with pytest.raises(KeyboardInterrupt):
+        kernel(1.0)
+
+    def broken(*args: object) -> None:
+        raise SystemError("something else")
+
+    kernel.compiled = broken
+    with pytest.raises(SystemError, match="something else"):
+        kernel(1.0)

@@ -221,6 +221,7 @@ def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
     except Exception as error:  # noqa: BLE001 - the last line of defence, deliberately broad
         from stack.core.files import write_failure
 
+        ignore_signals()
         if debug:
             raise
         if write_failure(error):

@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from records.compiled import Kernel
+
 NOT_ZERO = 1e-2
 """highway-env's `utils.not_zero` threshold [same unit as the value]."""
 
@@ -32,7 +34,7 @@ def _not_zero(x: float) -> float:  # pragma: no cover - compiled
     return x if abs(x) > NOT_ZERO else (NOT_ZERO if x >= 0 else -NOT_ZERO)
 
 
-@njit(cache=True, nogil=True)
+@Kernel
 def idm_inputs(
     ego: np.ndarray,
     front: np.ndarray,
@@ -81,7 +83,7 @@ def idm_inputs(
     return valid, base, led, relative, heading, gap, led_speed
 
 
-@njit(cache=True, nogil=True)
+@Kernel
 def idm_gap_ratios(
     closing: np.ndarray,
     gap: np.ndarray,
@@ -106,7 +108,7 @@ def idm_gap_ratios(
     return ratio
 
 
-@njit(cache=True, nogil=True)
+@Kernel
 def idm_accelerations(
     rows: int, valid: np.ndarray, free_power: np.ndarray, led: np.ndarray, gap_power: np.ndarray, a_max: float
 ) -> np.ndarray:  # pragma: no cover - compiled; covered through TrafficFrame.idm
@@ -129,7 +131,7 @@ def _clip(x: float, bound: float) -> float:  # pragma: no cover - compiled
     return _minimum(_maximum(x, -bound), bound)
 
 
-@njit(cache=True, nogil=True)
+@Kernel
 def lateral_command_sines(
     r_target: np.ndarray, speed: np.ndarray, kp_lateral: float
 ) -> np.ndarray:  # pragma: no cover - compiled; covered through VectorRoad
@@ -141,7 +143,7 @@ def lateral_command_sines(
     return sine
 
 
-@njit(cache=True, nogil=True)
+@Kernel
 def slip_sines(
     heading_command: np.ndarray,
     lane_heading: np.ndarray,
@@ -161,7 +163,7 @@ def slip_sines(
     return sine
 
 
-@njit(cache=True, nogil=True)
+@Kernel
 def clipped_actions(
     speed: np.ndarray,
     max_speed: np.ndarray,
@@ -197,7 +199,7 @@ def clipped_actions(
     return clipped_steering, clipped_acceleration
 
 
-@njit(cache=True, nogil=True)
+@Kernel
 def integrated(
     x: np.ndarray,
     y: np.ndarray,

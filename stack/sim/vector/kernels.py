@@ -11,6 +11,8 @@ import math
 import numpy as np
 from numba import njit
 
+from records.compiled import Kernel
+
 SEPARATION_MARGIN = 1e-6
 """Distance [m] by which two swept rectangles must be apart on one of their axes before the narrow
 phase is skipped; float rounding differences with stock's own projections are below 1e-10 m."""
@@ -26,7 +28,7 @@ def _half_extent(
     return length / 2 * along + width / 2 * across
 
 
-@njit(cache=True, nogil=True)
+@Kernel
 def close_pair_rows(
     x: np.ndarray,
     y: np.ndarray,
@@ -104,7 +106,7 @@ def _maximum_zero(x: float) -> float:  # pragma: no cover - compiled; covered th
     return x if x >= 0 or x != x else 0.0
 
 
-@njit(cache=True, nogil=True)
+@Kernel
 def closest_lanes(
     x: np.ndarray,
     y: np.ndarray,
@@ -135,7 +137,7 @@ def closest_lanes(
     return rows
 
 
-@njit(cache=True, nogil=True)
+@Kernel
 def lane_order(
     position: np.ndarray,
     start: np.ndarray,
@@ -186,7 +188,7 @@ def lane_order(
     return s, r, order, sorted_s, tied, next_on, last_before
 
 
-@njit(cache=True, nogil=True)
+@Kernel
 def neighbour_rows(
     me: np.ndarray,
     lane_rows: np.ndarray,
