@@ -11,21 +11,10 @@ import numpy as np
 from numba import njit
 
 from records.compiled import Kernel
+from stack.sim.vector.kernels import maximum, minimum, wrap_to_pi
 
 NOT_ZERO = 1e-2
 """highway-env's `utils.not_zero` threshold [same unit as the value]."""
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _maximum(a: float, b: float) -> float:  # pragma: no cover - compiled
-    """`np.maximum(a, b)`: NaN in `a` stays."""
-    return a if a >= b or a != a else b
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _minimum(a: float, b: float) -> float:  # pragma: no cover - compiled
-    """`np.minimum(a, b)`: NaN in `a` stays."""
-    return a if a <= b or a != a else b
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -65,8 +54,8 @@ def idm_inputs(
     for i in range(count):
         e = ego[valid[i]]
         limit, target = speed_limit[e], target_speed[e]
-        desired = target if limit != limit else _minimum(_maximum(target, 0.0), limit)
-        base[i] = _maximum(speed[e], 0.0) / abs(_not_zero(desired))
+        desired = target if limit != limit else minimum(maximum(target, 0.0), limit)
+        base[i] = maximum(speed[e], 0.0) / abs(_not_zero(desired))
         led[i] = front[valid[i]] >= 0
     led_count = int(led.sum())
     relative, heading = np.empty((led_count, 2)), np.empty((led_count, 2))
@@ -128,7 +117,7 @@ def idm_accelerations(
 @njit(cache=True, nogil=True, inline="always")
 def _clip(x: float, bound: float) -> float:  # pragma: no cover - compiled
     """`lanes.clip`: np.minimum(np.maximum(x, -bound), bound)."""
-    return _minimum(_maximum(x, -bound), bound)
+    return minimum(maximum(x, -bound), bound)
 
 
 @Kernel
@@ -158,7 +147,7 @@ def slip_sines(
     sine = np.empty(heading.shape[0])
     for i in range(heading.shape[0]):
         reference = lane_heading[i] + _clip(heading_command[i], np.pi / 4)
-        rate = kp_heading * (((reference - heading[i] + np.pi) % (2 * np.pi)) - np.pi)
+        rate = kp_heading * wrap_to_pi(reference - heading[i])
         sine[i] = _clip(length[i] / 2 / _not_zero(speed[i]) * rate, 1.0)
     return sine
 

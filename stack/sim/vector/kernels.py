@@ -101,9 +101,21 @@ def _lane_coordinates(
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _maximum_zero(x: float) -> float:  # pragma: no cover - compiled; covered through closest_lanes
-    """`np.maximum(x, 0)`: NaN stays NaN."""
-    return x if x >= 0 or x != x else 0.0
+def maximum(a: float, b: float) -> float:  # pragma: no cover - compiled
+    """`np.maximum(a, b)`: NaN in `a` stays."""
+    return a if a >= b or a != a else b
+
+
+@njit(cache=True, nogil=True, inline="always")
+def minimum(a: float, b: float) -> float:  # pragma: no cover - compiled
+    """`np.minimum(a, b)`: NaN in `a` stays."""
+    return a if a <= b or a != a else b
+
+
+@njit(cache=True, nogil=True, inline="always")
+def wrap_to_pi(angle: float) -> float:  # pragma: no cover - compiled
+    """highway-env's `utils.wrap_to_pi` [rad]: ((angle + pi) mod 2 pi) - pi, numpy's float modulo."""
+    return ((angle + np.pi) % (2 * np.pi)) - np.pi
 
 
 @Kernel
@@ -126,8 +138,8 @@ def closest_lanes(
     for i in range(x.shape[0]):
         best = np.inf
         for lane in range(start.shape[0]):
-            angle = abs(((heading[i] - lane_heading[lane] + np.pi) % (2 * np.pi)) - np.pi)
-            distance = abs(r[lane, i]) + _maximum_zero(s[i] - length[lane]) + _maximum_zero(0 - s[i])
+            angle = abs(wrap_to_pi(heading[i] - lane_heading[lane]))
+            distance = abs(r[lane, i]) + maximum(s[i] - length[lane], 0.0) + maximum(0 - s[i], 0.0)
             distance = distance + angle
             if distance != distance:
                 rows[i] = lane

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from operator import attrgetter
@@ -38,7 +39,7 @@ def steps_like_vehicle(cls: type) -> bool:
 def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: bool) -> Moved:
     """`Vehicle.step(dt)` of every mover: clip, integrate, apply impacts, find the lane. Returns
     where the movers ended."""
-    kinds = {cls: _STEP_KIND.get(cls) or _step_kind(cls) for cls in set(map(type, movers))}
+    kinds = {cls: _step_kind(cls) for cls in set(map(type, movers))}
     state = columns(movers, _mover_state)
     speed, max_speed, min_speed, heading, length, width, diagonal, x, y, steering, acceleration = state[:11]
     crashed, impacted = state[11] != 0, state[12].nonzero()[0].tolist()
@@ -87,15 +88,12 @@ def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: boo
     return Moved(movers, Footprints(x, y, heading, speed, length, width, diagonal), lanes.lane_id[rows])
 
 
-_STEP_KIND: dict[type, tuple[bool, bool]] = {}
-
-
+@functools.cache
 def _step_kind(cls: type) -> tuple[bool, bool]:
     """Whether `cls.step` advances `IDMVehicle`'s lane-change timer, and whether it stops at a
     standstill (`TrafficVehicle`)."""
     step = cls.step  # type: ignore[attr-defined]
-    kind = _STEP_KIND[cls] = (step in (IDMVehicle.step, TrafficVehicle.step), step is TrafficVehicle.step)
-    return kind
+    return step in (IDMVehicle.step, TrafficVehicle.step), step is TrafficVehicle.step
 
 
 def _mover_state(v: Vehicle) -> tuple[float, ...]:
