@@ -1,11 +1,15 @@
 """The grid's optional features (`GridConfig.features`), computed from the same world and masks as
-the presence grid: per-cell relative speed, per-row time-to-collision, the ego's lateral state."""
+the presence grid: per-cell relative speed, per-row time-to-collision, the ego's lateral state, per-row
+traffic ahead."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from records import EGO_HEADING_SCALE, GridConfig, WorldState
+from records import EGO_HEADING_SCALE, TRAFFIC_RANGE, GridConfig, WorldState
+
+TRAFFIC_VALUES = 3
+"""Values of the `traffic` feature per grid row."""
 
 
 def relative_speed(
@@ -18,14 +22,33 @@ def relative_speed(
 ) -> np.ndarray:
     """Per cell, the nearest occupant's longitudinal speed minus the ego's / speed_scale, in [-1, 1]."""
     grid = np.zeros((len(road_rows), config.cells), dtype=np.float32)
-    lane_heading = world.lanes[0].heading_at(float(world.s[0]))
-    longitudinal = world.speed * np.cos(world.heading - lane_heading)
-    value = np.clip((longitudinal[1:] - longitudinal[0]) / config.speed_scale, -1, 1)
+    value = _relative_longitudinal_speed(config, world)
     for vehicle in np.argsort(-np.abs(rel_s)):
         for row, lane in enumerate(road_rows):
             if lane >= 0 and across[vehicle, lane]:
                 grid[row, along[vehicle]] = value[vehicle]
     return grid
+
+
+def traffic(
+    config: GridConfig, world: WorldState, rel_s: np.ndarray, across: np.ndarray, road_rows: np.ndarray
+) -> np.ndarray:
+    """Per row, the traffic within TRAFFIC_RANGE ahead of the ego, far beyond the grid: [mean and
+    lowest relative speed of its vehicles (as `relative_speed`, 0 when there are none), the share of
+    the range their lengths fill in [0, 1]]; [0, 0, 1] off the road. Tells a stopped lane, a truck
+    lane and a free road apart before they reach the grid."""
+    value = _relative_longitudinal_speed(config, world)
+    ahead = (rel_s > 0) & (rel_s <= TRAFFIC_RANGE)
+    described = np.zeros((len(road_rows), TRAFFIC_VALUES), dtype=np.float32)
+    for row, lane in enumerate(road_rows):
+        if lane < 0:
+            described[row] = (0.0, 0.0, 1.0)
+            continue
+        in_lane = np.flatnonzero(ahead & across[:, lane])
+        if in_lane.size:
+            filled = min(float(world.length[1:][in_lane].sum()) / TRAFFIC_RANGE, 1.0)
+            described[row] = (value[in_lane].mean(), value[in_lane].min(), filled)
+    return described
 
 
 def time_to_collision(
@@ -56,3 +79,11 @@ def ego_lateral(world: WorldState) -> np.ndarray:
     lane_heading = world.lanes[ego_lane].heading_at(float(world.s[0]))
     heading = np.arctan2(np.sin(world.heading[0] - lane_heading), np.cos(world.heading[0] - lane_heading))
     return np.clip([offset, heading / EGO_HEADING_SCALE], -1, 1).astype(np.float32)
+
+
+def _relative_longitudinal_speed(config: GridConfig, world: WorldState) -> np.ndarray:
+    """Per vehicle, its speed along the lane heading at the ego minus the ego's / speed_scale, in
+    [-1, 1]."""
+    lane_heading = world.lanes[0].heading_at(float(world.s[0]))
+    longitudinal = world.speed * np.cos(world.heading - lane_heading)
+    return np.clip((longitudinal[1:] - longitudinal[0]) / config.speed_scale, -1, 1)

@@ -20,7 +20,10 @@ Optional features (`features`):
 - `ego_speed`: one value, the ego's speed / MAX_SPEED in [0, 1];
 - `ego_lateral`: two values, the ego's offset from its lane's centre / lane width in [-1, 1] and
   its heading relative to the lane / EGO_HEADING_SCALE clipped to [-1, 1]: a lane change under way
-  shows in both (positive towards the higher lane indices, the right).
+  shows in both (positive towards the higher lane indices, the right);
+- `traffic`: per row, the vehicles within TRAFFIC_RANGE [m] ahead of the ego in that lane, beyond the
+  grid's sight: their mean and lowest relative speed (as `relative_speed`; 0 when there are none) and
+  the share of the range their lengths fill, in [0, 1]; [0, 0, 1] off the road.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from gymnasium import spaces
 from perception import features
 from records import (
     ENCODINGS,
+    FEATURES,
     MAX_SPEED,
     SIDE_LANES_SEEN,
     Encoding,
@@ -41,6 +45,30 @@ from records import (
     lane_code_bits,
     unknown_name,
 )
+
+
+def observation_layout(config: GridConfig, lanes_count: int) -> list[tuple[str, int]]:
+    """The observation encoding's parts in order as (name, values): presence, each enabled feature
+    in FEATURES' order, the lane part."""
+    rows, cells = config.rows(lanes_count), config.cells
+    sizes = {
+        "relative_speed": rows * cells,
+        "ttc": rows,
+        "ego_speed": 1,
+        "ego_lateral": 2,
+        "traffic": rows * features.TRAFFIC_VALUES,
+    }
+    enabled = [(name, sizes[name]) for name in FEATURES if name in config.features]
+    return [("presence", rows * cells), *enabled, ("lane", config.lane_code_size(lanes_count))]
+
+
+def _observation_low(name: str, size: int) -> np.ndarray:
+    """Lower bound of the observation part `name` (upper bounds are all 1)."""
+    if name in ("relative_speed", "ego_lateral"):
+        return -np.ones(size, dtype=np.float32)
+    if name == "traffic":
+        return np.tile(np.array([-1, -1, 0], dtype=np.float32), size // features.TRAFFIC_VALUES)
+    return np.zeros(size, dtype=np.float32)
 
 
 def lane_code(lane: int, lanes: int) -> np.ndarray:
@@ -67,6 +95,7 @@ class OccupancyGrid:
     ttc: np.ndarray | None = None
     ego_speed: float | None = None
     ego_lateral: np.ndarray | None = None
+    traffic: np.ndarray | None = None
 
     @property
     def ego_row(self) -> int:
@@ -94,18 +123,10 @@ class OccupancyGrid:
         return np.concatenate([self.cells.ravel(), self.lane_part()])
 
     def to_observation(self) -> np.ndarray:
-        """Presence, then each enabled feature, then the lane part, flattened (float32)."""
-        parts = [self.cells.ravel()]
-        if self.relative_speed is not None:
-            parts.append(self.relative_speed.ravel())
-        if self.ttc is not None:
-            parts.append(self.ttc)
-        if self.ego_speed is not None:
-            parts.append(np.array([self.ego_speed], dtype=np.float32))
-        if self.ego_lateral is not None:
-            parts.append(self.ego_lateral)
-        parts.append(self.lane_part())
-        return np.concatenate(parts).astype(np.float32)
+        """Presence, then each enabled feature, then the lane part, flattened (float32): the parts of
+        `observation_layout`."""
+        parts = [np.ravel(getattr(self, name)) for name in FEATURES if getattr(self, name) is not None]
+        return np.concatenate([self.cells.ravel(), *parts, self.lane_part()]).astype(np.float32)
 
     def encode(self, encoding: Encoding) -> np.ndarray:
         """The encoding named `encoding`: paper, observation or tabular."""
@@ -138,18 +159,9 @@ class OccupancyGridBuilder:
         return spaces.Box(0.0, 1.0, shape=(size,), dtype=np.float32)
 
     def observation_space(self, lanes_count: int) -> spaces.Box:
-        rows, cells = self.config.rows(lanes_count), self.config.cells
-        size = rows * cells * (1 + ("relative_speed" in self.config.features))
-        size += rows * ("ttc" in self.config.features) + ("ego_speed" in self.config.features)
-        size += 2 * ("ego_lateral" in self.config.features)
-        lateral = size - 2 - self.config.lane_code_size(lanes_count)
-        size += self.config.lane_code_size(lanes_count)
-        low = np.zeros(size, dtype=np.float32)
-        if "relative_speed" in self.config.features:
-            low[rows * cells : 2 * rows * cells] = -1.0
-        if "ego_lateral" in self.config.features:
-            low[lateral : lateral + 2] = -1.0
-        return spaces.Box(low, np.ones(size, dtype=np.float32), dtype=np.float32)
+        layout = observation_layout(self.config, lanes_count)
+        low = np.concatenate([_observation_low(name, size) for name, size in layout])
+        return spaces.Box(low, np.ones_like(low), dtype=np.float32)
 
     def tabular_space(self, lanes_count: int) -> spaces.Box:
         where = 3 if self.config.lane_code == "sides" else lanes_count - 1
@@ -188,8 +200,19 @@ class OccupancyGridBuilder:
             float(np.clip(world.speed[0] / MAX_SPEED, 0, 1)) if "ego_speed" in config.features else None
         )
         ego_lateral = features.ego_lateral(world) if "ego_lateral" in config.features else None
+        traffic = None
+        if "traffic" in config.features:
+            traffic = features.traffic(config, world, rel_s, across, road_rows)
         return OccupancyGrid(
-            occupancy, ego_lane, world.lanes_count, config, relative_speed, ttc, ego_speed, ego_lateral
+            occupancy,
+            ego_lane,
+            world.lanes_count,
+            config,
+            relative_speed,
+            ttc,
+            ego_speed,
+            ego_lateral,
+            traffic,
         )
 
     def _road_rows(self, ego_lane: int, lanes_count: int) -> np.ndarray:

@@ -18,9 +18,11 @@ SUBMODULES = ("records.names", "records.tick", "records.world", "records.grid")
 if TYPE_CHECKING:
     from records.grid import (
         EGO_HEADING_SCALE,
+        FEATURES,
         MAX_LANES,
         MAX_SPEED,
         SIDE_LANES_SEEN,
+        TRAFFIC_RANGE,
         GridConfig,
         lane_code_bits,
     )
@@ -88,6 +90,8 @@ __all__ = [
     "MAX_LANES",
     "SIDE_LANES_SEEN",
     "EGO_HEADING_SCALE",
+    "FEATURES",
+    "TRAFFIC_RANGE",
     "lane_curvature",
     "one_of",
     "unknown_name",

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -11,8 +11,14 @@ MAX_SPEED = 40.0
 """Speed that the grid's `ego_speed` feature maps to 1 [m/s] (highway-env's Vehicle.MAX_SPEED)."""
 EGO_HEADING_SCALE = 0.2
 """Heading error to the lane [rad] that the grid's `ego_lateral` feature maps to 1."""
+TRAFFIC_RANGE = 200.0
+"""How far ahead of the ego the grid's `traffic` feature describes each lane's traffic [m]."""
 SIDE_LANES_SEEN = 2
 """`lane_code: sides` counts the lanes on each side of the ego up to this many."""
+
+Feature = Literal["relative_speed", "ttc", "ego_speed", "ego_lateral", "traffic"]
+FEATURES: tuple[Feature, ...] = get_args(Feature)
+"""The grid's optional features, in the order the observation lays them out."""
 
 
 class GridConfig(BaseModel):
@@ -27,8 +33,8 @@ class GridConfig(BaseModel):
     lanes: Literal["absolute", "ego"] = "absolute"
     lateral_reach: int = Field(1, ge=1, le=8, description="ego mode: neighbour lanes on each side")
     footprint: bool = True
-    features: tuple[Literal["relative_speed", "ttc", "ego_speed", "ego_lateral"], ...] = Field(
-        (), max_length=4, description="optional features, each at most once"
+    features: tuple[Feature, ...] = Field(
+        (), max_length=len(FEATURES), description="optional features, each at most once"
     )
     speed_scale: float = Field(20.0, ge=0.1, le=100, description="relative speed giving feature 1 [m/s]")
     ttc_horizon: float = Field(10.0, ge=0.1, le=100, description="time-to-collision giving feature 1 [s]")

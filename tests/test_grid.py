@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from perception.grid import GridConfig, OccupancyGridBuilder, lane_code
+from perception.grid import GridConfig, OccupancyGridBuilder, lane_code, observation_layout
 from tests.helpers import scene
 
 GRID = GridConfig(cell_length=5.0, cells_ahead=9, cells_behind=2)
@@ -174,6 +174,38 @@ def test_relative_speed_and_time_to_collision_features():
     np.testing.assert_allclose(grid.ttc, [0.4, 0.5])
     opening = build(scene(2, (0.0, 0), [(25.0, 0.0)], speed=20.0, other_speed=25.0), config)
     np.testing.assert_allclose(opening.ttc, [1.0, 1.0])
+
+
+def test_traffic_feature_describes_each_lanes_traffic_far_beyond_the_grid():
+    """Per row within TRAFFIC_RANGE ahead: mean and lowest relative speed, the share of the range
+    the vehicles' lengths fill; a stopped car 150 m ahead (past the grid's 45 m) shows at -1."""
+    config = GRID.model_copy(
+        update={"lanes": "ego", "lateral_reach": 1, "features": ("traffic",), "speed_scale": 20.0}
+    )
+    stopped = dataclasses.replace(
+        scene(3, (0.0, 0), [(150.0, 0.0), (100.0, 4.0), (60.0, 4.0), (250.0, 4.0), (-30.0, 4.0)], speed=25.0),
+    )
+    stopped.speed[1] = 0.0
+    grid = build(stopped, config)
+    assert grid.cells[1].sum() == 0, "nothing in the ego's lane within the grid"
+    # row 0 is off the road; row 1 the ego's lane: the stopped car, -25 / 20 clipped to -1, 5 of 200 m
+    # row 2 (lane 1): the cars at +60 and +100 m (20 m/s: -0.25), not those at +250 and -30 m
+    np.testing.assert_allclose(grid.traffic, [[0, 0, 1], [-1, -1, 0.025], [-0.25, -0.25, 0.05]])
+    empty = build(scene(3, (0.0, 1)), config)
+    np.testing.assert_allclose(empty.traffic, np.zeros((3, 3)))
+    builder = OccupancyGridBuilder(config)
+    assert builder.observation_space(3).contains(grid.to_observation())
+    np.testing.assert_array_equal(grid.to_observation()[-2 - 9 : -2], grid.traffic.ravel())
+
+
+def test_observation_layout_gives_every_part_in_feature_order():
+    config = GRID.model_copy(
+        update={"lanes": "ego", "lane_code": "sides", "features": ("traffic", "ego_speed", "ttc")}
+    )
+    layout = observation_layout(config, 4)
+    assert layout == [("presence", 33), ("ttc", 3), ("ego_speed", 1), ("traffic", 9), ("lane", 2)]
+    space = OccupancyGridBuilder(config).observation_space(4)
+    assert space.shape == (48,) and space.low[-11:-2].tolist() == [-1, -1, 0] * 3
 
 
 def test_non_finite_vehicle_is_rejected_naming_it():

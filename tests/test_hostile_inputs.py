@@ -37,7 +37,7 @@ def one_line_refusal(arguments: list[str], expected: str) -> None:
         ("perception: {sensor: {false_positives: 1.0e+12}}\n", "false_positives: Input should be less than"),
         (
             "perception: {features: [" + "ttc, " * 20_000 + "]}\n",
-            "perception.features: Tuple should have at most 4",
+            "perception.features: Tuple should have at most 5",
         ),
     ],
 )

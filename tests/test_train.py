@@ -8,16 +8,18 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch as th
 import yaml
 from stable_baselines3.common.buffers import NStepReplayBuffer
 from stable_baselines3.common.env_checker import check_env
 from typer.testing import CliRunner
 
+from perception.grid import OccupancyGridBuilder
 from planner.learned import load_agent
 from planner.model_file import load_model
 from planner.validation import RealTimeValidation, Validation
 from stack.apps.cli import app
-from stack.core.config import build_config
+from stack.core.config import build_config, grid_config
 from stack.core.decision_env import HierarchicalHighwayEnv
 from stack.sim.envs import HIERARCHICAL_HIGHWAY
 from stack.training.checkpoint import DqnCounters, TabularCounters, read_checkpoint
@@ -387,6 +389,46 @@ def test_a_run_starts_from_init_model_and_refuses_one_that_does_not_fit(tmp_path
         result = CliRunner().invoke(app, ["train", "-c", str(config), "--out", str(tmp_path / "o")])
         assert result.exit_code == 2 and message in result.output, result.output
         assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+
+
+def test_a_start_seeing_fewer_features_is_widened_and_decides_as_before(tmp_path):
+    """A start model without the run's `traffic` feature starts the run (its first layer widened,
+    the new inputs at zero weight): on any observation the widened network gives the start's
+    Q-values on the same world seen without the feature; a start with a feature the run lacks is
+    refused in one line."""
+    Trainer(build_config(TINY), tmp_path / "first", progress=False).run()
+    start = tmp_path / "first" / "final.npz"
+    wider = {**TINY["perception"], "features": [*TINY["perception"]["features"], "traffic"]}
+    data = {
+        **TINY,
+        "perception": wider,
+        "train": {**TINY["train"], "steps": 6, "learning_starts": 100, "init_model": str(start)},
+    }
+    config = build_config(data)
+    trainer = Trainer(config, tmp_path / "wide", progress=False)
+    trainer.run()
+    narrow_agent = load_agent(start)
+    wide_network = trainer.model.policy.q_net.q_net
+    env = HierarchicalHighwayEnv(config)
+    env.reset(seed=3)
+    narrow_view = OccupancyGridBuilder(narrow_agent.grid_config)
+    wide_view = OccupancyGridBuilder(grid_config(config))
+    for _ in range(4):
+        world = env.loop.perceived
+        wide = wide_view.build(world)
+        assert np.abs(wide.traffic).sum() > 0, "the feature sees traffic ahead"
+        with th.no_grad():
+            q_wide = wide_network(th.as_tensor(wide.to_observation()[None])).numpy()
+        q_narrow = narrow_agent.q_values(narrow_view.build(world).to_observation())
+        np.testing.assert_allclose(q_wide, q_narrow, rtol=1e-5, atol=1e-6)
+        env.step(1)
+
+    narrower = tmp_path / "narrower.yaml"
+    fewer = {**TINY["perception"], "features": ["relative_speed", "ttc"]}
+    narrower.write_text(yaml.safe_dump({**data, "perception": fewer}))
+    result = CliRunner().invoke(app, ["train", "-c", str(narrower), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2 and "train.init_model" in result.output and "grid" in result.output
+    assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
 
 
 def test_a_config_names_its_starting_model_beside_it_from_any_working_directory(tmp_path, monkeypatch):

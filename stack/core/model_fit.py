@@ -50,11 +50,21 @@ def checked_start_model(config: RunConfig) -> Path | None:
     metadata = checked_model(path, ("ddqn", "dqn"))[1]
     assert metadata.observation_size is not None, "DDQN / DQN files hold Q-networks"
     grid = grid_config(config)
-    theirs = (metadata.encoding, metadata.grid, list(metadata.hidden))
+    theirs = (metadata.encoding, widened_grid(metadata.grid, grid), list(metadata.hidden))
     ours = (train.encoding, grid, net_arch(train.network))
     for field, their, our in zip(("encoding", "grid", "hidden layers"), theirs, ours, strict=True):
         if their != our:
             raise ModelFileError(f"train.init_model: {path} has {field} {their}, this run needs {our}")
     lanes = config.highway.lane_counts
-    check_road_fit(path, grid, metadata.encoding, metadata.observation_size, lanes, "train.init_model")
+    check_road_fit(
+        path, metadata.grid, metadata.encoding, metadata.observation_size, lanes, "train.init_model"
+    )
     return path
+
+
+def widened_grid(start: GridConfig, grid: GridConfig) -> GridConfig:
+    """`start` with `grid`'s features when it sees a subset of them (a model may start a run that
+    adds features: their inputs start at zero weight), else `start` unchanged."""
+    if set(start.features) <= set(grid.features):
+        return start.model_copy(update={"features": grid.features})
+    return start

@@ -15,11 +15,12 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv
 
+from perception.grid import OccupancyGridBuilder, observation_layout
 from planner.ddqn import DoubleDQN
 from planner.learned import LearnedAgent, load_agent
 from planner.model_metadata import ModelMetadata
 from planner.networks import net_arch
-from records import N_ACTIONS
+from records import N_ACTIONS, GridConfig
 from stack.core.closed_loop import grid_config
 from stack.core.config import RunConfig
 from stack.core.decision_env import HierarchicalHighwayEnv
@@ -123,9 +124,38 @@ def initial_model(config: RunConfig) -> LearnedAgent | None:
     return agent
 
 
-def warm_start(model: DQN, start: LearnedAgent) -> None:
-    """Copy `start`'s Q-network into the online and target networks of `model`."""
+def warm_start(model: DQN, start: LearnedAgent, grid: GridConfig | None = None, lanes_count: int = 4) -> None:
+    """Copy `start`'s Q-network into the online and target networks of `model`. A start that sees
+    fewer of `grid`'s features than the run (on a road of `lanes_count` lanes) has its first layer
+    widened: each input it knows keeps its weights, the new ones start at zero, so the model starts
+    deciding as `start` does."""
     weights = start.network.state_dict()
+    if grid is not None and grid.features != start.grid_config.features:
+        weights = widened_first_layer(weights, start.grid_config, grid, lanes_count)
     with th.no_grad():
         model.policy.q_net.q_net.load_state_dict(weights)
         model.policy.q_net_target.q_net.load_state_dict(weights)
+
+
+def widened_first_layer(
+    weights: dict[str, th.Tensor], start: GridConfig, grid: GridConfig, lanes_count: int
+) -> dict[str, th.Tensor]:
+    """`weights` of a Q-network seeing `start`'s observation, its first layer moved onto `grid`'s
+    observation part by part (`observation_layout`), zero on the parts `start` does not have."""
+    first = weights["0.weight"]
+    widened = th.zeros(
+        (first.shape[0], int(OccupancyGridBuilder(grid).space("observation", lanes_count).shape[0]))
+    )
+    start_parts = _part_columns(start, lanes_count)
+    for name, columns in _part_columns(grid, lanes_count).items():
+        if name in start_parts:
+            widened[:, columns] = first[:, start_parts[name]]
+    return {**weights, "0.weight": widened}
+
+
+def _part_columns(grid: GridConfig, lanes_count: int) -> dict[str, slice]:
+    """Each observation part's columns."""
+    columns, start = {}, 0
+    for name, size in observation_layout(grid, lanes_count):
+        columns[name], start = slice(start, start + size), start + size
+    return columns

@@ -30,7 +30,7 @@ from planner.scores import Validation
 from planner.tabular import QLearning
 from planner.validation import RealTimeValidation
 from records import child_seed
-from stack.core.config import RunConfig, load_config, write_config
+from stack.core.config import RunConfig, grid_config, load_config, write_config
 from stack.core.decision_env import HierarchicalHighwayEnv
 from stack.training.checkpoint import Checkpoint, DqnCounters, TabularCounters, read_checkpoint
 from stack.training.demonstrations import demonstrations_used, start_from_demonstrations
@@ -165,7 +165,7 @@ class Trainer:
                 ) from None
             self._restore_common(checkpoint)
         elif self.start is not None:
-            warm_start(self.model, self.start)
+            warm_start(self.model, self.start, grid_config(self.config), self.config.highway.lanes_count)
         self.validation = self._validation_callback(export_q_network)
         if not resumed and self.config.train.demonstrations is not None:
             start_from_demonstrations(self.model, self.config, self.validation, self.progress)  # type: ignore[arg-type]
