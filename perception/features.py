@@ -6,10 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from records import EGO_HEADING_SCALE, TRAFFIC_RANGE, GridConfig, WorldState
-
-TRAFFIC_VALUES = 3
-"""Values of the `traffic` feature per grid row."""
+from records import EGO_HEADING_SCALE, TRAFFIC_RANGE, TRAFFIC_VALUES, GridConfig, WorldState
 
 
 def relative_speed(

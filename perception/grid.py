@@ -39,6 +39,7 @@ from records import (
     FEATURES,
     MAX_SPEED,
     SIDE_LANES_SEEN,
+    TRAFFIC_VALUES,
     Encoding,
     GridConfig,
     WorldState,
@@ -47,27 +48,12 @@ from records import (
 )
 
 
-def observation_layout(config: GridConfig, lanes_count: int) -> list[tuple[str, int]]:
-    """The observation encoding's parts in order as (name, values): presence, each enabled feature
-    in FEATURES' order, the lane part."""
-    rows, cells = config.rows(lanes_count), config.cells
-    sizes = {
-        "relative_speed": rows * cells,
-        "ttc": rows,
-        "ego_speed": 1,
-        "ego_lateral": 2,
-        "traffic": rows * features.TRAFFIC_VALUES,
-    }
-    enabled = [(name, sizes[name]) for name in FEATURES if name in config.features]
-    return [("presence", rows * cells), *enabled, ("lane", config.lane_code_size(lanes_count))]
-
-
 def _observation_low(name: str, size: int) -> np.ndarray:
     """Lower bound of the observation part `name` (upper bounds are all 1)."""
     if name in ("relative_speed", "ego_lateral"):
         return -np.ones(size, dtype=np.float32)
     if name == "traffic":
-        return np.tile(np.array([-1, -1, 0], dtype=np.float32), size // features.TRAFFIC_VALUES)
+        return np.tile(np.array([-1, -1, 0], dtype=np.float32), size // TRAFFIC_VALUES)
     return np.zeros(size, dtype=np.float32)
 
 
@@ -124,7 +110,7 @@ class OccupancyGrid:
 
     def to_observation(self) -> np.ndarray:
         """Presence, then each enabled feature, then the lane part, flattened (float32): the parts of
-        `observation_layout`."""
+        `GridConfig.observation_layout`."""
         parts = [np.ravel(getattr(self, name)) for name in FEATURES if getattr(self, name) is not None]
         return np.concatenate([self.cells.ravel(), *parts, self.lane_part()]).astype(np.float32)
 
@@ -159,7 +145,7 @@ class OccupancyGridBuilder:
         return spaces.Box(0.0, 1.0, shape=(size,), dtype=np.float32)
 
     def observation_space(self, lanes_count: int) -> spaces.Box:
-        layout = observation_layout(self.config, lanes_count)
+        layout = self.config.observation_layout(lanes_count)
         low = np.concatenate([_observation_low(name, size) for name, size in layout])
         return spaces.Box(low, np.ones_like(low), dtype=np.float32)
 

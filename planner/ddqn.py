@@ -12,13 +12,17 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, fields
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 import torch as th
 from stable_baselines3 import DQN
+from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.utils import polyak_update
+from stable_baselines3.dqn.policies import DQNPolicy, QNetwork
 from torch.nn import functional as F
+
+from planner.mobil import MobilPrior
 
 
 def double_q_target(
@@ -144,9 +148,34 @@ class Demonstrations:
         )
 
 
+class PriorQNetwork(QNetwork):
+    """SB3's Q-network whose greedy action adds `prior`'s bonus to MOBIL's proposed change (None:
+    SB3's argmax)."""
+
+    prior: MobilPrior | None = None
+
+    def _predict(self, observation: th.Tensor, deterministic: bool = True) -> th.Tensor:  # type: ignore[override]
+        q_values = self(observation)
+        if self.prior is not None:
+            q_values = q_values + th.as_tensor(self.prior.bonuses(observation.cpu().numpy()))
+        return q_values.argmax(dim=1).reshape(-1)
+
+
+class PriorDQNPolicy(DQNPolicy):
+    """SB3's MLP DQN policy on `PriorQNetwork`s."""
+
+    def make_q_net(self) -> QNetwork:
+        net_args = self._update_features_extractor(self.net_args, features_extractor=None)
+        return PriorQNetwork(**net_args).to(self.device)
+
+
 class DoubleDQN(DQN):
     """SB3's DQN with the Double-DQN target. Once `demonstrations` are set, `demonstration_share`
-    of every batch is drawn from them, with DQfD's margin loss (`margin`, weight `margin_weight`)."""
+    of every batch is drawn from them, with DQfD's margin loss (`margin`, weight `margin_weight`).
+    With a `mobil_prior` its greedy actions (in training's rollouts and in validation) are the
+    prior's (`planner.mobil.MobilPrior`); the TD target stays the Q-network's own."""
+
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": PriorDQNPolicy}
 
     def __init__(
         self,
@@ -154,11 +183,15 @@ class DoubleDQN(DQN):
         demonstration_share: float = 0.25,
         margin: float = 0.8,
         margin_weight: float = 1.0,
+        mobil_prior: MobilPrior | None = None,
         **kwargs: Any,
     ) -> None:
         self.demonstrations: Demonstrations | None = None
         self.demonstration_share, self.margin, self.margin_weight = demonstration_share, margin, margin_weight
         super().__init__(*args, **kwargs)
+        if isinstance(self.q_net, PriorQNetwork):
+            self.q_net.prior = mobil_prior
+        assert mobil_prior is None or self.q_net.prior is mobil_prior, "a MOBIL prior needs MlpPolicy"
 
     def pretrain(
         self, gradient_steps: int, batch_size: int, on_step: Callable[[], object] | None = None

@@ -13,6 +13,7 @@ from stable_baselines3.common.torch_layers import create_mlp
 from torch import nn
 
 from planner.agents import Action, Policy
+from planner.mobil import MobilPrior
 from planner.model_check import checked_model
 from planner.model_file import save_model
 from planner.model_metadata import ModelMetadata
@@ -26,7 +27,8 @@ def q_network(observation_size: int, actions: int, hidden: list[int]) -> nn.Sequ
 
 
 class LearnedAgent(Policy):
-    """Greedy agent over a Q-network; `grid_config` and `encoding` say what it must be shown."""
+    """Greedy agent over a Q-network (with the MOBIL prior its file declares); `grid_config` and
+    `encoding` say what it must be shown."""
 
     def __init__(self, network: nn.Sequential, metadata: ModelMetadata, source: str = "model") -> None:
         assert metadata.observation_size is not None, "a Q-network's metadata names its input size"
@@ -36,6 +38,7 @@ class LearnedAgent(Policy):
         self.observation_size = metadata.observation_size
         self.encoding: Encoding = metadata.encoding
         self.grid_config: GridConfig = metadata.grid
+        self.prior = MobilPrior(metadata.grid, metadata.mobil_prior) if metadata.mobil_prior else None
 
     def q_values(self, observation: np.ndarray) -> np.ndarray:
         batch = np.asarray(observation, dtype=np.float32).reshape(-1, self.observation_size)
@@ -50,7 +53,10 @@ class LearnedAgent(Policy):
                 f"({self.encoding} encoding of grid {self.grid_config.model_dump(mode='json')}), "
                 f"got {size}"
             )
-        actions = self.q_values(observation).argmax(axis=1)
+        q_values = self.q_values(observation)
+        if self.prior is not None:
+            q_values += self.prior.bonuses(np.asarray(observation).reshape(len(q_values), -1))
+        actions = q_values.argmax(axis=1)
         return actions[0] if np.asarray(observation).ndim == 1 else actions
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from planner.agents import Action, Policy
-from records import MAX_SPEED, Command, Encoding, GridConfig
+from records import MAX_SPEED, N_ACTIONS, Command, Encoding, GridConfig
 
 ACCELERATION = 3.0
 """IDM maximum acceleration [m/s^2]."""
@@ -100,3 +100,54 @@ class MobilAgent(Policy):
             if gain > best_gain:
                 best, best_gain = command, gain
         return np.array(best)
+
+
+MAX_PRIOR = 10.0
+"""Largest MOBIL prior a model may declare [reward units]."""
+
+
+def prior_problem(grid: GridConfig, encoding: Encoding, bonus: float) -> str | None:
+    """Why a Q-network seeing `grid` with `encoding` cannot decide with a MOBIL prior of `bonus`,
+    or None: MOBIL reads the lanes beside the ego and the relative and ego speeds from the network's
+    own observation."""
+    if not 0 <= bonus <= MAX_PRIOR:
+        return f"expected a bonus in 0..{MAX_PRIOR:g} reward units, got {bonus}"
+    needed = ("relative_speed", "ego_speed")
+    if bonus and (encoding != "observation" or grid.lanes != "ego" or not set(needed) <= set(grid.features)):
+        return "MOBIL needs the observation encoding of ego-relative rows with relative_speed and ego_speed"
+    return None
+
+
+class MobilPrior:
+    """The bonus [reward units] a Q-network's greedy decision gives the lane change MOBIL proposes
+    on the same observation: MOBIL's change is made when the network rates it at most `bonus`
+    below its own best action, so the network keeps the last word on every other decision and on
+    changes it rates far worse (on highway-env's traffic, stage 3 rated MOBIL's changes 0.33 below
+    staying, median). MOBIL sees the three middle rows of the network's grid, as its own agent
+    would."""
+
+    def __init__(self, grid: GridConfig, bonus: float) -> None:
+        self.mobil, self.bonus = MobilAgent(grid), bonus
+        parts = grid.observation_parts(1)
+        reach = grid.lateral_reach
+        self.rows = grid.rows(1)
+        self.middle = slice(reach - 1, reach + 2)
+        self.presence, self.relative = parts["presence"], parts["relative_speed"]
+        self.ego_speed, self.lane_start = parts["ego_speed"], parts["lane"].start
+
+    def bonuses(self, observations: np.ndarray) -> np.ndarray:
+        """(batch, actions): `bonus` on each row's proposed change, 0 elsewhere."""
+        observations = np.asarray(observations, dtype=np.float32).reshape(len(observations), -1)
+        added = np.zeros((len(observations), N_ACTIONS), dtype=np.float32)
+        for row, observation in enumerate(observations):
+            proposal = int(self.mobil.choose(self.mobil_observation(observation)))
+            if proposal != Command.STAY:
+                added[row, proposal] = self.bonus
+        return added
+
+    def mobil_observation(self, observation: np.ndarray) -> np.ndarray:
+        """MOBIL's own observation cut out of the network's."""
+        presence = observation[self.presence].reshape(self.rows, -1)[self.middle]
+        relative = observation[self.relative].reshape(self.rows, -1)[self.middle]
+        lane = observation[self.lane_start :]
+        return np.concatenate([presence.ravel(), relative.ravel(), observation[self.ego_speed], lane])

@@ -5,14 +5,16 @@ the ones those sizes give, every weight finite."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 from pydantic import ValidationError
 
+from planner.mobil import prior_problem
 from planner.model_file import ModelFileError, load_model
 from planner.model_metadata import ModelMetadata
-from records import ENCODINGS, N_ACTIONS, GridConfig
+from records import ENCODINGS, N_ACTIONS, Encoding, GridConfig
 
 MAX_INPUTS = 100_000
 """Largest observation a Q-network model may declare [values]."""
@@ -74,9 +76,17 @@ def _check_metadata(path: Path | str, metadata: dict) -> None:
             problem = f"actions: the loop commands LEFT, STAY, RIGHT ({N_ACTIONS}), not {str(actions)[:20]}"
     if problem is None:
         try:
-            GridConfig.model_validate(metadata.get("grid"))
+            grid = GridConfig.model_validate(metadata.get("grid"))
         except ValidationError as error:
             first = error.errors()[0]
             problem = f"grid.{'.'.join(map(str, first['loc']))}: {first['msg']}"[:200]
+        else:
+            problem = _prior_problem(metadata.get("mobil_prior", 0.0), grid, encoding)
     if problem:
         raise ModelFileError(f"{path}: model metadata {problem}")
+
+
+def _prior_problem(bonus: object, grid: GridConfig, encoding: Encoding) -> str | None:
+    if not isinstance(bonus, int | float) or isinstance(bonus, bool) or not math.isfinite(bonus):
+        return "mobil_prior: expected a number"
+    return f"mobil_prior: {problem}" if (problem := prior_problem(grid, encoding, bonus)) else None

@@ -19,8 +19,10 @@ class ModelMetadata:
     `encoding` and `grid` of the observations it takes (`observation_size` values), its `actions`
     and `hidden` layer widths, the `network` size name, the `lanes_count` of the road it trained
     on, the `trained_steps`, the training `seed` and the `validation` that kept it. Only `kind`,
-    `grid` and, for a Q-network, the sizes are needed to use it (`planner.model_check` checks
-    them); the rest describes where it came from and is None in a file that does not say."""
+    `grid`, for a Q-network the sizes and its `mobil_prior` (the bonus its greedy decision gives
+    MOBIL's proposed change, `planner.mobil.MobilPrior`; 0: none, and not written) are needed to
+    use it (`planner.model_check` checks them); the rest describes where it came from and is None
+    in a file that does not say."""
 
     kind: ModelKind
     algorithm: str | None = None
@@ -34,6 +36,7 @@ class ModelMetadata:
     trained_steps: int | None = None
     seed: int | None = None
     validation: Validation | None = None
+    mobil_prior: float = 0.0
 
     def to_json(self) -> dict[str, Any]:
         """The metadata member's keys in the order drivestack has always written them; a field
@@ -51,6 +54,7 @@ class ModelMetadata:
             "trained_steps": self.trained_steps,
             "seed": self.seed,
             "validation": asdict(self.validation) if self.validation is not None else None,
+            "mobil_prior": self.mobil_prior or None,
         }
         return {key: value for key, value in data.items() if value is not None}
 
@@ -72,6 +76,7 @@ class ModelMetadata:
             trained_steps=_typed(data, "trained_steps", int),
             seed=_typed(data, "seed", int),
             validation=_validation(data.get("validation")),
+            mobil_prior=float(data.get("mobil_prior", 0.0)),
         )
 
 

@@ -23,6 +23,7 @@ if TYPE_CHECKING:
         MAX_SPEED,
         SIDE_LANES_SEEN,
         TRAFFIC_RANGE,
+        TRAFFIC_VALUES,
         GridConfig,
         lane_code_bits,
     )
@@ -92,6 +93,7 @@ __all__ = [
     "EGO_HEADING_SCALE",
     "FEATURES",
     "TRAFFIC_RANGE",
+    "TRAFFIC_VALUES",
     "lane_curvature",
     "one_of",
     "unknown_name",

@@ -13,6 +13,8 @@ EGO_HEADING_SCALE = 0.2
 """Heading error to the lane [rad] that the grid's `ego_lateral` feature maps to 1."""
 TRAFFIC_RANGE = 200.0
 """How far ahead of the ego the grid's `traffic` feature describes each lane's traffic [m]."""
+TRAFFIC_VALUES = 3
+"""Values of the `traffic` feature per grid row."""
 SIDE_LANES_SEEN = 2
 """`lane_code: sides` counts the lanes on each side of the ego up to this many."""
 
@@ -66,6 +68,27 @@ class GridConfig(BaseModel):
 
     def rows(self, lanes_count: int) -> int:
         return lanes_count if self.lanes == "absolute" else 2 * self.lateral_reach + 1
+
+    def observation_layout(self, lanes_count: int) -> list[tuple[str, int]]:
+        """The observation encoding's parts in order as (name, values): presence, each enabled
+        feature in FEATURES' order, the lane part."""
+        rows, cells = self.rows(lanes_count), self.cells
+        sizes = {
+            "relative_speed": rows * cells,
+            "ttc": rows,
+            "ego_speed": 1,
+            "ego_lateral": 2,
+            "traffic": rows * TRAFFIC_VALUES,
+        }
+        enabled = [(name, sizes[name]) for name in FEATURES if name in self.features]
+        return [("presence", rows * cells), *enabled, ("lane", self.lane_code_size(lanes_count))]
+
+    def observation_parts(self, lanes_count: int) -> dict[str, slice]:
+        """Each part of `observation_layout`'s columns in the observation."""
+        parts, start = {}, 0
+        for name, size in self.observation_layout(lanes_count):
+            parts[name], start = slice(start, start + size), start + size
+        return parts
 
     def lane_code_size(self, lanes_count: int) -> int:
         """Values of the ego-lane part of the paper and observation encodings."""

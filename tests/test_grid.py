@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from perception.grid import GridConfig, OccupancyGridBuilder, lane_code, observation_layout
+from perception.grid import GridConfig, OccupancyGridBuilder, lane_code
 from tests.helpers import scene
 
 GRID = GridConfig(cell_length=5.0, cells_ahead=9, cells_behind=2)
@@ -202,7 +202,7 @@ def test_observation_layout_gives_every_part_in_feature_order():
     config = GRID.model_copy(
         update={"lanes": "ego", "lane_code": "sides", "features": ("traffic", "ego_speed", "ttc")}
     )
-    layout = observation_layout(config, 4)
+    layout = config.observation_layout(4)
     assert layout == [("presence", 33), ("ttc", 3), ("ego_speed", 1), ("traffic", 9), ("lane", 2)]
     space = OccupancyGridBuilder(config).observation_space(4)
     assert space.shape == (48,) and space.low[-11:-2].tolist() == [-1, -1, 0] * 3

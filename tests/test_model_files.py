@@ -65,6 +65,10 @@ def test_a_member_that_inflates_beyond_the_limit_is_refused_before_inflating(tmp
         ({"observation_size": 10**9}, "observation_size: expected an integer"),
         ({"grid": {"cells_ahead": 10**8}}, "grid.cells_ahead: Input should be less than or equal to 200"),
         ({"observation_size": 50}, "model arrays do not match its metadata"),
+        ({"mobil_prior": "lots"}, "mobil_prior: expected a number"),
+        ({"mobil_prior": -0.5}, r"mobil_prior: expected a bonus in 0..10 reward units, got -0.5"),
+        ({"mobil_prior": 1e308 * 10}, "mobil_prior: expected a number"),
+        ({"mobil_prior": 0.4, "encoding": "paper"}, "mobil_prior: MOBIL needs the observation encoding"),
     ],
 )
 def test_metadata_the_loop_cannot_use_is_refused_before_building(tmp_path, changes, message):

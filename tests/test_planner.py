@@ -14,11 +14,11 @@ from perception.grid import GridConfig, OccupancyGridBuilder
 from planner.agents import decide
 from planner.ddqn import DoubleDQN, double_q_target
 from planner.factory import SHIPPED_MODELS, make_agent
-from planner.learned import export_q_network, load_agent
-from planner.mobil import MobilAgent
+from planner.learned import LearnedAgent, export_q_network, load_agent
+from planner.mobil import MobilAgent, MobilPrior
 from planner.model_file import ModelFileError, load_model, save_model
 from planner.model_metadata import ModelMetadata
-from records import ENCODINGS, N_ACTIONS, POLICY_NAMES, Command
+from records import ENCODINGS, FEATURES, N_ACTIONS, POLICY_NAMES, Command
 from stack.apps.cli import app
 from tests.helpers import scene
 
@@ -135,6 +135,45 @@ def test_mobil_changes_lane_for_a_gain_and_respects_the_new_follower():
     assert decide(agent, observation_for(agent, world)) is Command.STAY
 
 
+def test_mobil_prior_cuts_mobils_own_view_out_of_the_networks_observation():
+    """MOBIL inside the prior sees bit for bit what the MOBIL agent sees on its own grid."""
+    grid = GRID.model_copy(
+        update={"lanes": "ego", "lateral_reach": 2, "lane_code": "sides", "features": FEATURES}
+    )
+    prior = MobilPrior(grid, 0.4)
+    for world in (
+        scene(4, (0.0, 1), [(15.0, 4.0), (30.0, 0.0), (-20.0, 8.0), (200.0, 12.0)], other_speed=15.0),
+        scene(3, (0.0, 0), [(12.0, 0.0), (-6.0, 4.0)]),
+    ):
+        network_view = OccupancyGridBuilder(grid).build(world).to_observation()
+        own_view = observation_for(prior.mobil, world)
+        np.testing.assert_array_equal(prior.mobil_observation(network_view), own_view)
+
+
+def test_mobil_prior_raises_mobils_change_by_its_bonus_and_the_network_keeps_the_last_word():
+    """A network rating LEFT 0.3 below STAY: with a 0.4 bonus it follows MOBIL's proposed LEFT,
+    with 0.2 it stays; where MOBIL proposes nothing the bonus changes nothing."""
+    grid = GRID.model_copy(update={"lanes": "ego", "features": ("relative_speed", "ego_speed")})
+    size = OccupancyGridBuilder(grid).observation_space(3).shape[0]
+    network = th.nn.Sequential(th.nn.Linear(size, 3))
+    with th.no_grad():
+        network[0].weight.zero_()
+        network[0].bias.copy_(th.tensor([-0.3, 0.0, -1.0]))
+    slow_leader = scene(3, (0.0, 1), [(15.0, 4.0), (-30.0, 8.0)], speed=25.0, other_speed=15.0)
+    free_road = scene(3, (0.0, 1), speed=25.0)
+    mobil = MobilAgent(grid)
+    assert decide(mobil, observation_for(mobil, slow_leader)) is Command.LEFT
+    for bonus, expected in ((0.4, Command.LEFT), (0.2, Command.STAY), (0.0, Command.STAY)):
+        metadata = ModelMetadata(
+            kind="mlp", encoding="observation", observation_size=size, grid=grid, mobil_prior=bonus
+        )
+        agent = LearnedAgent(network, metadata)
+        assert decide(agent, observation_for(agent, slow_leader)) is expected, bonus
+        assert decide(agent, observation_for(agent, free_road)) is Command.STAY
+        batch = np.stack([observation_for(agent, slow_leader), observation_for(agent, free_road)])
+        assert agent.choose(batch).tolist() == [expected, Command.STAY]
+
+
 def test_double_q_target_uses_the_online_argmax_and_the_target_value():
     rewards, dones = th.tensor([[1.0], [0.0]]), th.tensor([[0.0], [1.0]])
     online = th.tensor([[0.0, 5.0, 1.0], [3.0, 0.0, 0.0]])
@@ -228,8 +267,9 @@ def test_export_writes_an_sb3_zip_that_dqn_load_opens_and_drives_alike(tmp_path)
     agent = load_agent(SHIPPED_MODELS["ddqn"])
     observations = np.random.default_rng(0).uniform(0, 1, (64, agent.observation_size)).astype(np.float32)
     np.testing.assert_array_equal(
-        sb3.predict(observations, deterministic=True)[0], agent.predict(observations)[0]
+        sb3.predict(observations, deterministic=True)[0], agent.q_values(observations).argmax(axis=1)
     )
+    assert ("mobil_prior" in result.output) == bool(agent.metadata.mobil_prior)
     again = CliRunner().invoke(app, ["export", str(SHIPPED_MODELS["ddqn"]), "--sb3", str(out)])
     assert again.exit_code == 2 and "exists" in again.output
     missing = CliRunner().invoke(

@@ -25,6 +25,7 @@ from stack.sim.envs import HIERARCHICAL_HIGHWAY
 from stack.training.checkpoint import DqnCounters, TabularCounters, read_checkpoint
 from stack.training.summary import TrainSummary
 from stack.training.trainer import Trainer
+from tests.helpers import scene
 
 TINY = {
     "seed": 1,
@@ -366,7 +367,8 @@ def test_n_step_returns_discount_each_sample_by_gamma_to_its_length(tmp_path):
 
 def test_a_run_starts_from_init_model_and_refuses_one_that_does_not_fit(tmp_path):
     """`train.init_model`: the online and target networks start as the file's network (no gradient
-    step before learning_starts, so the final model is that network); a file with other hidden
+    step before learning_starts, so the final model is that network), validated at step 0 as the
+    first model to keep; a file with other hidden
     layers, a missing file or a tabular run are refused in one line before any episode."""
     Trainer(build_config(TINY), tmp_path / "first", progress=False).run()
     start = tmp_path / "first" / "final.npz"
@@ -378,6 +380,8 @@ def test_a_run_starts_from_init_model_and_refuses_one_that_does_not_fit(tmp_path
         np.testing.assert_array_equal(tuned[key], original[key], err_msg=key)
     target = trainer.model.policy.q_net_target.q_net.state_dict()
     np.testing.assert_array_equal(target["0.weight"].numpy(), original["0.weight"])
+    first = trainer.history[0]
+    assert (first.step, first.period, first.improved) == (0, "long", True), "the start is a candidate"
 
     config = tmp_path / "other.yaml"
     for change, message in (
@@ -431,10 +435,42 @@ def test_a_start_seeing_fewer_features_is_widened_and_decides_as_before(tmp_path
     assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
 
 
+def test_a_mobil_prior_decides_in_rollouts_validation_and_the_written_files(tmp_path):
+    """`train.mobil_prior`: the SB3 model's greedy actions and the agent loaded from its files are
+    the same prior's decisions; a run that cannot show MOBIL its lanes is refused in one line."""
+    data = {**TINY, "train": {**TINY["train"], "mobil_prior": 0.5}}
+    trainer = Trainer(build_config(data), tmp_path / "prior", progress=False)
+    trainer.run()
+    agent = load_agent(tmp_path / "prior" / "best.npz")
+    assert agent.metadata.mobil_prior == 0.5 and agent.prior is not None
+    assert trainer.model.policy.q_net.prior.bonus == 0.5
+    env = HierarchicalHighwayEnv(trainer.config)
+    observations = [env.reset(seed=5)[0]]
+    for _ in range(6):
+        observations.append(env.step(1)[0])
+    slow_leader = scene(4, (0.0, 1), [(15.0, 4.0), (-30.0, 8.0)], speed=25.0, other_speed=15.0)
+    observations.append(OccupancyGridBuilder(grid_config(trainer.config)).build(slow_leader).to_observation())
+    final = load_agent(tmp_path / "prior" / "final.npz")
+    batch = np.stack(observations)
+    greedy, _ = trainer.model.predict(batch, deterministic=True)
+    assert greedy.tolist() == final.choose(batch).tolist()
+    assert final.prior.bonuses(batch)[-1].tolist() == [0.5, 0, 0], "MOBIL proposes LEFT"
+
+    refused = tmp_path / "refused.yaml"
+    for change, message in (
+        ({"perception": {"lanes": "ego", "features": ["ttc"]}}, "train.mobil_prior: MOBIL needs"),
+        ({"train": {**data["train"], "algorithm": "dqn"}}, "mobil_prior: only the ddqn algorithm"),
+    ):
+        refused.write_text(yaml.safe_dump({**data, **change}))
+        result = CliRunner().invoke(app, ["train", "-c", str(refused), "--out", str(tmp_path / "o")])
+        assert result.exit_code == 2 and message in result.output, result.output
+        assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+
+
 def test_a_config_names_its_starting_model_beside_it_from_any_working_directory(tmp_path, monkeypatch):
     """A relative `train.init_model` naming a file beside the config file is that file (the shipped
-    config starts from `ddqn-stage2.npz` beside it, which started from `ddqn-stage1.npz`, also from
-    an installed wheel)."""
+    config starts from `ddqn-stage3.npz` beside it, which started from `ddqn-stage2.npz` and that from
+    `ddqn-stage1.npz`, also from an installed wheel)."""
     from stack.core.config import load_config
 
     folder = tmp_path / "configs"
@@ -444,7 +480,11 @@ def test_a_config_names_its_starting_model_beside_it_from_any_working_directory(
     monkeypatch.chdir(tmp_path)
     assert load_config("configs/train.yaml").train.init_model == str(folder / "start.npz")
     shipped = Path(__file__).parents[1] / "configs" / "train"
-    for config, start in (("ddqn.yaml", "ddqn-stage2.npz"), ("ddqn-stage2.yaml", "ddqn-stage1.npz")):
+    for config, start in (
+        ("ddqn.yaml", "ddqn-stage3.npz"),
+        ("ddqn-stage3.yaml", "ddqn-stage2.npz"),
+        ("ddqn-stage2.yaml", "ddqn-stage1.npz"),
+    ):
         assert Path(load_config(shipped / config).train.init_model).samefile(shipped / start)
 
 

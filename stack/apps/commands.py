@@ -100,10 +100,16 @@ def export(
         check_destination(sb3)
         from stack.apps.export import export_sb3
 
-        written = export_sb3(model, sb3)
+        written, prior = export_sb3(model, sb3)
     except ValueError as error:
         fail(str(error))
     Console().print(f"wrote {written}: stable_baselines3.DQN.load({str(written)!r})", highlight=False)
+    if prior:
+        Console().print(
+            f"note: the zip's DQN.predict decides on the bare Q-values; drivestack adds {prior:g} to "
+            "the lane change MOBIL proposes (mobil_prior)",
+            highlight=False,
+        )
 
 
 def agents() -> None:

@@ -3,7 +3,9 @@
 The Q-network's weights go into SB3's own `DQN` (its `MlpPolicy` with the same hidden layers), with
 the observation space of the model's encoding and `Discrete(3)` actions, so `DQN.load(OUT)` opens it
 for evaluation or fine-tuning with SB3 or rl-zoo3. The zip is SB3's format (it pickles SB3's own
-classes); drivestack itself never loads it: its model files stay data-only.
+classes); drivestack itself never loads it: its model files stay data-only. A model's MOBIL prior
+(`planner.mobil.MobilPrior`) is drivestack's decision rule, not SB3's: `DQN.predict` on the zip
+decides on the bare Q-values (the CLI says so).
 """
 
 from __future__ import annotations
@@ -29,8 +31,9 @@ class _Spaces(gym.Env):
         self.observation_space, self.action_space = observation_space, gym.spaces.Discrete(N_ACTIONS)
 
 
-def export_sb3(model: Path, out: Path) -> Path:
-    """Write `model` (a DDQN or DQN model file) as an SB3 `DQN` zip at `out`; returns the path.
+def export_sb3(model: Path, out: Path) -> tuple[Path, float]:
+    """Write `model` (a DDQN or DQN model file) as an SB3 `DQN` zip at `out`; returns the path and
+    the model's MOBIL prior (0: none), which the zip does not hold.
     A missing model, an existing or unwritable `out`, or a model that is not a Q-network raise
     ValueError (ModelFileError) with a one-line message, before anything is written."""
     if not model.is_file():
@@ -57,4 +60,4 @@ def export_sb3(model: Path, out: Path) -> Path:
     except OSError as error:
         written.unlink(missing_ok=True)
         raise ValueError(f"--sb3: cannot write {written} ({error.strerror})") from None
-    return written
+    return written, agent.metadata.mobil_prior

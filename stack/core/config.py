@@ -15,6 +15,7 @@ from pydantic import Field, ValidationError, model_validator
 from controllers.config import ControllerConfig
 from perception.grid import OccupancyGridBuilder
 from perception.sensor import SensorConfig
+from planner.mobil import prior_problem
 from planner.safety import SafetyConfig
 from records import AGENT_NAMES, SEED_LIMIT, GridConfig
 from records.plugins import AGENT_GROUP, plugin_name
@@ -84,6 +85,12 @@ class RunConfig(Strict):
                 f"decision_period_s: must be at least one control tick "
                 f"({1.0 / self.control_rate_hz:.4f} s), got {self.decision_period_s}"
             )
+        return self
+
+    @model_validator(mode="after")
+    def _mobil_sees_its_lanes(self) -> RunConfig:
+        if problem := prior_problem(grid_config(self), self.train.encoding, self.train.mobil_prior):
+            raise ValueError(f"train.mobil_prior: {problem}")
         return self
 
     @model_validator(mode="after")

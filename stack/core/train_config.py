@@ -8,6 +8,7 @@ from typing import Annotated
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from planner.mobil import MAX_PRIOR
 from planner.networks import NET_ARCHS
 from records import ENCODINGS, LEARNED_AGENTS, SEED_LIMIT, Encoding, LearnedAgentName, one_of, unknown_name
 from stack.sim import scenarios
@@ -143,6 +144,13 @@ class TrainConfig(Strict):
     demonstrations: DemonstrationConfig | None = Field(
         None, description="an expert's episodes to pre-train on and keep learning from (ddqn only)"
     )
+    mobil_prior: float = Field(
+        0.0,
+        ge=0,
+        le=MAX_PRIOR,
+        description="bonus [reward units] the greedy decision gives the lane change MOBIL proposes "
+        "(ddqn only; in rollouts, validation and the model files written; 0: none)",
+    )
 
     @field_validator("init_model")
     @classmethod
@@ -159,4 +167,6 @@ class TrainConfig(Strict):
             raise ValueError("init_model: tabular Q-learning starts from an empty table")
         if self.algorithm != "ddqn" and self.demonstrations is not None:
             raise ValueError("demonstrations: only the ddqn algorithm learns from them")
+        if self.algorithm != "ddqn" and self.mobil_prior:
+            raise ValueError("mobil_prior: only the ddqn algorithm decides with one")
         return self

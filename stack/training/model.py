@@ -15,9 +15,10 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv
 
-from perception.grid import OccupancyGridBuilder, observation_layout
+from perception.grid import OccupancyGridBuilder
 from planner.ddqn import DoubleDQN
 from planner.learned import LearnedAgent, load_agent
+from planner.mobil import MobilPrior
 from planner.model_metadata import ModelMetadata
 from planner.networks import net_arch
 from records import N_ACTIONS, GridConfig
@@ -66,10 +67,12 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
     th.set_num_threads(1)
     train = config.train
     algorithm = ALGORITHMS[train.algorithm]
-    dqfd: dict[str, Any] = {}
+    own_options: dict[str, Any] = {}
     if (demonstrations := train.demonstrations) is not None:
-        dqfd = {"demonstration_share": demonstrations.share, "margin": demonstrations.margin}
-        dqfd["margin_weight"] = demonstrations.margin_weight
+        own_options = {"demonstration_share": demonstrations.share, "margin": demonstrations.margin}
+        own_options["margin_weight"] = demonstrations.margin_weight
+    if train.mobil_prior:
+        own_options["mobil_prior"] = MobilPrior(grid_config(config), train.mobil_prior)
     return algorithm(
         "MlpPolicy",
         env,
@@ -90,7 +93,7 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
         seed=config.seed,
         verbose=0,
         device="cpu",
-        **dqfd,
+        **own_options,
     )
 
 
@@ -111,6 +114,7 @@ def model_metadata(config: RunConfig, env: HierarchicalHighwayEnv, trained_steps
         lanes_count=config.highway.lanes_count,
         trained_steps=trained_steps,
         seed=config.seed,
+        mobil_prior=train.mobil_prior,
     )
 
 
@@ -141,21 +145,13 @@ def widened_first_layer(
     weights: dict[str, th.Tensor], start: GridConfig, grid: GridConfig, lanes_count: int
 ) -> dict[str, th.Tensor]:
     """`weights` of a Q-network seeing `start`'s observation, its first layer moved onto `grid`'s
-    observation part by part (`observation_layout`), zero on the parts `start` does not have."""
+    observation part by part (`GridConfig.observation_parts`), zero on the parts `start` does not have."""
     first = weights["0.weight"]
     widened = th.zeros(
         (first.shape[0], int(OccupancyGridBuilder(grid).space("observation", lanes_count).shape[0]))
     )
-    start_parts = _part_columns(start, lanes_count)
-    for name, columns in _part_columns(grid, lanes_count).items():
+    start_parts = start.observation_parts(lanes_count)
+    for name, columns in grid.observation_parts(lanes_count).items():
         if name in start_parts:
             widened[:, columns] = first[:, start_parts[name]]
     return {**weights, "0.weight": widened}
-
-
-def _part_columns(grid: GridConfig, lanes_count: int) -> dict[str, slice]:
-    """Each observation part's columns."""
-    columns, start = {}, 0
-    for name, size in observation_layout(grid, lanes_count):
-        columns[name], start = slice(start, start + size), start + size
-    return columns

@@ -169,6 +169,8 @@ class Trainer:
         self.validation = self._validation_callback(export_q_network)
         if not resumed and self.config.train.demonstrations is not None:
             start_from_demonstrations(self.model, self.config, self.validation, self.progress)  # type: ignore[arg-type]
+        elif not resumed and self.start is not None:
+            self.validation.validate_start(self.model)
         checkpoints = Checkpoints(
             self.config.train.checkpoint_every, self._save_checkpoint, lambda: self.stop_requested
         )
