@@ -6,7 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from records import EGO_HEADING_SCALE, TRAFFIC_RANGE, TRAFFIC_VALUES, GridConfig, WorldState
+from records import EGO_HEADING_SCALE, TRAFFIC_VALUES, GridConfig, WorldState
+
+TRAFFIC_RANGE = 200.0
+"""How far ahead of the ego the `traffic` feature describes each lane's traffic [m]."""
 
 
 def relative_speed(

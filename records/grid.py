@@ -11,8 +11,6 @@ MAX_SPEED = 40.0
 """Speed that the grid's `ego_speed` feature maps to 1 [m/s] (highway-env's Vehicle.MAX_SPEED)."""
 EGO_HEADING_SCALE = 0.2
 """Heading error to the lane [rad] that the grid's `ego_lateral` feature maps to 1."""
-TRAFFIC_RANGE = 200.0
-"""How far ahead of the ego the grid's `traffic` feature describes each lane's traffic [m]."""
 TRAFFIC_VALUES = 3
 """Values of the `traffic` feature per grid row."""
 SIDE_LANES_SEEN = 2
