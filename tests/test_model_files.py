@@ -161,6 +161,7 @@ def test_a_model_that_does_not_fit_the_road_is_refused_alike_everywhere(tmp_path
     size, given = (int(builder.space("observation", lanes).shape[0]) for lanes in (4, 2))
     arrays["0.weight"] = np.zeros((arrays["0.weight"].shape[0], size), dtype=arrays["0.weight"].dtype)
     model = tmp_path / "paper-4-lanes.npz"
+    metadata.pop("mobil_prior", None)  # MOBIL cannot read the paper's state
     save_model(model, arrays, {**metadata, "grid": grid, "observation_size": size, "lanes_count": 2})
     expected = (
         f"{model}: expects observations of {size} values; its observation grid gives {given} "
