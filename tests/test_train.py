@@ -435,6 +435,21 @@ def test_a_start_seeing_fewer_features_is_widened_and_decides_as_before(tmp_path
     assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
 
 
+def test_a_paper_state_start_with_fewer_features_starts_as_it_is(tmp_path):
+    """On the paper's state the features are not in the observation: a start that lists fewer of
+    them has the run's input size and starts the run unchanged (no widening)."""
+    paper = {**TINY, "train": {**TINY["train"], "encoding": "paper"}}
+    Trainer(build_config(paper), tmp_path / "first", progress=False).run()
+    start = tmp_path / "first" / "final.npz"
+    more = {**paper["perception"], "features": [*paper["perception"]["features"], "traffic"]}
+    data = {**paper, "perception": more}
+    data["train"] = {**paper["train"], "steps": 6, "learning_starts": 100, "init_model": str(start)}
+    Trainer(build_config(data), tmp_path / "tuned", progress=False).run()
+    tuned, original = load_model(tmp_path / "tuned" / "final.npz")[0], load_model(start)[0]
+    for key in original:
+        np.testing.assert_array_equal(tuned[key], original[key], err_msg=key)
+
+
 def test_a_mobil_prior_decides_in_rollouts_validation_and_the_written_files(tmp_path):
     """`train.mobil_prior`: the SB3 model's greedy actions and the agent loaded from its files are
     the same prior's decisions; a run that cannot show MOBIL its lanes is refused in one line."""

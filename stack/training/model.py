@@ -15,7 +15,6 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv
 
-from perception.grid import OccupancyGridBuilder
 from planner.ddqn import DoubleDQN
 from planner.learned import LearnedAgent, load_agent
 from planner.mobil import MobilPrior
@@ -130,11 +129,12 @@ def initial_model(config: RunConfig) -> LearnedAgent | None:
 
 def warm_start(model: DQN, start: LearnedAgent, grid: GridConfig | None = None, lanes_count: int = 4) -> None:
     """Copy `start`'s Q-network into the online and target networks of `model`. A start that sees
-    fewer of `grid`'s features than the run (on a road of `lanes_count` lanes) has its first layer
-    widened: each input it knows keeps its weights, the new ones start at zero, so the model starts
-    deciding as `start` does."""
+    fewer of `grid`'s features than the run (so fewer observation values, on a road of
+    `lanes_count` lanes) has its first layer widened: each input it knows keeps its weights, the new
+    ones start at zero, so the model starts deciding as `start` does."""
     weights = start.network.state_dict()
-    if grid is not None and grid.features != start.grid_config.features:
+    if weights["0.weight"].shape[1] != model.policy.q_net.q_net[0].in_features:
+        assert grid is not None, "a start of another input size is widened onto the run's grid"
         weights = widened_first_layer(weights, start.grid_config, grid, lanes_count)
     with th.no_grad():
         model.policy.q_net.q_net.load_state_dict(weights)
@@ -146,12 +146,10 @@ def widened_first_layer(
 ) -> dict[str, th.Tensor]:
     """`weights` of a Q-network seeing `start`'s observation, its first layer moved onto `grid`'s
     observation part by part (`GridConfig.observation_parts`), zero on the parts `start` does not have."""
-    first = weights["0.weight"]
-    widened = th.zeros(
-        (first.shape[0], int(OccupancyGridBuilder(grid).space("observation", lanes_count).shape[0]))
-    )
+    first, parts = weights["0.weight"], grid.observation_parts(lanes_count)
+    widened = th.zeros((first.shape[0], parts["lane"].stop))
     start_parts = start.observation_parts(lanes_count)
-    for name, columns in grid.observation_parts(lanes_count).items():
+    for name, columns in parts.items():
         if name in start_parts:
             widened[:, columns] = first[:, start_parts[name]]
     return {**weights, "0.weight": widened}
