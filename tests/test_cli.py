@@ -143,6 +143,8 @@ def test_compare_runs_every_agent_on_the_same_episodes(tmp_path):
         assert s["baseline"] == "keep-lane"
     assert summaries[1]["difference"]["mean_speed"] == [0.0, 0.0, 0.0]
     assert "| speed - keep-lane m/s |" in result.output and " [" in result.output
+    assert "| longest standstill s / ep |" in result.output
+    assert all(len(s["intervals"]["longest_standstill_s"]) == 3 for s in summaries)
     assert (out / "comparison.png").stat().st_size > 5_000
     rows = (out / "episodes.csv").read_text().strip().splitlines()
     assert rows[0].startswith("agent,episode,seed,") and len(rows) == 1 + 3 * 2

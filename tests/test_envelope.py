@@ -15,6 +15,7 @@ from controllers.reference import QuinticProfile, WarpedProfile, drivable_durati
 from records import Actuation, Command, EgoState, Neighbour, Reference
 from stack.core.config import ConfigError, build_config
 from stack.core.episodes import run
+from stack.core.metrics import longest_run
 from stack.core.safety_metrics import (
     SafetyMonitor,
     classify_collision,
@@ -232,6 +233,28 @@ def test_spawns_are_feasible_and_safety_metrics_reach_the_summary(scenario):
     assert results.summary["collisions"] == 0
     for key in ("at_fault_collisions", "road_departures", "min_ttc_s", "time_below_min_distance_s"):
         assert key in results.summary
+
+
+def test_longest_run_counts_the_longest_stretch_of_true():
+    assert longest_run(np.array([], dtype=bool)) == 0
+    assert longest_run(np.array([False, False])) == 0
+    assert longest_run(np.array([True, False, True, True, True, False, True, True])) == 3
+    assert longest_run(np.array([False, True, True])) == 2
+
+
+def test_longest_standstill_sees_an_ego_held_behind_a_blocked_lane():
+    """keep-lane on `incident` stops behind the stopped car and never moves again: its longest
+    standstill is every tick from its first stop to the end; on highway-env's traffic it never
+    stands still."""
+    episode = {"episodes": 1, "seed": 970, "planner": {"agent": "keep-lane"}, "highway": {}}
+    blocked = run(build_config(episode, scenario="incident"), progress=False)
+    speed = np.array(blocked.episodes[0].trace["speed"][1:])
+    first_stop = int(np.argmax(speed < 0.5))
+    assert 0 < first_stop and (speed[first_stop:] < 0.5).all()
+    assert blocked.episodes[0].longest_standstill_s == pytest.approx((speed.size - first_stop) * DT)
+    assert blocked.summary["longest_standstill_s"] > 10.0
+    flowing = run(build_config(episode, scenario="highway-v0", highway__duration=10), progress=False)
+    assert flowing.summary["longest_standstill_s"] == 0.0
 
 
 @pytest.mark.parametrize("plant", ["kinematic", "dynamic"])

@@ -29,6 +29,7 @@ MEANS = (
     "aborted_changes",
     "time_below_min_distance_s",
     "emergency_brakings",
+    "longest_standstill_s",
 )
 """Per-episode metrics reported as means over episodes (none can be negative)."""
 RATES = {
@@ -242,12 +243,12 @@ def markdown(rows: list[dict[str, Any]]) -> str:
 
 
 def safety_markdown(rows: list[dict[str, Any]]) -> str:
-    """The safety table (docs/safety-metrics.md): at-fault collisions and road departures as rates
-    with their intervals, the worst minimum TTC, time below R157's minimum following distance and
-    emergency brakings per episode."""
+    """The safety table (docs/envelope.md): at-fault collisions and road departures as rates
+    with their intervals, the worst minimum TTC, time below R157's minimum following distance,
+    emergency brakings and the longest standstill per episode."""
     header = (
         "| agent | at-fault collisions % | not at fault | road departures % | min TTC s "
-        "| below R157 d_min s / ep | emergency brakings / ep |"
+        "| below R157 d_min s / ep | emergency brakings / ep | longest standstill s / ep |"
     )
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
     for row, name in zip(rows, shown(rows), strict=True):
@@ -255,6 +256,7 @@ def safety_markdown(rows: list[dict[str, Any]]) -> str:
         lines.append(
             f"| {name} | {_cell(ci['at_fault_rate'], 100, 1)} | {row['not_at_fault_collisions']} | "
             f"{_cell(ci['road_departure_rate'], 100, 1)} | {row['min_ttc_s']:.2f} | "
-            f"{_cell(ci['time_below_min_distance_s'])} | {_cell(ci['emergency_brakings'])} |"
+            f"{_cell(ci['time_below_min_distance_s'])} | {_cell(ci['emergency_brakings'])} | "
+            f"{_cell(ci['longest_standstill_s'])} |"
         )
     return "\n".join(lines) + "\n"

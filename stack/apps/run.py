@@ -207,6 +207,7 @@ def print_tables(summary: dict, episodes: list[EpisodeResult], console: Console 
         ("min time to collision", f"{summary['min_ttc_s']:.2f} s"),
         ("time below R157 d_min / episode", f"{summary['time_below_min_distance_s']:.2f} s"),
         ("emergency brakings / episode", f"{summary['emergency_brakings']:.2f}"),
+        ("longest standstill / episode", f"{summary['longest_standstill_s']:.2f} s"),
         ("accuracy", "n/a" if accuracy is None else f"{accuracy:.2f} %"),
         ("passed cars", summary["passed_cars"]),
         ("mean speed", f"{summary['mean_speed']:.2f} m/s"),

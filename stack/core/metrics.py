@@ -18,7 +18,7 @@ import numpy as np
 from perception.grid import OccupancyGrid
 from records import WorldState
 from stack.core.loop_records import Tick
-from stack.core.safety_metrics import TTC_CAP_S
+from stack.core.safety_metrics import STOPPED_SPEED_MPS, TTC_CAP_S
 
 COMFORT_WINDOW_S = 0.5
 """Moving-average window for lateral acceleration and jerk [s] (UN R79)."""
@@ -114,6 +114,7 @@ class EpisodeResult:
     min_ttc_s: float = TTC_CAP_S
     time_below_min_distance_s: float = 0.0
     emergency_brakings: int = 0
+    longest_standstill_s: float = 0.0
     solve_ms_p50: float = field(default=0.0, compare=False)
     solve_ms_p95: float = field(default=0.0, compare=False)
     trace: dict[str, list[float]] = field(default_factory=dict, repr=False)
@@ -137,8 +138,10 @@ class EpisodeResult:
 @dataclass(frozen=True)
 class Driven:
     """What the recorder measured of an episode: control ticks (`steps`), duration [s], passed
-    cars, the ego's mean speed [m/s], peak |lateral acceleration| [m/s^2] and jerk [m/s^3], and
-    the per-tick `trace` of time [s], speed [m/s] and lateral offset [m]."""
+    cars, the ego's mean speed [m/s], peak |lateral acceleration| [m/s^2] and jerk [m/s^3], its
+    longest standstill [s] (the most ticks in a row that ended with it below `STOPPED_SPEED_MPS`,
+    times the tick: an ego that cannot get round a blocked lane stands still for the rest of the
+    episode), and the per-tick `trace` of time [s], speed [m/s] and lateral offset [m]."""
 
     steps: int
     duration_s: float
@@ -146,6 +149,7 @@ class Driven:
     mean_speed: float
     peak_lat_accel: float
     peak_lat_jerk: float
+    longest_standstill_s: float
     trace: dict[str, list[float]]
 
 
@@ -226,8 +230,15 @@ class EpisodeRecorder:
             mean_speed=float(np.mean(self.speed)),
             peak_lat_accel=peak_accel,
             peak_lat_jerk=peak_jerk,
+            longest_standstill_s=longest_run(np.array(self.speed[1:]) < STOPPED_SPEED_MPS) * dt,
             trace={"time": self.time, "speed": self.speed, "d": self.d},
         )
+
+
+def longest_run(flags: np.ndarray) -> int:
+    """Length of the longest run of True in `flags` (0 if none)."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], flags.astype(np.int8), [0]))))
+    return int((edges[1::2] - edges[::2]).max(initial=0))
 
 
 TIMING_FIELDS = ("solve_ms_p50", "solve_ms_p95")
@@ -259,6 +270,7 @@ def summarize(results: list[EpisodeResult], **identity: object) -> dict:
         "min_ttc_s": float(min(r.min_ttc_s for r in results)),
         "time_below_min_distance_s": float(np.mean([r.time_below_min_distance_s for r in results])),
         "emergency_brakings": float(np.mean([r.emergency_brakings for r in results])),
+        "longest_standstill_s": float(np.mean([r.longest_standstill_s for r in results])),
         "passed_cars": passed,
         "accuracy": 100.0 * passed / (passed + collisions) if passed + collisions else None,
         "mean_speed": float(np.mean([r.mean_speed for r in results])),
