@@ -14,15 +14,14 @@ TRAFFIC_RANGE = 200.0
 
 def relative_speed(
     config: GridConfig,
-    world: WorldState,
+    value: np.ndarray,
     rel_s: np.ndarray,
     along: np.ndarray,
     across: np.ndarray,
     road_rows: np.ndarray,
 ) -> np.ndarray:
-    """Per cell, the nearest occupant's longitudinal speed minus the ego's / speed_scale, in [-1, 1]."""
+    """Per cell, the nearest occupant's `value` (its `relative_longitudinal_speed`)."""
     grid = np.zeros((len(road_rows), config.cells), dtype=np.float32)
-    value = _relative_longitudinal_speed(config, world)
     for vehicle in np.argsort(-np.abs(rel_s)):
         for row, lane in enumerate(road_rows):
             if lane >= 0 and across[vehicle, lane]:
@@ -31,13 +30,12 @@ def relative_speed(
 
 
 def traffic(
-    config: GridConfig, world: WorldState, rel_s: np.ndarray, across: np.ndarray, road_rows: np.ndarray
+    world: WorldState, value: np.ndarray, rel_s: np.ndarray, across: np.ndarray, road_rows: np.ndarray
 ) -> np.ndarray:
     """Per row, the traffic within TRAFFIC_RANGE ahead of the ego, far beyond the grid: [mean and
-    lowest relative speed of its vehicles (as `relative_speed`, 0 when there are none), the share of
-    the range their lengths fill in [0, 1]]; [0, 0, 1] off the road. Tells a stopped lane, a truck
+    lowest `value` (the vehicles' `relative_longitudinal_speed`; 0 when there are none), the share
+    of the range their lengths fill in [0, 1]]; [0, 0, 1] off the road. Tells a stopped lane, a truck
     lane and a free road apart before they reach the grid."""
-    value = _relative_longitudinal_speed(config, world)
     ahead = (rel_s > 0) & (rel_s <= TRAFFIC_RANGE)
     described = np.zeros((len(road_rows), TRAFFIC_VALUES), dtype=np.float32)
     for row, lane in enumerate(road_rows):
@@ -81,7 +79,7 @@ def ego_lateral(world: WorldState) -> np.ndarray:
     return np.clip([offset, heading / EGO_HEADING_SCALE], -1, 1).astype(np.float32)
 
 
-def _relative_longitudinal_speed(config: GridConfig, world: WorldState) -> np.ndarray:
+def relative_longitudinal_speed(config: GridConfig, world: WorldState) -> np.ndarray:
     """Per vehicle, its speed along the lane heading at the ego minus the ego's / speed_scale, in
     [-1, 1]."""
     lane_heading = world.lanes[0].heading_at(float(world.s[0]))

@@ -177,18 +177,19 @@ class OccupancyGridBuilder:
             across[:, road_rows[on_road]].T.astype(np.float32) @ along.astype(np.float32)
         ) > 0
         occupancy[~on_road] = 1.0
-        relative_speed = ttc = None
+        relative_speed = ttc = traffic = None
+        if {"relative_speed", "traffic"} & set(config.features):
+            value = features.relative_longitudinal_speed(config, world)
         if "relative_speed" in config.features:
-            relative_speed = features.relative_speed(config, world, rel_s, along, across, road_rows)
+            relative_speed = features.relative_speed(config, value, rel_s, along, across, road_rows)
         if "ttc" in config.features:
             ttc = features.time_to_collision(config, world, rel_s, across, road_rows)
         ego_speed = (
             float(np.clip(world.speed[0] / MAX_SPEED, 0, 1)) if "ego_speed" in config.features else None
         )
         ego_lateral = features.ego_lateral(world) if "ego_lateral" in config.features else None
-        traffic = None
         if "traffic" in config.features:
-            traffic = features.traffic(config, world, rel_s, across, road_rows)
+            traffic = features.traffic(world, value, rel_s, across, road_rows)
         return OccupancyGrid(
             occupancy,
             ego_lane,
