@@ -297,6 +297,16 @@ def test_the_closest_lane_kernel_picks_numpys_lane_on_every_input():
         np.testing.assert_array_equal(table.closest(x, y, heading), expected, err_msg=f"case {case}")
 
 
+def vector_env_after(scenario: str, seed: int, frames: int) -> gym.Env:
+    """A vector-backend env of `scenario` reset with `seed` and driven `frames` frames (braking)."""
+    highway = build_config({}, scenario=scenario).highway
+    env = gym.make(VECTOR_HIGHWAY, config=env_config(highway), disable_env_checker=True)
+    env.reset(seed=seed)
+    for frame in range(frames):
+        env.step(braking(frame))
+    return env
+
+
 def test_a_frames_idm_is_highway_envs_bit_for_bit():
     """`TrafficFrame.idm` (compiled arithmetic around numpy's powers and dot products) against
     `IDMVehicle.acceleration` for every vehicle behind every other, and without a leader or an ego,
@@ -306,11 +316,7 @@ def test_a_frames_idm_is_highway_envs_bit_for_bit():
     from stack.sim.fast_road import LaneProjections
     from stack.sim.vector.frame import TrafficFrame
 
-    highway = build_config({}, scenario="dense").highway
-    env = gym.make(VECTOR_HIGHWAY, config=env_config(highway), disable_env_checker=True)
-    env.reset(seed=5)
-    for frame in range(40):
-        env.step(braking(frame))
+    env = vector_env_after("dense", seed=5, frames=40)
     road = env.unwrapped.road
     frame = TrafficFrame(LaneProjections(road), LaneTable.fit(road.network))
     objects = frame.projections.objects
@@ -324,4 +330,33 @@ def test_a_frames_idm_is_highway_envs_bit_for_bit():
     ]
     got = frame.idm(ego, front, delta, jam)
     np.testing.assert_array_equal(got.view(np.uint64), np.array(expected, dtype=float).view(np.uint64))
+    env.close()
+
+
+def test_the_step_reads_what_the_act_left_and_the_kept_constants_follow_the_vehicles():
+    """After `act`, the vector step takes the movers' state and the drivers' actions from the act's
+    arrays (the same numbers the vehicles hold), and keeps the vehicles' constants only while the
+    same vehicles drive: a vehicle replaced is read afresh."""
+    from stack.sim.vector.motion import MOVER_CONSTANTS, KeptColumns, columns
+
+    env = vector_env_after("overtaking", seed=3, frames=5)
+    road = env.unwrapped.road
+    road.act()
+    acted = road.acted
+    assert acted is not None and len(acted.vehicles) == len(road.vehicles)
+    np.testing.assert_array_equal(acted.speed, [v.speed for v in road.vehicles])
+    np.testing.assert_array_equal(acted.position, [v.position for v in road.vehicles])
+    driven = [road.vehicles[row] for row in acted.driven.tolist()]
+    np.testing.assert_array_equal(acted.steering, [v.action["steering"] for v in driven])
+    road.step(1 / 15)
+    assert road.acted is None and road.mover_constants is not None
+    kept = road.mover_constants
+    assert KeptColumns.of(list(road.vehicles), MOVER_CONSTANTS, kept) is kept
+    replaced = list(road.vehicles)
+    replaced[-1] = road.vehicles[0].create_from(road.vehicles[0])
+    replaced[-1].LENGTH = 12.0
+    fresh = KeptColumns.of(replaced, MOVER_CONSTANTS, kept)
+    assert fresh is not kept
+    np.testing.assert_array_equal(fresh.rows, columns(replaced, MOVER_CONSTANTS))
+    assert fresh.rows[2, -1] == 12.0
     env.close()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from operator import attrgetter
+from operator import attrgetter, is_
 from typing import Any
 
 import numpy as np
@@ -36,13 +36,46 @@ def steps_like_vehicle(cls: type) -> bool:
     return known
 
 
-def move(movers: list[Vehicle], lanes: LaneTable, dt: float, record_history: bool) -> Moved:
+@dataclass(frozen=True, eq=False)
+class FrameActed:
+    """What `Road.act()` left for the step that follows it: the movers' speeds [m/s], headings
+    [rad] and centres [m] as the act read them (nothing moves a vehicle between the two), and the
+    steering [rad] and acceleration [m/s^2] it gave the `driven` rows; the other movers' actions
+    are read off them."""
+
+    vehicles: list[Vehicle]
+    speed: np.ndarray
+    heading: np.ndarray
+    position: np.ndarray
+    driven: np.ndarray
+    steering: np.ndarray
+    acceleration: np.ndarray
+
+
+def move(
+    movers: list[Vehicle],
+    lanes: LaneTable,
+    dt: float,
+    record_history: bool,
+    acted: FrameActed | None = None,
+    constants: np.ndarray | None = None,
+) -> Moved:
     """`Vehicle.step(dt)` of every mover: clip, integrate, apply impacts, find the lane. Returns
-    where the movers ended."""
+    where the movers ended. With what the act left (`acted`) and the movers' `MOVER_CONSTANTS` rows
+    (`constants`), only their crash state and the undriven movers' actions are read off them."""
     kinds = {cls: _step_kind(cls) for cls in set(map(type, movers))}
-    state = columns(movers, _mover_state)
-    speed, max_speed, min_speed, heading, length, width, diagonal, x, y, steering, acceleration = state[:11]
-    crashed, impacted = state[11] != 0, state[12].nonzero()[0].tolist()
+    if acted is None or constants is None:
+        state = columns(movers, _mover_state)
+        speed, max_speed, min_speed, heading, length, width, diagonal = state[:7]
+        x, y, steering, acceleration = state[7:11]
+        crashed, impacted = state[11] != 0, state[12].nonzero()[0].tolist()
+    else:
+        speed, heading = acted.speed, acted.heading
+        x, y = acted.position.T.copy()
+        max_speed, min_speed, length, width, diagonal = constants
+        steering, acceleration = _actions(movers, acted)
+        crashed = np.fromiter((v.crashed for v in movers), dtype=bool, count=len(movers))
+        impacted = [i for i, v in enumerate(movers) if v.impact is not None]
     if len(kinds) == 1:
         stops = np.full(len(movers), next(iter(kinds.values()))[1])
     else:
@@ -94,6 +127,43 @@ def _step_kind(cls: type) -> tuple[bool, bool]:
     standstill (`TrafficVehicle`)."""
     step = cls.step  # type: ignore[attr-defined]
     return step in (IDMVehicle.step, TrafficVehicle.step), step is TrafficVehicle.step
+
+
+def _actions(movers: list[Vehicle], acted: FrameActed) -> tuple[np.ndarray, np.ndarray]:
+    """Every mover's (steering, acceleration): the driven rows' from `acted`, the others' read."""
+    steering, acceleration = np.empty(len(movers)), np.empty(len(movers))
+    steering[acted.driven], acceleration[acted.driven] = acted.steering, acted.acceleration
+    undriven = np.ones(len(movers), dtype=bool)
+    undriven[acted.driven] = False
+    for i in undriven.nonzero()[0].tolist():
+        action = movers[i].action
+        steering[i], acceleration[i] = action["steering"], action["acceleration"]
+    return steering, acceleration
+
+
+MOVER_CONSTANTS = attrgetter("MAX_SPEED", "MIN_SPEED", "LENGTH", "WIDTH", "diagonal")
+"""A mover's MAX_SPEED, MIN_SPEED [m/s], LENGTH, WIDTH and diagonal [m]."""
+
+
+@dataclass(frozen=True, eq=False)
+class KeptColumns:
+    """`columns(objects, attributes)` of attributes set when an object is made, kept while the same
+    objects, in the same order, ask again."""
+
+    objects: list[Any]
+    rows: np.ndarray
+
+    @staticmethod
+    def of(objects: list[Any], attributes: Callable[[Any], Any], kept: KeptColumns | None) -> KeptColumns:
+        """`kept` if it holds `objects`, else read afresh."""
+        if kept is not None and same_objects(kept.objects, objects):
+            return kept
+        return KeptColumns(list(objects), columns(objects, attributes))
+
+
+def same_objects(these: Sequence[object], those: Sequence[object]) -> bool:
+    """Whether two sequences hold the same objects in the same order."""
+    return len(these) == len(those) and all(map(is_, these, those))
 
 
 def _mover_state(v: Vehicle) -> tuple[float, ...]:

@@ -28,6 +28,8 @@ other lanes (a curved exit, `neighbour_vehicles_connected_lanes`) run as `FastRo
 
 from __future__ import annotations
 
+from operator import attrgetter
+
 import numpy as np
 from highway_env.road.lane import StraightLane
 from highway_env.vehicle.behavior import IDMVehicle
@@ -39,7 +41,17 @@ from stack.sim.traffic import IDM_DRIVERS, ScenarioTraffic
 from stack.sim.vector.dynamics import lateral_command_sines, slip_sines
 from stack.sim.vector.frame import TrafficFrame
 from stack.sim.vector.lanes import LaneTable, clip
-from stack.sim.vector.motion import Footprints, Moved, close_pairs, columns, move, steps_like_vehicle
+from stack.sim.vector.motion import (
+    MOVER_CONSTANTS,
+    Footprints,
+    FrameActed,
+    KeptColumns,
+    Moved,
+    close_pairs,
+    move,
+    same_objects,
+    steps_like_vehicle,
+)
 
 
 def _plain_velocity(cls: type) -> bool:
@@ -53,6 +65,11 @@ class VectorRoad(FastRoad):
     _lanes: LaneTable | None | bool = False
     moved: Moved | None = None
     """Where the last step left every vehicle (`take_moved`)."""
+    acted: FrameActed | None = None
+    """What the last act left for the step that follows it."""
+    mover_constants: KeptColumns | None = None
+    driver_constants: KeptColumns | None = None
+    """The movers' `MOVER_CONSTANTS` and the drivers' `DRIVER_CONSTANTS`, kept from frame to frame."""
 
     def _lane_table(self) -> LaneTable | None:
         if self._lanes is False:
@@ -65,6 +82,7 @@ class VectorRoad(FastRoad):
         return lanes if plain else None
 
     def act(self) -> None:
+        self.acted = None
         lanes = self._lane_table()
         if lanes is None:
             super().act()
@@ -83,7 +101,8 @@ class VectorRoad(FastRoad):
                 for vehicle in self.vehicles:
                     vehicle.act()
                 return
-            plan = Drivers(drivers, places, frame)
+            self.driver_constants = KeptColumns.of(drivers, DRIVER_CONSTANTS, self.driver_constants)
+            plan = Drivers(drivers, places, frame, self.driver_constants.rows)
             at_lane_end = plan.at_lane_end()
             decisions = self._mobil(plan, ~at_lane_end)
             may_change = plan.enable_lane_change & (plan.timer_due | ~plan.on_target)
@@ -108,7 +127,18 @@ class VectorRoad(FastRoad):
                     vehicle.change_lane_policy()
                     retargeted.append(k)
             plan.retarget(retargeted)
-            self._drive(plan)
+            steering, acceleration = self._drive(plan)
+            if projections.vehicles_first:
+                n = len(self.vehicles)
+                self.acted = FrameActed(
+                    list(self.vehicles),
+                    frame.speed[:n],
+                    frame.heading[:n],
+                    frame.position[:n],
+                    np.array(places, dtype=int),
+                    steering,
+                    acceleration,
+                )
         finally:
             self._projections = None
 
@@ -164,8 +194,9 @@ class VectorRoad(FastRoad):
         return decisions
 
     @staticmethod
-    def _drive(plan: Drivers) -> None:
-        """`IDMVehicle.act`'s steering and IDM acceleration of every driver, after its decisions."""
+    def _drive(plan: Drivers) -> tuple[np.ndarray, np.ndarray]:
+        """`IDMVehicle.act`'s steering [rad] and IDM acceleration [m/s^2] of every driver, after its
+        decisions: set as their actions, and returned."""
         frame, drivers, me = plan.frame, plan.drivers, plan.me
         lanes = frame.lanes
         heading, speed, target = frame.heading[me], frame.speed[me], plan.target
@@ -187,23 +218,29 @@ class VectorRoad(FastRoad):
         acceleration = clip(acceleration, IDMVehicle.ACC_MAX)
         for v, steer, accel in zip(drivers, steering, acceleration, strict=True):
             v.action = {"steering": steer, "acceleration": accel}
+        return steering, acceleration
 
     def step(self, dt: float) -> None:
         lanes = self._lane_table()
         if lanes is None:
             super().step(dt)
             return
+        acted, self.acted = self.acted, None
         kinds = {cls: steps_like_vehicle(cls) for cls in set(map(type, self.vehicles))}
         if all(kinds.values()):
             movers = list(self.vehicles)
         else:
-            movers = []
+            movers, acted = [], None
             for vehicle in self.vehicles:
                 if kinds[type(vehicle)]:
                     movers.append(vehicle)
                 else:
                     vehicle.step(dt)
-        moved = move(movers, lanes, dt, self.record_history) if movers else None
+        constants = None
+        if acted is not None and same_objects(acted.vehicles, movers):
+            self.mover_constants = KeptColumns.of(movers, MOVER_CONSTANTS, self.mover_constants)
+            constants = self.mover_constants.rows
+        moved = move(movers, lanes, dt, self.record_history, acted, constants) if movers else None
         self.moved = moved if moved is not None and len(movers) == len(self.vehicles) else None
         if self.moved is not None and len(movers) >= 2:
             self._collide(dt, close_pairs(self.moved.footprints, dt))
@@ -224,16 +261,8 @@ class VectorRoad(FastRoad):
         return close_pairs(Footprints.of(self.vehicles), dt)
 
 
-def _driver_state(vehicle: IDMVehicle) -> tuple[float, ...]:
-    return (
-        vehicle.LENGTH,
-        vehicle.DELTA,
-        vehicle.DISTANCE_WANTED,
-        vehicle.LANE_CHANGE_DELAY < vehicle.timer,
-        vehicle.enable_lane_change,
-        vehicle.lane_index == vehicle.target_lane_index,
-        bool(vehicle.route),
-    )
+DRIVER_CONSTANTS = attrgetter("LENGTH", "DELTA", "DISTANCE_WANTED")
+"""A driver's LENGTH [m], IDM exponent DELTA and jam distance DISTANCE_WANTED [m]."""
 
 
 class Drivers:
@@ -243,8 +272,10 @@ class Drivers:
     own_acceleration: np.ndarray
     """IDM acceleration [m/s^2] behind the own lane's leader, per driver (set by `_mobil`)."""
 
-    def __init__(self, drivers: list[IDMVehicle], places: list[int], frame: TrafficFrame) -> None:
-        """`places`: the drivers' places in the road's vehicles."""
+    def __init__(
+        self, drivers: list[IDMVehicle], places: list[int], frame: TrafficFrame, constants: np.ndarray
+    ) -> None:
+        """`places`: the drivers' places in the road's vehicles; `constants`: their `DRIVER_CONSTANTS`."""
         self.drivers, self.frame = drivers, frame
         projections, lane_row = frame.projections, frame.lanes.row
         if projections.vehicles_first:
@@ -252,8 +283,11 @@ class Drivers:
         else:
             self.me = np.array([projections.row[id(v)] for v in drivers], dtype=int)
         self.target = np.array([lane_row[v.target_lane_index] for v in drivers], dtype=int)
-        self.length, self.delta, self.jam, *flags = columns(drivers, _driver_state)
-        self.timer_due, self.enable_lane_change, self.on_target, self.routed = (flag != 0 for flag in flags)
+        self.length, self.delta, self.jam = constants
+        self.timer_due = np.array([v.LANE_CHANGE_DELAY < v.timer for v in drivers], dtype=bool)
+        self.enable_lane_change = np.array([v.enable_lane_change for v in drivers], dtype=bool)
+        self.on_target = np.array([v.lane_index == v.target_lane_index for v in drivers], dtype=bool)
+        self.routed = np.array([bool(v.route) for v in drivers], dtype=bool)
         """Per driver: its lane-change timer is past `LANE_CHANGE_DELAY`; it may change lane; it is in
         its target lane; it follows a route."""
         self.own_front, self.own_rear = frame.neighbours(self.me, frame.lane[self.me])
