@@ -335,8 +335,9 @@ def test_a_frames_idm_is_highway_envs_bit_for_bit():
 
 def test_the_step_reads_what_the_act_left_and_the_kept_constants_follow_the_vehicles():
     """After `act`, the vector step takes the movers' state and the drivers' actions from the act's
-    arrays (the same numbers the vehicles hold), and keeps the vehicles' constants only while the
-    same vehicles drive: a vehicle replaced is read afresh."""
+    arrays, and the next act the vehicles' state from where the step left them (the same numbers the
+    vehicles hold); the vehicles' constants are kept only while the same vehicles drive: a vehicle
+    replaced is read afresh."""
     from stack.sim.vector.motion import MOVER_CONSTANTS, KeptColumns, columns
 
     env = vector_env_after("overtaking", seed=3, frames=5)
@@ -350,6 +351,15 @@ def test_the_step_reads_what_the_act_left_and_the_kept_constants_follow_the_vehi
     np.testing.assert_array_equal(acted.steering, [v.action["steering"] for v in driven])
     road.step(1 / 15)
     assert road.acted is None and road.mover_constants is not None
+    stepped = road.stepped
+    assert stepped is not None
+    np.testing.assert_array_equal(stepped.footprints.heading, [v.heading for v in road.vehicles])
+    np.testing.assert_array_equal(
+        stepped.lane_row, [road._lane_table().row[v.lane_index] for v in road.vehicles]
+    )
+    road.act()
+    assert road.stepped is None and road.acted is not None
+    np.testing.assert_array_equal(road.acted.position, [v.position for v in road.vehicles])
     kept = road.mover_constants
     assert KeptColumns.of(list(road.vehicles), MOVER_CONSTANTS, kept) is kept
     replaced = list(road.vehicles)

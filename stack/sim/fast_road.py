@@ -54,14 +54,20 @@ def is_kind(cls: type, base: type) -> bool:
 class LaneProjections:
     """Per-frame cache: every road object projected on each queried lane."""
 
-    def __init__(self, road: Road) -> None:
+    def __init__(self, road: Road, vehicle_position: np.ndarray | None = None) -> None:
+        """`vehicle_position`, when given, is where the road's vehicles stand (n x 2) [m], known
+        already; the other objects' positions are read."""
         self.road = road
         candidates = road.vehicles + road.objects
         landmarks = {cls for cls in set(map(type, candidates)) if is_kind(cls, Landmark)}
         self.objects = [o for o in candidates if type(o) not in landmarks] if landmarks else candidates
         self.vehicles_first = not landmarks
         """Whether the road's vehicles are the first rows, in road order (no landmark left out)."""
-        self.position = np.array([o.position for o in self.objects], dtype=float).reshape(-1, 2)
+        if vehicle_position is None or not self.vehicles_first:
+            self.position = np.array([o.position for o in self.objects], dtype=float).reshape(-1, 2)
+        else:
+            others = [o.position for o in self.objects[len(vehicle_position) :]]
+            self.position = np.concatenate([vehicle_position, np.array(others, dtype=float).reshape(-1, 2)])
         self.lanes: dict[LaneIndex, tuple[list[float], list[int]]] = {}
 
     @cached_property

@@ -13,7 +13,7 @@ from stack.sim.fast_road import NEIGHBOUR_MARGIN, LaneProjections, is_kind
 from stack.sim.vector.dynamics import idm_accelerations, idm_gap_ratios, idm_inputs
 from stack.sim.vector.kernels import lane_order, neighbour_rows
 from stack.sim.vector.lanes import LaneTable
-from stack.sim.vector.motion import columns
+from stack.sim.vector.motion import Moved, columns
 
 
 class TrafficFrame:
@@ -21,7 +21,9 @@ class TrafficFrame:
     s [m] (the same on every lane), r [m] per lane, and per lane the objects highway-env's
     neighbour search counts as on it, in order of s."""
 
-    def __init__(self, projections: LaneProjections, lanes: LaneTable) -> None:
+    def __init__(self, projections: LaneProjections, lanes: LaneTable, moved: Moved | None = None) -> None:
+        """`moved`, when given, is where the last step left the road's vehicles, the first rows
+        (nothing has moved them since): their headings, speeds and lanes are taken from it."""
         objects = projections.objects
         self.projections, self.lanes = projections, lanes
         self.position = projections.position
@@ -30,8 +32,16 @@ class TrafficFrame:
         def state(o: RoadObject) -> tuple[float, float, float, int]:
             return o.heading, o.speed, getattr(o, "target_speed", 0), lane_row.get(o.lane_index, 0)
 
-        self.heading, self.speed, self.target_speed, lane = columns(objects, state)
-        self.lane = lane.astype(int)
+        if moved is None:
+            self.heading, self.speed, self.target_speed, lane = columns(objects, state)
+            self.lane = lane.astype(int)
+        else:
+            n = len(moved.vehicles)
+            others = columns(objects[n:], state) if len(objects) > n else np.empty((4, 0))
+            self.heading = np.concatenate([moved.footprints.heading, others[0]])
+            self.speed = np.concatenate([moved.footprints.speed, others[1]])
+            self.target_speed = np.array([getattr(o, "target_speed", 0) for o in objects], dtype=float)
+            self.lane = np.concatenate([moved.lane_row, others[3].astype(int)])
         kinds = {cls: is_kind(cls, Vehicle) for cls in set(map(type, objects))}
         if all(kinds.values()):
             self.is_vehicle = np.ones(len(objects), dtype=bool)

@@ -118,7 +118,10 @@ def move(
     timed = movers if all(timed for timed, _ in kinds.values()) else [v for v in movers if kinds[type(v)][0]]
     for v in timed:
         v.timer += dt
-    return Moved(movers, Footprints(x, y, heading, speed, length, width, diagonal), lanes.lane_id[rows])
+    lane_rows = np.array(rows, dtype=int)
+    return Moved(
+        movers, Footprints(x, y, heading, speed, length, width, diagonal), lanes.lane_id[lane_rows], lane_rows
+    )
 
 
 @functools.cache
@@ -209,12 +212,13 @@ class Footprints:
 
 @dataclass(frozen=True, eq=False)
 class Moved:
-    """Vehicles that a frame moved, and where they ended: their footprints and lane ids (the last
-    item of their lane index)."""
+    """Vehicles that a frame moved, and where they ended: their footprints, lane ids (the last item
+    of their lane index) and lanes' rows in the road's `LaneTable`."""
 
     vehicles: list[Vehicle]
     footprints: Footprints
     lane_id: np.ndarray
+    lane_row: np.ndarray
 
 
 def columns(objects: Sequence[object], attributes: Callable[[Any], Any]) -> np.ndarray:

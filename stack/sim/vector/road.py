@@ -65,6 +65,8 @@ class VectorRoad(FastRoad):
     _lanes: LaneTable | None | bool = False
     moved: Moved | None = None
     """Where the last step left every vehicle (`take_moved`)."""
+    stepped: Moved | None = None
+    """The same, kept for the next act."""
     acted: FrameActed | None = None
     """What the last act left for the step that follows it."""
     mover_constants: KeptColumns | None = None
@@ -87,9 +89,13 @@ class VectorRoad(FastRoad):
         if lanes is None:
             super().act()
             return
-        self._projections = projections = LaneProjections(self)
+        stepped, self.stepped = self.stepped, None
+        if stepped is not None and not same_objects(stepped.vehicles, self.vehicles):
+            stepped = None
+        position = None if stepped is None else np.stack([stepped.footprints.x, stepped.footprints.y], axis=1)
+        self._projections = projections = LaneProjections(self, position)
         try:
-            frame = TrafficFrame(projections, lanes)
+            frame = TrafficFrame(projections, lanes, stepped if projections.vehicles_first else None)
             drivers, places, others = [], [], []
             for place, vehicle in enumerate(self.vehicles):
                 if type(vehicle) in IDM_DRIVERS and not vehicle.crashed:
@@ -241,7 +247,7 @@ class VectorRoad(FastRoad):
             self.mover_constants = KeptColumns.of(movers, MOVER_CONSTANTS, self.mover_constants)
             constants = self.mover_constants.rows
         moved = move(movers, lanes, dt, self.record_history, acted, constants) if movers else None
-        self.moved = moved if moved is not None and len(movers) == len(self.vehicles) else None
+        self.moved = self.stepped = moved if moved is not None and len(movers) == len(self.vehicles) else None
         if self.moved is not None and len(movers) >= 2:
             self._collide(dt, close_pairs(self.moved.footprints, dt))
         else:
