@@ -3,8 +3,10 @@ frame at once, with trajectories identical to stock.
 
 A `FastRoad` frame still runs highway-env's per-vehicle Python: `IDMVehicle.act` (IDM, the steering
 controller) and `Vehicle.step` (kinematic integration, closest-lane search). `VectorRoad` keeps
-highway-env's vehicle objects, reads their state into arrays once per frame and once per step, and
-computes the continuous parts as array operations over the vehicles, in the stock operation order:
+highway-env's vehicle objects as the state of record and writes every step back to them, but each
+phase reads the vehicles' state from the arrays the previous one computed (nothing moves a vehicle in
+between; their constants are kept while the same vehicles drive, `motion.KeptColumns`), and computes
+the continuous parts as array operations over the vehicles, in the stock operation order:
 
 - act: the discrete decisions of the `IDMVehicle`s that act this frame (`follow_road` at a lane's
   end, `change_lane_policy`: the MOBIL evaluation due every 1 s, the abort of a contested change) run
