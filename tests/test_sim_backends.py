@@ -354,9 +354,8 @@ def test_the_step_reads_what_the_act_left_and_the_kept_constants_follow_the_vehi
     stepped = road.stepped
     assert stepped is not None
     np.testing.assert_array_equal(stepped.footprints.heading, [v.heading for v in road.vehicles])
-    np.testing.assert_array_equal(
-        stepped.lane_row, [road._lane_table().row[v.lane_index] for v in road.vehicles]
-    )
+    lane_row = LaneTable.fit(road.network).row
+    np.testing.assert_array_equal(stepped.lane_row, [lane_row[v.lane_index] for v in road.vehicles])
     road.act()
     assert road.stepped is None and road.acted is not None
     np.testing.assert_array_equal(road.acted.position, [v.position for v in road.vehicles])
