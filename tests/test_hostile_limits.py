@@ -27,7 +27,8 @@ def interrupted_run(tmp_path: Path) -> tuple[Path, list[str], Path]:
     arguments = ["run", "-c", str(tiny_config_file(tmp_path)), "--agent", "keep-lane", "--episodes", "2"]
     result = CliRunner().invoke(app, [*arguments, "--out", str(out), "--no-progress"])
     assert result.exit_code == 0, result.output
-    rows = [json.dumps({k: v for k, v in row.items()}) for row in csv_rows(out / "episodes.csv")]
+    timings = csv_rows(out / "timings.csv")
+    rows = [json.dumps(row | timing) for row, timing in zip(csv_rows(out / "episodes.csv"), timings)]
     journal = out / "keep-lane.episodes.partial.jsonl"
     journal.write_text(rows[0] + "\n")
     return out, arguments, journal
@@ -63,7 +64,7 @@ def test_a_damaged_journal_row_is_dropped_with_a_warning_and_the_rows_before_kep
     assert resumed.exit_code == 0, resumed.output
     assert f"warning: {journal}: dropped line 2" in resumed.output
     assert json.loads((out / "summary.json").read_text())["episodes"] == 2
-    assert csv_rows(out / "episodes.csv")[0] == first
+    assert csv_rows(out / "episodes.csv")[0] | csv_rows(out / "timings.csv")[0] == first
 
 
 def test_journal_values_out_of_range_never_reach_the_summary(tmp_path):

@@ -142,9 +142,11 @@ def compare_and_report(
     rows = comparison(runs, baseline)
     with deferred(interrupt_after=False):
         write_comparison(rows, out)
-        write_csv(
-            out / "episodes.csv", [{"agent": r.summary["agent"], **e.row()} for r in runs for e in r.episodes]
-        )
+        for name, row in (
+            ("episodes.csv", EpisodeResult.outcome_row),
+            ("timings.csv", EpisodeResult.timing_row),
+        ):
+            write_csv(out / name, [{"agent": r.summary["agent"], **row(e)} for r in runs for e in r.episodes])
         for journal in journals if not interrupted else []:
             journal.discard()
     print(markdown(rows), end="")

@@ -79,7 +79,8 @@ def write_results(
     """The results folder, each file written whole (`stack.core.files`)."""
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "summary.json", summary)
-    write_csv(out / "episodes.csv", [episode.row() for episode in episodes])
+    write_csv(out / "episodes.csv", [episode.outcome_row() for episode in episodes])
+    write_csv(out / "timings.csv", [episode.timing_row() for episode in episodes])
     if any(episode.trace for episode in episodes):
         with replacing(out / "traces.png") as path:
             plot_traces(episodes, path, summary)

@@ -212,13 +212,15 @@ def in_scenario(config: RunConfig, name: str) -> RunConfig:
 def build_config(
     data: dict[str, Any], source: str = "config", labels: dict[str, str] | None = None, **overrides: Any
 ) -> RunConfig:
-    """Validate `data` in its scenario (`scenario` in `overrides` or in `data`, see
-    `stack.sim.scenarios`) with dotted-key `overrides` applied (None values are ignored). An error
+    """Validate `data` in its scenario with dotted-key `overrides` applied (None values are
+    ignored): `scenario` in `overrides` moves `data` to that world, a `scenario` of `data`'s own
+    keeps the world keys `data` sets over it (`stack.sim.scenarios.apply`). An error
     in a key that `labels` names (dotted key -> e.g. the CLI option that set it) blames that label
     instead of `source`."""
     labels = labels or {}
     data = dict(data)
-    scenario = overrides.pop("scenario", None) or data.get("scenario")
+    moved_to = overrides.pop("scenario", None)
+    scenario = moved_to or data.get("scenario")
     if scenario is not None:
         blamed = labels.get("scenario", source)
         if not isinstance(scenario, str):
@@ -226,7 +228,7 @@ def build_config(
                 f"{blamed}: scenario: expected a scenario name, one of {', '.join(scenarios.names())}"
             )
         try:
-            data = scenarios.apply(scenario, data)
+            data = scenarios.apply(scenario, data, keep_own=moved_to is None)
         except ValueError as error:
             raise ConfigError(f"{blamed}: scenario: {error}") from None
     for dotted, value in overrides.items():

@@ -121,8 +121,18 @@ class EpisodeResult:
     snapshot: tuple[WorldState, OccupancyGrid] | None = field(default=None, repr=False, compare=False)
 
     def row(self) -> dict:
-        """The flat record written to CSV (no traces, no snapshot)."""
+        """The flat record (no traces, no snapshot): a journal line."""
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("trace", "snapshot")}
+
+    def outcome_row(self) -> dict:
+        """`row()` without its wall-clock fields: an episodes.csv line, the same on every rerun."""
+        return {name: value for name, value in self.row().items() if name not in TIMING_FIELDS}
+
+    def timing_row(self) -> dict:
+        """The episode, its seed and its wall-clock fields: a timings.csv line."""
+        return {"episode": self.episode, "seed": self.seed} | {
+            name: getattr(self, name) for name in TIMING_FIELDS
+        }
 
     @classmethod
     def from_row(cls, row: dict[str, Any]) -> EpisodeResult | None:

@@ -1,9 +1,11 @@
 """Named scenarios: the world a run drives in, shipped with the package (`drivestack scenarios`).
 
 A scenario is a YAML file here: a one-line `description`, optionally a `base` scenario it extends,
-and the config sections it sets. Applied to a run config, a scenario replaces the whole `highway:`
-section (road and traffic) and the whole `perception.sensor:` section, so nothing of another world
-leaks in; everything else (agent, controller, grid, training) stays the config's.
+and the config sections it sets. Moved to a scenario (`--scenario`), a run config's whole `highway:`
+section (road and traffic) and whole `perception.sensor:` section are replaced, so nothing of another
+world leaks in; everything else (agent, controller, grid, training) stays the config's. A config that
+names its own `scenario:` keeps the world keys it sets itself over the scenario's, so the resolved
+`config.yaml` of every results folder reads back as the config that ran.
 """
 
 from __future__ import annotations
@@ -50,11 +52,29 @@ def road(name: str) -> dict[str, Any]:
     return copy.deepcopy(_read(name)["highway"])
 
 
-def apply(name: str, config: dict[str, Any]) -> dict[str, Any]:
-    """`config` (a run config as data) in scenario `name`; ValueError for an unknown name."""
+def apply(name: str, config: dict[str, Any], keep_own: bool = False) -> dict[str, Any]:
+    """`config` (a run config as data) in scenario `name`; ValueError for an unknown name. With
+    `keep_own`, the `highway:` and `perception.sensor:` keys `config` sets are laid over the
+    scenario's (a config naming its own scenario); without, the scenario's replace them."""
     scenario = copy.deepcopy(_read(name))
-    applied = {**config, "scenario": name, "highway": scenario["highway"]}
     perception = config.get("perception", {})
+    own_road = config.get("highway") if keep_own else None
+    applied = {**config, "scenario": name, "highway": laid_over(scenario["highway"], own_road)}
     if isinstance(perception, dict):
-        applied["perception"] = {**perception, "sensor": scenario.get("perception", {}).get("sensor", {})}
+        own_sensor = perception.get("sensor") if keep_own else None
+        sensor = laid_over(scenario.get("perception", {}).get("sensor", {}), own_sensor)
+        applied["perception"] = {**perception, "sensor": sensor}
     return applied
+
+
+def laid_over(base: dict[str, Any], own: Any) -> Any:
+    """`own` laid over `base`, section by section (a key `own` sets wins; lists are replaced
+    whole); `own` as it is when either is not a section (validation then names the bad value)."""
+    if own is None:
+        return base
+    if not isinstance(own, dict):
+        return own
+    return base | {
+        key: laid_over(base[key], value) if isinstance(base.get(key), dict) else value
+        for key, value in own.items()
+    }
