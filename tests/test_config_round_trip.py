@@ -82,3 +82,18 @@ def test_run_from_a_folders_config_reproduces_its_episodes_byte_for_byte(tmp_pat
 @pytest.mark.parametrize("scenario", scenarios.names())
 def test_every_scenario_reproduces_from_its_folder(tmp_path, scenario):
     test_run_from_a_folders_config_reproduces_its_episodes_byte_for_byte(tmp_path, scenario)
+
+
+def test_every_sweep_trial_keeps_the_fixed_world_keys(tmp_path):
+    """Issue 52 (2): the trials read the sweep's written base config; its world keys stay."""
+    from stack.apps.sweep import BASE, prepare
+    from stack.core.sweep_config import load_sweep, trial_config
+
+    fixed = {"train.scenarios": {}, "highway.duration": 6, "highway.vehicles_count": 12}
+    spec = {"config": str(TRAIN_CONFIG), "fixed": fixed, "space": {"train.gamma": [0.9, 0.95]}}
+    (tmp_path / "sweep.yaml").write_text(yaml.safe_dump(spec))
+    sweep, base, _ = load_sweep(tmp_path / "sweep.yaml")
+    (tmp_path / "sweep").mkdir()
+    prepare(sweep, base, tmp_path / "sweep")
+    trial = trial_config(tmp_path / "sweep" / BASE, {}, {"train.gamma": 0.9})
+    assert (trial.highway.duration, trial.highway.vehicles_count, trial.train.gamma) == (6, 12, 0.9)

@@ -164,3 +164,20 @@ def test_train_resume_of_a_folder_without_an_owner_record_is_refused_unless_adop
     assert json.loads((folder / "summary.json").read_text())["steps"] == 30
     assert json.loads((folder / MARKER).read_text())["command"] == "train"
     one_line_refusal(["train", "--resume", str(folder), "--adopt"], "already records its owner")
+
+
+def test_a_training_started_with_world_sets_over_a_scenario_resumes_in_that_world(tmp_path):
+    """Issue 52 (3, 4): the folder's config.yaml reads back as the run's config, so `--resume`
+    finds its own run (it used to answer "is another run's" and, adopted, trained in the
+    scenario's 40-s world)."""
+    source = tmp_path / "tiny-train.yaml"
+    source.write_text(yaml.safe_dump({**TINY, "train": {**TINY["train"], "steps": 20}}))
+    folder = tmp_path / "train"
+    world = ["--scenario", "overtaking", "--set", "highway.duration=4", "--set", "highway.vehicles_count=9"]
+    first = CliRunner().invoke(app, ["train", "-c", str(source), *world, "--out", str(folder), "--no-progress"])
+    assert first.exit_code == 0, first.output
+    resumed = CliRunner().invoke(app, ["train", "--resume", str(folder), "--steps", "40", "--no-progress"])
+    assert resumed.exit_code == 0, resumed.output
+    config = load_config(folder / "config.yaml")
+    assert (config.scenario, config.highway.duration, config.highway.vehicles_count) == ("overtaking", 4, 9)
+    assert json.loads((folder / "summary.json").read_text())["steps"] == 40
