@@ -174,7 +174,9 @@ def test_a_training_started_with_world_sets_over_a_scenario_resumes_in_that_worl
     source.write_text(yaml.safe_dump({**TINY, "train": {**TINY["train"], "steps": 20}}))
     folder = tmp_path / "train"
     world = ["--scenario", "overtaking", "--set", "highway.duration=4", "--set", "highway.vehicles_count=9"]
-    first = CliRunner().invoke(app, ["train", "-c", str(source), *world, "--out", str(folder), "--no-progress"])
+    first = CliRunner().invoke(
+        app, ["train", "-c", str(source), *world, "--out", str(folder), "--no-progress"]
+    )
     assert first.exit_code == 0, first.output
     resumed = CliRunner().invoke(app, ["train", "--resume", str(folder), "--steps", "40", "--no-progress"])
     assert resumed.exit_code == 0, resumed.output

@@ -21,14 +21,24 @@ from tests.test_cli import tiny_config_file
 from tests.test_hostile_inputs import one_line_refusal
 
 
-def interrupted_run(tmp_path: Path) -> tuple[Path, list[str], Path]:
+def interrupted_run(tmp_path: Path, episodes: int = 2) -> tuple[Path, list[str], Path]:
     """A finished one-episode run turned into an interrupted one (its journal put back)."""
     out = tmp_path / "run"
-    arguments = ["run", "-c", str(tiny_config_file(tmp_path)), "--agent", "keep-lane", "--episodes", "2"]
+    arguments = [
+        "run",
+        "-c",
+        str(tiny_config_file(tmp_path)),
+        "--agent",
+        "keep-lane",
+        "--episodes",
+        str(episodes),
+    ]
     result = CliRunner().invoke(app, [*arguments, "--out", str(out), "--no-progress"])
     assert result.exit_code == 0, result.output
     timings = csv_rows(out / "timings.csv")
-    rows = [json.dumps(row | timing) for row, timing in zip(csv_rows(out / "episodes.csv"), timings)]
+    rows = [
+        json.dumps(row | timing) for row, timing in zip(csv_rows(out / "episodes.csv"), timings, strict=True)
+    ]
     journal = out / "keep-lane.episodes.partial.jsonl"
     journal.write_text(rows[0] + "\n")
     return out, arguments, journal

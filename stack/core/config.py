@@ -264,6 +264,8 @@ def read_mapping(path: Path | str) -> dict[str, Any]:
         problem = getattr(error, "problem", None)
         reason = f" ({str(problem)[:MAX_QUOTE]})" if problem else ""
         raise ConfigError(f"{path}: not valid YAML{where}{reason}") from None
+    except ValueError as error:  # an integer of more digits than Python converts
+        raise ConfigError(f"{path}: a value it holds cannot be read ({str(error)[:MAX_QUOTE]})") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping of keys at the top level")
     return data

@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import errno
 import json
+import math
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
@@ -47,6 +48,7 @@ def replacing(path: Path) -> Iterator[Path]:
     OSError is raised as `WriteFailed` naming `path`)."""
     temporary = path.with_name(f".{path.stem}.partial{path.suffix}")
     try:
+        temporary.unlink(missing_ok=True)
         yield temporary
         os.replace(temporary, path)
     except OSError as error:
@@ -61,7 +63,26 @@ def write_text(path: Path, text: str) -> None:
 
 
 def write_json(path: Path, data: Any) -> None:
-    write_text(path, json.dumps(data, indent=2) + "\n")
+    """`data` as strict JSON (`finite`): every JSON reader takes it."""
+    write_text(path, json.dumps(finite(data), indent=2, allow_nan=False) + "\n")
+
+
+def finite(data: Any) -> Any:
+    """`data` with every non-finite number as null; in a mapping, the key `<key>_not_finite`
+    beside it says which it was ("inf", "-inf" or "nan": an unbounded time to collision, a
+    controller that returned NaN)."""
+    if isinstance(data, float) and not math.isfinite(data):
+        return None
+    if isinstance(data, dict):
+        notes = {
+            f"{key}_not_finite": str(value)
+            for key, value in data.items()
+            if isinstance(value, float) and not math.isfinite(value)
+        }
+        return {key: finite(value) for key, value in data.items()} | notes
+    if isinstance(data, list | tuple):
+        return [finite(value) for value in data]
+    return data
 
 
 def write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
@@ -96,7 +117,7 @@ class EpisodeJournal:
         with deferred():
             try:
                 self.path.parent.mkdir(parents=True, exist_ok=True)
-                with self.path.open("ab", buffering=0) as handle:
+                with open_appending(self.path) as handle:
                     start = handle.seek(0, os.SEEK_END)
                     try:
                         _write_all(handle, line)
@@ -130,6 +151,13 @@ class EpisodeJournal:
         self.path.unlink(missing_ok=True)
 
 
+def open_appending(path: Path) -> BinaryIO:
+    """`path` opened to append, unbuffered; OSError (ELOOP) when it is a symbolic link, so a
+    results folder's files never write through a link to a file outside it."""
+    descriptor = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+    return os.fdopen(descriptor, "ab", buffering=0)
+
+
 def _write_all(handle: BinaryIO, data: bytes) -> None:
     """All of `data` through the unbuffered `handle`: a write to a filling disk may take part of
     it before the next one fails."""
@@ -144,6 +172,6 @@ def _json_object(line: bytes) -> dict[str, Any] | None:
     """`line` as a JSON object, or None when it is not one (not UTF-8, not JSON, not an object)."""
     try:
         row = json.loads(line.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
+    except (ValueError, RecursionError):  # not UTF-8, not JSON, an integer over Python's digit limit
         return None
     return row if isinstance(row, dict) else None

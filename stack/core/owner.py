@@ -10,10 +10,12 @@ only with `--adopt` (`stack.apps.adoption`)."""
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import hashlib
 import json
 import os
+import stat
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import IO
@@ -94,7 +96,7 @@ def claim(folder: Path, wanted: Owner, resuming: bool, restart: bool = True) -> 
     if why := refusal(folder, wanted, resuming, restart):
         raise FolderRefused(why)
     folder.mkdir(parents=True, exist_ok=True)
-    handle = (folder / LOCK).open("a+")
+    handle = lock_file(folder / LOCK)
     try:
         fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
@@ -113,3 +115,21 @@ def claim(folder: Path, wanted: Owner, resuming: bool, restart: bool = True) -> 
     handle.flush()
     write_json(folder / MARKER, asdict(wanted))
     return handle
+
+
+def lock_file(path: Path) -> IO[str]:
+    """`path` opened to read and write, created if missing; FolderRefused when it is not a plain
+    file of its own (a link, a pipe, a folder): the pid written into it must not land elsewhere."""
+    flags = os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK
+    try:
+        descriptor = os.open(path, flags, 0o644)
+    except OSError as error:
+        if error.errno not in (errno.ELOOP, errno.EISDIR, errno.ENXIO):
+            raise
+        raise FolderRefused(
+            f"--out: {path} is not a plain file; remove it or choose another folder"
+        ) from None
+    if not stat.S_ISREG(os.fstat(descriptor).st_mode):
+        os.close(descriptor)
+        raise FolderRefused(f"--out: {path} is not a plain file; remove it or choose another folder")
+    return os.fdopen(descriptor, "a+")

@@ -1,0 +1,96 @@
+"""Issue 52's hostile and careless cases: each one line with the right exit code, nothing written
+outside `--out`, nothing finished lost, strict JSON."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+from typer.testing import CliRunner
+
+from stack.apps.cli import app
+from stack.core.files import finite, write_json
+from tests.test_cli import tiny_config_file
+from tests.test_hostile_inputs import one_line_refusal
+from tests.test_hostile_limits import interrupted_run
+
+KEEP_LANE = ["--agent", "keep-lane", "--episodes", "1", "--no-progress"]
+
+
+def strict(text: str) -> object:
+    """`text` parsed as strict JSON (NaN and Infinity refused)."""
+
+    def refuse(constant: str) -> None:
+        raise ValueError(f"not strict JSON: {constant}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+@pytest.mark.parametrize(
+    "name", [".drivestack.lock", ".summary.partial.json", "keep-lane.episodes.partial.jsonl"]
+)
+def test_a_link_in_the_folder_never_writes_outside_it(tmp_path, name):
+    precious = tmp_path / "precious.txt"
+    precious.write_text("keep me\n")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / name).symlink_to(precious)
+    result = CliRunner().invoke(
+        app, ["run", "-c", str(tiny_config_file(tmp_path)), *KEEP_LANE, "--out", str(out)]
+    )
+    assert precious.read_text() == "keep me\n"
+    if name == ".drivestack.lock":
+        assert result.exit_code == 2 and "is not a plain file" in result.output, result.output
+        assert len(result.output.strip().splitlines()) == 1
+    else:
+        assert result.exit_code in (0, 2), result.output
+
+
+def test_a_pipe_as_the_lock_file_is_refused_without_a_hang(tmp_path):
+    import os
+
+    out = tmp_path / "out"
+    out.mkdir()
+    os.mkfifo(out / ".drivestack.lock")
+    one_line_refusal(
+        ["run", "-c", str(tiny_config_file(tmp_path)), *KEEP_LANE, "--out", str(out)], "is not a plain file"
+    )
+
+
+def test_a_config_integer_of_more_digits_than_python_converts_is_one_line(tmp_path):
+    config = tmp_path / "big.yaml"
+    config.write_text("seed: " + "9" * 4400 + "\n")
+    one_line_refusal(["run", "-c", str(config), "--out", str(tmp_path / "x")], f"{config}: a value it holds")
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_journal_line_with_a_huge_integer_is_dropped_and_the_lines_before_kept(tmp_path):
+    out, arguments, journal = interrupted_run(tmp_path, episodes=4)
+    with journal.open("a") as handle:
+        handle.write('{"episode": ' + "1" * 4400 + "}\n")
+    resumed = CliRunner().invoke(app, [*arguments, "--out", str(out), "--resume", "--no-progress"])
+    assert resumed.exit_code == 0, resumed.output
+    assert f"warning: {journal}: dropped line 2" in resumed.output
+    assert json.loads((out / "summary.json").read_text())["episodes"] == 4
+
+
+def test_results_are_strict_json_with_the_reason_beside_a_non_finite_value(tmp_path):
+    data = {"gap": math.inf, "rows": [1.0, -math.inf, math.nan], "inner": {"ttc": math.nan}}
+    assert finite(data) == {
+        "gap": None,
+        "gap_not_finite": "inf",
+        "rows": [1.0, None, None],
+        "inner": {"ttc": None, "ttc_not_finite": "nan"},
+    }
+    write_json(tmp_path / "x.json", data)
+    assert strict((tmp_path / "x.json").read_text())["gap_not_finite"] == "inf"
+
+
+def test_the_readmes_cut_in_point_writes_strict_json(tmp_path):
+    point = "speed=13.89,relative_speed=6,gap=10,lateral_speed=0.5"
+    out = tmp_path / "point"
+    result = CliRunner().invoke(app, ["safety", "--scenario", "cut-in", "--point", point, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    written = strict((out / "point.json").read_text())
+    assert isinstance(written, dict) and written["scenario"] == "cut-in"
