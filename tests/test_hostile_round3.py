@@ -94,3 +94,51 @@ def test_the_readmes_cut_in_point_writes_strict_json(tmp_path):
     assert result.exit_code == 0, result.output
     written = strict((out / "point.json").read_text())
     assert isinstance(written, dict) and written["scenario"] == "cut-in"
+
+
+@pytest.mark.parametrize("agents", ["", ",,", "mobil,,rule"])
+def test_an_empty_agent_list_or_entry_is_one_line(tmp_path, agents):
+    one_line_refusal(["compare", "--agents", agents, "--out", str(tmp_path / "x")], "--agents: expected")
+    assert not (tmp_path / "x").exists()
+
+
+def test_an_empty_controller_list_is_one_line(tmp_path):
+    one_line_refusal(["track", "--controller", "", "--out", str(tmp_path / "x")], "--controller: expected")
+
+
+def test_an_empty_set_value_is_refused_and_null_sets_null(tmp_path):
+    out = str(tmp_path / "x")
+    one_line_refusal(
+        ["run", "--set", "highway.duration=4", "--set", "highway.duration=", "--out", out],
+        "--set highway.duration: expected a value after '='",
+    )
+    for null in ("null", "~"):
+        one_line_refusal(
+            ["run", "--set", f"highway.duration={null}", "--out", out],
+            "--set highway.duration: highway.duration: Input should be a valid number (got None)",
+        )
+    from stack.apps.options import configured
+
+    config = configured(None, ["planner.model=planner/models/ddqn.npz", "planner.model=null"])
+    assert config.planner.model is None
+
+
+@pytest.mark.parametrize(
+    ("entry", "expected"),
+    [
+        ("perception.features=[ttc,ttc,ttc]", "--set perception.features: perception: features: each"),
+        ("hïghway.duration=5", "--set hïghway.duration: hïghway: unknown key"),
+        (".".join(["a"] * 60) + "=1", "--set a.a.a.a"),
+    ],
+)
+def test_a_bad_set_blames_the_option_not_the_packaged_config(tmp_path, entry, expected):
+    one_line_refusal(["run", "--set", entry, "--out", str(tmp_path / "x")], expected)
+
+
+def test_a_config_files_own_error_still_blames_the_file_beside_a_set(tmp_path):
+    config = tmp_path / "bad.yaml"
+    config.write_text("highway: {lanes_count: 0}\n")
+    one_line_refusal(
+        ["run", "-c", str(config), "--set", "highway.duration=5", "--out", str(tmp_path / "x")],
+        f"{config}: highway.lanes_count",
+    )

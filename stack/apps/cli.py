@@ -25,6 +25,7 @@ from stack.apps.options import (
     configured,
     fail,
     guarded,
+    listed,
     per_agent,
     ray_or_fail,
     until_interrupted,
@@ -126,7 +127,7 @@ def track(
     from stack.apps.track import controller_names, parse_speeds, track_and_report
 
     try:
-        names = controller_names(controller)
+        names = controller_names(",".join(listed("--controller", controller)))
     except ValueError as error:
         fail(f"--controller: {error}")
     plants = chosen("--plant", plant, PLANTS)
@@ -167,7 +168,7 @@ def compare(
         model_paths = dict(entry.split("=", 1) for entry in models.split(",") if entry)
     except ValueError:
         fail(f"--models: expected name=path[,name=path], got {models!r}")
-    names = [name for name in agents.split(",") if name]
+    names = listed("--agents", agents)
     if len(set(names)) < len(names):
         fail(f"--agents: expected each agent once, got {agents!r}")
     if baseline is not None and baseline not in names:

@@ -108,18 +108,24 @@ def per_agent(
 
 def parsed_sets(sets: list[str]) -> dict[str, object]:
     """`--set` entries as config overrides (dotted keys as `a__b`); YAML values without anchors or
-    aliases, so a short value cannot expand into a huge one."""
+    aliases, so a short value cannot expand into a huge one. `null` (or `~`) sets the key to null
+    (`NULL`: validation says where null is not allowed); an empty value is refused."""
+    from stack.core.config import NULL
+
     values: dict[str, object] = {}
     for entry in sets:
         key, separator, raw = entry.partition("=")
         if not separator or not SET_KEY.fullmatch(key):
             fail(f"--set: expected KEY=VALUE with a dotted key (e.g. seed=3), got {entry[:80]!r}")
+        if not raw.strip():
+            fail(f"--set {key}: expected a value after '=' (null sets the key to null)")
         if len(raw) > MAX_SET_LENGTH or "&" in raw or "*" in raw:
             fail(f"--set {key}: expected a plain YAML value of at most {MAX_SET_LENGTH} characters")
         try:
-            values[key.replace(".", "__")] = yaml.safe_load(raw)
+            value = yaml.safe_load(raw)
         except yaml.YAMLError:
             fail(f"--set {key}: not a YAML value: {raw[:80]!r}")
+        values[key.replace(".", "__")] = NULL if value is None else value
     return values
 
 
@@ -146,9 +152,17 @@ def bare_ray_as_local(arguments: list[str]) -> list[str]:
     ]
 
 
+def listed(option: str, value: str) -> list[str]:
+    """The comma-separated names of `value`, or a one-line error for an empty list or entry."""
+    names = [name.strip() for name in value.split(",")]
+    if not all(names):
+        fail(f"{option}: expected comma-separated names, none of them empty, got {value!r}")
+    return names
+
+
 def chosen(option: str, value: str, options: tuple[str, ...]) -> tuple[str, ...]:
     """The comma-separated names of `value` (`all`: every option), or a one-line error."""
-    names = options if value == "all" else tuple(value.split(","))
+    names = options if value == "all" else tuple(listed(option, value))
     if unknown := [name for name in names if name not in options]:
         fail(f"{option}: unknown {unknown[0]!r}; available: {', '.join(options)}, all")
     return names

@@ -6,6 +6,7 @@ Every error is one line naming the file and the dotted key, e.g.
 
 from __future__ import annotations
 
+from itertools import chain
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -133,6 +134,15 @@ class RunConfig(Strict):
         return max(1, round(self.decision_period_s * self.control_rate_hz))
 
 
+class Null:
+    """The value of an override that sets its key to null (`--set KEY=null`); None as an
+    override means "not given"."""
+
+    def __repr__(self) -> str:
+        return "null"
+
+
+NULL = Null()
 MAX_CONFIG_BYTES = 1_000_000
 """Largest config file read [bytes]."""
 MAX_QUOTE = 80
@@ -156,7 +166,8 @@ def one_line(error: ValidationError, source: str, labels: dict[str, str]) -> str
     first = error.errors()[0]
     key = ".".join(str(part) for part in first["loc"])
     message = first["msg"].removeprefix("Value error, ")
-    source = label_for(labels, key or message.split(":", 1)[0], source)
+    named = message.split(":", 1)[0] if ":" in message else ""
+    source = label_for(labels, f"{key}.{named}" if key and named.isidentifier() else key or named, source)
     if first["type"] == "extra_forbidden":
         message = "unknown key"
     elif first["type"] != "value_error" and not isinstance(first.get("input"), dict):
@@ -166,10 +177,12 @@ def one_line(error: ValidationError, source: str, labels: dict[str, str]) -> str
 
 def label_for(labels: dict[str, str], key: str, source: str) -> str:
     """What to name for an error at dotted `key`: the label of the key or of the nearest section
-    holding it (`--set highway.traffic=...` for `highway.traffic.classes.0.share`), else `source`."""
+    holding it (`--set highway.traffic=...` for `highway.traffic.classes.0.share`), else of a key
+    inside it (`--set hïghway.duration=5` for the unknown section `hïghway`), else `source`."""
     parts = key.split(".")
     found = (labels.get(".".join(parts[:end])) for end in range(len(parts), 0, -1))
-    return next((label for label in found if label is not None), source)
+    inside = (label for dotted, label in labels.items() if dotted.startswith(f"{key}."))
+    return next(chain((label for label in found if label is not None), inside), source)
 
 
 def printable(message: str, limit: int = 300) -> str:
@@ -213,8 +226,9 @@ def build_config(
     data: dict[str, Any], source: str = "config", labels: dict[str, str] | None = None, **overrides: Any
 ) -> RunConfig:
     """Validate `data` in its scenario with dotted-key `overrides` applied (None values are
-    ignored): `scenario` in `overrides` moves `data` to that world, a `scenario` of `data`'s own
-    keeps the world keys `data` sets over it (`stack.sim.scenarios.apply`). An error
+    ignored, `NULL` sets null): `scenario` in `overrides` moves `data` to that world, a
+    `scenario` of `data`'s own keeps the world keys `data` sets over it
+    (`stack.sim.scenarios.apply`). An error
     in a key that `labels` names (dotted key -> e.g. the CLI option that set it) blames that label
     instead of `source`."""
     labels = labels or {}
@@ -234,7 +248,7 @@ def build_config(
     for dotted, value in overrides.items():
         if value is not None:
             key = dotted.replace("__", ".")
-            _set_dotted(data, key, value, labels.get(key, source))
+            _set_dotted(data, key, None if value is NULL else value, labels.get(key, source))
     if mismatch := boolean_mismatch(RunConfig, data):
         key, message = mismatch
         raise ConfigError(printable(f"{label_for(labels, key, source)}: {key}: {message}"))
