@@ -3,10 +3,14 @@
 
 from __future__ import annotations
 
+import math
+from numbers import Real
+from typing import Any
+
 from controllers.config import ControllerConfig
 from controllers.protocol import Controller
-from records import PlantName
-from records.plugins import CONTROLLER_GROUP, PluginError, construct, load_class
+from records import Actuation, EgoState, PlantName, Reference
+from records.plugins import CONTROLLER_GROUP, PluginError, bad_return, construct, failed_call, load_class
 
 PROTOCOL = (
     "a controller: methods reset() and step(state, reference) -> Actuation, and attributes "
@@ -27,4 +31,53 @@ def plugin_controller(config: ControllerConfig, dt: float, plant: PlantName) -> 
         missing.append("solve_times")
     if missing:
         raise PluginError(f"{config.type}: not {PROTOCOL}; it lacks {', '.join(missing)}")
-    return controller
+    return GuardedController(controller, config.type)
+
+
+ACTUATION = "an Actuation of finite acceleration [m/s²] and steering [rad]"
+
+
+class GuardedController:
+    """A plug-in controller whose `step` and `reset` are checked at every call: an exception, or a
+    step that returns anything but an `Actuation` of two finite real numbers, is `PluginFailed`
+    naming the plug-in. `fallbacks`, `solve_times` and every other attribute are the plug-in's."""
+
+    def __init__(self, controller: Controller, name: str) -> None:
+        self.controller, self.name = controller, name
+
+    @property
+    def fallbacks(self) -> int:
+        return self.controller.fallbacks
+
+    @fallbacks.setter
+    def fallbacks(self, count: int) -> None:
+        self.controller.fallbacks = count
+
+    @property
+    def solve_times(self) -> list[float]:
+        return self.controller.solve_times
+
+    @solve_times.setter
+    def solve_times(self, times: list[float]) -> None:
+        self.controller.solve_times = times
+
+    def reset(self) -> None:
+        try:
+            self.controller.reset()
+        except Exception as error:  # noqa: BLE001 - user code may raise anything
+            raise failed_call(self.name, "reset", error) from None
+
+    def step(self, state: EgoState, reference: Reference) -> Actuation:
+        try:
+            actuation = self.controller.step(state, reference)
+        except Exception as error:  # noqa: BLE001 - user code may raise anything
+            raise failed_call(self.name, "step", error) from None
+        values = (getattr(actuation, "acceleration", None), getattr(actuation, "steering", None))
+        if not isinstance(actuation, Actuation) or not all(
+            isinstance(v, Real) and not isinstance(v, bool) and math.isfinite(v) for v in values
+        ):
+            raise bad_return(self.name, "step", actuation, ACTUATION)
+        return actuation
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.controller, name)

@@ -29,6 +29,21 @@ class PluginError(ValueError):
     """A plug-in that cannot be used; the message is one line for the user."""
 
 
+class PluginFailed(RuntimeError):
+    """A plug-in that raised or returned what its protocol rules out while the work ran; the
+    message (one line) names the plug-in, the call and what came back."""
+
+
+def failed_call(plugin: str, call: str, error: BaseException) -> PluginFailed:
+    """`PluginFailed` for `plugin`'s `call` that raised `error`."""
+    return PluginFailed(f"plug-in {plugin}: {call} raised {type(error).__name__}: {_first(error)}")
+
+
+def bad_return(plugin: str, call: str, value: object, expected: str) -> PluginFailed:
+    """`PluginFailed` for `plugin`'s `call` that returned `value` instead of `expected`."""
+    return PluginFailed(f"plug-in {plugin}: {call} returned {repr(value)[:80]}; expected {expected}")
+
+
 def is_spec(value: str) -> bool:
     """Whether `value` names a class by path (it has a colon) rather than by a registered name."""
     return ":" in value
@@ -69,7 +84,7 @@ def load_class(value: str, group: str) -> type:
         module = _file_module(Path(module_name)) if module_name.endswith(".py") else _module(module_name)
     except PluginError:
         raise
-    except Exception as error:  # noqa: BLE001 - user code may raise anything while importing
+    except (Exception, SystemExit) as error:  # noqa: BLE001 - user code may raise anything while importing
         raise PluginError(f"{value}: importing it failed: {type(error).__name__}: {_first(error)}") from None
     found = getattr(module, class_name, None)
     if not inspect.isclass(found):
@@ -131,7 +146,7 @@ def construct(cls: type, offered: dict[str, Any], what: str) -> Any:
     given = offered if takes_all else {k: v for k, v in offered.items() if k in parameters}
     try:
         return cls(**given)
-    except Exception as error:  # noqa: BLE001 - user code may raise anything
+    except (Exception, SystemExit) as error:  # noqa: BLE001 - user code may raise anything
         why = f"{type(error).__name__}: {_first(error)}"
         raise PluginError(f"{what}: constructing it failed: {why}") from None
 

@@ -142,3 +142,97 @@ def test_a_config_files_own_error_still_blames_the_file_beside_a_set(tmp_path):
         ["run", "-c", str(config), "--set", "highway.duration=5", "--out", str(tmp_path / "x")],
         f"{config}: highway.lanes_count",
     )
+
+
+AGENT_RETURNING = """
+import numpy as np
+
+class Agent:
+    encoding = "paper"
+    grid_config = None
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        {body}
+"""
+CONTROLLER_RETURNING = """
+from records import Actuation
+
+class Controller:
+    fallbacks = 0
+
+    def __init__(self):
+        self.solve_times = []
+
+    def reset(self):
+        pass
+
+    def step(self, state, reference):
+        return {value}
+"""
+
+
+def cli_line(arguments: list[str], capsys) -> tuple[int, str]:
+    """The exit code and stderr of `drivestack ARGUMENTS` through its entry point."""
+    from stack.apps.options import guarded
+
+    with pytest.raises(SystemExit) as stopped:
+        guarded(app, arguments)
+    return int(stopped.value.code or 0), capsys.readouterr().err
+
+
+def test_a_plugin_that_exits_at_import_is_named_in_one_line(tmp_path):
+    plugin = tmp_path / "quits.py"
+    plugin.write_text("import sys\nsys.exit(0)\n")
+    one_line_refusal(
+        ["run", "--agent", f"{plugin}:Agent", "--out", str(tmp_path / "x")],
+        "quits.py:Agent: importing it failed: SystemExit: 0",
+    )
+    assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize(
+    ("body", "shown"),
+    [
+        ("raise KeyError('lane')", "predict raised KeyError: 'lane'"),
+        ("return 1.5, state", "predict returned 1.5; expected one action index"),
+        ("return True, state", "predict returned True; expected one action index"),
+        ("return np.array([0, 1, 2]), state", "predict returned array([0, 1, 2]); expected"),
+        ("return 7, state", "predict returned 7; expected"),
+        ("return 'LEFT', state", "predict returned 'LEFT'; expected"),
+    ],
+)
+def test_a_plugin_agents_bad_predict_is_one_line_naming_it(tmp_path, capsys, body, shown):
+    plugin = tmp_path / "bad_agent.py"
+    plugin.write_text(AGENT_RETURNING.format(body=body))
+    arguments = [
+        "run",
+        "-c",
+        str(tiny_config_file(tmp_path)),
+        "--agent",
+        f"{plugin}:Agent",
+        "--episodes",
+        "1",
+    ]
+    code, err = cli_line([*arguments, "--no-progress", "--out", str(tmp_path / "x")], capsys)
+    assert code == 1 and err.startswith(f"error: plug-in {plugin}:Agent: {shown}"), err
+    assert len(err.strip().splitlines()) == 1 and "internal error" not in err
+
+
+@pytest.mark.parametrize(
+    ("value", "shown"),
+    [
+        ("Actuation(acceleration=float('nan'), steering=0.0)", "step returned Actuation(acceleration=nan"),
+        ("'full throttle'", "step returned 'full throttle'; expected an Actuation"),
+        ("1 / 0", "step raised ZeroDivisionError: division by zero"),
+    ],
+)
+def test_a_plugin_controllers_bad_step_is_one_line_naming_it(tmp_path, capsys, value, shown):
+    plugin = tmp_path / "bad_controller.py"
+    plugin.write_text(CONTROLLER_RETURNING.format(value=value))
+    spec = f"{plugin}:Controller"
+    code, err = cli_line(
+        ["track", "--controller", spec, "--speeds", "20", "--no-progress", "--out", str(tmp_path / "x")],
+        capsys,
+    )
+    assert code == 1 and err.startswith(f"error: plug-in {spec}: {shown}"), err
+    assert not (tmp_path / "x" / "tracking.json").exists()

@@ -249,8 +249,9 @@ def test_entry_points_add_names_to_the_listings_and_the_configs(user_files, monk
     from stack.core.episodes import build_agent
 
     config = build_config({"planner": {"agent": "leftie"}, "controller": {"type": "heading-pd"}})
-    assert type(build_agent(config, 0)).__name__ == "LeftWhenBlocked"
-    assert type(make_controller(ControllerConfig(type="heading-pd"), 1 / 15)).__name__ == "HeadingPD"
+    assert type(build_agent(config, 0).agent).__name__ == "LeftWhenBlocked"
+    controller = make_controller(ControllerConfig(type="heading-pd"), 1 / 15)
+    assert type(controller.controller).__name__ == "HeadingPD"
     from stack.apps.track import controller_names
 
     assert controller_names("all")[-2:] == ["builtin", "heading-pd"]

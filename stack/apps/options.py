@@ -233,11 +233,16 @@ def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
             sys.exit(130)
         raise
     except Exception as error:  # noqa: BLE001 - the last line of defence, deliberately broad
+        from records.plugins import PluginFailed
+        from stack.core.config import printable
         from stack.core.files import write_failure
 
         ignore_signals()
         if debug:
             raise
+        if isinstance(error, PluginFailed):
+            print(f"error: {printable(str(error))}", file=sys.stderr)
+            sys.exit(1)
         if write_failure(error):
             print(f"error: {cannot_write(error)}", file=sys.stderr)
             sys.exit(2)
