@@ -245,3 +245,26 @@ def test_safety_cli_refuses_bad_input_in_one_line(tmp_path, arguments, message):
     result = CliRunner().invoke(app, ["safety", *arguments, "--out", str(tmp_path / "x")])
     assert result.exit_code == 2 and message in result.output, result.output
     assert not (tmp_path / "x").exists()
+
+
+def test_a_stop_before_a_scenario_type_has_a_point_keeps_the_others_and_exits_130(
+    tmp_path, tiny_grids, monkeypatch
+):
+    """Issue 52 (8): the stop used to end in 'internal error: ValueError: Number of columns ...'
+    while drawing the map of a type without a finished point."""
+    from stack.apps import safety as safety_app
+
+    real = safety_app.completed
+
+    def first_then_stop(*arguments, **options):
+        yield next(iter(real(*arguments, **options)))
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(safety_app, "completed", first_then_stop)
+    out = tmp_path / "safety"
+    result = CliRunner().invoke(app, ["safety", "--quick", "--out", str(out), "--no-progress"])
+    assert result.exit_code == 130, result.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] and summary["scenarios"]["lead-braking"]["points"] == 1
+    assert summary["scenarios"]["cut-out"]["points"] == 0 and not (out / "safety_cut-out.png").exists()
+    assert (out / "safety_lead-braking.png").is_file()

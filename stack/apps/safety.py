@@ -70,7 +70,7 @@ def assess_and_report(
         write_config(config, out / "config.yaml", "the resolved config of this safety assessment")
         write_json(out / "summary.json", {**meta, "scenarios": summaries})
         write_csv(out / "safety.csv", table_rows(results))
-        for kind in kinds:
+        for kind in (kind for kind in kinds if summaries[kind]["points"]):
             title = (
                 f"{kind}: {config.planner.agent} + {config.controller.type}, {config.sim.plant} plant "
                 "vs R157 careful & competent driver"
