@@ -46,3 +46,24 @@ def test_command_text_says_what_became_of_the_command():
     assert command_text(Command.LEFT, Command.LEFT) == "command LEFT"
     assert command_text(Command.LEFT, Command.STAY) == "command LEFT -> STAY (safety layer)"
     assert command_text(Command.RIGHT, None) == "command RIGHT (ignored: lane change running)"
+
+
+def test_the_road_view_is_drawn_when_the_environment_asks_for_the_dummy_driver(tmp_path):
+    """Issue 52 (7): with SDL_VIDEODRIVER=dummy highway-env skips drawing; the adapter renders
+    offscreen instead, so the GIF's road view is not black."""
+    import os
+    import subprocess
+    import sys
+
+    from tests.test_cli import tiny_config_file
+
+    out = tmp_path / "out"
+    arguments = ["run", "-c", str(tiny_config_file(tmp_path)), "--episodes", "1", "--video", "--no-progress"]
+    environment = os.environ | {"SDL_VIDEODRIVER": "dummy"}
+    done = subprocess.run(
+        [sys.executable, "-m", "stack", *arguments, "--out", str(out)], env=environment, capture_output=True
+    )
+    assert done.returncode == 0, done.stderr.decode()
+    frame = np.asarray(imageio.mimread(out / "episode0.gif")[0])[:, :, :3]
+    road = frame[4 + 2 * LINE_PX :][:ROAD_HEIGHT_PX]
+    assert road.mean() > 60 and len(np.unique(road.reshape(-1, 3), axis=0)) >= 4, "drawn, not black"

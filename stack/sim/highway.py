@@ -11,7 +11,8 @@ import os
 import weakref
 from typing import cast
 
-os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")  # "dummy" makes highway-env skip drawing
+if os.environ.get("SDL_VIDEODRIVER", "dummy") == "dummy":  # highway-env skips drawing under "dummy"
+    os.environ["SDL_VIDEODRIVER"] = "offscreen"
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 
 import gymnasium as gym
