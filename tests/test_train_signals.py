@@ -58,18 +58,23 @@ def test_a_finished_training_is_not_resumed_and_more_steps_continue_it(tmp_path)
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="env workers are processes")
-def test_a_dead_env_worker_ends_training_in_one_line_with_its_checkpoint_kept(tmp_path):
+@pytest.mark.parametrize("worker", [0, 1])
+def test_a_dead_env_worker_ends_training_in_one_line_with_its_checkpoint_kept(tmp_path, worker):
+    """The second worker too (issue 52, 6): the first one's reply is then read, SB3's `close()`
+    waited for it again, forever."""
     config = build_config({**TINY, "train": {**TINY["train"], "envs": 2, "steps": 400}})
     trainer = Trainer(config, tmp_path / "t", progress=False)
     real_save = trainer._save_checkpoint
 
     def save_then_kill_a_worker() -> int:
         steps = real_save()
-        os.kill(trainer.env.processes[0].pid, signal.SIGKILL)
+        os.kill(trainer.env.processes[worker].pid, signal.SIGKILL)
         return steps
 
     trainer._save_checkpoint = save_then_kill_a_worker
+    started = time.monotonic()
     with pytest.raises(EnvWorkerDied, match="a training environment process died .*--resume"):
         trainer.run()
+    assert time.monotonic() - started < 60, "no hang"
     assert (tmp_path / "t" / "checkpoint.npz").is_file()
     assert not any(p.is_alive() for p in trainer.env.processes)

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env import SubprocVecEnv, VecEnv
 
 from planner.model_file import CHECKPOINT
 from stack.core.config import RunConfig
@@ -74,11 +74,21 @@ def worker_death(env: object, out: Path, error: BaseException) -> str:
     return f"a training environment process died{how}; {kept}"
 
 
-def close_env(env: Monitor | VecEnv) -> None:
-    """Close `env` and its worker processes, also when one of them is dead."""
-    try:
-        env.close()
-    except (EOFError, OSError):
-        for process in getattr(env, "processes", []):
-            process.kill()
-            process.join(timeout=10)
+def close_env(env: Monitor | VecEnv, a_worker_died: bool = False) -> None:
+    """Close `env` and its worker processes. After `a_worker_died` the workers are ended without
+    SB3's goodbye exchange: a reply of a live worker may already have been read while `waiting`
+    is still set, and `close()` would wait for it forever."""
+    processes = getattr(env, "processes", [])
+    if not a_worker_died:
+        try:
+            env.close()
+            return
+        except (EOFError, OSError):
+            pass
+    for process in processes:
+        process.kill()
+        process.join(timeout=10)
+    for remote in getattr(env, "remotes", []):
+        remote.close()
+    if isinstance(env, SubprocVecEnv):
+        env.closed = True

@@ -106,7 +106,9 @@ class Trainer:
                 self.stop_requested = interrupted = True
                 steps = self._save_checkpoint()
             except (EOFError, ConnectionError) as error:
-                raise EnvWorkerDied(worker_death(self.env, self.out, error)) from None
+                death = worker_death(self.env, self.out, error)
+                close_env(self.env, a_worker_died=True)
+                raise EnvWorkerDied(death) from None
             finally:
                 close_env(self.env)
             return self._finish(steps, interrupted)
