@@ -253,3 +253,25 @@ def test_a_bare_ray_option_means_a_local_instance():
     assert bare_ray_as_local(["run", "--ray"]) == ["run", "--ray=local"]
     assert bare_ray_as_local(["run", "--ray", "--jobs", "2"]) == ["run", "--ray=local", "--jobs", "2"]
     assert bare_ray_as_local(["run", "--ray", "auto"]) == ["run", "--ray", "auto"]
+
+
+def test_a_grpc_server_that_is_not_a_ray_cluster_is_one_line_within_seconds(tmp_path):
+    """Issue 52 (17): a proxy or another gRPC service at the address (here a gRPC server with no
+    services) used to cost ~20 s of Ray's retries, then a hint about tokens."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import grpc
+
+    server = grpc.server(ThreadPoolExecutor(max_workers=1))
+    port = server.add_insecure_port("127.0.0.1:0")
+    server.start()
+    try:
+        out = tmp_path / "out"
+        started = time.monotonic()
+        result = invoke("run", "--episodes", "1", "--ray", f"127.0.0.1:{port}", "--out", str(out))
+        assert time.monotonic() - started < 15, "no minute of retries"
+    finally:
+        server.stop(None)
+    assert result.exit_code == 2, result.output
+    assert f"127.0.0.1:{port} answers gRPC, but not as a Ray cluster" in result.output
+    assert len(result.output.strip().splitlines()) == 1 and not out.exists()

@@ -77,6 +77,24 @@ def check_address(address: str) -> None:
         raise RayUnavailable(
             f"--ray {address}: {target} answers, but not as a Ray cluster (no gRPC); check the port"
         )
+    if why := not_a_gcs(target):
+        raise RayUnavailable(f"--ray {address}: {target} answers gRPC, but not as a Ray cluster ({why})")
+
+
+def not_a_gcs(target: str) -> str | None:
+    """Why the gRPC server at `target` is not a Ray cluster's GCS (the first line of the error its
+    client raised at once: a proxy or another service answers 404 or UNIMPLEMENTED), or None
+    when it is, or when it refuses only for authentication (`ray.init` then says so). Without
+    this `ray.init` retries such a server for ~20 s before failing with a hint about tokens."""
+    from ray._raylet import GcsClient  # type: ignore[attr-defined]
+
+    try:
+        with _stderr_silenced():
+            GcsClient(address=target)
+    except Exception as error:  # noqa: BLE001 - Ray raises its own RpcError and others
+        message = (str(error).splitlines() or [type(error).__name__])[0][:120]
+        return None if "auth" in message.lower() else message
+    return None
 
 
 HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
