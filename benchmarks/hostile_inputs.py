@@ -189,7 +189,30 @@ def cases(folder: Path) -> dict[str, list[str]]:
         "highway.lanes_count=2",
     ]
     found.update(folder_cases(folder))
+    found.update(round_three_cases(folder))
     return found
+
+
+def round_three_cases(folder: Path) -> dict[str, list[str]]:
+    """Issue 52: links in a results folder, over-long integers, empty lists and values, keys a
+    --set created, a plug-in that exits at import."""
+    (linked := folder / "linked").mkdir()
+    (precious := folder / "precious.txt").write_text("keep")
+    (linked / ".drivestack.lock").symlink_to(precious)
+    (digits := folder / "digits.yaml").write_text("seed: " + "9" * 4400 + "\n")
+    (quits := folder / "quits.py").write_text("import sys\nsys.exit(0)\n")
+    return {
+        "a link as the folder's lock file": ["run", "--out", str(linked)],
+        "a config integer of 4,400 digits": ["run", "-c", str(digits)],
+        "compare --agents ''": ["compare", "--agents", ""],
+        "compare --agents ',,'": ["compare", "--agents", ",,"],
+        "track --controller ''": ["track", "--controller", ""],
+        "--set highway.duration=": ["run", "--set", "highway.duration="],
+        "--set highway.duration=null": ["run", "--set", "highway.duration=null"],
+        "--set perception.features=[ttc,ttc,ttc]": ["run", "--set", "perception.features=[ttc,ttc,ttc]"],
+        "--set a 60-level key": ["run", "--set", ".".join(["a"] * 60) + "=1"],
+        "a plug-in that exits at import": ["run", "--agent", f"{quits}:Agent"],
+    }
 
 
 def folder_cases(folder: Path) -> dict[str, list[str]]:

@@ -71,6 +71,8 @@ def refusal(folder: Path, wanted: Owner, resuming: bool, restart: bool = True) -
     """Why the command `wanted` may not write `folder` (one line), or None when it may: a resumed
     command needs the same owner (or none: an older folder), a fresh one an empty folder or, with
     `restart`, one it made itself with the same config."""
+    if not plain_or_missing(folder / LOCK):
+        return NOT_PLAIN.format(path=folder / LOCK)
     found = owner_of(folder)
     if resuming:
         if found is not None and found.command != wanted.command:
@@ -126,10 +128,21 @@ def lock_file(path: Path) -> IO[str]:
     except OSError as error:
         if error.errno not in (errno.ELOOP, errno.EISDIR, errno.ENXIO):
             raise
-        raise FolderRefused(
-            f"--out: {path} is not a plain file; remove it or choose another folder"
-        ) from None
+        raise FolderRefused(NOT_PLAIN.format(path=path)) from None
     if not stat.S_ISREG(os.fstat(descriptor).st_mode):
         os.close(descriptor)
-        raise FolderRefused(f"--out: {path} is not a plain file; remove it or choose another folder")
+        raise FolderRefused(NOT_PLAIN.format(path=path))
     return os.fdopen(descriptor, "a+")
+
+
+NOT_PLAIN = "--out: {path} is not a plain file; remove it or choose another folder"
+
+
+def plain_or_missing(path: Path) -> bool:
+    """Whether `path` is a plain file (not a link to one) or nothing at all."""
+    try:
+        return stat.S_ISREG(path.lstat().st_mode)
+    except FileNotFoundError:
+        return True
+    except OSError:
+        return False
