@@ -45,6 +45,15 @@ class LearnedAgent(Policy):
         with th.no_grad():
             return self.network(th.as_tensor(batch)).numpy()
 
+    score_name = "Q-value (with the MOBIL prior's bonus)"
+
+    def scores(self, observation: np.ndarray) -> np.ndarray:
+        """The Q-values the greedy decision on one `observation` compares, per `Command`."""
+        q_values = self.q_values(observation)
+        if self.prior is not None:
+            q_values += self.prior.bonuses(np.asarray(observation).reshape(len(q_values), -1))
+        return np.asarray(q_values[0], dtype=float)
+
     def choose(self, observation: np.ndarray) -> Action:
         size = np.asarray(observation).size
         if size % self.observation_size:
@@ -70,6 +79,13 @@ class TabularAgent(Policy):
         self.metadata = metadata
         self.source = source
         self.grid_config: GridConfig = metadata.grid
+
+    score_name = "Q-value (table)"
+
+    def scores(self, observation: np.ndarray) -> np.ndarray:
+        """The table's Q-values for one tabular state, per `Command` (checked as `choose` does)."""
+        self.choose(observation)
+        return np.asarray(self.table[tuple(np.asarray(observation, dtype=np.int64).reshape(-1))], dtype=float)
 
     def choose(self, observation: np.ndarray) -> Action:
         index = tuple(np.asarray(observation, dtype=np.int64).reshape(-1))
