@@ -83,13 +83,15 @@ def assess_and_report(
             )
             plot_map(kind, [r for r in results if r.point.kind == kind], title, out / f"safety_{kind}.png")
     print_summary(summaries)
-    for result in results if folder is not None else []:
-        if result.outcome == "failure" and (folder / f"{point_name(result.point)}.rrd").is_file():
+    kept = [
+        folder / f"{point_name(r.point)}.rrd"
+        for r in results
+        if folder is not None and r.outcome == "failure"
+    ]
+    for path in kept:
+        if path.is_file():
             Console().print(
-                f"failure ({result.point.kind}): open its recording with  drivestack view "
-                f"{folder / point_name(result.point)}.rrd",
-                highlight=False,
-                soft_wrap=True,
+                f"failure: open its recording with  drivestack view {path}", highlight=False, soft_wrap=True
             )
     stopped = f" (interrupted: {len(results)} of {len(points)} points)" if interrupted else ""
     Console().print(f"results: {out}{stopped}")

@@ -94,6 +94,7 @@ class EpisodeRecording:
         self.buffers = Buffers()
         self.first: WorldState | None = None
         self.dt = 0.0
+        self.road_y0 = 0.0
         self.ticks = 0
         self.pending_scores: tuple[np.ndarray, str] | None = None
         self.safety_reacted: tuple[int, ...] = ()
@@ -111,6 +112,7 @@ class EpisodeRecording:
     def start(self, world: WorldState, dt: float, lane: int) -> None:
         """The episode begins in `world`; ticks are `dt` seconds apart; the ego keeps `lane`."""
         self.first, self.dt = world, dt
+        self.road_y0 = float(world.lanes[0].position(float(world.s[0]), 0.0)[1])
         self._vehicles(world, (), frozenset())
         self._phase(world.time, f"keep lane {lane}")
 
@@ -205,7 +207,8 @@ class EpisodeRecording:
         buffers.time.append(world.time)
         buffers.boxes.append(box_corners(world))
         buffers.roles.append(roles)
-        buffers.ego_x.append(float(world.position[0, 0]))
+        road_y = float(world.lanes[0].position(float(world.s[0]), 0.0)[1])
+        buffers.shift.append((float(world.position[0, 0]), road_y - self.road_y0))
         buffers.add("ego/speed", float(world.speed[0]))
         buffers.add("ego/d", float(world.d[0]))
         self.s_range = [

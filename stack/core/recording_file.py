@@ -33,6 +33,10 @@ COLOURS = {
     "grid": (230, 40, 200),
 }
 """RGB per vehicle role and road element."""
+WIDTHS = {"ego": -1.5, "leader": -1.5, "reacted": -1.5, "traffic": -1.0, "lines": -0.75, "edges": -1.5}
+WIDTHS |= {"reference": -1.25, "grid": -1.0}
+"""Line radius per role and road element in the viewer's UI points (rerun reads a negative radius
+so): lines stay visible however far the view is zoomed out."""
 SCORE_COLOURS = {Command.LEFT: (40, 120, 240), Command.STAY: (90, 90, 90), Command.RIGHT: (240, 120, 40)}
 UNITS = {
     "ego/speed": "m/s",
@@ -85,7 +89,9 @@ class Buffers:
     series: dict[str, list[float]] = field(default_factory=dict)
     boxes: list[np.ndarray] = field(default_factory=list)
     roles: list[np.ndarray] = field(default_factory=list)
-    ego_x: list[float] = field(default_factory=list)
+    shift: list[tuple[float, float]] = field(default_factory=list)
+    """Per sample: the ego's x [m] and how far the road's reference line has moved in y [m] since
+    the start (0 on a straight road): the road view follows both."""
     events: list[tuple[float, str, str]] = field(default_factory=list)
     phases: list[tuple[float, str]] = field(default_factory=list)
     paths: list[tuple[float, np.ndarray]] = field(default_factory=list)
@@ -115,7 +121,7 @@ def write_recording(
     recording = rr.RecordingStream(APPLICATION_ID, recording_id=path.stem + "-" + os.urandom(4).hex())
     recording.set_log_time_enabled(False)
     recording.set_log_tick_enabled(False)
-    recording.save(partial, default_blueprint=blueprint(rr))
+    recording.save(partial, default_blueprint=blueprint(rr, first))
     try:
         recording.send_recording_name(f"{path.stem}: {title}")
         recording.log("description", rr.TextDocument(title), static=True)
@@ -129,10 +135,13 @@ def write_recording(
     os.replace(partial, path)
 
 
-def blueprint(rr: Any) -> Any:
-    """The default layout: the road view beside the time series and the events."""
+def blueprint(rr: Any, world: WorldState) -> Any:
+    """The default layout: the road view (`world`'s road, around the ego) beside the time series
+    and the events."""
     rrb = rr.blueprint
-    bounds = rrb.VisualBounds2D(x_range=[-VIEW_BEHIND_M, VIEW_AHEAD_M], y_range=[-10.0, 26.0])
+    half, offsets = world.lane_width / 2, world.lane_offsets
+    across = [float(offsets.min()) - half - 8.0, float(offsets.max()) + half + 8.0]
+    bounds = rrb.VisualBounds2D(x_range=[-VIEW_BEHIND_M, VIEW_AHEAD_M], y_range=across)
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
@@ -154,7 +163,7 @@ def blueprint(rr: Any) -> Any:
 
 def _strips(rr: Any, polygons: np.ndarray) -> Any:
     """(strips, points, 2) float32 as rerun's LineStrip2D arrow array, built in one piece."""
-    import pyarrow as pa
+    import pyarrow as pa  # type: ignore[import-untyped]
 
     kind = rr.components.LineStrip2DBatch._ARROW_DATATYPE
     count, points = polygons.shape[0], polygons.shape[1] if polygons.ndim == 3 else 0
@@ -176,7 +185,7 @@ def _road(rr: Any, recording: Any, world: WorldState, s_range: list[float]) -> N
     for name, strips in (("edges", [lines[0], lines[-1]]), ("lines", lines[1:-1])):
         recording.log(
             f"scene/world/road/{name}",
-            rr.LineStrips2D(strips, colors=COLOURS[name], radii=0.15 if name == "edges" else 0.08),
+            rr.LineStrips2D(strips, colors=COLOURS[name], radii=WIDTHS[name]),
             static=True,
         )
 
@@ -186,14 +195,16 @@ def _ticks(rr: Any, recording: Any, buffers: Buffers) -> None:
     times = np.array(buffers.time)
     index = [rr.TimeColumn("sim_time", duration=times), rr.TimeColumn("tick", sequence=np.arange(len(times)))]
     shift = np.zeros((len(times), 3))
-    shift[:, 0] = -np.array(buffers.ego_x)
+    shift[:, :2] = -np.array(buffers.shift)
     recording.send_columns("scene/world", index, rr.Transform3D.columns(translation=shift))
     boxes, roles = np.concatenate(buffers.boxes), np.concatenate(buffers.roles)
     for number, role in enumerate(("ego", "leader", "reacted", "traffic")):
         chosen = roles == number
         counts = [int(np.count_nonzero(r == number)) for r in buffers.roles]
         path = f"scene/world/vehicles/{role}"
-        recording.log(path, rr.LineStrips2D.from_fields(colors=COLOURS[role], radii=0.12), static=True)
+        recording.log(
+            path, rr.LineStrips2D.from_fields(colors=COLOURS[role], radii=WIDTHS[role]), static=True
+        )
         strips = rr.LineStrips2D.columns(strips=_strips(rr, boxes[chosen])).partition(counts)
         recording.send_columns(path, index, strips)
     tick_index = [
@@ -206,12 +217,12 @@ def _ticks(rr: Any, recording: Any, buffers: Buffers) -> None:
         recording.send_columns(name, columns, rr.Scalars.columns(scalars=np.array(values, dtype=float)))
     recording.log(
         "scene/world/reference",
-        rr.LineStrips2D.from_fields(colors=COLOURS["reference"], radii=0.1),
+        rr.LineStrips2D.from_fields(colors=COLOURS["reference"], radii=WIDTHS["reference"]),
         static=True,
     )
-    for time, path in buffers.paths:
+    for time, points in buffers.paths:
         recording.set_time("sim_time", duration=time)
-        recording.log("scene/world/reference", rr.LineStrips2D([path]))
+        recording.log("scene/world/reference", rr.LineStrips2D([points]))
 
 
 def _decisions(rr: Any, recording: Any, buffers: Buffers) -> None:
@@ -227,7 +238,9 @@ def _decisions(rr: Any, recording: Any, buffers: Buffers) -> None:
             static=True,
         )
     recording.log(
-        "scene/world/grid", rr.LineStrips2D.from_fields(colors=COLOURS["grid"], radii=0.1), static=True
+        "scene/world/grid",
+        rr.LineStrips2D.from_fields(colors=COLOURS["grid"], radii=WIDTHS["grid"]),
+        static=True,
     )
     for number, decision in enumerate(buffers.decisions):
         recording.set_time("sim_time", duration=decision.time)
