@@ -54,7 +54,6 @@ ENTITIES = {
     "/decision/scores/LEFT",
     "/decision/scores/STAY",
     "/decision/scores/RIGHT",
-    "/decision/grid",
     "/events/decisions",
     "/events/maneuver",
 }

@@ -22,6 +22,7 @@ from records import Command, WorldState
 from stack.core.config import RunConfig
 from stack.core.loop_records import Tick
 from stack.core.recording_file import Buffers, Decision, write_recording
+from stack.core.recording_geometry import lane_points
 from stack.core.safety_metrics import TTC_CAP_S, SafetyMonitor, r157_min_following_distance
 
 RECORDINGS = "recordings"
@@ -30,9 +31,6 @@ REFERENCE_HORIZON_S = 6.0
 """How far ahead the ego's reference path is drawn at each decision and maneuver change [s]."""
 REFERENCE_STEP_S = 0.25
 """Spacing of the reference path's points [s]."""
-ROLES = ("ego", "leader", "reacted", "traffic")
-"""Vehicle roles, each its own entity: the ego, the leaders its cruise keeps a gap to, the vehicles
-the safety layer or emergency braking reacted to, everyone else (the first role that fits)."""
 
 
 def agent_folders(agents: Sequence[str]) -> dict[str, str]:
@@ -47,44 +45,6 @@ def agent_folders(agents: Sequence[str]) -> dict[str, str]:
     }
 
 
-def box_corners(world: WorldState) -> np.ndarray:
-    """Every vehicle's footprint as a closed polygon: (vehicles, 5, 2) world coordinates [m]."""
-    cos, sin = np.cos(world.heading), np.sin(world.heading)
-    half_l, half_w = world.length / 2, world.width / 2
-    along = np.array([1.0, 1.0, -1.0, -1.0, 1.0])
-    across = np.array([1.0, -1.0, -1.0, 1.0, 1.0])
-    dx = along[None, :] * half_l[:, None]
-    dy = across[None, :] * half_w[:, None]
-    x = world.position[:, 0:1] + dx * cos[:, None] - dy * sin[:, None]
-    y = world.position[:, 1:2] + dx * sin[:, None] + dy * cos[:, None]
-    return np.stack([x, y], axis=2).astype(np.float32)
-
-
-def grid_cells(world: WorldState, grid: OccupancyGrid) -> list[np.ndarray]:
-    """The occupied cells of `grid` (built on `world`) as closed polygons in world coordinates [m]:
-    a cell spans its lane's width and `cell_length` along the road, ego-relative."""
-    config, lane_frame = grid.config, world.lanes[0]
-    half = world.lane_width / 2
-    polygons = []
-    for row, column in zip(*np.nonzero(grid.cells > 0), strict=True):
-        lane = grid.row_lane(int(row))
-        if not 0 <= lane < world.lanes_count:
-            continue
-        start = float(world.s[0]) + (int(column) - config.ego_column - 0.5) * config.cell_length
-        d = float(world.lane_offsets[lane])
-        corners = [
-            (start, d - half),
-            (start + config.cell_length, d - half),
-            (start + config.cell_length, d + half),
-            (start, d + half),
-            (start, d - half),
-        ]
-        polygons.append(
-            np.array([lane_frame.position(s, lateral) for s, lateral in corners], dtype=np.float32)
-        )
-    return polygons
-
-
 class EpisodeRecording:
     """One episode's recording, written to `path` on `close` (the file appears whole)."""
 
@@ -94,7 +54,6 @@ class EpisodeRecording:
         self.buffers = Buffers()
         self.first: WorldState | None = None
         self.dt = 0.0
-        self.road_y0 = 0.0
         self.ticks = 0
         self.pending_scores: tuple[np.ndarray, str] | None = None
         self.safety_reacted: tuple[int, ...] = ()
@@ -107,13 +66,11 @@ class EpisodeRecording:
         self.departed = False
         self.phase = ""
         self.draw_path = True
-        self.s_range = [math.inf, -math.inf]
 
     def start(self, world: WorldState, dt: float, lane: int) -> None:
         """The episode begins in `world`; ticks are `dt` seconds apart; the ego keeps `lane`."""
         self.first, self.dt = world, dt
-        self.road_y0 = float(world.lanes[0].position(float(world.s[0]), 0.0)[1])
-        self._vehicles(world, (), frozenset())
+        self._world(world, ())
         self._phase(world.time, f"keep lane {lane}")
 
     def scores(self, values: np.ndarray, name: str) -> None:
@@ -133,9 +90,7 @@ class EpisodeRecording:
         None when not asked), what the maneuver got (`applied`) and the vehicles the layer reacted to."""
         scores, name = self.pending_scores or (None, "")
         self.pending_scores = None
-        cells = grid_cells(world, grid) if grid is not None else []
-        picture = grid.cells.astype(np.float32) if grid is not None else np.zeros((0, 0), np.float32)
-        decision = Decision(world.time, command, filtered, applied, scores, name, cells, picture)
+        decision = Decision(world.time, command, filtered, applied, scores, name, world, grid)
         self.buffers.decisions.append(decision)
         masked = filtered is not None and filtered is not command
         self.safety_reacted = reacted_to if masked else ()
@@ -176,9 +131,8 @@ class EpisodeRecording:
             self.draw_path = True
         if self.draw_path:
             self._reference_path(tick)
-        leaders = frozenset(leader.vehicle for leader in reference.leaders)
         reacted = self.safety_reacted + ((cause,) if cause is not None else ())
-        self._vehicles(world, reacted, leaders)
+        self._world(world, tuple(leader.vehicle for leader in reference.leaders), reacted)
         ego = world.ego_state()
         add = self.buffers.add
         add("control/steering", actuation.steering)
@@ -192,29 +146,14 @@ class EpisodeRecording:
         add("maneuver/target_lane", tick.target)
         self._safety(time, world, monitor)
 
-    def _vehicles(self, world: WorldState, reacted: tuple[int, ...], leaders: frozenset[int]) -> None:
-        """The vehicles' boxes and roles, and the ego's series, at `world`."""
-        roles = np.full(world.count, 3, dtype=np.int8)
-        if reacted or leaders:
-            ids = world.ids.tolist()
-            for row, vehicle in enumerate(ids):
-                if vehicle in reacted:
-                    roles[row] = 2
-                elif vehicle in leaders:
-                    roles[row] = 1
-        roles[0] = 0
+    def _world(self, world: WorldState, leaders: tuple[int, ...], reacted: tuple[int, ...] = ()) -> None:
+        """A snapshot to draw (records never change once made: kept as it is, drawn at `close`),
+        with the ids of the ego's leaders and of the vehicles the safety layers reacted to."""
         buffers = self.buffers
-        buffers.time.append(world.time)
-        buffers.boxes.append(box_corners(world))
-        buffers.roles.append(roles)
-        road_y = float(world.lanes[0].position(float(world.s[0]), 0.0)[1])
-        buffers.shift.append((float(world.position[0, 0]), road_y - self.road_y0))
+        buffers.worlds.append(world)
+        buffers.marked.append((leaders, reacted))
         buffers.add("ego/speed", float(world.speed[0]))
         buffers.add("ego/d", float(world.d[0]))
-        self.s_range = [
-            min(self.s_range[0], float(world.s.min())),
-            max(self.s_range[1], float(world.s.max())),
-        ]
 
     def _safety(self, time: float, world: WorldState, monitor: SafetyMonitor) -> None:
         """The TTC to the leader in the ego's lane, R157's distance, and the monitor's events."""
@@ -253,9 +192,7 @@ class EpisodeRecording:
         times = reference.time + np.arange(0.0, REFERENCE_HORIZON_S + 1e-9, REFERENCE_STEP_S)
         d, _ = reference.lateral.samples(times)
         s = float(world.s[0]) + float(world.speed[0]) * (times - reference.time)
-        lane = world.lanes[0]
-        path = np.array([lane.position(float(a), float(b)) for a, b in zip(s, d, strict=True)], np.float32)
-        self.buffers.paths.append((reference.time, path))
+        self.buffers.paths.append((reference.time, lane_points(world.lanes[0], s, d).astype(np.float32)))
 
     def _event(self, time: float, text: str, level: str) -> None:
         self.buffers.events.append((time, text, level))
@@ -270,7 +207,7 @@ class EpisodeRecording:
             raise RuntimeError("an episode recording is written after its episode started")
         if self.min_ttc_time is not None:
             self._event(self.min_ttc_time, f"minimum TTC of the episode: {self.last_min_ttc:.2f} s", "INFO")
-        write_recording(self.path, self.title, self.first, self.dt, self.buffers, self.s_range)
+        write_recording(self.path, self.title, self.buffers)
         return self.path
 
 

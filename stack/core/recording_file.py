@@ -15,7 +15,9 @@ from typing import Any
 
 import numpy as np
 
+from perception.grid import OccupancyGrid
 from records import Command, WorldState
+from stack.core.recording_geometry import box_corners, grid_cells, lane_points
 
 APPLICATION_ID = "drivestack"
 VIEW_AHEAD_M, VIEW_BEHIND_M = 150.0, 60.0
@@ -33,6 +35,9 @@ COLOURS = {
     "grid": (230, 40, 200),
 }
 """RGB per vehicle role and road element."""
+ROLES = ("ego", "leader", "reacted", "traffic")
+"""Vehicle roles, each its own entity: the ego, the leaders its cruise keeps a gap to, the vehicles
+the safety layer or emergency braking reacted to, everyone else (the first role that fits)."""
 WIDTHS = {"ego": -1.5, "leader": -1.5, "reacted": -1.5, "traffic": -1.0, "lines": -0.75, "edges": -1.5}
 WIDTHS |= {"reference": -1.25, "grid": -1.0}
 """Line radius per role and road element in the viewer's UI points (rerun reads a negative radius
@@ -58,7 +63,7 @@ UNITS = {
 class Decision:
     """One decision point: when [s], the agent's command, what the safety layer let through
     (`filtered`), what the maneuver received (`applied`; None while a lane change ran), the agent's
-    scores per command, and the occupied cells of the grid it saw as polygons [m]."""
+    scores per command (in `score_name`'s unit), the world then and the grid the agent saw."""
 
     time: float
     command: Command
@@ -66,8 +71,8 @@ class Decision:
     applied: Command | None
     scores: np.ndarray | None
     score_name: str
-    cells: list[np.ndarray]
-    grid: np.ndarray
+    world: WorldState
+    grid: OccupancyGrid | None
 
     @property
     def outcome(self) -> str:
@@ -85,13 +90,12 @@ class Decision:
 class Buffers:
     """Everything recorded so far, column by column (one entry per sample)."""
 
-    time: list[float] = field(default_factory=list)
+    worlds: list[WorldState] = field(default_factory=list)
+    """The world at the start and after every tick."""
+    marked: list[tuple[tuple[int, ...], tuple[int, ...]]] = field(default_factory=list)
+    """Per world: the ids of the ego's leaders and of the vehicles the safety layer or emergency
+    braking reacted to."""
     series: dict[str, list[float]] = field(default_factory=dict)
-    boxes: list[np.ndarray] = field(default_factory=list)
-    roles: list[np.ndarray] = field(default_factory=list)
-    shift: list[tuple[float, float]] = field(default_factory=list)
-    """Per sample: the ego's x [m] and how far the road's reference line has moved in y [m] since
-    the start (0 on a straight road): the road view follows both."""
     events: list[tuple[float, str, str]] = field(default_factory=list)
     phases: list[tuple[float, str]] = field(default_factory=list)
     paths: list[tuple[float, np.ndarray]] = field(default_factory=list)
@@ -111,11 +115,10 @@ def quiet_rerun() -> Any:
     return rerun
 
 
-def write_recording(
-    path: Path, title: str, first: WorldState, dt: float, buffers: Buffers, s_range: list[float]
-) -> None:
+def write_recording(path: Path, title: str, buffers: Buffers) -> None:
     """The recording in `buffers` as `path`, written under a temporary name and renamed."""
     rr = quiet_rerun()
+    first = buffers.worlds[0]
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_name(path.name + ".part")
     recording = rr.RecordingStream(APPLICATION_ID, recording_id=path.stem + "-" + os.urandom(4).hex())
@@ -125,7 +128,7 @@ def write_recording(
     try:
         recording.send_recording_name(f"{path.stem}: {title}")
         recording.log("description", rr.TextDocument(title), static=True)
-        _road(rr, recording, first, s_range)
+        _road(rr, recording, buffers.worlds)
         _ticks(rr, recording, buffers)
         _decisions(rr, recording, buffers)
         _events(rr, recording, buffers)
@@ -174,14 +177,14 @@ def _strips(rr: Any, polygons: np.ndarray) -> Any:
     )
 
 
-def _road(rr: Any, recording: Any, world: WorldState, s_range: list[float]) -> None:
+def _road(rr: Any, recording: Any, worlds: list[WorldState]) -> None:
     """Lane lines and road edges (static), along the stretch of road the vehicles covered."""
-    lane = world.lanes[0]
-    start, end = s_range[0] - VIEW_AHEAD_M, s_range[1] + VIEW_AHEAD_M
-    s = np.arange(start, end + ROAD_STEP_M, ROAD_STEP_M)
+    world = worlds[0]
+    covered = np.concatenate([w.s for w in worlds[:: max(1, len(worlds) // 50)] + worlds[-1:]])
+    s = np.arange(covered.min() - VIEW_AHEAD_M, covered.max() + VIEW_AHEAD_M + ROAD_STEP_M, ROAD_STEP_M)
     half, offsets = world.lane_width / 2, sorted(float(o) for o in world.lane_offsets)
     boundaries = [offsets[0] - half] + [o + half for o in offsets]
-    lines = [np.array([lane.position(float(x), b) for x in s], dtype=np.float32) for b in boundaries]
+    lines = [lane_points(world.lanes[0], s, np.full(len(s), b)).astype(np.float32) for b in boundaries]
     for name, strips in (("edges", [lines[0], lines[-1]]), ("lines", lines[1:-1])):
         recording.log(
             f"scene/world/road/{name}",
@@ -192,20 +195,27 @@ def _road(rr: Any, recording: Any, world: WorldState, s_range: list[float]) -> N
 
 def _ticks(rr: Any, recording: Any, buffers: Buffers) -> None:
     """Per tick: the view's shift, every vehicle's box by role, the reference paths and the series."""
-    times = np.array(buffers.time)
+    worlds = buffers.worlds
+    times = np.array([world.time for world in worlds])
     index = [rr.TimeColumn("sim_time", duration=times), rr.TimeColumn("tick", sequence=np.arange(len(times)))]
-    shift = np.zeros((len(times), 3))
-    shift[:, :2] = -np.array(buffers.shift)
-    recording.send_columns("scene/world", index, rr.Transform3D.columns(translation=shift))
-    boxes, roles = np.concatenate(buffers.boxes), np.concatenate(buffers.roles)
-    for number, role in enumerate(("ego", "leader", "reacted", "traffic")):
+    recording.send_columns("scene/world", index, rr.Transform3D.columns(translation=_view_shift(worlds)))
+    counts = np.array([world.count for world in worlds])
+    boxes = box_corners(
+        np.concatenate([world.position for world in worlds]),
+        np.concatenate([world.heading for world in worlds]),
+        np.concatenate([world.length for world in worlds]),
+        np.concatenate([world.width for world in worlds]),
+    )
+    owner = np.repeat(np.arange(len(worlds)), counts)
+    roles = _roles(owner, np.concatenate([world.ids for world in worlds]), buffers.marked)
+    for number, role in enumerate(ROLES):
         chosen = roles == number
-        counts = [int(np.count_nonzero(r == number)) for r in buffers.roles]
         path = f"scene/world/vehicles/{role}"
         recording.log(
             path, rr.LineStrips2D.from_fields(colors=COLOURS[role], radii=WIDTHS[role]), static=True
         )
-        strips = rr.LineStrips2D.columns(strips=_strips(rr, boxes[chosen])).partition(counts)
+        per_world = np.bincount(owner[chosen], minlength=len(worlds))
+        strips = rr.LineStrips2D.columns(strips=_strips(rr, boxes[chosen])).partition(per_world)
         recording.send_columns(path, index, strips)
     tick_index = [
         rr.TimeColumn("sim_time", duration=times[1:]),
@@ -215,54 +225,98 @@ def _ticks(rr: Any, recording: Any, buffers: Buffers) -> None:
         recording.log(name, rr.SeriesLines(names=f"{name.split('/')[-1]} [{UNITS[name]}]"), static=True)
         columns = index if len(values) == len(times) else tick_index
         recording.send_columns(name, columns, rr.Scalars.columns(scalars=np.array(values, dtype=float)))
-    recording.log(
-        "scene/world/reference",
-        rr.LineStrips2D.from_fields(colors=COLOURS["reference"], radii=WIDTHS["reference"]),
-        static=True,
-    )
-    for time, points in buffers.paths:
-        recording.set_time("sim_time", duration=time)
-        recording.log("scene/world/reference", rr.LineStrips2D([points]))
+    style = rr.LineStrips2D.from_fields(colors=COLOURS["reference"], radii=WIDTHS["reference"])
+    recording.log("scene/world/reference", style, static=True)
+    if buffers.paths:
+        paths = np.stack([points for _, points in buffers.paths])
+        when = [rr.TimeColumn("sim_time", duration=[time for time, _ in buffers.paths])]
+        strips = rr.LineStrips2D.columns(strips=_strips(rr, paths)).partition(np.ones(len(paths), dtype=int))
+        recording.send_columns("scene/world/reference", when, strips)
+
+
+def _roles(
+    owner: np.ndarray, ids: np.ndarray, marked: list[tuple[tuple[int, ...], tuple[int, ...]]]
+) -> np.ndarray:
+    """Each box's role (index in `ROLES`): `owner` is the world of each box, `ids` its vehicle,
+    `marked` per world the leaders and the vehicles reacted to (reacted wins); a world's first box is
+    the ego."""
+    roles = np.full(len(ids), ROLES.index("traffic"), dtype=np.int8)
+    span = int(ids.max()) + 1 if len(ids) else 1
+    key = owner.astype(np.int64) * span + ids
+    for role, column in (("leader", 0), ("reacted", 1)):
+        wanted = [world * span + vehicle for world, marks in enumerate(marked) for vehicle in marks[column]]
+        if wanted:
+            roles[np.isin(key, np.array(wanted, dtype=np.int64))] = ROLES.index(role)
+    roles[np.flatnonzero(np.diff(owner, prepend=-1))] = ROLES.index("ego")
+    return roles
+
+
+def _view_shift(worlds: list[WorldState]) -> np.ndarray:
+    """Per world, the translation [m] that keeps the road view on the ego: back by the ego's x,
+    and by how far the road's reference line has moved in y since the start (0 on a straight
+    road), so the view follows the road through a bend and the ego's lane changes show."""
+    shift = np.zeros((len(worlds), 3))
+    shift[:, 0] = [-float(world.position[0, 0]) for world in worlds]
+    lane, s = worlds[0].lanes[0], np.array([float(world.s[0]) for world in worlds])
+    road_y = lane_points(lane, s, np.zeros(len(s)))[:, 1]
+    shift[:, 1] = -(road_y - road_y[0])
+    return shift
 
 
 def _decisions(rr: Any, recording: Any, buffers: Buffers) -> None:
     """Per decision point: the command, what the safety layer made of it, the scores, the grid."""
+    decisions = buffers.decisions
     for name in ("command", "applied"):
-        recording.log(
-            f"decision/{name}", rr.SeriesPoints(names=f"{name} (lane shift: -1 left, +1 right)"), static=True
-        )
+        style = rr.SeriesPoints(names=f"{name} (lane shift: -1 left, +1 right)")
+        recording.log(f"decision/{name}", style, static=True)
     for command in Command:
-        recording.log(
-            f"decision/scores/{command.name}",
-            rr.SeriesPoints(names=command.name, colors=SCORE_COLOURS[command]),
-            static=True,
-        )
-    recording.log(
-        "scene/world/grid",
-        rr.LineStrips2D.from_fields(colors=COLOURS["grid"], radii=WIDTHS["grid"]),
-        static=True,
+        style = rr.SeriesPoints(names=command.name, colors=SCORE_COLOURS[command])
+        recording.log(f"decision/scores/{command.name}", style, static=True)
+    style = rr.LineStrips2D.from_fields(colors=COLOURS["grid"], radii=WIDTHS["grid"])
+    recording.log("scene/world/grid", style, static=True)
+    if not decisions:
+        return
+    index = [
+        rr.TimeColumn("sim_time", duration=[decision.time for decision in decisions]),
+        rr.TimeColumn("decision", sequence=np.arange(len(decisions))),
+    ]
+    commands = np.array([decision.command.lane_shift for decision in decisions], dtype=float)
+    applied = [
+        decision.applied.lane_shift if decision.applied is not None else np.nan for decision in decisions
+    ]
+    recording.send_columns("decision/command", index, rr.Scalars.columns(scalars=commands))
+    recording.send_columns(
+        "decision/applied", index, rr.Scalars.columns(scalars=np.array(applied, dtype=float))
     )
-    for number, decision in enumerate(buffers.decisions):
-        recording.set_time("sim_time", duration=decision.time)
-        recording.set_time("decision", sequence=number)
-        recording.log("decision/command", rr.Scalars(decision.command.lane_shift))
-        applied = decision.applied.lane_shift if decision.applied is not None else np.nan
-        recording.log("decision/applied", rr.Scalars(applied))
-        text = f"decision {number}: {decision.command.name}, {decision.outcome}"
-        if decision.scores is not None:
-            text += f"; {decision.score_name}: " + ", ".join(
-                f"{command.name} {value:.3g}"
-                for command, value in zip(Command, decision.scores, strict=False)
-            )
-            for command, value in zip(Command, decision.scores, strict=False):
-                recording.log(f"decision/scores/{command.name}", rr.Scalars(float(value)))
-        level = "INFO" if decision.outcome == "permitted" else "WARN"
-        recording.log("events/decisions", rr.TextLog(text, level=level))
-        recording.log(
-            "decision/grid", rr.Tensor(decision.grid, dim_names=["row (lane)", "cell (along the road)"])
+    scores = np.array(
+        [
+            d.scores[: len(Command)] if d.scores is not None else np.full(len(Command), np.nan)
+            for d in decisions
+        ]
+    )
+    for command in Command:
+        column = rr.Scalars.columns(scalars=scores[:, command])
+        recording.send_columns(f"decision/scores/{command.name}", index, column)
+    texts = [_decision_text(number, decision) for number, decision in enumerate(decisions)]
+    levels = ["INFO" if decision.outcome == "permitted" else "WARN" for decision in decisions]
+    recording.send_columns("events/decisions", index, rr.TextLog.columns(text=texts, level=levels))
+    cells = [grid_cells(d.world, d.grid) if d.grid is not None else np.zeros((0, 5, 2)) for d in decisions]
+    polygons = _strips(rr, np.concatenate(cells)) if cells else None
+    counts = np.array([len(c) for c in cells])
+    recording.send_columns(
+        "scene/world/grid", index, rr.LineStrips2D.columns(strips=polygons).partition(counts)
+    )
+
+
+def _decision_text(number: int, decision: Decision) -> str:
+    """One line for the events: the command, what became of it, the agent's scores."""
+    text = f"decision {number}: {decision.command.name}, {decision.outcome}"
+    if decision.scores is not None:
+        rated = zip(Command, decision.scores, strict=False)
+        text += f"; {decision.score_name}: " + ", ".join(
+            f"{command.name} {value:.3g}" for command, value in rated
         )
-        recording.log("scene/world/grid", rr.LineStrips2D(decision.cells))
-    recording.reset_time()
+    return text
 
 
 def _events(rr: Any, recording: Any, buffers: Buffers) -> None:
