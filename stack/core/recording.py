@@ -21,7 +21,7 @@ from perception.grid import OccupancyGrid
 from records import Command, WorldState
 from stack.core.config import RunConfig
 from stack.core.loop_records import Tick
-from stack.core.recording_file import Buffers, Decision, write_recording
+from stack.core.recording_file import Buffers, Decision, Frame, write_recording
 from stack.core.recording_geometry import lane_points
 from stack.core.safety_metrics import TTC_CAP_S, SafetyMonitor, r157_min_following_distance
 
@@ -70,6 +70,7 @@ class EpisodeRecording:
     def start(self, world: WorldState, dt: float, lane: int) -> None:
         """The episode begins in `world`; ticks are `dt` seconds apart; the ego keeps `lane`."""
         self.first, self.dt = world, dt
+        self.buffers.first = world
         self._world(world, ())
         self._phase(world.time, f"keep lane {lane}")
 
@@ -147,10 +148,10 @@ class EpisodeRecording:
         self._safety(time, world, monitor)
 
     def _world(self, world: WorldState, leaders: tuple[int, ...], reacted: tuple[int, ...] = ()) -> None:
-        """A snapshot to draw (records never change once made: kept as it is, drawn at `close`),
-        with the ids of the ego's leaders and of the vehicles the safety layers reacted to."""
+        """A snapshot to draw at `close` (its vehicles' arrays, `Frame`), with the ids of the ego's
+        leaders and of the vehicles the safety layer or emergency braking reacted to."""
         buffers = self.buffers
-        buffers.worlds.append(world)
+        buffers.frames.append(Frame.of(world))
         buffers.marked.append((leaders, reacted))
         buffers.add("ego/speed", float(world.speed[0]))
         buffers.add("ego/d", float(world.d[0]))

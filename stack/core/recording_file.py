@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -86,12 +86,32 @@ class Decision:
         return "permitted"
 
 
+class Frame(NamedTuple):
+    """What a recording keeps of one world: its time [s], and per vehicle (row 0 the ego) the id,
+    centre [m], heading [rad], length and width [m] and position along the road `s` [m]. The
+    arrays are the world's own (a record's arrays never change), so keeping them copies nothing."""
+
+    time: float
+    ids: np.ndarray
+    position: np.ndarray
+    heading: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+    s: np.ndarray
+
+    @classmethod
+    def of(cls, world: WorldState) -> Frame:
+        return cls(world.time, world.ids, world.position, world.heading, world.length, world.width, world.s)
+
+
 @dataclass
 class Buffers:
     """Everything recorded so far, column by column (one entry per sample)."""
 
-    worlds: list[WorldState] = field(default_factory=list)
-    """The world at the start and after every tick."""
+    first: WorldState | None = None
+    """The world at the start (its road is drawn)."""
+    frames: list[Frame] = field(default_factory=list)
+    """The vehicles at the start and after every tick."""
     marked: list[tuple[tuple[int, ...], tuple[int, ...]]] = field(default_factory=list)
     """Per world: the ids of the ego's leaders and of the vehicles the safety layer or emergency
     braking reacted to."""
@@ -118,7 +138,9 @@ def quiet_rerun() -> Any:
 def write_recording(path: Path, title: str, buffers: Buffers) -> None:
     """The recording in `buffers` as `path`, written under a temporary name and renamed."""
     rr = quiet_rerun()
-    first = buffers.worlds[0]
+    first = buffers.first
+    if first is None:
+        raise ValueError("a recording starts with its first world")
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_name(path.name + ".part")
     recording = rr.RecordingStream(APPLICATION_ID, recording_id=path.stem + "-" + os.urandom(4).hex())
@@ -128,8 +150,8 @@ def write_recording(path: Path, title: str, buffers: Buffers) -> None:
     try:
         recording.send_recording_name(f"{path.stem}: {title}")
         recording.log("description", rr.TextDocument(title), static=True)
-        _road(rr, recording, buffers.worlds)
-        _ticks(rr, recording, buffers)
+        _road(rr, recording, first, buffers.frames)
+        _ticks(rr, recording, first, buffers)
         _decisions(rr, recording, buffers)
         _events(rr, recording, buffers)
         recording.flush()
@@ -177,10 +199,9 @@ def _strips(rr: Any, polygons: np.ndarray) -> Any:
     )
 
 
-def _road(rr: Any, recording: Any, worlds: list[WorldState]) -> None:
-    """Lane lines and road edges (static), along the stretch of road the vehicles covered."""
-    world = worlds[0]
-    covered = np.concatenate([w.s for w in worlds[:: max(1, len(worlds) // 50)] + worlds[-1:]])
+def _road(rr: Any, recording: Any, world: WorldState, frames: list[Frame]) -> None:
+    """Lane lines and road edges (static) of `world`'s road, along the stretch the vehicles covered."""
+    covered = np.concatenate([f.s for f in frames[:: max(1, len(frames) // 50)] + frames[-1:]])
     s = np.arange(covered.min() - VIEW_AHEAD_M, covered.max() + VIEW_AHEAD_M + ROAD_STEP_M, ROAD_STEP_M)
     half, offsets = world.lane_width / 2, sorted(float(o) for o in world.lane_offsets)
     boundaries = [offsets[0] - half] + [o + half for o in offsets]
@@ -193,13 +214,14 @@ def _road(rr: Any, recording: Any, worlds: list[WorldState]) -> None:
         )
 
 
-def _ticks(rr: Any, recording: Any, buffers: Buffers) -> None:
+def _ticks(rr: Any, recording: Any, first: WorldState, buffers: Buffers) -> None:
     """Per tick: the view's shift, every vehicle's box by role, the reference paths and the series."""
-    worlds = buffers.worlds
+    worlds = buffers.frames
     times = np.array([world.time for world in worlds])
     index = [rr.TimeColumn("sim_time", duration=times), rr.TimeColumn("tick", sequence=np.arange(len(times)))]
-    recording.send_columns("scene/world", index, rr.Transform3D.columns(translation=_view_shift(worlds)))
-    counts = np.array([world.count for world in worlds])
+    shift = _view_shift(first, worlds)
+    recording.send_columns("scene/world", index, rr.Transform3D.columns(translation=shift))
+    counts = np.array([len(world.ids) for world in worlds])
     boxes = box_corners(
         np.concatenate([world.position for world in worlds]),
         np.concatenate([world.heading for world in worlds]),
@@ -251,13 +273,13 @@ def _roles(
     return roles
 
 
-def _view_shift(worlds: list[WorldState]) -> np.ndarray:
+def _view_shift(first: WorldState, worlds: list[Frame]) -> np.ndarray:
     """Per world, the translation [m] that keeps the road view on the ego: back by the ego's x,
     and by how far the road's reference line has moved in y since the start (0 on a straight
     road), so the view follows the road through a bend and the ego's lane changes show."""
     shift = np.zeros((len(worlds), 3))
     shift[:, 0] = [-float(world.position[0, 0]) for world in worlds]
-    lane, s = worlds[0].lanes[0], np.array([float(world.s[0]) for world in worlds])
+    lane, s = first.lanes[0], np.array([float(world.s[0]) for world in worlds])
     road_y = lane_points(lane, s, np.zeros(len(s)))[:, 1]
     shift[:, 1] = -(road_y - road_y[0])
     return shift
