@@ -52,6 +52,8 @@ class MobilAgent(Policy):
         self.grid_config = grid.model_copy(
             update={"lanes": "ego", "lateral_reach": 1, "features": ("relative_speed", "ego_speed")}
         )
+        self.last_gains: tuple[np.ndarray | None, np.ndarray] = (None, np.zeros(N_ACTIONS))
+        """The last observation decided on and its `gains` (`scores` reads them)."""
 
     def _decode(self, observation: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         g = self.grid_config
@@ -82,6 +84,11 @@ class MobilAgent(Policy):
     score_name = "MOBIL incentive [m/s²]"
 
     def scores(self, observation: np.ndarray) -> np.ndarray:
+        """`gains`, those of the last decision when it was on this very observation."""
+        seen, gains = self.last_gains
+        return (gains if seen is observation else self.gains(observation)).copy()
+
+    def gains(self, observation: np.ndarray) -> np.ndarray:
         """Per `Command`: the ego's IDM acceleration gain [m/s²] from the change (0 for STAY; NaN
         where the lane is occupied beside the ego or its new follower would brake too hard)."""
         presence, relative, speed = self._decode(observation)
@@ -105,7 +112,8 @@ class MobilAgent(Policy):
         return gains
 
     def choose(self, observation: np.ndarray) -> Action:
-        gains = self.scores(observation)
+        gains = self.gains(observation)
+        self.last_gains = (observation, gains)
         best, best_gain = Command.STAY, THRESHOLD
         for command in (Command.LEFT, Command.RIGHT):
             if gains[command] > best_gain:

@@ -1,5 +1,5 @@
 """The `drivestack` commands that do not run episodes here: `sweep` (training runs on Ray Tune),
-`export`, and the `agents` and `controllers` listings. Parsing and one-line errors only, like
+`export`, `view` (rerun's viewer on recordings), and the `agents` and `controllers` listings. Parsing and one-line errors only, like
 `stack.apps.cli`, which registers them."""
 
 from __future__ import annotations
