@@ -83,7 +83,9 @@ def test_ray_tasks_write_their_episodes_recordings_into_the_folder(tmp_path, loc
     local = invoke(*common, "--out", str(tmp_path / "local"))
     remote = invoke(*common, "--ray", "local", "--record", "--out", str(tmp_path / "ray"))
     assert local.exit_code == 0 and remote.exit_code == 0, remote.output
-    assert episode_rows(tmp_path / "local" / "episodes.csv") == episode_rows(tmp_path / "ray" / "episodes.csv")
+    assert episode_rows(tmp_path / "local" / "episodes.csv") == episode_rows(
+        tmp_path / "ray" / "episodes.csv"
+    )
     names = sorted(path.name for path in (tmp_path / "ray" / "recordings").iterdir())
     assert names == ["episode-0000.rrd", "episode-0001.rrd"]
 

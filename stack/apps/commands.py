@@ -1,6 +1,6 @@
 """The `drivestack` commands that do not run episodes here: `sweep` (training runs on Ray Tune),
-`export`, `view` (rerun's viewer on recordings), and the `agents` and `controllers` listings. Parsing and one-line errors only, like
-`stack.apps.cli`, which registers them."""
+`export`, `view` (rerun's viewer on recordings), and the `agents` and `controllers` listings.
+Parsing and one-line errors only, like `stack.apps.cli`, which registers them."""
 
 from __future__ import annotations
 
