@@ -18,6 +18,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from stack.apps.view import stop
+
 FLAGS = (
     "--headless",
     "--no-sandbox",
@@ -105,12 +107,7 @@ def screenshot(url: str, path: Path, wait_s: float, size: tuple[int, int] = (160
             shot = pipe.call("Page.captureScreenshot", {"format": "png"}, session)
             path.write_bytes(base64.b64decode(shot["data"]))
         finally:
-            browser.terminate()
-            try:
-                browser.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                browser.kill()
-                browser.wait()
+            stop(browser, grace_s=10.0)
             os.close(commands_write)
             os.close(answers_read)
     return path

@@ -154,10 +154,15 @@ def view(recordings: list[Path], web: bool) -> int:
     try:
         return process.wait()
     except KeyboardInterrupt:
-        process.terminate()
-        try:
-            process.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
+        stop(process)
         return 0
+
+
+def stop(process: subprocess.Popen, grace_s: float = 5.0) -> None:
+    """End `process`: asked to (SIGTERM), then killed if it is still running after `grace_s` [s]."""
+    process.terminate()
+    try:
+        process.wait(timeout=grace_s)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()
