@@ -1,7 +1,8 @@
 # Two entry points: `make run` (closed loop, default agent) and `make test`; `make test-slow` runs the
 # tests marked slow (pyproject's addopts deselect them by default; a later -m replaces that).
 # Both create or refresh .venv themselves; the stamp re-installs when the package metadata changes.
-# `make test` installs the ray extra too: the suite tests --ray and sweep on a local Ray instance.
+# `make test` installs the ray and viz extras too: the suite tests --ray and sweep on a local Ray instance,
+# and --record / drivestack view with rerun.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -13,7 +14,7 @@ ARGS ?=
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[dev,ray]'
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[dev,ray,viz]'
 	touch $(STAMP)
 
 run: $(STAMP)
@@ -36,6 +37,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/loop_profile.py --scenario overtaking
 	$(BIN)/python benchmarks/sim_speed.py
 	$(BIN)/python benchmarks/oracle_cost.py
+	$(BIN)/python benchmarks/record_cost.py
 	$(BIN)/python benchmarks/feasible_spawns.py
 	$(BIN)/python benchmarks/grid_speed.py
 	$(BIN)/python benchmarks/deepcars_speed.py

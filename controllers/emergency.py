@@ -28,6 +28,8 @@ class EmergencyBraking:
 
     def reset(self) -> None:
         self.active = False
+        self.cause: int | None = None
+        """The leader (its id) whose approach started the braking running now (None: none runs)."""
         self.activations = 0
         self.speeds: dict[int, float] = {}
         self.slowing: dict[int, float] = {}
@@ -52,6 +54,7 @@ class EmergencyBraking:
                 or leader.gap / closing < self.trigger_ttc_s
                 or (stops_in is not None and speed**2 / (2 * (room + stops_in)) > self.comfort_deceleration)
             ):
+                self.cause = leader.vehicle
                 return True
         return False
 
@@ -72,6 +75,7 @@ class EmergencyBraking:
         self.speeds, self.slowing = {leader.vehicle: leader.speed for leader in leaders}, slowing
         if self.active:
             self.active = self.closing_in(speed, leaders)
+            self.cause = self.cause if self.active else None
         elif self.needed(speed, leaders, braking):
             self.active = True
             self.activations += 1

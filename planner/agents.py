@@ -37,6 +37,17 @@ class Agent(Protocol):
     ) -> Prediction: ...
 
 
+@runtime_checkable
+class Scored(Protocol):
+    """An agent that can say how it rated each command of a decision (a recording shows it):
+    `scores(observation)` gives one value per `Command` (NaN where a command was not rated), in
+    the unit `score_name` names."""
+
+    score_name: str
+
+    def scores(self, observation: np.ndarray) -> np.ndarray: ...
+
+
 def decide(agent: Agent, observation: np.ndarray) -> Command:
     """One greedy decision."""
     action, _ = agent.predict(observation, deterministic=True)

@@ -39,13 +39,24 @@ class LearnedAgent(Policy):
         self.encoding: Encoding = metadata.encoding
         self.grid_config: GridConfig = metadata.grid
         self.prior = MobilPrior(metadata.grid, metadata.mobil_prior) if metadata.mobil_prior else None
+        self.last_rated: tuple[np.ndarray | None, np.ndarray] = (None, np.zeros((1, N_ACTIONS)))
+        """The last observation decided on and its `rated` values (`scores` reads them)."""
 
     def q_values(self, observation: np.ndarray) -> np.ndarray:
         batch = np.asarray(observation, dtype=np.float32).reshape(-1, self.observation_size)
         with th.no_grad():
             return self.network(th.as_tensor(batch)).numpy()
 
-    def choose(self, observation: np.ndarray) -> Action:
+    score_name = "Q-value (with the MOBIL prior's bonus)"
+
+    def scores(self, observation: np.ndarray) -> np.ndarray:
+        """The Q-values the greedy decision on one `observation` compares, per `Command` (those of
+        the last decision when it was on this very observation: no second pass of the network)."""
+        seen, rated = self.last_rated
+        return np.asarray((rated if seen is observation else self.rated(observation))[0], dtype=float)
+
+    def rated(self, observation: np.ndarray) -> np.ndarray:
+        """(batch, actions): the Q-values with the MOBIL prior's bonus, checked for size."""
         size = np.asarray(observation).size
         if size % self.observation_size:
             raise ValueError(
@@ -56,6 +67,11 @@ class LearnedAgent(Policy):
         q_values = self.q_values(observation)
         if self.prior is not None:
             q_values += self.prior.bonuses(np.asarray(observation).reshape(len(q_values), -1))
+        return q_values
+
+    def choose(self, observation: np.ndarray) -> Action:
+        q_values = self.rated(observation)
+        self.last_rated = (observation, q_values)
         actions = q_values.argmax(axis=1)
         return actions[0] if np.asarray(observation).ndim == 1 else actions
 
@@ -70,6 +86,13 @@ class TabularAgent(Policy):
         self.metadata = metadata
         self.source = source
         self.grid_config: GridConfig = metadata.grid
+
+    score_name = "Q-value (table)"
+
+    def scores(self, observation: np.ndarray) -> np.ndarray:
+        """The table's Q-values for one tabular state, per `Command` (checked as `choose` does)."""
+        self.choose(observation)
+        return np.asarray(self.table[tuple(np.asarray(observation, dtype=np.int64).reshape(-1))], dtype=float)
 
     def choose(self, observation: np.ndarray) -> Action:
         index = tuple(np.asarray(observation, dtype=np.int64).reshape(-1))

@@ -52,6 +52,8 @@ class MobilAgent(Policy):
         self.grid_config = grid.model_copy(
             update={"lanes": "ego", "lateral_reach": 1, "features": ("relative_speed", "ego_speed")}
         )
+        self.last_gains: tuple[np.ndarray | None, np.ndarray] = (None, np.zeros(N_ACTIONS))
+        """The last observation decided on and its `gains` (`scores` reads them)."""
 
     def _decode(self, observation: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         g = self.grid_config
@@ -79,12 +81,22 @@ class MobilAgent(Policy):
                 return distance - g.cell_length, relative[row, column]
         return None
 
-    def choose(self, observation: np.ndarray) -> Action:
+    score_name = "MOBIL incentive [m/s²]"
+
+    def scores(self, observation: np.ndarray) -> np.ndarray:
+        """`gains`, those of the last decision when it was on this very observation."""
+        seen, gains = self.last_gains
+        return (gains if seen is observation else self.gains(observation)).copy()
+
+    def gains(self, observation: np.ndarray) -> np.ndarray:
+        """Per `Command`: the ego's IDM acceleration gain [m/s²] from the change (0 for STAY; NaN
+        where the lane is occupied beside the ego or its new follower would brake too hard)."""
         presence, relative, speed = self._decode(observation)
         ego_column = self.grid_config.ego_column
         current = self._neighbour(presence, relative, 1, ahead=True)
         gain_now = idm(speed, speed + current[1], current[0]) if current else idm(speed, speed, FREE_GAP)
-        best, best_gain = Command.STAY, THRESHOLD
+        gains = np.full(N_ACTIONS, np.nan)
+        gains[Command.STAY] = 0.0
         for command, row in ((Command.LEFT, 0), (Command.RIGHT, 2)):
             if presence[row, ego_column] > 0:
                 continue
@@ -94,11 +106,18 @@ class MobilAgent(Policy):
                 follower_speed = speed + follower[1]
                 if idm(follower_speed, speed, follower[0]) < -SAFE_DECELERATION:
                     continue
-            gain = (
+            gains[command] = (
                 idm(speed, speed + leader[1], leader[0]) if leader else idm(speed, speed, FREE_GAP)
             ) - gain_now
-            if gain > best_gain:
-                best, best_gain = command, gain
+        return gains
+
+    def choose(self, observation: np.ndarray) -> Action:
+        gains = self.gains(observation)
+        self.last_gains = (observation, gains)
+        best, best_gain = Command.STAY, THRESHOLD
+        for command in (Command.LEFT, Command.RIGHT):
+            if gains[command] > best_gain:
+                best, best_gain = command, float(gains[command])
         return np.array(best)
 
 

@@ -51,30 +51,39 @@ class SafetyCounts:
 
 
 class SafetyLayer:
-    """Masks unsafe commands and flags lane changes to abort; counts both."""
+    """Masks unsafe commands and flags lane changes to abort; counts both. `reacted_to` holds the
+    ids of the vehicles whose gap made it act last (a recording marks them)."""
 
     def __init__(self, config: SafetyConfig) -> None:
         self.config = config
         self.masked = 0
         self.aborted = 0
+        self.reacted_to: tuple[int, ...] = ()
 
     @property
     def counts(self) -> SafetyCounts:
         return SafetyCounts(self.masked, self.aborted)
 
     def gap_is_safe(self, world: WorldState, lane: int, min_gap: float, min_ttc: float, strict: bool) -> bool:
+        return not self.unsafe_neighbours(world, lane, min_gap, min_ttc, strict)
+
+    def unsafe_neighbours(
+        self, world: WorldState, lane: int, min_gap: float, min_ttc: float, strict: bool
+    ) -> tuple[int, ...]:
+        """The vehicles (ids) ahead and behind in `lane` closer than the gap [m] or TTC [s] allows."""
         config = self.config
         v = float(world.speed[0])
         ahead, behind = world.neighbours(lane)
+        unsafe: tuple[int, ...] = ()
         if ahead is not None and not self._clear(
             ahead, max(min_gap, config.front_time_gap_s * v * strict), v - ahead.speed, min_ttc
         ):
-            return False
+            unsafe += (ahead.vehicle,)
         if behind is not None and not self._clear(
             behind, max(min_gap, config.rear_time_gap_s * behind.speed * strict), behind.speed - v, min_ttc
         ):
-            return False
-        return True
+            unsafe += (behind.vehicle,)
+        return unsafe
 
     @staticmethod
     def _clear(other: Neighbour, min_gap: float, closing: float, min_ttc: float) -> bool:
@@ -95,14 +104,22 @@ class SafetyLayer:
         if self.permits(command, world, lane):
             return command
         self.masked += 1
+        target = lane + command.lane_shift
+        config = self.config
+        if 0 <= target < world.lanes_count:
+            self.reacted_to = self.unsafe_neighbours(world, target, config.min_gap_m, config.min_ttc_s, True)
+        else:
+            self.reacted_to = ()
         return Command.STAY
 
     def should_abort(self, world: WorldState, target: int) -> bool:
         """True when the gap in `target` has closed below the abort margins."""
         if not self.config.enabled:
             return False
-        unsafe = not self.gap_is_safe(
-            world, target, self.config.abort_gap_m, self.config.abort_ttc_s, strict=False
+        unsafe = self.unsafe_neighbours(
+            world, target, self.config.abort_gap_m, self.config.abort_ttc_s, False
         )
-        self.aborted += unsafe
-        return unsafe
+        if unsafe:
+            self.aborted += 1
+            self.reacted_to = unsafe
+        return bool(unsafe)

@@ -39,6 +39,7 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
     assert "| road act" in run("loop_profile.py", "--episodes", "1", "--duration", "1").replace("&nbsp;", "")
     assert "cheaper" in run("oracle_cost.py", "--seeds", "0", "--duration", "2")
     assert "| control ticks" in run("oracle_cost.py", "--profile", "--seeds", "0", "--duration", "2")
+    assert "| all |" in run("record_cost.py", "--seeds", "0", "--duration", "2", "--repeats", "1")
     assert "env steps/s" in run("train_rate.py", "--steps", "510")
     training = yaml.safe_load((ROOT / "configs" / "train" / "ddqn.yaml").read_text())
     training |= {"scenario": None, "highway": {"vehicles_count": 10, "duration": 3}}

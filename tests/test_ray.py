@@ -77,6 +77,19 @@ def test_compare_on_ray_gives_the_summaries_of_one_job(tmp_path, local_ray):
     assert [outcome(row) for row in rows[0]] == [outcome(row) for row in rows[1]]
 
 
+def test_ray_tasks_write_their_episodes_recordings_into_the_folder(tmp_path, local_ray):
+    pytest.importorskip("rerun", reason="rerun-sdk (the viz extra) is not installed")
+    common = ["run", "--agent", "rule", "--episodes", "2", *TINY_RUN]
+    local = invoke(*common, "--out", str(tmp_path / "local"))
+    remote = invoke(*common, "--ray", "local", "--record", "--out", str(tmp_path / "ray"))
+    assert local.exit_code == 0 and remote.exit_code == 0, remote.output
+    assert episode_rows(tmp_path / "local" / "episodes.csv") == episode_rows(
+        tmp_path / "ray" / "episodes.csv"
+    )
+    names = sorted(path.name for path in (tmp_path / "ray" / "recordings").iterdir())
+    assert names == ["episode-0000.rrd", "episode-0001.rrd"]
+
+
 @pytest.mark.slow
 def test_plug_ins_from_outside_the_repository_give_the_same_results_on_ray(tmp_path, local_ray, monkeypatch):
     """An agent in a file and a controller as a module, both in a folder outside the repository

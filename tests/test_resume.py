@@ -32,7 +32,9 @@ def test_a_run_beside_another_agent_resumes_each_agent_from_its_own_journal(tmp_
     ran: list[tuple[str, int]] = []
     real = episodes.run_episode
     monkeypatch.setattr(
-        episodes, "run_episode", lambda c, e, f=None: ran.append((c.planner.agent, e)) or real(c, e, f)
+        episodes,
+        "run_episode",
+        lambda c, e, *more, **kw: ran.append((c.planner.agent, e)) or real(c, e, *more, **kw),
     )
     resumed = CliRunner().invoke(app, [*arguments, "--out", str(out), "--resume", "--no-progress"])
     assert resumed.exit_code == 0, resumed.output

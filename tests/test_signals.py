@@ -106,7 +106,9 @@ def test_a_stopped_comparison_keeps_the_agents_run_so_far_and_resume_finishes_it
         handle.write('{"episode": 3, "seed": 1, "ste')
     ran: list[int] = []
     real = episodes.run_episode
-    monkeypatch.setattr(episodes, "run_episode", lambda c, e, f=None: ran.append(e) or real(c, e, f))
+    monkeypatch.setattr(
+        episodes, "run_episode", lambda c, e, *more, **kw: ran.append(e) or real(c, e, *more, **kw)
+    )
     resumed = CliRunner().invoke(app, [*arguments, "--out", str(out), "--resume"])
     assert resumed.exit_code == 0, resumed.output
     assert len(ran) == 12 - rows[1]["episodes"] and not list(out.glob("*.partial*"))
@@ -236,7 +238,7 @@ def test_an_interrupt_before_the_first_episode_exits_130_and_resume_runs_it(tmp_
     out = tmp_path / "run"
     arguments = ["run", "-c", str(tiny_config_file(tmp_path)), "--agent", "keep-lane", "--episodes", "1"]
 
-    def interrupted(*_: object) -> None:
+    def interrupted(*_: object, **__: object) -> None:
         raise KeyboardInterrupt
 
     monkeypatch.setattr(episodes, "run_episode", interrupted)

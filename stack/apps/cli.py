@@ -10,13 +10,14 @@ from typing import Any, cast
 import typer
 
 from records.plugins import SPEC_FORMS
-from stack.apps.commands import agents, controllers, export, sweep
+from stack.apps.commands import agents, controllers, export, sweep, view
 from stack.apps.folders import claimed, claimed_for, episodes_kept, resumed
 from stack.apps.options import (
     AGAIN,
     JOBS_OPTION,
     PLANT_HELP,
     RAY_OPTION,
+    RECORD_HELP,
     SET_HELP,
     TRAIN_CONFIG,
     VARIANT_HELP,
@@ -28,6 +29,7 @@ from stack.apps.options import (
     listed,
     per_agent,
     ray_or_fail,
+    rerun_or_fail,
     until_interrupted,
 )
 from stack.apps.plugin_checks import agent_name_or_fail, plugins_or_fail
@@ -79,8 +81,10 @@ def run(
     progress: bool = typer.Option(True, help="Show a progress bar."),
     beside: str | None = typer.Option(None, help="Also run this agent on the same seeds, then both."),
     resume: bool = typer.Option(False, help=RESUME_HELP),
+    record: bool = typer.Option(False, "--record", help=RECORD_HELP.format(item="episode")),
 ) -> None:
     """Run seeded closed-loop episodes and write a results folder."""
+    rerun_or_fail("--record", record)
     agent_name_or_fail("--beside", beside)
     pairs = [(agent, model)] + ([(beside, None)] if beside is not None else [])
     cfgs = per_agent(
@@ -103,7 +107,8 @@ def run(
     from stack.apps.run import run_and_report
 
     until_interrupted(
-        lambda: run_and_report(cfgs, folder, video, jobs, progress, ray, done), lambda: episodes_kept(folder)
+        lambda: run_and_report(cfgs, folder, video, jobs, progress, ray, done, record),
+        lambda: episodes_kept(folder),
     )
 
 
@@ -121,8 +126,10 @@ def track(
     out: Path | None = typer.Option(None, help="Results folder (default: runs/track-<time>)."),
     ray: str | None = RAY_OPTION,
     progress: bool = typer.Option(True, help="Show a progress bar."),
+    record: bool = typer.Option(False, "--record", help=RECORD_HELP.format(item="maneuver")),
 ) -> None:
     """Single lane changes on empty straight and curved roads: tracking metrics and plots."""
+    rerun_or_fail("--record", record)
     from records import PLANTS
     from stack.apps.track import controller_names, parse_speeds, track_and_report
 
@@ -139,7 +146,7 @@ def track(
     ray_or_fail(ray)
     folder = claimed_for("track", out, f"{names}{plants}{speed_list}", cfg)
     until_interrupted(
-        lambda: track_and_report(names, speed_list, cfg, folder, progress, cast(Any, plants), ray),
+        lambda: track_and_report(names, speed_list, cfg, folder, progress, cast(Any, plants), ray, record),
         lambda: f"the table above holds every maneuver measured; {AGAIN}",
     )
 
@@ -162,8 +169,10 @@ def compare(
     out: Path | None = typer.Option(None, help="Results folder (default: runs/compare-<time>)."),
     resume: bool = typer.Option(False, help=RESUME_HELP),
     progress: bool = typer.Option(True, help="Show progress bars."),
+    record: bool = typer.Option(False, "--record", help=RECORD_HELP.format(item="episode and agent")),
 ) -> None:
     """Every agent on the same seeded episodes: one table, one bar plot."""
+    rerun_or_fail("--record", record)
     try:
         model_paths = dict(entry.split("=", 1) for entry in models.split(",") if entry)
     except ValueError:
@@ -196,7 +205,7 @@ def compare(
     from stack.apps.compare import compare_and_report
 
     until_interrupted(
-        lambda: compare_and_report(configs, folder, jobs, progress, baseline, ray, done),
+        lambda: compare_and_report(configs, folder, jobs, progress, baseline, ray, done, record),
         lambda: episodes_kept(folder),
     )
 
@@ -218,8 +227,12 @@ def safety(
     jobs: int = JOBS_OPTION,
     ray: str | None = RAY_OPTION,
     progress: bool = typer.Option(True, help="Show a progress bar."),
+    record: bool = typer.Option(
+        False, "--record", help=RECORD_HELP.format(item="failure point (or --point)")
+    ),
 ) -> None:
     """UN R157-style safety assessment: lead braking, cut-in, cut-out grids against the careful driver."""
+    rerun_or_fail("--record", record)
     from stack.sim.safety_scenarios import SCENARIO_KINDS, parse_point
 
     kinds = cast(Any, chosen("--scenario", scenario, SCENARIO_KINDS))
@@ -251,9 +264,9 @@ def safety(
     from stack.apps.safety import assess_and_report, replay
 
     if chosen_point is not None:
-        until_interrupted(lambda: replay(cfg, chosen_point, video, folder))
+        until_interrupted(lambda: replay(cfg, chosen_point, video, folder, record))
     else:
-        until_interrupted(lambda: assess_and_report(cfg, kinds, quick, folder, jobs, progress, ray))
+        until_interrupted(lambda: assess_and_report(cfg, kinds, quick, folder, jobs, progress, ray, record))
 
 
 @app.command()
@@ -271,6 +284,7 @@ app.command()(export)
 app.command()(agents)
 app.command()(controllers)
 app.command()(sweep)
+app.command()(view)
 
 
 @reproduce_app.command("deepcars")

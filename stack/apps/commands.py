@@ -1,6 +1,6 @@
 """The `drivestack` commands that do not run episodes here: `sweep` (training runs on Ray Tune),
-`export`, and the `agents` and `controllers` listings. Parsing and one-line errors only, like
-`stack.apps.cli`, which registers them."""
+`export`, `view` (rerun's viewer on recordings), and the `agents` and `controllers` listings.
+Parsing and one-line errors only, like `stack.apps.cli`, which registers them."""
 
 from __future__ import annotations
 
@@ -138,3 +138,27 @@ def _listing(descriptions: dict[str, str], group: str, width: int) -> None:
     for name, target in entry_points(group).items():
         typer.echo(f"{name:{width}} installed plug-in {target}")
     typer.echo(f"{'':{width}} or a plug-in: {SPEC_FORMS} (docs/plugins.md)")
+
+
+def view(
+    path: Path = typer.Argument(..., help="A recording (.rrd) or a results folder made with --record."),
+    worst: bool = typer.Option(
+        False, "--worst", help="Open the folder's worst episode (collision, else slowest)."
+    ),
+    agent: str | None = typer.Option(None, help="With --worst on a comparison: whose worst episode."),
+    web: bool = typer.Option(False, "--web", help="Serve rerun's web viewer on 127.0.0.1 instead."),
+) -> None:
+    """Open rerun's viewer on a recording, a results folder's recordings or its worst episode."""
+    from stack.apps.options import rerun_or_fail
+
+    rerun_or_fail("view")
+    from stack.apps.view import recordings_in, rerun_program, view
+
+    try:
+        recordings = recordings_in(path, worst, agent)
+        rerun_program()
+    except ValueError as error:
+        fail(str(error))
+    code = view(recordings, web)
+    if code:
+        raise typer.Exit(code=code)

@@ -20,6 +20,7 @@ from stack.core.executors import shared_workers
 from stack.core.files import EpisodeJournal, save_figure, write_csv, write_json
 from stack.core.interrupts import deferred
 from stack.core.metrics import EpisodeResult
+from stack.core.recording import RECORDINGS, agent_folders
 from stack.core.statistics import Interval, mean_interval, paired_difference, rate_interval
 
 MEANS = (
@@ -79,14 +80,17 @@ def compare(
     progress: bool = True,
     ray: str | None = None,
     done: dict[str, list[EpisodeResult]] | None = None,
+    record: Path | None = None,
 ) -> list[RunResults]:
     """One run per config (one config per agent, the same episodes and seeds), over `jobs`
     processes (started once for all the agents) or as Ray tasks at address `ray`, each finished
     episode recorded in its agent's journal as it finishes; `done` holds each agent's episodes an
     interrupted comparison finished (`stack.apps.resume.resumable`). Ctrl-C stops the comparison:
     the agents run so far are returned (the last one with the episodes it finished); none raises
-    KeyboardInterrupt."""
+    KeyboardInterrupt. With `record` (a folder), each agent's episodes are recorded into its own
+    subfolder (`stack.core.recording.agent_folders`)."""
     runs: list[RunResults] = []
+    folders = agent_folders([config.planner.agent for config in configs])
     with shared_workers():
         for config, journal in zip(configs, journals, strict=True):
             finished = (done or {}).get(config.planner.agent, [])
@@ -99,6 +103,7 @@ def compare(
                         ray=ray,
                         on_finished=journal.record,
                         done=finished,
+                        record=record / folders[config.planner.agent] if record is not None else None,
                     )
                 )
             except KeyboardInterrupt:
@@ -132,12 +137,16 @@ def compare_and_report(
     baseline: str | None = None,
     ray: str | None = None,
     done: dict[str, list[EpisodeResult]] | None = None,
+    record: bool = False,
 ) -> bool:
     """Run every config, write `out` (comparison.json, comparison.png), print the table; True
     when Ctrl-C cut the comparison short (the agents run so far are written, the journals kept
-    for `--resume`). `done`: the episodes resumed (`stack.apps.resume.resumable`)."""
+    for `--resume`). `done`: the episodes resumed (`stack.apps.resume.resumable`). With `record`,
+    the episodes' recordings go to out/recordings/AGENT, and the command that opens each agent's
+    worst episode is printed."""
     journals = started(configs, out, done)
-    runs = compare(configs, journals, jobs=jobs, progress=progress, ray=ray, done=done)
+    folder = out / RECORDINGS if record else None
+    runs = compare(configs, journals, jobs=jobs, progress=progress, ray=ray, done=done, record=folder)
     interrupted = len(runs) < len(configs) or bool(runs[-1].summary["interrupted"])
     rows = comparison(runs, baseline)
     with deferred(interrupt_after=False):
@@ -152,6 +161,12 @@ def compare_and_report(
     print(markdown(rows), end="")
     stopped = " (interrupted: the agents run so far; the same command with --resume finishes it)"
     print(f"results: {out}" + (stopped if interrupted else ""))
+    if folder is not None:
+        folders = agent_folders([config.planner.agent for config in configs])
+        for results in runs:
+            name = folders[results.summary["agent"]]
+            if any((folder / name).glob("episode-*.rrd")):
+                print(f"worst episode of {name}: drivestack view {out} --worst --agent {name}")
     return interrupted
 
 

@@ -142,6 +142,15 @@ def ray_or_fail(address: str | None) -> None:
         fail(str(error))
 
 
+def rerun_or_fail(option: str, wanted: bool = True) -> None:
+    """With `wanted` (`--record`, `view`), refuse in one line, before any work, when rerun is not
+    installed (it is the optional extra `viz`)."""
+    import importlib.util
+
+    if wanted and importlib.util.find_spec("rerun") is None:
+        fail(f"{option}: needs rerun (rerun-sdk), which is not installed: pip install 'drivestack[viz]'")
+
+
 def bare_ray_as_local(arguments: list[str]) -> list[str]:
     """`--ray` without an address (last, or followed by another option) as `--ray local`."""
     return [
@@ -255,6 +264,10 @@ def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
 
 
 RAY_OPTION = typer.Option(None, "--ray", metavar="[ADDRESS]", help=RAY_HELP)
+RECORD_HELP = (
+    "Write a rerun recording (.rrd) per {item} into OUT/recordings (docs/recording.md; open it with "
+    "drivestack view); needs pip install 'drivestack\\[viz]'."
+)
 VERSION_OPTION = typer.Option(
     False, "--version", callback=_print_version, is_eager=True, help="Print the version and exit."
 )

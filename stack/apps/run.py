@@ -21,6 +21,7 @@ from stack.core.episodes import run
 from stack.core.files import replacing, write_csv, write_json
 from stack.core.interrupts import deferred
 from stack.core.metrics import EpisodeResult
+from stack.core.recording import RECORDINGS
 
 LANE_CHANGE_SPEED = 0.3
 """Lateral speed [m/s] above which an episode counts as changing lane in the traces plot."""
@@ -37,16 +38,28 @@ def run_and_report(
     progress: bool,
     ray: str | None = None,
     done: dict[str, list[EpisodeResult]] | None = None,
+    record: bool = False,
 ) -> bool:
     """Run the first config's episodes (over `jobs` processes, or Ray tasks at address `ray`),
     write `out`, print the tables; True when Ctrl-C cut the run short (the finished episodes are
     written, and kept journaled for `--resume`). Raises KeyboardInterrupt if none finished. A
     second config (`--beside AGENT`) then drives the same seeds: `beside.json` and a table hold
     both agents with the paired difference to it. `done`: the episodes resumed
-    (`stack.apps.resume.resumable`)."""
+    (`stack.apps.resume.resumable`). With `record`, every episode run writes its rerun recording
+    into out/recordings (the `--beside` agent's into out/recordings/beside)."""
     journals = started(configs, out, done)
     finished = [(done or {}).get(config.planner.agent, []) for config in configs]
-    results = run(configs[0], video, progress, jobs, ray, on_finished=journals[0].record, done=finished[0])
+    folder = out / RECORDINGS if record else None
+    results = run(
+        configs[0],
+        video,
+        progress,
+        jobs,
+        ray,
+        on_finished=journals[0].record,
+        done=finished[0],
+        record=folder,
+    )
     with deferred(interrupt_after=False):
         write_results(out, results.summary, results.episodes, results.frames)
     print_tables(results.summary, results.episodes)
@@ -56,7 +69,10 @@ def run_and_report(
     rows = None
     if len(configs) > 1 and not interrupted:
         try:
-            beside = run(configs[1], False, progress, jobs, ray, journals[1].record, finished[1])
+            beside_folder = folder / "beside" if folder is not None else None
+            beside = run(
+                configs[1], False, progress, jobs, ray, journals[1].record, finished[1], beside_folder
+            )
             interrupted = bool(beside.summary["interrupted"])
             rows = comparison([results, beside], baseline=configs[1].planner.agent)
         except KeyboardInterrupt:
@@ -70,6 +86,10 @@ def run_and_report(
         print(markdown(rows), end="")
     stopped = " (interrupted: the same command with --resume finishes it)"
     Console().print(f"results: {out}" + (stopped if interrupted else ""))
+    if folder is not None and any(folder.glob("episode-*.rrd")):
+        Console().print(
+            f"replay the worst episode: drivestack view {out} --worst", highlight=False, soft_wrap=True
+        )
     return interrupted
 
 

@@ -19,7 +19,8 @@ from stack.core.config import RunConfig, write_config
 from stack.core.executors import completed
 from stack.core.files import replacing, write_csv, write_json
 from stack.core.interrupts import deferred
-from stack.core.safety_assessment import Assessed, assess, drive_reference, drive_stack
+from stack.core.recording import RECORDINGS
+from stack.core.safety_assessment import Assessed, assess, drive_reference, drive_stack, point_name
 from stack.sim.safety_scenarios import PARAMETERS, Point, ScenarioKind, grid
 
 
@@ -37,15 +38,20 @@ def assess_and_report(
     jobs: int,
     progress: bool,
     ray: str | None = None,
+    record: bool = False,
 ) -> bool:
     """Assess every point of `kinds`' grids, write `out`, print the table and the replay commands
-    of the failures; True when Ctrl-C cut it short (the points finished are written)."""
+    of the failures; True when Ctrl-C cut it short (the points finished are written). With
+    `record`, each failure point's drive is recorded in out/recordings, and the command that opens
+    it is printed."""
     points = [point for kind in kinds for point in grid(kind, quick)]
+    folder = out / RECORDINGS if record else None
+    tasks = [(config, p, folder) if folder is not None else (config, p) for p in points]
     done: dict[int, Assessed] = {}
     interrupted = False
     with tqdm(total=len(points), unit="point", disable=not progress) as bar:
         try:
-            for index, result in completed(assess, [(config, p) for p in points], jobs, ray):
+            for index, result in completed(assess, tasks, jobs, ray):
                 done[index] = result
                 bar.update(1)
                 bar.set_postfix(failures=sum(r.outcome == "failure" for r in done.values()))
@@ -77,6 +83,16 @@ def assess_and_report(
             )
             plot_map(kind, [r for r in results if r.point.kind == kind], title, out / f"safety_{kind}.png")
     print_summary(summaries)
+    kept = [
+        folder / f"{point_name(r.point)}.rrd"
+        for r in results
+        if folder is not None and r.outcome == "failure"
+    ]
+    for path in kept:
+        if path.is_file():
+            Console().print(
+                f"failure: open its recording with  drivestack view {path}", highlight=False, soft_wrap=True
+            )
     stopped = f" (interrupted: {len(results)} of {len(points)} points)" if interrupted else ""
     Console().print(f"results: {out}{stopped}")
     return interrupted
@@ -92,11 +108,13 @@ def table_rows(results: list[Assessed]) -> list[dict[str, object]]:
     return rows
 
 
-def replay(config: RunConfig, point: Point, video: bool, out: Path) -> bool:
+def replay(config: RunConfig, point: Point, video: bool, out: Path, record: bool = False) -> bool:
     """Drive one point with both drivers, print the outcome, and with `video` write the stack's
-    drive as out/safety_<type>.gif; False (never interrupted)."""
+    drive as out/safety_<type>.gif, with `record` as a recording in out/recordings; False (never
+    interrupted)."""
     frames: list[np.ndarray] | None = [] if video else None
-    result = Assessed(point, drive_stack(config, point, frames), drive_reference(config, point))
+    folder = out / RECORDINGS if record else None
+    result = Assessed(point, drive_stack(config, point, frames, folder), drive_reference(config, point))
     with deferred(interrupt_after=False):
         write_config(config, out / "config.yaml", f"the resolved config; point {point.kind} {point.text}")
         write_json(out / "point.json", result.row())
@@ -112,6 +130,8 @@ def replay(config: RunConfig, point: Point, video: bool, out: Path) -> bool:
         highlight=False,
     )
     Console().print(f"results: {out}", highlight=False)
+    if folder is not None:
+        Console().print(f"open it: drivestack view {folder / point_name(point)}.rrd", highlight=False)
     return False
 
 

@@ -15,6 +15,7 @@ MPC fallbacks.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from contextlib import closing
 from dataclasses import asdict
@@ -36,6 +37,7 @@ from stack.core.executors import completed
 from stack.core.files import write_json
 from stack.core.interrupts import deferred
 from stack.core.metrics import Tracking, lateral_series, tracking
+from stack.core.recording import RECORDINGS, episode_recording
 from stack.sim.empty_road import BuiltinDriver, EmptyRoad, PlantKind, RoadKind
 
 TRACK_CONTROLLERS: tuple[str, ...] = (*CONTROLLER_NAMES, "builtin")
@@ -88,10 +90,12 @@ def run_maneuver(
     direction: str,
     duration: float,
     dt: float,
+    record: Path | None = None,
 ) -> TrackedLaneChange:
     """One lane change to the `direction` ("left" or "right") at `speeds` [m/s], or starting at
     `speeds[0]` with the cruise set to `speeds[1]`, in the closed loop: lane keeping for LEAD_IN_S,
-    the change (however long the car's speed makes it), lane keeping for SETTLE_S."""
+    the change (however long the car's speed makes it), lane keeping for SETTLE_S. With `record`
+    (a folder), the maneuver is recorded there (`maneuver_name`.rrd)."""
     speed, end_speed = speeds if isinstance(speeds, tuple) else (speeds, speeds)
     builtin = controller_name == "builtin"
     road = EmptyRoad(road_kind, "builtin" if builtin else plant, speed, dt)
@@ -106,7 +110,10 @@ def run_maneuver(
             "controller": controller.model_copy(update={"lane_change_duration_s": duration}),
         }
     )
-    loop = ClosedLoop(run_config, road, controller=BuiltinDriver(road) if builtin else None)
+    name = maneuver_name(controller_name, road_kind, plant, (speed, end_speed), direction)
+    recording = episode_recording(run_config, record, name, 0)
+    given = BuiltinDriver(road) if builtin else None
+    loop = ClosedLoop(run_config, road, controller=given, recording=recording)
     loop.reset(seed=0)
     command = Command.LEFT if direction == "left" else Command.RIGHT
     planned = loop.start_lane_change(command, at_time=LEAD_IN_S)
@@ -115,6 +122,8 @@ def run_maneuver(
     while loop.changing_lane and loop.world.time < LEAD_IN_S + MAX_CHANGE_S:
         loop.act(Command.STAY, ticks=1)
     loop.act(Command.STAY, ticks=round(SETTLE_S / dt))
+    if recording is not None:
+        recording.close()
     traces, solves = loop.traces(), loop.solve_statistics()
     time, d = traces.time[:-1], traces.d[:-1]
     heading, speed_trace, d_reference = traces.heading[:-1], traces.speed[:-1], traces.d_reference
@@ -143,6 +152,12 @@ def run_maneuver(
     )
 
 
+def maneuver_name(controller: str, road: RoadKind, plant: str, speeds: Speeds, direction: str) -> str:
+    """A maneuver's file name (no suffix): controller, road, plant, speed [m/s], direction."""
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", label(controller)).strip("._")
+    return f"{safe}-{road}-{plant}-{speed_label(speeds)}mps-{direction}"
+
+
 def _run_maneuver(arguments: tuple) -> TrackedLaneChange:
     """`run_maneuver` on one tuple of arguments (a task for `completed`)."""
     return run_maneuver(*arguments)
@@ -156,11 +171,12 @@ def track_and_report(
     progress: bool,
     plants: tuple[PlantName, ...] = PLANTS,
     ray: str | None = None,
+    record: bool = False,
 ) -> bool:
     """Every maneuver (here, or as Ray tasks at address `ray`) with a progress bar, then the table
     (before the files: a folder that cannot be written loses no figure measured), the files and
     where they are; True when Ctrl-C cut it short (the maneuvers finished are written; none
-    finished: KeyboardInterrupt)."""
+    finished: KeyboardInterrupt). With `record`, each maneuver's recording goes to out/recordings."""
     builtin_runs = 1 if "kinematic" in plants else 0
     total = (
         sum(len(speeds_on(road, speeds)) for road in ROADS)
@@ -177,6 +193,7 @@ def track_and_report(
             plants=plants,
             progress=lambda: bar.update(1),
             ray=ray,
+            record=out / RECORDINGS if record else None,
         )
     print_tracking(maneuvers)
     with deferred(interrupt_after=False):
@@ -185,6 +202,8 @@ def track_and_report(
     interrupted = len(maneuvers) < total
     stopped = f" (interrupted: the {len(maneuvers)} of {total} maneuvers finished)"
     Console().print(f"results: {out}" + (stopped if interrupted else ""))
+    if record:
+        Console().print(f"replay a maneuver: drivestack view {out / RECORDINGS}/NAME.rrd", highlight=False)
     return interrupted
 
 
@@ -198,11 +217,13 @@ def measure(
     plants: tuple[PlantName, ...] = PLANTS,
     progress: Callable[[], object] | None = None,
     ray: str | None = None,
+    record: Path | None = None,
 ) -> list[TrackedLaneChange]:
     """All maneuvers, in a fixed order whatever ran them (here, or Ray tasks at address `ray`).
-    Ctrl-C keeps the maneuvers finished (none: it is raised)."""
+    Ctrl-C keeps the maneuvers finished (none: it is raised). `record`: the folder each maneuver
+    writes its recording into."""
     chosen = [
-        (name, config, road_kind, plant, speed, direction, duration, dt)
+        (name, config, road_kind, plant, speed, direction, duration, dt, record)
         for road_kind in roads
         for plant in plants
         for name in controllers

@@ -33,6 +33,7 @@ from stack.core.metrics import EpisodeRecorder, EpisodeResult, Traces
 from stack.core.safety_metrics import SafetyMonitor
 
 if TYPE_CHECKING:
+    from stack.core.recording import EpisodeRecording
     from stack.core.video import Video
 
 SNAPSHOT_TIME_S = 10.0
@@ -75,13 +76,16 @@ class ClosedLoop:
         frames: list[np.ndarray] | None = None,
         grid: GridConfig | None = None,
         controller: Controller | None = None,
+        recording: EpisodeRecording | None = None,
     ) -> None:
         """`grid` overrides the config's perception grid (an agent that needs its own view);
         `frames`, when given, collects a rendered frame every `VIDEO_FRAME_TICKS` ticks;
-        `controller` replaces the one the config names (reset at every episode)."""
+        `controller` replaces the one the config names (reset at every episode); `recording`,
+        when given, records the episode (`stack.core.recording`; one loop, one episode)."""
         self.config = config
         self.plant = plant
         self.frames = frames
+        self.recording = recording
         self.given_controller = controller
         self.builder = OccupancyGridBuilder(grid or grid_config(config))
 
@@ -97,7 +101,7 @@ class ClosedLoop:
         )
         self.controller.reset()
         self.fallbacks_before = self.controller.fallbacks
-        self.solves_before = len(self.controller.solve_times)
+        self.solves_before = self.solves_recorded = len(self.controller.solve_times)
         control = config.controller
         self.maneuver = Maneuver(
             self.world,
@@ -125,6 +129,8 @@ class ClosedLoop:
         self.applied: Command | None = Command.STAY
         self.grid: OccupancyGrid | None = None
         self.snapshot: tuple[WorldState, OccupancyGrid] | None = None
+        if self.recording is not None:
+            self.recording.start(self.world, self.plant.dt, self.maneuver.lane)
         return self.world
 
     @property
@@ -163,10 +169,15 @@ class ClosedLoop:
         training MDP, so every transition spans the same time and one discount factor fits all."""
         considered = not self.maneuver.changing_lane
         self.command, self.applied = command, None
+        filtered = None
         if considered:
-            self.applied = self.safety.filter(command, self.perceived, self.maneuver.lane)
+            filtered = self.applied = self.safety.filter(command, self.perceived, self.maneuver.lane)
             if not self.maneuver.command(self.applied, self.world):
                 self.applied = Command.STAY
+        recording = self.recording
+        if recording is not None:
+            reacted = self.safety.reacted_to
+            recording.decision(self.world, self.grid, command, filtered, self.applied, reacted)
         speeds: list[float] = []
         while not self.done:
             tick = self.tick()
@@ -177,6 +188,8 @@ class ClosedLoop:
                 self.monitor.record_departure(tick.world)
             if self.video is not None:
                 self.video.add(tick, self.grid, self.command, self.applied)
+            if recording is not None:
+                self._record(recording, tick)
             speeds.append(float(tick.world.speed[0]))
             completed = self.maneuver.update(self.world)
             if ticks is not None:
@@ -186,6 +199,15 @@ class ClosedLoop:
                 break
         mean_speed = float(np.mean(speeds)) if speeds else float(self.world.speed[0])
         return Acted(len(speeds), considered, mean_speed)
+
+    def _record(self, recording: EpisodeRecording, tick: Tick) -> None:
+        """Hand `tick` to the recording with what the safety layer, emergency braking, the safety
+        monitor and the controller did on it."""
+        times = self.controller.solve_times
+        solve = times[-1] if len(times) > self.solves_recorded else None
+        self.solves_recorded = len(times)
+        emergency = (self.emergency.cause, self.emergency.activations)
+        recording.tick(tick, self.safety.aborted, self.safety.reacted_to, emergency, self.monitor, solve)
 
     def tick(self) -> Tick:
         """One control tick: reference, actuation (emergency braking last), one plant step and what
@@ -227,7 +249,12 @@ class ClosedLoop:
         stateless). `view` replaces the builder of the copy's grids (a planner whose rollouts
         perceive as another agent does)."""
         memo: dict[int, object] = {id(self.config): self.config, id(self.builder): view or self.builder}
-        memo |= {id(self.frames): None, id(self.video): None, id(self.recorder): None}
+        memo |= {
+            id(self.frames): None,
+            id(self.video): None,
+            id(self.recorder): None,
+            id(self.recording): None,
+        }
         snapshot = self.snapshot[0] if self.snapshot is not None else None
         for world in (self.world, self.perceived, snapshot):
             if world is not None:

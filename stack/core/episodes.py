@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from planner.agents import Agent, decide
+from planner.agents import Agent, Scored, decide
 from planner.factory import make_agent, model_label, model_path
 from records import LEARNED_AGENTS, child_seed
 from stack.core.closed_loop import ClosedLoop, grid_config
@@ -22,6 +22,7 @@ from stack.core.executors import completed
 from stack.core.metrics import EpisodeResult, summarize
 from stack.core.model_fit import check_road_fit
 from stack.core.oracle import Oracle
+from stack.core.recording import episode_recording
 from stack.sim.highway import HighwayAdapter
 
 
@@ -41,12 +42,18 @@ def build_agent(config: RunConfig, seed: int) -> Agent:
 
 
 def agent_step(loop: ClosedLoop, agent: Agent) -> int:
-    """Perceive, let `agent` decide on its own encoding, act until the next decision; ticks run."""
+    """Perceive, let `agent` decide on its own encoding, act until the next decision; ticks run.
+    A recorded loop also gets the agent's scores of the decision, when it has them (`Scored`)."""
     grid = loop.perceive()
+    observation = None
     if isinstance(agent, Oracle):
         command = agent.plan(loop)
     else:
-        command = decide(agent, grid.encode(agent.encoding))
+        observation = grid.encode(agent.encoding)
+        command = decide(agent, observation)
+    if loop.recording is not None and isinstance(agent, Scored):
+        seen = observation if observation is not None else np.empty(0)
+        loop.recording.scores(agent.scores(seen), agent.score_name)
     return loop.act(command).ticks
 
 
@@ -65,22 +72,31 @@ class RunResults:
     frames: list[np.ndarray]
 
 
-def run_episode(config: RunConfig, episode: int, frames: list[np.ndarray] | None = None) -> EpisodeResult:
+def run_episode(
+    config: RunConfig, episode: int, frames: list[np.ndarray] | None = None, record: Path | None = None
+) -> EpisodeResult:
     """Episode `episode` of `config` (seed = config.seed + episode); `frames`, when given, collects
-    the rendered frames. Its result does not depend on which process runs it or what ran before:
-    the env a process keeps for a config is reset with the episode's seed (highway-env then
-    rebuilds the road and reseeds every draw), and the learned agents it keeps are greedy,
-    stateless policies over a model file that has not changed since it was checked."""
+    the rendered frames; with `record` (a folder), the episode is recorded there as
+    `episode-NNNN.rrd` (`stack.core.recording`; written by whichever process runs it). Its result
+    does not depend on which process runs it, what ran before or whether it is recorded: the env a
+    process keeps for a config is reset with the episode's seed (highway-env then rebuilds the road
+    and reseeds every draw), and the learned agents it keeps are greedy, stateless policies over a
+    model file that has not changed since it was checked."""
     seed = child_seed(config.seed, episode)
     agent = kept_agent(config, seed)
+    recording = episode_recording(config, record, f"episode-{episode:04d}", seed)
     if frames is not None:
         with HighwayAdapter(
             config.highway, config.sim.backend, render=True, plant=config.sim.plant
         ) as adapter:
-            loop = ClosedLoop(config, adapter, frames, grid=agent.grid_config)
-            return run_agent_episode(loop, agent, episode, seed)
-    loop = ClosedLoop(config, kept_adapter(config), grid=agent.grid_config)
-    return run_agent_episode(loop, agent, episode, seed)
+            loop = ClosedLoop(config, adapter, frames, grid=agent.grid_config, recording=recording)
+            result = run_agent_episode(loop, agent, episode, seed)
+    else:
+        loop = ClosedLoop(config, kept_adapter(config), grid=agent.grid_config, recording=recording)
+        result = run_agent_episode(loop, agent, episode, seed)
+    if recording is not None:
+        recording.close()
+    return result
 
 
 KEPT_PER_PROCESS = 4
@@ -143,13 +159,15 @@ def run(
     ray: str | None = None,
     on_finished: Callable[[EpisodeResult], None] | None = None,
     done: Sequence[EpisodeResult] = (),
+    record: Path | None = None,
 ) -> RunResults:
     """Run `config.episodes` seeded episodes over `jobs` processes, or as Ray tasks with `ray` (an
     address, see `stack.core.executors`); results are ordered by episode, identical for any `jobs`
     or `ray`. With `video`, episode 0 (unless done) runs here and keeps its frames. `done` are
     episodes an earlier run of `config` finished: they count as they are and are not run again.
     Ctrl-C keeps the finished episodes (`summary["interrupted"]`); `on_finished` sees each as it
-    finishes (if it raises, the episodes still running are stopped before the error goes on)."""
+    finishes (if it raises, the episodes still running are stopped before the error goes on).
+    `record`: a folder each episode run writes its recording into (`run_episode`)."""
     frames: list[np.ndarray] = []
     results: dict[int, EpisodeResult] = {episode.episode: episode for episode in done}
     pending = [episode for episode in range(config.episodes) if episode not in results]
@@ -165,8 +183,9 @@ def run(
 
     try:
         if video and pending and pending[0] == 0:
-            finished(run_episode(config, pending.pop(0), frames))
-        with closing(completed(partial(run_episode, config), pending, jobs, ray)) as results_coming:
+            finished(run_episode(config, pending.pop(0), frames, record))
+        task = partial(run_episode, config, record=record)
+        with closing(completed(task, pending, jobs, ray)) as results_coming:
             for _, result in results_coming:
                 finished(result)
     except KeyboardInterrupt:

@@ -45,11 +45,19 @@ class Oracle(Policy):
         self.base = base
         self.grid_config: GridConfig | None = base.grid_config
         self.view = OccupancyGridBuilder(base.grid_config) if base.grid_config is not None else None
+        self.values = np.full(len(COMMANDS), np.nan)
 
     @classmethod
     def for_road(cls, config: OracleConfig, lanes: int, grid: GridConfig) -> Oracle:
         """The oracle whose base policy is `config.base` as built for this road."""
         return cls(config, make_agent(config.base, lanes, grid))
+
+    score_name = "distance reached [m] (lane changes less the margin)"
+
+    def scores(self, observation: np.ndarray) -> np.ndarray:
+        """What the last `plan` rated each `Command` (NaN before the first, or when no lane change
+        was permitted and nothing was searched); `observation` is not read."""
+        return self.values.copy()
 
     def choose(self, observation: np.ndarray) -> Action:
         raise TypeError("the oracle plans on copies of the simulator: call plan(loop), not predict")
@@ -57,10 +65,13 @@ class Oracle(Policy):
     def plan(self, loop: ClosedLoop) -> Command:
         """The root command whose best branch gets furthest without a crash."""
         start_s, start_time = float(loop.world.s[0]), loop.world.time
+        self.values = np.full(len(COMMANDS), np.nan)
         if not any(loop.permits(c) for c in COMMANDS[1:]):
             return Command.STAY
         values = [self._value(loop, command, self.config.depth, start_s, start_time) for command in COMMANDS]
         values[1:] = [value - self.config.margin_m for value in values[1:]]
+        for command, value in zip(COMMANDS, values, strict=True):
+            self.values[command] = value
         return COMMANDS[int(np.argmax(values))]
 
     def _value(

@@ -13,7 +13,9 @@ distance [s] (a fourth criterion, not a collision).
 
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -21,6 +23,7 @@ from records import PlantName
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import RunConfig
 from stack.core.episodes import build_agent, run_agent_episode
+from stack.core.recording import episode_recording
 from stack.core.reference_driver import CarefulDriver
 from stack.core.safety_metrics import SafetyMonitor
 from stack.sim.safety_scenarios import Point, build
@@ -108,15 +111,26 @@ def drive_reference(config: RunConfig, point: Point) -> Drive:
     )
 
 
-def drive_stack(config: RunConfig, point: Point, frames: list[np.ndarray] | None = None) -> Drive:
+def point_name(point: Point) -> str:
+    """A point's recording name (no suffix): its type and parameters, as a file name."""
+    return f"{point.kind}-" + re.sub(r"[^A-Za-z0-9_.-]+", "_", point.text.replace("=", "-"))
+
+
+def drive_stack(
+    config: RunConfig, point: Point, frames: list[np.ndarray] | None = None, record: Path | None = None
+) -> Drive:
     """The full stack (perception, agent, safety layer, maneuver, controller, emergency braking)
-    on `point`; `frames`, when given, collects video frames."""
+    on `point`; `frames`, when given, collects video frames; with `record` (a folder), the drive is
+    recorded there as `point_name(point)`.rrd."""
     config = point_config(config, point)
     road = plant_for(config, point)
     road.rendering = frames is not None
     agent = build_agent(config, config.seed)
-    loop = ClosedLoop(config, road, frames, grid=agent.grid_config)
+    recording = episode_recording(config, record, point_name(point), config.seed)
+    loop = ClosedLoop(config, road, frames, grid=agent.grid_config, recording=recording)
     result = run_agent_episode(loop, agent, 0, config.seed)
+    if recording is not None:
+        recording.close()
     return Drive(
         result.crashed,
         result.min_ttc_s,
@@ -127,7 +141,13 @@ def drive_stack(config: RunConfig, point: Point, frames: list[np.ndarray] | None
     )
 
 
-def assess(task: tuple[RunConfig, Point]) -> Assessed:
-    """Both drives of one point (a task for `stack.core.executors.completed`)."""
-    config, point = task
-    return Assessed(point, drive_stack(config, point), drive_reference(config, point))
+def assess(task: tuple[RunConfig, Point] | tuple[RunConfig, Point, Path]) -> Assessed:
+    """Both drives of one point (a task for `stack.core.executors.completed`); with a folder as
+    the task's third item, the stack's drive of a failure point is recorded there (every drive is
+    recorded, those of the other points deleted once the reference driver's outcome is known)."""
+    config, point = task[0], task[1]
+    record = task[2] if len(task) > 2 else None
+    assessed = Assessed(point, drive_stack(config, point, record=record), drive_reference(config, point))
+    if record is not None and assessed.outcome != "failure":
+        (record / f"{point_name(point)}.rrd").unlink(missing_ok=True)
+    return assessed
