@@ -369,3 +369,29 @@ def test_the_step_reads_what_the_act_left_and_the_kept_constants_follow_the_vehi
     np.testing.assert_array_equal(fresh.rows, columns(replaced, MOVER_CONSTANTS))
     assert fresh.rows[2, -1] == 12.0
     env.close()
+
+
+DROP_IN_CONFIGS = {
+    "6 lanes": {"lanes_count": 6},
+    "80 vehicles at density 2.5": {"vehicles_count": 80, "vehicles_density": 2.5},
+    "aggressive drivers": {"other_vehicles_type": "highway_env.vehicle.behavior.AggressiveVehicle"},
+    "2 lanes": {"lanes_count": 2},
+}
+
+
+@pytest.mark.parametrize("config", DROP_IN_CONFIGS.values(), ids=DROP_IN_CONFIGS.keys())
+@pytest.mark.parametrize(
+    "env_id", ["drivestack/Highway-v0", "drivestack/FastHighway-v0", "drivestack/VectorHighway-v0"]
+)
+def test_the_drop_in_ids_are_highway_v0_vehicle_for_vehicle(env_id, config):
+    """Issue 49 (4): made with highway-v0's config, the stack's gym ids give highway-v0's traffic
+    (they diverged at the first frame by 22-551 m: the stack's feasible spawns applied to them)."""
+    stock, ours = gym.make("highway-v0", config=config), gym.make(env_id, config=config)
+
+    def vehicles(env: gym.Env) -> np.ndarray:
+        return np.array([[*v.position, v.speed, v.heading] for v in env.unwrapped.road.vehicles])
+
+    stock.reset(seed=7), ours.reset(seed=7)
+    for _ in range(8):
+        np.testing.assert_array_equal(vehicles(ours), vehicles(stock))
+        stock.step(1), ours.step(1)

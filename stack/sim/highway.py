@@ -47,10 +47,12 @@ MAX_STEERING = ContinuousAction.STEERING_RANGE[1]
 
 def env_config(highway: HighwayConfig, plant: PlantName = "kinematic") -> dict:
     """The highway-env config for a closed-loop run: continuous action (on highway-env's dynamic
-    bicycle for the `dynamic` plant), one frame per step, traffic that stops instead of reversing."""
+    bicycle for the `dynamic` plant), one frame per step, traffic that stops instead of reversing
+    and starts feasible (the stack's world; the gym ids alone are highway-v0's)."""
     return {
         **highway.model_dump(mode="json", exclude={"road"}),
         "other_vehicles_type": TRAFFIC_VEHICLE,
+        "feasible_spawns": True,
         "policy_frequency": highway.simulation_frequency,
         "action": {"type": "ContinuousAction", "dynamical": plant == "dynamic"},
         # The stack reads the road itself; the cheapest observation keeps highway-env's work minimal.

@@ -11,7 +11,10 @@ MOBIL lane changes on or off and an IDM jam distance that grows with its length,
 start feasible: a vehicle placed too close ahead of the last one in its lane, for both lengths and a
 safe gap at the follower's speed (`make_room`), is moved forward. Every draw comes
 from the env's seeded generator, so the same seed gives the same traffic. Without `traffic` in the
-config, highway-env's own placement runs, with the same draws, its starts made feasible too.
+config, highway-env's own placement runs, with the same draws; its starts are made feasible too only
+where `feasible_spawns` asks (the stack's roads: `stack.sim.highway.env_config`), so the gym ids
+`drivestack/Highway-v0`, `FastHighway-v0` and `VectorHighway-v0` made with highway-v0's config give
+highway-v0's traffic, vehicle for vehicle.
 """
 
 from __future__ import annotations
@@ -196,7 +199,12 @@ def random_traffic(rng: np.random.Generator, ranges: dict[str, Any]) -> dict[str
 
 class ScenarioTraffic(HighwayEnv):
     """highway-v0 whose `_create_vehicles` reads `config["traffic"]` (see the module docstring), and
-    whose `_reset` draws the road's traffic first when `config["random_traffic"]` is set."""
+    whose `_reset` draws the road's traffic first when `config["random_traffic"]` is set. Without
+    either, and without `config["feasible_spawns"]`, it is highway-v0."""
+
+    @classmethod
+    def default_config(cls) -> dict:
+        return {**super().default_config(), "feasible_spawns": False}
 
     def _reset(self) -> None:
         ranges = self.config.get("random_traffic")
@@ -206,7 +214,8 @@ class ScenarioTraffic(HighwayEnv):
 
     def _create_highway_env_vehicles(self) -> None:
         """highway-env's own `_create_vehicles` (the ego at 25 m/s behind all the traffic, the same
-        draws in the same order), with every start made feasible by `make_room`."""
+        draws in the same order), with every start made feasible by `make_room` when
+        `feasible_spawns` is set."""
         other_type = utils.class_from_path(self.config["other_vehicles_type"])
         spawned = Vehicle.create_random(
             self.road,
@@ -220,7 +229,8 @@ class ScenarioTraffic(HighwayEnv):
         for _ in range(self.config["vehicles_count"]):
             vehicle = other_type.create_random(self.road, spacing=1 / self.config["vehicles_density"])
             vehicle.randomize_behavior()
-            make_room(self, vehicle)
+            if self.config["feasible_spawns"]:
+                make_room(self, vehicle)
             self.road.vehicles.append(vehicle)
 
     def _create_vehicles(self) -> None:
