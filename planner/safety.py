@@ -41,6 +41,30 @@ def _ttc(gap: float, closing: float) -> float:
     return math.inf if closing <= 0 else max(gap, 0.0) / closing
 
 
+def neighbours_clear(
+    config: SafetyConfig,
+    speed: float,
+    ahead: Neighbour | None,
+    behind: Neighbour | None,
+    min_gap: float,
+    min_ttc: float,
+    strict: bool,
+) -> bool:
+    """Whether a lane with these neighbours is safe for an ego at `speed` [m/s]: the gap rule of the
+    module docstring (time gaps only when `strict`); what a planner that checks gaps itself uses."""
+    if ahead is not None and not _clear(
+        ahead, max(min_gap, config.front_time_gap_s * speed * strict), speed - ahead.speed, min_ttc
+    ):
+        return False
+    return behind is None or _clear(
+        behind, max(min_gap, config.rear_time_gap_s * behind.speed * strict), behind.speed - speed, min_ttc
+    )
+
+
+def _clear(other: Neighbour, min_gap: float, closing: float, min_ttc: float) -> bool:
+    return other.gap >= min_gap and _ttc(other.gap, closing) >= min_ttc
+
+
 @dataclass(frozen=True)
 class SafetyCounts:
     """What the safety layer did in an episode: commands it `masked` (replaced by STAY) and lane
@@ -63,22 +87,8 @@ class SafetyLayer:
         return SafetyCounts(self.masked, self.aborted)
 
     def gap_is_safe(self, world: WorldState, lane: int, min_gap: float, min_ttc: float, strict: bool) -> bool:
-        config = self.config
-        v = float(world.speed[0])
         ahead, behind = world.neighbours(lane)
-        if ahead is not None and not self._clear(
-            ahead, max(min_gap, config.front_time_gap_s * v * strict), v - ahead.speed, min_ttc
-        ):
-            return False
-        if behind is not None and not self._clear(
-            behind, max(min_gap, config.rear_time_gap_s * behind.speed * strict), behind.speed - v, min_ttc
-        ):
-            return False
-        return True
-
-    @staticmethod
-    def _clear(other: Neighbour, min_gap: float, closing: float, min_ttc: float) -> bool:
-        return other.gap >= min_gap and _ttc(other.gap, closing) >= min_ttc
+        return neighbours_clear(self.config, float(world.speed[0]), ahead, behind, min_gap, min_ttc, strict)
 
     def permits(self, command: Command, world: WorldState, lane: int) -> bool:
         """Whether `filter` lets `command` through (without counting a mask)."""
