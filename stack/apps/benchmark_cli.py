@@ -52,6 +52,10 @@ def benchmark(
         fail(f"--models: {unknown[0]!r} is not among --agents ({', '.join(names)})")
     if resume and out is None:
         fail("--resume: name the folder of the interrupted benchmark with --out")
+    from stack.core.files import JOURNAL
+
+    if resume and out is not None and out.is_dir() and not any(out.glob(f"*/*.{JOURNAL}")):
+        fail(f"--resume: {out} holds no unfinished episodes (no journal); nothing to resume")
     from stack.apps.benchmark import BenchmarkPlan
 
     plan = BenchmarkPlan.chosen(quick, episodes, seed, duration)
