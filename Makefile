@@ -36,6 +36,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/loop_profile.py --scenario overtaking
 	$(BIN)/python benchmarks/sim_speed.py
 	$(BIN)/python benchmarks/oracle_cost.py
+	$(BIN)/python benchmarks/lookahead_cost.py
 	$(BIN)/python benchmarks/feasible_spawns.py
 	$(BIN)/python benchmarks/grid_speed.py
 	$(BIN)/python benchmarks/deepcars_speed.py

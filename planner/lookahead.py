@@ -167,7 +167,8 @@ class LookaheadAgent(Policy):
         then the one without an at-fault collision and with the largest TTC ranks first (scores
         below 2e-3), and no hysteresis holds the lane."""
         config = self.setup.config
-        at_fault, min_ttc, progress, emergency = outcome.T
+        at_fault, min_ttc, driven, emergency, end_speed = outcome.T
+        progress = driven + config.terminal_s * end_speed
         distance = self.setup.driving.lane_width
         lateral = np.where(changes, QUINTIC_PEAK_ACCELERATION * distance / duration**2, 0.0)
         jerk = np.where(changes, QUINTIC_PEAK_JERK * distance / duration**3, 0.0)

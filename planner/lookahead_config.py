@@ -14,6 +14,9 @@ class LookaheadConfig(BaseModel):
 
     horizon_s: float = Field(8.0, ge=1.0, le=15.0, description="how far each command is rolled out [s]")
     step_s: float = Field(0.25, ge=0.02, le=1.0, description="rollout step [s]")
+    terminal_s: float = Field(
+        0.0, ge=0, le=30, description="progress counts the end speed times this beyond the horizon [s]"
+    )
     weight_progress: float = Field(5.0, ge=0, le=100, description="weight of progress along the road")
     weight_ttc: float = Field(5.0, ge=0, le=100, description="weight of the time-to-collision score")
     weight_comfort: float = Field(2.0, ge=0, le=100, description="weight of the comfort score")

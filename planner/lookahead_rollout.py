@@ -23,7 +23,7 @@ from records.compiled import Kernel
 EGO = ("set_speed", "time_gap", "standstill_gap", "comfort_decel", "max_accel", "kp_speed",
        "emergency_decel", "emergency_ttc", "length", "width", "lane_width")  # fmt: skip
 """The ego's parameters, in the order `rollout` reads them."""
-OUTCOME = ("at_fault", "min_ttc", "progress", "emergency")
+OUTCOME = ("at_fault", "min_ttc", "progress", "emergency", "end_speed")
 """What `rollout` returns per command, in its columns' order."""
 
 IDM_ACCELERATION = 3.0
@@ -59,16 +59,16 @@ def rollout(
     steps: int,
     dt: float,
 ) -> np.ndarray:  # pragma: no cover - compiled; covered through the agent's tests
-    """(commands, 4): per command (lane shift `shifts`, lane-change duration `durations` [s]) the
+    """(commands, 5): per command (lane shift `shifts`, lane-change duration `durations` [s]) the
     `OUTCOME`: an at-fault collision (1/0), the smallest TTC [s], the ego's progress [m], emergency
-    braking (1/0), over `steps` steps of `dt` [s] from the ego at `speed` and the others at
-    (`lane`, `centre`, `length`, `velocity`). An at-fault collision: the ego reaches a vehicle ahead
-    in a lane it occupies, or any vehicle in the lane it moves into; being hit from behind in its
-    own lane is not its fault and is not counted."""
+    braking (1/0), the ego's speed at the end [m/s], over `steps` steps of `dt` [s] from the ego at
+    `speed` and the others at (`lane`, `centre`, `length`, `velocity`). An at-fault collision: the
+    ego reaches a vehicle ahead in a lane it occupies, or any vehicle in the lane it moves into;
+    being hit from behind in its own lane is not its fault and is not counted."""
     set_speed, time_gap, standstill, comfort, max_accel, kp = ego[0], ego[1], ego[2], ego[3], ego[4], ego[5]
     emergency_decel, emergency_ttc, ego_length, ego_width, width = ego[6], ego[7], ego[8], ego[9], ego[10]
     count = lane.shape[0]
-    outcome = np.zeros((shifts.shape[0], 4))
+    outcome = np.zeros((shifts.shape[0], 5))
     s = np.empty(count)
     v = np.empty(count)
     a = np.empty(count)
@@ -152,4 +152,5 @@ def rollout(
             if at_fault:
                 break
         outcome[c, 0], outcome[c, 1], outcome[c, 2], outcome[c, 3] = at_fault, min_ttc, ego_s, emergency
+        outcome[c, 4] = ego_v
     return outcome
