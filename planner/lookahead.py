@@ -110,7 +110,7 @@ class LookaheadAgent(Policy):
         layer would pass (on the vehicles as read) and that the maneuver would start at this speed."""
         found = [Command.STAY]
         driving = self.setup.driving
-        for command, exists in ((Command.LEFT, scene.left), (Command.RIGHT, scene.right)):
+        for command, exists in ((Command.LEFT, scene.left > 0), (Command.RIGHT, scene.right > 0)):
             if (
                 exists
                 and scene.speed >= driving.min_change_speed
@@ -155,6 +155,8 @@ class LookaheadAgent(Policy):
             self._ego,
             self._steps,
             config.step_s,
+            scene.left,
+            scene.right,
         )
         scores, fallback = self.scores(outcome, shifts != 0, duration)
         best = int(np.argmax(scores))
@@ -167,8 +169,8 @@ class LookaheadAgent(Policy):
         then the one without an at-fault collision and with the largest TTC ranks first (scores
         below 2e-3), and no hysteresis holds the lane."""
         config = self.setup.config
-        at_fault, min_ttc, driven, emergency, end_speed = outcome.T
-        progress = driven + config.terminal_s * end_speed
+        at_fault, min_ttc, driven, emergency, end_speed, option = outcome.T
+        progress = driven + config.terminal_s * np.maximum(end_speed, config.option_discount * option)
         distance = self.setup.driving.lane_width
         lateral = np.where(changes, QUINTIC_PEAK_ACCELERATION * distance / duration**2, 0.0)
         jerk = np.where(changes, QUINTIC_PEAK_JERK * distance / duration**3, 0.0)

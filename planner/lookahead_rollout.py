@@ -23,7 +23,7 @@ from records.compiled import Kernel
 EGO = ("set_speed", "time_gap", "standstill_gap", "comfort_decel", "max_accel", "kp_speed",
        "emergency_decel", "emergency_ttc", "length", "width", "lane_width")  # fmt: skip
 """The ego's parameters, in the order `rollout` reads them."""
-OUTCOME = ("at_fault", "min_ttc", "progress", "emergency", "end_speed")
+OUTCOME = ("at_fault", "min_ttc", "progress", "emergency", "end_speed", "option_speed")
 """What `rollout` returns per command, in its columns' order."""
 
 IDM_ACCELERATION = 3.0
@@ -42,6 +42,8 @@ CLOSING_GAIN = 0.8
 """Its relative-speed gain [1/s] (`AdaptiveCruise.KP_CLOSING`)."""
 STOP_MARGIN = 1.0
 """Gap emergency braking keeps when stopping [m] (`EmergencyBraking.STOP_MARGIN_M`)."""
+OPTION_RANGE = 60.0
+"""How far ahead of the ego's end position a lane beside its end lane is read for its speed [m]."""
 NO_TTC = 1e3
 """The TTC reported when nothing closes in [s]."""
 
@@ -58,17 +60,22 @@ def rollout(
     ego: np.ndarray,
     steps: int,
     dt: float,
+    left: int,
+    right: int,
 ) -> np.ndarray:  # pragma: no cover - compiled; covered through the agent's tests
-    """(commands, 5): per command (lane shift `shifts`, lane-change duration `durations` [s]) the
+    """(commands, 6): per command (lane shift `shifts`, lane-change duration `durations` [s]) the
     `OUTCOME`: an at-fault collision (1/0), the smallest TTC [s], the ego's progress [m], emergency
-    braking (1/0), the ego's speed at the end [m/s], over `steps` steps of `dt` [s] from the ego at
-    `speed` and the others at (`lane`, `centre`, `length`, `velocity`). An at-fault collision: the
+    braking (1/0), the ego's speed at the end [m/s] and the best speed a lane beside its end lane
+    offers then (the nearest vehicle's within `OPTION_RANGE` ahead, else the set speed; 0 when no
+    lane is beside), over `steps` steps of `dt` [s] from the ego at `speed` and the others at
+    (`lane`, `centre`, `length`, `velocity`), on a road with `left` and `right` lanes beside the
+    ego's (as far as seen). An at-fault collision: the
     ego reaches a vehicle ahead in a lane it occupies, or any vehicle in the lane it moves into;
     being hit from behind in its own lane is not its fault and is not counted."""
     set_speed, time_gap, standstill, comfort, max_accel, kp = ego[0], ego[1], ego[2], ego[3], ego[4], ego[5]
     emergency_decel, emergency_ttc, ego_length, ego_width, width = ego[6], ego[7], ego[8], ego[9], ego[10]
     count = lane.shape[0]
-    outcome = np.zeros((shifts.shape[0], 5))
+    outcome = np.zeros((shifts.shape[0], 6))
     s = np.empty(count)
     v = np.empty(count)
     a = np.empty(count)
@@ -153,4 +160,13 @@ def rollout(
                 break
         outcome[c, 0], outcome[c, 1], outcome[c, 2], outcome[c, 3] = at_fault, min_ttc, ego_s, emergency
         outcome[c, 4] = ego_v
+        for beside in (shift - 1, shift + 1):
+            if beside < -left or beside > right:
+                continue
+            nearest, flow = 1e9, set_speed
+            for i in range(count):
+                ahead = s[i] - ego_s
+                if lane[i] == beside and 0.0 < ahead < min(nearest, OPTION_RANGE):
+                    nearest, flow = ahead, min(v[i], set_speed)
+            outcome[c, 5] = max(outcome[c, 5], flow)
     return outcome

@@ -1,4 +1,4 @@
-"""What the lookahead sees: its own long, fine grid (the ego's lane and one on each side, with
+"""What the lookahead sees: its own long, fine grid (the ego's lane and two on each side, with
 relative speeds), read back into the vehicles around the ego.
 
 A vehicle marks every cell its footprint overlaps, so a run of occupied cells with one relative
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from records import MAX_SPEED, GridConfig
+from records import MAX_SPEED, SIDE_LANES_SEEN, GridConfig
 
 CELL_M = 2.0
 """The lookahead grid's cell length [m]."""
@@ -23,18 +23,20 @@ CELLS_BEHIND = 30
 """Its cells behind (60 m: a car 10 m/s faster is seen 6 s before it reaches the ego)."""
 SPEED_SCALE = MAX_SPEED
 """Relative speed giving grid feature 1 [m/s]: a stopped car is not clipped at any ego speed."""
+REACH = SIDE_LANES_SEEN
+"""Lanes seen on each side of the ego's (2: the lane a change leads to, and the one beyond it)."""
 EGO_LENGTH = 5.0
 """The ego's length [m] (highway-env's vehicles'): the grid shows the others only."""
 
 
 def lookahead_grid(grid: GridConfig) -> GridConfig:
-    """The grid the lookahead decides on: the run's, reshaped to ego-relative rows (the lane on
-    each side), `CELL_M` cells from `CELLS_BEHIND` behind to `CELLS_AHEAD` ahead, footprints,
+    """The grid the lookahead decides on: the run's, reshaped to ego-relative rows (`REACH` lanes
+    on each side), `CELL_M` cells from `CELLS_BEHIND` behind to `CELLS_AHEAD` ahead, footprints,
     relative and ego speeds, and the lanes on each side (`sides`: any lane count)."""
     return grid.model_copy(
         update={
             "lanes": "ego",
-            "lateral_reach": 1,
+            "lateral_reach": REACH,
             "cell_length": CELL_M,
             "cells_ahead": CELLS_AHEAD,
             "cells_behind": CELLS_BEHIND,
@@ -48,13 +50,13 @@ def lookahead_grid(grid: GridConfig) -> GridConfig:
 
 @dataclass(frozen=True)
 class Scene:
-    """The ego's speed [m/s], whether a lane exists on its left and right, and the vehicles seen:
-    lane relative to the ego's (-1 left, 0 own, +1 right), centre along the road relative to the
-    ego's [m], length [m], speed [m/s]."""
+    """The ego's speed [m/s], the lanes on its left and right (up to `REACH`), and the vehicles
+    seen: lane relative to the ego's (-1 the next on the left, 0 its own, +1 the next on the right,
+    +-2 beyond), centre along the road relative to the ego's [m], length [m], speed [m/s]."""
 
     speed: float
-    left: bool
-    right: bool
+    left: int
+    right: int
     lane: np.ndarray
     centre: np.ndarray
     length: np.ndarray
@@ -64,24 +66,24 @@ class Scene:
 def read_scene(grid: GridConfig, observation: np.ndarray) -> Scene:
     """The `Scene` in an observation of `grid` (a `lookahead_grid`); ValueError on another size."""
     observation = np.asarray(observation, dtype=np.float64).reshape(-1)
-    cells = grid.cells
-    size = 3 * cells
+    cells, rows = grid.cells, 2 * REACH + 1
+    size = rows * cells
     if observation.size != 2 * size + 3:
         raise ValueError(
-            f"lookahead agent expected 2 x 3 x {cells} grid values, the ego speed and 2 side-lane "
+            f"lookahead agent expected 2 x {rows} x {cells} grid values, the ego speed and 2 side-lane "
             f"values; got {observation.size} values"
         )
-    presence = observation[:size].reshape(3, cells) > 0
-    relative = observation[size : 2 * size].reshape(3, cells) * grid.speed_scale
+    presence = observation[:size].reshape(rows, cells) > 0
+    relative = observation[size : 2 * size].reshape(rows, cells) * grid.speed_scale
     speed = float(observation[2 * size]) * MAX_SPEED
-    left, right = (bool(value > 0) for value in observation[2 * size + 1 :])
-    exists = np.array([left, True, right])
+    left, right = (round(float(value) * SIDE_LANES_SEEN) for value in observation[2 * size + 1 :])
     lanes, centres, lengths, speeds = [], [], [], []
-    for row in np.flatnonzero(exists):
+    for shift in range(-min(left, REACH), min(right, REACH) + 1):
+        row = shift + REACH
         first, last = _runs(presence[row], relative[row])
         rear = (first - grid.ego_column - 0.5) * grid.cell_length
         front = (last - grid.ego_column + 0.5) * grid.cell_length
-        lanes.append(np.full(first.size, row - 1, dtype=np.int64))
+        lanes.append(np.full(first.size, shift, dtype=np.int64))
         centres.append((rear + front) / 2)
         lengths.append(front - rear)
         speeds.append(np.maximum(speed + relative[row, first], 0.0))
