@@ -15,14 +15,14 @@ class LookaheadConfig(BaseModel):
     horizon_s: float = Field(8.0, ge=1.0, le=15.0, description="how far each command is rolled out [s]")
     step_s: float = Field(0.25, ge=0.02, le=1.0, description="rollout step [s]")
     terminal_s: float = Field(
-        0.0,
+        2.0,
         ge=0,
         le=30,
-        description="progress counts, beyond the horizon, this times the end speed or the discounted "
-        "speed a lane beside the end lane offers, whichever is higher [s]",
+        description="progress counts, beyond the horizon, this times the end speed or, for a change, "
+        "the discounted speed the lane beyond its target offers, whichever is higher [s]",
     )
     option_discount: float = Field(
-        0.8, ge=0, le=1, description="what a lane beside the end lane is worth against being in it"
+        0.8, ge=0, le=1, description="what the lane beyond a change's target is worth against being in it"
     )
     weight_progress: float = Field(5.0, ge=0, le=100, description="weight of progress along the road")
     weight_ttc: float = Field(5.0, ge=0, le=100, description="weight of the time-to-collision score")

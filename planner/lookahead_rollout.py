@@ -43,7 +43,7 @@ CLOSING_GAIN = 0.8
 STOP_MARGIN = 1.0
 """Gap emergency braking keeps when stopping [m] (`EmergencyBraking.STOP_MARGIN_M`)."""
 OPTION_RANGE = 60.0
-"""How far ahead of the ego's end position a lane beside its end lane is read for its speed [m]."""
+"""How far ahead of the ego's end position the lane beyond a change's target is read [m]."""
 NO_TTC = 1e3
 """The TTC reported when nothing closes in [s]."""
 
@@ -65,13 +65,14 @@ def rollout(
 ) -> np.ndarray:  # pragma: no cover - compiled; covered through the agent's tests
     """(commands, 6): per command (lane shift `shifts`, lane-change duration `durations` [s]) the
     `OUTCOME`: an at-fault collision (1/0), the smallest TTC [s], the ego's progress [m], emergency
-    braking (1/0), the ego's speed at the end [m/s] and the best speed a lane beside its end lane
-    offers then (the nearest vehicle's within `OPTION_RANGE` ahead, else the set speed; 0 when no
-    lane is beside), over `steps` steps of `dt` [s] from the ego at `speed` and the others at
-    (`lane`, `centre`, `length`, `velocity`), on a road with `left` and `right` lanes beside the
-    ego's (as far as seen). An at-fault collision: the
-    ego reaches a vehicle ahead in a lane it occupies, or any vehicle in the lane it moves into;
-    being hit from behind in its own lane is not its fault and is not counted."""
+    braking (1/0), the ego's speed at the end [m/s] and, for a change, the speed the lane beyond its
+    target offers then (the lane a second change the same way would reach: the nearest vehicle's
+    within `OPTION_RANGE` ahead, else the set speed; 0 for STAY or when there is no such lane);
+    over `steps` steps of `dt` [s] from the ego at `speed` and the others at (`lane`, `centre`,
+    `length`, `velocity`), on a road with `left` and `right` lanes beside the ego's (as far as
+    seen). An at-fault collision: the ego reaches a vehicle ahead in a lane it occupies, or any
+    vehicle in the lane it moves into; being hit from behind in its own lane is not its fault and
+    is not counted."""
     set_speed, time_gap, standstill, comfort, max_accel, kp = ego[0], ego[1], ego[2], ego[3], ego[4], ego[5]
     emergency_decel, emergency_ttc, ego_length, ego_width, width = ego[6], ego[7], ego[8], ego[9], ego[10]
     count = lane.shape[0]
@@ -160,13 +161,12 @@ def rollout(
                 break
         outcome[c, 0], outcome[c, 1], outcome[c, 2], outcome[c, 3] = at_fault, min_ttc, ego_s, emergency
         outcome[c, 4] = ego_v
-        for beside in (shift - 1, shift + 1):
-            if beside < -left or beside > right:
-                continue
+        onward = shift + shift
+        if shift != 0 and -left <= onward <= right:
             nearest, flow = 1e9, set_speed
             for i in range(count):
                 ahead = s[i] - ego_s
-                if lane[i] == beside and 0.0 < ahead < min(nearest, OPTION_RANGE):
+                if lane[i] == onward and 0.0 < ahead < min(nearest, OPTION_RANGE):
                     nearest, flow = ahead, min(v[i], set_speed)
-            outcome[c, 5] = max(outcome[c, 5], flow)
+            outcome[c, 5] = flow
     return outcome

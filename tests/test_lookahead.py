@@ -59,9 +59,18 @@ def test_a_car_stopped_ahead_in_the_left_lane_scores_the_change_into_it_lower():
     assert ranking.chosen is Command.STAY and scores[Command.LEFT] < scores[Command.STAY]
 
 
+def test_a_change_towards_a_fast_lane_two_over_is_worth_its_first_step():
+    trucks = [(0, 30.0, 12.0, 18.0), (-1, 45.0, 12.0, 17.0), (-2, 80.0, 5.0, 30.0)]
+    blocked = scene(trucks, speed=18.0, left=2, right=0)
+    onward = LookaheadSetup(LookaheadConfig(terminal_s=4.0))
+    assert LookaheadAgent(GridConfig(), onward).rank(blocked).chosen is Command.LEFT
+    myopic = LookaheadSetup(LookaheadConfig(terminal_s=0.0))
+    assert LookaheadAgent(GridConfig(), myopic).rank(blocked).chosen is Command.STAY
+
+
 def test_hysteresis_keeps_the_lane_on_ties_and_near_ties():
     assert AGENT.rank(scene()).chosen is Command.STAY
-    near = scene([(0, 60.0, 5.0, 24.0)])
+    near = scene([(0, 100.0, 5.0, 24.5)])
     ranking = AGENT.rank(near)
     gain = max(ranking.scores) - ranking.scores[0]
     assert 0 < gain < AGENT.setup.config.margin and ranking.chosen is Command.STAY
