@@ -163,10 +163,10 @@ def rollout(
         outcome[c, 4] = ego_v
         onward = shift + shift
         if shift != 0 and -left <= onward <= right:
-            nearest, flow = 1e9, set_speed
+            closest, flow = OPTION_RANGE, set_speed
             for i in range(count):
                 ahead = s[i] - ego_s
-                if lane[i] == onward and 0.0 < ahead < min(nearest, OPTION_RANGE):
-                    nearest, flow = ahead, min(v[i], set_speed)
+                if lane[i] == onward and 0.0 < ahead < closest:
+                    closest, flow = ahead, min(v[i], set_speed)
             outcome[c, 5] = flow
     return outcome
