@@ -38,6 +38,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/sim_speed.py
 	$(BIN)/python benchmarks/oracle_cost.py
 	$(BIN)/python benchmarks/record_cost.py
+	$(BIN)/python benchmarks/lookahead_cost.py
 	$(BIN)/python benchmarks/feasible_spawns.py
 	$(BIN)/python benchmarks/grid_speed.py
 	$(BIN)/python benchmarks/deepcars_speed.py

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from planner.agents import Agent, FreeGapAgent, KeepLaneAgent, RandomAgent
 from planner.mobil import MobilAgent
 from records import AGENT_NAMES, LEARNED_AGENTS, POLICY_NAMES, GridConfig, unknown_name
 from records.plugins import AGENT_GROUP, checked_name
+
+if TYPE_CHECKING:
+    from planner.lookahead import LookaheadSetup
 
 MODELS = Path(__file__).parent / "models"
 
@@ -22,6 +26,8 @@ AGENT_DESCRIPTIONS: dict[str, str] = {
     "tabular": "tabular Q-learning on the paper's tabular state; the shipped table unless --model",
     "rule": "hand-written: into the adjacent lane with the most free cells ahead when it is clearly freer",
     "mobil": "MOBIL (Kesting et al.): a change when the incentive beats the threshold and it is safe",
+    "lookahead": "PDM-Closed for highways: rolls out each permitted command through the stack's own "
+    "maneuver and cruise for 8 s, picks by progress, time to collision and comfort",
     "keep-lane": "never changes lane (adaptive cruise only): the baseline of every comparison",
     "random": "a uniformly random command each decision (seeded)",
     "oracle": "perfect information: searches copies of the simulator (slow; each scenario's ceiling)",
@@ -35,10 +41,12 @@ def make_agent(
     grid: GridConfig,
     seed: int = 0,
     model: Path | str | None = None,
+    lookahead: LookaheadSetup | None = None,
 ) -> Agent:
     """Build the agent `name` for a road of `lanes` lanes seen through `grid`; learned agents load
-    `model` (by default the shipped one). Any other name is a plug-in (`planner.plugins`), given
-    `model` if it takes one."""
+    `model` (by default the shipped one), the lookahead takes the run's `lookahead` setup (by
+    default the stack's defaults). Any other name is a plug-in (`planner.plugins`), given `model`
+    if it takes one."""
     if (path := model_path(name, model)) is not None:
         from planner.learned import load_agent
 
@@ -47,6 +55,10 @@ def make_agent(
         return FreeGapAgent(lanes, grid)
     if name == "mobil":
         return MobilAgent(grid)
+    if name == "lookahead":
+        from planner.lookahead import LookaheadAgent
+
+        return LookaheadAgent(grid, lookahead)
     if name == "keep-lane":
         return KeepLaneAgent()
     if name == "random":

@@ -41,6 +41,46 @@ def _ttc(gap: float, closing: float) -> float:
     return math.inf if closing <= 0 else max(gap, 0.0) / closing
 
 
+def neighbours_clear(
+    config: SafetyConfig,
+    speed: float,
+    ahead: Neighbour | None,
+    behind: Neighbour | None,
+    min_gap: float,
+    min_ttc: float,
+    strict: bool,
+) -> bool:
+    """Whether a lane with these neighbours is safe for an ego at `speed` [m/s]: the gap rule of the
+    module docstring (time gaps only when `strict`); what a planner that checks gaps itself uses."""
+    return not unsafe_neighbours(config, speed, ahead, behind, min_gap, min_ttc, strict)
+
+
+def unsafe_neighbours(
+    config: SafetyConfig,
+    speed: float,
+    ahead: Neighbour | None,
+    behind: Neighbour | None,
+    min_gap: float,
+    min_ttc: float,
+    strict: bool,
+) -> tuple[int, ...]:
+    """The vehicles (ids) of `ahead` and `behind` closer than the gap [m] or TTC [s] allows."""
+    unsafe: tuple[int, ...] = ()
+    if ahead is not None and not _clear(
+        ahead, max(min_gap, config.front_time_gap_s * speed * strict), speed - ahead.speed, min_ttc
+    ):
+        unsafe += (ahead.vehicle,)
+    if behind is not None and not _clear(
+        behind, max(min_gap, config.rear_time_gap_s * behind.speed * strict), behind.speed - speed, min_ttc
+    ):
+        unsafe += (behind.vehicle,)
+    return unsafe
+
+
+def _clear(other: Neighbour, min_gap: float, closing: float, min_ttc: float) -> bool:
+    return other.gap >= min_gap and _ttc(other.gap, closing) >= min_ttc
+
+
 @dataclass(frozen=True)
 class SafetyCounts:
     """What the safety layer did in an episode: commands it `masked` (replaced by STAY) and lane
@@ -71,23 +111,8 @@ class SafetyLayer:
         self, world: WorldState, lane: int, min_gap: float, min_ttc: float, strict: bool
     ) -> tuple[int, ...]:
         """The vehicles (ids) ahead and behind in `lane` closer than the gap [m] or TTC [s] allows."""
-        config = self.config
-        v = float(world.speed[0])
         ahead, behind = world.neighbours(lane)
-        unsafe: tuple[int, ...] = ()
-        if ahead is not None and not self._clear(
-            ahead, max(min_gap, config.front_time_gap_s * v * strict), v - ahead.speed, min_ttc
-        ):
-            unsafe += (ahead.vehicle,)
-        if behind is not None and not self._clear(
-            behind, max(min_gap, config.rear_time_gap_s * behind.speed * strict), behind.speed - v, min_ttc
-        ):
-            unsafe += (behind.vehicle,)
-        return unsafe
-
-    @staticmethod
-    def _clear(other: Neighbour, min_gap: float, closing: float, min_ttc: float) -> bool:
-        return other.gap >= min_gap and _ttc(other.gap, closing) >= min_ttc
+        return unsafe_neighbours(self.config, float(world.speed[0]), ahead, behind, min_gap, min_ttc, strict)
 
     def permits(self, command: Command, world: WorldState, lane: int) -> bool:
         """Whether `filter` lets `command` through (without counting a mask)."""

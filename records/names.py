@@ -8,7 +8,7 @@ from typing import Literal, get_args
 import numpy as np
 from pydantic import BeforeValidator
 
-PolicyName = Literal["ddqn", "dqn", "tabular", "rule", "mobil", "keep-lane", "random"]
+PolicyName = Literal["ddqn", "dqn", "tabular", "rule", "mobil", "lookahead", "keep-lane", "random"]
 """Agents that decide on an observation (`planner.factory.make_agent`)."""
 AgentName = Literal[PolicyName, "oracle"]
 """Every agent a run can use: the policies and the perfect-information oracle (`stack.core.oracle`)."""

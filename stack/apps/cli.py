@@ -10,6 +10,7 @@ from typing import Any, cast
 import typer
 
 from records.plugins import SPEC_FORMS
+from stack.apps.benchmark_cli import benchmark
 from stack.apps.commands import agents, controllers, export, sweep, view
 from stack.apps.folders import claimed, claimed_for, episodes_kept, resumed
 from stack.apps.options import (
@@ -285,6 +286,7 @@ app.command()(agents)
 app.command()(controllers)
 app.command()(sweep)
 app.command()(view)
+app.command()(benchmark)
 
 
 @reproduce_app.command("deepcars")

@@ -313,6 +313,7 @@ class ClosedLoop:
             time_below_min_distance_s=monitor.time_below_min_distance_s,
             emergency_brakings=self.emergency.activations,
             longest_standstill_s=driven.longest_standstill_s,
+            time_below_ttc_floor_s=monitor.time_below_ttc_floor_s,
             solve_ms_p50=solves.p50_ms,
             solve_ms_p95=solves.p95_ms,
             trace=driven.trace,

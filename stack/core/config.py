@@ -16,6 +16,7 @@ from pydantic import Field, ValidationError, model_validator
 from controllers.config import ControllerConfig
 from perception.grid import OccupancyGridBuilder
 from perception.sensor import SensorConfig
+from planner.lookahead_config import LookaheadConfig
 from planner.mobil import prior_problem
 from planner.safety import SafetyConfig
 from records import AGENT_NAMES, SEED_LIMIT, GridConfig
@@ -59,6 +60,7 @@ class PlannerConfig(Strict):
     model: Path | None = None
     safety: SafetyConfig = SafetyConfig()
     oracle: OracleConfig = OracleConfig()
+    lookahead: LookaheadConfig = LookaheadConfig()
 
 
 class RunConfig(Strict):

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from contextlib import closing
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from tqdm import tqdm
@@ -25,6 +26,9 @@ from stack.core.oracle import Oracle
 from stack.core.recording import episode_recording
 from stack.sim.highway import HighwayAdapter
 
+if TYPE_CHECKING:
+    from planner.lookahead import LookaheadSetup
+
 
 def build_agent(config: RunConfig, seed: int) -> Agent:
     """The agent `config.planner` names, for the run's road and grid; raises ValueError (one line)
@@ -33,12 +37,35 @@ def build_agent(config: RunConfig, seed: int) -> Agent:
     if planner.agent == "oracle":
         return Oracle.for_road(planner.oracle, lanes, grid_config(config))
     path = model_path(planner.agent, planner.model)
-    agent = make_agent(planner.agent, lanes, grid_config(config), seed, path or planner.model)
+    setup = lookahead_setup(config) if planner.agent == "lookahead" else None
+    agent = make_agent(planner.agent, lanes, grid_config(config), seed, path or planner.model, setup)
     expected = getattr(agent, "observation_size", None)
     grid = agent.grid_config or grid_config(config)
     if expected is not None:
         check_road_fit(path or "", grid, agent.encoding, expected, config.highway.lane_counts)
     return agent
+
+
+def lookahead_setup(config: RunConfig) -> LookaheadSetup:
+    """What the lookahead agent takes from `config`: its settings, the maneuver's and the adaptive
+    cruise's parameters, the safety layer's gaps."""
+    from planner.lookahead import DrivingModel, LookaheadSetup
+
+    control = config.controller
+    driving = DrivingModel(
+        set_speed=control.set_speed_mps,
+        time_gap=control.time_gap_s,
+        standstill_gap=control.standstill_gap_m,
+        comfort_decel=control.comfort_decel_mps2,
+        max_accel=control.pid.max_acceleration,
+        kp_speed=control.pid.kp_speed,
+        emergency_decel=control.emergency_decel_mps2,
+        emergency_ttc=control.emergency_ttc_s,
+        lane_change_s=control.lane_change_duration_s,
+        max_course=math.radians(control.lane_change_max_course_deg),
+        min_change_speed=control.min_lane_change_speed_mps,
+    )
+    return LookaheadSetup(config.planner.lookahead, driving, config.planner.safety)
 
 
 def agent_step(loop: ClosedLoop, agent: Agent) -> int:

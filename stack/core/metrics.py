@@ -115,6 +115,7 @@ class EpisodeResult:
     time_below_min_distance_s: float = 0.0
     emergency_brakings: int = 0
     longest_standstill_s: float = 0.0
+    time_below_ttc_floor_s: float = 0.0
     solve_ms_p50: float = field(default=0.0, compare=False)
     solve_ms_p95: float = field(default=0.0, compare=False)
     trace: dict[str, list[float]] = field(default_factory=dict, repr=False)

@@ -18,6 +18,9 @@
 - **time below the R157 minimum following distance** [s]: the gap to the vehicle ahead in the ego's
   lane is below d_min = v * t_front(v), UN R157 paragraph 5.2.3.3's table (1.0 s at 7.2 km/h up
   to 1.6 s at 60 km/h, linear in between, 1.6 s above); counted from 7.2 km/h up.
+- **time below the TTC floor** [s]: the TTC (as for the minimum) to a vehicle ahead in a lane the
+  ego occupies is below `TTC_FLOOR_S` (nuPlan's TTC metric, whose floor is 0.95 s; the benchmark's
+  share of time above a floor).
 """
 
 from __future__ import annotations
@@ -35,6 +38,8 @@ STOPPED_SPEED_MPS = 0.5
 """Below this speed a vehicle counts as stopped [m/s]."""
 TTC_CAP_S = 99.0
 """The minimum TTC an episode reports when nothing ever closed in on a leader [s]."""
+TTC_FLOOR_S = 1.5
+"""Time to collision below which a tick counts towards the time below the TTC floor [s]."""
 R157_TIME_GAP = ((7.2, 1.0), (10.0, 1.1), (20.0, 1.2), (30.0, 1.3), (40.0, 1.4), (50.0, 1.5), (60.0, 1.6))
 """UN R157 paragraph 5.2.3.3: (present speed [km/h], minimum time gap t_front [s])."""
 R157_MIN_SPEED_MPS = 7.2 / 3.6
@@ -144,6 +149,7 @@ class SafetyMonitor:
         self.dt = dt
         self.min_ttc_s = TTC_CAP_S
         self.time_below_min_distance_s = 0.0
+        self.time_below_ttc_floor_s = 0.0
         self.road_departure = False
         self.collision: Collision | None = None
 
@@ -157,10 +163,14 @@ class SafetyMonitor:
         extent = footprint_lateral_extent(world)
         self.road_departure = self.road_departure or _departed(world, extent)
         v = float(world.speed[0])
+        below_floor = False
         for lane in _occupied_lanes(world, extent):
             leader = world.neighbours(lane)[0]
             if leader is not None and leader.gap > 0 and v > leader.speed:
-                self.min_ttc_s = min(self.min_ttc_s, leader.gap / (v - leader.speed))
+                ttc = leader.gap / (v - leader.speed)
+                self.min_ttc_s = min(self.min_ttc_s, ttc)
+                below_floor = below_floor or ttc < TTC_FLOOR_S
+        self.time_below_ttc_floor_s += self.dt * below_floor
         leader = world.neighbours(world.ego_lane)[0] if 0 <= world.ego_lane < world.lanes_count else None
         if leader is not None and leader.gap < r157_min_following_distance(v):
             self.time_below_min_distance_s += self.dt
