@@ -92,6 +92,7 @@ def test_benchmark_writes_its_folder_and_refuses_bad_input(tmp_path):
     no = ["--out", str(tmp_path / "no")]
     for bad in (
         ["--agents", "", *no],
+        ["--agents", "mobil,,rule", *no],
         ["--agents", "mobil,mobil", *no],
         ["--agents", "genius", *no],
         ["--resume"],

@@ -8,7 +8,16 @@ from pathlib import Path
 import typer
 
 from records.plugins import SPEC_FORMS
-from stack.apps.options import JOBS_OPTION, PLANT_HELP, RAY_OPTION, SET_HELP, fail, per_agent, ray_or_fail
+from stack.apps.options import (
+    JOBS_OPTION,
+    PLANT_HELP,
+    RAY_OPTION,
+    SET_HELP,
+    fail,
+    listed,
+    per_agent,
+    ray_or_fail,
+)
 
 BENCHMARK_AGENTS = "keep-lane,rule,mobil,ddqn,lookahead"
 REPORT_SEED = 970_000
@@ -39,9 +48,7 @@ def benchmark(
     progress: bool = typer.Option(True, help="Show progress bars."),
 ) -> None:
     """Every agent on every named scenario on fixed report seeds: one score and one table per agent."""
-    names = [name for name in agents.split(",") if name]
-    if not names:
-        fail(f"--agents: expected one or more comma-separated agent names, got {agents!r}")
+    names = listed("--agents", agents)
     if len(set(names)) < len(names):
         fail(f"--agents: expected each agent once, got {agents!r}")
     try:
