@@ -22,7 +22,7 @@ from planner.agents import Action, Policy
 from planner.lookahead_config import LookaheadConfig
 from planner.lookahead_rollout import rollout
 from planner.lookahead_scene import EGO_LENGTH, Scene, lookahead_grid, read_scene
-from planner.safety import SafetyConfig, neighbours_clear
+from planner.safety import SafetyConfig, unsafe_neighbours
 from records import Command, Encoding, GridConfig, Neighbour
 
 QUINTIC_PEAK_SPEED = 15.0 / 8.0
@@ -120,7 +120,7 @@ class LookaheadAgent(Policy):
         return tuple(found)
 
     def _gap_clear(self, scene: Scene, shift: int) -> bool:
-        """The safety layer's gap rule (`planner.safety.neighbours_clear`) in lane `shift`."""
+        """The safety layer's gap rule (`planner.safety.unsafe_neighbours`) in lane `shift`."""
         in_lane = scene.lane == shift
         ahead, behind = in_lane & (scene.centre > 0), in_lane & (scene.centre <= 0)
         gaps = np.abs(scene.centre) - (scene.length + EGO_LENGTH) / 2
@@ -133,7 +133,7 @@ class LookaheadAgent(Policy):
             row = rows[np.argmin(np.abs(scene.centre[rows]))]
             neighbours.append(Neighbour(float(gaps[row]), float(scene.velocity[row])))
         safety = self.setup.safety
-        return not safety.enabled or neighbours_clear(
+        return not safety.enabled or not unsafe_neighbours(
             safety, scene.speed, neighbours[0], neighbours[1], safety.min_gap_m, safety.min_ttc_s, strict=True
         )
 

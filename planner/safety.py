@@ -41,20 +41,6 @@ def _ttc(gap: float, closing: float) -> float:
     return math.inf if closing <= 0 else max(gap, 0.0) / closing
 
 
-def neighbours_clear(
-    config: SafetyConfig,
-    speed: float,
-    ahead: Neighbour | None,
-    behind: Neighbour | None,
-    min_gap: float,
-    min_ttc: float,
-    strict: bool,
-) -> bool:
-    """Whether a lane with these neighbours is safe for an ego at `speed` [m/s]: the gap rule of the
-    module docstring (time gaps only when `strict`); what a planner that checks gaps itself uses."""
-    return not unsafe_neighbours(config, speed, ahead, behind, min_gap, min_ttc, strict)
-
-
 def unsafe_neighbours(
     config: SafetyConfig,
     speed: float,
@@ -64,7 +50,9 @@ def unsafe_neighbours(
     min_ttc: float,
     strict: bool,
 ) -> tuple[int, ...]:
-    """The vehicles (ids) of `ahead` and `behind` closer than the gap [m] or TTC [s] allows."""
+    """The vehicles (ids) of `ahead` and `behind` closer than the gap [m] or TTC [s] allows for an
+    ego at `speed` [m/s]: the gap rule of the module docstring (time gaps only when `strict`); none
+    when the lane is safe. What a planner that checks gaps itself uses too."""
     unsafe: tuple[int, ...] = ()
     if ahead is not None and not _clear(
         ahead, max(min_gap, config.front_time_gap_s * speed * strict), speed - ahead.speed, min_ttc
