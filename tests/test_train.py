@@ -161,12 +161,18 @@ def test_training_resumes_after_an_interruption(tmp_path, monkeypatch):
     assert load_agent(out / "final.npz").metadata.trained_steps == 40
 
 
-def test_train_cli_smoke_writes_best_model_and_curve(tmp_path):
+def trained(tmp_path: Path, data: dict) -> tuple[Path, Path]:
+    """`drivestack train` of config `data` (written to tmp_path): the config file and the folder."""
     config = tmp_path / "tiny.yaml"
-    config.write_text(yaml.safe_dump(TINY))
+    config.write_text(yaml.safe_dump(data))
     out = tmp_path / "out"
     result = CliRunner().invoke(app, ["train", "--config", str(config), "--out", str(out), "--no-progress"])
     assert result.exit_code == 0, result.output
+    return config, out
+
+
+def test_train_cli_smoke_writes_best_model_and_curve(tmp_path):
+    config, out = trained(tmp_path, TINY)
     for name in (
         "best.npz",
         "final.npz",

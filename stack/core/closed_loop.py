@@ -25,6 +25,7 @@ from controllers.protocol import Controller
 from controllers.tracker import make_controller
 from perception.grid import OccupancyGrid, OccupancyGridBuilder
 from perception.sensor import SensorModel
+from planner.agents import Agent, sees_permitted
 from planner.safety import SafetyLayer
 from records import Actuation, Command, GridConfig, WorldState
 from stack.core.config import RunConfig, grid_config
@@ -239,6 +240,22 @@ class ClosedLoop:
     def permits(self, command: Command) -> bool:
         """Whether the safety layer would pass `command` now (nothing is counted)."""
         return self.safety.permits(command, self.perceived, self.maneuver.lane)
+
+    def permitted(self) -> np.ndarray:
+        """Per `Command`, 1.0 where `act` would carry it out now, else 0.0: STAY always; a lane
+        change when no change is running, the safety layer passes it and the maneuver would start
+        it (at or above its lane-change speed). What an agent trained with an action mask sees."""
+        starts = not self.maneuver.changing_lane and float(self.world.speed[0]) >= self.maneuver.min_speed
+        return np.array(
+            [command is Command.STAY or (starts and self.permits(command)) for command in Command],
+            dtype=np.float32,
+        )
+
+    def observation(self, agent: Agent, grid: OccupancyGrid) -> np.ndarray:
+        """What `agent` decides on: `grid` in its encoding, followed by `permitted()` when it
+        `sees_permitted`."""
+        encoded = grid.encode(agent.encoding)
+        return np.concatenate([encoded, self.permitted()]) if sees_permitted(agent) else encoded
 
     def fork(self, view: OccupancyGridBuilder | None = None) -> ClosedLoop:
         """A copy of the loop now, to play a future on (the simulator is deterministic, so the copy
