@@ -204,12 +204,12 @@ def test_a_scenario_gives_the_same_summaries_on_one_or_two_processes():
 
 def test_random_traffic_draws_a_seeded_world_per_episode_from_its_ranges():
     config = build_config({}, scenario="random")
-    assert config.highway.lane_counts == (3, 4, 5)
+    assert config.highway.lane_counts == (2, 3, 4, 5, 6)
     ranges = config.highway.random_traffic
     assert ranges is not None
-    lanes, trucks_changing = set(), set()
+    lanes, trucks_changing, truck_lanes = set(), set(), set()
     with HighwayAdapter(config.highway, "vector") as adapter:
-        for seed in range(12):
+        for seed in range(40):
             world = adapter.reset(seed=seed)
             drawn = adapter.env.unwrapped.config
             lanes.add(world.lanes_count)
@@ -222,11 +222,16 @@ def test_random_traffic_draws_a_seeded_world_per_episode_from_its_ranges():
                 truck = classes["truck"]
                 trucks_changing.add(truck["changes_lane"])
                 assert truck["speed_mps"][1] <= car[1] and truck["speed_mps"][0] >= 2.0
+                if not truck["changes_lane"]:
+                    kept = tuple(truck["lanes"])
+                    right = (world.lanes_count - 2, world.lanes_count - 1)
+                    assert kept in ((0, 1), right)
+                    truck_lanes.add("left" if kept == (0, 1) and kept != right else "right")
             moving = world.speed > 0 if "incident" in drawn["traffic"] else slice(None)
             assert np.all(world.speed[moving] == drawn["traffic"]["spawn_speed_mps"])
             again = adapter.reset(seed=seed)
             np.testing.assert_array_equal(world.position, again.position)
-    assert lanes == {3, 4, 5} and trucks_changing == {True, False}
+    assert lanes == {2, 3, 4, 5, 6} and trucks_changing == {True, False} and truck_lanes == {"left", "right"}
 
 
 def test_random_traffic_spawns_are_feasible_and_every_agent_drives_any_lane_count():
