@@ -234,6 +234,23 @@ def test_random_traffic_draws_a_seeded_world_per_episode_from_its_ranges():
     assert lanes == {2, 3, 4, 5, 6} and trucks_changing == {True, False} and truck_lanes == {"left", "right"}
 
 
+def test_a_random_world_is_seen_through_a_sensor_drawn_from_its_seed():
+    from stack.core.closed_loop import episode_sensor
+
+    config = build_config({"scenario": "random", "perception": {"sensor": {"range_m": 150.0}}})
+    ranges = config.highway.random_traffic
+    assert ranges is not None
+    drawn = [episode_sensor(config, seed) for seed in range(30)]
+    assert drawn[:3] == [episode_sensor(config, seed) for seed in range(3)], "the seed alone draws it"
+    for name in ("position_noise_m", "miss_probability", "false_positives"):
+        values = [getattr(sensor, name) for sensor in drawn]
+        low, high = getattr(ranges, name)
+        assert all(low <= value <= high for value in values) and len(set(values)) == 30, name
+    assert {sensor.range_m for sensor in drawn} == {150.0}, "what is not drawn stays the config's"
+    fixed = build_config({"perception": {"sensor": {"position_noise_m": 0.3}}}, scenario="dense")
+    assert episode_sensor(fixed, 5) is fixed.perception.sensor
+
+
 def test_random_traffic_spawns_are_feasible_and_every_agent_drives_any_lane_count():
     config = build_config(
         {"episodes": 12, "seed": 31, "planner": {"agent": "rule"}}, scenario="random", highway__duration=3
