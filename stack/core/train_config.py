@@ -80,8 +80,9 @@ ScenarioMix = Annotated[dict[str, float], AfterValidator(checked_mix)]
 """Named scenarios with their shares (relative weights)."""
 
 
-EXPERTS = ("mobil", "rule", "oracle")
-"""Agents whose decisions can be demonstrations: the classical baselines and the oracle."""
+EXPERTS = ("mobil", "rule", "lookahead", "oracle")
+"""Agents whose decisions can be demonstrations: the classical baselines, the lookahead planner and
+the oracle."""
 
 
 class DemonstrationConfig(Strict):
