@@ -61,15 +61,7 @@ def observe_batch(config: GridConfig, batch: WorldBatch) -> np.ndarray:
     observations = np.zeros((batch.worlds, size), dtype=np.float32)
     _observe(
         observations,
-        batch.count,
-        batch.s,
-        batch.d,
-        batch.speed,
-        batch.length,
-        batch.width,
-        batch.lane,
-        batch.lanes_count,
-        batch.lane_offsets,
+        batch.columns(),
         batch.lane_width,
         longitudinal,
         config.cell_length,
@@ -93,15 +85,7 @@ def observe_batch(config: GridConfig, batch: WorldBatch) -> np.ndarray:
 @Kernel
 def _observe(
     out: np.ndarray,
-    count: np.ndarray,
-    s: np.ndarray,
-    d: np.ndarray,
-    speed: np.ndarray,
-    length: np.ndarray,
-    width: np.ndarray,
-    lane: np.ndarray,
-    lanes_count: np.ndarray,
-    lane_offsets: np.ndarray,
+    columns: tuple[np.ndarray, ...],
     lane_width: float,
     longitudinal: np.ndarray,
     cell_length: float,
@@ -119,6 +103,7 @@ def _observe(
     max_speed: float,
     side_lanes_seen: int,
 ) -> None:  # pragma: no cover - compiled; covered through observe_batch
+    count, s, d, speed, length, width, lane, lanes_count, lane_offsets = columns
     half_lane = lane_width / 2
     for w in range(out.shape[0]):
         n, lanes, ego_lane = count[w], lanes_count[w], lane[w, 0]

@@ -34,6 +34,21 @@ class WorldBatch:
     def worlds(self) -> int:
         return len(self.count)
 
+    def columns(self) -> tuple[np.ndarray, ...]:
+        """(count, s, d, speed, length, width, lane, lanes_count, lane_offsets): the arrays a
+        compiled kernel takes as one tuple."""
+        return (
+            self.count,
+            self.s,
+            self.d,
+            self.speed,
+            self.length,
+            self.width,
+            self.lane,
+            self.lanes_count,
+            self.lane_offsets,
+        )
+
     @classmethod
     def of(cls, worlds: list[WorldState]) -> WorldBatch:
         """The snapshots `worlds` stacked (padded to the largest vehicle and lane counts)."""

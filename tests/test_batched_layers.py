@@ -1,5 +1,7 @@
-"""The batched `observation` encoding: every world of a batch encoded to the bits of
-`OccupancyGridBuilder.build(world).encode("observation")`, on worlds the closed loop drove."""
+"""The layers' batched kernels against their per-world code, on worlds the closed loop drove: the
+`observation` encoding (`perception.batch_grid`) to the bits of `OccupancyGridBuilder.build(world)
+.encode("observation")`, and the safety layer's verdicts (`planner.batch_safety`) to each loop's
+`permitted()`."""
 
 import dataclasses
 
@@ -8,11 +10,14 @@ import pytest
 
 from perception.batch_grid import observe_batch
 from perception.grid import OccupancyGridBuilder
+from planner.agents import decide
+from planner.batch_safety import permitted_batch
 from planner.lookahead_scene import lookahead_grid
 from records import GridConfig, WorldState
 from records.batch import WorldBatch
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import build_config
+from stack.core.episodes import build_agent
 from stack.sim.highway import HighwayAdapter
 
 GRIDS = {
@@ -98,3 +103,32 @@ def test_what_the_batch_cannot_encode_is_refused_in_one_line(worlds):
     )
     with pytest.raises(ValueError, match="world 1 has a non-finite state"):
         observe_batch(GRIDS["ego rows, every batched feature"], WorldBatch.of([worlds[1], broken]))
+
+
+def test_the_safety_layer_s_verdicts_for_a_batch_are_each_loop_s():
+    """At every decision period of MOBIL-driven episodes, stepped as the training MDP steps them
+    (so also while a change runs; refusals, noise): `permitted_batch` over all of them equals each
+    loop's `permitted()`."""
+    expected, perceived, lanes, changing, speeds = [], [], [], [], []
+    for scenario, seeds in (("random", (0, 11, 5)), ("jam", (0,)), ("incident", (1,))):
+        config = build_config({"highway": {"duration": 15}, "planner": {"agent": "mobil"}}, scenario=scenario)
+        agent = build_agent(config, 0)
+        with HighwayAdapter(config.highway, config.sim.backend) as adapter:
+            loop = ClosedLoop(config, adapter, grid=agent.grid_config)
+            for seed in seeds:
+                loop.reset(seed)
+                while not loop.done:
+                    expected.append(loop.permitted())
+                    perceived.append(loop.perceived)
+                    lanes.append(loop.maneuver.lane)
+                    changing.append(loop.maneuver.changing_lane)
+                    speeds.append(float(loop.world.speed[0]))
+                    command = decide(agent, loop.observation(agent, loop.perceive()))
+                    loop.act(command, ticks=config.decision_ticks)
+    safety, min_speed = config.planner.safety, loop.maneuver.min_speed
+    batched = permitted_batch(
+        safety, WorldBatch.of(perceived), np.array(lanes), np.array(changing), np.array(speeds), min_speed
+    )
+    np.testing.assert_array_equal(batched, np.array(expected))
+    refused = (batched[:, [0, 2]] == 0) & ~np.array(changing)[:, None]
+    assert refused.any() and (batched[:, [0, 2]] == 1).any() and any(changing), "every verdict occurs"
