@@ -23,11 +23,11 @@ from stack.sim.envs import register_when_imported  # noqa: E402
 register_when_imported()
 
 _PUBLIC = {
-    "load_config": "stack.core.config",
-    "build_config": "stack.core.config",
-    "RunConfig": "stack.core.config",
-    "run": "stack.core.episodes",
-    "run_episode": "stack.core.episodes",
+    "load_config": "stack.settings.run",
+    "build_config": "stack.settings.run",
+    "RunConfig": "stack.settings.run",
+    "run": "stack.runs.episodes",
+    "run_episode": "stack.runs.episodes",
     "world_state": "stack.sim.highway",
 }
 __all__ = list(_PUBLIC)

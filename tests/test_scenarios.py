@@ -6,10 +6,10 @@ from typer.testing import CliRunner
 
 from records import Actuation
 from stack.apps.cli import app
-from stack.core.config import ConfigError, build_config
-from stack.core.episodes import run
-from stack.core.metrics import outcome
-from stack.sim import scenarios
+from stack.loop.metrics import outcome
+from stack.runs.episodes import run
+from stack.settings import scenarios
+from stack.settings.run import ConfigError, build_config
 from stack.sim.highway import HighwayAdapter
 
 REQUIRED = {"highway-v0", "dense", "lanes-3", "lanes-5", "overtaking", "noisy"}

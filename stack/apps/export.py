@@ -20,7 +20,7 @@ from planner.learned import LearnedAgent, load_agent
 from planner.model_file import ModelFileError
 from records import N_ACTIONS
 from stack.apps.folders import check_destination
-from stack.core.model_fit import check_road_fit
+from stack.runs.model_fit import check_road_fit
 from stack.training.model import warm_start
 
 

@@ -12,7 +12,7 @@ from planner.model_check import checked_model
 from planner.model_file import ModelFileError
 from planner.networks import net_arch
 from records import Encoding, GridConfig
-from stack.core.config import RunConfig, grid_config
+from stack.settings.run import RunConfig, grid_config
 
 
 def check_road_fit(
