@@ -23,8 +23,8 @@ from planner.batch_safety import permitted_batch
 from planner.safety import SafetyLayer
 from records import Command, GridConfig, WorldState
 from records.batch import WorldBatch
-from stack.core.closed_loop import ClosedLoop
-from stack.core.config import build_config
+from stack.loop.closed_loop import ClosedLoop
+from stack.settings.run import build_config
 from stack.sim.highway import HighwayAdapter
 
 GRID = GridConfig(

@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/decision_ceiling.py [--episodes 20] [--horizon 15] [--base mobil]
                                                     [--depth 1] [--jobs 2] [--config configs/highway.yaml]
 
-The oracle (`stack.core.oracle`) copies the whole closed loop at every decision point (the simulator
+The oracle (`stack.agents.oracle`) copies the whole closed loop at every decision point (the simulator
 is deterministic once spawned, so the copy foresees the other vehicles exactly), tries each command
 the safety layer lets through (with `--depth 2`, each pair of consecutive commands), follows it with
 the `--base` agent for `--horizon` seconds and keeps the command that gets furthest down the road
@@ -21,8 +21,8 @@ import platform
 
 import numpy as np
 
-from stack.core.config import load_config
-from stack.core.episodes import run
+from stack.runs.episodes import run
+from stack.settings.run import load_config
 
 
 def main() -> None:

@@ -9,8 +9,8 @@ from __future__ import annotations
 import argparse
 import time
 
-from stack.core.config import build_config
-from stack.core.episodes import run
+from stack.runs.episodes import run
+from stack.settings.run import build_config
 
 SCENARIOS = ("dense", "jam")
 FIRST_SECONDS = 3.0

@@ -18,7 +18,7 @@ from highway_env.envs.common.observation import OccupancyGridObservation
 
 from perception.grid import GridConfig, OccupancyGridBuilder
 from records import Actuation
-from stack.core.config import HighwayConfig
+from stack.settings.run import HighwayConfig
 from stack.sim.highway import HighwayAdapter
 
 

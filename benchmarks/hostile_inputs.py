@@ -26,7 +26,7 @@ from perception.grid import OccupancyGridBuilder  # noqa: E402
 from planner.factory import SHIPPED_MODELS  # noqa: E402
 from planner.model_file import FORMAT, save_model  # noqa: E402
 from records import GridConfig  # noqa: E402
-from stack.core.owner import MARKER  # noqa: E402
+from stack.runtime.owner import MARKER  # noqa: E402
 from tests.test_hostile_inputs import BOMB, owned_training_folder  # noqa: E402
 from tests.test_model_files import metadata_bytes, npy, shipped, with_metadata, write  # noqa: E402
 

@@ -18,10 +18,10 @@ import time
 import numpy as np
 
 from planner.agents import decide
-from stack.core.closed_loop import ClosedLoop
-from stack.core.config import build_config
-from stack.core.episodes import build_agent
-from stack.sim import scenarios
+from stack.loop.closed_loop import ClosedLoop
+from stack.runs.episodes import build_agent
+from stack.settings import scenarios
+from stack.settings.run import build_config
 from stack.sim.highway import HighwayAdapter
 
 

@@ -25,8 +25,8 @@ from typing import Any
 COMPONENTS = [
     line.split(" = ")
     for line in """\
-act (control ticks to the next decision) = stack.core.closed_loop:ClosedLoop.act
-  tick = stack.core.closed_loop:ClosedLoop.tick
+act (control ticks to the next decision) = stack.loop.closed_loop:ClosedLoop.act
+  tick = stack.loop.closed_loop:ClosedLoop.tick
     env step (adapter) = stack.sim.highway:HighwayAdapter.step
       road act (traffic decisions, IDM) = stack.sim.vector.road:VectorRoad.act
       road step (kinematics, collisions) = stack.sim.vector.road:VectorRoad.step
@@ -34,10 +34,10 @@ act (control ticks to the next decision) = stack.core.closed_loop:ClosedLoop.act
     controller = controllers.tracker:SteeringTracker.step
     maneuver reference = controllers.maneuver:Maneuver.reference
     emergency braking = controllers.emergency:EmergencyBraking.apply
-  metrics recorder = stack.core.metrics:EpisodeRecorder.record
-  safety monitor = stack.core.safety_metrics:SafetyMonitor.record
-perception (grid) = stack.core.closed_loop:ClosedLoop.perceive
-start-up: env reset = stack.core.closed_loop:ClosedLoop.reset""".splitlines()
+  metrics recorder = stack.loop.metrics:EpisodeRecorder.record
+  safety monitor = stack.loop.safety_metrics:SafetyMonitor.record
+perception (grid) = stack.loop.closed_loop:ClosedLoop.perceive
+start-up: env reset = stack.loop.closed_loop:ClosedLoop.reset""".splitlines()
 ]
 """(label, module:[Owner.]attribute): indentation nests a component in the one above."""
 
@@ -79,8 +79,8 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=3)
     parser.add_argument("--duration", type=float, default=15.0, help="episode length [s]")
     args = parser.parse_args()
-    from stack.core.config import build_config
-    from stack.core.episodes import run_episode
+    from stack.runs.episodes import run_episode
+    from stack.settings.run import build_config
 
     config = build_config(
         {"planner": {"agent": args.agent}, "sim": {"backend": args.backend}, "seed": 0},

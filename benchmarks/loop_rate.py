@@ -27,9 +27,9 @@ import gymnasium as gym
 import numpy as np
 
 from planner.factory import make_agent
-from stack.core.closed_loop import ClosedLoop, grid_config
-from stack.core.config import load_config
-from stack.core.episodes import run_agent_episode
+from stack.loop.closed_loop import ClosedLoop, grid_config
+from stack.runs.episodes import run_agent_episode
+from stack.settings.run import load_config
 from stack.sim.highway import HighwayAdapter, env_config
 
 
@@ -62,9 +62,9 @@ def loop_rate(run_config, seeds: range) -> float:
 
 def episode_cpu(scenario: str, agent: str, episodes: int, duration: float) -> None:
     """CPU ms per frame of the same seeded episodes on the stock and the vector backend."""
-    from stack.core.config import build_config
-    from stack.core.episodes import run_episode
-    from stack.core.metrics import TIMING_FIELDS
+    from stack.loop.metrics import TIMING_FIELDS
+    from stack.runs.episodes import run_episode
+    from stack.settings.run import build_config
 
     configs = {
         backend: build_config(

@@ -21,7 +21,7 @@ from controllers.config import MPCSettings
 from controllers.mpc import MPCTracker
 from controllers.mpc_problem import Problem, build_problem
 from stack.apps.track import run_maneuver
-from stack.core.config import ControllerConfig
+from stack.settings.run import ControllerConfig
 
 DT = 1 / 15
 CASES = (("straight", 22.0), ("bend-1000", 35.0))

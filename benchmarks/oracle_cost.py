@@ -20,14 +20,14 @@ import time
 
 from loop_profile import instrument
 
-from stack.core.config import build_config
-from stack.core.episodes import run_episode
-from stack.core.metrics import TIMING_FIELDS
+from stack.loop.metrics import TIMING_FIELDS
+from stack.runs.episodes import run_episode
+from stack.settings.run import build_config
 
 COMPONENTS = [
-    ["search (`Oracle.plan`)", "stack.core.oracle:Oracle.plan"],
-    ["copies of the loop (`ClosedLoop.fork`)", "stack.core.closed_loop:ClosedLoop.fork"],
-    ["control ticks (the rollouts' and the episode's)", "stack.core.closed_loop:ClosedLoop.tick"],
+    ["search (`Oracle.plan`)", "stack.agents.oracle:Oracle.plan"],
+    ["copies of the loop (`ClosedLoop.fork`)", "stack.loop.closed_loop:ClosedLoop.fork"],
+    ["control ticks (the rollouts' and the episode's)", "stack.loop.closed_loop:ClosedLoop.tick"],
     ["base agent's decisions (Q-network)", "planner.learned:LearnedAgent.choose"],
     ["grids the base agent sees", "perception.grid:OccupancyGridBuilder.build"],
 ]

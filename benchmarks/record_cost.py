@@ -20,8 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from stack.core.config import build_config
-from stack.core.episodes import run_episode
+from stack.runs.episodes import run_episode
+from stack.settings.run import build_config
 
 
 def cpu_seconds(config: object, episode: int, record: Path | None) -> tuple[float, object]:

@@ -22,7 +22,7 @@ import gymnasium as gym
 import numpy as np
 
 from records import Actuation
-from stack.core.config import HighwayConfig, build_config
+from stack.settings.run import HighwayConfig, build_config
 from stack.sim.envs import FAST_HIGHWAY, HIGHWAY, VECTOR_HIGHWAY
 from stack.sim.highway import HighwayAdapter, env_config
 

@@ -20,9 +20,9 @@ from pathlib import Path
 from typing import Any
 
 from stack.apps.compare import differences
-from stack.core.config import RunConfig, load_config
-from stack.core.episodes import run
-from stack.core.files import write_text
+from stack.runs.episodes import run
+from stack.runtime.files import write_text
+from stack.settings.run import RunConfig, load_config
 from stack.training.trainer import BEST, Trainer
 
 VARIANTS: dict[str, dict[str, Any]] = {

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from loop_profile import instrument
 
-from stack.core.config import load_config
+from stack.settings.run import load_config
 from stack.training.trainer import Trainer
 
 VARIANTS = [("fast", 1), ("vector", 1), ("vector", 2)]

@@ -8,8 +8,8 @@ from typing import Annotated, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from common.plugins import CONTROLLER_GROUP, plugin_name
 from records import CONTROLLER_NAMES, one_of
-from records.plugins import CONTROLLER_GROUP, plugin_name
 
 MPCSolver = Literal["rti", "sqp", "ipopt"]
 """`rti`: one Gauss-Newton SQP step per tick from the shifted last solution (acados' real-time

@@ -7,6 +7,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from controllers.leaders import leaders
 from controllers.reference import QuinticProfile, WarpedProfile, drivable_duration, lane_change, lane_keeping
 from records import Command, Reference, WorldState
 
@@ -102,7 +103,7 @@ class Maneuver:
         lanes = (self.lane, self.target) if self.changing_lane else (self.lane,)
         heading_for = self.target if self.clock.profile_time(world.time) >= self.profile.t0 else self.lane
         return Reference.sampled(
-            self.clock, world.time, self.set_speed, world.leaders(lanes), target_lane=heading_for
+            self.clock, world.time, self.set_speed, leaders(world, lanes), target_lane=heading_for
         )
 
     def _rate(self, speed: float) -> float:

@@ -9,7 +9,7 @@ stage k: x_{k+1} = f(x_k, u_k), then the steering rate and the lateral accelerat
 excess. Parameters p = (d_ref[N+1], psi_ref[N+1], v_ref[N+1], curvature, x_0, u_-1). Hard bounds:
 steering and acceleration (an input inside them always exists). Soft bounds: the steering rate
 |delta_k - delta_{k-1}| / dt and the lateral acceleration relative to the lane,
-a_y = v_{k+1} (psi_{k+1} - psi_k) / dt (what `stack.core.metrics` measures): the quantity minus a
+a_y = v_{k+1} (psi_{k+1} - psi_k) / dt (what `stack.loop.metrics` measures): the quantity minus a
 free excess e must lie inside the bound, and e is priced `weight_slack` e^2, so no start state
 makes the problem infeasible (the same optimum as a non-negative slack on each side, with one
 constraint row instead of two). (No linear term: qrqp starts from the unconstrained minimiser, and

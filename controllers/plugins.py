@@ -1,5 +1,5 @@
 """Controllers from outside the package: a class by path or an installed entry point
-(`records.plugins`), built for the run and checked against the `Controller` protocol."""
+(`common.plugins`), built for the run and checked against the `Controller` protocol."""
 
 from __future__ import annotations
 
@@ -7,10 +7,10 @@ import math
 from numbers import Real
 from typing import Any
 
+from common.plugins import CONTROLLER_GROUP, PluginError, bad_return, construct, failed_call, load_class
 from controllers.config import ControllerConfig
 from controllers.protocol import Controller
 from records import Actuation, EgoState, PlantName, Reference
-from records.plugins import CONTROLLER_GROUP, PluginError, bad_return, construct, failed_call, load_class
 
 PROTOCOL = (
     "a controller: methods reset() and step(state, reference) -> Actuation, and attributes "

@@ -1,6 +1,6 @@
 """Controllers behind one verb, `step(state, reference) -> Actuation` (the `Controller` protocol),
 built by name: PID, MPC, the classic trackers (pure pursuit, Stanley, LQR) or a plug-in
-(`records.plugins`)."""
+(`common.plugins`)."""
 
 from __future__ import annotations
 

@@ -16,9 +16,9 @@ import math
 
 import numpy as np
 
+from common.compiled import Kernel
 from records import FEATURES, MAX_SPEED, SIDE_LANES_SEEN, GridConfig
 from records.batch import WorldBatch
-from records.compiled import Kernel
 
 BATCHED_FEATURES = tuple(name for name in FEATURES if name in ("relative_speed", "ttc", "ego_speed"))
 """The grid features the batched encoding computes (in the observation's order)."""

@@ -13,10 +13,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from common.compiled import Kernel
 from planner.safety import SafetyConfig
 from records import N_ACTIONS
 from records.batch import WorldBatch
-from records.compiled import Kernel
 
 
 def permitted_batch(

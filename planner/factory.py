@@ -5,10 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from common.plugins import AGENT_GROUP, checked_name
 from planner.agents import Agent, FreeGapAgent, KeepLaneAgent, RandomAgent
 from planner.mobil import MobilAgent
 from records import AGENT_NAMES, LEARNED_AGENTS, POLICY_NAMES, GridConfig, unknown_name
-from records.plugins import AGENT_GROUP, checked_name
 
 if TYPE_CHECKING:
     from planner.lookahead import LookaheadSetup

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from records.compiled import Kernel
+from common.compiled import Kernel
 
 EGO = ("set_speed", "time_gap", "standstill_gap", "comfort_decel", "max_accel", "kp_speed",
        "emergency_decel", "emergency_ttc", "length", "width", "lane_width")  # fmt: skip

@@ -1,4 +1,4 @@
-"""Agents from outside the package: a class by path or an installed entry point (`records.plugins`),
+"""Agents from outside the package: a class by path or an installed entry point (`common.plugins`),
 built for the run and checked against the `Agent` protocol before any episode."""
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
+from common.plugins import AGENT_GROUP, PluginError, bad_return, construct, failed_call, load_class
 from planner.agents import Agent, Prediction
 from records import ENCODINGS, N_ACTIONS, Command, Encoding, GridConfig
-from records.plugins import AGENT_GROUP, PluginError, bad_return, construct, failed_call, load_class
 
 PROTOCOL = (
     "an agent: attributes encoding (one of " + ", ".join(ENCODINGS) + ") and grid_config "

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from common.neighbours import neighbours
 from records import Command, Neighbour, WorldState
 
 MAX_GAP_M = 200.0
@@ -99,7 +100,7 @@ class SafetyLayer:
         self, world: WorldState, lane: int, min_gap: float, min_ttc: float, strict: bool
     ) -> tuple[int, ...]:
         """The vehicles (ids) ahead and behind in `lane` closer than the gap [m] or TTC [s] allows."""
-        ahead, behind = world.neighbours(lane)
+        ahead, behind = neighbours(world, lane)
         return unsafe_neighbours(self.config, float(world.speed[0]), ahead, behind, min_gap, min_ttc, strict)
 
     def permits(self, command: Command, world: WorldState, lane: int) -> bool:

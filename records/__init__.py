@@ -3,10 +3,12 @@
 `stack`, `perception`, `planner` and `controllers` import this package and nothing of each other
 below `stack`. It holds plain data: the world snapshot (`WorldState`), the decision (`Command`),
 the grid an agent is shown (`GridConfig`), and what flows through one control tick (`EgoState`,
-`Reference`, `Actuation`). Behaviour stays in the layers; only small derived views live here.
-Import from `records` itself; the submodules only keep each part short, and each is imported on
-the first use of one of its names (numpy and pydantic with them), so `records.plugins` alone stays
-light for the command line's option texts.
+`Reference`, `Actuation`). Data and names only: behaviour stays in the layers, and what two layers
+share of it lives beside this package in `common` (plug-in loading, compiled kernels, the ego's
+neighbours); a record derives views of its own fields only (`WorldState.ego_state`), with no
+cache, kernel or user code. Import from `records` itself; the submodules only keep each part
+short, and each is imported on the first use of one of its names (numpy and pydantic with them),
+so `import records` stays light for the command line's option texts.
 """
 
 from importlib import import_module

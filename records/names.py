@@ -11,11 +11,11 @@ from pydantic import BeforeValidator
 PolicyName = Literal["ddqn", "dqn", "tabular", "rule", "mobil", "lookahead", "keep-lane", "random"]
 """Agents that decide on an observation (`planner.factory.make_agent`)."""
 AgentName = Literal[PolicyName, "oracle"]
-"""Every agent a run can use: the policies and the perfect-information oracle (`stack.core.oracle`)."""
+"""Every agent a run can use: the policies and the perfect-information oracle (`stack.agents.oracle`)."""
 LearnedAgentName = Literal["ddqn", "dqn", "tabular"]
 Encoding = Literal["observation", "paper", "tabular"]
 ControllerName = Literal["pid", "mpc", "pure-pursuit", "stanley", "lqr"]
-"""The built-in trackers; a run also takes plug-ins (`records.plugins`)."""
+"""The built-in trackers; a run also takes plug-ins (`common.plugins`)."""
 Backend = Literal["vector", "fast", "stock"]
 PlantName = Literal["kinematic", "dynamic"]
 """The ego's vehicle model: highway-env's kinematic bicycle, or its dynamic bicycle with tyre slip."""

@@ -1,6 +1,9 @@
-"""drivestack's top layer: the simulator (`sim`), the run core (`core`), the applications
-(`apps`, the `drivestack` CLI) and the paper's grid world (`deepcars`), over the layers
-`perception`, `planner` and `controllers`.
+"""drivestack's top layer, over the layers `perception`, `planner` and `controllers`, in floors that
+import only those below them: the process runtime (`runtime`), the settings a run is told
+(`settings`), the simulator (`sim`), the recording's file (`rrd`), the closed loop (`loop`), the
+agents that need it (`agents`), seeded episodes (`runs`), the R157 safety assessment
+(`assessment`), training (`training`) and the applications (`apps`, the `drivestack` CLI); the
+paper's grid world (`deepcars`) stands alone (docs/architecture.md).
 
 The public API, imported on first use so `import stack` stays light:
 
@@ -23,11 +26,11 @@ from stack.sim.envs import register_when_imported  # noqa: E402
 register_when_imported()
 
 _PUBLIC = {
-    "load_config": "stack.core.config",
-    "build_config": "stack.core.config",
-    "RunConfig": "stack.core.config",
-    "run": "stack.core.episodes",
-    "run_episode": "stack.core.episodes",
+    "load_config": "stack.settings.run",
+    "build_config": "stack.settings.run",
+    "RunConfig": "stack.settings.run",
+    "run": "stack.runs.episodes",
+    "run_episode": "stack.runs.episodes",
     "world_state": "stack.sim.highway",
 }
 __all__ = list(_PUBLIC)

@@ -1,8 +1,8 @@
 """The `drivestack` entry point, also `python -m stack`: SIGINT and SIGTERM are held from its first
 line, so a stop while the command line is imported ends the command with exit 130 before any work
-(`stack.core.interrupts.hold_signals`)."""
+(`stack.runtime.interrupts.hold_signals`)."""
 
-from stack.core.interrupts import hold_signals
+from stack.runtime.interrupts import hold_signals
 
 
 def main() -> None:

@@ -10,8 +10,8 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import pytest
 
-from stack.core import interrupts
-from stack.core.config import build_config
+from stack.runtime import interrupts
+from stack.settings.run import build_config
 
 
 @pytest.fixture
@@ -26,7 +26,7 @@ def tiny_config():
 @pytest.fixture
 def own_handlers():
     """The test process's SIGINT and SIGTERM handlers and the interrupt state
-    (`stack.core.interrupts`), put back after a test that sends itself signals."""
+    (`stack.runtime.interrupts`), put back after a test that sends itself signals."""
     saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     yield
     interrupts.catch_signals()

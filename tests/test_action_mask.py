@@ -16,8 +16,8 @@ from planner.model_file import load_model
 from planner.model_metadata import ModelMetadata
 from records import Command, GridConfig
 from stack.apps.cli import app
-from stack.core.config import build_config
-from stack.core.decision_env import HierarchicalHighwayEnv
+from stack.settings.run import build_config
+from stack.training.decision_env import HierarchicalHighwayEnv
 from tests.test_train import TINY, trained
 
 MASKED = {**TINY, "train": {**TINY["train"], "action_mask": True}}

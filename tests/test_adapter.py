@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from records import Actuation
-from stack.core.config import HighwayConfig
+from stack.settings.run import HighwayConfig
 from stack.sim.highway import HighwayAdapter, to_env_action
 
 

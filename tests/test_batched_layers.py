@@ -15,9 +15,9 @@ from planner.batch_safety import permitted_batch
 from planner.lookahead_scene import lookahead_grid
 from records import GridConfig, WorldState
 from records.batch import WorldBatch
-from stack.core.closed_loop import ClosedLoop
-from stack.core.config import build_config
-from stack.core.episodes import build_agent
+from stack.loop.closed_loop import ClosedLoop
+from stack.runs.episodes import build_agent
+from stack.settings.run import build_config
 from stack.sim.highway import HighwayAdapter
 
 GRIDS = {

@@ -241,7 +241,7 @@ def test_the_dynamic_plant_drives_every_command(tmp_path):
 
 def test_the_snapshot_carries_the_ego_s_body_rates():
     from records import Actuation
-    from stack.core.config import HighwayConfig
+    from stack.settings.run import HighwayConfig
     from stack.sim.highway import HighwayAdapter
 
     for plant in ("kinematic", "dynamic"):

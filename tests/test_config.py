@@ -3,7 +3,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from stack.core.config import ConfigError, load_config
+from stack.settings.run import ConfigError, load_config
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -12,8 +12,8 @@ from typer.testing import CliRunner
 
 from stack.apps.cli import app
 from stack.apps.options import RUN_CONFIG, TRAIN_CONFIG
-from stack.core.config import ConfigError, build_config, config_text, load_config
-from stack.sim import scenarios
+from stack.settings import scenarios
+from stack.settings.run import ConfigError, build_config, config_text, load_config
 
 WORLD_SETS = {
     "highway.duration": st.integers(2, 60),
@@ -87,7 +87,7 @@ def test_every_scenario_reproduces_from_its_folder(tmp_path, scenario):
 def test_every_sweep_trial_keeps_the_fixed_world_keys(tmp_path):
     """Issue 52 (2): the trials read the sweep's written base config; its world keys stay."""
     from stack.apps.sweep import BASE, prepare
-    from stack.core.sweep_config import load_sweep, trial_config
+    from stack.settings.sweep import load_sweep, trial_config
 
     fixed = {"train.scenarios": {}, "highway.duration": 6, "highway.vehicles_count": 12}
     spec = {"config": str(TRAIN_CONFIG), "fixed": fixed, "space": {"train.gamma": [0.9, 0.95]}}

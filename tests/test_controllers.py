@@ -21,7 +21,7 @@ from controllers.reference import lane_change
 from controllers.tracker import PIDTracker
 from records import Actuation, EgoState, Reference
 from stack.apps.track import run_maneuver
-from stack.core.config import ConfigError, ControllerConfig, build_config
+from stack.settings.run import ConfigError, ControllerConfig, build_config
 from stack.sim.empty_road import EmptyRoad
 
 GOLDEN = Path(__file__).parent / "golden" / "lane_change.npz"

@@ -13,9 +13,9 @@ from perception.grid import OccupancyGridBuilder
 from planner.agents import decide
 from planner.ddqn import Demonstrations, DoubleDQN, margin_loss
 from planner.mobil import MobilAgent
-from stack.core.config import build_config, grid_config
-from stack.core.decision_env import HierarchicalHighwayEnv
-from stack.core.executors import completed
+from stack.runtime.executors import completed
+from stack.settings.run import build_config, grid_config
+from stack.training.decision_env import HierarchicalHighwayEnv
 from stack.training.demonstrations import (
     collect_demonstrations,
     demonstration_worlds,

@@ -13,16 +13,16 @@ from controllers.lateral import MAX_COURSE, LateralPID
 from controllers.maneuver import Maneuver
 from controllers.reference import QuinticProfile, WarpedProfile, drivable_duration
 from records import Actuation, Command, EgoState, Neighbour, Reference
-from stack.core.config import ConfigError, build_config
-from stack.core.episodes import run
-from stack.core.metrics import longest_run
-from stack.core.safety_metrics import (
+from stack.loop.metrics import longest_run
+from stack.loop.safety_metrics import (
     SafetyMonitor,
     classify_collision,
     departed,
     occupied_lanes,
     r157_min_following_distance,
 )
+from stack.runs.episodes import run
+from stack.settings.run import ConfigError, build_config
 from stack.sim.plant import StableBicycleVehicle, substeps
 from tests.helpers import scene
 
@@ -259,7 +259,7 @@ def test_longest_standstill_sees_an_ego_held_behind_a_blocked_lane():
 
 @pytest.mark.parametrize("plant", ["kinematic", "dynamic"])
 def test_lane_keeping_from_standstill_on_both_plants(plant):
-    from stack.core.closed_loop import ClosedLoop
+    from stack.loop.closed_loop import ClosedLoop
     from stack.sim.empty_road import EmptyRoad
 
     config = build_config(

@@ -23,8 +23,8 @@ def test_the_public_api_is_exported():
     import perception
     import planner
     import stack
-    from stack.core.config import load_config
-    from stack.core.episodes import run_episode
+    from stack.runs.episodes import run_episode
+    from stack.settings.run import load_config
     from stack.sim.highway import world_state
 
     assert {"OccupancyGridBuilder", "GridConfig", "WorldState"} <= set(perception.__all__)

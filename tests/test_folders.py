@@ -11,8 +11,8 @@ from typer.testing import CliRunner
 
 from stack.apps.cli import app
 from stack.apps.training import training_owner
-from stack.core.config import load_config, write_config
-from stack.core.owner import MARKER, Owner, claim
+from stack.runtime.owner import MARKER, Owner, claim
+from stack.settings.run import load_config, write_config
 from tests.test_cli import tiny_config_file
 from tests.test_hostile_inputs import one_line_refusal
 from tests.test_train import TINY

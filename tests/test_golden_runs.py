@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stack.core import metrics
-from stack.core.config import build_config
-from stack.core.episodes import run
+from stack.loop import metrics
+from stack.runs.episodes import run
+from stack.settings.run import build_config
 
 GOLDEN = Path(__file__).parent / "golden" / "runs.json"
 CASES = {

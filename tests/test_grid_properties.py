@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from perception.grid import GridConfig, OccupancyGridBuilder
 from records import Actuation, WorldState
-from stack.core.config import HighwayConfig
+from stack.settings.run import HighwayConfig
 from stack.sim.highway import HighwayAdapter
 from tests.helpers import scene
 

@@ -97,8 +97,8 @@ def owned_training_folder(folder: Path, config: dict) -> None:
     from dataclasses import asdict
 
     from stack.apps.training import training_owner
-    from stack.core.config import load_config
-    from stack.core.owner import MARKER
+    from stack.runtime.owner import MARKER
+    from stack.settings.run import load_config
 
     folder.mkdir()
     (folder / "config.yaml").write_text(yaml.safe_dump(config))

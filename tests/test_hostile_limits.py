@@ -14,9 +14,9 @@ from typer.testing import CliRunner
 
 from planner import model_file
 from stack.apps.cli import app
-from stack.core.config import RunConfig
-from stack.core.train_config import TrainConfig
-from stack.sim.settings import HighwayConfig
+from stack.settings.run import RunConfig
+from stack.settings.train import TrainConfig
+from stack.settings.world import HighwayConfig
 from tests.test_cli import tiny_config_file
 from tests.test_hostile_inputs import one_line_refusal
 
@@ -189,7 +189,7 @@ def test_an_option_without_effect_is_refused(tmp_path):
 
 def test_jobs_beyond_memory_are_refused_before_any_process(tmp_path, monkeypatch):
     from stack.apps import training
-    from stack.core import executors
+    from stack.runtime import executors
 
     monkeypatch.setattr(training, "available_memory_bytes", lambda: 2 * training.WORKER_BYTES)
     monkeypatch.setattr(executors, "usable_cpus", lambda: 8)
@@ -224,7 +224,7 @@ def test_a_ray_address_where_something_else_listens_is_refused_within_seconds():
     import threading
     import time
 
-    from stack.core.ray_tasks import PROBE_TIMEOUT_S, RayUnavailable, check_address
+    from stack.runtime.ray_tasks import PROBE_TIMEOUT_S, RayUnavailable, check_address
 
     http_server = http.server.HTTPServer(("127.0.0.1", 0), http.server.BaseHTTPRequestHandler)
     threading.Thread(target=http_server.serve_forever, daemon=True).start()

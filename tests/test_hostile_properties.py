@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from stack.apps.cli import app
-from stack.core.config import ConfigError, build_config, config_text, load_config
+from stack.settings.run import ConfigError, build_config, config_text, load_config
 
 SECTIONS = {
     "highway": ["lanes_count", "vehicles_count", "vehicles_density", "duration", "traffic", "road"],
@@ -153,7 +153,7 @@ sweep_spaces = st.dictionaries(
 def test_any_sweep_file_loads_or_is_one_line(tmp_path_factory, space, samples, metric):
     """A sweep file is refused in one line, or every trial it can start (each grid value, choice
     and range end) loads: no trial fails on its config an hour later."""
-    from stack.core.sweep_config import candidates, load_sweep, trial_config
+    from stack.settings.sweep import candidates, load_sweep, trial_config
 
     folder = tmp_path_factory.mktemp("sweep")
     (folder / "base.yaml").write_text("episodes: 1\n")

@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from stack.apps.cli import app
-from stack.core.files import finite, write_json
+from stack.runtime.files import finite, write_json
 from tests.test_cli import tiny_config_file
 from tests.test_hostile_inputs import one_line_refusal
 from tests.test_hostile_limits import interrupted_run

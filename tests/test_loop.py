@@ -3,13 +3,14 @@ import dataclasses
 import numpy as np
 import pytest
 
+from controllers.leaders import leaders
 from planner.factory import make_agent
 from records import Command
-from stack.core.closed_loop import ClosedLoop, grid_config
-from stack.core.config import build_config
-from stack.core.episodes import run, run_agent_episode
-from stack.core.loop_records import LoopStatus, SolveStatistics
-from stack.core.metrics import outcome
+from stack.loop.closed_loop import ClosedLoop, grid_config
+from stack.loop.loop_records import LoopStatus, SolveStatistics
+from stack.loop.metrics import outcome
+from stack.runs.episodes import run, run_agent_episode
+from stack.settings.run import build_config
 from stack.sim.empty_road import EmptyRoad
 from stack.sim.highway import HighwayAdapter
 
@@ -97,7 +98,7 @@ def test_safety_and_cruise_act_on_the_perceived_world(tiny_config):
         phantoms = loop.perceived.count - loop.world.count
         reference = loop.maneuver.reference(loop.perceived)
         assert phantoms > 0 and loop.perceived.ids[-1] >= 1_000_000, "the sensor's phantoms are in it"
-        assert reference.leaders == loop.perceived.leaders((loop.maneuver.lane,))
+        assert reference.leaders == leaders(loop.perceived, (loop.maneuver.lane,))
         ground = ClosedLoop(truth, adapter)
         ground.reset(1)
         assert ground.perceived is ground.world

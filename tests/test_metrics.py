@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from records import Actuation, Reference
-from stack.core.loop_records import Tick
-from stack.core.metrics import EpisodeRecorder, EpisodeResult, lateral_comfort, moving_average, summarize
+from stack.loop.loop_records import Tick
+from stack.loop.metrics import EpisodeRecorder, EpisodeResult, lateral_comfort, moving_average, summarize
 from tests.helpers import scene
 
 

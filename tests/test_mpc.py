@@ -20,7 +20,7 @@ from controllers.tracker import PIDTracker
 from records import EgoState, Reference
 from stack.apps.cli import app
 from stack.apps.track import run_maneuver
-from stack.core.config import ControllerConfig
+from stack.settings.run import ControllerConfig
 
 DT = 1 / 15
 

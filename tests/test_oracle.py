@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from records import Command
-from stack.core.closed_loop import ClosedLoop
-from stack.core.config import build_config
-from stack.core.episodes import build_agent, run
-from stack.core.oracle import Oracle
+from stack.agents.oracle import Oracle
+from stack.loop.closed_loop import ClosedLoop
+from stack.runs.episodes import build_agent, run
+from stack.settings.run import build_config
 from stack.sim.highway import HighwayAdapter
 
 SHORT = {"episodes": 1, "seed": 3, "highway": {"duration": 6}, "planner": {"agent": "oracle"}}
@@ -50,7 +50,7 @@ def test_the_oracle_is_refused_as_an_observation_policy_and_drives_like_any_agen
 
 
 def test_oracle_settings_are_validated():
-    from stack.core.config import ConfigError
+    from stack.settings.run import ConfigError
 
     for bad, key in [({"depth": 0}, "depth"), ({"horizon_s": -1}, "horizon_s"), ({"base": "oracle"}, "base")]:
         with pytest.raises(ConfigError, match=f"planner.oracle.{key}"):

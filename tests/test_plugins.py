@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from records import plugins
+from common import plugins
 from stack.apps.cli import app
-from stack.core.metrics import outcome
+from stack.loop.metrics import outcome
 from tests.test_cli import tiny_config_file
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -245,8 +245,8 @@ def test_entry_points_add_names_to_the_listings_and_the_configs(user_files, monk
     assert "heading-pd" in invoke("controllers").output
     from controllers.config import ControllerConfig
     from controllers.tracker import make_controller
-    from stack.core.config import build_config
-    from stack.core.episodes import build_agent
+    from stack.runs.episodes import build_agent
+    from stack.settings.run import build_config
 
     config = build_config({"planner": {"agent": "leftie"}, "controller": {"type": "heading-pd"}})
     assert type(build_agent(config, 0).agent).__name__ == "LeftWhenBlocked"

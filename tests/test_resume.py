@@ -6,10 +6,10 @@ import json
 from typer.testing import CliRunner
 
 from stack.apps.cli import app
-from stack.core import episodes
-from stack.core.config import load_config
-from stack.core.episodes import run_episode
-from stack.core.owner import MARKER
+from stack.runs import episodes
+from stack.runs.episodes import run_episode
+from stack.runtime.owner import MARKER
+from stack.settings.run import load_config
 from tests.test_cli import tiny_config_file
 from tests.test_signals import untimed
 

@@ -1,3 +1,4 @@
+from common.neighbours import lateral_extent, neighbours
 from planner.safety import SafetyConfig, SafetyLayer
 from records import Command
 from tests.helpers import scene
@@ -59,10 +60,10 @@ def test_a_car_nosing_into_the_lane_is_seen_there_by_its_turned_footprint():
     import numpy as np
 
     world = scene(3, (0.0, 2), [(8.0, 4.9)], speed=12.0, other_speed=0.0)
-    assert world.neighbours(2)[0] is None
+    assert neighbours(world, 2)[0] is None
     heading = world.heading.copy()
     heading[1] = math.radians(33.0)
     nosing = type(world)(**{**world.__dict__, "heading": heading})
-    leader = nosing.neighbours(2)[0]
+    leader = neighbours(nosing, 2)[0]
     assert leader is not None and leader.gap == 3.0
-    assert np.isclose(nosing.lateral_extent()[0], 5 * math.sin(heading[1]) + 2 * math.cos(heading[1]))
+    assert np.isclose(lateral_extent(nosing)[0], 5 * math.sin(heading[1]) + 2 * math.cos(heading[1]))

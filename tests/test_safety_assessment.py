@@ -8,11 +8,12 @@ import pytest
 from typer.testing import CliRunner
 
 from controllers.emergency import EmergencyBraking
+from controllers.leaders import leaders
 from records import Actuation, Neighbour
 from stack.apps.cli import app
-from stack.core.config import build_config
-from stack.core.reference_driver import CarefulDriver, stopping_distance
-from stack.core.safety_assessment import assess, drive_reference
+from stack.assessment.reference_driver import CarefulDriver, stopping_distance
+from stack.assessment.safety_assessment import assess, drive_reference
+from stack.settings.run import build_config
 from stack.sim import safety_scenarios
 from stack.sim.safety_scenarios import LENGTH, Point, build, grid, parse_point
 from stack.sim.scripted_road import EGO_START_S, Actor, ScriptedRoad
@@ -158,10 +159,10 @@ def test_braking_leader_triggers_emergency_braking_before_the_constant_speed_pre
 def test_leaving_leader_no_longer_hides_the_vehicle_beyond():
     road = build(Point("cut-out", (20.0, 60.0, 2.0)), 4, "kinematic", DT)
     world = road.reset()
-    assert len(world.leaders((1,))) == 1
+    assert len(leaders(world, (1,))) == 1
     while road.actors[0].d < 5.5:
         world = road.step(Actuation(0.0, 0.0))
-    assert [leader.speed for leader in world.leaders((1,))] == [20.0, 0.0]
+    assert [leader.speed for leader in leaders(world, (1,))] == [20.0, 0.0]
 
 
 def test_reference_driver_on_a_lead_braking_point_it_cannot_avoid():

@@ -6,10 +6,10 @@ from typer.testing import CliRunner
 
 from records import Actuation
 from stack.apps.cli import app
-from stack.core.config import ConfigError, build_config
-from stack.core.episodes import run
-from stack.core.metrics import outcome
-from stack.sim import scenarios
+from stack.loop.metrics import outcome
+from stack.runs.episodes import run
+from stack.settings import scenarios
+from stack.settings.run import ConfigError, build_config
 from stack.sim.highway import HighwayAdapter
 
 REQUIRED = {"highway-v0", "dense", "lanes-3", "lanes-5", "overtaking", "noisy"}
@@ -236,7 +236,7 @@ def test_random_traffic_draws_a_seeded_world_per_episode_from_its_ranges():
 
 
 def test_a_random_world_is_seen_through_a_sensor_drawn_from_its_seed():
-    from stack.core.closed_loop import episode_sensor
+    from stack.loop.closed_loop import episode_sensor
 
     config = build_config({"scenario": "random", "perception": {"sensor": {"range_m": 150.0}}})
     ranges = config.highway.random_traffic

@@ -5,7 +5,7 @@ import pytest
 from pydantic import ValidationError
 
 from perception.sensor import PHANTOM_ID_BASE, SensorConfig, SensorModel
-from stack.core.config import ConfigError, build_config
+from stack.settings.run import ConfigError, build_config
 from tests.helpers import scene
 
 WORLD = scene(3, (0.0, 1), [(10.0, 0.0), (30.0, 4.0), (-70.0, 8.0), (120.0, 0.0)])

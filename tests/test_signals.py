@@ -18,9 +18,10 @@ from typer.testing import CliRunner
 from stack.apps import track as track_module
 from stack.apps.cli import app
 from stack.apps.run import undrawn
-from stack.core import episodes, executors, interrupts, watchdog
-from stack.core.files import EpisodeJournal, replacing, write_text
-from stack.core.metrics import outcome
+from stack.loop.metrics import outcome
+from stack.runs import episodes
+from stack.runtime import executors, interrupts, watchdog
+from stack.runtime.files import EpisodeJournal, replacing, write_text
 from tests.test_cli import tiny_config_file
 
 SHORT = ["--set", "highway.duration=4", "--set", "highway.vehicles_count=8", "--no-progress"]
@@ -345,7 +346,7 @@ def test_work_that_stops_itself_is_asked_once_and_later_signals_wait(own_handler
 
 ORPHANS = """
 import subprocess, sys, time
-from stack.core.watchdog import watch_descendants
+from stack.runtime.watchdog import watch_descendants
 watch_descendants()
 shell = subprocess.Popen(["sh", "-c", "sleep 600 & echo $!; wait"], stdout=subprocess.PIPE, text=True)
 print(shell.pid, shell.stdout.readline().strip(), flush=True)
@@ -388,7 +389,7 @@ def test_a_stop_inside_a_compiled_kernel_call_is_a_keyboard_interrupt():
     """numba's dispatcher turns a KeyboardInterrupt raised by the signal handler during a call into
     SystemErrors ("returned a result with an exception set") caused by it: `Kernel` raises the
     KeyboardInterrupt, so the episode loops stop and keep what is finished; other errors pass."""
-    from records.compiled import Kernel
+    from common.compiled import Kernel
 
     def doubled(x: float) -> float:
         return 2 * x

@@ -11,7 +11,7 @@ import pytest
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.kinematics import Vehicle
 
-from stack.core.config import ConfigError, HighwayConfig, build_config
+from stack.settings.run import ConfigError, HighwayConfig, build_config
 from stack.sim import envs
 from stack.sim.envs import FAST_HIGHWAY, VECTOR_HIGHWAY
 from stack.sim.highway import HighwayAdapter, env_config

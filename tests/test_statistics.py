@@ -2,7 +2,7 @@
 
 import pytest
 
-from stack.core.statistics import mean_interval, paired_difference, rate_interval
+from stack.runs.statistics import mean_interval, paired_difference, rate_interval
 
 
 def test_t_interval_of_a_mean():

@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 from stack.apps import commands, training
-from stack.core.owner import MARKER, Owner, claim
+from stack.runtime.owner import MARKER, Owner, claim
 from tests.test_cli import tiny_config_file
 from tests.test_hostile_inputs import one_line_refusal
 from tests.test_train import TINY
@@ -57,7 +57,7 @@ def test_a_bad_sweep_is_one_line_before_ray_starts(tmp_path, no_ray, monkeypatch
 def test_trials_that_need_more_cpus_than_there_are_are_refused_before_ray_starts(
     tmp_path, no_ray, monkeypatch
 ):
-    from stack.core import machine
+    from stack.runtime import machine
 
     monkeypatch.setattr(machine, "usable_cpus", lambda: 2)
     spec = sweep_file(tmp_path, space={"train.envs": [1, 3]})

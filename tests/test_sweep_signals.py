@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from stack.core.interrupts import STOPPING
-from stack.core.watchdog import descendants
+from stack.runtime.interrupts import STOPPING
+from stack.runtime.watchdog import descendants
 from tests.test_signals import outliving
 from tests.test_train import TINY
 

@@ -7,11 +7,12 @@ import dataclasses
 import numpy as np
 import pytest
 
+from common.neighbours import neighbours, scanned_neighbours
 from records import Actuation
-from stack.core import episodes
-from stack.core.config import HighwayConfig, build_config
-from stack.core.episodes import run_episode
-from stack.core.metrics import TIMING_FIELDS
+from stack.loop.metrics import TIMING_FIELDS
+from stack.runs import episodes
+from stack.runs.episodes import run_episode
+from stack.settings.run import HighwayConfig, build_config
 from stack.sim.fast_road import FastRoad
 from stack.sim.highway import HighwayAdapter, snapshot
 from tests.helpers import scene
@@ -67,15 +68,15 @@ def test_the_neighbours_of_every_lane_at_once_are_each_lane_s(seed):
     others += others[:3]  # ties in distance
     world = scene(4, (0.0, int(rng.integers(0, 4))), others, length=float(rng.uniform(4, 12)))
     for lane in range(-4, 4):
-        assert world.neighbours(lane) == world._neighbours_of(lane)
+        assert neighbours(world, lane) == scanned_neighbours(world, lane)
     with pytest.raises(IndexError):
-        world.neighbours(4)
+        neighbours(world, 4)
 
 
 def test_the_neighbours_with_a_vehicle_at_infinity_are_each_lane_s():
     world = scene(3, (0.0, 1), [(np.inf, 4.0), (np.inf, 0.0), (-np.inf, 4.0), (12.0, 8.0)])
     for lane in range(3):
-        assert world.neighbours(lane) == world._neighbours_of(lane)
+        assert neighbours(world, lane) == scanned_neighbours(world, lane)
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -131,8 +132,8 @@ def test_a_process_keeps_a_bounded_number_of_envs():
 
 def test_what_a_snapshot_derived_stays_out_of_its_fields():
     world = scene(3, (0.0, 1), [(10.0, 4.0), (-8.0, 0.0)])
-    ahead = world.neighbours(1)[0]
+    ahead = neighbours(world, 1)[0]
     world.ego_state()
     moved = type(world)(**{**world.__dict__, "s": world.s + np.array([0.0, 5.0, 0.0])})
     assert set(world.__dict__) == {f.name for f in dataclasses.fields(world)}
-    assert moved.neighbours(1)[0].gap == ahead.gap + 5.0
+    assert neighbours(moved, 1)[0].gap == ahead.gap + 5.0

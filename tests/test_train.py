@@ -19,10 +19,10 @@ from planner.learned import load_agent
 from planner.model_file import load_model
 from planner.validation import RealTimeValidation, Validation
 from stack.apps.cli import app
-from stack.core.config import build_config, grid_config
-from stack.core.decision_env import HierarchicalHighwayEnv
+from stack.settings.run import build_config, grid_config
 from stack.sim.envs import HIERARCHICAL_HIGHWAY
 from stack.training.checkpoint import DqnCounters, TabularCounters, read_checkpoint
+from stack.training.decision_env import HierarchicalHighwayEnv
 from stack.training.summary import TrainSummary
 from stack.training.trainer import Trainer
 from tests.helpers import scene
@@ -492,7 +492,7 @@ def test_a_config_names_its_starting_model_beside_it_from_any_working_directory(
     """A relative `train.init_model` naming a file beside the config file is that file (the shipped
     config starts from `ddqn-stage3.npz` beside it, which started from `ddqn-stage2.npz` and that from
     `ddqn-stage1.npz`, also from an installed wheel)."""
-    from stack.core.config import load_config
+    from stack.settings.run import load_config
 
     folder = tmp_path / "configs"
     folder.mkdir()

@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from planner.model_file import load_checkpoint
 from stack.apps.cli import app
-from stack.core.config import build_config
+from stack.settings.run import build_config
 from stack.training.envs import EnvWorkerDied
 from stack.training.trainer import Trainer
 from tests.test_hostile_inputs import one_line_refusal

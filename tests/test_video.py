@@ -7,7 +7,7 @@ import numpy as np
 from perception.grid import GridConfig, OccupancyGridBuilder
 from perception.plot import AXIS_PX, CAPTION_PX, OCCUPIED, grid_panel
 from records import Command
-from stack.core.video import LINE_PX, command_text
+from stack.loop.video import LINE_PX, command_text
 from tests.helpers import scene
 from tests.test_cli import run_tiny
 

@@ -15,7 +15,7 @@ from matplotlib.figure import Figure
 from typer.testing import CliRunner
 
 from stack.apps.cli import app
-from stack.core import files
+from stack.runtime import files
 from tests.test_cli import tiny_config_file
 from tests.test_hostile_inputs import one_line_refusal
 from tests.test_train import TINY

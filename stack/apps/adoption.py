@@ -1,5 +1,5 @@
 """`train --resume DIR --adopt`: a training folder made before results folders recorded their owner
-(`stack.core.owner.MARKER`) is taken over only when asked, and only when its `config.yaml` agrees
+(`stack.runtime.owner.MARKER`) is taken over only when asked, and only when its `config.yaml` agrees
 with what the run's own files recorded: the files are a training run's, its model files were
 trained with this algorithm, encoding, network, grid, lane count and seed, its checkpoint with this
 learning rate, its summary with this algorithm and network. What no file records (gamma, the
@@ -12,10 +12,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from planner.model_file import CHECKPOINT, ModelFileError, load_checkpoint, load_model
-from stack.core.owner import LOCK
+from stack.runtime.owner import LOCK
 
 if TYPE_CHECKING:
-    from stack.core.config import RunConfig
+    from stack.settings.run import RunConfig
 
 MODELS = ("best.npz", "final.npz")
 TRAINING_FILES = frozenset(
@@ -59,7 +59,7 @@ def adoption_refusal(folder: Path, config: RunConfig) -> str | None:
 def recorded_settings(folder: Path, config: RunConfig) -> list[tuple[str, Any, Any]]:
     """(file and key, what the file recorded, what `config` gives) for every setting the run's
     files recorded; ModelFileError for a model file or checkpoint that cannot be read."""
-    from stack.core.config import grid_config
+    from stack.settings.run import grid_config
 
     train = config.train
     expected = {

@@ -20,12 +20,12 @@ from stack.apps.benchmark_report import (
 )
 from stack.apps.compare import compare, comparison, write_comparison
 from stack.apps.resume import journal_of, journaled, resolved_config, started
-from stack.core.config import RunConfig, in_scenario
-from stack.core.files import write_csv, write_json, write_text
-from stack.core.interrupts import deferred
-from stack.core.metrics import EpisodeResult
-from stack.core.safety_metrics import TTC_FLOOR_S
-from stack.sim import scenarios
+from stack.loop.metrics import EpisodeResult
+from stack.loop.safety_metrics import TTC_FLOOR_S
+from stack.runtime.files import write_csv, write_json, write_text
+from stack.runtime.interrupts import deferred
+from stack.settings import scenarios
+from stack.settings.run import RunConfig, in_scenario
 
 REPORT_SEED = 970_000
 """The first seed of the benchmark's episodes (report seeds: never trained, selected or tuned on)."""

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from records.plugins import SPEC_FORMS
+from common.plugins import SPEC_FORMS
 from stack.apps.options import (
     JOBS_OPTION,
     PLANT_HELP,
@@ -59,7 +59,7 @@ def benchmark(
         fail(f"--models: {unknown[0]!r} is not among --agents ({', '.join(names)})")
     if resume and out is None:
         fail("--resume: name the folder of the interrupted benchmark with --out")
-    from stack.core.files import JOURNAL
+    from stack.runtime.files import JOURNAL
 
     if resume and out is not None and out.is_dir() and not any(out.glob(f"*/*.{JOURNAL}")):
         fail(f"--resume: {out} holds no unfinished episodes (no journal); nothing to resume")

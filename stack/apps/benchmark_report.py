@@ -7,7 +7,7 @@ An episode scores gate x the weighted mean of four sub-scores in [0, 1]:
   road lets the stack drive), capped at 1. Computable without the oracle; on a road where nobody can
   reach the set speed (a jam) every agent scores low, and only the comparison between agents counts;
 - **TTC** (weight 5): the share of the episode's time with no vehicle ahead in an occupied lane
-  closer than `stack.core.safety_metrics.TTC_FLOOR_S` (1.5 s) in time to collision;
+  closer than `stack.loop.safety_metrics.TTC_FLOOR_S` (1.5 s) in time to collision;
 - **comfort** (weight 2): the share of three bounds kept over the episode: peak lateral acceleration
   <= 2 m/s^2 and peak lateral jerk <= 2.5 m/s^3 (the project's targets, tighter than ISO 11270's 3
   and 5), and no emergency braking;
@@ -26,9 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from records.plugins import short_labels
-from stack.core.metrics import EpisodeResult
-from stack.core.statistics import Interval, mean_interval, rate_interval
+from common.plugins import short_labels
+from stack.loop.metrics import EpisodeResult
+from stack.runs.statistics import Interval, mean_interval, rate_interval
 
 WEIGHTS = {"progress": 5.0, "ttc": 5.0, "comfort": 2.0, "economy": 1.0}
 """The sub-scores' weights (nuPlan's: progress 5, TTC 5, comfort 2; economy added here)."""
@@ -172,7 +172,7 @@ def plot_leaderboard(rows: list[dict[str, Any]], title: str, path: Path) -> None
     scenario's score per agent."""
     import matplotlib.pyplot as plt
 
-    from stack.core.files import save_figure
+    from stack.runtime.files import save_figure
 
     names = short_labels([row["agent"] for row in rows])
     scenarios = list(dict.fromkeys(s for row in rows for s in row["scenarios"]))

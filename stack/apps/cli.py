@@ -9,7 +9,7 @@ from typing import Any, cast
 
 import typer
 
-from records.plugins import SPEC_FORMS
+from common.plugins import SPEC_FORMS
 from stack.apps.benchmark_cli import benchmark
 from stack.apps.commands import agents, controllers, export, sweep, view
 from stack.apps.folders import claimed, claimed_for, episodes_kept, resumed
@@ -251,7 +251,7 @@ def safety(
     if cfg.highway.lanes_count < 3:
         fail(f"highway.lanes_count: the safety scenarios need 3 or more lanes, got {cfg.highway.lanes_count}")
     plugins_or_fail([cfg], ["--agent" if agent else "planner.agent"])
-    from stack.core.episodes import build_agent
+    from stack.runs.episodes import build_agent
 
     try:
         build_agent(cfg, cfg.seed)
@@ -273,7 +273,7 @@ def safety(
 @app.command()
 def scenarios() -> None:
     """The named worlds `--scenario` takes, one line each."""
-    from stack.sim import scenarios as named
+    from stack.settings import scenarios as named
 
     for name in named.names():
         typer.echo(f"{name:12} {named.description(name)}")

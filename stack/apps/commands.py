@@ -9,7 +9,7 @@ from pathlib import Path
 import typer
 from rich.console import Console
 
-from records.plugins import AGENT_GROUP, SPEC_FORMS
+from common.plugins import AGENT_GROUP, SPEC_FORMS
 from stack.apps.options import AGAIN, fail, ray_or_fail, until_interrupted
 
 SWEEP_RAY_HELP = (
@@ -32,8 +32,8 @@ def sweep(
     if resume is not None and out is not None:
         fail("--out: has no effect with --resume; the sweep goes on in its own folder")
     from stack.apps.training import check_init_model, check_memory
-    from stack.core.config import ConfigError
-    from stack.core.sweep_config import SWEEP_FILE, load_sweep
+    from stack.settings.run import ConfigError
+    from stack.settings.sweep import SWEEP_FILE, load_sweep
 
     spec = resume / SWEEP_FILE if resume is not None else config or Path(SWEEP_FILE)
     if resume is not None and not spec.is_file():
@@ -46,14 +46,14 @@ def sweep(
         check_memory(trial)
         check_init_model(trial)
     from stack.apps.folders import claimed, location
-    from stack.core.owner import Owner, refusal
+    from stack.runtime.owner import Owner, refusal
 
     folder, owner = location(resume or out, "sweep"), Owner("sweep", "")
     if why := refusal(folder, owner, resume is not None, restart=False):
         fail(why)
     envs = max(trial.train.envs for trial in trials)
     if ray in (None, "local"):
-        from stack.core.machine import usable_cpus
+        from stack.runtime.machine import usable_cpus
 
         trial_cpus_or_fail(envs, usable_cpus(), "this machine")
     ray_or_fail(ray or "local")
@@ -129,7 +129,7 @@ def agents() -> None:
 def controllers() -> None:
     """The controllers `--controller` takes, one line each: the built-in ones, then those installed
     packages register (entry points `drivestack.controllers`)."""
-    from records.plugins import CONTROLLER_GROUP
+    from common.plugins import CONTROLLER_GROUP
     from stack.apps.track import CONTROLLER_DESCRIPTIONS
 
     _listing(CONTROLLER_DESCRIPTIONS, CONTROLLER_GROUP, 13)
@@ -137,7 +137,7 @@ def controllers() -> None:
 
 def _listing(descriptions: dict[str, str], group: str, width: int) -> None:
     """One line per built-in name, then per name installed in the entry-point `group`."""
-    from records.plugins import entry_points
+    from common.plugins import entry_points
 
     for name, text in descriptions.items():
         typer.echo(f"{name:{width}} {text}")

@@ -1,8 +1,8 @@
 """`drivestack compare`: several agents on the same seeded episodes; every metric with its 95 %
-confidence interval and, with a baseline, the paired difference to it (`stack.core.statistics`).
+confidence interval and, with a baseline, the paired difference to it (`stack.runs.statistics`).
 Writes comparison.json, comparison.png and episodes.csv (every agent's episodes, for pairings the
 table does not show) and prints one markdown table. The figure and the tables show a plug-in by its
-class name (`records.plugins.short_labels`); the files name it in full."""
+class name (`common.plugins.short_labels`); the files name it in full."""
 
 from __future__ import annotations
 
@@ -12,16 +12,16 @@ from typing import Any
 import matplotlib.pyplot as plt
 from matplotlib.axes import Axes
 
-from records.plugins import short_labels
+from common.plugins import short_labels
 from stack.apps.resume import started
-from stack.core.config import RunConfig
-from stack.core.episodes import RunResults, run
-from stack.core.executors import shared_workers
-from stack.core.files import EpisodeJournal, save_figure, write_csv, write_json
-from stack.core.interrupts import deferred
-from stack.core.metrics import EpisodeResult
-from stack.core.recording import RECORDINGS, agent_folders
-from stack.core.statistics import Interval, mean_interval, paired_difference, rate_interval
+from stack.loop.metrics import EpisodeResult
+from stack.loop.recording import RECORDINGS, agent_folders
+from stack.runs.episodes import RunResults, run
+from stack.runs.statistics import Interval, mean_interval, paired_difference, rate_interval
+from stack.runtime.executors import shared_workers
+from stack.runtime.files import EpisodeJournal, save_figure, write_csv, write_json
+from stack.runtime.interrupts import deferred
+from stack.settings.run import RunConfig
 
 MEANS = (
     "mean_speed",
@@ -88,7 +88,7 @@ def compare(
     interrupted comparison finished (`stack.apps.resume.resumable`). Ctrl-C stops the comparison:
     the agents run so far are returned (the last one with the episodes it finished); none raises
     KeyboardInterrupt. With `record` (a folder), each agent's episodes are recorded into its own
-    subfolder (`stack.core.recording.agent_folders`)."""
+    subfolder (`stack.loop.recording.agent_folders`)."""
     runs: list[RunResults] = []
     folders = agent_folders([config.planner.agent for config in configs])
     with shared_workers():

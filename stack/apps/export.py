@@ -23,8 +23,8 @@ from planner.model_file import ModelFileError
 from planner.model_metadata import ModelMetadata
 from records import N_ACTIONS
 from stack.apps.folders import check_destination
-from stack.core.decision_env import with_permitted
-from stack.core.model_fit import check_road_fit
+from stack.runs.model_fit import check_road_fit
+from stack.training.decision_env import with_permitted
 from stack.training.model import warm_start
 
 

@@ -1,5 +1,5 @@
 """Where a command writes: `--out` checked without creating anything, then taken for the command
-(`stack.core.owner`) as the last check before any work, the lock held until the command ends."""
+(`stack.runtime.owner`) as the last check before any work, the lock held until the command ends."""
 
 from __future__ import annotations
 
@@ -10,11 +10,11 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
 from stack.apps.options import fail
-from stack.core.owner import FolderRefused, Owner, claim, fingerprint
+from stack.runtime.owner import FolderRefused, Owner, claim, fingerprint
 
 if TYPE_CHECKING:
-    from stack.core.config import RunConfig
-    from stack.core.metrics import EpisodeResult
+    from stack.loop.metrics import EpisodeResult
+    from stack.settings.run import RunConfig
 
 
 def fresh_run_dir(prefix: str) -> Path:
@@ -59,7 +59,7 @@ time in a process: a test runs several in one)."""
 def claimed(
     out: Path | None, prefix: str, owner: Owner, resuming: bool = False, restart: bool = True
 ) -> Path:
-    """`location(out, prefix)` taken for `owner` (`stack.core.owner.claim`): the folder exists,
+    """`location(out, prefix)` taken for `owner` (`stack.runtime.owner.claim`): the folder exists,
     is locked until the command ends and records its owner; a one-line error otherwise."""
     folder = location(out, prefix)
     while _held:
@@ -77,7 +77,7 @@ def claimed(
 def claimed_for(command: str, out: Path | None, arguments: str, config: RunConfig | None = None) -> Path:
     """`claimed` for a command without `--resume`, owned by the hash of its `arguments` and
     resolved `config`; its folder's default name is the command's last word."""
-    from stack.core.config import config_text
+    from stack.settings.run import config_text
 
     asked = fingerprint(arguments + (config_text(config) if config is not None else ""))
     prefix = command.split()[-1]
@@ -102,7 +102,7 @@ def episodes_kept(folder: Path) -> str:
     """What a run or comparison in `folder` kept when a results file could not be written (a full
     disk, a folder made read-only), and how to go on."""
     from stack.apps.options import AGAIN
-    from stack.core.files import JOURNAL
+    from stack.runtime.files import JOURNAL
 
     journals = sorted(path.name for path in folder.glob(f"*.{JOURNAL}"))
     if not journals or not (folder / "config.yaml").is_file():

@@ -14,10 +14,10 @@ import yaml
 from rich.console import Console
 from rich.markup import escape
 
-from stack.core.interrupts import catch_signals, ignore_signals, received
+from stack.runtime.interrupts import catch_signals, ignore_signals, received
 
 if TYPE_CHECKING:
-    from stack.core.config import RunConfig
+    from stack.settings.run import RunConfig
 
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
@@ -73,7 +73,7 @@ def configured(
     blamed = {key.replace("__", "."): f"--set {key.replace('__', '.')}" for key in set_values}
     blamed |= {key.replace("__", "."): OPTIONS.get(key, f"--{key}") for key in given}
     blamed |= {key: label for key, label in (labels or {}).items() if key in blamed}
-    from stack.core.config import ConfigError, load_config
+    from stack.settings.run import ConfigError, load_config
 
     try:
         return load_config(path or RUN_CONFIG, blamed, **values)
@@ -110,7 +110,7 @@ def parsed_sets(sets: list[str]) -> dict[str, object]:
     """`--set` entries as config overrides (dotted keys as `a__b`); YAML values without anchors or
     aliases, so a short value cannot expand into a huge one. `null` (or `~`) sets the key to null
     (`NULL`: validation says where null is not allowed); an empty value is refused."""
-    from stack.core.config import NULL
+    from stack.settings.run import NULL
 
     values: dict[str, object] = {}
     for entry in sets:
@@ -130,11 +130,11 @@ def parsed_sets(sets: list[str]) -> dict[str, object]:
 
 
 def ray_or_fail(address: str | None) -> None:
-    """With `--ray`, connect now (see `stack.core.ray_tasks.connect`), so a missing Ray or an
+    """With `--ray`, connect now (see `stack.runtime.ray_tasks.connect`), so a missing Ray or an
     unreachable address is one line before any work."""
     if address is None:
         return
-    from stack.core.ray_tasks import RayUnavailable, connect
+    from stack.runtime.ray_tasks import RayUnavailable, connect
 
     try:
         connect(address)
@@ -200,8 +200,8 @@ def until_interrupted(work: Callable[[], bool], kept: Callable[[], str] = lambda
     exit 130 then; one line (and exit 130) when it was cut before anything finished. A results
     file that cannot be written (a full disk, a read-only folder) is one line (exit 2) saying
     what was kept and how to go on (`kept`); so is a plug-in that a worker could not load."""
-    from records.plugins import PluginError
-    from stack.core.files import write_failure
+    from common.plugins import PluginError
+    from stack.runtime.files import write_failure
 
     try:
         interrupted = work()
@@ -242,9 +242,9 @@ def guarded(app: typer.Typer, arguments: list[str] | None = None) -> None:
             sys.exit(130)
         raise
     except Exception as error:  # noqa: BLE001 - the last line of defence, deliberately broad
-        from records.plugins import PluginFailed
-        from stack.core.config import printable
-        from stack.core.files import write_failure
+        from common.plugins import PluginFailed
+        from stack.runtime.files import write_failure
+        from stack.settings.run import printable
 
         ignore_signals()
         if debug:

@@ -9,13 +9,13 @@ from typing import TYPE_CHECKING
 from stack.apps.options import fail
 
 if TYPE_CHECKING:
-    from stack.core.config import RunConfig
+    from stack.settings.run import RunConfig
 
 
 def agent_name_or_fail(option: str, value: str | None) -> None:
     """A one-line error (exit 2) unless `value` (None: not given) is an agent name or plug-in."""
+    from common.plugins import AGENT_GROUP, checked_name
     from records import AGENT_NAMES
-    from records.plugins import AGENT_GROUP, checked_name
 
     try:
         if value is not None:
@@ -33,7 +33,7 @@ def plugins_or_fail(configs: Sequence[RunConfig], options: Sequence[str]) -> Non
     if all(c.planner.agent in AGENT_NAMES and c.controller.type in CONTROLLER_NAMES for c in configs):
         return
     from controllers.tracker import make_controller
-    from stack.core.episodes import build_agent
+    from stack.runs.episodes import build_agent
 
     for config, option in zip(configs, options, strict=False):
         try:

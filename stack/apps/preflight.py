@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from stack.apps.options import fail
 
 if TYPE_CHECKING:
-    from stack.core.config import RunConfig
+    from stack.settings.run import RunConfig
 
 
 def checked_run(
@@ -21,7 +21,7 @@ def checked_run(
     (`stack.apps.folders.claimed`; `prefix` names the command)."""
     from planner.factory import model_path
     from planner.model_check import checked_model
-    from stack.core.model_fit import check_file_fit
+    from stack.runs.model_fit import check_file_fit
 
     for config in configs:
         try:
@@ -38,11 +38,11 @@ def checked_run(
 
     check_jobs(jobs)
     folder = location(out, prefix)
-    from stack.core.owner import refusal
+    from stack.runtime.owner import refusal
 
     if why := refusal(folder, run_owner(configs, prefix), resuming):
         fail(why)
-    from stack.core.episodes import build_agent
+    from stack.runs.episodes import build_agent
 
     for config in configs:
         try:

@@ -1,5 +1,5 @@
 """What `run` and `compare` keep so that `--resume` can finish them: the resolved config written
-when they start, and one journal of finished episodes per agent (`stack.core.files`). Light to
+when they start, and one journal of finished episodes per agent (`stack.runtime.files`). Light to
 import: a refused `--resume` costs no simulator import."""
 
 from __future__ import annotations
@@ -8,12 +8,12 @@ import math
 import sys
 from pathlib import Path
 
+from common.plugins import file_safe
 from records import child_seed
-from records.plugins import file_safe
-from stack.core.config import RunConfig, config_text, printable
-from stack.core.files import JOURNAL, EpisodeJournal, write_text
-from stack.core.metrics import EpisodeResult
-from stack.core.owner import Owner, fingerprint, refusal
+from stack.loop.metrics import EpisodeResult
+from stack.runtime.files import JOURNAL, EpisodeJournal, write_text
+from stack.runtime.owner import Owner, fingerprint, refusal
+from stack.settings.run import RunConfig, config_text, printable
 
 JOURNAL_ROW_BYTES = 2_000
 """Bytes one journaled episode takes at most (about 450 in practice): bounds what --resume reads."""
@@ -53,7 +53,7 @@ def started(
 
 def resumable(configs: list[RunConfig], out: Path, command: str) -> dict[str, list[EpisodeResult]]:
     """Per agent, the episodes the interrupted `command` (run or compare) in `out` finished: the
-    folder must be that command's (`stack.core.owner`), its config.yaml the one `configs` write,
+    folder must be that command's (`stack.runtime.owner`), its config.yaml the one `configs` write,
     and each journaled episode one of theirs (`journaled`). ValueError, naming the file, when `out`
     holds another run, none, or no journal (a finished run: nothing to resume)."""
     if why := refusal(out, run_owner(configs, command), resuming=True):

@@ -11,17 +11,17 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+from common.plugins import short_labels
 from perception.plot import plot_grid_over_road
-from records.plugins import short_labels
 from stack.apps.compare import comparison, markdown
 from stack.apps.resume import started
-from stack.core.closed_loop import VIDEO_FRAME_TICKS
-from stack.core.config import RunConfig
-from stack.core.episodes import run
-from stack.core.files import replacing, write_csv, write_json
-from stack.core.interrupts import deferred
-from stack.core.metrics import EpisodeResult
-from stack.core.recording import RECORDINGS
+from stack.loop.closed_loop import VIDEO_FRAME_TICKS
+from stack.loop.metrics import EpisodeResult
+from stack.loop.recording import RECORDINGS
+from stack.runs.episodes import run
+from stack.runtime.files import replacing, write_csv, write_json
+from stack.runtime.interrupts import deferred
+from stack.settings.run import RunConfig
 
 LANE_CHANGE_SPEED = 0.3
 """Lateral speed [m/s] above which an episode counts as changing lane in the traces plot."""
@@ -96,7 +96,7 @@ def run_and_report(
 def write_results(
     out: Path, summary: dict, episodes: list[EpisodeResult], frames: list[np.ndarray] | None = None
 ) -> None:
-    """The results folder, each file written whole (`stack.core.files`)."""
+    """The results folder, each file written whole (`stack.runtime.files`)."""
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "summary.json", summary)
     write_csv(out / "episodes.csv", [episode.outcome_row() for episode in episodes])

@@ -1,6 +1,6 @@
 """`drivestack safety`: the R157-style safety assessment. Every point of each chosen scenario grid
 (`stack.sim.safety_scenarios`) is driven by the full stack and by the careful and competent
-reference driver (`stack.core.safety_assessment`), here or over `jobs` processes or Ray tasks;
+reference driver (`stack.assessment.safety_assessment`), here or over `jobs` processes or Ray tasks;
 the results folder holds summary.json, safety.csv (one row per point) and one preventability map
 per scenario type (`safety_<type>.png`). `--point` replays one point (with `--video`, as a GIF)."""
 
@@ -14,13 +14,13 @@ from rich.console import Console
 from tqdm import tqdm
 
 from stack.apps.safety_report import plot_map, print_summary, summary
-from stack.core.closed_loop import VIDEO_FRAME_TICKS
-from stack.core.config import RunConfig, write_config
-from stack.core.executors import completed
-from stack.core.files import replacing, write_csv, write_json
-from stack.core.interrupts import deferred
-from stack.core.recording import RECORDINGS
-from stack.core.safety_assessment import Assessed, assess, drive_reference, drive_stack, point_name
+from stack.assessment.safety_assessment import Assessed, assess, drive_reference, drive_stack, point_name
+from stack.loop.closed_loop import VIDEO_FRAME_TICKS
+from stack.loop.recording import RECORDINGS
+from stack.runtime.executors import completed
+from stack.runtime.files import replacing, write_csv, write_json
+from stack.runtime.interrupts import deferred
+from stack.settings.run import RunConfig, write_config
 from stack.sim.safety_scenarios import PARAMETERS, Point, ScenarioKind, grid
 
 

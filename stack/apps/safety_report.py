@@ -16,8 +16,8 @@ from matplotlib.patches import Patch
 from rich.console import Console
 from rich.table import Table
 
-from stack.core.files import save_figure
-from stack.core.safety_assessment import OUTCOMES, Assessed
+from stack.assessment.safety_assessment import OUTCOMES, Assessed
+from stack.runtime.files import save_figure
 from stack.sim.safety_scenarios import PARAMETERS, ScenarioKind
 
 COLOURS = ("#4caf50", "#2196f3", "#e53935", "#9e9e9e")

@@ -1,4 +1,4 @@
-"""`drivestack sweep`: `drivestack train` runs over a grid or random space (`stack.core.sweep_config`)
+"""`drivestack sweep`: `drivestack train` runs over a grid or random space (`stack.settings.sweep`)
 as Ray Tune trials. Each trial trains in its own run folder, `trials/<trial id>` (the same
 checkpoints, best model and summary as `drivestack train`), and reports every long real-time
 validation to Tune: `score` is the sweep's metric of the trial's kept (best) model so far. An
@@ -23,11 +23,11 @@ import yaml
 
 from planner.scores import Validation
 from stack.apps.sweep_report import TRIALS, report
-from stack.core.config import write_config
-from stack.core.files import write_text
-from stack.core.interrupts import deferred, received, stopped_by
-from stack.core.owner import Owner, claim, fingerprint
-from stack.core.sweep_config import SWEEP_FILE, SweepFile, trial_config
+from stack.runtime.files import write_text
+from stack.runtime.interrupts import deferred, received, stopped_by
+from stack.runtime.owner import Owner, claim, fingerprint
+from stack.settings.run import write_config
+from stack.settings.sweep import SWEEP_FILE, SweepFile, trial_config
 
 BASE, TUNE = "config.yaml", "tune"
 SCORE = "score"
@@ -64,7 +64,7 @@ TRIAL = "sweep trial"
 def train_trial(params: dict[str, Any], folder: Path, metric: str) -> None:
     """One Tune trial: a training run in folder/trials/<trial id> with `params` over the sweep's
     base config, resumed from that folder's checkpoint when an earlier attempt left one. The trial
-    owns and locks its folder while it trains (`stack.core.owner`)."""
+    owns and locks its folder while it trains (`stack.runtime.owner`)."""
     from ray import tune
 
     from stack.training.trainer import Trainer

@@ -12,8 +12,8 @@ from typing import Any
 
 import matplotlib.pyplot as plt
 
-from stack.core.files import replacing, save_figure, write_csv, write_json, write_text
-from stack.core.sweep_config import SweepFile
+from stack.runtime.files import replacing, save_figure, write_csv, write_json, write_text
+from stack.settings.sweep import SweepFile
 from stack.training.summary import TrainSummary
 
 TRIALS = "trials"

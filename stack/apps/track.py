@@ -8,7 +8,7 @@ to 3 s after its end. `builtin` is highway-env's own ControlledVehicle lane chan
 built-in controller and every one installed packages register (entry points
 `drivestack.controllers`); plug-in classes (`module.path:Class`, `file.py:Class`) join by name.
 
-Metrics (`stack.core.metrics.tracking`, defined in docs/architecture.md): lateral RMS / max error to
+Metrics (`stack.loop.metrics.tracking`, defined in docs/architecture.md): lateral RMS / max error to
 the reference, overshoot, duration, peak |a_y| and lateral jerk, controller time per tick p50 / p95,
 MPC fallbacks.
 """
@@ -25,19 +25,19 @@ from pydantic import ValidationError
 from rich.console import Console
 from tqdm import tqdm
 
+from common.plugins import CONTROLLER_GROUP, entry_points, label
 from controllers.config import ControllerConfig
 from controllers.tracker import make_controller
 from records import CONTROLLER_NAMES, PLANTS, Command, PlantName
-from records.plugins import CONTROLLER_GROUP, entry_points, label
 from stack.apps.track_record import TrackedLaneChange
 from stack.apps.track_report import plot_maneuvers, print_tracking, speed_label
-from stack.core.closed_loop import ClosedLoop
-from stack.core.config import RunConfig, write_config
-from stack.core.executors import completed
-from stack.core.files import write_json
-from stack.core.interrupts import deferred
-from stack.core.metrics import Tracking, lateral_series, tracking
-from stack.core.recording import RECORDINGS, episode_recording
+from stack.loop.closed_loop import ClosedLoop
+from stack.loop.metrics import Tracking, lateral_series, tracking
+from stack.loop.recording import RECORDINGS, episode_recording
+from stack.runtime.executors import completed
+from stack.runtime.files import write_json
+from stack.runtime.interrupts import deferred
+from stack.settings.run import RunConfig, write_config
 from stack.sim.empty_road import BuiltinDriver, EmptyRoad, PlantKind, RoadKind
 
 TRACK_CONTROLLERS: tuple[str, ...] = (*CONTROLLER_NAMES, "builtin")

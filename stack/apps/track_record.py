@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
-from stack.core.metrics import Tracking
+from stack.loop.metrics import Tracking
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from stack.core.files import save_figure
+from stack.runtime.files import save_figure
 
 if TYPE_CHECKING:
     from stack.apps.track_record import TrackedLaneChange

@@ -13,11 +13,11 @@ from typing import TYPE_CHECKING
 
 from planner.model_file import CHECKPOINT as CHECKPOINT_FILE
 from stack.apps.options import AGAIN, cannot_write, configured, fail
-from stack.core.machine import available_memory_bytes
-from stack.core.owner import MARKER, Owner, fingerprint, owner_of
+from stack.runtime.machine import available_memory_bytes
+from stack.runtime.owner import MARKER, Owner, fingerprint, owner_of
 
 if TYPE_CHECKING:
-    from stack.core.config import RunConfig
+    from stack.settings.run import RunConfig
     from stack.training.summary import TrainSummary
 
 RESUME_ONLY_STEPS = "only --steps may change on resume (the run goes on as it was configured)"
@@ -39,7 +39,7 @@ WORKER_BYTES = 450 * 2**20
 def check_jobs(jobs: int) -> None:
     """Refuse, before any process starts, more episode processes (`--jobs`, at most one per usable
     CPU) than the available memory holds."""
-    from stack.core.executors import usable_cpus
+    from stack.runtime.executors import usable_cpus
 
     workers = min(jobs, usable_cpus())
     if workers > 1 and (available := available_memory_bytes()) is not None:
@@ -54,7 +54,7 @@ def check_init_model(config: RunConfig) -> None:
     """Refuse, before the run folder exists and before torch is imported, a `train.init_model`
     that does not fit the run."""
     from planner.model_file import ModelFileError
-    from stack.core.model_fit import checked_start_model
+    from stack.runs.model_fit import checked_start_model
 
     try:
         checked_start_model(config)
@@ -79,8 +79,8 @@ def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:
     """Train (or resume) in `folder` and print the outcome; True when a signal stopped it (its
     checkpoint written: resumable). A signal while the env processes start stops before training;
     signals after training only wait for the files. A dead env process ends it in one line."""
-    from stack.core.files import write_failure
-    from stack.core.interrupts import deferred, received
+    from stack.runtime.files import write_failure
+    from stack.runtime.interrupts import deferred, received
     from stack.training.envs import EnvWorkerDied
     from stack.training.trainer import Trainer
 
@@ -163,7 +163,7 @@ def resumed_training(
         )
     if found is not None and adopt:
         fail(f"--adopt: {folder} already records its owner; resume without --adopt")
-    from stack.core.config_checks import first_change
+    from stack.settings.checks import first_change
 
     stored = configured(folder / "config.yaml", [])
     config = configured(folder / "config.yaml", sets, train__steps=steps)

@@ -19,7 +19,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from stack.core.recording import RECORDINGS, agent_folders
+from stack.loop.recording import RECORDINGS, agent_folders
 
 LOOPBACK = "127.0.0.1"
 

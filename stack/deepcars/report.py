@@ -14,7 +14,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from records import Command
-from stack.core.files import save_figure, write_json, write_text
+from stack.runtime.files import save_figure, write_json, write_text
 
 if TYPE_CHECKING:
     from stack.deepcars.spec import Budget, Row, Rules

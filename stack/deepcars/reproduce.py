@@ -18,10 +18,10 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from planner.networks import NET_ARCHS
-from stack.core.interrupts import deferred
 from stack.deepcars.report import plot_curves, write_tables
 from stack.deepcars.rows import baselines, deep, lookahead, tabular
 from stack.deepcars.spec import FULL, QUICK, RULES, Budget, Row
+from stack.runtime.interrupts import deferred
 
 __all__ = ["FULL", "QUICK", "Budget", "Row", "lookahead", "reproduce"]
 

@@ -26,9 +26,9 @@ from highway_env.vehicle.dynamics import BicycleVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
 from records import BACKENDS, Actuation, Backend, PlantName, RoadName, WorldState, unknown_name
+from stack.settings.world import HighwayConfig
 from stack.sim.envs import FAST_EXIT, FAST_HIGHWAY, HIGHWAY, VECTOR_HIGHWAY
 from stack.sim.plant import stabilised
-from stack.sim.settings import HighwayConfig
 from stack.sim.traffic import TRAFFIC_VEHICLE
 from stack.sim.vector.motion import Moved, columns
 

@@ -12,7 +12,7 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 
 from records import N_ACTIONS
-from stack.core.decision_env import EpisodeRecord
+from stack.training.decision_env import EpisodeRecord
 
 MAX_EPISODE_DECISIONS = 100_000
 """Most actions an episode record of a checkpoint may hold (an hour of driving at 25 per second)."""

@@ -8,7 +8,7 @@ import math
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from stack.core.config import RunConfig
+    from stack.settings.run import RunConfig
 
 MEMORY_SHARE = 0.8
 """The share of the available memory a run may plan to take."""
@@ -18,7 +18,7 @@ def transition_bytes(config: RunConfig) -> int:
     """Memory one stored transition takes [bytes]: its observation and next observation (float32)
     plus action, reward, done and timeout (or discount)."""
     from perception.grid import OccupancyGridBuilder
-    from stack.core.config import grid_config
+    from stack.settings.run import grid_config
 
     grid = OccupancyGridBuilder(grid_config(config))
     size = math.prod(grid.space(config.train.encoding, config.highway.lanes_count).shape)

@@ -18,12 +18,12 @@ from planner.ddqn import Demonstrations, DoubleDQN
 from planner.factory import make_agent
 from planner.validation import RealTimeValidation
 from records import N_ACTIONS, Command, child_seed
-from stack.core.closed_loop import ClosedLoop
-from stack.core.config import RunConfig, grid_config
-from stack.core.decision_env import HierarchicalHighwayEnv
-from stack.core.episodes import lookahead_setup
-from stack.core.executors import completed
-from stack.core.oracle import Oracle
+from stack.agents.oracle import Oracle
+from stack.loop.closed_loop import ClosedLoop
+from stack.runs.episodes import lookahead_setup
+from stack.runtime.executors import completed
+from stack.settings.run import RunConfig, grid_config
+from stack.training.decision_env import HierarchicalHighwayEnv
 from stack.training.summary import DemonstrationsUsed
 
 

@@ -16,9 +16,9 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import SubprocVecEnv, VecEnv
 
 from planner.model_file import CHECKPOINT
-from stack.core.config import RunConfig
-from stack.core.decision_env import HierarchicalHighwayEnv
-from stack.core.interrupts import handled_by, note_stop
+from stack.runtime.interrupts import handled_by, note_stop
+from stack.settings.run import RunConfig
+from stack.training.decision_env import HierarchicalHighwayEnv
 
 
 class StopTraining(Exception):

@@ -21,10 +21,10 @@ from planner.mobil import MobilPrior
 from planner.model_metadata import ModelMetadata
 from planner.networks import net_arch
 from records import N_ACTIONS, GridConfig
-from stack.core.closed_loop import grid_config
-from stack.core.config import RunConfig
-from stack.core.decision_env import HierarchicalHighwayEnv
-from stack.core.model_fit import checked_start_model
+from stack.loop.closed_loop import grid_config
+from stack.runs.model_fit import checked_start_model
+from stack.settings.run import RunConfig
+from stack.training.decision_env import HierarchicalHighwayEnv
 from stack.training.envs import StopTraining
 
 ALGORITHMS: dict[str, type[DQN]] = {"ddqn": DoubleDQN, "dqn": DQN}

@@ -9,8 +9,8 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 
 from planner.scores import Validation, kept_models
-from stack.core.config import RunConfig
-from stack.core.files import save_figure, write_json
+from stack.runtime.files import save_figure, write_json
+from stack.settings.run import RunConfig
 from stack.training.summary import NO_CURVE, DemonstrationsUsed, TrainSummary
 
 

@@ -30,9 +30,9 @@ from planner.scores import Validation
 from planner.tabular import QLearning
 from planner.validation import RealTimeValidation
 from records import child_seed
-from stack.core.config import RunConfig, grid_config, load_config, write_config
-from stack.core.decision_env import HierarchicalHighwayEnv
+from stack.settings.run import RunConfig, grid_config, load_config, write_config
 from stack.training.checkpoint import Checkpoint, DqnCounters, TabularCounters, read_checkpoint
+from stack.training.decision_env import HierarchicalHighwayEnv
 from stack.training.demonstrations import demonstrations_used, start_from_demonstrations
 from stack.training.envs import (
     EnvWorkerDied,

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from records.compiled import Kernel
+from common.compiled import Kernel
 from stack.sim.vector.kernels import maximum, minimum, wrap_to_pi
 
 NOT_ZERO = 1e-2

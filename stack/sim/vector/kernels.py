@@ -11,7 +11,7 @@ import math
 import numpy as np
 from numba import njit
 
-from records.compiled import Kernel
+from common.compiled import Kernel
 
 SEPARATION_MARGIN = 1e-6
 """Distance [m] by which two swept rectangles must be apart on one of their axes before the narrow

@@ -18,9 +18,9 @@ from contextlib import contextmanager
 from types import ModuleType
 from typing import Any, TypeVar
 
-from stack.core.interrupts import deferred
-from stack.core.machine import usable_cpus
-from stack.core.watchdog import watch_descendants
+from stack.runtime.interrupts import deferred
+from stack.runtime.machine import usable_cpus
+from stack.runtime.watchdog import watch_descendants
 
 Item = TypeVar("Item")
 Result = TypeVar("Result")
@@ -170,7 +170,7 @@ def _no_ray_sigterm_handler(ray: ModuleType) -> Iterator[None]:
     """Inside the block Ray installs no SIGTERM handler: `ray.init` installs two, which exit (with
     code 15, or 1 after killing Ray's processes) wherever the signal finds the command, and a start
     cut short leaves Ray's core worker running, which crashes the exit. So the command's handlers
-    stay (`stack.core.interrupts`) and Ray's own exit handler ends its processes."""
+    stay (`stack.runtime.interrupts`) and Ray's own exit handler ends its processes."""
     utils = ray._private.utils
     install = utils.set_sigterm_handler
     utils.set_sigterm_handler = lambda handler: None

@@ -6,6 +6,7 @@ Every error is one line naming the file and the dotted key, e.g.
 
 from __future__ import annotations
 
+from functools import cache
 from itertools import chain
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -13,6 +14,7 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import Field, ValidationError, model_validator
 
+from common.plugins import AGENT_GROUP, plugin_name
 from controllers.config import ControllerConfig
 from perception.grid import OccupancyGridBuilder
 from perception.sensor import SensorConfig
@@ -20,12 +22,11 @@ from planner.lookahead_config import LookaheadConfig
 from planner.mobil import prior_problem
 from planner.safety import SafetyConfig
 from records import AGENT_NAMES, SEED_LIMIT, GridConfig
-from records.plugins import AGENT_GROUP, plugin_name
-from stack.core.config_checks import boolean_mismatch
-from stack.core.files import write_text
-from stack.core.train_config import Strict, TrainConfig
-from stack.sim import scenarios
-from stack.sim.settings import HighwayConfig, SimConfig
+from stack.runtime.files import write_text
+from stack.settings import scenarios
+from stack.settings.checks import boolean_mismatch
+from stack.settings.train import Strict, TrainConfig
+from stack.settings.world import HighwayConfig, SimConfig
 
 
 class ConfigError(ValueError):
@@ -64,7 +65,7 @@ class PlannerConfig(Strict):
 
 
 class RunConfig(Strict):
-    scenario: str | None = Field(None, description="the named world applied (stack.sim.scenarios)")
+    scenario: str | None = Field(None, description="the named world applied (stack.settings.scenarios)")
     seed: int = Field(0, ge=0, le=SEED_LIMIT - 1_000_000, description="seed of the first episode")
     episodes: int = Field(5, ge=1, le=1_000_000)
     highway: HighwayConfig = HighwayConfig()
@@ -216,12 +217,28 @@ def write_config(config: RunConfig, path: Path, comment: str = "") -> None:
 
 def named_roads(mix: dict[str, float]) -> dict[str, HighwayConfig]:
     """The road of each scenario of `mix`, by name."""
-    return {name: HighwayConfig(**scenarios.road(name)) for name in mix}
+    return {name: scenario_road(name) for name in mix}
+
+
+@cache
+def scenario_road(name: str) -> HighwayConfig:
+    """Scenario `name`'s road and traffic, resolved once per process: every world of a training
+    mix is validated, and each validation checks the roads of the whole mix."""
+    return HighwayConfig(**scenarios.road(name))
 
 
 def in_scenario(config: RunConfig, name: str) -> RunConfig:
     """`config` moved to scenario `name` (its world replaced, everything else kept)."""
     return RunConfig.model_validate(scenarios.apply(name, config.model_dump(mode="json")))
+
+
+def training_worlds(config: RunConfig) -> dict[str, RunConfig]:
+    """The worlds a training episode draws from, by name: `config` moved to each scenario of its
+    mix (`train.scenarios`), else `config` itself (named by its scenario, or "configured"). The one
+    place a mix is resolved; the decision MDP and its validation read what it returns."""
+    if not config.train.scenarios:
+        return {config.scenario or "configured": config}
+    return {name: in_scenario(config, name) for name in config.train.scenarios}
 
 
 def build_config(
@@ -230,7 +247,7 @@ def build_config(
     """Validate `data` in its scenario with dotted-key `overrides` applied (None values are
     ignored, `NULL` sets null): `scenario` in `overrides` moves `data` to that world, a
     `scenario` of `data`'s own keeps the world keys `data` sets over it
-    (`stack.sim.scenarios.apply`). An error
+    (`stack.settings.scenarios.apply`). An error
     in a key that `labels` names (dotted key -> e.g. the CLI option that set it) blames that label
     instead of `source`."""
     labels = labels or {}

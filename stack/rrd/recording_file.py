@@ -1,4 +1,4 @@
-"""Writes an episode's recording (`stack.core.recording`) as a rerun `.rrd` file: the entities of
+"""Writes an episode's recording (`stack.loop.recording`) as a rerun `.rrd` file: the entities of
 docs/recording.md, their styles and a default layout (the road following the ego, the controllers'
 signals, the decisions' scores, the events). rerun is imported here only, when a file is written.
 
@@ -17,7 +17,7 @@ import numpy as np
 
 from perception.grid import OccupancyGrid
 from records import Command, WorldState
-from stack.core.recording_geometry import box_corners, grid_cells, lane_points
+from stack.rrd.recording_geometry import box_corners, grid_cells, lane_points
 
 APPLICATION_ID = "drivestack"
 VIEW_AHEAD_M, VIEW_BEHIND_M = 150.0, 60.0

@@ -11,17 +11,15 @@ import errno
 import json
 import math
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, suppress
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, BinaryIO, TypeGuard
+from typing import TYPE_CHECKING, Any, BinaryIO, Protocol, TypeGuard
 
-from stack.core.interrupts import deferred
+from stack.runtime.interrupts import deferred
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
-
-    from stack.core.metrics import EpisodeResult
 
 
 WRITE_ERRORS = frozenset(
@@ -102,15 +100,22 @@ JOURNAL = "episodes.partial.jsonl"
 """Finished episodes, one JSON line each, as they finish; replaced by the results at the end."""
 
 
+class JournalEntry(Protocol):
+    """What the journal keeps of a finished episode (`stack.loop.metrics.EpisodeResult`): its row
+    of plain values (the runtime never imports the loop it keeps the results of)."""
+
+    def row(self) -> dict[str, Any]: ...
+
+
 class EpisodeJournal:
     """`path` gets one JSON line per finished episode, on disk before the next episode counts;
-    a signal arriving meanwhile waits for the line (`stack.core.interrupts.deferred`). The ordered
+    a signal arriving meanwhile waits for the line (`stack.runtime.interrupts.deferred`). The ordered
     results replace it at the end (`discard`)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
 
-    def record(self, episode: EpisodeResult) -> None:
+    def record(self, episode: JournalEntry) -> None:
         """Append `episode`'s line; a line that cannot be written whole is cut off again, so the
         journal holds the lines before it (`WriteFailed`)."""
         line = (json.dumps(episode.row()) + "\n").encode()
@@ -141,7 +146,7 @@ class EpisodeJournal:
             )
         return [_json_object(line) for line in self.path.read_bytes().splitlines()]
 
-    def keep(self, episodes: list[EpisodeResult]) -> None:
+    def keep(self, episodes: Sequence[JournalEntry]) -> None:
         """Rewrite the journal to hold exactly `episodes` (those a resumed run keeps), so appending
         goes on after them; an empty journal when there are none."""
         with deferred():

@@ -17,13 +17,13 @@ from tqdm import tqdm
 from planner.agents import Agent, Scored, decide, sees_permitted
 from planner.factory import make_agent, model_label, model_path
 from records import LEARNED_AGENTS, child_seed
-from stack.core.closed_loop import ClosedLoop, grid_config
-from stack.core.config import RunConfig
-from stack.core.executors import completed
-from stack.core.metrics import EpisodeResult, summarize
-from stack.core.model_fit import check_road_fit
-from stack.core.oracle import Oracle
-from stack.core.recording import episode_recording
+from stack.loop.closed_loop import ClosedLoop, grid_config
+from stack.settings.run import RunConfig
+from stack.runtime.executors import completed
+from stack.loop.metrics import EpisodeResult, summarize
+from stack.runs.model_fit import check_road_fit
+from stack.agents.oracle import Oracle
+from stack.loop.recording import episode_recording
 from stack.sim.highway import HighwayAdapter
 
 if TYPE_CHECKING:
@@ -105,7 +105,7 @@ def run_episode(
 ) -> EpisodeResult:
     """Episode `episode` of `config` (seed = config.seed + episode); `frames`, when given, collects
     the rendered frames; with `record` (a folder), the episode is recorded there as
-    `episode-NNNN.rrd` (`stack.core.recording`; written by whichever process runs it). Its result
+    `episode-NNNN.rrd` (`stack.loop.recording`; written by whichever process runs it). Its result
     does not depend on which process runs it, what ran before or whether it is recorded: the env a
     process keeps for a config is reset with the episode's seed (highway-env then rebuilds the road
     and reseeds every draw), and the learned agents it keeps are greedy, stateless policies over a
@@ -190,7 +190,7 @@ def run(
     record: Path | None = None,
 ) -> RunResults:
     """Run `config.episodes` seeded episodes over `jobs` processes, or as Ray tasks with `ray` (an
-    address, see `stack.core.executors`); results are ordered by episode, identical for any `jobs`
+    address, see `stack.runtime.executors`); results are ordered by episode, identical for any `jobs`
     or `ray`. With `video`, episode 0 (unless done) runs here and keeps its frames. `done` are
     episodes an earlier run of `config` finished: they count as they are and are not run again.
     Ctrl-C keeps the finished episodes (`summary["interrupted"]`); `on_finished` sees each as it

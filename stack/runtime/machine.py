@@ -1,5 +1,5 @@
 """What this machine gives a run, asked in one place: its CPUs (by the process pool,
-`stack.core.executors`, and a local Ray instance, `stack.core.ray_tasks`, which must not import
+`stack.runtime.executors`, and a local Ray instance, `stack.runtime.ray_tasks`, which must not import
 each other) and its available memory (by the checks before a run)."""
 
 from __future__ import annotations

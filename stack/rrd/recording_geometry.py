@@ -1,5 +1,5 @@
 """Where a recording draws things, in world coordinates [m], many points at once: the vehicles'
-footprints, the cells of a grid, lines along a lane (`stack.core.recording_file` writes them)."""
+footprints, the cells of a grid, lines along a lane (`stack.rrd.recording_file` writes them)."""
 
 from __future__ import annotations
 

@@ -18,8 +18,8 @@ from itertools import islice
 from multiprocessing import get_context
 from typing import TypeVar
 
-from stack.core.interrupts import raise_if_stopped
-from stack.core.machine import usable_cpus
+from stack.runtime.interrupts import raise_if_stopped
+from stack.runtime.machine import usable_cpus
 
 Item = TypeVar("Item")
 Result = TypeVar("Result")
@@ -61,7 +61,7 @@ def completed(
     """(index, task(item)) for every item, in completion order: with `ray` (`local`, `auto` or
     HOST:PORT) as Ray tasks, else over `jobs` spawned processes (1: one after the other, here)."""
     if ray is not None:
-        from stack.core.ray_tasks import ray_completed
+        from stack.runtime.ray_tasks import ray_completed
 
         yield from ray_completed(task, items, ray)
     elif jobs <= 1 or len(items) <= 1:

@@ -4,7 +4,7 @@ lists every entity path and its unit).
 The loop hands the recording what it does outside the tick, as it does the video: `start` at reset,
 `decision` at each decision point (with the agent's `scores`, when it has them), `tick` after each
 control tick. Each tick is kept as a few numbers and the vehicles' box corners; `close` writes them
-all at once as columns (`stack.core.recording_file`), so recording costs the episode little and
+all at once as columns (`stack.rrd.recording_file`), so recording costs the episode little and
 never changes it: it reads the loop's records and counters, it sets nothing.
 """
 
@@ -17,13 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
+from common.neighbours import neighbours
 from perception.grid import OccupancyGrid
 from records import Command, WorldState
-from stack.core.config import RunConfig
-from stack.core.loop_records import Tick
-from stack.core.recording_file import Buffers, Decision, Frame, write_recording
-from stack.core.recording_geometry import lane_points
-from stack.core.safety_metrics import TTC_CAP_S, SafetyMonitor, r157_min_following_distance
+from stack.loop.loop_records import Tick
+from stack.loop.safety_metrics import TTC_CAP_S, SafetyMonitor, r157_min_following_distance
+from stack.rrd.recording_file import Buffers, Decision, Frame, write_recording
+from stack.rrd.recording_geometry import lane_points
+from stack.settings.run import RunConfig
 
 RECORDINGS = "recordings"
 """The results folder's subfolder that holds the recordings."""
@@ -36,7 +37,7 @@ REFERENCE_STEP_S = 0.25
 def agent_folders(agents: Sequence[str]) -> dict[str, str]:
     """The subfolder of `RECORDINGS` that holds each agent's episodes in a comparison of `agents`:
     its name as the tables show it (a plug-in by its class name), reduced to a safe file name."""
-    from records.plugins import short_labels
+    from common.plugins import short_labels
 
     shown = short_labels(list(agents))
     return {
@@ -159,7 +160,7 @@ class EpisodeRecording:
     def _safety(self, time: float, world: WorldState, monitor: SafetyMonitor) -> None:
         """The TTC to the leader in the ego's lane, R157's distance, and the monitor's events."""
         lane = world.ego_lane
-        leader = world.neighbours(lane)[0] if 0 <= lane < world.lanes_count else None
+        leader = neighbours(world, lane)[0] if 0 <= lane < world.lanes_count else None
         speed = float(world.speed[0])
         ttc = TTC_CAP_S
         if leader is not None and leader.gap > 0 and speed > leader.speed:

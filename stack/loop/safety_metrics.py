@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from common.neighbours import neighbours
 from records import WorldState
 
 DEPARTURE_TOLERANCE_M = 0.3
@@ -165,12 +166,12 @@ class SafetyMonitor:
         v = float(world.speed[0])
         below_floor = False
         for lane in _occupied_lanes(world, extent):
-            leader = world.neighbours(lane)[0]
+            leader = neighbours(world, lane)[0]
             if leader is not None and leader.gap > 0 and v > leader.speed:
                 ttc = leader.gap / (v - leader.speed)
                 self.min_ttc_s = min(self.min_ttc_s, ttc)
                 below_floor = below_floor or ttc < TTC_FLOOR_S
         self.time_below_ttc_floor_s += self.dt * below_floor
-        leader = world.neighbours(world.ego_lane)[0] if 0 <= world.ego_lane < world.lanes_count else None
+        leader = neighbours(world, world.ego_lane)[0] if 0 <= world.ego_lane < world.lanes_count else None
         if leader is not None and leader.gap < r157_min_following_distance(v):
             self.time_below_min_distance_s += self.dt

@@ -1,4 +1,4 @@
-"""What the closed loop (`stack.core.closed_loop`) hands out: the record of one control tick, of one
+"""What the closed loop (`stack.loop.closed_loop`) hands out: the record of one control tick, of one
 `act`, its status at a decision point and its controller's solve statistics. Frozen records, so
 whoever consumes them (the metrics recorder, the safety monitor, the video, the training MDP) reads
 them without changing the loop."""

@@ -17,8 +17,8 @@ import numpy as np
 
 from perception.grid import OccupancyGrid
 from records import WorldState
-from stack.core.loop_records import Tick
-from stack.core.safety_metrics import STOPPED_SPEED_MPS, TTC_CAP_S
+from stack.loop.loop_records import Tick
+from stack.loop.safety_metrics import STOPPED_SPEED_MPS, TTC_CAP_S
 
 COMFORT_WINDOW_S = 0.5
 """Moving-average window for lateral acceleration and jerk [s] (UN R79)."""

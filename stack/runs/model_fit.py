@@ -13,7 +13,7 @@ from planner.model_file import ModelFileError
 from planner.model_metadata import ModelMetadata
 from planner.networks import net_arch
 from records import N_ACTIONS, Encoding, GridConfig
-from stack.core.config import RunConfig, grid_config
+from stack.settings.run import RunConfig, grid_config
 
 
 def check_road_fit(

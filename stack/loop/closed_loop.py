@@ -28,14 +28,14 @@ from perception.sensor import SensorConfig, SensorModel
 from planner.agents import Agent, sees_permitted
 from planner.safety import SafetyLayer
 from records import Actuation, Command, GridConfig, WorldState
-from stack.core.config import RunConfig, grid_config
-from stack.core.loop_records import Acted, LoopStatus, SolveStatistics, Tick
-from stack.core.metrics import EpisodeRecorder, EpisodeResult, Traces
-from stack.core.safety_metrics import SafetyMonitor
+from stack.loop.loop_records import Acted, LoopStatus, SolveStatistics, Tick
+from stack.loop.metrics import EpisodeRecorder, EpisodeResult, Traces
+from stack.loop.safety_metrics import SafetyMonitor
+from stack.settings.run import RunConfig, grid_config
 
 if TYPE_CHECKING:
-    from stack.core.recording import EpisodeRecording
-    from stack.core.video import Video
+    from stack.loop.recording import EpisodeRecording
+    from stack.loop.video import Video
 
 SNAPSHOT_TIME_S = 10.0
 """Each episode keeps the (world, grid) of its first decision at or after this time [s]."""
@@ -98,7 +98,7 @@ class ClosedLoop:
         """`grid` overrides the config's perception grid (an agent that needs its own view);
         `frames`, when given, collects a rendered frame every `VIDEO_FRAME_TICKS` ticks;
         `controller` replaces the one the config names (reset at every episode); `recording`,
-        when given, records the episode (`stack.core.recording`; one loop, one episode)."""
+        when given, records the episode (`stack.loop.recording`; one loop, one episode)."""
         self.config = config
         self.plant = plant
         self.frames = frames
@@ -135,7 +135,7 @@ class ClosedLoop:
         self.recorder: EpisodeRecorder | None = EpisodeRecorder(self.world)
         self.video: Video | None = None
         if self.frames is not None:
-            from stack.core.video import Video  # PIL and the grid pictures: loaded only for a video
+            from stack.loop.video import Video  # PIL and the grid pictures: loaded only for a video
 
             title = (
                 f"{config.planner.agent} + {config.controller.type}, "

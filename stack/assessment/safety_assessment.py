@@ -1,5 +1,5 @@
 """One point of the safety assessment: the full stack and the reference driver (R157's careful and
-competent driver, `stack.core.reference_driver`) each drive the same scenario on the same plant.
+competent driver, `stack.assessment.reference_driver`) each drive the same scenario on the same plant.
 
 Outcome of a point (the stack's collision vs the reference's):
 - `avoided by both`;
@@ -20,12 +20,12 @@ from pathlib import Path
 import numpy as np
 
 from records import PlantName
-from stack.core.closed_loop import ClosedLoop
-from stack.core.config import RunConfig
-from stack.core.episodes import build_agent, run_agent_episode
-from stack.core.recording import episode_recording
-from stack.core.reference_driver import CarefulDriver
-from stack.core.safety_metrics import SafetyMonitor
+from stack.assessment.reference_driver import CarefulDriver
+from stack.loop.closed_loop import ClosedLoop
+from stack.loop.recording import episode_recording
+from stack.loop.safety_metrics import SafetyMonitor
+from stack.runs.episodes import build_agent, run_agent_episode
+from stack.settings.run import RunConfig
 from stack.sim.safety_scenarios import Point, build
 from stack.sim.scripted_road import ScriptedRoad
 
@@ -142,7 +142,7 @@ def drive_stack(
 
 
 def assess(task: tuple[RunConfig, Point] | tuple[RunConfig, Point, Path]) -> Assessed:
-    """Both drives of one point (a task for `stack.core.executors.completed`); with a folder as
+    """Both drives of one point (a task for `stack.runtime.executors.completed`); with a folder as
     the task's third item, the stack's drive of a failure point is recorded there (every drive is
     recorded, those of the other points deleted once the reference driver's outcome is known)."""
     config, point = task[0], task[1]

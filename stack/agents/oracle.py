@@ -15,7 +15,7 @@ is in BENCHMARKS.md).
 It is an agent, one of `drivestack agents`, but it lives here, beside the closed loop, rather than
 in `planner/` with the others: it plans on the loop itself (`ClosedLoop.fork`, `permits`,
 `changing_lane`), and the layers never import `stack`. The loop knows it only as an agent with a
-`plan(loop)` (`stack.core.episodes.agent_step`).
+`plan(loop)` (`stack.runs.episodes.agent_step`).
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ from perception.grid import OccupancyGridBuilder
 from planner.agents import Action, Agent, Policy, decide
 from planner.factory import make_agent
 from records import Command, Encoding, GridConfig
-from stack.core.closed_loop import ClosedLoop
-from stack.core.config import OracleConfig
+from stack.loop.closed_loop import ClosedLoop
+from stack.settings.run import OracleConfig
 
 COMMANDS = (Command.STAY, Command.LEFT, Command.RIGHT)
 

@@ -22,8 +22,8 @@ from gymnasium import spaces
 
 from perception.grid import OccupancyGridBuilder
 from records import N_ACTIONS, TRAINING_SEED_FLOOR, Command, drawn_seed
-from stack.core.closed_loop import ClosedLoop
-from stack.core.config import RunConfig, build_config, grid_config, in_scenario
+from stack.loop.closed_loop import ClosedLoop
+from stack.settings.run import RunConfig, build_config, grid_config, training_worlds
 from stack.sim.highway import HighwayAdapter
 
 
@@ -52,9 +52,8 @@ class HierarchicalHighwayEnv(gym.Env):
             config = build_config(config or {}, "HierarchicalHighway-v0 config")
         self.config = config
         self.render_mode = render_mode
-        mix = config.train.scenarios
-        self.worlds = [in_scenario(config, name) for name in mix] if mix else [config]
-        self.world_names = list(mix) if mix else [config.scenario or "configured"]
+        mix, worlds = config.train.scenarios, training_worlds(config)
+        self.worlds, self.world_names = list(worlds.values()), list(worlds)
         self.shares = np.array(list(mix.values()) if mix else [1.0]) / sum(mix.values() or [1.0])
         self.adapters = [
             HighwayAdapter(

@@ -17,7 +17,7 @@ from PIL import Image, ImageDraw
 from perception.grid import OccupancyGrid
 from perception.plot import TEXT, grid_panel
 from records import Command
-from stack.core.loop_records import Tick
+from stack.loop.loop_records import Tick
 
 LINE_PX = 13
 """Height of one caption line [px]."""
@@ -57,7 +57,7 @@ def video_frame(
 
 
 class RenderedRoad(Protocol):
-    """What the video draws from: a plant that renders its road (`stack.core.closed_loop.Plant`)."""
+    """What the video draws from: a plant that renders its road (`stack.loop.closed_loop.Plant`)."""
 
     @property
     def rendering(self) -> bool: ...

@@ -11,7 +11,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validat
 from planner.mobil import MAX_PRIOR
 from planner.networks import NET_ARCHS
 from records import ENCODINGS, LEARNED_AGENTS, SEED_LIMIT, Encoding, LearnedAgentName, one_of, unknown_name
-from stack.sim import scenarios
+from stack.settings import scenarios
 
 MAX_STEPS = 1_000_000_000
 """Upper bound of every step count and period [environment steps] (the largest `train.steps`)."""

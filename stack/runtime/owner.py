@@ -20,7 +20,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import IO
 
-from stack.core.files import write_json
+from stack.runtime.files import write_json
 
 MARKER = ".drivestack-owner.json"
 """The owner record of a results folder: {"command": ..., "config": ...}."""

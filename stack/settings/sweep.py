@@ -29,9 +29,9 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, Field, ValidationError, field_validator
 
-from stack.core.config import ConfigError, RunConfig, load_config, one_line, printable, read_mapping
-from stack.core.config_checks import boolean_mismatch
-from stack.core.train_config import Strict
+from stack.settings.checks import boolean_mismatch
+from stack.settings.run import ConfigError, RunConfig, load_config, one_line, printable, read_mapping
+from stack.settings.train import Strict
 
 SWEEP_FILE = "sweep.yaml"
 """The sweep file a sweep folder keeps (`--resume` reads it)."""

@@ -1,0 +1,4 @@
+"""Behaviour that more than one layer needs, on the ground floor beside `records`: loading plug-ins
+(`plugins`), numba kernels that a stop interrupts (`compiled`), and the ego's neighbours in a world
+snapshot (`neighbours`). It imports only `records`; `perception`, `planner`, `controllers` and
+`stack` may import it."""
