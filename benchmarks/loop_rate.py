@@ -63,8 +63,8 @@ def loop_rate(run_config, seeds: range) -> float:
 def episode_cpu(scenario: str, agent: str, episodes: int, duration: float) -> None:
     """CPU ms per frame of the same seeded episodes on the stock and the vector backend."""
     from stack.core.config import build_config
+    from stack.core.episode_result import TIMING_FIELDS
     from stack.core.episodes import run_episode
-    from stack.core.metrics import TIMING_FIELDS
 
     configs = {
         backend: build_config(

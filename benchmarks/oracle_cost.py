@@ -21,8 +21,8 @@ import time
 from loop_profile import instrument
 
 from stack.core.config import build_config
+from stack.core.episode_result import TIMING_FIELDS
 from stack.core.episodes import run_episode
-from stack.core.metrics import TIMING_FIELDS
 
 COMPONENTS = [
     ["search (`Oracle.plan`)", "stack.core.oracle:Oracle.plan"],

@@ -7,9 +7,9 @@ from planner.factory import make_agent
 from records import Command
 from stack.core.closed_loop import ClosedLoop, grid_config
 from stack.core.config import build_config
+from stack.core.episode_result import outcome
 from stack.core.episodes import run, run_agent_episode
 from stack.core.loop_records import LoopStatus, SolveStatistics
-from stack.core.metrics import outcome
 from stack.sim.empty_road import EmptyRoad
 from stack.sim.highway import HighwayAdapter
 

@@ -20,7 +20,7 @@ from typer.testing import CliRunner
 from stack.apps.cli import app
 from stack.apps.options import bare_ray_as_local
 from stack.core import interrupts, ray_tasks
-from stack.core.metrics import outcome
+from stack.core.episode_result import outcome
 from stack.core.ray_tasks import connect, import_path, worker_call
 from tests.test_plugins import PLUGIN_CONTROLLER, fails_on_workers
 from tests.test_train import TINY

@@ -7,8 +7,8 @@ from typer.testing import CliRunner
 from records import Actuation
 from stack.apps.cli import app
 from stack.core.config import ConfigError, build_config
+from stack.core.episode_result import outcome
 from stack.core.episodes import run
-from stack.core.metrics import outcome
 from stack.sim import scenarios
 from stack.sim.highway import HighwayAdapter
 

@@ -19,8 +19,8 @@ from stack.apps import track as track_module
 from stack.apps.cli import app
 from stack.apps.run import undrawn
 from stack.core import episodes, executors, interrupts, watchdog
+from stack.core.episode_result import outcome
 from stack.core.files import EpisodeJournal, replacing, write_text
-from stack.core.metrics import outcome
 from tests.test_cli import tiny_config_file
 
 SHORT = ["--set", "highway.duration=4", "--set", "highway.vehicles_count=8", "--no-progress"]

@@ -10,8 +10,8 @@ import pytest
 from records import Actuation
 from stack.core import episodes
 from stack.core.config import HighwayConfig, build_config
+from stack.core.episode_result import TIMING_FIELDS
 from stack.core.episodes import run_episode
-from stack.core.metrics import TIMING_FIELDS
 from stack.sim.fast_road import FastRoad
 from stack.sim.highway import HighwayAdapter, snapshot
 from tests.helpers import scene

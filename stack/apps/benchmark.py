@@ -21,9 +21,9 @@ from stack.apps.benchmark_report import (
 from stack.apps.compare import compare, comparison, write_comparison
 from stack.apps.resume import journal_of, journaled, resolved_config, started
 from stack.core.config import RunConfig, in_scenario
+from stack.core.episode_result import EpisodeResult
 from stack.core.files import write_csv, write_json, write_text
 from stack.core.interrupts import deferred
-from stack.core.metrics import EpisodeResult
 from stack.core.safety_metrics import TTC_FLOOR_S
 from stack.sim import scenarios
 

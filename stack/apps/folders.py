@@ -14,7 +14,7 @@ from stack.core.owner import FolderRefused, Owner, claim, fingerprint
 
 if TYPE_CHECKING:
     from stack.core.config import RunConfig
-    from stack.core.metrics import EpisodeResult
+    from stack.core.episode_result import EpisodeResult
 
 
 def fresh_run_dir(prefix: str) -> Path:

@@ -19,8 +19,8 @@ from planner.factory import make_agent, model_label, model_path
 from records import LEARNED_AGENTS, child_seed
 from stack.core.closed_loop import ClosedLoop, grid_config
 from stack.core.config import RunConfig
+from stack.core.episode_result import EpisodeResult, summarize
 from stack.core.executors import completed
-from stack.core.metrics import EpisodeResult, summarize
 from stack.core.model_fit import check_road_fit
 from stack.core.oracle import Oracle
 from stack.core.recording import episode_recording

@@ -21,7 +21,7 @@ from stack.core.interrupts import deferred
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from stack.core.metrics import EpisodeResult
+    from stack.core.episode_result import EpisodeResult
 
 
 WRITE_ERRORS = frozenset(
