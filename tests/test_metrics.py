@@ -3,7 +3,7 @@ import pytest
 
 from records import Actuation, Reference
 from stack.apps.compare import intervals, markdown
-from stack.core.episode_fields import summary_rows
+from stack.core.episode_fields import reported, summary_rows
 from stack.core.episode_result import TIMING_FIELDS, EpisodeResult, summarize
 from stack.core.episodes import RunResults
 from stack.core.loop_records import Tick
@@ -89,3 +89,10 @@ def test_wall_clock_fields_go_to_timings_only():
     assert not set(TIMING_FIELDS) & set(recorded.outcome_row())
     assert list(recorded.timing_row()) == ["episode", "seed", *TIMING_FIELDS]
     assert "time_in_leftmost_lane_s" in recorded.outcome_row()
+
+
+def test_every_reported_field_names_its_time_unit():
+    declared = {field.name: how.unit for field, how in reported(EpisodeResult)}
+    assert len(declared) == len(EpisodeResult.__dataclass_fields__) - 2, "all but the trace and snapshot"
+    for name, unit in declared.items():
+        assert name.endswith(f"_{unit}") == (unit in ("s", "ms")), name

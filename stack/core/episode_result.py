@@ -33,14 +33,17 @@ from stack.core.safety_metrics import TTC_CAP_S
 
 
 def _not_at_fault(values: list[bool], episodes: Sequence[EpisodeResult]) -> int:
+    """Collisions not at fault: all collisions but those at fault (`values`)."""
     return sum(e.crashed for e in episodes) - sum(values)
 
 
 def _failures(values: list[bool], episodes: Sequence[EpisodeResult]) -> int:
+    """Episodes with an at-fault collision or a road departure."""
     return sum(e.at_fault_collision or e.road_departure for e in episodes)
 
 
 def _accuracy(values: list[int], episodes: Sequence[EpisodeResult]) -> float | None:
+    """The paper's accuracy [%]: passed / (passed + collided) x 100; None when both are 0."""
     passed, collisions = sum(values), sum(e.crashed for e in episodes)
     return 100.0 * passed / (passed + collisions) if passed + collisions else None
 
