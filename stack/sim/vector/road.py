@@ -30,7 +30,7 @@ other lanes (a curved exit, `neighbour_vehicles_connected_lanes`) run as `FastRo
 
 from __future__ import annotations
 
-from operator import attrgetter
+from operator import attrgetter, itemgetter
 
 import numpy as np
 from highway_env.road.lane import StraightLane
@@ -127,13 +127,7 @@ class VectorRoad(FastRoad):
         drive (`_drive`: every driver's steering and acceleration at once) and, when the frame's
         first rows are the road's vehicles, leave the step what it read and gave
         (`acted_for_step`)."""
-        drivers, places, others = [], [], []
-        for place, vehicle in enumerate(self.vehicles):
-            if type(vehicle) in IDM_DRIVERS and not vehicle.crashed:
-                drivers.append(vehicle)
-                places.append(place)
-            else:
-                others.append(place)
+        drivers, places, others = self._drivers_and_others()
         if not drivers:
             for vehicle in self.vehicles:
                 vehicle.act()
@@ -154,36 +148,57 @@ class VectorRoad(FastRoad):
                 acceleration,
             )
 
+    def _drivers_and_others(self) -> tuple[list[IDMVehicle], list[int], list[int]]:
+        """The IDM drivers that act this frame (not crashed: stock's act returns at once for those),
+        their places in the road's vehicles, and the places of the other vehicles."""
+        drivers, places, others = [], [], []
+        for place, vehicle in enumerate(self.vehicles):
+            if type(vehicle) in IDM_DRIVERS and not vehicle.crashed:
+                drivers.append(vehicle)
+                places.append(place)
+            else:
+                others.append(place)
+        return drivers, places, others
+
     def _decide(self, plan: Drivers, places: list[int], others: list[int]) -> None:
         """Every vehicle's discrete decisions, in the road's order as stock makes them (a driver's
         abort of a contested change reads the target lanes of those before it): the other vehicles
-        act whole; the drivers due to decide take MOBIL's batch outcome (`_mobil`); those at their
-        lane's end follow the road, and those whose change is due or runs then decide alone
-        (`change_lane_policy`). The drivers' target lanes are read again afterwards."""
+        act whole; the drivers due to decide take MOBIL's outcome, evaluated for all of them at once
+        (`_mobil`: it reads positions and speeds, which no decision changes); those at their lane's
+        end or whose change is due or runs decide as stock does (`_stock_decisions`); the rest
+        decide nothing this frame. The drivers' target lanes are read again afterwards."""
         at_lane_end = plan.at_lane_end()
         decisions = self._mobil(plan, ~at_lane_end)
         may_change = plan.enable_lane_change & (plan.timer_due | ~plan.on_target)
         acting = set(decisions).union((at_lane_end | may_change).nonzero()[0].tolist())
+        turns: list[tuple[int, int | None]] = [(place, None) for place in others]
+        turns += [(places[k], k) for k in acting]
         retargeted = []
-        for place, k in sorted([(place, -1) for place in others] + [(places[k], k) for k in acting]):
+        for place, k in sorted(turns, key=itemgetter(0)):
             vehicle = self.vehicles[place]
-            if k < 0:
+            if k is None:
                 vehicle.act()
-                continue
-            if k in decisions:
+            elif k in decisions:
                 vehicle.timer = 0
                 if decisions[k]:
                     vehicle.target_lane_index = decisions[k]
                     retargeted.append(k)
-                continue
-            if at_lane_end[k]:
-                vehicle.follow_road()
-                retargeted.append(k)
-            due = vehicle.LANE_CHANGE_DELAY < vehicle.timer
-            if vehicle.enable_lane_change and (due or vehicle.lane_index != vehicle.target_lane_index):
-                vehicle.change_lane_policy()
+            elif self._stock_decisions(vehicle, bool(at_lane_end[k])):
                 retargeted.append(k)
         plan.retarget(retargeted)
+
+    @staticmethod
+    def _stock_decisions(driver: IDMVehicle, at_lane_end: bool) -> bool:
+        """`IDMVehicle.act`'s decisions for a driver MOBIL's batch left out: onto the next lane at
+        its lane's end (`follow_road`), then `change_lane_policy` when its change is due or runs (a
+        contested change is aborted there). Whether its target lane may have changed."""
+        if at_lane_end:
+            driver.follow_road()
+        due = driver.LANE_CHANGE_DELAY < driver.timer
+        if driver.enable_lane_change and (due or driver.lane_index != driver.target_lane_index):
+            driver.change_lane_policy()
+            return True
+        return at_lane_end
 
     def _mobil(self, plan: Drivers, free: np.ndarray) -> dict[int, LaneIndex | None]:
         """`change_lane_policy`'s outcome for the drivers due to decide (not those not `free`: they
