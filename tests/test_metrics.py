@@ -2,8 +2,12 @@ import numpy as np
 import pytest
 
 from records import Actuation, Reference
+from stack.apps.compare import intervals, markdown
+from stack.loop.episode_fields import reported, summary_rows
+from stack.loop.episode_result import TIMING_FIELDS, EpisodeResult, summarize
 from stack.loop.loop_records import Tick
-from stack.loop.metrics import EpisodeRecorder, EpisodeResult, lateral_comfort, moving_average, summarize
+from stack.loop.metrics import EpisodeRecorder, lateral_comfort, moving_average
+from stack.runs.episodes import RunResults
 from tests.helpers import scene
 
 
@@ -36,3 +40,59 @@ def test_moving_average_and_comfort_of_a_constant_turn():
     accel, jerk = lateral_comfort(heading, np.full(30, speed), dt)
     assert accel == pytest.approx(speed * yaw_rate)
     assert jerk == pytest.approx(0.0, abs=1e-9)
+
+
+def test_time_in_the_leftmost_lane_counts_the_ticks_that_end_there():
+    recorder = EpisodeRecorder(scene(3, (0.0, 0)))
+    reference, actuation = Reference(0.0, 0.0, 0.0, set_speed=25.0), Actuation(0.0, 0.0)
+    for tick, lane in enumerate((0, 1, 0, 0, 2), start=1):
+        recorder.record(Tick(reference, actuation, scene(3, (2.0 * tick, lane), time=0.1 * tick), lane, lane))
+    assert recorder.driven(0.1).time_in_leftmost_lane_s == pytest.approx(0.3), "the start is no tick"
+
+
+def episode(number: int, crashed: bool, leftmost_s: float) -> EpisodeResult:
+    return EpisodeResult(
+        number, number, 10, 1.0, crashed, 0, 1, 20.0, 0.5, 0.8, time_in_leftmost_lane_s=leftmost_s
+    )
+
+
+def test_the_summary_the_run_table_and_compare_follow_the_fields_declarations():
+    episodes = [episode(0, False, 2.0), episode(1, True, 4.0)]
+    summary = summarize(episodes, agent="rule")
+    assert list(summary)[:8] == [
+        "agent",
+        "episodes",
+        "collisions",
+        "collision_rate",
+        "at_fault_collisions",
+        "not_at_fault_collisions",
+        "road_departures",
+        "failures",
+    ]
+    assert list(summary)[-4:] == ["peak_lat_jerk", "mpc_fallbacks", "solve_ms_p50", "solve_ms_p95"]
+    assert summary["time_in_leftmost_lane_s"] == 3.0 and summary["not_at_fault_collisions"] == 1
+    rows = dict(summary_rows(EpisodeResult, summary))
+    assert rows["time in the leftmost lane / episode"] == "3.00 s"
+    assert rows["collision rate"] == "50.0% (1)" and rows["accuracy"] == "0.00 %"
+    assert dict(summary_rows(EpisodeResult, summarize([episode(0, False, 0.0)])))["accuracy"] == "n/a"
+    found = intervals(RunResults(summary, episodes, []))
+    assert list(found)[:3] == ["collision_rate", "at_fault_rate", "road_departure_rate"]
+    assert found["time_in_leftmost_lane_s"].value == 3.0 and found["collision_rate"].value == 0.5
+    assert "| leftmost lane s / ep |" in markdown(
+        [{**summary, "intervals": {k: v.as_list() for k, v in found.items()}}]
+    )
+
+
+def test_wall_clock_fields_go_to_timings_only():
+    assert TIMING_FIELDS == ("solve_ms_p50", "solve_ms_p95")
+    recorded = episode(0, False, 1.0)
+    assert not set(TIMING_FIELDS) & set(recorded.outcome_row())
+    assert list(recorded.timing_row()) == ["episode", "seed", *TIMING_FIELDS]
+    assert "time_in_leftmost_lane_s" in recorded.outcome_row()
+
+
+def test_every_reported_field_names_its_time_unit():
+    declared = {field.name: how.unit for field, how in reported(EpisodeResult)}
+    assert len(declared) == len(EpisodeResult.__dataclass_fields__) - 2, "all but the trace and snapshot"
+    for name, unit in declared.items():
+        assert (f"_{unit}_" in f"{name}_") == (unit in ("s", "ms")), name

@@ -63,3 +63,18 @@ def test_the_same_agent_twice_is_refused_before_any_work(tmp_path):
         result = CliRunner().invoke(app, [*arguments, "--out", str(tmp_path / "out")])
         assert result.exit_code == 2 and message in result.output, result.output
     assert not (tmp_path / "out").exists()
+
+
+def test_a_journal_an_earlier_version_wrote_is_refused_in_one_line(tmp_path):
+    config = tiny_config_file(tmp_path)
+    arguments = ["run", "-c", str(config), "--agent", "keep-lane", "--episodes", "2"]
+    out = tmp_path / "out"
+    started = CliRunner().invoke(app, [*arguments, "--out", str(out), "--no-progress"])
+    assert started.exit_code == 0, started.output
+    older = run_episode(load_config(config, planner__agent="keep-lane", episodes=2), 0).row()
+    older.pop("time_in_leftmost_lane_s")
+    (out / "keep-lane.episodes.partial.jsonl").write_text(json.dumps(older) + "\n")
+    refused = CliRunner().invoke(app, [*arguments, "--out", str(out), "--resume", "--no-progress"])
+    lines = refused.output.strip().splitlines()
+    assert refused.exit_code == 2 and len(lines) == 1, refused.output
+    assert "written by an earlier drivestack (its episodes lack time_in_leftmost_lane_s)" in lines[0]

@@ -343,22 +343,22 @@ def test_the_step_reads_what_the_act_left_and_the_kept_constants_follow_the_vehi
     env = vector_env_after("overtaking", seed=3, frames=5)
     road = env.unwrapped.road
     road.act()
-    acted = road.acted
+    acted = road.acted_for_step
     assert acted is not None and len(acted.vehicles) == len(road.vehicles)
     np.testing.assert_array_equal(acted.speed, [v.speed for v in road.vehicles])
     np.testing.assert_array_equal(acted.position, [v.position for v in road.vehicles])
     driven = [road.vehicles[row] for row in acted.driven.tolist()]
     np.testing.assert_array_equal(acted.steering, [v.action["steering"] for v in driven])
     road.step(1 / 15)
-    assert road.acted is None and road.mover_constants is not None
-    stepped = road.stepped
-    assert stepped is not None
-    np.testing.assert_array_equal(stepped.footprints.heading, [v.heading for v in road.vehicles])
+    assert road.acted_for_step is None and road.mover_constants is not None
+    left = road.left_by_step
+    assert left is not None
+    np.testing.assert_array_equal(left.footprints.heading, [v.heading for v in road.vehicles])
     lane_row = LaneTable.fit(road.network).row
-    np.testing.assert_array_equal(stepped.lane_row, [lane_row[v.lane_index] for v in road.vehicles])
+    np.testing.assert_array_equal(left.lane_row, [lane_row[v.lane_index] for v in road.vehicles])
     road.act()
-    assert road.stepped is None and road.acted is not None
-    np.testing.assert_array_equal(road.acted.position, [v.position for v in road.vehicles])
+    assert road.left_by_step is None and road.acted_for_step is not None
+    np.testing.assert_array_equal(road.acted_for_step.position, [v.position for v in road.vehicles])
     kept = road.mover_constants
     assert KeptColumns.of(list(road.vehicles), MOVER_CONSTANTS, kept) is kept
     replaced = list(road.vehicles)

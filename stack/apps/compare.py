@@ -14,7 +14,9 @@ from matplotlib.axes import Axes
 
 from common.plugins import short_labels
 from stack.apps.resume import started
-from stack.loop.metrics import EpisodeResult
+from stack.loop.episode_fields import columns, interval_text
+from stack.loop.episode_fields import intervals as declared_intervals
+from stack.loop.episode_result import EpisodeResult
 from stack.loop.recording import RECORDINGS, agent_folders
 from stack.runs.episodes import RunResults, run
 from stack.runs.statistics import Interval, mean_interval, paired_difference, rate_interval
@@ -23,22 +25,6 @@ from stack.runtime.files import EpisodeJournal, save_figure, write_csv, write_js
 from stack.runtime.interrupts import deferred
 from stack.settings.run import RunConfig
 
-MEANS = (
-    "mean_speed",
-    "lane_changes",
-    "masked_commands",
-    "aborted_changes",
-    "time_below_min_distance_s",
-    "emergency_brakings",
-    "longest_standstill_s",
-)
-"""Per-episode metrics reported as means over episodes (none can be negative)."""
-RATES = {
-    "collision_rate": "crashed",
-    "at_fault_rate": "at_fault_collision",
-    "road_departure_rate": "road_departure",
-}
-"""Rates of per-episode outcomes: the reported metric and the episode field it counts."""
 PANELS = (
     ("collision_rate", "collision rate [%]", 100.0),
     ("mean_speed", "mean speed [m/s]", 1.0),
@@ -47,29 +33,30 @@ PANELS = (
 
 
 def intervals(results: RunResults) -> dict[str, Interval]:
-    """Every reported metric of one agent with its 95 % interval."""
+    """Every reported metric of one agent with its 95 % interval: each field of `EpisodeResult`
+    that declares one, as a rate of its episodes or a mean over them (none can be negative)."""
     episodes = results.episodes
-    found = {
-        metric: rate_interval(sum(getattr(e, field) for e in episodes), len(episodes))
-        for metric, field in RATES.items()
-    }
-    for metric in MEANS:
-        found[metric] = mean_interval([getattr(e, metric) for e in episodes], floor=0.0)
+    found = {}
+    for name, interval in declared_intervals(EpisodeResult):
+        values = [getattr(e, name) for e in episodes]
+        if interval.kind == "rate":
+            found[interval.key] = rate_interval(sum(values), len(episodes))
+        else:
+            found[interval.key] = mean_interval(values, floor=0.0)
     return found
 
 
 def differences(results: RunResults, baseline: RunResults) -> dict[str, Interval]:
     """Agent minus baseline, episode by episode (same seeds), for every reported metric, over the
     episodes both finished (all of them unless the comparison was interrupted)."""
-    pairs = {**RATES, **{metric: metric for metric in MEANS}}
     theirs = {e.episode: e for e in baseline.episodes}
     shared = [(e, theirs[e.episode]) for e in results.episodes if e.episode in theirs]
     return {
-        metric: paired_difference(
-            [float(getattr(mine, field)) for mine, _ in shared],
-            [float(getattr(other, field)) for _, other in shared],
+        interval.key: paired_difference(
+            [float(getattr(mine, name)) for mine, _ in shared],
+            [float(getattr(other, name)) for _, other in shared],
         )
-        for metric, field in pairs.items()
+        for name, interval in declared_intervals(EpisodeResult)
     }
 
 
@@ -228,52 +215,31 @@ def _bars(axis: Axes, names: list[str], intervals: list[list[float]], label: str
     axis.grid(axis="y", alpha=0.3)
 
 
-def _cell(interval: list[float], scale: float = 1.0, digits: int = 2, sign: str = "") -> str:
-    value, low, high = (scale * v for v in interval)
-    return f"{value:{sign}.{digits}f} [{low:{sign}.{digits}f}, {high:{sign}.{digits}f}]"
-
-
 def markdown(rows: list[dict[str, Any]]) -> str:
     """The table: every metric as value [95 % interval]; paired differences with a baseline."""
-    header = (
-        "| agent | episodes | collision rate % | accuracy % | mean speed m/s | lane changes / ep "
-        "| masked / ep | aborted / ep |"
-    )
+    shown_columns = columns(EpisodeResult, "agents")
+    header = "| agent | episodes | " + " | ".join(column.header for column in shown_columns) + " |"
     baseline = shown_baseline(rows) if rows[0].get("baseline") else None
     if baseline:
         header += f" speed - {baseline} m/s | collision rate - {baseline} % |"
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
     for row, name in zip(rows, shown(rows), strict=True):
-        ci = row["intervals"]
-        accuracy = "n/a" if row["accuracy"] is None else f"{row['accuracy']:.2f}"
-        line = (
-            f"| {name} | {row['episodes']} | {_cell(ci['collision_rate'], 100, 1)} | {accuracy} | "
-            f"{_cell(ci['mean_speed'])} | {_cell(ci['lane_changes'])} | {_cell(ci['masked_commands'])} | "
-            f"{_cell(ci['aborted_changes'])} |"
-        )
+        line = f"| {name} | {row['episodes']} | " + " | ".join(c.cell(row) for c in shown_columns) + " |"
         if baseline:
             difference = row["difference"]
-            line += f" {_cell(difference['mean_speed'], sign='+')} |"
-            line += f" {_cell(difference['collision_rate'], 100, 1, '+')} |"
+            line += f" {interval_text(difference['mean_speed'], sign='+')} |"
+            line += f" {interval_text(difference['collision_rate'], 100, 1, '+')} |"
         lines.append(line)
     return "\n".join(lines) + "\n\n" + safety_markdown(rows)
 
 
 def safety_markdown(rows: list[dict[str, Any]]) -> str:
-    """The safety table (docs/envelope.md): at-fault collisions and road departures as rates
-    with their intervals, the worst minimum TTC, time below R157's minimum following distance,
-    emergency brakings and the longest standstill per episode."""
-    header = (
-        "| agent | at-fault collisions % | not at fault | road departures % | min TTC s "
-        "| below R157 d_min s / ep | emergency brakings / ep | longest standstill s / ep |"
-    )
+    """The safety table (docs/envelope.md): the safety columns `EpisodeResult` declares (at-fault
+    collisions and road departures as rates with their intervals, the worst minimum TTC, time
+    below R157's minimum following distance, emergency brakings, the longest standstill ...)."""
+    shown_columns = columns(EpisodeResult, "safety")
+    header = "| agent | " + " | ".join(column.header for column in shown_columns) + " |"
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
     for row, name in zip(rows, shown(rows), strict=True):
-        ci = row["intervals"]
-        lines.append(
-            f"| {name} | {_cell(ci['at_fault_rate'], 100, 1)} | {row['not_at_fault_collisions']} | "
-            f"{_cell(ci['road_departure_rate'], 100, 1)} | {row['min_ttc_s']:.2f} | "
-            f"{_cell(ci['time_below_min_distance_s'])} | {_cell(ci['emergency_brakings'])} | "
-            f"{_cell(ci['longest_standstill_s'])} |"
-        )
+        lines.append(f"| {name} | " + " | ".join(column.cell(row) for column in shown_columns) + " |")
     return "\n".join(lines) + "\n"

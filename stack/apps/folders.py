@@ -13,7 +13,7 @@ from stack.apps.options import fail
 from stack.runtime.owner import FolderRefused, Owner, claim, fingerprint
 
 if TYPE_CHECKING:
-    from stack.loop.metrics import EpisodeResult
+    from stack.loop.episode_result import EpisodeResult
     from stack.settings.run import RunConfig
 
 

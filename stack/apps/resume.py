@@ -10,7 +10,7 @@ from pathlib import Path
 
 from common.plugins import file_safe
 from records import child_seed
-from stack.loop.metrics import EpisodeResult
+from stack.loop.episode_result import EpisodeResult
 from stack.runtime.files import JOURNAL, EpisodeJournal, write_text
 from stack.runtime.owner import Owner, fingerprint, refusal
 from stack.settings.run import RunConfig, config_text, printable
@@ -78,10 +78,16 @@ def resumable(configs: list[RunConfig], out: Path, command: str) -> dict[str, li
 def journaled(config: RunConfig, journal: EpisodeJournal) -> list[EpisodeResult]:
     """The episodes of `config` that `journal` holds; a line that is not one (damaged, cut short,
     a value out of range, another run's episode) is dropped with a one-line warning naming the
-    file, and that episode runs again."""
+    file, and that episode runs again. A journal an earlier version wrote (its episodes lack fields
+    measured since) is refused: ValueError, in one line."""
     episodes: dict[int, EpisodeResult] = {}
     dropped = []
     for number, row in enumerate(journal.lines(JOURNAL_ROW_BYTES * config.episodes), start=1):
+        if row is not None and (missing := EpisodeResult.missing(row)):
+            raise ValueError(
+                f"--resume: {journal.path} was written by an earlier drivestack (its episodes lack "
+                f"{', '.join(missing)}); run again without --resume"
+            )
         episode = EpisodeResult.from_row(row) if row is not None and in_range(row) else None
         if episode is None or not belongs(episode, config):
             dropped.append(number)

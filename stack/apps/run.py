@@ -16,7 +16,8 @@ from perception.plot import plot_grid_over_road
 from stack.apps.compare import comparison, markdown
 from stack.apps.resume import started
 from stack.loop.closed_loop import VIDEO_FRAME_TICKS
-from stack.loop.metrics import EpisodeResult
+from stack.loop.episode_fields import summary_rows
+from stack.loop.episode_result import EpisodeResult
 from stack.loop.recording import RECORDINGS
 from stack.runs.episodes import run
 from stack.runtime.files import replacing, write_csv, write_json
@@ -216,25 +217,7 @@ def print_tables(summary: dict, episodes: list[EpisodeResult], console: Console 
     overview = Table(title=f"summary: {agent_and_controller(summary)}")
     overview.add_column("metric")
     overview.add_column("value", justify="right")
-    accuracy = summary["accuracy"]
-    for name, value in (
-        ("episodes", summary["episodes"]),
-        ("collision rate", f"{summary['collision_rate']:.1%} ({summary['collisions']})"),
-        (
-            "at fault / not at fault",
-            f"{summary['at_fault_collisions']} / {summary['not_at_fault_collisions']}",
-        ),
-        ("road departures", summary["road_departures"]),
-        ("min time to collision", f"{summary['min_ttc_s']:.2f} s"),
-        ("time below R157 d_min / episode", f"{summary['time_below_min_distance_s']:.2f} s"),
-        ("emergency brakings / episode", f"{summary['emergency_brakings']:.2f}"),
-        ("longest standstill / episode", f"{summary['longest_standstill_s']:.2f} s"),
-        ("accuracy", "n/a" if accuracy is None else f"{accuracy:.2f} %"),
-        ("passed cars", summary["passed_cars"]),
-        ("mean speed", f"{summary['mean_speed']:.2f} m/s"),
-        ("lane changes / episode", f"{summary['lane_changes']:.2f}"),
-        ("MPC fallbacks", summary["mpc_fallbacks"]),
-        ("control compute p50 / p95", f"{summary['solve_ms_p50']:.2f} / {summary['solve_ms_p95']:.2f} ms"),
-    ):
-        overview.add_row(name, str(value))
+    overview.add_row("episodes", str(summary["episodes"]))
+    for label, text in summary_rows(EpisodeResult, summary):
+        overview.add_row(label, text)
     console.print(overview)

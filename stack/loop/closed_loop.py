@@ -28,8 +28,10 @@ from perception.sensor import SensorConfig, SensorModel
 from planner.agents import Agent, sees_permitted
 from planner.safety import SafetyLayer
 from records import Actuation, Command, GridConfig, WorldState
+from stack.loop.episode_fields import record_fields
+from stack.loop.episode_result import EpisodeResult
 from stack.loop.loop_records import Acted, LoopStatus, SolveStatistics, Tick
-from stack.loop.metrics import EpisodeRecorder, EpisodeResult, Traces
+from stack.loop.metrics import EpisodeRecorder, Traces
 from stack.loop.safety_metrics import SafetyMonitor
 from stack.settings.run import RunConfig, grid_config
 
@@ -322,33 +324,21 @@ class ClosedLoop:
         return SolveStatistics(p50, p95, self.controller.fallbacks - self.fallbacks_before)
 
     def result(self, episode: int) -> EpisodeResult:
-        """The episode's result, as its parts measured it so far."""
-        driven, monitor, safety = self._recorded().driven(self.plant.dt), self.monitor, self.safety.counts
-        solves = self.solve_statistics()
+        """The episode's result, as its parts measured it so far: what the recorder and the safety
+        monitor measured goes in whole (`Driven`, `SafetyMeasures`: fields named as the result's)."""
+        safety, solves = self.safety.counts, self.solve_statistics()
         return EpisodeResult(
             episode=episode,
             seed=self.seed,
-            steps=driven.steps,
-            duration_s=driven.duration_s,
             crashed=self.crashed,
-            passed_cars=driven.passed_cars,
             lane_changes=self.maneuver.counts.lane_changes,
-            mean_speed=driven.mean_speed,
-            peak_lat_accel=driven.peak_lat_accel,
-            peak_lat_jerk=driven.peak_lat_jerk,
             masked_commands=safety.masked,
             aborted_changes=safety.aborted,
             mpc_fallbacks=solves.fallbacks,
-            road_departure=monitor.road_departure,
-            at_fault_collision=monitor.collision is not None and monitor.collision.at_fault,
-            collision_kind=monitor.collision.kind if monitor.collision else "",
-            min_ttc_s=monitor.min_ttc_s,
-            time_below_min_distance_s=monitor.time_below_min_distance_s,
             emergency_brakings=self.emergency.activations,
-            longest_standstill_s=driven.longest_standstill_s,
-            time_below_ttc_floor_s=monitor.time_below_ttc_floor_s,
             solve_ms_p50=solves.p50_ms,
             solve_ms_p95=solves.p95_ms,
-            trace=driven.trace,
             snapshot=self.snapshot,
+            **record_fields(self._recorded().driven(self.plant.dt)),
+            **record_fields(self.monitor.measured()),
         )

@@ -10,15 +10,14 @@
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from perception.grid import OccupancyGrid
 from records import WorldState
 from stack.loop.loop_records import Tick
-from stack.loop.safety_metrics import STOPPED_SPEED_MPS, TTC_CAP_S
+from stack.loop.safety_metrics import STOPPED_SPEED_MPS
 
 COMFORT_WINDOW_S = 0.5
 """Moving-average window for lateral acceleration and jerk [s] (UN R79)."""
@@ -92,67 +91,14 @@ def tracking(
 
 
 @dataclass(frozen=True)
-class EpisodeResult:
-    """One closed-loop episode; `trace` holds per-tick time [s], speed [m/s] and lateral offset [m]."""
-
-    episode: int
-    seed: int
-    steps: int
-    duration_s: float
-    crashed: bool
-    passed_cars: int
-    lane_changes: int
-    mean_speed: float
-    peak_lat_accel: float
-    peak_lat_jerk: float
-    masked_commands: int = 0
-    aborted_changes: int = 0
-    mpc_fallbacks: int = 0
-    road_departure: bool = False
-    at_fault_collision: bool = False
-    collision_kind: str = ""
-    min_ttc_s: float = TTC_CAP_S
-    time_below_min_distance_s: float = 0.0
-    emergency_brakings: int = 0
-    longest_standstill_s: float = 0.0
-    time_below_ttc_floor_s: float = 0.0
-    solve_ms_p50: float = field(default=0.0, compare=False)
-    solve_ms_p95: float = field(default=0.0, compare=False)
-    trace: dict[str, list[float]] = field(default_factory=dict, repr=False)
-    snapshot: tuple[WorldState, OccupancyGrid] | None = field(default=None, repr=False, compare=False)
-
-    def row(self) -> dict:
-        """The flat record (no traces, no snapshot): a journal line."""
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("trace", "snapshot")}
-
-    def outcome_row(self) -> dict:
-        """`row()` without its wall-clock fields: an episodes.csv line, the same on every rerun."""
-        return {name: value for name, value in self.row().items() if name not in TIMING_FIELDS}
-
-    def timing_row(self) -> dict:
-        """The episode, its seed and its wall-clock fields: a timings.csv line."""
-        return {"episode": self.episode, "seed": self.seed} | {
-            name: getattr(self, name) for name in TIMING_FIELDS
-        }
-
-    @classmethod
-    def from_row(cls, row: dict[str, Any]) -> EpisodeResult | None:
-        """The episode `row()` recorded, or None when `row` is not one (other keys, a value not of
-        its field's type)."""
-        kinds = {"int": int, "bool": bool, "float": int | float, "str": str}
-        typed = {f.name: kinds[str(f.type)] for f in fields(cls) if f.name not in ("trace", "snapshot")}
-        if sorted(row) != sorted(typed) or not all(isinstance(row[n], kind) for n, kind in typed.items()):
-            return None
-        return cls(**row)
-
-
-@dataclass(frozen=True)
 class Driven:
     """What the recorder measured of an episode: control ticks (`steps`), duration [s], passed
     cars, the ego's mean speed [m/s], peak |lateral acceleration| [m/s^2] and jerk [m/s^3], its
     longest standstill [s] (the most ticks in a row that ended with it below `STOPPED_SPEED_MPS`,
     times the tick: an ego that cannot get round a blocked lane stands still for the rest of the
-    episode), and the per-tick `trace` of time [s], speed [m/s] and lateral offset [m]."""
+    episode), its time in the leftmost lane [s] (the ticks that ended with it in lane 0, the lane
+    that keep-right rules reserve for overtaking, times the tick), and the per-tick `trace` of time
+    [s], speed [m/s] and lateral offset [m]. Its fields are `EpisodeResult`'s of the same names."""
 
     steps: int
     duration_s: float
@@ -161,6 +107,7 @@ class Driven:
     peak_lat_accel: float
     peak_lat_jerk: float
     longest_standstill_s: float
+    time_in_leftmost_lane_s: float
     trace: dict[str, list[float]]
 
 
@@ -190,6 +137,7 @@ class EpisodeRecorder:
         self.speed: list[float] = []
         self.heading: list[float] = []
         self.d: list[float] = []
+        self.lane: list[int] = []
         self.d_reference: list[float] = []
         self.steering: list[float] = []
         self._record_world(world)
@@ -219,6 +167,7 @@ class EpisodeRecorder:
         self.speed.append(float(world.speed[0]))
         self.heading.append(float(world.heading[0]) - world.lanes[0].heading_at(float(world.s[0])))
         self.d.append(float(world.d[0]))
+        self.lane.append(world.ego_lane)
 
     def traces(self) -> Traces:
         """Everything recorded so far, as arrays (see `Traces`)."""
@@ -242,6 +191,7 @@ class EpisodeRecorder:
             peak_lat_accel=peak_accel,
             peak_lat_jerk=peak_jerk,
             longest_standstill_s=longest_run(np.array(self.speed[1:]) < STOPPED_SPEED_MPS) * dt,
+            time_in_leftmost_lane_s=float(np.count_nonzero(np.array(self.lane[1:]) == 0) * dt),
             trace={"time": self.time, "speed": self.speed, "d": self.d},
         )
 
@@ -250,47 +200,3 @@ def longest_run(flags: np.ndarray) -> int:
     """Length of the longest run of True in `flags` (0 if none)."""
     edges = np.flatnonzero(np.diff(np.concatenate(([0], flags.astype(np.int8), [0]))))
     return int((edges[1::2] - edges[::2]).max(initial=0))
-
-
-TIMING_FIELDS = ("solve_ms_p50", "solve_ms_p95")
-"""Summary and episode fields measured in wall-clock time: never part of a result's identity."""
-
-
-def outcome(summary: dict) -> dict:
-    """`summary` without its timing fields: what two runs of one seed must agree on."""
-    return {key: value for key, value in summary.items() if key not in TIMING_FIELDS}
-
-
-def summarize(results: list[EpisodeResult], **identity: object) -> dict:
-    """Aggregate episodes (order-independent): rates, accuracy, means; `identity` is copied in.
-    The controller's compute time per tick [ms] is the median of the episodes' medians
-    (`solve_ms_p50`) and the worst episode's 95th percentile (`solve_ms_p95`): measured, so the
-    only fields that differ between two runs of one seed (see `TIMING_FIELDS`)."""
-    collisions = sum(r.crashed for r in results)
-    passed = sum(r.passed_cars for r in results)
-    at_fault = sum(r.at_fault_collision for r in results)
-    return {
-        **identity,
-        "episodes": len(results),
-        "collisions": collisions,
-        "collision_rate": collisions / len(results),
-        "at_fault_collisions": at_fault,
-        "not_at_fault_collisions": collisions - at_fault,
-        "road_departures": sum(r.road_departure for r in results),
-        "failures": sum(r.at_fault_collision or r.road_departure for r in results),
-        "min_ttc_s": float(min(r.min_ttc_s for r in results)),
-        "time_below_min_distance_s": float(np.mean([r.time_below_min_distance_s for r in results])),
-        "emergency_brakings": float(np.mean([r.emergency_brakings for r in results])),
-        "longest_standstill_s": float(np.mean([r.longest_standstill_s for r in results])),
-        "passed_cars": passed,
-        "accuracy": 100.0 * passed / (passed + collisions) if passed + collisions else None,
-        "mean_speed": float(np.mean([r.mean_speed for r in results])),
-        "lane_changes": float(np.mean([r.lane_changes for r in results])),
-        "masked_commands": float(np.mean([r.masked_commands for r in results])),
-        "aborted_changes": float(np.mean([r.aborted_changes for r in results])),
-        "peak_lat_accel": float(max(r.peak_lat_accel for r in results)),
-        "peak_lat_jerk": float(max(r.peak_lat_jerk for r in results)),
-        "mpc_fallbacks": sum(r.mpc_fallbacks for r in results),
-        "solve_ms_p50": float(np.median([r.solve_ms_p50 for r in results])),
-        "solve_ms_p95": float(max(r.solve_ms_p95 for r in results)),
-    }

@@ -143,6 +143,19 @@ def _collided_with(world: WorldState) -> int | None:
     return int(crashed[np.argmin(distance)])
 
 
+@dataclass(frozen=True)
+class SafetyMeasures:
+    """What the safety monitor measured of an episode (module docstring; times in s): its fields
+    are `EpisodeResult`'s of the same names."""
+
+    road_departure: bool
+    at_fault_collision: bool
+    collision_kind: str
+    min_ttc_s: float
+    time_below_min_distance_s: float
+    time_below_ttc_floor_s: float
+
+
 class SafetyMonitor:
     """Per-episode safety record, fed the true world after every control tick."""
 
@@ -175,3 +188,15 @@ class SafetyMonitor:
         leader = neighbours(world, world.ego_lane)[0] if 0 <= world.ego_lane < world.lanes_count else None
         if leader is not None and leader.gap < r157_min_following_distance(v):
             self.time_below_min_distance_s += self.dt
+
+    def measured(self) -> SafetyMeasures:
+        """The episode so far (see `SafetyMeasures`)."""
+        collision = self.collision
+        return SafetyMeasures(
+            road_departure=self.road_departure,
+            at_fault_collision=collision is not None and collision.at_fault,
+            collision_kind=collision.kind if collision is not None else "",
+            min_ttc_s=self.min_ttc_s,
+            time_below_min_distance_s=self.time_below_min_distance_s,
+            time_below_ttc_floor_s=self.time_below_ttc_floor_s,
+        )

@@ -17,13 +17,13 @@ from tqdm import tqdm
 from planner.agents import Agent, Scored, decide, sees_permitted
 from planner.factory import make_agent, model_label, model_path
 from records import LEARNED_AGENTS, child_seed
-from stack.loop.closed_loop import ClosedLoop, grid_config
-from stack.settings.run import RunConfig
-from stack.runtime.executors import completed
-from stack.loop.metrics import EpisodeResult, summarize
-from stack.runs.model_fit import check_road_fit
 from stack.agents.oracle import Oracle
+from stack.loop.closed_loop import ClosedLoop, grid_config
+from stack.loop.episode_result import EpisodeResult, summarize
 from stack.loop.recording import episode_recording
+from stack.runs.model_fit import check_road_fit
+from stack.runtime.executors import completed
+from stack.settings.run import RunConfig
 from stack.sim.highway import HighwayAdapter
 
 if TYPE_CHECKING:

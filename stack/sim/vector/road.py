@@ -30,7 +30,7 @@ other lanes (a curved exit, `neighbour_vehicles_connected_lanes`) run as `FastRo
 
 from __future__ import annotations
 
-from operator import attrgetter
+from operator import attrgetter, itemgetter
 
 import numpy as np
 from highway_env.road.lane import StraightLane
@@ -62,23 +62,38 @@ def _plain_velocity(cls: type) -> bool:
 
 
 class VectorRoad(FastRoad):
-    """A `FastRoad` whose IDM/MOBIL traffic and kinematics run as array operations (module docstring)."""
+    """A `FastRoad` whose IDM/MOBIL traffic and kinematics run as array operations (module docstring).
 
-    _lanes: LaneTable | None | bool = False
-    moved: Moved | None = None
-    """Where the last step left every vehicle (`take_moved`)."""
-    stepped: Moved | None = None
-    """The same, kept for the next act."""
-    acted: FrameActed | None = None
-    """What the last act left for the step that follows it."""
-    mover_constants: KeptColumns | None = None
+    It keeps what one frame computed for the next only where the next frame would read the same
+    bits again, each cache checked against the vehicles it was made of before it is used."""
+
+    _network_lanes: LaneTable | None | bool = False
+    """The road network's lanes as arrays (`LaneTable.fit`), fitted at the first act or step: False
+    until then, None when a lane is not one the table holds. Valid for the road's life: highway-env
+    builds a new road, with a new network, at every reset, and never edits a network."""
+    left_by_step: Moved | None = None
+    """Where the last step left every vehicle, read by the next act instead of the vehicles'
+    attributes (the step wrote those bits there). Taken once; valid only if the road still holds
+    the vehicles it moved, in the same order (vehicles may be added or removed between frames):
+    nothing moves a vehicle between a step and the next act."""
+    acted_for_step: FrameActed | None = None
+    """What this frame's act read of the vehicles and gave the drivers, for the step right after it:
+    cleared by every act, taken by the step, which uses it only if it moves the very vehicles the
+    act read (a non-kinematic vehicle steps by itself)."""
     driver_constants: KeptColumns | None = None
-    """The movers' `MOVER_CONSTANTS` and the drivers' `DRIVER_CONSTANTS`, kept from frame to frame."""
+    mover_constants: KeptColumns | None = None
+    """The drivers' `DRIVER_CONSTANTS` and the movers' `MOVER_CONSTANTS`, kept from frame to frame:
+    class constants, fixed when a vehicle is made, so valid while the same vehicles, in the same
+    order, drive (`KeptColumns.of` reads them afresh otherwise)."""
+    moved: Moved | None = None
+    """Where the last step left every vehicle, for the adapter's snapshot (`take_moved`)."""
 
     def _lane_table(self) -> LaneTable | None:
-        if self._lanes is False:
-            self._lanes = LaneTable.fit(self.network)
-        lanes = self._lanes
+        """The network's `LaneTable`, or None when this frame runs as `FastRoad` (a lane the table
+        cannot hold, connected-lane neighbours, or a vehicle that does not move along its heading)."""
+        if self._network_lanes is False:
+            self._network_lanes = LaneTable.fit(self.network)
+        lanes = self._network_lanes
         assert lanes is not True
         if lanes is None or self.neighbour_vehicles_connected_lanes:
             return None
@@ -86,69 +101,104 @@ class VectorRoad(FastRoad):
         return lanes if plain else None
 
     def act(self) -> None:
-        self.acted = None
+        """Stock `Road.act` for every vehicle, in phases: read the frame (from the last step where it
+        is valid), then `_act_in` it; the lane projections it indexes serve the per-vehicle calls
+        (`neighbour_vehicles`) of this act only."""
+        self.acted_for_step = None
         lanes = self._lane_table()
         if lanes is None:
             super().act()
             return
-        stepped, self.stepped = self.stepped, None
-        if stepped is not None and not same_objects(stepped.vehicles, self.vehicles):
-            stepped = None
-        position = None if stepped is None else np.stack([stepped.footprints.x, stepped.footprints.y], axis=1)
+        moved = self._take_left_by_step()
+        position = None if moved is None else np.stack([moved.footprints.x, moved.footprints.y], axis=1)
         self._projections = projections = LaneProjections(self, position)
         try:
-            frame = TrafficFrame(projections, lanes, stepped if projections.vehicles_first else None)
-            drivers, places, others = [], [], []
-            for place, vehicle in enumerate(self.vehicles):
-                if type(vehicle) in IDM_DRIVERS and not vehicle.crashed:
-                    drivers.append(vehicle)
-                    places.append(place)
-                else:
-                    others.append((place, -1))
-            if not drivers:
-                for vehicle in self.vehicles:
-                    vehicle.act()
-                return
-            self.driver_constants = KeptColumns.of(drivers, DRIVER_CONSTANTS, self.driver_constants)
-            plan = Drivers(drivers, places, frame, self.driver_constants.rows)
-            at_lane_end = plan.at_lane_end()
-            decisions = self._mobil(plan, ~at_lane_end)
-            may_change = plan.enable_lane_change & (plan.timer_due | ~plan.on_target)
-            acting = set(decisions).union((at_lane_end | may_change).nonzero()[0].tolist())
-            retargeted = []
-            for place, k in sorted(others + [(places[k], k) for k in acting]):
-                vehicle = self.vehicles[place]
-                if k < 0:
-                    vehicle.act()
-                    continue
-                if k in decisions:
-                    vehicle.timer = 0
-                    if decisions[k]:
-                        vehicle.target_lane_index = decisions[k]
-                        retargeted.append(k)
-                    continue
-                if at_lane_end[k]:
-                    vehicle.follow_road()
-                    retargeted.append(k)
-                due = vehicle.LANE_CHANGE_DELAY < vehicle.timer
-                if vehicle.enable_lane_change and (due or vehicle.lane_index != vehicle.target_lane_index):
-                    vehicle.change_lane_policy()
-                    retargeted.append(k)
-            plan.retarget(retargeted)
-            steering, acceleration = self._drive(plan)
-            if projections.vehicles_first:
-                n = len(self.vehicles)
-                self.acted = FrameActed(
-                    list(self.vehicles),
-                    frame.speed[:n],
-                    frame.heading[:n],
-                    frame.position[:n],
-                    np.array(places, dtype=int),
-                    steering,
-                    acceleration,
-                )
+            self._act_in(TrafficFrame(projections, lanes, moved if projections.vehicles_first else None))
         finally:
             self._projections = None
+
+    def _take_left_by_step(self) -> Moved | None:
+        """`left_by_step`, once, if the road still holds the vehicles it moved, in the same order."""
+        moved, self.left_by_step = self.left_by_step, None
+        return moved if moved is not None and same_objects(moved.vehicles, self.vehicles) else None
+
+    def _act_in(self, frame: TrafficFrame) -> None:
+        """The act of one frame: split the IDM drivers from the other vehicles, decide (`_decide`),
+        drive (`_drive`: every driver's steering and acceleration at once) and, when the frame's
+        first rows are the road's vehicles, leave the step what it read and gave
+        (`acted_for_step`)."""
+        drivers, places, others = self._drivers_and_others()
+        if not drivers:
+            for vehicle in self.vehicles:
+                vehicle.act()
+            return
+        self.driver_constants = KeptColumns.of(drivers, DRIVER_CONSTANTS, self.driver_constants)
+        plan = Drivers(drivers, places, frame, self.driver_constants.rows)
+        self._decide(plan, places, others)
+        steering, acceleration = self._drive(plan)
+        if frame.projections.vehicles_first:
+            n = len(self.vehicles)
+            self.acted_for_step = FrameActed(
+                list(self.vehicles),
+                frame.speed[:n],
+                frame.heading[:n],
+                frame.position[:n],
+                np.array(places, dtype=int),
+                steering,
+                acceleration,
+            )
+
+    def _drivers_and_others(self) -> tuple[list[IDMVehicle], list[int], list[int]]:
+        """The IDM drivers that act this frame (not crashed: stock's act returns at once for those),
+        their places in the road's vehicles, and the places of the other vehicles."""
+        drivers, places, others = [], [], []
+        for place, vehicle in enumerate(self.vehicles):
+            if type(vehicle) in IDM_DRIVERS and not vehicle.crashed:
+                drivers.append(vehicle)
+                places.append(place)
+            else:
+                others.append(place)
+        return drivers, places, others
+
+    def _decide(self, plan: Drivers, places: list[int], others: list[int]) -> None:
+        """Every vehicle's discrete decisions, in the road's order as stock makes them (a driver's
+        abort of a contested change reads the target lanes of those before it): the other vehicles
+        act whole; the drivers due to decide take MOBIL's outcome, evaluated for all of them at once
+        (`_mobil`: it reads positions and speeds, which no decision changes); those at their lane's
+        end or whose change is due or runs decide as stock does (`_stock_decisions`); the rest
+        decide nothing this frame. The drivers' target lanes are read again afterwards."""
+        at_lane_end = plan.at_lane_end()
+        decisions = self._mobil(plan, ~at_lane_end)
+        may_change = plan.enable_lane_change & (plan.timer_due | ~plan.on_target)
+        acting = set(decisions).union((at_lane_end | may_change).nonzero()[0].tolist())
+        turns: list[tuple[int, int | None]] = [(place, None) for place in others]
+        turns += [(places[k], k) for k in acting]
+        retargeted = []
+        for place, k in sorted(turns, key=itemgetter(0)):
+            vehicle = self.vehicles[place]
+            if k is None:
+                vehicle.act()
+            elif k in decisions:
+                vehicle.timer = 0
+                if decisions[k]:
+                    vehicle.target_lane_index = decisions[k]
+                    retargeted.append(k)
+            elif self._stock_decisions(vehicle, bool(at_lane_end[k])):
+                retargeted.append(k)
+        plan.retarget(retargeted)
+
+    @staticmethod
+    def _stock_decisions(driver: IDMVehicle, at_lane_end: bool) -> bool:
+        """`IDMVehicle.act`'s decisions for a driver MOBIL's batch left out: onto the next lane at
+        its lane's end (`follow_road`), then `change_lane_policy` when its change is due or runs (a
+        contested change is aborted there). Whether its target lane may have changed."""
+        if at_lane_end:
+            driver.follow_road()
+        due = driver.LANE_CHANGE_DELAY < driver.timer
+        if driver.enable_lane_change and (due or driver.lane_index != driver.target_lane_index):
+            driver.change_lane_policy()
+            return True
+        return at_lane_end
 
     def _mobil(self, plan: Drivers, free: np.ndarray) -> dict[int, LaneIndex | None]:
         """`change_lane_policy`'s outcome for the drivers due to decide (not those not `free`: they
@@ -229,11 +279,13 @@ class VectorRoad(FastRoad):
         return steering, acceleration
 
     def step(self, dt: float) -> None:
+        """Stock `Road.step`: every vehicle moved over `dt` [s] (the kinematic ones at once, from what
+        the act read and gave them when it read these very vehicles), then the collisions."""
         lanes = self._lane_table()
         if lanes is None:
             super().step(dt)
             return
-        acted, self.acted = self.acted, None
+        acted, self.acted_for_step = self.acted_for_step, None
         kinds = {cls: steps_like_vehicle(cls) for cls in set(map(type, self.vehicles))}
         if all(kinds.values()):
             movers = list(self.vehicles)
@@ -249,7 +301,8 @@ class VectorRoad(FastRoad):
             self.mover_constants = KeptColumns.of(movers, MOVER_CONSTANTS, self.mover_constants)
             constants = self.mover_constants.rows
         moved = move(movers, lanes, dt, self.record_history, acted, constants) if movers else None
-        self.moved = self.stepped = moved if moved is not None and len(movers) == len(self.vehicles) else None
+        all_moved = moved if moved is not None and len(movers) == len(self.vehicles) else None
+        self.moved = self.left_by_step = all_moved
         if self.moved is not None and len(movers) >= 2:
             self._collide(dt, close_pairs(self.moved.footprints, dt))
         else:
