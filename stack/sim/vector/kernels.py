@@ -82,7 +82,7 @@ def close_pair_rows(
 
 
 @njit(cache=True, nogil=True)
-def _lane_coordinates(
+def lane_coordinates(
     x: np.ndarray, y: np.ndarray, start: np.ndarray, direction: np.ndarray, lateral: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled; covered through its callers
     """Longitudinal s (n,) [m], the same on every lane, and lateral r (L, n) [m] coordinates of
@@ -133,7 +133,7 @@ def closest_lanes(
     distance beyond either end + |heading difference wrapped to [-pi, pi)|), the first on ties
     and the first NaN if any, as numpy's `argmin`: sums, comparisons and a float modulo, each in
     numpy's operation order (the same bits). Lanes as in `lane_order`, headings [rad]."""
-    s, r = _lane_coordinates(x, y, start, direction, lateral)
+    s, r = lane_coordinates(x, y, start, direction, lateral)
     rows = np.zeros(x.shape[0], dtype=np.int64)
     for i in range(x.shape[0]):
         best = np.inf
@@ -164,13 +164,13 @@ def lane_order(
 ]:  # pragma: no cover - compiled; covered through TrafficFrame
     """`TrafficFrame`'s lane coordinates and search tables of objects at `position` (n, 2) [m] on
     parallel straight lanes (`start` (L, 2) [m], the shared unit `direction`, unit `lateral` (L, 2),
-    `length` and `half_width` [m]): s (n,) and r (L, n) [m] (`_lane_coordinates`); the order by
+    `length` and `half_width` [m]): s (n,) and r (L, n) [m] (`lane_coordinates`); the order by
     s (ties by row), the sorted s and whether two tie; per lane and sorted position p, the first
     position >= p (n if none) and the last position < p (-1 if none) of an object on the lane as
     `Road.neighbour_vehicles` counts it (highway-env's `on_lane` with a lateral `margin` [m],
     `vehicle_length` [m] beyond both ends), exact comparisons all."""
     count, lanes = position.shape[0], start.shape[0]
-    s, r = _lane_coordinates(position[:, 0], position[:, 1], start, direction, lateral)
+    s, r = lane_coordinates(position[:, 0], position[:, 1], start, direction, lateral)
     order = np.argsort(s, kind="mergesort")
     sorted_s = s[order]
     tied = False
