@@ -1,0 +1,173 @@
+"""The state of record of a batch of traffic worlds: [worlds, vehicles] arrays, per-world lanes, and
+the translation from and to highway-env's road objects (a world is read from the road highway-env
+spawns at reset; `road_of` builds the objects back on request)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from highway_env.road.road import Road, RoadNetwork
+from highway_env.vehicle.behavior import IDMVehicle
+from highway_env.vehicle.kinematics import Vehicle
+
+from stack.sim.traffic import TrafficVehicle
+from stack.sim.vector.lanes import LaneTable
+
+PLAIN, IDM, TRAFFIC = 0, 1, 2
+"""Vehicle kinds: highway-env's kinematic `Vehicle` (the ego, a stopped car), its `IDMVehicle`, the
+stack's `TrafficVehicle` (an IDM vehicle that stops at a standstill)."""
+KINDS: dict[type, int] = {Vehicle: PLAIN, IDMVehicle: IDM, TrafficVehicle: TRAFFIC}
+CLASSES = {kind: cls for cls, kind in KINDS.items()}
+
+VEHICLE_COLUMNS: dict[str, tuple[type, float]] = {
+    "x": (float, 0.0),
+    "y": (float, 0.0),
+    "heading": (float, 0.0),
+    "speed": (float, 0.0),
+    "target_speed": (float, 0.0),
+    "length": (float, 1.0),
+    "width": (float, 1.0),
+    "diagonal": (float, 1.0),
+    "delta": (float, IDMVehicle.DELTA),
+    "distance_wanted": (float, IDMVehicle.DISTANCE_WANTED),
+    "max_speed": (float, Vehicle.MAX_SPEED),
+    "min_speed": (float, Vehicle.MIN_SPEED),
+    "timer": (float, 0.0),
+    "steering": (float, 0.0),
+    "acceleration": (float, 0.0),
+    "impact_x": (float, 0.0),
+    "impact_y": (float, 0.0),
+    "lane": (int, 0),
+    "target_lane": (int, 0),
+    "kind": (int, PLAIN),
+    "crashed": (bool, False),
+    "impacted": (bool, False),
+    "enable_lane_change": (bool, False),
+}
+"""Every vehicle's columns, (worlds, vehicles) each, with the value of an empty row: its centre (x,
+y) [m], heading [rad], speed and IDM target speed [m/s] (0 for a plain vehicle, as IDM reads it),
+length, width, diagonal [m], IDM exponent and jam distance [m], speed range [m/s], lane-change
+timer [s], the action it holds (steering [rad], acceleration [m/s^2], as `Vehicle.action`), the
+impact to apply at its next step [m], its lane and target lane (rows of its world's lanes; a plain
+vehicle's target is its lane), kind,
+crash flag, whether an impact is pending, and whether MOBIL lane changes are on."""
+
+LANE_COLUMNS: dict[str, tuple[type, float]] = {
+    "lane_length": (float, 0.0),
+    "half_width": (float, 0.0),
+    "lane_heading": (float, 0.0),
+    "speed_limit": (float, np.nan),
+    "forbidden": (bool, True),
+}
+"""Every lane's columns, (worlds, lanes): length, half width [m], heading [rad], speed limit [m/s]
+(NaN: none), whether lane changes into it are forbidden."""
+
+
+class UnsupportedRoad(ValueError):
+    """A road the batch cannot hold as arrays."""
+
+
+@dataclass(frozen=True, eq=False)
+class SpawnedWorld:
+    """One world as highway-env spawned it: its vehicles' columns (one row each, road order), its
+    lanes, the ego's row, and the objects kept for `road_of`."""
+
+    columns: dict[str, np.ndarray]
+    lanes: LaneTable
+    ego: int
+    network: RoadNetwork
+
+
+def read_world(road: Road, ego: Vehicle) -> SpawnedWorld:
+    """The arrays of a highway-env road: parallel axis-aligned straight lanes of one segment, level at
+    their start (highway-v0's), no obstacles, and vehicles of the kinds in `KINDS` without routes;
+    `UnsupportedRoad` names what is not."""
+    lanes = LaneTable.fit(road.network)
+    if lanes is None or len({index[:2] for index in lanes.indices}) != 1:
+        raise UnsupportedRoad("batched traffic needs one segment of parallel, axis-aligned straight lanes")
+    if road.objects or road.neighbour_vehicles_connected_lanes:
+        raise UnsupportedRoad("batched traffic drives roads without objects or connected-lane neighbours")
+    rows: list[dict[str, Any]] = []
+    for vehicle in road.vehicles:
+        kind = KINDS.get(type(vehicle))
+        if kind is None:
+            raise UnsupportedRoad(f"batched traffic has no {type(vehicle).__name__} (only {list(KINDS)})")
+        rows.append(_vehicle_row(vehicle, kind, lanes))
+    columns = {
+        name: np.array([row[name] for row in rows], dtype=dtype) for name, (dtype, _) in VEHICLE_COLUMNS.items()
+    }
+    return SpawnedWorld(columns, lanes, road.vehicles.index(ego), road.network)
+
+
+def _vehicle_row(vehicle: Vehicle, kind: int, lanes: LaneTable) -> dict[str, Any]:
+    action, impact = vehicle.action, vehicle.impact
+    row: dict[str, Any] = {
+        "x": vehicle.position[0],
+        "y": vehicle.position[1],
+        "heading": vehicle.heading,
+        "speed": vehicle.speed,
+        "target_speed": getattr(vehicle, "target_speed", 0),
+        "length": vehicle.LENGTH,
+        "width": vehicle.WIDTH,
+        "diagonal": vehicle.diagonal,
+        "max_speed": vehicle.MAX_SPEED,
+        "min_speed": vehicle.MIN_SPEED,
+        "steering": float(action["steering"]),
+        "acceleration": float(action["acceleration"]),
+        "impact_x": 0.0 if impact is None else impact[0],
+        "impact_y": 0.0 if impact is None else impact[1],
+        "lane": lanes.row[vehicle.lane_index],
+        "kind": kind,
+        "crashed": vehicle.crashed,
+        "impacted": impact is not None,
+    }
+    if kind == PLAIN:
+        default = VEHICLE_COLUMNS
+        row |= {name: default[name][1] for name in ("delta", "distance_wanted", "timer", "enable_lane_change")}
+        return row | {"target_lane": row["lane"]}
+    assert isinstance(vehicle, IDMVehicle)
+    if vehicle.route:
+        raise UnsupportedRoad("batched traffic has no vehicles following routes")
+    return row | {
+        "delta": vehicle.DELTA,
+        "distance_wanted": vehicle.DISTANCE_WANTED,
+        "timer": vehicle.timer,
+        "target_lane": lanes.row[vehicle.target_lane_index],
+        "enable_lane_change": vehicle.enable_lane_change,
+    }
+
+
+def road_of(
+    columns: dict[str, np.ndarray], lanes: LaneTable, network: RoadNetwork, np_random: np.random.Generator
+) -> list[Vehicle]:
+    """highway-env vehicles on a new `Road` over `network`, in road order, built from one world's
+    columns (one row per vehicle): the objects stock would hold at this frame."""
+    road = Road(network=network, np_random=np_random)
+    for i in range(len(columns["x"])):
+        value = {name: column[i].item() for name, column in columns.items()}
+        cls = CLASSES[value["kind"]]
+        position = [value["x"], value["y"]]
+        if value["kind"] == PLAIN:
+            vehicle = cls(road, position, value["heading"], value["speed"])
+        else:
+            vehicle = cls(
+                road,
+                position,
+                value["heading"],
+                value["speed"],
+                target_lane_index=lanes.indices[value["target_lane"]],
+                target_speed=value["target_speed"],
+            )
+            vehicle.timer, vehicle.DELTA = value["timer"], value["delta"]
+            vehicle.DISTANCE_WANTED = value["distance_wanted"]
+            vehicle.enable_lane_change = value["enable_lane_change"]
+        vehicle.LENGTH, vehicle.WIDTH, vehicle.diagonal = value["length"], value["width"], value["diagonal"]
+        vehicle.lane_index = lanes.indices[value["lane"]]
+        vehicle.lane = lanes.lanes[value["lane"]]
+        vehicle.crashed = value["crashed"]
+        vehicle.action = {"steering": value["steering"], "acceleration": value["acceleration"]}
+        vehicle.impact = np.array([value["impact_x"], value["impact_y"]]) if value["impacted"] else None
+        road.vehicles.append(vehicle)
+    return road.vehicles
