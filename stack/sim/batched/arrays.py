@@ -95,8 +95,9 @@ def read_world(road: Road, ego: Vehicle) -> SpawnedWorld:
         if kind is None:
             raise UnsupportedRoad(f"batched traffic has no {type(vehicle).__name__} (only {list(KINDS)})")
         rows.append(_vehicle_row(vehicle, kind, lanes))
-    columns = {
-        name: np.array([row[name] for row in rows], dtype=dtype) for name, (dtype, _) in VEHICLE_COLUMNS.items()
+    columns: dict[str, np.ndarray] = {
+        name: np.array([row[name] for row in rows], dtype=dtype)
+        for name, (dtype, _) in VEHICLE_COLUMNS.items()
     }
     return SpawnedWorld(columns, lanes, road.vehicles.index(ego), road.network)
 
@@ -125,7 +126,9 @@ def _vehicle_row(vehicle: Vehicle, kind: int, lanes: LaneTable) -> dict[str, Any
     }
     if kind == PLAIN:
         default = VEHICLE_COLUMNS
-        row |= {name: default[name][1] for name in ("delta", "distance_wanted", "timer", "enable_lane_change")}
+        row |= {
+            name: default[name][1] for name in ("delta", "distance_wanted", "timer", "enable_lane_change")
+        }
         return row | {"target_lane": row["lane"]}
     assert isinstance(vehicle, IDMVehicle)
     if vehicle.route:

@@ -167,7 +167,11 @@ def plan_decisions(
                 if v == i or not controlled[other] or lane[other] == goal:
                     continue
                 d = s_w[v] - s_me
-                largest = distance_wanted[g] + reach * time_wanted + reach * (reach + abs(speed[other])) / braking_term
+                largest = (
+                    distance_wanted[g]
+                    + reach * time_wanted
+                    + reach * (reach + abs(speed[other])) / braking_term
+                )
                 if 0 < d and d < largest * (1 + 1e-9) + 1e-9:
                     if pairs == pair_capacity:
                         pair_capacity *= 2
@@ -246,7 +250,11 @@ def decide(
                 other = pair_other[pair]
                 if target[other] == goal:
                     d = s[other] - s[g]
-                    desired = distance_wanted[g] + speed[g] * time_wanted + speed[g] * pair_closing[pair] / braking_term
+                    desired = (
+                        distance_wanted[g]
+                        + speed[g] * time_wanted
+                        + speed[g] * pair_closing[pair] / braking_term
+                    )
                     if 0 < d and d < desired:
                         target[g] = lane[g]
                         break
@@ -265,7 +273,11 @@ def decide(
             own_rear_a = side_accelerations[4, side]
             own_rear_pred_a = side_accelerations[5, side]
             if not new_rear_pred_a < -max_braking_imposed:
-                gain = self_pred_a - self_a + politeness * (new_rear_pred_a - new_rear_a + own_rear_pred_a - own_rear_a)
+                gain = (
+                    self_pred_a
+                    - self_a
+                    + politeness * (new_rear_pred_a - new_rear_a + own_rear_pred_a - own_rear_a)
+                )
                 if not gain < min_gain:
                     target[g] = side_lane[side]
             side += 1

@@ -27,21 +27,23 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import gymnasium as gym
 import numpy as np
 from highway_env import utils
 from highway_env.envs.common.action import ContinuousAction
 from highway_env.road.lane import StraightLane
+from highway_env.road.road import RoadNetwork
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import RoadObject
 
 from stack.sim.batched.arrays import (
     LANE_COLUMNS,
+    PLAIN,
     TRAFFIC,
     VEHICLE_COLUMNS,
-    PLAIN,
     SpawnedWorld,
     read_world,
     road_of,
@@ -58,8 +60,9 @@ from stack.sim.envs import HIGHWAY
 from stack.sim.fast_road import BROAD_PHASE_MARGIN, NEIGHBOUR_MARGIN
 from stack.sim.highway import MAX_ACCELERATION, MAX_STEERING, env_config
 from stack.sim.settings import HighwayConfig
+from stack.sim.traffic import ScenarioTraffic
 from stack.sim.vector.dynamics import bicycle_step, clipped_actions, steering_angles
-from stack.sim.vector.frame import BRAKING_TERM, idm
+from stack.sim.vector.frame import BRAKING_TERM, IdmRows
 from stack.sim.vector.kernels import SEPARATION_MARGIN
 from stack.sim.vector.lanes import LaneTable, clip
 
@@ -79,17 +82,22 @@ class TrafficBatch:
     def __init__(self, highway: HighwayConfig, worlds: int) -> None:
         if worlds < 1:
             raise ValueError(f"a batch needs at least one world, got {worlds}")
+        if highway.road != "highway":
+            raise ValueError(
+                f"batched traffic runs the highway road, not {highway.road!r} (a curved exit lane)"
+            )
         self.highway = highway
         self.worlds = worlds
         self._spawner = gym.make(HIGHWAY, config=env_config(highway), disable_env_checker=True)
-        config = self._spawner.unwrapped.config
+        self._env = cast(ScenarioTraffic, self._spawner.unwrapped)
+        config = self._env.config
         self.dt = 1 / config["simulation_frequency"]
         self._time_step = 1 / config["policy_frequency"]
         self._duration = config["duration"]
         self._offroad_terminal = bool(config["offroad_terminal"])
         self._rngs: list[np.random.Generator | None] = [None] * worlds
         self._lane_tables: list[LaneTable | None] = [None] * worlds
-        self._networks: list[object] = [None] * worlds
+        self._networks: list[RoadNetwork | None] = [None] * worlds
         self.vehicles, self.lanes = 0, 0
         self.columns: dict[str, np.ndarray] = {}
         self.lane_columns: dict[str, np.ndarray] = {}
@@ -111,7 +119,7 @@ class TrafficBatch:
         for table in ("columns", "lane_columns"):
             held = self.__dict__.get(table, {})
             if name in held:
-                return held[name]  # type: ignore[no-any-return]
+                return held[name]
         raise AttributeError(name)
 
     def _allocate(self, vehicles: int, lanes: int) -> None:
@@ -119,9 +127,12 @@ class TrafficBatch:
         vehicles, lanes = max(vehicles, self.vehicles), max(lanes, self.lanes)
         if (vehicles, lanes) == (self.vehicles, self.lanes):
             return
-        for table, spec, size in ((self.columns, VEHICLE_COLUMNS, vehicles), (self.lane_columns, LANE_COLUMNS, lanes)):
+        for table, spec, size in (
+            (self.columns, VEHICLE_COLUMNS, vehicles),
+            (self.lane_columns, LANE_COLUMNS, lanes),
+        ):
             for name, (dtype, empty) in spec.items():
-                grown = np.full((self.worlds, size), empty, dtype=dtype)
+                grown: np.ndarray = np.full((self.worlds, size), empty, dtype=dtype)
                 old = table.get(name)
                 if old is not None:
                     grown[:, : old.shape[1]] = old
@@ -146,7 +157,7 @@ class TrafficBatch:
 
     def reset_world(self, world: int, seed: int | None = None) -> None:
         """Spawn world `world` anew: with `seed`, or (None) with the generator its last reset left."""
-        env = self._spawner.unwrapped
+        env = self._env
         if seed is None:
             rng = self._rngs[world]
             if rng is None:
@@ -255,7 +266,8 @@ class TrafficBatch:
         heading, speed = flat["heading"], flat["speed"]
         direction_of = np.empty((len(heading), 2))
         direction_of[:, 0], direction_of[:, 1] = np.cos(heading), np.sin(heading)
-        kinematics = IdmInputs(
+        kinematics = IdmRows(
+            is_vehicle=np.ones(len(speed), dtype=bool),
             speed=speed,
             target_speed=flat["target_speed"],
             speed_limit=lanes["speed_limit"][world_of, flat["lane"]],
@@ -298,7 +310,9 @@ class TrafficBatch:
         blocks = 6 * len(me)
         side_accelerations, own_acceleration = a[:blocks].reshape(6, -1), a[blocks:]
         changer = drivers[pair_driver]
-        closing = np.vecdot(kinematics.velocity[changer] - kinematics.velocity[pair_other], direction_of[changer])
+        closing = np.vecdot(
+            kinematics.velocity[changer] - kinematics.velocity[pair_other], direction_of[changer]
+        )
         decide(
             drivers,
             lane,
@@ -335,7 +349,11 @@ class TrafficBatch:
             )
         world, row = drivers // self.vehicles, drivers % self.vehicles
         flat["steering"][drivers] = steering_angles(
-            r[world, goal, row], lanes["lane_heading"][world, goal], heading[drivers], flat["length"][drivers], speed[drivers]
+            r[world, goal, row],
+            lanes["lane_heading"][world, goal],
+            heading[drivers],
+            flat["length"][drivers],
+            speed[drivers],
         )
         flat["acceleration"][drivers] = clip(acceleration, IDMVehicle.ACC_MAX)
 
@@ -376,8 +394,16 @@ class TrafficBatch:
         lanes = self.lane_columns
         lane_count, start, direction, lateral = self._lane_args()
         closest = closest_lane_rows(
-            active, self.x, self.y, self.heading, lane_count, start, direction, lateral,
-            lanes["lane_length"], lanes["lane_heading"],
+            active,
+            self.x,
+            self.y,
+            self.heading,
+            lane_count,
+            start,
+            direction,
+            lateral,
+            lanes["lane_length"],
+            lanes["lane_heading"],
         )
         self.columns["lane"][...] = np.where(closest >= 0, closest, self.lane)
         plain = self.kind == PLAIN
@@ -435,39 +461,22 @@ class TrafficBatch:
         r = delta_x * lanes["lateral"][worlds, lane, 0] + delta_y * lanes["lateral"][worlds, lane, 1]
         length = lanes["lane_length"][worlds, lane]
         vehicle_length = StraightLane.VEHICLE_LENGTH
-        return (np.abs(r) <= lanes["half_width"][worlds, lane]) & (-vehicle_length <= s) & (s < length + vehicle_length)
+        return (
+            (np.abs(r) <= lanes["half_width"][worlds, lane])
+            & (-vehicle_length <= s)
+            & (s < length + vehicle_length)
+        )
 
     def road(self, world: int) -> tuple[list[Vehicle], Vehicle]:
         """highway-env objects of world `world` as it stands: its vehicles on a new `Road` of its
         lanes (road order), and its ego (for rendering, video, a user reading the road)."""
         table, network, rng = self._lane_tables[world], self._networks[world], self._rngs[world]
-        if table is None or rng is None:
+        if table is None or network is None or rng is None:
             raise ValueError(f"world {world} has not been reset")
         n = int(self.count[world])
         columns = {name: column[world, :n] for name, column in self.columns.items()}
-        vehicles = road_of(columns, table, network, rng)  # type: ignore[arg-type]
+        vehicles = road_of(columns, table, network, rng)
         return vehicles, vehicles[int(self.ego[world])]
-
-
-@dataclass(frozen=True, eq=False)
-class IdmInputs:
-    """What IDM reads of every row of the batch (flat): speed, target speed, lane speed limit [m/s],
-    s along the lanes [m], velocity [m/s] and heading direction (rows, 2)."""
-
-    speed: np.ndarray
-    target_speed: np.ndarray
-    speed_limit: np.ndarray
-    s: np.ndarray
-    velocity: np.ndarray
-    direction: np.ndarray
-
-    def idm(self, ego: np.ndarray, front: np.ndarray, delta: np.ndarray, jam: np.ndarray) -> np.ndarray:
-        """`frame.idm` over these rows (every row a vehicle)."""
-        every_row = np.ones(len(self.speed), dtype=bool)
-        return idm(
-            ego, front, delta, jam, every_row, self.speed, self.target_speed, self.speed_limit, self.s,
-            self.velocity, self.direction,
-        )
 
 
 class _Body(RoadObject):

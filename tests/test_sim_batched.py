@@ -1,0 +1,159 @@
+"""Each world of a `TrafficBatch` is the world the `vector` backend drives alone through
+`HighwayAdapter`: every vehicle's x, y, heading, speed, lane, target lane and crash flag, at every
+frame, bit for bit, across crashes and the autoreset that follows them; for any batch size."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from highway_env.road.road import Road
+
+from records import Actuation
+from stack.core.config import build_config
+from stack.sim.batched.arrays import UnsupportedRoad, read_world
+from stack.sim.batched.traffic import TrafficBatch
+from stack.sim.envs import HIGHWAY
+from stack.sim.highway import HighwayAdapter, env_config
+from stack.sim.settings import HighwayConfig
+
+
+def rams(frame: int, world: int) -> tuple[float, float]:
+    """An ego that speeds up and weaves (world by world a little differently): it rear-ends traffic
+    in some worlds, so crashes, impacts and autoresets are compared too."""
+    return 2.0 + 2.0 * np.sin(frame / 9 + world), 0.03 * np.sin(frame / 15 + 2 * world)
+
+
+def vehicle_states(vehicles: list) -> np.ndarray:
+    """x, y, heading, speed, lane id, target lane id and crash flag of highway-env vehicles."""
+    rows = []
+    for v in vehicles:
+        target = getattr(v, "target_lane_index", v.lane_index)
+        rows.append([*v.position, v.heading, v.speed, v.lane_index[2], target[2], v.crashed])
+    return np.array(rows, dtype=float)
+
+
+def world_states(batch: TrafficBatch, world: int) -> np.ndarray:
+    """The same columns of one world of a batch (lane rows are lane ids on highway-v0's roads)."""
+    n = batch.count[world]
+    columns = [batch.x, batch.y, batch.heading, batch.speed, batch.lane, batch.target_lane, batch.crashed]
+    return np.stack([column[world, :n] for column in columns], axis=1).astype(float)
+
+
+def batch_trajectories(highway: HighwayConfig, seeds: list[int], frames: int) -> list[list[np.ndarray]]:
+    """Every world's states after reset and after each of `frames` steps, world k seeded `seeds[k]`."""
+    batch = TrafficBatch(highway, len(seeds))
+    batch.reset(seeds)
+    trajectories = [[world_states(batch, k)] for k in range(len(seeds))]
+    for frame in range(frames):
+        actuations = np.array([rams(frame, k) for k in range(len(seeds))])
+        batch.step(actuations[:, 0], actuations[:, 1])
+        for k, trajectory in enumerate(trajectories):
+            trajectory.append(world_states(batch, k))
+    batch.close()
+    return trajectories
+
+
+def alone_trajectory(
+    highway: HighwayConfig, seed: int, world: int, frames: int
+) -> tuple[list[np.ndarray], int]:
+    """The vector backend's states of world `world` driven alone, reset with `seed` and afterwards,
+    once an episode ends, with `env.reset()` (its generator continued) at the next step, as the
+    batch autoresets; and how many resets that took."""
+    adapter = HighwayAdapter(highway, backend="vector")
+    adapter.reset(seed)
+    road = adapter.env.unwrapped
+    states, resets = [vehicle_states(road.road.vehicles)], 0
+    for frame in range(frames):
+        if adapter.done:
+            adapter.env.reset()
+            adapter.terminated = adapter.truncated = False
+            resets += 1
+        else:
+            acceleration, steering = rams(frame, world)
+            adapter.step(Actuation(acceleration=acceleration, steering=steering))
+        states.append(vehicle_states(road.road.vehicles))
+    adapter.close()
+    return states, resets
+
+
+def assert_worlds_identical(highway: HighwayConfig, seeds: list[int], frames: int) -> int:
+    """Compare every world of a batch with the vector backend alone; returns the autoresets seen."""
+    resets = 0
+    for k, batched in enumerate(batch_trajectories(highway, seeds, frames)):
+        alone, world_resets = alone_trajectory(highway, seeds[k], k, frames)
+        resets += world_resets
+        for frame, (a, b) in enumerate(zip(alone, batched, strict=True)):
+            np.testing.assert_array_equal(
+                b.view(np.uint64), a.view(np.uint64), err_msg=f"world {k} (seed {seeds[k]}), frame {frame}"
+            )
+    return resets
+
+
+@pytest.mark.parametrize(
+    ("scenario", "frames"), [("highway-v0", 200), ("overtaking", 120), ("incident", 120)]
+)
+def test_each_world_is_the_vector_backends_world_bit_for_bit(scenario, frames):
+    highway = build_config({}, scenario=scenario).highway
+    resets = assert_worlds_identical(highway, [3, 4, 5], frames)
+    if scenario == "highway-v0":
+        assert resets >= 1, "the ramming egos must crash, and their worlds autoreset"
+
+
+STRAIGHT_SCENARIOS = ["highway-v0", "lanes-3", "lanes-5", "dense", "jam", "incident", "overtaking", "random"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", STRAIGHT_SCENARIOS)
+def test_each_world_is_the_vector_backends_world_over_full_episodes(scenario):
+    """Every named scenario on straight roads (`noisy` is `overtaking`'s world), three seeds, 40 s
+    episodes and beyond: 660 frames with autoresets."""
+    highway = build_config({}, scenario=scenario).highway
+    assert_worlds_identical(highway, [0, 1, 2], frames=660)
+
+
+def test_a_world_is_the_same_in_a_batch_of_any_size():
+    highway = build_config({}, scenario="random").highway
+    seeds = list(range(100, 164))
+    wide = batch_trajectories(highway, seeds, frames=60)
+    for size in (1, 3):
+        for k, narrow in enumerate(batch_trajectories(highway, seeds[:size], frames=60)):
+            for frame, (a, b) in enumerate(zip(wide[k], narrow, strict=True)):
+                np.testing.assert_array_equal(
+                    b.view(np.uint64), a.view(np.uint64), err_msg=f"N={size}, {frame}"
+                )
+
+
+def test_the_road_of_a_world_steps_on_in_highway_env_as_in_the_batch():
+    """`road(world)` builds highway-env objects that stock `Road.act` and `Road.step` take to the
+    batch's next frame exactly."""
+    highway = build_config({}, scenario="overtaking").highway
+    batch = TrafficBatch(highway, 2)
+    batch.reset([7, 8])
+    for _ in range(30):
+        batch.step(np.array([1.0, -1.0]), np.array([0.0, 0.01]))
+    vehicles, ego = batch.road(1)
+    assert np.array_equal(vehicle_states(vehicles), world_states(batch, 1))
+    road = vehicles[0].road
+    assert isinstance(road, Road)
+    batch.step(np.array([1.0, -1.0]), np.array([0.0, 0.01]))
+    driven = batch.ego[1]
+    ego.action = {"acceleration": batch.acceleration[1, driven], "steering": batch.steering[1, driven]}
+    road.act()
+    road.step(batch.dt)
+    np.testing.assert_array_equal(vehicle_states(road.vehicles), world_states(batch, 1))
+
+
+def test_roads_the_batch_cannot_hold_are_refused_by_name():
+    with pytest.raises(ValueError, match="highway road"):
+        TrafficBatch(build_config({}, scenario="exit").highway, 1)
+    env = gym.make("exit-v0", config={}, disable_env_checker=True)
+    env.reset(seed=0)
+    with pytest.raises(UnsupportedRoad, match="one segment"):
+        read_world(env.unwrapped.road, env.unwrapped.vehicle)
+    env.close()
+    env = gym.make(HIGHWAY, config=env_config(HighwayConfig(vehicles_count=3)), disable_env_checker=True)
+    env.reset(seed=0)
+    env.unwrapped.road.vehicles[1].route = [("0", "1", 0)]
+    with pytest.raises(UnsupportedRoad, match="routes"):
+        read_world(env.unwrapped.road, env.unwrapped.vehicle)
