@@ -12,9 +12,8 @@ import numpy as np
 from numba import njit
 
 from records.compiled import Kernel
-from stack.sim.vector.kernels import close_pair_rows, closest_lanes, lane_coordinates
+from stack.sim.vector.kernels import closest_lanes, could_touch, lane_coordinates
 
-_close_pair_rows = close_pair_rows.compiled
 _closest_lanes = closest_lanes.compiled
 
 
@@ -324,31 +323,52 @@ def collision_candidates(
     length: np.ndarray,
     width: np.ndarray,
     diagonal: np.ndarray,
+    direction: np.ndarray,
     dt: float,
     broad_margin: float,
     separation_margin: float,
 ) -> np.ndarray:  # pragma: no cover - compiled
     """The (world, i, j) triples, i < j, by world then i then j, of the vehicle pairs that
-    `stack.sim.vector.kernels.close_pair_rows` keeps: a superset of the pairs highway-env's
-    collision test finds touching or about to, over `dt` [s]."""
+    `stack.sim.vector.kernels.could_touch` keeps (a superset of the pairs highway-env's collision
+    test finds touching or about to over `dt` [s]), from a sweep along each world's lane
+    `direction` (an axis): no pair further apart along it than the largest reach is tested."""
     found = np.empty((0, 3), dtype=np.int64)
     for w in range(x.shape[0]):
         n = count[w]
         if n < 2:
             continue
-        pairs = _close_pair_rows(
-            x[w, :n],
-            y[w, :n],
-            heading[w, :n],
-            speed[w, :n],
-            length[w, :n],
-            width[w, :n],
-            diagonal[w, :n],
-            dt,
-            broad_margin,
-            separation_margin,
-        )
+        x_w, y_w, speed_w = x[w, :n], y[w, :n], speed[w, :n]
+        cos, sin = np.cos(heading[w, :n]), np.sin(heading[w, :n])
+        along = x_w * direction[w, 0] + y_w * direction[w, 1]
+        order = np.argsort(along, kind="mergesort")
+        reach = (diagonal[w, :n].max() + max(speed_w.max(), 0.0) * dt + broad_margin) * (1 + 1e-9)
+        pairs = np.empty((0, 2), dtype=np.int64)
+        for p in range(n):
+            for q in range(p + 1, n):
+                if along[order[q]] - along[order[p]] > reach:
+                    break
+                a, b = min(order[p], order[q]), max(order[p], order[q])
+                close = could_touch(
+                    a,
+                    b,
+                    x_w,
+                    y_w,
+                    cos,
+                    sin,
+                    speed_w,
+                    length[w, :n],
+                    width[w, :n],
+                    diagonal[w, :n],
+                    dt,
+                    broad_margin,
+                    separation_margin,
+                )
+                if close:
+                    pair = np.empty((1, 2), dtype=np.int64)
+                    pair[0, 0], pair[0, 1] = a, b
+                    pairs = np.concatenate((pairs, pair))
         if pairs.shape[0]:
+            pairs = pairs[np.argsort(pairs[:, 0] * n + pairs[:, 1])]
             rows = np.empty((pairs.shape[0], 3), dtype=np.int64)
             rows[:, 0] = w
             rows[:, 1:] = pairs

@@ -422,6 +422,7 @@ class TrafficBatch:
             self.length,
             self.width,
             self.diagonal,
+            self.lane_columns["direction"],
             self.dt,
             BROAD_PHASE_MARGIN,
             SEPARATION_MARGIN,
