@@ -118,7 +118,11 @@ def memory_of(highway: HighwayConfig, worlds: int, frames: int) -> None:
     batch.reset(list(range(worlds)))
     for frame in range(frames):
         batch.step(np.full(worlds, BRAKING), np.array([actuation(frame, k)[1] for k in range(worlds)]))
-    arrays = sum(column.nbytes for table in (batch.columns, batch.lane_columns) for column in table.values())
+    arrays = sum(
+        column.nbytes
+        for table in (batch.arrays.columns, batch.arrays.lane_columns)
+        for column in table.values()
+    )
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"{peak_mb:.0f} {arrays / 2**20:.2f}")
 

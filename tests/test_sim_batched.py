@@ -35,8 +35,17 @@ def vehicle_states(vehicles: list) -> np.ndarray:
 
 def world_states(batch: TrafficBatch, world: int) -> np.ndarray:
     """The same columns of one world of a batch (lane rows are lane ids on highway-v0's roads)."""
-    n = batch.count[world]
-    columns = [batch.x, batch.y, batch.heading, batch.speed, batch.lane, batch.target_lane, batch.crashed]
+    arrays = batch.arrays
+    n = arrays.count[world]
+    columns = [
+        arrays.x,
+        arrays.y,
+        arrays.heading,
+        arrays.speed,
+        arrays.lane,
+        arrays.target_lane,
+        arrays.crashed,
+    ]
     return np.stack([column[world, :n] for column in columns], axis=1).astype(float)
 
 
@@ -137,8 +146,8 @@ def test_the_road_of_a_world_steps_on_in_highway_env_as_in_the_batch():
     road = vehicles[0].road
     assert isinstance(road, Road)
     batch.step(np.array([1.0, -1.0]), np.array([0.0, 0.01]))
-    driven = batch.ego[1]
-    ego.action = {"acceleration": batch.acceleration[1, driven], "steering": batch.steering[1, driven]}
+    arrays, driven = batch.arrays, batch.arrays.ego[1]
+    ego.action = {"acceleration": arrays.acceleration[1, driven], "steering": arrays.steering[1, driven]}
     road.act()
     road.step(batch.dt)
     np.testing.assert_array_equal(vehicle_states(road.vehicles), world_states(batch, 1))

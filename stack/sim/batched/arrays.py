@@ -142,6 +142,88 @@ def _vehicle_row(vehicle: Vehicle, kind: int, lanes: LaneTable) -> dict[str, Any
     }
 
 
+class BatchArrays:
+    """The columns of N worlds: `VEHICLE_COLUMNS` (worlds, vehicles) and `LANE_COLUMNS` (worlds,
+    lanes) by name (`arrays.x`, `arrays.lane_length`), the lanes' `start` and `lateral` (worlds,
+    lanes, 2) and shared `direction` (worlds, 2), each world's lane and vehicle count and ego row.
+    A world's vehicles fill its first rows in road order; the arrays grow to the largest world."""
+
+    def __init__(self, worlds: int) -> None:
+        self.worlds = worlds
+        self.vehicles, self.lanes = 0, 0
+        self.columns: dict[str, np.ndarray] = {}
+        self.lane_columns: dict[str, np.ndarray] = {}
+        self.allocate(1, 1)
+        self.count = np.zeros(worlds, dtype=np.int64)
+        """Vehicles in each world (its first rows)."""
+        self.ego = np.zeros(worlds, dtype=np.int64)
+        """The ego's row in each world."""
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        """A vehicle column (worlds, vehicles) or lane column (worlds, lanes) by name."""
+        for table in ("columns", "lane_columns"):
+            held = self.__dict__.get(table, {})
+            if name in held:
+                return held[name]
+        raise AttributeError(name)
+
+    def allocate(self, vehicles: int, lanes: int) -> None:
+        """Room for `vehicles` a world and `lanes` lanes, keeping what the arrays hold."""
+        vehicles, lanes = max(vehicles, self.vehicles), max(lanes, self.lanes)
+        if (vehicles, lanes) == (self.vehicles, self.lanes):
+            return
+        for table, spec, size in (
+            (self.columns, VEHICLE_COLUMNS, vehicles),
+            (self.lane_columns, LANE_COLUMNS, lanes),
+        ):
+            for name, (dtype, empty) in spec.items():
+                grown: np.ndarray = np.full((self.worlds, size), empty, dtype=dtype)
+                old = table.get(name)
+                if old is not None:
+                    grown[:, : old.shape[1]] = old
+                table[name] = grown
+        for name, shape in (("start", (lanes, 2)), ("lateral", (lanes, 2))):
+            grown = np.zeros((self.worlds, *shape))
+            old = self.lane_columns.get(name)
+            if old is not None:
+                grown[:, : old.shape[1]] = old
+            self.lane_columns[name] = grown
+        if "direction" not in self.lane_columns:
+            self.lane_columns["direction"] = np.zeros((self.worlds, 2))
+            self.lane_columns["lane_count"] = np.zeros(self.worlds, dtype=np.int64)
+        self.vehicles, self.lanes = vehicles, lanes
+
+    def load(self, world: int, spawned: SpawnedWorld) -> None:
+        """Write a spawned world into world `world`'s rows."""
+        n, lanes = len(spawned.columns["x"]), len(spawned.lanes.indices)
+        self.allocate(n, lanes)
+        for name, (_, empty) in VEHICLE_COLUMNS.items():
+            self.columns[name][world] = empty
+            self.columns[name][world, :n] = spawned.columns[name]
+        table = spawned.lanes
+        lane_values = {
+            "lane_length": table.length,
+            "half_width": table.half_width,
+            "lane_heading": table.heading,
+            "speed_limit": table.speed_limit,
+            "forbidden": table.forbidden,
+            "start": table.start,
+            "lateral": table.lateral,
+        }
+        for name, values in lane_values.items():
+            column = self.lane_columns[name]
+            column[world] = LANE_COLUMNS[name][1] if name in LANE_COLUMNS else 0.0
+            column[world, :lanes] = values
+        self.lane_columns["direction"][world] = table.direction
+        self.lane_columns["lane_count"][world] = lanes
+        self.count[world], self.ego[world] = n, spawned.ego
+
+    def lane_args(self) -> tuple[np.ndarray, ...]:
+        """Lane count, start, direction and lateral of every world's lanes."""
+        lanes = self.lane_columns
+        return lanes["lane_count"], lanes["start"], lanes["direction"], lanes["lateral"]
+
+
 def road_of(
     columns: dict[str, np.ndarray], lanes: LaneTable, network: RoadNetwork, np_random: np.random.Generator
 ) -> list[Vehicle]:
