@@ -34,7 +34,6 @@ import gymnasium as gym
 import numpy as np
 from highway_env import utils
 from highway_env.envs.common.action import ContinuousAction
-from highway_env.road.lane import StraightLane
 from highway_env.road.road import RoadNetwork
 from highway_env.vehicle.kinematics import Vehicle
 
@@ -74,7 +73,8 @@ class TrafficBatch:
         self.dt = 1 / config["simulation_frequency"]
         self._time_step = 1 / config["policy_frequency"]
         self._duration = config["duration"]
-        self._offroad_terminal = bool(config["offroad_terminal"])
+        if config["offroad_terminal"]:
+            raise ValueError("batched traffic ends an episode on the ego's crash or the duration only")
         self._rngs: list[np.random.Generator | None] = [None] * worlds
         self._lane_tables: list[LaneTable | None] = [None] * worlds
         self._networks: list[RoadNetwork | None] = [None] * worlds
@@ -132,7 +132,7 @@ class TrafficBatch:
         act(arrays, active)
         move(arrays, active, self.dt)
         ego_crashed = arrays.crashed.reshape(-1)[ego_rows]
-        terminated = stepping & (ego_crashed | (self._offroad_terminal & ~self._egos_on_road()))
+        terminated = stepping & ego_crashed
         truncated = stepping & (self.time >= self._duration)
         self.ended = Ended(terminated, truncated)
         self._pending_reset = terminated | truncated
@@ -148,22 +148,6 @@ class TrafficBatch:
         )
         self.arrays.steering.reshape(-1)[rows] = utils.lmap(
             np.clip(normalised_steering, -1, 1), [-1, 1], ContinuousAction.STEERING_RANGE
-        )
-
-    def _egos_on_road(self) -> np.ndarray:
-        """Whether each world's ego is on its lane (`RoadObject.on_road`)."""
-        arrays, worlds = self.arrays, np.arange(self.worlds)
-        lane, lanes = arrays.lane[worlds, arrays.ego], arrays.lane_columns
-        delta_x = arrays.x[worlds, arrays.ego] - lanes["start"][worlds, lane, 0]
-        delta_y = arrays.y[worlds, arrays.ego] - lanes["start"][worlds, lane, 1]
-        s = delta_x * lanes["direction"][:, 0] + delta_y * lanes["direction"][:, 1]
-        r = delta_x * lanes["lateral"][worlds, lane, 0] + delta_y * lanes["lateral"][worlds, lane, 1]
-        length = lanes["lane_length"][worlds, lane]
-        vehicle_length = StraightLane.VEHICLE_LENGTH
-        return (
-            (np.abs(r) <= lanes["half_width"][worlds, lane])
-            & (-vehicle_length <= s)
-            & (s < length + vehicle_length)
         )
 
     def road(self, world: int) -> tuple[list[Vehicle], Vehicle]:
