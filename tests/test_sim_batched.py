@@ -7,13 +7,16 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
-from highway_env.road.road import Road
+from highway_env.road.road import Road, RoadNetwork
+from highway_env.vehicle.kinematics import Vehicle
 
 from records import Actuation
 from stack.core.config import build_config
-from stack.sim.batched.arrays import UnsupportedRoad, read_world
+from stack.sim.batched.arrays import BatchArrays, UnsupportedRoad, read_world
+from stack.sim.batched.kernels import lane_frames, lane_neighbours
 from stack.sim.batched.traffic import TrafficBatch
 from stack.sim.envs import HIGHWAY
+from stack.sim.fast_road import NEIGHBOUR_MARGIN
 from stack.sim.highway import HighwayAdapter, env_config
 from stack.sim.settings import HighwayConfig
 
@@ -166,3 +169,41 @@ def test_roads_the_batch_cannot_hold_are_refused_by_name():
     env.unwrapped.road.vehicles[1].route = [("0", "1", 0)]
     with pytest.raises(UnsupportedRoad, match="routes"):
         read_world(env.unwrapped.road, env.unwrapped.vehicle)
+
+
+def test_the_neighbour_search_picks_highway_envs_neighbours_on_ties():
+    """`lane_neighbours` against `Road.neighbour_vehicles` for every vehicle on every lane of crowded
+    random roads whose positions tie in s (the last front in road order, the first rear), including
+    vehicles between lanes and beyond the road's ends."""
+    rng = np.random.default_rng(11)
+    compared = 0
+    for _ in range(30):
+        road = Road(RoadNetwork.straight_road_network(3, length=200), np_random=np.random.default_rng(0))
+        for _ in range(int(rng.integers(2, 25))):
+            position = [np.round(rng.uniform(-10, 215) * 2) / 2, np.round(rng.uniform(-3, 11) * 4) / 4]
+            road.vehicles.append(Vehicle(road, position, 0.0, 20.0))
+        arrays = BatchArrays(1)
+        arrays.load(0, read_world(road, road.vehicles[0]))
+        lane_count, start, direction, lateral = arrays.lane_args()
+        s, _, on, on_count = lane_frames(
+            arrays.count,
+            arrays.x,
+            arrays.y,
+            lane_count,
+            start,
+            direction,
+            lateral,
+            arrays.lane_length,
+            arrays.half_width,
+            5.0,
+            NEIGHBOUR_MARGIN,
+        )
+        for lane in range(3):
+            rows = np.arange(len(road.vehicles))
+            front, rear = lane_neighbours(rows, np.full(len(rows), lane), s, on, on_count)
+            for i, vehicle in enumerate(road.vehicles):
+                expected = road.neighbour_vehicles(vehicle, ("0", "1", lane))
+                got = tuple(road.vehicles[k] if k >= 0 else None for k in (front[i], rear[i]))
+                assert got[0] is expected[0] and got[1] is expected[1], (lane, i)
+                compared += 1
+    assert compared > 500
