@@ -207,3 +207,16 @@ def test_the_neighbour_search_picks_highway_envs_neighbours_on_ties():
                 assert got[0] is expected[0] and got[1] is expected[1], (lane, i)
                 compared += 1
     assert compared > 500
+
+
+def test_a_step_needs_reset_worlds_and_one_actuation_per_world():
+    batch = TrafficBatch(HighwayConfig(vehicles_count=5), 2)
+    with pytest.raises(ValueError, match=r"worlds \[0, 1\] have not been reset"):
+        batch.step(np.zeros(2), np.zeros(2))
+    batch.reset([0, 1])
+    with pytest.raises(ValueError, match=r"2 worlds, got shape \(3,\)"):
+        batch.step(np.zeros(3), np.zeros(3))
+    with pytest.raises(ValueError, match="one seed per world"):
+        batch.reset([0])
+    assert not batch.step([0.0, 0.0], [0.0, 0.0]).terminated.any()
+    batch.close()

@@ -32,6 +32,7 @@ from typing import cast
 
 import gymnasium as gym
 import numpy as np
+import numpy.typing as npt
 from highway_env import utils
 from highway_env.envs.common.action import ContinuousAction
 from highway_env.road.road import RoadNetwork
@@ -114,11 +115,15 @@ class TrafficBatch:
         self.ended.terminated[world] = self.ended.truncated[world] = False
         self._pending_reset[world] = False
 
-    def step(self, acceleration: np.ndarray, steering: np.ndarray) -> Ended:
+    def step(self, acceleration: npt.ArrayLike, steering: npt.ArrayLike) -> Ended:
         """One frame of every world, the ego of world k actuated with `acceleration[k]` [m/s^2] and
         `steering[k]` [rad] (through `ContinuousAction`'s normalised range, as `HighwayAdapter`
         applies an `Actuation`: +-5 m/s^2, +-pi/4 rad at most). Worlds that ended at the last step
         are reset instead (their actuation is ignored)."""
+        accelerations, steerings = self._per_world(acceleration), self._per_world(steering)
+        unset = [world for world, rng in enumerate(self._rngs) if rng is None]
+        if unset:
+            raise ValueError(f"worlds {unset} have not been reset: call reset(seeds) first")
         resetting = self._pending_reset.nonzero()[0]
         for world in resetting.tolist():
             self.reset_world(world)
@@ -128,7 +133,7 @@ class TrafficBatch:
         active = np.where(stepping, arrays.count, 0)
         self.time[stepping] += self._time_step
         ego_rows = worlds * arrays.vehicles + arrays.ego
-        self._drive_egos(ego_rows[stepping], acceleration[stepping], steering[stepping])
+        self._drive_egos(ego_rows[stepping], accelerations[stepping], steerings[stepping])
         act(arrays, active)
         move(arrays, active, self.dt)
         ego_crashed = arrays.crashed.reshape(-1)[ego_rows]
@@ -137,6 +142,13 @@ class TrafficBatch:
         self.ended = Ended(terminated, truncated)
         self._pending_reset = terminated | truncated
         return self.ended
+
+    def _per_world(self, values: npt.ArrayLike) -> np.ndarray:
+        """`values` as floats, one per world; ValueError for another shape."""
+        array = np.asarray(values, dtype=float)
+        if array.shape != (self.worlds,):
+            raise ValueError(f"one value per world: {self.worlds} worlds, got shape {array.shape}")
+        return array
 
     def _drive_egos(self, rows: np.ndarray, acceleration: np.ndarray, steering: np.ndarray) -> None:
         """`HighwayAdapter.step`'s actuation on the egos: normalised by `to_env_action`, then mapped
