@@ -13,10 +13,10 @@ from highway_env.vehicle.kinematics import Vehicle
 from records import Actuation
 from stack.core.config import build_config
 from stack.sim.batched.arrays import BatchArrays, UnsupportedRoad, read_world
-from stack.sim.batched.kernels import lane_frames, lane_neighbours
+from stack.sim.batched.frame import lane_frame
+from stack.sim.batched.kernels import lane_neighbours
 from stack.sim.batched.traffic import TrafficBatch
 from stack.sim.envs import HIGHWAY
-from stack.sim.fast_road import NEIGHBOUR_MARGIN
 from stack.sim.highway import HighwayAdapter, env_config
 from stack.sim.settings import HighwayConfig
 
@@ -184,20 +184,7 @@ def test_the_neighbour_search_picks_highway_envs_neighbours_on_ties():
             road.vehicles.append(Vehicle(road, position, 0.0, 20.0))
         arrays = BatchArrays(1)
         arrays.load(0, read_world(road, road.vehicles[0]))
-        lane_count, start, direction, lateral = arrays.lane_args()
-        s, _, on, on_count = lane_frames(
-            arrays.count,
-            arrays.x,
-            arrays.y,
-            lane_count,
-            start,
-            direction,
-            lateral,
-            arrays.lane_length,
-            arrays.half_width,
-            5.0,
-            NEIGHBOUR_MARGIN,
-        )
+        s, _, on, on_count = lane_frame(arrays, arrays.count)
         for lane in range(3):
             rows = np.arange(len(road.vehicles))
             front, rear = lane_neighbours(rows, np.full(len(rows), lane), s, on, on_count)

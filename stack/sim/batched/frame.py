@@ -27,12 +27,14 @@ from stack.sim.vector.kernels import SEPARATION_MARGIN
 from stack.sim.vector.lanes import clip
 
 
-def act(arrays: BatchArrays, active: np.ndarray) -> None:
-    """`Road.act()` of every active world: the IDM drivers' decisions, steering and acceleration."""
-    flat = {name: column.reshape(-1) for name, column in arrays.columns.items()}
+def lane_frame(
+    arrays: BatchArrays, active: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """`lane_frames` of the worlds' vehicles as they stand: s (W, V) and r (W, L, V) [m], the
+    vehicles highway-env's neighbour search counts on each lane (W, L, V) and how many (W, L)."""
     lanes = arrays.lane_columns
     lane_count, start, direction, lateral = arrays.lane_args()
-    s, r, on, on_count = lane_frames(
+    return lane_frames(
         active,
         arrays.x,
         arrays.y,
@@ -45,6 +47,14 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
         StraightLane.VEHICLE_LENGTH,
         NEIGHBOUR_MARGIN,
     )
+
+
+def act(arrays: BatchArrays, active: np.ndarray) -> None:
+    """`Road.act()` of every active world: the IDM drivers' decisions, steering and acceleration."""
+    flat = {name: column.reshape(-1) for name, column in arrays.columns.items()}
+    lanes = arrays.lane_columns
+    lane_count = lanes["lane_count"]
+    s, r, on, on_count = lane_frame(arrays, active)
     in_world = np.arange(arrays.vehicles)[None, :] < active[:, None]
     kind, crashed = flat["kind"], flat["crashed"]
     drivers = np.flatnonzero(in_world.reshape(-1) & (kind != PLAIN) & ~crashed)
