@@ -161,7 +161,6 @@ def move(arrays: BatchArrays, active: np.ndarray, dt: float) -> None:
     rows = np.flatnonzero(in_world.reshape(-1))
     if len(rows) == 0:
         return
-    dt = dt
     speed, crashed = flat["speed"][rows], flat["crashed"][rows]
     steering, acceleration = clipped_actions(
         speed,

@@ -5,7 +5,7 @@ actuation, the same world the `vector` backend drives alone through `HighwayAdap
 at reset highway-env spawns the world's road with the world's own generator (a seed, or the stream
 the world's last reset left, as one env's `reset()` continues it), the arrays read it once, and from
 then on a frame of every world is a fixed sequence of compiled kernels (`stack.sim.batched.kernels`,
-the vector backend's `dynamics` and `frame.idm`) and numpy's transcendental calls and dot products
+the vector backend's `dynamics` and `frame.IdmRows`) and numpy's transcendental calls and dot products
 over all the worlds' vehicles at once, in highway-env's operation order:
 
 - act: each world's lane coordinates and lane occupancy; every IDM driver's own-lane neighbours,
@@ -15,7 +15,7 @@ over all the worlds' vehicles at once, in highway-env's operation order:
   changing lane and the steering controller;
 - step: `clip_actions` (and `TrafficVehicle`'s stop at a standstill), the kinematic bicycle,
   pending impacts, the lane-change timers, the closest lane; the collision candidates
-  (`close_pair_rows`, a superset) go through highway-env's own `_is_colliding`, pair by pair in
+  (`could_touch` along a sweep, a superset) go through highway-env's own `_is_colliding`, pair by pair in
   stock's order, which sets the impacts and crash flags.
 
 The four facts this identity rests on are the vector backend's (`stack.sim.vector.road`). Worlds
