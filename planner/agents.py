@@ -48,6 +48,13 @@ class Scored(Protocol):
     def scores(self, observation: np.ndarray) -> np.ndarray: ...
 
 
+def sees_permitted(agent: object) -> bool:
+    """Whether the loop shows `agent` the safety layer's permitted commands after its encoding
+    (`N_ACTIONS` values, 1 permitted, 0 refused, in `Command` order): an agent trained with an
+    action mask says so with `sees_permitted = True` (any agent may; by default none does)."""
+    return getattr(agent, "sees_permitted", False) is True
+
+
 def decide(agent: Agent, observation: np.ndarray) -> Command:
     """One greedy decision."""
     action, _ = agent.predict(observation, deterministic=True)

@@ -23,6 +23,19 @@ from stable_baselines3.dqn.policies import DQNPolicy, QNetwork
 from torch.nn import functional as F
 
 from planner.mobil import MobilPrior
+from records import N_ACTIONS
+
+
+def permitted_columns(observations: th.Tensor) -> th.Tensor:
+    """The safety layer's permitted commands that end an observation of an agent trained with
+    `action_mask` (`N_ACTIONS` values, 1 permitted, 0 refused), shape (batch, N_ACTIONS)."""
+    return observations[:, -N_ACTIONS:]
+
+
+def masked(q_values: th.Tensor, permitted: th.Tensor | None) -> th.Tensor:
+    """`q_values` with the commands not `permitted` (mask value below 0.5) at -inf, so that no
+    argmax picks them; unchanged without a mask."""
+    return q_values if permitted is None else q_values.masked_fill(permitted < 0.5, -th.inf)
 
 
 def double_q_target(
@@ -31,9 +44,11 @@ def double_q_target(
     discounts: th.Tensor | float,
     next_q_online: th.Tensor,
     next_q_target: th.Tensor,
+    next_permitted: th.Tensor | None = None,
 ) -> th.Tensor:
-    """Double-Q TD target, shape (batch, 1)."""
-    next_actions = next_q_online.argmax(dim=1, keepdim=True)
+    """Double-Q TD target, shape (batch, 1); with `next_permitted`, the online network picks the
+    next action among the commands the safety layer permits there (invalid-action masking)."""
+    next_actions = masked(next_q_online, next_permitted).argmax(dim=1, keepdim=True)
     next_values = th.gather(next_q_target, dim=1, index=next_actions)
     return rewards + (1 - dones) * discounts * next_values
 
@@ -150,14 +165,17 @@ class Demonstrations:
 
 class PriorQNetwork(QNetwork):
     """SB3's Q-network whose greedy action adds `prior`'s bonus to MOBIL's proposed change (None:
-    SB3's argmax)."""
+    SB3's argmax) and, with `action_mask`, picks among the commands its observation permits."""
 
     prior: MobilPrior | None = None
+    action_mask: bool = False
 
     def _predict(self, observation: th.Tensor, deterministic: bool = True) -> th.Tensor:  # type: ignore[override]
         q_values = self(observation)
         if self.prior is not None:
             q_values = q_values + th.as_tensor(self.prior.bonuses(observation.cpu().numpy()))
+        if self.action_mask:
+            q_values = masked(q_values, permitted_columns(observation))
         return q_values.argmax(dim=1).reshape(-1)
 
 
@@ -173,7 +191,10 @@ class DoubleDQN(DQN):
     """SB3's DQN with the Double-DQN target. Once `demonstrations` are set, `demonstration_share`
     of every batch is drawn from them, with DQfD's margin loss (`margin`, weight `margin_weight`).
     With a `mobil_prior` its greedy actions (in training's rollouts and in validation) are the
-    prior's (`planner.mobil.MobilPrior`); the TD target stays the Q-network's own."""
+    prior's (`planner.mobil.MobilPrior`); the TD target stays the Q-network's own. With
+    `action_mask`, every observation ends with the safety layer's permitted commands
+    (`permitted_columns`): greedy actions, exploration and the TD target's next action are chosen
+    among them, so the agent learns what it may do and is never taught by a refused command."""
 
     policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": PriorDQNPolicy}
 
@@ -184,14 +205,38 @@ class DoubleDQN(DQN):
         margin: float = 0.8,
         margin_weight: float = 1.0,
         mobil_prior: MobilPrior | None = None,
+        action_mask: bool = False,
         **kwargs: Any,
     ) -> None:
         self.demonstrations: Demonstrations | None = None
         self.demonstration_share, self.margin, self.margin_weight = demonstration_share, margin, margin_weight
+        self.action_mask = action_mask
         super().__init__(*args, **kwargs)
         if isinstance(self.q_net, PriorQNetwork):
-            self.q_net.prior = mobil_prior
-        assert mobil_prior is None or self.q_net.prior is mobil_prior, "a MOBIL prior needs MlpPolicy"
+            self.q_net.prior, self.q_net.action_mask = mobil_prior, action_mask
+        assert not (mobil_prior or action_mask) or isinstance(self.q_net, PriorQNetwork), (
+            "a MOBIL prior and an action mask need MlpPolicy"
+        )
+
+    def predict(
+        self,
+        observation: np.ndarray | dict[str, np.ndarray],
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        """SB3's epsilon-greedy `predict`; with `action_mask`, an exploring step draws among the
+        permitted commands of each observation (from the action space's generator, which
+        checkpoints keep)."""
+        if not self.action_mask:
+            return super().predict(observation, state, episode_start, deterministic)
+        if deterministic or np.random.rand() >= self.exploration_rate:
+            return self.policy.predict(observation, state, episode_start, deterministic=True)
+        assert isinstance(observation, np.ndarray), "an action mask needs array observations"
+        rows = observation.reshape(-1, observation.shape[-1])
+        permitted = rows[:, -N_ACTIONS:] >= 0.5
+        drawn = np.array([self.action_space.sample(mask=row.astype(np.int8)) for row in permitted])
+        return (drawn if observation.ndim > 1 else drawn[0]), state
 
     def pretrain(
         self, gradient_steps: int, batch_size: int, on_step: Callable[[], object] | None = None
@@ -247,6 +292,7 @@ class DoubleDQN(DQN):
                 batch.discounts,
                 self.q_net(batch.next_observations),
                 self.q_net_target(batch.next_observations),
+                permitted_columns(batch.next_observations) if self.action_mask else None,
             )
         q_values = self.q_net(batch.observations)
         loss = F.smooth_l1_loss(th.gather(q_values, dim=1, index=batch.actions), target_q_values)

@@ -28,7 +28,9 @@ def q_network(observation_size: int, actions: int, hidden: list[int]) -> nn.Sequ
 
 class LearnedAgent(Policy):
     """Greedy agent over a Q-network (with the MOBIL prior its file declares); `grid_config` and
-    `encoding` say what it must be shown."""
+    `encoding` say what it must be shown, and `sees_permitted` whether the loop appends the safety
+    layer's permitted commands to it (a model trained with an action mask): it then decides among
+    them."""
 
     def __init__(self, network: nn.Sequential, metadata: ModelMetadata, source: str = "model") -> None:
         assert metadata.observation_size is not None, "a Q-network's metadata names its input size"
@@ -39,6 +41,7 @@ class LearnedAgent(Policy):
         self.encoding: Encoding = metadata.encoding
         self.grid_config: GridConfig = metadata.grid
         self.prior = MobilPrior(metadata.grid, metadata.mobil_prior) if metadata.mobil_prior else None
+        self.sees_permitted = metadata.action_mask
         self.last_rated: tuple[np.ndarray | None, np.ndarray] = (None, np.zeros((1, N_ACTIONS)))
         """The last observation decided on and its `rated` values (`scores` reads them)."""
 
@@ -72,6 +75,9 @@ class LearnedAgent(Policy):
     def choose(self, observation: np.ndarray) -> Action:
         q_values = self.rated(observation)
         self.last_rated = (observation, q_values)
+        if self.sees_permitted:
+            permitted = np.asarray(observation).reshape(len(q_values), -1)[:, -N_ACTIONS:] >= 0.5
+            q_values = np.where(permitted, q_values, -np.inf)
         actions = q_values.argmax(axis=1)
         return actions[0] if np.asarray(observation).ndim == 1 else actions
 

@@ -82,6 +82,8 @@ def _check_metadata(path: Path | str, metadata: dict) -> None:
             problem = f"grid.{'.'.join(map(str, first['loc']))}: {first['msg']}"[:200]
         else:
             problem = _prior_problem(metadata.get("mobil_prior", 0.0), grid, encoding)
+    if problem is None and metadata.get("action_mask", False) not in (True, False):
+        problem = "action_mask: expected true or false"
     if problem:
         raise ModelFileError(f"{path}: model metadata {problem}")
 

@@ -20,8 +20,10 @@ class ModelMetadata:
     and `hidden` layer widths, the `network` size name, the `lanes_count` of the road it trained
     on, the `trained_steps`, the training `seed` and the `validation` that kept it. Only `kind`,
     `grid`, for a Q-network the sizes and its `mobil_prior` (the bonus its greedy decision gives
-    MOBIL's proposed change, `planner.mobil.MobilPrior`; 0: none, and not written) are needed to
-    use it (`planner.model_check` checks them); the rest describes where it came from and is None
+    MOBIL's proposed change, `planner.mobil.MobilPrior`; 0: none, and not written) and its
+    `action_mask` (its observations end with the safety layer's permitted commands, and it decides
+    among them; False: not written) are needed to use it (`planner.model_check` checks them); the
+    rest describes where it came from and is None
     in a file that does not say."""
 
     kind: ModelKind
@@ -37,6 +39,7 @@ class ModelMetadata:
     seed: int | None = None
     validation: Validation | None = None
     mobil_prior: float = 0.0
+    action_mask: bool = False
 
     def to_json(self) -> dict[str, Any]:
         """The metadata member's keys in the order drivestack has always written them; a field
@@ -55,6 +58,7 @@ class ModelMetadata:
             "seed": self.seed,
             "validation": asdict(self.validation) if self.validation is not None else None,
             "mobil_prior": self.mobil_prior or None,
+            "action_mask": self.action_mask or None,
         }
         return {key: value for key, value in data.items() if value is not None}
 
@@ -77,6 +81,7 @@ class ModelMetadata:
             seed=_typed(data, "seed", int),
             validation=_validation(data.get("validation")),
             mobil_prior=float(data.get("mobil_prior", 0.0)),
+            action_mask=data.get("action_mask", False) is True,
         )
 
 

@@ -123,7 +123,10 @@ def test_a_run_with_demonstrations_validates_its_pretrained_model_first(tmp_path
     ("change", "message"),
     [
         ({"algorithm": "dqn"}, "demonstrations: only the ddqn algorithm learns from them"),
-        ({"demonstrations": {"expert": "ddqn"}}, "unknown expert 'ddqn'; available: mobil, rule, oracle"),
+        (
+            {"demonstrations": {"expert": "ddqn"}},
+            "unknown expert 'ddqn'; available: mobil, rule, lookahead, oracle",
+        ),
         ({"demonstrations": {"share": 1.0}}, "share"),
     ],
 )
@@ -147,12 +150,32 @@ def test_a_checkpoint_s_demonstrations_are_checked_before_use():
         Demonstrations.from_arrays({"actions": np.zeros(2)}, 4, 3)
 
 
-@pytest.mark.parametrize("expert", ["rule", "oracle"])
+@pytest.mark.parametrize("expert", ["rule", "lookahead", "oracle"])
 def test_every_expert_drives_a_recorded_episode(expert):
     config = build_config(TINY)
     episode = expert_episode(config, expert, 200_001)
     assert len(episode) == 5 and set(episode.actions) <= {0, 1, 2}
     assert episode.observations.shape[1] == HierarchicalHighwayEnv(config).observation_space.shape[0]
+
+
+def test_with_an_action_mask_an_expert_s_refused_command_is_recorded_as_stay():
+    """The rule agent proposes changes the loop would not carry out in a jam (5 in this episode);
+    masked, every recorded action is one the observation permits, and the episode is the one the
+    loop drove."""
+    masked = {**TINY, "scenario": "jam", "highway": {"duration": 15}}
+    masked["train"] = {**TINY["train"], "action_mask": True}
+    config = build_config(masked)
+    episode = expert_episode(config, "rule", 200_003)
+    permitted = episode.observations[:, -3:]
+    assert all(permitted[step, action] == 1 for step, action in enumerate(episode.actions))
+    env = HierarchicalHighwayEnv(config)
+    observation, _ = env.reset(seed=200_003)
+    rule, refused = expert_policy(env.loop.config, "rule"), 0
+    for action in episode.actions:
+        refused += rule(env.loop) != action
+        observation, *_ = env.step(action)
+    assert env.loop.safety.masked == 0 and refused > 0
+    np.testing.assert_array_equal(episode.next_observations[-1], observation)
 
 
 def deaf_after_an_expert_episode(seed):

@@ -185,6 +185,7 @@ def test_run_and_train_take_a_scenario_from_the_cli(tmp_path):
     assert ran.exit_code == 0, ran.output
     assert json.loads((run_out / "summary.json").read_text())["scenario"] == "exit"
     small = ["--envs", "1", "--set", "train.buffer_size=1000", "--set", "highway.duration=5"]
+    small += ["--set", "train.validation.short_episodes=1", "--set", "train.validation.long_episodes=1"]
     trained = CliRunner().invoke(
         app,
         ["train", "--scenario", "lanes-3", "--steps", "20", *small, "--no-progress", "--out", str(train_out)],
@@ -204,12 +205,12 @@ def test_a_scenario_gives_the_same_summaries_on_one_or_two_processes():
 
 def test_random_traffic_draws_a_seeded_world_per_episode_from_its_ranges():
     config = build_config({}, scenario="random")
-    assert config.highway.lane_counts == (3, 4, 5)
+    assert config.highway.lane_counts == (2, 3, 4, 5, 6)
     ranges = config.highway.random_traffic
     assert ranges is not None
-    lanes, trucks_changing = set(), set()
+    lanes, trucks_changing, truck_lanes = set(), set(), set()
     with HighwayAdapter(config.highway, "vector") as adapter:
-        for seed in range(12):
+        for seed in range(40):
             world = adapter.reset(seed=seed)
             drawn = adapter.env.unwrapped.config
             lanes.add(world.lanes_count)
@@ -222,11 +223,33 @@ def test_random_traffic_draws_a_seeded_world_per_episode_from_its_ranges():
                 truck = classes["truck"]
                 trucks_changing.add(truck["changes_lane"])
                 assert truck["speed_mps"][1] <= car[1] and truck["speed_mps"][0] >= 2.0
+                if not truck["changes_lane"]:
+                    kept = tuple(truck["lanes"])
+                    right = (world.lanes_count - 2, world.lanes_count - 1)
+                    assert kept in ((0, 1), right)
+                    truck_lanes.add("left" if kept == (0, 1) and kept != right else "right")
             moving = world.speed > 0 if "incident" in drawn["traffic"] else slice(None)
             assert np.all(world.speed[moving] == drawn["traffic"]["spawn_speed_mps"])
             again = adapter.reset(seed=seed)
             np.testing.assert_array_equal(world.position, again.position)
-    assert lanes == {3, 4, 5} and trucks_changing == {True, False}
+    assert lanes == {2, 3, 4, 5, 6} and trucks_changing == {True, False} and truck_lanes == {"left", "right"}
+
+
+def test_a_random_world_is_seen_through_a_sensor_drawn_from_its_seed():
+    from stack.core.closed_loop import episode_sensor
+
+    config = build_config({"scenario": "random", "perception": {"sensor": {"range_m": 150.0}}})
+    ranges = config.highway.random_traffic
+    assert ranges is not None
+    drawn = [episode_sensor(config, seed) for seed in range(30)]
+    assert drawn[:3] == [episode_sensor(config, seed) for seed in range(3)], "the seed alone draws it"
+    for name in ("position_noise_m", "miss_probability", "false_positives"):
+        values = [getattr(sensor, name) for sensor in drawn]
+        low, high = getattr(ranges, name)
+        assert all(low <= value <= high for value in values) and len(set(values)) == 30, name
+    assert {sensor.range_m for sensor in drawn} == {150.0}, "what is not drawn stays the config's"
+    fixed = build_config({"perception": {"sensor": {"position_noise_m": 0.3}}}, scenario="dense")
+    assert episode_sensor(fixed, 5) is fixed.perception.sensor
 
 
 def test_random_traffic_spawns_are_feasible_and_every_agent_drives_any_lane_count():

@@ -161,12 +161,18 @@ def test_training_resumes_after_an_interruption(tmp_path, monkeypatch):
     assert load_agent(out / "final.npz").metadata.trained_steps == 40
 
 
-def test_train_cli_smoke_writes_best_model_and_curve(tmp_path):
+def trained(tmp_path: Path, data: dict) -> tuple[Path, Path]:
+    """`drivestack train` of config `data` (written to tmp_path): the config file and the folder."""
     config = tmp_path / "tiny.yaml"
-    config.write_text(yaml.safe_dump(TINY))
+    config.write_text(yaml.safe_dump(data))
     out = tmp_path / "out"
     result = CliRunner().invoke(app, ["train", "--config", str(config), "--out", str(out), "--no-progress"])
     assert result.exit_code == 0, result.output
+    return config, out
+
+
+def test_train_cli_smoke_writes_best_model_and_curve(tmp_path):
+    config, out = trained(tmp_path, TINY)
     for name in (
         "best.npz",
         "final.npz",
@@ -530,5 +536,6 @@ def test_training_on_roads_of_several_lane_counts_needs_an_encoding_of_one_size(
     result = CliRunner().invoke(
         app, ["train", "-c", str(config), "--scenario", "random", "--out", str(tmp_path / "o")]
     )
-    assert result.exit_code == 2 and "has a different size on random (lane counts [3, 4, 5])" in result.output
+    assert result.exit_code == 2
+    assert "has a different size on random (lane counts [2, 3, 4, 5, 6])" in result.output
     assert not (tmp_path / "o").exists()

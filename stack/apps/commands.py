@@ -100,14 +100,20 @@ def export(
         check_destination(sb3)
         from stack.apps.export import export_sb3
 
-        written, prior = export_sb3(model, sb3)
+        written, metadata = export_sb3(model, sb3)
     except ValueError as error:
         fail(str(error))
     Console().print(f"wrote {written}: stable_baselines3.DQN.load({str(written)!r})", highlight=False)
-    if prior:
+    if metadata.mobil_prior:
         Console().print(
-            f"note: the zip's DQN.predict decides on the bare Q-values; drivestack adds {prior:g} to "
-            "the lane change MOBIL proposes (mobil_prior)",
+            f"note: the zip's DQN.predict decides on the bare Q-values; drivestack adds "
+            f"{metadata.mobil_prior:g} to the lane change MOBIL proposes (mobil_prior)",
+            highlight=False,
+        )
+    if metadata.action_mask:
+        Console().print(
+            "note: the zip's observations end with the safety layer's 3 permitted commands (1 / 0); "
+            "its DQN.predict may pick a refused one, drivestack picks among the permitted only",
             highlight=False,
         )
 

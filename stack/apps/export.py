@@ -5,7 +5,9 @@ the observation space of the model's encoding and `Discrete(3)` actions, so `DQN
 for evaluation or fine-tuning with SB3 or rl-zoo3. The zip is SB3's format (it pickles SB3's own
 classes); drivestack itself never loads it: its model files stay data-only. A model's MOBIL prior
 (`planner.mobil.MobilPrior`) is drivestack's decision rule, not SB3's: `DQN.predict` on the zip
-decides on the bare Q-values (the CLI says so).
+decides on the bare Q-values (the CLI says so). So is an action mask: a model trained with one takes
+observations that end with the safety layer's permitted commands (the zip's observation space has
+them, in [0, 1]), and drivestack decides among the permitted ones only.
 """
 
 from __future__ import annotations
@@ -18,8 +20,10 @@ from stable_baselines3 import DQN
 from perception.grid import OccupancyGridBuilder
 from planner.learned import LearnedAgent, load_agent
 from planner.model_file import ModelFileError
+from planner.model_metadata import ModelMetadata
 from records import N_ACTIONS
 from stack.apps.folders import check_destination
+from stack.core.decision_env import with_permitted
 from stack.core.model_fit import check_road_fit
 from stack.training.model import warm_start
 
@@ -31,9 +35,9 @@ class _Spaces(gym.Env):
         self.observation_space, self.action_space = observation_space, gym.spaces.Discrete(N_ACTIONS)
 
 
-def export_sb3(model: Path, out: Path) -> tuple[Path, float]:
+def export_sb3(model: Path, out: Path) -> tuple[Path, ModelMetadata]:
     """Write `model` (a DDQN or DQN model file) as an SB3 `DQN` zip at `out`; returns the path and
-    the model's MOBIL prior (0: none), which the zip does not hold.
+    the model's metadata (its MOBIL prior and action mask are decision rules the zip does not hold).
     A missing model, an existing or unwritable `out`, or a model that is not a Q-network raise
     ValueError (ModelFileError) with a one-line message, before anything is written."""
     if not model.is_file():
@@ -44,8 +48,10 @@ def export_sb3(model: Path, out: Path) -> tuple[Path, float]:
         raise ModelFileError(f"{model}: a Q-table has no SB3 counterpart; export a DDQN or DQN model")
     lanes = 4 if agent.metadata.lanes_count is None else agent.metadata.lanes_count
     grid = agent.grid_config
-    check_road_fit(model, grid, agent.encoding, agent.observation_size, lanes)
+    check_road_fit(model, grid, agent.encoding, agent.observation_size, lanes, permitted=agent.sees_permitted)
     space = OccupancyGridBuilder(grid).space(agent.encoding, lanes)
+    if agent.sees_permitted:
+        space = with_permitted(space)
     sb3 = DQN(
         "MlpPolicy",
         _Spaces(space),
@@ -60,4 +66,4 @@ def export_sb3(model: Path, out: Path) -> tuple[Path, float]:
     except OSError as error:
         written.unlink(missing_ok=True)
         raise ValueError(f"--sb3: cannot write {written} ({error.strerror})") from None
-    return written, agent.metadata.mobil_prior
+    return written, agent.metadata

@@ -21,7 +21,7 @@ def checked_run(
     (`stack.apps.folders.claimed`; `prefix` names the command)."""
     from planner.factory import model_path
     from planner.model_check import checked_model
-    from stack.core.model_fit import check_road_fit
+    from stack.core.model_fit import check_file_fit
 
     for config in configs:
         try:
@@ -29,7 +29,7 @@ def checked_run(
                 _, metadata = checked_model(path, (config.planner.agent,))
                 if metadata.kind == "mlp" and metadata.observation_size is not None:
                     lanes = config.highway.lane_counts
-                    check_road_fit(path, metadata.grid, metadata.encoding, metadata.observation_size, lanes)
+                    check_file_fit(path, metadata, lanes)
         except ValueError as error:
             fail(str(error))
     from stack.apps.folders import claimed, location

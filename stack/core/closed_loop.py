@@ -24,7 +24,8 @@ from controllers.maneuver import Maneuver
 from controllers.protocol import Controller
 from controllers.tracker import make_controller
 from perception.grid import OccupancyGrid, OccupancyGridBuilder
-from perception.sensor import SensorModel
+from perception.sensor import SensorConfig, SensorModel
+from planner.agents import Agent, sees_permitted
 from planner.safety import SafetyLayer
 from records import Actuation, Command, GridConfig, WorldState
 from stack.core.config import RunConfig, grid_config
@@ -40,6 +41,22 @@ SNAPSHOT_TIME_S = 10.0
 """Each episode keeps the (world, grid) of its first decision at or after this time [s]."""
 VIDEO_FRAME_TICKS = 2
 """Control ticks per video frame: the 1st, 3rd, 5th ... tick is drawn (7.5 frames/s at 15 Hz)."""
+
+
+SENSOR_DRAW_STREAM = 7
+"""The generator stream `episode_sensor` draws a random world's sensor from (beside the seed)."""
+
+
+def episode_sensor(config: RunConfig, seed: int) -> SensorConfig:
+    """The sensor episode `seed` is seen through: `perception.sensor`, or, on a road of random
+    traffic, that sensor with its noise, missed detections and phantoms drawn from the ranges of
+    `highway.random_traffic` (from the seed alone, so every backend and process draws the same)."""
+    ranges, sensor = config.highway.random_traffic, config.perception.sensor
+    if ranges is None:
+        return sensor
+    rng = np.random.default_rng((seed, SENSOR_DRAW_STREAM))
+    drawn = ("position_noise_m", "miss_probability", "false_positives")
+    return sensor.model_copy(update={name: float(rng.uniform(*getattr(ranges, name))) for name in drawn})
 
 
 class Plant(Protocol):
@@ -93,7 +110,7 @@ class ClosedLoop:
         config = self.config
         self.seed = seed
         self.world = self.plant.reset(seed)
-        self.sensor = SensorModel(config.perception.sensor, seed)
+        self.sensor = SensorModel(episode_sensor(config, seed), seed)
         self.perceived = self._observe()
         self.safety = SafetyLayer(config.planner.safety)
         self.controller = self.given_controller or make_controller(
@@ -239,6 +256,22 @@ class ClosedLoop:
     def permits(self, command: Command) -> bool:
         """Whether the safety layer would pass `command` now (nothing is counted)."""
         return self.safety.permits(command, self.perceived, self.maneuver.lane)
+
+    def permitted(self) -> np.ndarray:
+        """Per `Command`, 1.0 where `act` would carry it out now, else 0.0: STAY always; a lane
+        change when no change is running, the safety layer passes it and the maneuver would start
+        it (at or above its lane-change speed). What an agent trained with an action mask sees."""
+        starts = not self.maneuver.changing_lane and float(self.world.speed[0]) >= self.maneuver.min_speed
+        return np.array(
+            [command is Command.STAY or (starts and self.permits(command)) for command in Command],
+            dtype=np.float32,
+        )
+
+    def observation(self, agent: Agent, grid: OccupancyGrid) -> np.ndarray:
+        """What `agent` decides on: `grid` in its encoding, followed by `permitted()` when it
+        `sees_permitted`."""
+        encoded = grid.encode(agent.encoding)
+        return np.concatenate([encoded, self.permitted()]) if sees_permitted(agent) else encoded
 
     def fork(self, view: OccupancyGridBuilder | None = None) -> ClosedLoop:
         """A copy of the loop now, to play a future on (the simulator is deterministic, so the copy

@@ -1,13 +1,15 @@
 """`drivestack/HierarchicalHighway-v0`: the decision layer's MDP on the full stack.
 
 Action: `Discrete(3)` (LEFT, STAY, RIGHT). Observation: the perception encoding named by
-`config.train.encoding`. One step is one decision period of the closed loop: the safety layer,
-maneuver and controllers run inside at the control rate. A lane change spans several steps, and
-actions taken while it runs are ignored, so every transition lasts the same time (one discount
-factor per step is then right; a whole lane change in one step would earn several periods of reward
-for one discount and bias the agent towards changing lane). Reward: see `RewardConfig` (the
-paper's +1 / -1 by default). With `train.scenarios`, each episode draws its world from the mix (one
-closed loop per scenario, all shown the same encoding, which must then have one size on every road).
+`config.train.encoding`, followed with `train.action_mask` by the safety layer's permitted commands
+(`ClosedLoop.permitted`: 3 values, 1 permitted, 0 refused). One step is one decision period of the
+closed loop: the safety layer, maneuver and controllers run inside at the control rate. A lane
+change spans several steps, and actions taken while it runs are ignored, so every transition lasts
+the same time (one discount factor per step is then right; a whole lane change in one step would
+earn several periods of reward for one discount and bias the agent towards changing lane). Reward:
+see `RewardConfig` (the paper's +1 / -1 by default). With `train.scenarios`, each episode draws its
+world from the mix (one closed loop per scenario, all shown the same encoding, which must then have
+one size on every road).
 """
 
 from __future__ import annotations
@@ -32,6 +34,12 @@ class EpisodeRecord:
 
     generator_state: dict
     actions: list[int]
+
+
+def with_permitted(space: spaces.Box) -> spaces.Box:
+    """`space` followed by the `N_ACTIONS` permitted-command values, each in [0, 1]."""
+    low, high = np.zeros(N_ACTIONS, space.dtype), np.ones(N_ACTIONS, space.dtype)
+    return spaces.Box(np.concatenate([space.low, low]), np.concatenate([space.high, high]))
 
 
 class HierarchicalHighwayEnv(gym.Env):
@@ -60,11 +68,14 @@ class HierarchicalHighwayEnv(gym.Env):
         self.adapter, self.loop = self.adapters[0], self.loops[0]
         self.encoding = config.train.encoding
         builder = OccupancyGridBuilder(grid_config(self.worlds[0]))
-        self.observation_space = builder.space(self.encoding, config.highway.lanes_count)
+        space = builder.space(self.encoding, config.highway.lanes_count)
+        self.action_mask = config.train.action_mask
+        self.observation_space = with_permitted(space) if self.action_mask else space
         self.action_space = spaces.Discrete(N_ACTIONS)
 
     def _observe(self) -> np.ndarray:
-        return self.loop.perceive().encode(self.encoding)
+        encoded = self.loop.perceive().encode(self.encoding)
+        return np.concatenate([encoded, self.loop.permitted()]) if self.action_mask else encoded
 
     def reset(
         self, *, seed: int | None = None, options: dict | None = None

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from tqdm import tqdm
 
-from planner.agents import Agent, Scored, decide
+from planner.agents import Agent, Scored, decide, sees_permitted
 from planner.factory import make_agent, model_label, model_path
 from records import LEARNED_AGENTS, child_seed
 from stack.core.closed_loop import ClosedLoop, grid_config
@@ -42,7 +42,8 @@ def build_agent(config: RunConfig, seed: int) -> Agent:
     expected = getattr(agent, "observation_size", None)
     grid = agent.grid_config or grid_config(config)
     if expected is not None:
-        check_road_fit(path or "", grid, agent.encoding, expected, config.highway.lane_counts)
+        counts = config.highway.lane_counts
+        check_road_fit(path or "", grid, agent.encoding, expected, counts, permitted=sees_permitted(agent))
     return agent
 
 
@@ -76,7 +77,7 @@ def agent_step(loop: ClosedLoop, agent: Agent) -> int:
     if isinstance(agent, Oracle):
         command = agent.plan(loop)
     else:
-        observation = grid.encode(agent.encoding)
+        observation = loop.observation(agent, grid)
         command = decide(agent, observation)
     if loop.recording is not None and isinstance(agent, Scored):
         seen = observation if observation is not None else np.empty(0)

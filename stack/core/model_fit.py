@@ -10,8 +10,9 @@ from perception.grid import OccupancyGridBuilder
 from planner.factory import model_path
 from planner.model_check import checked_model
 from planner.model_file import ModelFileError
+from planner.model_metadata import ModelMetadata
 from planner.networks import net_arch
-from records import Encoding, GridConfig
+from records import N_ACTIONS, Encoding, GridConfig
 from stack.core.config import RunConfig, grid_config
 
 
@@ -22,19 +23,30 @@ def check_road_fit(
     size: int,
     lanes: int | tuple[int, ...],
     option: str = "",
+    permitted: bool = False,
 ) -> None:
     """Refuse (ModelFileError, one line; prefixed with `option`, the setting that named the model,
     when given) a model that expects `size` observation values, seen through `grid` with
-    `encoding`, on a road of `lanes` lanes (or of any of several lane counts, as random traffic
-    draws them) whose grid gives another number of values."""
+    `encoding` (followed by the `N_ACTIONS` permitted commands when `permitted`), on a road of
+    `lanes` lanes (or of any of several lane counts, as random traffic draws them) whose grid gives
+    another number of values."""
     for count in (lanes,) if isinstance(lanes, int) else lanes:
-        given = int(OccupancyGridBuilder(grid).space(encoding, count).shape[0])
+        given = int(OccupancyGridBuilder(grid).space(encoding, count).shape[0]) + N_ACTIONS * permitted
         if given != size:
             why = (
                 f"{model}: expects observations of {size} values; its {encoding} grid gives {given} "
                 f"on this {count}-lane road"
             )
             raise ModelFileError(f"{option}: {why}" if option else why)
+
+
+def check_file_fit(
+    model: Path | str, metadata: ModelMetadata, lanes: int | tuple[int, ...], option: str = ""
+) -> None:
+    """`check_road_fit` of a Q-network model file from its `metadata`."""
+    assert metadata.observation_size is not None, "a Q-network's metadata names its input size"
+    size = metadata.observation_size
+    check_road_fit(model, metadata.grid, metadata.encoding, size, lanes, option, metadata.action_mask)
 
 
 def checked_start_model(config: RunConfig) -> Path | None:
@@ -50,15 +62,15 @@ def checked_start_model(config: RunConfig) -> Path | None:
     metadata = checked_model(path, ("ddqn", "dqn"))[1]
     assert metadata.observation_size is not None, "DDQN / DQN files hold Q-networks"
     grid = grid_config(config)
-    theirs = (metadata.encoding, widened_grid(metadata.grid, grid), list(metadata.hidden))
-    ours = (train.encoding, grid, net_arch(train.network))
-    for field, their, our in zip(("encoding", "grid", "hidden layers"), theirs, ours, strict=True):
+    start_grid = widened_grid(metadata.grid, grid)
+    theirs = (metadata.encoding, start_grid, list(metadata.hidden), metadata.action_mask)
+    ours = (train.encoding, grid, net_arch(train.network), train.action_mask)
+    fields = ("encoding", "grid", "hidden layers", "action_mask")
+    for field, their, our in zip(fields, theirs, ours, strict=True):
         if their != our:
             raise ModelFileError(f"train.init_model: {path} has {field} {their}, this run needs {our}")
     lanes = config.highway.lane_counts
-    check_road_fit(
-        path, metadata.grid, metadata.encoding, metadata.observation_size, lanes, "train.init_model"
-    )
+    check_file_fit(path, metadata, lanes, "train.init_model")
     return path
 
 

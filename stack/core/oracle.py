@@ -92,5 +92,5 @@ class Oracle(Policy):
             )
         while not future.done and future.world.time - start_time < self.config.horizon_s:
             grid = future.perceive()
-            future.act(decide(self.base, grid.encode(self.base.encoding)))
+            future.act(decide(self.base, future.observation(self.base, grid)))
         return -math.inf if future.crashed else float(future.world.s[0]) - start_s

@@ -80,8 +80,9 @@ ScenarioMix = Annotated[dict[str, float], AfterValidator(checked_mix)]
 """Named scenarios with their shares (relative weights)."""
 
 
-EXPERTS = ("mobil", "rule", "oracle")
-"""Agents whose decisions can be demonstrations: the classical baselines and the oracle."""
+EXPERTS = ("mobil", "rule", "lookahead", "oracle")
+"""Agents whose decisions can be demonstrations: the classical baselines, the lookahead planner and
+the oracle."""
 
 
 class DemonstrationConfig(Strict):
@@ -151,6 +152,11 @@ class TrainConfig(Strict):
         description="bonus [reward units] the greedy decision gives the lane change MOBIL proposes "
         "(ddqn only; in rollouts, validation and the model files written; 0: none)",
     )
+    action_mask: bool = Field(
+        False,
+        description="the observation ends with the safety layer's permitted commands and the agent "
+        "chooses among them, in acting, exploring and the Double-DQN target (ddqn only)",
+    )
 
     @field_validator("init_model")
     @classmethod
@@ -169,4 +175,6 @@ class TrainConfig(Strict):
             raise ValueError("demonstrations: only the ddqn algorithm learns from them")
         if self.algorithm != "ddqn" and self.mobil_prior:
             raise ValueError("mobil_prior: only the ddqn algorithm decides with one")
+        if self.algorithm != "ddqn" and self.action_mask:
+            raise ValueError("action_mask: only the ddqn algorithm learns with one")
         return self

@@ -92,26 +92,40 @@ def _ordered_pair(bounds: tuple[float, float], low: float, high: float) -> tuple
 class RandomTrafficConfig(BaseModel):
     """Traffic drawn anew for every episode from the env's seeded generator (`stack.sim.traffic`), so
     that no single named world is what an agent sees: the lane count, the number of vehicles per
-    lane and highway-env's density, a share of trucks that keep to the two right lanes or (with
-    `trucks_change_lane`) change lane like cars, a car speed range `car_spread_mps` wide whose
-    lower bound is drawn from `car_speed_mps`, trucks slower than cars by `truck_slower_mps`, every
-    vehicle spawned at the trucks' mid speed, the ego's place in the traffic, and, with
-    `incident_probability`, a stopped car 150-350 m ahead in a random lane."""
+    lane and highway-env's density, a share of slow vehicles (trucks) that change lane like cars
+    (with probability `trucks_change_lane`) or else keep to two lanes, the right two or (with
+    probability `trucks_keep_left`) the left two, a car speed range `car_spread_mps` wide whose
+    lower bound is drawn from `car_speed_mps`, trucks slower than cars by `truck_slower_mps` (not
+    below 2 m/s), every vehicle spawned at the trucks' mid speed, the ego's place in the traffic,
+    and, with `incident_probability`, a stopped car 150-350 m ahead in a random lane; and the
+    sensor the episode is seen through (`position_noise_m`, `miss_probability`, `false_positives`,
+    drawn by the closed loop from the episode's seed, in place of `perception.sensor`'s). The
+    defaults span 2-6 lanes, density 0.5-3, 0-70 % trucks, desired speeds 2-36 m/s, the ego
+    anywhere from the back to the front of the traffic, and a sensor from perfect to the `noisy`
+    scenario's (0.5 m, 5 % missed, 0.2 phantoms an observation)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
-    lanes_count: tuple[int, int] = Field((3, 5), description="lane counts drawn from [low, high]")
+    lanes_count: tuple[int, int] = Field((2, 6), description="lane counts drawn from [low, high]")
     vehicles_per_lane: tuple[float, float] = (8.0, 20.0)
-    vehicles_density: tuple[float, float] = (0.6, 2.5)
-    truck_share: tuple[float, float] = (0.0, 0.6)
+    vehicles_density: tuple[float, float] = (0.5, 3.0)
+    truck_share: tuple[float, float] = (0.0, 0.7)
     trucks_change_lane: float = Field(0.3, ge=0, le=1, description="probability that trucks change lane")
+    trucks_keep_left: float = Field(
+        0.25, ge=0, le=1, description="probability that lane-keeping trucks keep to the two left lanes"
+    )
     car_speed_mps: tuple[float, float] = Field(
-        (6.0, 26.0), description="the cars' lowest desired speed [m/s]"
+        (3.0, 28.0), description="the cars' lowest desired speed [m/s]"
     )
     car_spread_mps: tuple[float, float] = Field((3.0, 8.0), description="the cars' speed range [m/s]")
     truck_slower_mps: tuple[float, float] = Field((2.0, 10.0), description="how much slower trucks are [m/s]")
-    ego_position: tuple[float, float] = Field((0.0, 0.7), description="the traffic's fraction behind the ego")
+    ego_position: tuple[float, float] = Field((0.0, 1.0), description="the traffic's fraction behind the ego")
     incident_probability: float = Field(0.15, ge=0, le=1)
+    position_noise_m: tuple[float, float] = Field((0.0, 0.5), description="the sensor's position noise [m]")
+    miss_probability: tuple[float, float] = Field((0.0, 0.05), description="the sensor's missed detections")
+    false_positives: tuple[float, float] = Field(
+        (0.0, 0.2), description="the sensor's phantom vehicles per observation"
+    )
 
     @field_validator("lanes_count")
     @classmethod
@@ -130,7 +144,17 @@ class RandomTrafficConfig(BaseModel):
     def _density(cls, bounds: tuple[float, float]) -> tuple[float, float]:
         return _ordered_pair(bounds, 0.1, 10.0)
 
-    @field_validator("truck_share", "ego_position")
+    @field_validator("position_noise_m")
+    @classmethod
+    def _noise(cls, bounds: tuple[float, float]) -> tuple[float, float]:
+        return _ordered_pair(bounds, 0.0, 5.0)
+
+    @field_validator("false_positives")
+    @classmethod
+    def _phantoms(cls, bounds: tuple[float, float]) -> tuple[float, float]:
+        return _ordered_pair(bounds, 0.0, 10.0)
+
+    @field_validator("truck_share", "ego_position", "miss_probability")
     @classmethod
     def _fraction(cls, bounds: tuple[float, float]) -> tuple[float, float]:
         return _ordered_pair(bounds, 0.0, 1.0)

@@ -163,6 +163,7 @@ def random_traffic(rng: np.random.Generator, ranges: dict[str, Any]) -> dict[str
     slower = draw("truck_slower_mps")
     truck_speeds = [max(speed - slower, SLOWEST_TRUCK_MPS) for speed in car_speeds]
     trucks_change_lane = bool(rng.random() < ranges["trucks_change_lane"])
+    truck_lanes = [0, 1] if rng.random() < ranges["trucks_keep_left"] else [lanes - 2, lanes - 1]
     truck_share = draw("truck_share")
     car: dict[str, Any] = {
         "name": "car",
@@ -175,7 +176,7 @@ def random_traffic(rng: np.random.Generator, ranges: dict[str, Any]) -> dict[str
         "share": truck_share,
         "speed_mps": truck_speeds,
         "length_m": [10.0, 12.0],
-        "lanes": None if trucks_change_lane else [lanes - 2, lanes - 1],
+        "lanes": None if trucks_change_lane else truck_lanes,
         "changes_lane": trucks_change_lane,
     }
     traffic: dict[str, Any] = {

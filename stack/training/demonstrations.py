@@ -17,10 +17,11 @@ from planner.agents import decide
 from planner.ddqn import Demonstrations, DoubleDQN
 from planner.factory import make_agent
 from planner.validation import RealTimeValidation
-from records import child_seed
+from records import N_ACTIONS, Command, child_seed
 from stack.core.closed_loop import ClosedLoop
 from stack.core.config import RunConfig, grid_config
 from stack.core.decision_env import HierarchicalHighwayEnv
+from stack.core.episodes import lookahead_setup
 from stack.core.executors import completed
 from stack.core.oracle import Oracle
 from stack.training.summary import DemonstrationsUsed
@@ -34,14 +35,16 @@ def expert_policy(world: RunConfig, expert_name: str) -> Callable[[ClosedLoop], 
     if expert_name == "oracle":
         oracle = Oracle.for_road(world.planner.oracle, lanes, grid)
         return lambda loop: oracle.plan(loop).value
-    expert = make_agent(expert_name, lanes, grid)
+    setup = lookahead_setup(world) if expert_name == "lookahead" else None
+    expert = make_agent(expert_name, lanes, grid, lookahead=setup)
     view = OccupancyGridBuilder(expert.grid_config or grid)
     return lambda loop: decide(expert, view.build(loop.perceived).encode(expert.encoding)).value
 
 
 def expert_episode(config: RunConfig, expert_name: str, seed: int) -> Demonstrations:
     """One episode of the decision MDP (its world and traffic drawn from `seed`) driven by the
-    expert, with the learner's observations and rewards. In a worker process it is deaf to Ctrl-C,
+    expert, with the learner's observations and rewards; with an action mask, an expert's command
+    the loop would not carry out is recorded as the STAY it becomes. In a worker process it is deaf to Ctrl-C,
     as the training env workers are: the learner stops the run (with a checkpoint) itself."""
     if multiprocessing.parent_process() is not None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -52,6 +55,8 @@ def expert_episode(config: RunConfig, expert_name: str, seed: int) -> Demonstrat
     terminated = truncated = False
     while not (terminated or truncated):
         action = expert(env.loop)
+        if env.action_mask and observation[action - N_ACTIONS] < 0.5:
+            action = Command.STAY.value
         observation, reward, terminated, truncated, _ = env.step(action)
         observations.append(observation)
         actions.append(action)

@@ -72,6 +72,8 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
         own_options["margin_weight"] = demonstrations.margin_weight
     if train.mobil_prior:
         own_options["mobil_prior"] = MobilPrior(grid_config(config), train.mobil_prior)
+    if train.action_mask:
+        own_options["action_mask"] = True
     return algorithm(
         "MlpPolicy",
         env,
@@ -114,6 +116,7 @@ def model_metadata(config: RunConfig, env: HierarchicalHighwayEnv, trained_steps
         trained_steps=trained_steps,
         seed=config.seed,
         mobil_prior=train.mobil_prior,
+        action_mask=train.action_mask,
     )
 
 
@@ -135,21 +138,29 @@ def warm_start(model: DQN, start: LearnedAgent, grid: GridConfig | None = None, 
     weights = start.network.state_dict()
     if weights["0.weight"].shape[1] != model.policy.q_net.q_net[0].in_features:
         assert grid is not None, "a start of another input size is widened onto the run's grid"
-        weights = widened_first_layer(weights, start.grid_config, grid, lanes_count)
+        weights = widened_first_layer(weights, start.grid_config, grid, lanes_count, start.sees_permitted)
     with th.no_grad():
         model.policy.q_net.q_net.load_state_dict(weights)
         model.policy.q_net_target.q_net.load_state_dict(weights)
 
 
 def widened_first_layer(
-    weights: dict[str, th.Tensor], start: GridConfig, grid: GridConfig, lanes_count: int
+    weights: dict[str, th.Tensor],
+    start: GridConfig,
+    grid: GridConfig,
+    lanes_count: int,
+    permitted: bool = False,
 ) -> dict[str, th.Tensor]:
     """`weights` of a Q-network seeing `start`'s observation, its first layer moved onto `grid`'s
-    observation part by part (`GridConfig.observation_parts`), zero on the parts `start` does not have."""
+    observation part by part (`GridConfig.observation_parts`), zero on the parts `start` does not
+    have; the permitted commands that end both observations when `permitted` keep their weights."""
     first, parts = weights["0.weight"], grid.observation_parts(lanes_count)
-    widened = th.zeros((first.shape[0], parts["lane"].stop))
+    size = parts["lane"].stop
+    widened = th.zeros((first.shape[0], size + N_ACTIONS * permitted))
     start_parts = start.observation_parts(lanes_count)
     for name, columns in parts.items():
         if name in start_parts:
             widened[:, columns] = first[:, start_parts[name]]
+    if permitted:
+        widened[:, size:] = first[:, -N_ACTIONS:]
     return {**weights, "0.weight": widened}

@@ -1,0 +1,134 @@
+"""The layers' batched kernels against their per-world code, on worlds the closed loop drove: the
+`observation` encoding (`perception.batch_grid`) to the bits of `OccupancyGridBuilder.build(world)
+.encode("observation")`, and the safety layer's verdicts (`planner.batch_safety`) to each loop's
+`permitted()`."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from perception.batch_grid import observe_batch
+from perception.grid import OccupancyGridBuilder
+from planner.agents import decide
+from planner.batch_safety import permitted_batch
+from planner.lookahead_scene import lookahead_grid
+from records import GridConfig, WorldState
+from records.batch import WorldBatch
+from stack.core.closed_loop import ClosedLoop
+from stack.core.config import build_config
+from stack.core.episodes import build_agent
+from stack.sim.highway import HighwayAdapter
+
+GRIDS = {
+    "default": GridConfig(),
+    "ego rows, every batched feature": GridConfig(
+        lanes="ego", lateral_reach=2, features=("relative_speed", "ttc", "ego_speed"), lane_code="sides"
+    ),
+    "centre cells only": GridConfig(
+        lanes="ego", footprint=False, features=("ttc", "relative_speed"), lane_code="sides", cell_length=3.0
+    ),
+    "the lookahead's": lookahead_grid(GridConfig()),
+}
+
+
+def driven_worlds(scenario: str, seeds: tuple[int, ...], every_s: float = 2.0) -> list[WorldState]:
+    """What the sensor reported every `every_s` [s] of closed-loop episodes keeping the lane (the
+    stack's cruise) on `scenario`: queues, the traffic's lane changes, trucks, incidents, noise."""
+    config = build_config({"highway": {"duration": 8}}, scenario=scenario)
+    worlds = []
+    with HighwayAdapter(config.highway, config.sim.backend) as adapter:
+        loop = ClosedLoop(config, adapter)
+        for seed in seeds:
+            loop.reset(seed)
+            next_time = 0.0
+            while not loop.done:
+                if loop.world.time >= next_time:
+                    worlds.append(loop.perceived)
+                    next_time += every_s
+                loop.tick()
+    return worlds
+
+
+@pytest.fixture(scope="module")
+def worlds() -> list[WorldState]:
+    return (
+        driven_worlds("random", (0, 4, 11, 1))
+        + driven_worlds("incident", (0,))
+        + driven_worlds("dense", (0,))
+    )
+
+
+def same_size_groups(worlds: list[WorldState], grid: GridConfig) -> list[list[WorldState]]:
+    """The worlds in batches whose observations have one size (absolute rows: one lane count)."""
+    if grid.lanes == "ego" and grid.lane_code == "sides":
+        return [worlds]
+    counts = sorted({world.lanes_count for world in worlds})
+    return [[world for world in worlds if world.lanes_count == count] for count in counts]
+
+
+@pytest.mark.parametrize("name", list(GRIDS))
+def test_every_world_of_a_batch_is_encoded_to_the_per_world_bits(worlds, name):
+    grid = GRIDS[name]
+    builder = OccupancyGridBuilder(grid)
+    for group in same_size_groups(worlds, grid):
+        batched = observe_batch(grid, WorldBatch.of(group))
+        for row, world in enumerate(group):
+            alone = builder.build(world).encode("observation")
+            assert batched.dtype == alone.dtype == np.float32
+            np.testing.assert_array_equal(
+                batched[row].view(np.uint32), alone.view(np.uint32), err_msg=f"world {row}"
+            )
+    assert {world.lanes_count for world in worlds} == {2, 3, 4, 5, 6}, "roads of every width"
+
+
+def test_a_world_alone_and_in_any_batch_is_encoded_the_same(worlds):
+    grid = GRIDS["ego rows, every batched feature"]
+    whole = observe_batch(grid, WorldBatch.of(worlds))
+    for start in (0, 5):
+        part = observe_batch(grid, WorldBatch.of(worlds[start : start + 3]))
+        np.testing.assert_array_equal(part, whole[start : start + 3])
+
+
+def test_what_the_batch_cannot_encode_is_refused_in_one_line(worlds):
+    batch = WorldBatch.of(worlds)
+    with pytest.raises(
+        ValueError, match="the batched grid computes relative_speed, ttc, ego_speed, not traffic"
+    ):
+        observe_batch(GridConfig(lanes="ego", lane_code="sides", features=("traffic",)), batch)
+    with pytest.raises(ValueError, match="need lanes: ego and lane_code: sides"):
+        observe_batch(GridConfig(), batch)
+    broken = dataclasses.replace(
+        worlds[0], speed=np.where(np.arange(worlds[0].count) == 1, np.nan, worlds[0].speed)
+    )
+    with pytest.raises(ValueError, match="world 1 has a non-finite state"):
+        observe_batch(GRIDS["ego rows, every batched feature"], WorldBatch.of([worlds[1], broken]))
+
+
+def test_the_safety_layer_s_verdicts_for_a_batch_are_each_loop_s():
+    """At every decision period of MOBIL-driven episodes, stepped as the training MDP steps them
+    (so also while a change runs; refusals, noise): `permitted_batch` over all of them equals each
+    loop's `permitted()`."""
+    expected, perceived, lanes, changing, speeds = [], [], [], [], []
+    for scenario, seeds in (("random", (0, 11, 5)), ("jam", (0,)), ("incident", (1,))):
+        config = build_config({"highway": {"duration": 15}, "planner": {"agent": "mobil"}}, scenario=scenario)
+        agent = build_agent(config, 0)
+        with HighwayAdapter(config.highway, config.sim.backend) as adapter:
+            loop = ClosedLoop(config, adapter, grid=agent.grid_config)
+            for seed in seeds:
+                loop.reset(seed)
+                while not loop.done:
+                    expected.append(loop.permitted())
+                    perceived.append(loop.perceived)
+                    lanes.append(loop.maneuver.lane)
+                    changing.append(loop.maneuver.changing_lane)
+                    speeds.append(float(loop.world.speed[0]))
+                    command = decide(agent, loop.observation(agent, loop.perceive()))
+                    loop.act(command, ticks=config.decision_ticks)
+    safety, min_speed = config.planner.safety, loop.maneuver.min_speed
+    batched = permitted_batch(
+        safety, WorldBatch.of(perceived), np.array(lanes), np.array(changing), np.array(speeds), min_speed
+    )
+    np.testing.assert_array_equal(batched, np.array(expected))
+    refused = (batched[:, [0, 2]] == 0) & ~np.array(changing)[:, None]
+    assert refused.any() and (batched[:, [0, 2]] == 1).any() and any(changing), "every verdict occurs"
