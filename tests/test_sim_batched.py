@@ -11,6 +11,7 @@ from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.kinematics import Vehicle
 
 from records import Actuation
+from records.batch import WorldBatch
 from stack.core.config import build_config
 from stack.sim.batched.arrays import BatchArrays, UnsupportedRoad, read_world
 from stack.sim.batched.frame import lane_frame
@@ -207,3 +208,38 @@ def test_a_step_needs_reset_worlds_and_one_actuation_per_world():
         batch.reset([0])
     assert not batch.step([0.0, 0.0], [0.0, 0.0]).terminated.any()
     batch.close()
+
+
+@pytest.mark.parametrize("scenario", ["overtaking", "random"])
+def test_the_world_batch_is_the_adapters_snapshots_stacked(scenario):
+    """`BatchArrays.world_batch()` (what the batched grid and safety layer read) against
+    `WorldBatch.of` the vector backend's `HighwayAdapter` snapshots, world by world, frame by
+    frame, bit for bit: the ego first, the others in road order, s and d in lane 0's frame."""
+    highway = build_config({}, scenario=scenario).highway
+    seeds = [3, 4, 5]
+    batch = TrafficBatch(highway, len(seeds))
+    batch.reset(seeds)
+    adapters = [HighwayAdapter(highway, backend="vector") for _ in seeds]
+    snapshots = [adapter.reset(seed) for adapter, seed in zip(adapters, seeds, strict=True)]
+    for frame in range(60):
+        batched = batch.arrays.world_batch()
+        for k, snapshot in enumerate(snapshots):
+            alone = WorldBatch.of([snapshot])
+            n, lanes = alone.count[0], alone.lanes_count[0]
+            assert (batched.count[k], batched.lanes_count[k]) == (n, lanes)
+            for name in ("s", "d", "speed", "heading", "length", "width", "lane"):
+                got, expected = getattr(batched, name)[k, :n], getattr(alone, name)[0]
+                np.testing.assert_array_equal(got.view(np.uint64), expected.view(np.uint64), err_msg=name)
+            np.testing.assert_array_equal(batched.lane_offsets[k, :lanes], alone.lane_offsets[0])
+            assert batched.lane_heading[k] == alone.lane_heading[0]
+            assert batched.lane_width == alone.lane_width
+        pending = batch.ended.terminated | batch.ended.truncated
+        actuations = np.array([rams(frame, k) for k in range(len(seeds))])
+        batch.step(actuations[:, 0], actuations[:, 1])
+        for k, adapter in enumerate(adapters):
+            if pending[k]:
+                adapter.env.reset()
+                adapter.terminated = adapter.truncated = False
+                snapshots[k] = adapter.snapshot()
+            else:
+                snapshots[k] = adapter.step(Actuation(*actuations[k]))

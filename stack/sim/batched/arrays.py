@@ -1,6 +1,7 @@
 """The state of record of a batch of traffic worlds: [worlds, vehicles] arrays, per-world lanes, and
 the translation from and to highway-env's road objects (a world is read from the road highway-env
-spawns at reset; `road_of` builds the objects back on request)."""
+spawns at reset; `road_of` builds the objects back on request), and the batched layers' view of
+it (`BatchArrays.world_batch`, a `records.WorldBatch`)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
+from records.batch import WorldBatch
 from stack.sim.traffic import TrafficVehicle
 from stack.sim.vector.lanes import LaneTable
 
@@ -222,6 +224,43 @@ class BatchArrays:
         """Lane count, start, direction and lateral of every world's lanes."""
         lanes = self.lane_columns
         return lanes["lane_count"], lanes["start"], lanes["direction"], lanes["lateral"]
+
+    def world_batch(self) -> WorldBatch:
+        """The worlds as the batched layers read them (`records.WorldBatch`): row 0 the ego, then the
+        other vehicles in road order, s and d [m] in the frame of lane 0, as `HighwayAdapter`'s
+        snapshot computes them (on axis-aligned lanes every product is by 0 or +-1: exact)."""
+        worlds, slots = np.arange(self.worlds)[:, None], np.arange(self.vehicles)[None, :]
+        ego = self.ego[:, None]
+        order = np.where(slots == 0, ego, slots - 1 + (slots - 1 >= ego))
+        present = slots < self.count[:, None]
+        order = np.where(present, order, 0)
+        lanes = self.lane_columns
+        start, direction = lanes["start"][:, 0], lanes["direction"]
+        lateral = lanes["lateral"][:, 0]
+        delta_x = self.x[worlds, order] - start[:, 0, None]
+        delta_y = self.y[worlds, order] - start[:, 1, None]
+        s = delta_x * direction[:, 0, None] + delta_y * direction[:, 1, None]
+        d = delta_x * lateral[:, 0, None] + delta_y * lateral[:, 1, None]
+        offsets = lanes["start"] - start[:, None, :]
+        lane_offsets = offsets[..., 0] * lateral[:, 0, None] + offsets[..., 1] * lateral[:, 1, None]
+
+        def rows(column: np.ndarray) -> np.ndarray:
+            return np.where(present, column[worlds, order], 0)
+
+        return WorldBatch(
+            count=self.count.copy(),
+            s=np.where(present, s, 0.0),
+            d=np.where(present, d, 0.0),
+            speed=rows(self.speed),
+            heading=rows(self.heading),
+            length=rows(self.length),
+            width=rows(self.width),
+            lane=rows(self.lane),
+            lanes_count=lanes["lane_count"].copy(),
+            lane_offsets=np.where(np.arange(self.lanes) < lanes["lane_count"][:, None], lane_offsets, 0.0),
+            lane_heading=lanes["lane_heading"][:, 0].copy(),
+            lane_width=float(2 * lanes["half_width"][0, 0]),
+        )
 
 
 def road_of(
