@@ -8,10 +8,12 @@ loops round differently from the libm compiled code would call, and highway-env 
 from __future__ import annotations
 
 import numpy as np
+from highway_env.vehicle.behavior import IDMVehicle
 from numba import njit
 
 from common.compiled import Kernel
 from stack.sim.vector.kernels import maximum, minimum, wrap_to_pi
+from stack.sim.vector.lanes import clip
 
 NOT_ZERO = 1e-2
 """highway-env's `utils.not_zero` threshold [same unit as the value]."""
@@ -211,3 +213,35 @@ def integrated(
         new_heading[i] = heading[i] + speed[i] * slip_sin[i] / (length[i] / 2) * dt
         new_speed[i] = speed[i] + acceleration[i] * dt
     return new_heading, new_speed
+
+
+def steering_angles(
+    r_target: np.ndarray, lane_heading: np.ndarray, heading: np.ndarray, length: np.ndarray, speed: np.ndarray
+) -> np.ndarray:
+    """`IDMVehicle.steering_control`'s steering [rad] per driver at lateral offset `r_target` [m]
+    from its target lane's centre, whose heading is `lane_heading` [rad] (straight lanes), heading
+    `heading` [rad], of `length` [m] at `speed` [m/s]: the compiled kernels around numpy's arcsin,
+    tan and arctan, clipped to `MAX_STEERING_ANGLE`."""
+    heading_command = np.arcsin(lateral_command_sines(r_target, speed, IDMVehicle.KP_LATERAL))
+    slip = np.arcsin(slip_sines(heading_command, lane_heading, heading, length, speed, IDMVehicle.KP_HEADING))
+    return clip(np.arctan(2 * np.tan(slip)), IDMVehicle.MAX_STEERING_ANGLE)
+
+
+def bicycle_step(
+    x: np.ndarray,
+    y: np.ndarray,
+    heading: np.ndarray,
+    speed: np.ndarray,
+    steering: np.ndarray,
+    acceleration: np.ndarray,
+    length: np.ndarray,
+    dt: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`Vehicle.step`'s kinematic bicycle over `dt` [s] for clipped `steering` [rad] and
+    `acceleration` [m/s^2]: moves (x, y) [m] in place, returns the new headings [rad] and speeds
+    [m/s]; numpy's arctan, tan, cos and sin around the compiled update."""
+    beta = np.arctan(1 / 2 * np.tan(steering))
+    course = heading + beta
+    return integrated(
+        x, y, heading, speed, acceleration, length, np.cos(course), np.sin(course), np.sin(beta), dt
+    )

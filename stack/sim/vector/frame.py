@@ -3,6 +3,8 @@ neighbour search for many vehicles at once, and its IDM acceleration evaluated r
 
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
+
 import numpy as np
 from highway_env.road.lane import StraightLane
 from highway_env.vehicle.behavior import IDMVehicle
@@ -89,26 +91,50 @@ class TrafficFrame:
         evaluating IDM vehicle of exponent `delta` and jam distance `distance_wanted` [m]; rows -1
         stand for no vehicle (0 without ego); the gap is measured along the ego's lane, as stock
         does."""
-        speed, velocity, direction = self.speed, self.velocity, self.direction
+        rows = IdmRows(**{column.name: getattr(self, column.name) for column in fields(IdmRows)})
+        return rows.idm(ego, front, delta, distance_wanted)
+
+
+@dataclass(frozen=True, eq=False)
+class IdmRows:
+    """What IDM reads of every row of a set of road objects: whether it is a vehicle, its speed,
+    target speed and lane speed limit [m/s] (NaN: none), s along the lanes [m], velocity [m/s]
+    and heading direction (rows, 2)."""
+
+    is_vehicle: np.ndarray
+    speed: np.ndarray
+    target_speed: np.ndarray
+    speed_limit: np.ndarray
+    s: np.ndarray
+    velocity: np.ndarray
+    direction: np.ndarray
+
+    def idm(
+        self, ego: np.ndarray, front: np.ndarray, delta: np.ndarray, distance_wanted: np.ndarray
+    ) -> np.ndarray:
+        """`IDMVehicle.acceleration(ego_vehicle=ego, front_vehicle=front)` [m/s^2] per pair of rows
+        (-1: none), evaluated by an IDM vehicle of exponent `delta` and jam distance
+        `distance_wanted` [m] per pair: compiled arithmetic around numpy's powers and dot products
+        (highway-env's bits)."""
         valid, base, led, relative, heading, gap, led_speed = idm_inputs(
             ego,
             front,
             self.is_vehicle,
-            speed,
+            self.speed,
             self.target_speed,
             self.speed_limit,
             self.s,
-            velocity,
-            direction,
+            self.velocity,
+            self.direction,
         )
         free_power = np.power(base, delta[valid])
         closing = np.vecdot(relative, heading)
         time_wanted, a_max = IDMVehicle.TIME_WANTED, IDMVehicle.COMFORT_ACC_MAX
         ratio = idm_gap_ratios(
-            closing, gap, led_speed, distance_wanted, valid, led, time_wanted, _BRAKING_TERM
+            closing, gap, led_speed, distance_wanted, valid, led, time_wanted, BRAKING_TERM
         )
         return idm_accelerations(len(ego), valid, free_power, led, np.power(ratio, 2), a_max)
 
 
-_BRAKING_TERM = 2 * np.sqrt(-IDMVehicle.COMFORT_ACC_MAX * IDMVehicle.COMFORT_ACC_MIN)
+BRAKING_TERM = 2 * np.sqrt(-IDMVehicle.COMFORT_ACC_MAX * IDMVehicle.COMFORT_ACC_MIN)
 """2 sqrt(a b) [m/s^2] of IDM's desired gap, as highway-env computes it."""

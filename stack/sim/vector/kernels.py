@@ -28,6 +28,50 @@ def _half_extent(
     return length / 2 * along + width / 2 * across
 
 
+@njit(cache=True, nogil=True)
+def could_touch(
+    a: int,
+    b: int,
+    x: np.ndarray,
+    y: np.ndarray,
+    cos: np.ndarray,
+    sin: np.ndarray,
+    speed: np.ndarray,
+    length: np.ndarray,
+    width: np.ndarray,
+    diagonal: np.ndarray,
+    dt: float,
+    broad_margin: float,
+    separation_margin: float,
+) -> bool:  # pragma: no cover - compiled; covered through motion.close_pairs
+    """Whether rows `a` and `b` pass highway-env's spherical pre-check over `dt` [s] (with
+    `broad_margin` [m]) and their rectangles, `a`'s swept by the relative displacement, are not
+    apart by `separation_margin` [m] along one of their own axes (headings by cos and sin)."""
+    reach = (diagonal[a] + diagonal[b]) / 2 + speed[a] * dt + broad_margin
+    if math.sqrt((x[b] - x[a]) ** 2 + (y[b] - y[a]) ** 2) > reach:
+        return False
+    relative_x = speed[a] * cos[a] - speed[b] * cos[b]
+    relative_y = speed[a] * sin[a] - speed[b] * sin[b]
+    for k in range(4):
+        owner = a if k < 2 else b
+        if k % 2 == 0:
+            ax, ay = cos[owner], sin[owner]
+        else:
+            ax, ay = -sin[owner], cos[owner]
+        extent_a = _half_extent(length[a], width[a], cos[a], sin[a], ax, ay)
+        extent_b = _half_extent(length[b], width[b], cos[b], sin[b], ax, ay)
+        centre_a = x[a] * ax + y[a] * ay
+        centre_b = x[b] * ax + y[b] * ay
+        sweep = (relative_x * ax + relative_y * ay) * dt
+        min_a = centre_a - extent_a + min(sweep, 0.0)
+        max_a = centre_a + extent_a + max(sweep, 0.0)
+        min_b, max_b = centre_b - extent_b, centre_b + extent_b
+        gap = min_b - max_a if min_a < min_b else min_a - max_b
+        if gap > separation_margin:
+            return False
+    return True
+
+
 @Kernel
 def close_pair_rows(
     x: np.ndarray,
@@ -41,40 +85,17 @@ def close_pair_rows(
     broad_margin: float,
     separation_margin: float,
 ) -> np.ndarray:  # pragma: no cover - compiled; covered through motion.close_pairs
+    """The pairs (a, b), a < b, by a then b, that `could_touch`."""
     count = x.shape[0]
     cos = np.cos(heading)
     sin = np.sin(heading)
     pairs = np.empty((max(count * (count - 1) // 2, 1), 2), dtype=np.int64)
     found = 0
-    axis_x = np.empty(4)
-    axis_y = np.empty(4)
     for a in range(count):
         for b in range(a + 1, count):
-            reach = (diagonal[a] + diagonal[b]) / 2 + speed[a] * dt + broad_margin
-            if math.sqrt((x[b] - x[a]) ** 2 + (y[b] - y[a]) ** 2) > reach:
-                continue
-            relative_x = speed[a] * cos[a] - speed[b] * cos[b]
-            relative_y = speed[a] * sin[a] - speed[b] * sin[b]
-            axis_x[0], axis_y[0] = cos[a], sin[a]
-            axis_x[1], axis_y[1] = -sin[a], cos[a]
-            axis_x[2], axis_y[2] = cos[b], sin[b]
-            axis_x[3], axis_y[3] = -sin[b], cos[b]
-            apart = False
-            for k in range(4):
-                ax, ay = axis_x[k], axis_y[k]
-                extent_a = _half_extent(length[a], width[a], cos[a], sin[a], ax, ay)
-                extent_b = _half_extent(length[b], width[b], cos[b], sin[b], ax, ay)
-                centre_a = x[a] * ax + y[a] * ay
-                centre_b = x[b] * ax + y[b] * ay
-                sweep = (relative_x * ax + relative_y * ay) * dt
-                min_a = centre_a - extent_a + min(sweep, 0.0)
-                max_a = centre_a + extent_a + max(sweep, 0.0)
-                min_b, max_b = centre_b - extent_b, centre_b + extent_b
-                gap = min_b - max_a if min_a < min_b else min_a - max_b
-                if gap > separation_margin:
-                    apart = True
-                    break
-            if not apart:
+            if could_touch(
+                a, b, x, y, cos, sin, speed, length, width, diagonal, dt, broad_margin, separation_margin
+            ):
                 pairs[found, 0] = a
                 pairs[found, 1] = b
                 found += 1
@@ -82,7 +103,7 @@ def close_pair_rows(
 
 
 @njit(cache=True, nogil=True)
-def _lane_coordinates(
+def lane_coordinates(
     x: np.ndarray, y: np.ndarray, start: np.ndarray, direction: np.ndarray, lateral: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled; covered through its callers
     """Longitudinal s (n,) [m], the same on every lane, and lateral r (L, n) [m] coordinates of
@@ -133,7 +154,7 @@ def closest_lanes(
     distance beyond either end + |heading difference wrapped to [-pi, pi)|), the first on ties
     and the first NaN if any, as numpy's `argmin`: sums, comparisons and a float modulo, each in
     numpy's operation order (the same bits). Lanes as in `lane_order`, headings [rad]."""
-    s, r = _lane_coordinates(x, y, start, direction, lateral)
+    s, r = lane_coordinates(x, y, start, direction, lateral)
     rows = np.zeros(x.shape[0], dtype=np.int64)
     for i in range(x.shape[0]):
         best = np.inf
@@ -164,13 +185,13 @@ def lane_order(
 ]:  # pragma: no cover - compiled; covered through TrafficFrame
     """`TrafficFrame`'s lane coordinates and search tables of objects at `position` (n, 2) [m] on
     parallel straight lanes (`start` (L, 2) [m], the shared unit `direction`, unit `lateral` (L, 2),
-    `length` and `half_width` [m]): s (n,) and r (L, n) [m] (`_lane_coordinates`); the order by
+    `length` and `half_width` [m]): s (n,) and r (L, n) [m] (`lane_coordinates`); the order by
     s (ties by row), the sorted s and whether two tie; per lane and sorted position p, the first
     position >= p (n if none) and the last position < p (-1 if none) of an object on the lane as
     `Road.neighbour_vehicles` counts it (highway-env's `on_lane` with a lateral `margin` [m],
     `vehicle_length` [m] beyond both ends), exact comparisons all."""
     count, lanes = position.shape[0], start.shape[0]
-    s, r = _lane_coordinates(position[:, 0], position[:, 1], start, direction, lateral)
+    s, r = lane_coordinates(position[:, 0], position[:, 1], start, direction, lateral)
     order = np.argsort(s, kind="mergesort")
     sorted_s = s[order]
     tied = False

@@ -14,7 +14,7 @@ from highway_env.vehicle.kinematics import Vehicle
 
 from stack.sim.fast_road import BROAD_PHASE_MARGIN
 from stack.sim.traffic import TrafficVehicle
-from stack.sim.vector.dynamics import clipped_actions, integrated
+from stack.sim.vector.dynamics import bicycle_step, clipped_actions
 from stack.sim.vector.kernels import SEPARATION_MARGIN, close_pair_rows
 from stack.sim.vector.lanes import LaneTable
 
@@ -83,11 +83,7 @@ def move(
     steering, acceleration = clipped_actions(
         speed, max_speed, min_speed, steering, acceleration, crashed, stops, dt
     )
-    beta = np.arctan(1 / 2 * np.tan(steering))
-    course = heading + beta
-    heading, speed = integrated(
-        x, y, heading, speed, acceleration, length, np.cos(course), np.sin(course), np.sin(beta), dt
-    )
+    heading, speed = bicycle_step(x, y, heading, speed, steering, acceleration, length, dt)
     for i in impacted:
         v = movers[i]
         x[i] += v.impact[0]

@@ -40,7 +40,7 @@ from highway_env.vehicle.objects import RoadObject
 
 from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections
 from stack.sim.traffic import IDM_DRIVERS, ScenarioTraffic
-from stack.sim.vector.dynamics import lateral_command_sines, slip_sines
+from stack.sim.vector.dynamics import steering_angles
 from stack.sim.vector.frame import TrafficFrame
 from stack.sim.vector.lanes import LaneTable, clip
 from stack.sim.vector.motion import (
@@ -260,12 +260,7 @@ class VectorRoad(FastRoad):
         heading, speed, target = frame.heading[me], frame.speed[me], plan.target
         changing = frame.lane[me] != target
 
-        heading_command = np.arcsin(lateral_command_sines(frame.r[target, me], speed, IDMVehicle.KP_LATERAL))
-        lane_heading = lanes.heading[target]
-        slip = np.arcsin(
-            slip_sines(heading_command, lane_heading, heading, plan.length, speed, IDMVehicle.KP_HEADING)
-        )
-        steering = clip(np.arctan(2 * np.tan(slip)), IDMVehicle.MAX_STEERING_ANGLE)
+        steering = steering_angles(frame.r[target, me], lanes.heading[target], heading, plan.length, speed)
 
         acceleration = plan.own_acceleration
         if changing.any():

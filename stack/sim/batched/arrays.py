@@ -1,0 +1,297 @@
+"""The state of record of a batch of traffic worlds: [worlds, vehicles] arrays, per-world lanes, and
+the translation from and to highway-env's road objects (a world is read from the road highway-env
+spawns at reset; `road_of` builds the objects back on request), and the batched layers' view of
+it (`BatchArrays.world_batch`, a `records.WorldBatch`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from highway_env.road.road import Road, RoadNetwork
+from highway_env.vehicle.behavior import IDMVehicle
+from highway_env.vehicle.kinematics import Vehicle
+
+from records.batch import WorldBatch
+from stack.sim.traffic import TrafficVehicle
+from stack.sim.vector.lanes import LaneTable
+
+PLAIN, IDM, TRAFFIC = 0, 1, 2
+"""Vehicle kinds: highway-env's kinematic `Vehicle` (the ego, a stopped car), its `IDMVehicle`, the
+stack's `TrafficVehicle` (an IDM vehicle that stops at a standstill)."""
+KINDS: dict[type, int] = {Vehicle: PLAIN, IDMVehicle: IDM, TrafficVehicle: TRAFFIC}
+CLASSES = {kind: cls for cls, kind in KINDS.items()}
+
+VEHICLE_COLUMNS: dict[str, tuple[type, float]] = {
+    "x": (float, 0.0),
+    "y": (float, 0.0),
+    "heading": (float, 0.0),
+    "speed": (float, 0.0),
+    "target_speed": (float, 0.0),
+    "length": (float, 1.0),
+    "width": (float, 1.0),
+    "diagonal": (float, 1.0),
+    "delta": (float, IDMVehicle.DELTA),
+    "distance_wanted": (float, IDMVehicle.DISTANCE_WANTED),
+    "max_speed": (float, Vehicle.MAX_SPEED),
+    "min_speed": (float, Vehicle.MIN_SPEED),
+    "timer": (float, 0.0),
+    "steering": (float, 0.0),
+    "acceleration": (float, 0.0),
+    "impact_x": (float, 0.0),
+    "impact_y": (float, 0.0),
+    "lane": (int, 0),
+    "target_lane": (int, 0),
+    "kind": (int, PLAIN),
+    "crashed": (bool, False),
+    "impacted": (bool, False),
+    "enable_lane_change": (bool, False),
+}
+"""Every vehicle's columns, (worlds, vehicles) each, with the value of an empty row: its centre (x,
+y) [m], heading [rad], speed and IDM target speed [m/s] (0 for a plain vehicle, as IDM reads it),
+length, width, diagonal [m], IDM exponent and jam distance [m], speed range [m/s], lane-change
+timer [s], the action it holds (steering [rad], acceleration [m/s^2], as `Vehicle.action`), the
+impact to apply at its next step [m], its lane and target lane (rows of its world's lanes; a plain
+vehicle's target is its lane), kind,
+crash flag, whether an impact is pending, and whether MOBIL lane changes are on."""
+
+LANE_COLUMNS: dict[str, tuple[type, float]] = {
+    "lane_length": (float, 0.0),
+    "half_width": (float, 0.0),
+    "lane_heading": (float, 0.0),
+    "speed_limit": (float, np.nan),
+    "forbidden": (bool, True),
+}
+"""Every lane's columns, (worlds, lanes): length, half width [m], heading [rad], speed limit [m/s]
+(NaN: none), whether lane changes into it are forbidden."""
+
+
+class UnsupportedRoad(ValueError):
+    """A road the batch cannot hold as arrays."""
+
+
+@dataclass(frozen=True, eq=False)
+class SpawnedWorld:
+    """One world as highway-env spawned it: its vehicles' columns (one row each, road order), its
+    lanes, the ego's row, and the objects kept for `road_of`."""
+
+    columns: dict[str, np.ndarray]
+    lanes: LaneTable
+    ego: int
+    network: RoadNetwork
+
+
+def read_world(road: Road, ego: Vehicle) -> SpawnedWorld:
+    """The arrays of a highway-env road: parallel axis-aligned straight lanes of one segment, level at
+    their start (highway-v0's), no obstacles, and vehicles of the kinds in `KINDS` without routes;
+    `UnsupportedRoad` names what is not."""
+    lanes = LaneTable.fit(road.network)
+    if lanes is None or len({index[:2] for index in lanes.indices}) != 1:
+        raise UnsupportedRoad("batched traffic needs one segment of parallel, axis-aligned straight lanes")
+    if road.objects or road.neighbour_vehicles_connected_lanes:
+        raise UnsupportedRoad("batched traffic drives roads without objects or connected-lane neighbours")
+    rows: list[dict[str, Any]] = []
+    for vehicle in road.vehicles:
+        kind = KINDS.get(type(vehicle))
+        if kind is None:
+            raise UnsupportedRoad(f"batched traffic has no {type(vehicle).__name__} (only {list(KINDS)})")
+        rows.append(_vehicle_row(vehicle, kind, lanes))
+    columns: dict[str, np.ndarray] = {
+        name: np.array([row[name] for row in rows], dtype=dtype)
+        for name, (dtype, _) in VEHICLE_COLUMNS.items()
+    }
+    return SpawnedWorld(columns, lanes, road.vehicles.index(ego), road.network)
+
+
+def _vehicle_row(vehicle: Vehicle, kind: int, lanes: LaneTable) -> dict[str, Any]:
+    action, impact = vehicle.action, vehicle.impact
+    row: dict[str, Any] = {
+        "x": vehicle.position[0],
+        "y": vehicle.position[1],
+        "heading": vehicle.heading,
+        "speed": vehicle.speed,
+        "target_speed": getattr(vehicle, "target_speed", 0),
+        "length": vehicle.LENGTH,
+        "width": vehicle.WIDTH,
+        "diagonal": vehicle.diagonal,
+        "max_speed": vehicle.MAX_SPEED,
+        "min_speed": vehicle.MIN_SPEED,
+        "steering": float(action["steering"]),
+        "acceleration": float(action["acceleration"]),
+        "impact_x": 0.0 if impact is None else impact[0],
+        "impact_y": 0.0 if impact is None else impact[1],
+        "lane": lanes.row[vehicle.lane_index],
+        "kind": kind,
+        "crashed": vehicle.crashed,
+        "impacted": impact is not None,
+    }
+    if kind == PLAIN:
+        default = VEHICLE_COLUMNS
+        row |= {
+            name: default[name][1] for name in ("delta", "distance_wanted", "timer", "enable_lane_change")
+        }
+        return row | {"target_lane": row["lane"]}
+    assert isinstance(vehicle, IDMVehicle)
+    if vehicle.route:
+        raise UnsupportedRoad("batched traffic has no vehicles following routes")
+    return row | {
+        "delta": vehicle.DELTA,
+        "distance_wanted": vehicle.DISTANCE_WANTED,
+        "timer": vehicle.timer,
+        "target_lane": lanes.row[vehicle.target_lane_index],
+        "enable_lane_change": vehicle.enable_lane_change,
+    }
+
+
+class BatchArrays:
+    """The columns of N worlds: `VEHICLE_COLUMNS` (worlds, vehicles) and `LANE_COLUMNS` (worlds,
+    lanes) by name (`arrays.x`, `arrays.lane_length`), the lanes' `start` and `lateral` (worlds,
+    lanes, 2) and shared `direction` (worlds, 2), each world's lane and vehicle count and ego row.
+    A world's vehicles fill its first rows in road order; the arrays grow to the largest world."""
+
+    def __init__(self, worlds: int) -> None:
+        self.worlds = worlds
+        self.vehicles, self.lanes = 0, 0
+        self.columns: dict[str, np.ndarray] = {}
+        self.lane_columns: dict[str, np.ndarray] = {}
+        self.allocate(1, 1)
+        self.count = np.zeros(worlds, dtype=np.int64)
+        """Vehicles in each world (its first rows)."""
+        self.ego = np.zeros(worlds, dtype=np.int64)
+        """The ego's row in each world."""
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        """A vehicle column (worlds, vehicles) or lane column (worlds, lanes) by name."""
+        for table in ("columns", "lane_columns"):
+            held = self.__dict__.get(table, {})
+            if name in held:
+                return held[name]
+        raise AttributeError(name)
+
+    def allocate(self, vehicles: int, lanes: int) -> None:
+        """Room for `vehicles` a world and `lanes` lanes, keeping what the arrays hold."""
+        vehicles, lanes = max(vehicles, self.vehicles), max(lanes, self.lanes)
+        if (vehicles, lanes) == (self.vehicles, self.lanes):
+            return
+        for table, spec, size in (
+            (self.columns, VEHICLE_COLUMNS, vehicles),
+            (self.lane_columns, LANE_COLUMNS, lanes),
+        ):
+            for name, (dtype, empty) in spec.items():
+                grown: np.ndarray = np.full((self.worlds, size), empty, dtype=dtype)
+                old = table.get(name)
+                if old is not None:
+                    grown[:, : old.shape[1]] = old
+                table[name] = grown
+        for name, shape in (("start", (lanes, 2)), ("lateral", (lanes, 2))):
+            grown = np.zeros((self.worlds, *shape))
+            old = self.lane_columns.get(name)
+            if old is not None:
+                grown[:, : old.shape[1]] = old
+            self.lane_columns[name] = grown
+        if "direction" not in self.lane_columns:
+            self.lane_columns["direction"] = np.zeros((self.worlds, 2))
+            self.lane_columns["lane_count"] = np.zeros(self.worlds, dtype=np.int64)
+        self.vehicles, self.lanes = vehicles, lanes
+
+    def load(self, world: int, spawned: SpawnedWorld) -> None:
+        """Write a spawned world into world `world`'s rows."""
+        n, lanes = len(spawned.columns["x"]), len(spawned.lanes.indices)
+        self.allocate(n, lanes)
+        for name, (_, empty) in VEHICLE_COLUMNS.items():
+            self.columns[name][world] = empty
+            self.columns[name][world, :n] = spawned.columns[name]
+        table = spawned.lanes
+        lane_values = {
+            "lane_length": table.length,
+            "half_width": table.half_width,
+            "lane_heading": table.heading,
+            "speed_limit": table.speed_limit,
+            "forbidden": table.forbidden,
+            "start": table.start,
+            "lateral": table.lateral,
+        }
+        for name, values in lane_values.items():
+            column = self.lane_columns[name]
+            column[world] = LANE_COLUMNS[name][1] if name in LANE_COLUMNS else 0.0
+            column[world, :lanes] = values
+        self.lane_columns["direction"][world] = table.direction
+        self.lane_columns["lane_count"][world] = lanes
+        self.count[world], self.ego[world] = n, spawned.ego
+
+    def lane_args(self) -> tuple[np.ndarray, ...]:
+        """Lane count, start, direction and lateral of every world's lanes."""
+        lanes = self.lane_columns
+        return lanes["lane_count"], lanes["start"], lanes["direction"], lanes["lateral"]
+
+    def world_batch(self) -> WorldBatch:
+        """The worlds as the batched layers read them (`records.WorldBatch`): row 0 the ego, then the
+        other vehicles in road order, s and d [m] in the frame of lane 0, as `HighwayAdapter`'s
+        snapshot computes them (on axis-aligned lanes every product is by 0 or +-1: exact)."""
+        worlds, slots = np.arange(self.worlds)[:, None], np.arange(self.vehicles)[None, :]
+        ego = self.ego[:, None]
+        order = np.where(slots == 0, ego, slots - 1 + (slots - 1 >= ego))
+        present = slots < self.count[:, None]
+        order = np.where(present, order, 0)
+        lanes = self.lane_columns
+        start, direction = lanes["start"][:, 0], lanes["direction"]
+        lateral = lanes["lateral"][:, 0]
+        delta_x = self.x[worlds, order] - start[:, 0, None]
+        delta_y = self.y[worlds, order] - start[:, 1, None]
+        s = delta_x * direction[:, 0, None] + delta_y * direction[:, 1, None]
+        d = delta_x * lateral[:, 0, None] + delta_y * lateral[:, 1, None]
+        offsets = lanes["start"] - start[:, None, :]
+        lane_offsets = offsets[..., 0] * lateral[:, 0, None] + offsets[..., 1] * lateral[:, 1, None]
+
+        def rows(column: np.ndarray) -> np.ndarray:
+            return np.where(present, column[worlds, order], 0)
+
+        return WorldBatch(
+            count=self.count.copy(),
+            s=np.where(present, s, 0.0),
+            d=np.where(present, d, 0.0),
+            speed=rows(self.speed),
+            heading=rows(self.heading),
+            length=rows(self.length),
+            width=rows(self.width),
+            lane=rows(self.lane),
+            lanes_count=lanes["lane_count"].copy(),
+            lane_offsets=np.where(np.arange(self.lanes) < lanes["lane_count"][:, None], lane_offsets, 0.0),
+            lane_heading=lanes["lane_heading"][:, 0].copy(),
+            lane_width=float(2 * lanes["half_width"][0, 0]),
+        )
+
+
+def road_of(
+    columns: dict[str, np.ndarray], lanes: LaneTable, network: RoadNetwork, np_random: np.random.Generator
+) -> list[Vehicle]:
+    """highway-env vehicles on a new `Road` over `network`, in road order, built from one world's
+    columns (one row per vehicle): the objects stock would hold at this frame."""
+    road = Road(network=network, np_random=np_random)
+    for i in range(len(columns["x"])):
+        value = {name: column[i].item() for name, column in columns.items()}
+        cls = CLASSES[value["kind"]]
+        position = [value["x"], value["y"]]
+        if value["kind"] == PLAIN:
+            vehicle = cls(road, position, value["heading"], value["speed"])
+        else:
+            vehicle = cls(
+                road,
+                position,
+                value["heading"],
+                value["speed"],
+                target_lane_index=lanes.indices[value["target_lane"]],
+                target_speed=value["target_speed"],
+            )
+            vehicle.timer, vehicle.DELTA = value["timer"], value["delta"]
+            vehicle.DISTANCE_WANTED = value["distance_wanted"]
+            vehicle.enable_lane_change = value["enable_lane_change"]
+        vehicle.LENGTH, vehicle.WIDTH, vehicle.diagonal = value["length"], value["width"], value["diagonal"]
+        vehicle.lane_index = lanes.indices[value["lane"]]
+        vehicle.lane = lanes.lanes[value["lane"]]
+        vehicle.crashed = value["crashed"]
+        vehicle.action = {"steering": value["steering"], "acceleration": value["acceleration"]}
+        vehicle.impact = np.array([value["impact_x"], value["impact_y"]]) if value["impacted"] else None
+        road.vehicles.append(vehicle)
+    return road.vehicles

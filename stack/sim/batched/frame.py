@@ -1,0 +1,262 @@
+"""One frame of a batch of traffic worlds over its arrays (`BatchArrays`): `act` (highway-env's
+`Road.act()`: the IDM drivers' decisions, steering and acceleration), `move` (`Road.step(dt)`: the
+vehicles' steps, then `collide`). Compiled kernels (`stack.sim.batched.kernels`, the vector backend's
+`dynamics`) around numpy's transcendental calls and dot products, in highway-env's operation order;
+only the worlds with vehicles in `active` (a count per world, 0 for a world left as it is) move."""
+
+from __future__ import annotations
+
+import numpy as np
+from highway_env.road.lane import StraightLane
+from highway_env.vehicle.behavior import IDMVehicle
+from highway_env.vehicle.objects import RoadObject
+
+from stack.sim.batched.arrays import PLAIN, TRAFFIC, BatchArrays
+from stack.sim.batched.kernels import (
+    closest_lane_rows,
+    collision_candidates,
+    decide,
+    lane_frames,
+    lane_neighbours,
+    plan_decisions,
+)
+from stack.sim.fast_road import BROAD_PHASE_MARGIN, NEIGHBOUR_MARGIN
+from stack.sim.vector.dynamics import bicycle_step, clipped_actions, steering_angles
+from stack.sim.vector.frame import BRAKING_TERM, IdmRows
+from stack.sim.vector.kernels import SEPARATION_MARGIN
+from stack.sim.vector.lanes import clip
+
+
+def lane_frame(
+    arrays: BatchArrays, active: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """`lane_frames` of the worlds' vehicles as they stand: s (W, V) and r (W, L, V) [m], the
+    vehicles highway-env's neighbour search counts on each lane (W, L, V) and how many (W, L)."""
+    lanes = arrays.lane_columns
+    lane_count, start, direction, lateral = arrays.lane_args()
+    return lane_frames(
+        active,
+        arrays.x,
+        arrays.y,
+        lane_count,
+        start,
+        direction,
+        lateral,
+        lanes["lane_length"],
+        lanes["half_width"],
+        StraightLane.VEHICLE_LENGTH,
+        NEIGHBOUR_MARGIN,
+    )
+
+
+def act(arrays: BatchArrays, active: np.ndarray) -> None:
+    """`Road.act()` of every active world: the IDM drivers' decisions, steering and acceleration."""
+    flat = {name: column.reshape(-1) for name, column in arrays.columns.items()}
+    lanes = arrays.lane_columns
+    lane_count = lanes["lane_count"]
+    s, r, on, on_count = lane_frame(arrays, active)
+    in_world = np.arange(arrays.vehicles)[None, :] < active[:, None]
+    kind, crashed = flat["kind"], flat["crashed"]
+    drivers = np.flatnonzero(in_world.reshape(-1) & (kind != PLAIN) & ~crashed)
+    if len(drivers) == 0:
+        return
+    world_of = np.repeat(np.arange(arrays.worlds), arrays.vehicles)
+    heading, speed = flat["heading"], flat["speed"]
+    direction_of = np.empty((len(heading), 2))
+    direction_of[:, 0], direction_of[:, 1] = np.cos(heading), np.sin(heading)
+    kinematics = IdmRows(
+        is_vehicle=np.ones(len(speed), dtype=bool),
+        speed=speed,
+        target_speed=flat["target_speed"],
+        speed_limit=lanes["speed_limit"][world_of, flat["lane"]],
+        s=s.reshape(-1),
+        velocity=speed[:, None] * direction_of,
+        direction=direction_of,
+    )
+    lane, target, timer = flat["lane"], flat["target_lane"], flat["timer"]
+    own_front, own_rear, side_driver, side_lane, side_front, side_rear, pair_driver, pair_other = (
+        plan_decisions(
+            drivers,
+            lane,
+            target,
+            speed,
+            timer,
+            flat["enable_lane_change"],
+            kind != PLAIN,
+            flat["distance_wanted"],
+            active,
+            s,
+            r,
+            on,
+            on_count,
+            lane_count,
+            lanes["lane_length"],
+            lanes["half_width"],
+            lanes["forbidden"],
+            IDMVehicle.LANE_CHANGE_DELAY,
+            IDMVehicle.TIME_WANTED,
+            BRAKING_TERM,
+            StraightLane.VEHICLE_LENGTH,
+        )
+    )
+    me = drivers[side_driver]
+    mover_rear, mover_front = own_rear[side_driver], own_front[side_driver]
+    egos = np.concatenate([side_rear, side_rear, me, me, mover_rear, mover_rear, drivers])
+    leaders = np.concatenate([side_front, me, side_front, mover_front, me, mover_front, own_front])
+    evaluators = np.concatenate([me] * 6 + [drivers])
+    a = kinematics.idm(egos, leaders, flat["delta"][evaluators], flat["distance_wanted"][evaluators])
+    blocks = 6 * len(me)
+    side_accelerations, own_acceleration = a[:blocks].reshape(6, -1), a[blocks:]
+    changer = drivers[pair_driver]
+    closing = np.vecdot(kinematics.velocity[changer] - kinematics.velocity[pair_other], direction_of[changer])
+    decide(
+        drivers,
+        lane,
+        target,
+        timer,
+        flat["enable_lane_change"],
+        speed,
+        kinematics.s,
+        flat["distance_wanted"],
+        side_driver,
+        side_lane,
+        side_accelerations,
+        pair_driver,
+        pair_other,
+        closing,
+        IDMVehicle.LANE_CHANGE_DELAY,
+        IDMVehicle.TIME_WANTED,
+        BRAKING_TERM,
+        IDMVehicle.POLITENESS,
+        IDMVehicle.LANE_CHANGE_MIN_ACC_GAIN,
+        IDMVehicle.LANE_CHANGE_MAX_BRAKING_IMPOSED,
+    )
+    goal = target[drivers]
+    changing = (lane[drivers] != goal).nonzero()[0]
+    acceleration = own_acceleration
+    if len(changing):
+        movers = drivers[changing]
+        target_front, _ = lane_neighbours(movers, goal[changing], s, on, on_count)
+        on_target = kinematics.idm(
+            movers, target_front, flat["delta"][movers], flat["distance_wanted"][movers]
+        )
+        acceleration[changing] = np.where(
+            on_target < acceleration[changing], on_target, acceleration[changing]
+        )
+    world, row = drivers // arrays.vehicles, drivers % arrays.vehicles
+    flat["steering"][drivers] = steering_angles(
+        r[world, goal, row],
+        lanes["lane_heading"][world, goal],
+        heading[drivers],
+        flat["length"][drivers],
+        speed[drivers],
+    )
+    flat["acceleration"][drivers] = clip(acceleration, IDMVehicle.ACC_MAX)
+
+
+def move(arrays: BatchArrays, active: np.ndarray, dt: float) -> None:
+    """`Road.step(dt)` of every active world: the vehicles' steps, then the collisions."""
+    flat = {name: column.reshape(-1) for name, column in arrays.columns.items()}
+    in_world = np.arange(arrays.vehicles)[None, :] < active[:, None]
+    rows = np.flatnonzero(in_world.reshape(-1))
+    if len(rows) == 0:
+        return
+    speed, crashed = flat["speed"][rows], flat["crashed"][rows]
+    steering, acceleration = clipped_actions(
+        speed,
+        flat["max_speed"][rows],
+        flat["min_speed"][rows],
+        flat["steering"][rows],
+        flat["acceleration"][rows],
+        crashed,
+        flat["kind"][rows] == TRAFFIC,
+        dt,
+    )
+    flat["steering"][rows], flat["acceleration"][rows] = steering, acceleration
+    x, y = flat["x"][rows], flat["y"][rows]
+    heading, speed = bicycle_step(
+        x, y, flat["heading"][rows], speed, steering, acceleration, flat["length"][rows], dt
+    )
+    impacted = flat["impacted"][rows]
+    if impacted.any():
+        x[impacted] += flat["impact_x"][rows][impacted]
+        y[impacted] += flat["impact_y"][rows][impacted]
+        flat["crashed"][rows[impacted]] = True
+        flat["impacted"][rows[impacted]] = False
+    flat["x"][rows], flat["y"][rows] = x, y
+    flat["heading"][rows], flat["speed"][rows] = heading, speed
+    timed = rows[flat["kind"][rows] != PLAIN]
+    flat["timer"][timed] += dt
+    lanes = arrays.lane_columns
+    lane_count, start, direction, lateral = arrays.lane_args()
+    closest = closest_lane_rows(
+        active,
+        arrays.x,
+        arrays.y,
+        arrays.heading,
+        lane_count,
+        start,
+        direction,
+        lateral,
+        lanes["lane_length"],
+        lanes["lane_heading"],
+    )
+    arrays.columns["lane"][...] = np.where(closest >= 0, closest, arrays.lane)
+    plain = arrays.kind == PLAIN
+    arrays.target_lane[plain] = arrays.lane[plain]
+    collide(arrays, active, dt)
+
+
+def collide(arrays: BatchArrays, active: np.ndarray, dt: float) -> None:
+    """highway-env's collision test on the candidate pairs, in stock's order (world by world,
+    i < j): impacts for the next step, crash flags now."""
+    candidates = collision_candidates(
+        active,
+        arrays.x,
+        arrays.y,
+        arrays.heading,
+        arrays.speed,
+        arrays.length,
+        arrays.width,
+        arrays.diagonal,
+        arrays.lane_columns["direction"],
+        dt,
+        BROAD_PHASE_MARGIN,
+        SEPARATION_MARGIN,
+    )
+    for world, i, j in candidates.tolist():
+        first, second = _body(arrays, world, i), _body(arrays, world, j)
+        intersecting, will_intersect, transition = first._is_colliding(second, dt)
+        if will_intersect:
+            _set_impact(arrays, world, i, transition / 2)
+            _set_impact(arrays, world, j, -transition / 2)
+        if intersecting:
+            arrays.crashed[world, i] = arrays.crashed[world, j] = True
+
+
+def _body(arrays: BatchArrays, world: int, row: int) -> _Body:
+    columns = arrays.columns
+    return _Body(
+        np.array([columns["x"][world, row], columns["y"][world, row]]),
+        float(columns["heading"][world, row]),
+        float(columns["speed"][world, row]),
+        float(columns["length"][world, row]),
+        float(columns["width"][world, row]),
+        float(columns["diagonal"][world, row]),
+    )
+
+
+def _set_impact(arrays: BatchArrays, world: int, row: int, impact: np.ndarray) -> None:
+    arrays.impact_x[world, row], arrays.impact_y[world, row] = impact
+    arrays.impacted[world, row] = True
+
+
+class _Body(RoadObject):
+    """A vehicle's footprint as highway-env's collision test reads it (`RoadObject._is_colliding`:
+    position, heading, speed, size, diagonal), without a road."""
+
+    def __init__(
+        self, position: np.ndarray, heading: float, speed: float, length: float, width: float, diagonal: float
+    ) -> None:
+        self.position, self.heading, self.speed = position, heading, speed
+        self.LENGTH, self.WIDTH, self.diagonal = length, width, diagonal

@@ -1,0 +1,175 @@
+"""Many traffic worlds stepped together, with [worlds, vehicles] arrays as the state of record.
+
+Each world is highway-v0 with the stack's traffic (`stack.sim.traffic`) and an ego driven by a given
+actuation, the same world the `vector` backend drives alone through `HighwayAdapter`, bit for bit:
+at reset highway-env spawns the world's road with the world's own generator (a seed, or the stream
+the world's last reset left, as one env's `reset()` continues it), the arrays read it once, and from
+then on a frame of every world is a fixed sequence of compiled kernels (`stack.sim.batched.kernels`,
+the vector backend's `dynamics` and `frame.IdmRows`) and numpy's transcendental calls and dot products
+over all the worlds' vehicles at once, in highway-env's operation order:
+
+- act: each world's lane coordinates and lane occupancy; every IDM driver's own-lane neighbours,
+  its MOBIL candidates (when its timer is due) and abort candidates (while it changes lane); the
+  IDM accelerations of all of them in one call; the decisions in road order per world (a driver
+  reads the target lanes the ones before it just chose); the target-lane IDM of the drivers
+  changing lane and the steering controller;
+- step: `clip_actions` (and `TrafficVehicle`'s stop at a standstill), the kinematic bicycle,
+  pending impacts, the lane-change timers, the closest lane; the collision candidates
+  (`could_touch` along a sweep, a superset) go through highway-env's own `_is_colliding`, pair by pair in
+  stock's order, which sets the impacts and crash flags.
+
+The four facts this identity rests on are the vector backend's (`stack.sim.vector.road`). Worlds
+whose episode ended (the ego crashed, or the duration is reached) are reset at their next `step`,
+which returns their first frame instead of stepping them (gymnasium's next-step autoreset); the
+other worlds step on, untouched. `road(world)` builds highway-env's objects on request; the arrays
+(`TrafficBatch.arrays`, `stack.sim.batched.arrays`) are the state of record."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import cast
+
+import gymnasium as gym
+import numpy as np
+import numpy.typing as npt
+from highway_env import utils
+from highway_env.envs.common.action import ContinuousAction
+from highway_env.road.road import RoadNetwork
+from highway_env.vehicle.kinematics import Vehicle
+
+from stack.settings.world import HighwayConfig
+from stack.sim.batched.arrays import BatchArrays, read_world, road_of
+from stack.sim.batched.frame import act, move
+from stack.sim.envs import HIGHWAY
+from stack.sim.highway import MAX_ACCELERATION, MAX_STEERING, env_config
+from stack.sim.traffic import ScenarioTraffic
+from stack.sim.vector.lanes import LaneTable
+
+
+@dataclass(frozen=True, eq=False)
+class Ended:
+    """Per world, after a step: whether its episode ended by the ego's crash (`terminated`) or
+    its duration (`truncated`); such a world is reset at its next step."""
+
+    terminated: np.ndarray
+    truncated: np.ndarray
+
+
+class TrafficBatch:
+    """N worlds of one highway config (`HighwayConfig`, kinematic ego), stepped together."""
+
+    def __init__(self, highway: HighwayConfig, worlds: int) -> None:
+        if worlds < 1:
+            raise ValueError(f"a batch needs at least one world, got {worlds}")
+        if highway.road != "highway":
+            raise ValueError(
+                f"batched traffic runs the highway road, not {highway.road!r} (a curved exit lane)"
+            )
+        self.highway = highway
+        self.worlds = worlds
+        self._spawner = gym.make(HIGHWAY, config=env_config(highway), disable_env_checker=True)
+        self._env = cast(ScenarioTraffic, self._spawner.unwrapped)
+        config = self._env.config
+        self.dt = 1 / config["simulation_frequency"]
+        self._time_step = 1 / config["policy_frequency"]
+        self._duration = config["duration"]
+        if config["offroad_terminal"]:
+            raise ValueError("batched traffic ends an episode on the ego's crash or the duration only")
+        self._rngs: list[np.random.Generator | None] = [None] * worlds
+        self._lane_tables: list[LaneTable | None] = [None] * worlds
+        self._networks: list[RoadNetwork | None] = [None] * worlds
+        self.arrays = BatchArrays(worlds)
+        """The state of record."""
+        self.time = np.zeros(worlds)
+        """Each world's episode time [s], as the env counts it."""
+        self.ended = Ended(np.zeros(worlds, dtype=bool), np.zeros(worlds, dtype=bool))
+        self._pending_reset = np.zeros(worlds, dtype=bool)
+
+    def close(self) -> None:
+        self._spawner.close()
+
+    def reset(self, seeds: Sequence[int]) -> None:
+        """Reset every world, world k with `seeds[k]`."""
+        if len(seeds) != self.worlds:
+            raise ValueError(f"one seed per world: {self.worlds} worlds, {len(seeds)} seeds")
+        for world, seed in enumerate(seeds):
+            self.reset_world(world, seed)
+
+    def reset_world(self, world: int, seed: int | None = None) -> None:
+        """Spawn world `world` anew: with `seed`, or (None) with the generator its last reset left."""
+        env = self._env
+        if seed is None:
+            rng = self._rngs[world]
+            if rng is None:
+                raise ValueError(f"world {world} has no generator yet: reset it with a seed first")
+            env._np_random = rng
+        self._spawner.reset(seed=seed)
+        self._rngs[world] = env.np_random
+        if type(env.vehicle) is not Vehicle:
+            raise ValueError("batched traffic drives a kinematic ego (plant: kinematic)")
+        spawned = read_world(env.road, env.vehicle)
+        self.arrays.load(world, spawned)
+        self._lane_tables[world], self._networks[world] = spawned.lanes, spawned.network
+        self.time[world] = env.time
+        self.ended.terminated[world] = self.ended.truncated[world] = False
+        self._pending_reset[world] = False
+
+    def step(self, acceleration: npt.ArrayLike, steering: npt.ArrayLike) -> Ended:
+        """One frame of every world, the ego of world k actuated with `acceleration[k]` [m/s^2] and
+        `steering[k]` [rad] (through `ContinuousAction`'s normalised range, as `HighwayAdapter`
+        applies an `Actuation`: +-5 m/s^2, +-pi/4 rad at most). Worlds that ended at the last step
+        are reset instead (their actuation is ignored)."""
+        accelerations, steerings = self._per_world(acceleration), self._per_world(steering)
+        unset = [world for world, rng in enumerate(self._rngs) if rng is None]
+        if unset:
+            raise ValueError(f"worlds {unset} have not been reset: call reset(seeds) first")
+        resetting = self._pending_reset.nonzero()[0]
+        for world in resetting.tolist():
+            self.reset_world(world)
+        arrays, worlds = self.arrays, np.arange(self.worlds)
+        stepping = np.ones(self.worlds, dtype=bool)
+        stepping[resetting] = False
+        active = np.where(stepping, arrays.count, 0)
+        self.time[stepping] += self._time_step
+        ego_rows = worlds * arrays.vehicles + arrays.ego
+        self._drive_egos(ego_rows[stepping], accelerations[stepping], steerings[stepping])
+        act(arrays, active)
+        move(arrays, active, self.dt)
+        ego_crashed = arrays.crashed.reshape(-1)[ego_rows]
+        terminated = stepping & ego_crashed
+        truncated = stepping & (self.time >= self._duration)
+        self.ended = Ended(terminated, truncated)
+        self._pending_reset = terminated | truncated
+        return self.ended
+
+    def _per_world(self, values: npt.ArrayLike) -> np.ndarray:
+        """`values` as floats, one per world; ValueError for another shape."""
+        array = np.asarray(values, dtype=float)
+        if array.shape != (self.worlds,):
+            raise ValueError(f"one value per world: {self.worlds} worlds, got shape {array.shape}")
+        return array
+
+    def _drive_egos(self, rows: np.ndarray, acceleration: np.ndarray, steering: np.ndarray) -> None:
+        """`HighwayAdapter.step`'s actuation on the egos: normalised by `to_env_action`, then mapped
+        back by `ContinuousAction` (the same float operations)."""
+        normalised_acceleration = np.minimum(np.maximum(acceleration / MAX_ACCELERATION, -1.0), 1.0)
+        normalised_steering = np.minimum(np.maximum(steering / MAX_STEERING, -1.0), 1.0)
+        self.arrays.acceleration.reshape(-1)[rows] = utils.lmap(
+            np.clip(normalised_acceleration, -1, 1), [-1, 1], ContinuousAction.ACCELERATION_RANGE
+        )
+        self.arrays.steering.reshape(-1)[rows] = utils.lmap(
+            np.clip(normalised_steering, -1, 1), [-1, 1], ContinuousAction.STEERING_RANGE
+        )
+
+    def road(self, world: int) -> tuple[list[Vehicle], Vehicle]:
+        """highway-env objects of world `world` as it stands: its vehicles on a new `Road` of its
+        lanes (road order), and its ego (for rendering, video, a user reading the road)."""
+        table, network, rng = self._lane_tables[world], self._networks[world], self._rngs[world]
+        if table is None or network is None or rng is None:
+            raise ValueError(f"world {world} has not been reset")
+        arrays = self.arrays
+        n = int(arrays.count[world])
+        columns = {name: column[world, :n] for name, column in arrays.columns.items()}
+        vehicles = road_of(columns, table, network, rng)
+        return vehicles, vehicles[int(arrays.ego[world])]
