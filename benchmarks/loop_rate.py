@@ -62,7 +62,7 @@ def loop_rate(run_config, seeds: range) -> float:
 
 def episode_cpu(scenario: str, agent: str, episodes: int, duration: float) -> None:
     """CPU ms per frame of the same seeded episodes on the stock and the vector backend."""
-    from stack.loop.episode_result import TIMING_FIELDS
+    from stack.results.episode_result import TIMING_FIELDS
     from stack.runs.episodes import run_episode
     from stack.settings.run import build_config
 

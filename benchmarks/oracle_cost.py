@@ -20,7 +20,7 @@ import time
 
 from loop_profile import instrument
 
-from stack.loop.episode_result import TIMING_FIELDS
+from stack.results.episode_result import TIMING_FIELDS
 from stack.runs.episodes import run_episode
 from stack.settings.run import build_config
 

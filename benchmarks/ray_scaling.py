@@ -24,7 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from stack.loop.episode_result import outcome
+from stack.results.episode_result import outcome
 
 MODES = (("--jobs 1", ["--jobs", "1"]), ("--jobs 2", ["--jobs", "2"]), ("--ray (local)", ["--ray", "local"]))
 

@@ -1,9 +1,9 @@
 """drivestack's top layer, over the layers `perception`, `planner` and `controllers`, in floors that
 import only those below them: the process runtime (`runtime`), the settings a run is told
-(`settings`), the simulator (`sim`), the recording's file (`rrd`), the closed loop (`loop`), the
-agents that need it (`agents`), seeded episodes (`runs`), the R157 safety assessment
-(`assessment`), training (`training`) and the applications (`apps`, the `drivestack` CLI); the
-paper's grid world (`deepcars`) stands alone (docs/architecture.md).
+(`settings`), the simulator (`sim`), the recording's file (`rrd`), the episode record (`results`),
+the closed loop (`loop`), the agents that need it (`agents`), seeded episodes (`runs`), the R157
+safety assessment (`assessment`), training (`training`) and the applications (`apps`, the
+`drivestack` CLI); the paper's grid world (`deepcars`) stands alone (docs/architecture.md).
 
 The public API, imported on first use so `import stack` stays light:
 

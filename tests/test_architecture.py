@@ -23,6 +23,7 @@ STACK_FLOORS = (
     "settings",
     "sim",
     "rrd",
+    "results",
     "loop",
     "agents",
     "runs",
@@ -197,7 +198,7 @@ def test_stack_imports_point_downwards(floor):
         assert not upward, f"{path.relative_to(ROOT)} imports {sorted(upward)}"
 
 
-ONE_ROLE_FOLDERS = ("runtime", "settings", "rrd", "loop", "agents", "runs", "assessment")
+ONE_ROLE_FOLDERS = ("runtime", "settings", "rrd", "results", "loop", "agents", "runs", "assessment")
 """The folders the run core was cut into (once `stack/core`, 4.1k lines); `apps` (a module per
 command), `sim` (three backends) and `training` are held by `MAX_LINES` per module instead."""
 

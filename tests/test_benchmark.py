@@ -9,7 +9,7 @@ from typer.testing import CliRunner
 from stack.apps.benchmark import BenchmarkPlan
 from stack.apps.benchmark_report import episode_score, leaderboard
 from stack.apps.cli import app
-from stack.loop.episode_result import EpisodeResult
+from stack.results.episode_result import EpisodeResult
 
 SET_SPEED = 30.0
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stack.loop import episode_result
+from stack.results import episode_result
 from stack.runs.episodes import run
 from stack.settings.run import build_config
 

@@ -7,8 +7,8 @@ from controllers.leaders import leaders
 from planner.factory import make_agent
 from records import Command
 from stack.loop.closed_loop import ClosedLoop, grid_config
-from stack.loop.episode_result import outcome
 from stack.loop.loop_records import LoopStatus, SolveStatistics
+from stack.results.episode_result import outcome
 from stack.runs.episodes import run, run_agent_episode
 from stack.settings.run import build_config
 from stack.sim.empty_road import EmptyRoad

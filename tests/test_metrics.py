@@ -3,10 +3,10 @@ import pytest
 
 from records import Actuation, Reference
 from stack.apps.compare import intervals, markdown
-from stack.loop.episode_fields import reported, summary_rows
-from stack.loop.episode_result import TIMING_FIELDS, EpisodeResult, summarize
 from stack.loop.loop_records import Tick
 from stack.loop.metrics import EpisodeRecorder, lateral_comfort, moving_average
+from stack.results.episode_fields import reported, summary_rows
+from stack.results.episode_result import TIMING_FIELDS, EpisodeResult, summarize
 from stack.runs.episodes import RunResults
 from tests.helpers import scene
 

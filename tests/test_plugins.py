@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from common import plugins
 from stack.apps.cli import app
-from stack.loop.episode_result import outcome
+from stack.results.episode_result import outcome
 from tests.test_cli import tiny_config_file
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

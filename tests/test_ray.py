@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 
 from stack.apps.cli import app
 from stack.apps.options import bare_ray_as_local
-from stack.loop.episode_result import outcome
+from stack.results.episode_result import outcome
 from stack.runtime import interrupts, ray_tasks
 from stack.runtime.ray_tasks import connect, import_path, worker_call
 from tests.test_plugins import PLUGIN_CONTROLLER, fails_on_workers

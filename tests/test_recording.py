@@ -20,7 +20,7 @@ from typer.testing import CliRunner
 from stack.apps import view as view_module
 from stack.apps.cli import app
 from stack.apps.view import viewer_environment, worst_episode
-from stack.loop.episode_result import outcome
+from stack.results.episode_result import outcome
 from stack.rrd.recording_file import COLOURS
 from tests.test_cli import run_tiny
 from tests.test_safety_assessment import NEVER_BRAKES, tiny_grids  # noqa: F401 - a fixture

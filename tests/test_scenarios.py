@@ -6,7 +6,7 @@ from typer.testing import CliRunner
 
 from records import Actuation
 from stack.apps.cli import app
-from stack.loop.episode_result import outcome
+from stack.results.episode_result import outcome
 from stack.runs.episodes import run
 from stack.settings import scenarios
 from stack.settings.run import ConfigError, build_config

@@ -18,7 +18,7 @@ from typer.testing import CliRunner
 from stack.apps import track as track_module
 from stack.apps.cli import app
 from stack.apps.run import undrawn
-from stack.loop.episode_result import outcome
+from stack.results.episode_result import outcome
 from stack.runs import episodes
 from stack.runtime import executors, interrupts, watchdog
 from stack.runtime.files import EpisodeJournal, replacing, write_text

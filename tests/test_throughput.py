@@ -9,7 +9,7 @@ import pytest
 
 from common.neighbours import neighbours, scanned_neighbours
 from records import Actuation
-from stack.loop.episode_result import TIMING_FIELDS
+from stack.results.episode_result import TIMING_FIELDS
 from stack.runs import episodes
 from stack.runs.episodes import run_episode
 from stack.settings.run import HighwayConfig, build_config

@@ -20,8 +20,8 @@ from stack.apps.benchmark_report import (
 )
 from stack.apps.compare import compare, comparison, write_comparison
 from stack.apps.resume import journal_of, journaled, resolved_config, started
-from stack.loop.episode_result import EpisodeResult
 from stack.loop.safety_metrics import TTC_FLOOR_S
+from stack.results.episode_result import EpisodeResult
 from stack.runtime.files import write_csv, write_json, write_text
 from stack.runtime.interrupts import deferred
 from stack.settings import scenarios

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from common.plugins import short_labels
-from stack.loop.episode_result import EpisodeResult
+from stack.results.episode_result import EpisodeResult
 from stack.runs.statistics import Interval, mean_interval, rate_interval
 
 WEIGHTS = {"progress": 5.0, "ttc": 5.0, "comfort": 2.0, "economy": 1.0}

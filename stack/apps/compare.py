@@ -14,10 +14,10 @@ from matplotlib.axes import Axes
 
 from common.plugins import short_labels
 from stack.apps.resume import started
-from stack.loop.episode_fields import columns, interval_text
-from stack.loop.episode_fields import intervals as declared_intervals
-from stack.loop.episode_result import EpisodeResult
 from stack.loop.recording import RECORDINGS, agent_folders
+from stack.results.episode_fields import columns, interval_text
+from stack.results.episode_fields import intervals as declared_intervals
+from stack.results.episode_result import EpisodeResult
 from stack.runs.episodes import RunResults, run
 from stack.runs.statistics import Interval, mean_interval, paired_difference, rate_interval
 from stack.runtime.executors import shared_workers

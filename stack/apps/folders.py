@@ -13,7 +13,7 @@ from stack.apps.options import fail
 from stack.runtime.owner import FolderRefused, Owner, claim, fingerprint
 
 if TYPE_CHECKING:
-    from stack.loop.episode_result import EpisodeResult
+    from stack.results.episode_result import EpisodeResult
     from stack.settings.run import RunConfig
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from common.plugins import file_safe
 from records import child_seed
-from stack.loop.episode_result import EpisodeResult
+from stack.results.episode_result import EpisodeResult
 from stack.runtime.files import JOURNAL, EpisodeJournal, write_text
 from stack.runtime.owner import Owner, fingerprint, refusal
 from stack.settings.run import RunConfig, config_text, printable

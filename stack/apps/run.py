@@ -16,9 +16,9 @@ from perception.plot import plot_grid_over_road
 from stack.apps.compare import comparison, markdown
 from stack.apps.resume import started
 from stack.loop.closed_loop import VIDEO_FRAME_TICKS
-from stack.loop.episode_fields import summary_rows
-from stack.loop.episode_result import EpisodeResult
 from stack.loop.recording import RECORDINGS
+from stack.results.episode_fields import summary_rows
+from stack.results.episode_result import EpisodeResult
 from stack.runs.episodes import run
 from stack.runtime.files import replacing, write_csv, write_json
 from stack.runtime.interrupts import deferred

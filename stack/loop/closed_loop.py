@@ -28,11 +28,11 @@ from perception.sensor import SensorConfig, SensorModel
 from planner.agents import Agent, sees_permitted
 from planner.safety import SafetyLayer
 from records import Actuation, Command, GridConfig, WorldState
-from stack.loop.episode_fields import record_fields
-from stack.loop.episode_result import EpisodeResult
 from stack.loop.loop_records import Acted, LoopStatus, SolveStatistics, Tick
 from stack.loop.metrics import EpisodeRecorder, Traces
 from stack.loop.safety_metrics import SafetyMonitor
+from stack.results.episode_fields import record_fields
+from stack.results.episode_result import EpisodeResult
 from stack.settings.run import RunConfig, grid_config
 
 if TYPE_CHECKING:

@@ -21,7 +21,8 @@ from common.neighbours import neighbours
 from perception.grid import OccupancyGrid
 from records import Command, WorldState
 from stack.loop.loop_records import Tick
-from stack.loop.safety_metrics import TTC_CAP_S, SafetyMonitor, r157_min_following_distance
+from stack.loop.safety_metrics import SafetyMonitor, r157_min_following_distance
+from stack.results.episode_result import TTC_CAP_S
 from stack.rrd.recording_file import Buffers, Decision, Frame, write_recording
 from stack.rrd.recording_geometry import lane_points
 from stack.settings.run import RunConfig

@@ -32,13 +32,12 @@ import numpy as np
 
 from common.neighbours import neighbours
 from records import WorldState
+from stack.results.episode_result import TTC_CAP_S
 
 DEPARTURE_TOLERANCE_M = 0.3
 """How far a footprint corner may lie beyond the road edge before it counts as a departure [m]."""
 STOPPED_SPEED_MPS = 0.5
 """Below this speed a vehicle counts as stopped [m/s]."""
-TTC_CAP_S = 99.0
-"""The minimum TTC an episode reports when nothing ever closed in on a leader [s]."""
 TTC_FLOOR_S = 1.5
 """Time to collision below which a tick counts towards the time below the TTC floor [s]."""
 R157_TIME_GAP = ((7.2, 1.0), (10.0, 1.1), (20.0, 1.2), (30.0, 1.3), (40.0, 1.4), (50.0, 1.5), (60.0, 1.6))

@@ -19,8 +19,8 @@ from planner.factory import make_agent, model_label, model_path
 from records import LEARNED_AGENTS, child_seed
 from stack.agents.oracle import Oracle
 from stack.loop.closed_loop import ClosedLoop, grid_config
-from stack.loop.episode_result import EpisodeResult, summarize
 from stack.loop.recording import episode_recording
+from stack.results.episode_result import EpisodeResult, summarize
 from stack.runs.model_fit import check_road_fit
 from stack.runtime.executors import completed
 from stack.settings.run import RunConfig

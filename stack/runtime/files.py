@@ -101,7 +101,7 @@ JOURNAL = "episodes.partial.jsonl"
 
 
 class JournalEntry(Protocol):
-    """What the journal keeps of a finished episode (`stack.loop.episode_result.EpisodeResult`): its row
+    """What the journal keeps of a finished episode (`stack.results.episode_result.EpisodeResult`): its row
     of plain values (the runtime never imports the loop it keeps the results of)."""
 
     def row(self) -> dict[str, Any]: ...

@@ -1,4 +1,4 @@
-"""How each field of an episode's record (`stack.loop.episode_result.EpisodeResult`) is reported, declared
+"""How each field of an episode's record (`stack.results.episode_result.EpisodeResult`) is reported, declared
 once on the field (`declared(...)` as its metadata) and read by every report:
 
 - its unit and its `section` (collisions, safety, progress, decisions, comfort, compute): the

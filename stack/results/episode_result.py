@@ -1,6 +1,6 @@
 """The record of one closed-loop episode (`EpisodeResult`) and the run's summary made from its
 episodes (`summarize`). Every measured field declares its unit and how the reports show it
-(`stack.loop.episode_fields`): summary.json, episodes.csv, timings.csv, the journal of a run that
+(`stack.results.episode_fields`): summary.json, episodes.csv, timings.csv, the journal of a run that
 can be resumed, the tables of `drivestack run` and `compare` and compare's intervals follow from
 these declarations, so a new metric is its computation plus its field here."""
 
@@ -12,7 +12,7 @@ from typing import Any
 
 from perception.grid import OccupancyGrid
 from records import WorldState
-from stack.loop.episode_fields import (
+from stack.results.episode_fields import (
     Column,
     CompareInterval,
     Summarized,
@@ -29,7 +29,9 @@ from stack.loop.episode_fields import (
     timing_fields,
     total,
 )
-from stack.loop.safety_metrics import TTC_CAP_S
+
+TTC_CAP_S = 99.0
+"""The minimum TTC an episode reports when nothing ever closed in on a leader [s]."""
 
 
 def _not_at_fault(values: list[bool], episodes: Sequence[EpisodeResult]) -> int:
@@ -51,7 +53,7 @@ def _accuracy(values: list[int], episodes: Sequence[EpisodeResult]) -> float | N
 @dataclass(frozen=True)
 class EpisodeResult:
     """One closed-loop episode; `trace` holds per-tick time [s], speed [m/s] and lateral offset [m].
-    Each measured field declares its unit and how the reports show it (`stack.loop.episode_fields`):
+    Each measured field declares its unit and how the reports show it (`stack.results.episode_fields`):
     summary.json, episodes.csv, timings.csv, the tables of `run` and `compare` and compare's
     intervals are made from these declarations."""
 
