@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
 from records import BACKENDS, MAX_LANES, PLANTS, ROADS, Backend, PlantName, RoadName, one_of
 
@@ -89,6 +89,21 @@ def _ordered_pair(bounds: tuple[float, float], low: float, high: float) -> tuple
     return _ordered_range(bounds)
 
 
+RANGE_LIMITS: dict[str, tuple[float, float]] = {
+    "vehicles_per_lane": (0.0, 50.0),
+    "vehicles_density": (0.1, 10.0),
+    "truck_share": (0.0, 1.0),
+    "ego_position": (0.0, 1.0),
+    "car_speed_mps": (0.0, MAX_CLASS_BOUND / 2),
+    "car_spread_mps": (0.0, MAX_CLASS_BOUND / 2),
+    "truck_slower_mps": (0.0, MAX_CLASS_BOUND / 2),
+    "position_noise_m": (0.0, 5.0),
+    "miss_probability": (0.0, 1.0),
+    "false_positives": (0.0, 10.0),
+}
+"""The bounds [low, high] of each `RandomTrafficConfig` range, in its fields' units."""
+
+
 class RandomTrafficConfig(BaseModel):
     """Traffic drawn anew for every episode from the env's seeded generator (`stack.sim.traffic`), so
     that no single named world is what an agent sees: the lane count, the number of vehicles per
@@ -134,35 +149,10 @@ class RandomTrafficConfig(BaseModel):
             raise ValueError(f"must be [low, high] with 2 <= low <= high <= {MAX_LANES}, got {list(bounds)}")
         return bounds
 
-    @field_validator("vehicles_per_lane")
+    @field_validator(*RANGE_LIMITS)
     @classmethod
-    def _per_lane(cls, bounds: tuple[float, float]) -> tuple[float, float]:
-        return _ordered_pair(bounds, 0.0, 50.0)
-
-    @field_validator("vehicles_density")
-    @classmethod
-    def _density(cls, bounds: tuple[float, float]) -> tuple[float, float]:
-        return _ordered_pair(bounds, 0.1, 10.0)
-
-    @field_validator("position_noise_m")
-    @classmethod
-    def _noise(cls, bounds: tuple[float, float]) -> tuple[float, float]:
-        return _ordered_pair(bounds, 0.0, 5.0)
-
-    @field_validator("false_positives")
-    @classmethod
-    def _phantoms(cls, bounds: tuple[float, float]) -> tuple[float, float]:
-        return _ordered_pair(bounds, 0.0, 10.0)
-
-    @field_validator("truck_share", "ego_position", "miss_probability")
-    @classmethod
-    def _fraction(cls, bounds: tuple[float, float]) -> tuple[float, float]:
-        return _ordered_pair(bounds, 0.0, 1.0)
-
-    @field_validator("car_speed_mps", "car_spread_mps", "truck_slower_mps")
-    @classmethod
-    def _speeds(cls, bounds: tuple[float, float]) -> tuple[float, float]:
-        return _ordered_pair(bounds, 0.0, MAX_CLASS_BOUND / 2)
+    def _within_limits(cls, bounds: tuple[float, float], info: ValidationInfo) -> tuple[float, float]:
+        return _ordered_pair(bounds, *RANGE_LIMITS[info.field_name or ""])
 
 
 class HighwayConfig(BaseModel):
