@@ -233,10 +233,26 @@ class DoubleDQN(DQN):
         if deterministic or np.random.rand() >= self.exploration_rate:
             return self.policy.predict(observation, state, episode_start, deterministic=True)
         assert isinstance(observation, np.ndarray), "an action mask needs array observations"
+        drawn = self._permitted_draws(observation)
+        return (drawn if observation.ndim > 1 else drawn[0]), state
+
+    def _sample_action(
+        self, learning_starts: int, action_noise: Any = None, n_envs: int = 1
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """SB3's rollout action; with `action_mask`, the warm-up's uniform draws (before
+        `learning_starts`) are among the permitted commands too."""
+        if not self.action_mask or self.num_timesteps >= learning_starts:
+            return super()._sample_action(learning_starts, action_noise, n_envs)
+        assert isinstance(self._last_obs, np.ndarray), "an action mask needs array observations"
+        drawn = self._permitted_draws(self._last_obs)
+        return drawn, drawn
+
+    def _permitted_draws(self, observation: np.ndarray) -> np.ndarray:
+        """One command per row of `observation`, drawn uniformly among those its last
+        `N_ACTIONS` values permit, from the action space's generator."""
         rows = observation.reshape(-1, observation.shape[-1])
         permitted = rows[:, -N_ACTIONS:] >= 0.5
-        drawn = np.array([self.action_space.sample(mask=row.astype(np.int8)) for row in permitted])
-        return (drawn if observation.ndim > 1 else drawn[0]), state
+        return np.array([self.action_space.sample(mask=row.astype(np.int8)) for row in permitted])
 
     def pretrain(
         self, gradient_steps: int, batch_size: int, on_step: Callable[[], object] | None = None

@@ -70,6 +70,37 @@ def test_greedy_and_exploring_actions_keep_to_the_permitted_commands():
     assert single.shape == () and int(single) == Command.STAY
 
 
+class OnlyStay(FourValues):
+    """Every observation permits STAY alone; episodes of 5 steps."""
+
+    observed = np.array([0.5, 0, 1, 0], dtype=np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.steps = 0
+        return self.observed, {}
+
+    def step(self, action):
+        self.steps += 1
+        return self.observed, 0.0, False, self.steps >= 5, {}
+
+
+def test_no_rollout_step_of_a_masked_model_takes_a_refused_command():
+    """Warm-up (uniform draws before `learning_starts`), exploring and greedy steps alike."""
+    model = DoubleDQN(
+        "MlpPolicy",
+        OnlyStay(),
+        action_mask=True,
+        learning_starts=30,
+        exploration_fraction=0.5,
+        policy_kwargs={"net_arch": [8]},
+        seed=1,
+    )
+    model.learn(60)
+    stored = model.replay_buffer.actions[: model.replay_buffer.size()].reshape(-1)
+    assert len(stored) == 60 and set(stored.tolist()) == {Command.STAY}
+
+
 def test_a_learned_agent_with_a_mask_decides_among_the_permitted_commands():
     network = q_network(4, 3, [8])
     with th.no_grad():
