@@ -6,9 +6,11 @@ ticks up to the next decision point. Each tick reads like do-mpc's loop: the man
 reference, the controller the actuation, the plant the next world; it returns a frozen `Tick`,
 which the metrics recorder, the safety monitor and the video consume outside the tick. Its face:
 `reset`, `perceive`, `act`, `tick`, the `world` (truth) and `perceived` (what the sensor reports)
-snapshots, `done` / `crashed`, `status()`, `traces()`, `solve_statistics()` and `result()`; for
-planners that look ahead, `permits`, `changing_lane` and `fork` (a copy to play the future on); for a
-scripted maneuver, `start_lane_change`.
+snapshots, `done` / `crashed`, `status()`, `traces()`, `solve_statistics()` and `result()`;
+`observation(agent, grid)`, what an agent decides on (with `permitted()`, the commands `act` would
+carry out, for an agent trained with an action mask); for planners that look ahead, `permits`,
+`changing_lane` and `fork` (a copy to play the future on); for a scripted maneuver,
+`start_lane_change`.
 """
 
 from __future__ import annotations
