@@ -5,7 +5,7 @@ from records import Actuation, Reference
 from stack.apps.compare import intervals, markdown
 from stack.loop.loop_records import Tick
 from stack.loop.metrics import EpisodeRecorder, lateral_comfort, moving_average
-from stack.results.episode_fields import reported, summary_rows
+from stack.results.episode_fields import columns, reported, summary_rows
 from stack.results.episode_result import TIMING_FIELDS, EpisodeResult, summarize
 from stack.runs.episodes import RunResults
 from tests.helpers import scene
@@ -96,3 +96,53 @@ def test_every_reported_field_names_its_time_unit():
     assert len(declared) == len(EpisodeResult.__dataclass_fields__) - 2, "all but the trace and snapshot"
     for name, unit in declared.items():
         assert (f"_{unit}_" in f"{name}_") == (unit in ("s", "ms")), name
+
+
+def test_run_s_table_of_episodes_is_made_from_the_declarations():
+    episode = EpisodeResult(
+        episode=3,
+        seed=7,
+        steps=600,
+        duration_s=40.0,
+        crashed=True,
+        passed_cars=4,
+        lane_changes=2,
+        mean_speed=21.456,
+        peak_lat_accel=1.234,
+        peak_lat_jerk=2.345,
+        road_departure=False,
+        at_fault_collision=True,
+        collision_kind="rear-end",
+        min_ttc_s=0.44,
+        emergency_brakings=1,
+    )
+    shown = columns(EpisodeResult, "episodes")
+    cells = {column.header: column.cell(episode.row()) for column in shown}
+    assert list(cells) == [
+        "episode",
+        "seed",
+        "crashed",
+        "fault",
+        "off road",
+        "min TTC [s]",
+        "AEB",
+        "passed",
+        "mean speed [m/s]",
+        "lane changes",
+        "peak |a_y| [m/s²]",
+        "peak jerk [m/s³]",
+    ]
+    assert list(cells.values()) == [
+        "3",
+        "7",
+        "yes",
+        "rear-end (at fault)",
+        "no",
+        "0.4",
+        "1",
+        "4",
+        "21.46",
+        "2",
+        "1.23",
+        "2.35",
+    ]

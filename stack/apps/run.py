@@ -17,7 +17,7 @@ from stack.apps.compare import comparison, markdown
 from stack.apps.resume import started
 from stack.loop.closed_loop import VIDEO_FRAME_TICKS
 from stack.loop.recording import RECORDINGS
-from stack.results.episode_fields import summary_rows
+from stack.results.episode_fields import columns, summary_rows
 from stack.results.episode_result import EpisodeResult
 from stack.runs.episodes import run
 from stack.runtime.files import replacing, write_csv, write_json
@@ -183,36 +183,12 @@ def agent_and_controller(summary: dict) -> str:
 def print_tables(summary: dict, episodes: list[EpisodeResult], console: Console | None = None) -> None:
     console = console or Console()
     table = Table(title="episodes")
-    for column in (
-        "episode",
-        "seed",
-        "crashed",
-        "fault",
-        "off road",
-        "min TTC [s]",
-        "AEB",
-        "passed",
-        "lane changes",
-        "mean speed [m/s]",
-        "peak |a_y| [m/s²]",
-        "peak jerk [m/s³]",
-    ):
-        table.add_column(column, justify="right")
-    for e in episodes:
-        table.add_row(
-            str(e.episode),
-            str(e.seed),
-            "yes" if e.crashed else "no",
-            e.collision_kind + (" (at fault)" if e.at_fault_collision else ""),
-            "yes" if e.road_departure else "no",
-            f"{e.min_ttc_s:.1f}",
-            str(e.emergency_brakings),
-            str(e.passed_cars),
-            str(e.lane_changes),
-            f"{e.mean_speed:.2f}",
-            f"{e.peak_lat_accel:.2f}",
-            f"{e.peak_lat_jerk:.2f}",
-        )
+    shown = columns(EpisodeResult, "episodes")
+    for column in shown:
+        table.add_column(column.header, justify="right")
+    for episode in episodes:
+        row = episode.row()
+        table.add_row(*(column.cell(row) for column in shown))
     console.print(table)
     overview = Table(title=f"summary: {agent_and_controller(summary)}")
     overview.add_column("metric")

@@ -100,14 +100,15 @@ class CompareInterval:
     kind: Literal["mean", "rate"]
 
 
-Table = Literal["agents", "safety"]
-"""compare's tables: the agents' headline metrics, and their safety metrics."""
+Table = Literal["agents", "safety", "episodes"]
+"""compare's tables (the agents' headline metrics, and their safety metrics) and run's table of
+episodes."""
 
 
 @dataclass(frozen=True)
 class Column:
-    """A column of one of compare's tables: its `header` and its cell, from an agent's row of
-    comparison.json (its summary and `intervals`) by `cell`."""
+    """A column of one of the tables: its `header` and its cell, by `cell` from an agent's row of
+    comparison.json (its summary and `intervals`) in compare's, from an episode's `row()` in run's."""
 
     table: Table
     header: str
@@ -188,7 +189,7 @@ def intervals(record: type) -> list[tuple[str, CompareInterval]]:
 
 
 def columns(record: type, table: Table) -> list[Column]:
-    """The columns of compare's `table`, in the reports' order."""
+    """The columns of `table`, in the reports' order."""
     return [column for _, how in reported(record) for column in how.columns if column.table == table]
 
 
@@ -201,6 +202,11 @@ def interval_text(interval: Sequence[float], scale: float = 1.0, digits: int = 2
 def interval_cell(key: str, scale: float = 1.0, digits: int = 2) -> Callable[[Mapping[str, Any]], str]:
     """A compare cell: the interval `key` of the agent's row."""
     return lambda row: interval_text(row["intervals"][key], scale, digits)
+
+
+def episode_cell(shown: str) -> Callable[[Mapping[str, Any]], str]:
+    """A cell of run's table of episodes: the episode's fields by the format `shown`."""
+    return lambda row: shown.format_map(row)
 
 
 def summary_cell(shown: str) -> Callable[[Mapping[str, Any]], str]:

@@ -18,6 +18,7 @@ from stack.results.episode_fields import (
     Summarized,
     SummaryRow,
     declared,
+    episode_cell,
     interval_cell,
     largest,
     mean,
@@ -57,8 +58,12 @@ class EpisodeResult:
     summary.json, episodes.csv, timings.csv, the tables of `run` and `compare` and compare's
     intervals are made from these declarations."""
 
-    episode: int = field(metadata=declared("", "episode"))
-    seed: int = field(metadata=declared("", "episode"))
+    episode: int = field(
+        metadata=declared("", "episode", columns=(Column("episodes", "episode", episode_cell("{episode}")),))
+    )
+    seed: int = field(
+        metadata=declared("", "episode", columns=(Column("episodes", "seed", episode_cell("{seed}")),))
+    )
     steps: int = field(metadata=declared("control ticks", "episode"))
     duration_s: float = field(metadata=declared("s", "episode"))
     crashed: bool = field(
@@ -68,7 +73,10 @@ class EpisodeResult:
             summary=(Summarized("collisions", total), Summarized("collision_rate", rate)),
             rows=(SummaryRow("collision rate", "{collision_rate:.1%} ({collisions})"),),
             interval=CompareInterval("collision_rate", "rate"),
-            columns=(Column("agents", "collision rate %", interval_cell("collision_rate", 100, 1)),),
+            columns=(
+                Column("episodes", "crashed", lambda row: "yes" if row["crashed"] else "no"),
+                Column("agents", "collision rate %", interval_cell("collision_rate", 100, 1)),
+            ),
         )
     )
     passed_cars: int = field(
@@ -77,7 +85,10 @@ class EpisodeResult:
             "progress",
             summary=(Summarized("passed_cars", total), Summarized("accuracy", _accuracy)),
             rows=(SummaryRow("accuracy", "{accuracy:.2f} %"), SummaryRow("passed cars", "{passed_cars}")),
-            columns=(Column("agents", "accuracy %", summary_cell("{accuracy:.2f}")),),
+            columns=(
+                Column("episodes", "passed", episode_cell("{passed_cars}")),
+                Column("agents", "accuracy %", summary_cell("{accuracy:.2f}")),
+            ),
         )
     )
     lane_changes: int = field(
@@ -87,7 +98,10 @@ class EpisodeResult:
             summary=(Summarized("lane_changes", mean),),
             rows=(SummaryRow("lane changes / episode", "{lane_changes:.2f}"),),
             interval=CompareInterval("lane_changes", "mean"),
-            columns=(Column("agents", "lane changes / ep", interval_cell("lane_changes")),),
+            columns=(
+                Column("episodes", "lane changes", episode_cell("{lane_changes}")),
+                Column("agents", "lane changes / ep", interval_cell("lane_changes")),
+            ),
         )
     )
     mean_speed: float = field(
@@ -97,14 +111,27 @@ class EpisodeResult:
             summary=(Summarized("mean_speed", mean),),
             rows=(SummaryRow("mean speed", "{mean_speed:.2f} m/s"),),
             interval=CompareInterval("mean_speed", "mean"),
-            columns=(Column("agents", "mean speed m/s", interval_cell("mean_speed")),),
+            columns=(
+                Column("episodes", "mean speed [m/s]", episode_cell("{mean_speed:.2f}")),
+                Column("agents", "mean speed m/s", interval_cell("mean_speed")),
+            ),
         )
     )
     peak_lat_accel: float = field(
-        metadata=declared("m/s^2", "comfort", summary=(Summarized("peak_lat_accel", largest),))
+        metadata=declared(
+            "m/s^2",
+            "comfort",
+            summary=(Summarized("peak_lat_accel", largest),),
+            columns=(Column("episodes", "peak |a_y| [m/s²]", episode_cell("{peak_lat_accel:.2f}")),),
+        )
     )
     peak_lat_jerk: float = field(
-        metadata=declared("m/s^3", "comfort", summary=(Summarized("peak_lat_jerk", largest),))
+        metadata=declared(
+            "m/s^3",
+            "comfort",
+            summary=(Summarized("peak_lat_jerk", largest),),
+            columns=(Column("episodes", "peak jerk [m/s³]", episode_cell("{peak_lat_jerk:.2f}")),),
+        )
     )
     masked_commands: int = field(
         default=0,
@@ -143,7 +170,10 @@ class EpisodeResult:
             summary=(Summarized("road_departures", total), Summarized("failures", _failures)),
             rows=(SummaryRow("road departures", "{road_departures}"),),
             interval=CompareInterval("road_departure_rate", "rate"),
-            columns=(Column("safety", "road departures %", interval_cell("road_departure_rate", 100, 1)),),
+            columns=(
+                Column("episodes", "off road", lambda row: "yes" if row["road_departure"] else "no"),
+                Column("safety", "road departures %", interval_cell("road_departure_rate", 100, 1)),
+            ),
         ),
     )
     at_fault_collision: bool = field(
@@ -165,7 +195,20 @@ class EpisodeResult:
             ),
         ),
     )
-    collision_kind: str = field(default="", metadata=declared("", "collisions"))
+    collision_kind: str = field(
+        default="",
+        metadata=declared(
+            "",
+            "collisions",
+            columns=(
+                Column(
+                    "episodes",
+                    "fault",
+                    lambda row: row["collision_kind"] + (" (at fault)" if row["at_fault_collision"] else ""),
+                ),
+            ),
+        ),
+    )
     min_ttc_s: float = field(
         default=TTC_CAP_S,
         metadata=declared(
@@ -173,7 +216,10 @@ class EpisodeResult:
             "safety",
             summary=(Summarized("min_ttc_s", smallest),),
             rows=(SummaryRow("min time to collision", "{min_ttc_s:.2f} s"),),
-            columns=(Column("safety", "min TTC s", summary_cell("{min_ttc_s:.2f}")),),
+            columns=(
+                Column("episodes", "min TTC [s]", episode_cell("{min_ttc_s:.1f}")),
+                Column("safety", "min TTC s", summary_cell("{min_ttc_s:.2f}")),
+            ),
         ),
     )
     time_below_min_distance_s: float = field(
@@ -197,7 +243,10 @@ class EpisodeResult:
             summary=(Summarized("emergency_brakings", mean),),
             rows=(SummaryRow("emergency brakings / episode", "{emergency_brakings:.2f}"),),
             interval=CompareInterval("emergency_brakings", "mean"),
-            columns=(Column("safety", "emergency brakings / ep", interval_cell("emergency_brakings")),),
+            columns=(
+                Column("episodes", "AEB", episode_cell("{emergency_brakings}")),
+                Column("safety", "emergency brakings / ep", interval_cell("emergency_brakings")),
+            ),
         ),
     )
     longest_standstill_s: float = field(
