@@ -117,7 +117,7 @@ def test_a_learned_agent_with_a_mask_decides_among_the_permitted_commands():
 def test_the_observation_ends_with_what_the_loop_would_carry_out():
     """Along an episode: the last three values are `ClosedLoop.permitted` (STAY alone during a
     change); a permitted change is never masked, a refused one is."""
-    env = HierarchicalHighwayEnv(build_config({**MASKED, "highway": {"vehicles_count": 20, "duration": 20}}))
+    env = HierarchicalHighwayEnv(build_config({**MASKED, "highway": {"vehicles_count": 20, "duration": 8}}))
     observation, _ = env.reset(seed=3)
     assert env.observation_space.shape == (observation.size,) and env.observation_space.contains(observation)
     seen_changing = refused_tried = False
