@@ -123,7 +123,7 @@ def test_the_safety_layer_s_verdicts_for_a_batch_are_each_loop_s():
                     lanes.append(loop.maneuver.lane)
                     changing.append(loop.maneuver.changing_lane)
                     speeds.append(float(loop.world.speed[0]))
-                    command = decide(agent, loop.observation(agent, loop.perceive()))
+                    command = decide(agent, loop.observation(loop.perceive(), agent.encoding, False))
                     loop.act(command, ticks=config.decision_ticks)
     safety, min_speed = config.planner.safety, loop.maneuver.min_speed
     batched = permitted_batch(

@@ -25,7 +25,7 @@ import math
 import numpy as np
 
 from perception.grid import OccupancyGridBuilder
-from planner.agents import Action, Agent, Policy, decide
+from planner.agents import Action, Agent, Policy, decide, sees_permitted
 from planner.factory import make_agent
 from records import Command, Encoding, GridConfig
 from stack.loop.closed_loop import ClosedLoop
@@ -92,5 +92,6 @@ class Oracle(Policy):
             )
         while not future.done and future.world.time - start_time < self.config.horizon_s:
             grid = future.perceive()
-            future.act(decide(self.base, future.observation(self.base, grid)))
+            seen = future.observation(grid, self.base.encoding, sees_permitted(self.base))
+            future.act(decide(self.base, seen))
         return -math.inf if future.crashed else float(future.world.s[0]) - start_s

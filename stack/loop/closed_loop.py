@@ -7,10 +7,10 @@ reference, the controller the actuation, the plant the next world; it returns a 
 which the metrics recorder, the safety monitor and the video consume outside the tick. Its face:
 `reset`, `perceive`, `act`, `tick`, the `world` (truth) and `perceived` (what the sensor reports)
 snapshots, `done` / `crashed`, `status()`, `traces()`, `solve_statistics()` and `result()`;
-`observation(agent, grid)`, what an agent decides on (with `permitted()`, the commands `act` would
-carry out, for an agent trained with an action mask); for planners that look ahead, `permits`,
-`changing_lane` and `fork` (a copy to play the future on); for a scripted maneuver,
-`start_lane_change`.
+`observation(grid, encoding, with_permitted)`, what an agent decides on (with `permitted()`, the
+commands `act` would carry out, for an agent trained with an action mask); for planners that look
+ahead, `permits`, `changing_lane` and `fork` (a copy to play the future on); for a scripted
+maneuver, `start_lane_change`.
 """
 
 from __future__ import annotations
@@ -27,9 +27,8 @@ from controllers.protocol import Controller
 from controllers.tracker import make_controller
 from perception.grid import OccupancyGrid, OccupancyGridBuilder
 from perception.sensor import SensorConfig, SensorModel
-from planner.agents import Agent, sees_permitted
 from planner.safety import SafetyLayer
-from records import Actuation, Command, GridConfig, WorldState
+from records import Actuation, Command, Encoding, GridConfig, WorldState
 from stack.loop.loop_records import Acted, LoopStatus, SolveStatistics, Tick
 from stack.loop.metrics import EpisodeRecorder, Traces
 from stack.loop.safety_metrics import SafetyMonitor
@@ -271,11 +270,11 @@ class ClosedLoop:
             dtype=np.float32,
         )
 
-    def observation(self, agent: Agent, grid: OccupancyGrid) -> np.ndarray:
-        """What `agent` decides on: `grid` in its encoding, followed by `permitted()` when it
-        `sees_permitted`."""
-        encoded = grid.encode(agent.encoding)
-        return np.concatenate([encoded, self.permitted()]) if sees_permitted(agent) else encoded
+    def observation(self, grid: OccupancyGrid, encoding: Encoding, with_permitted: bool) -> np.ndarray:
+        """What an agent decides on: `grid` in `encoding`, followed by `permitted()` for one trained
+        with an action mask (`with_permitted`; the training MDP's observation too)."""
+        encoded = grid.encode(encoding)
+        return np.concatenate([encoded, self.permitted()]) if with_permitted else encoded
 
     def fork(self, view: OccupancyGridBuilder | None = None) -> ClosedLoop:
         """A copy of the loop now, to play a future on (the simulator is deterministic, so the copy

@@ -77,7 +77,7 @@ def agent_step(loop: ClosedLoop, agent: Agent) -> int:
     if isinstance(agent, Oracle):
         command = agent.plan(loop)
     else:
-        observation = loop.observation(agent, grid)
+        observation = loop.observation(grid, agent.encoding, sees_permitted(agent))
         command = decide(agent, observation)
     if loop.recording is not None and isinstance(agent, Scored):
         seen = observation if observation is not None else np.empty(0)

@@ -73,8 +73,7 @@ class HierarchicalHighwayEnv(gym.Env):
         self.action_space = spaces.Discrete(N_ACTIONS)
 
     def _observe(self) -> np.ndarray:
-        encoded = self.loop.perceive().encode(self.encoding)
-        return np.concatenate([encoded, self.loop.permitted()]) if self.action_mask else encoded
+        return self.loop.observation(self.loop.perceive(), self.encoding, self.action_mask)
 
     def reset(
         self, *, seed: int | None = None, options: dict | None = None

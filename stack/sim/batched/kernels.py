@@ -12,7 +12,7 @@ import numpy as np
 from numba import njit
 
 from common.compiled import Kernel
-from stack.sim.vector.kernels import closest_lanes, could_touch, lane_coordinates
+from stack.sim.vector.kernels import closest_lanes, could_touch, counted_on_lane, lane_coordinates
 
 _closest_lanes = closest_lanes.compiled
 
@@ -48,11 +48,11 @@ def lane_frames(
         s[w, :n] = s_w
         r[w, :used, :n] = r_w
         for lane in range(used):
-            low, high = -vehicle_length, length[w, lane] + vehicle_length
-            reach = half_width[w, lane] + margin
             k = 0
             for i in range(n):
-                if low <= s_w[i] and s_w[i] < high and abs(r_w[lane, i]) <= reach:
+                if counted_on_lane(
+                    s_w[i], r_w[lane, i], length[w, lane], half_width[w, lane], vehicle_length, margin
+                ):
                     on[w, lane, k] = i
                     k += 1
             on_count[w, lane] = k

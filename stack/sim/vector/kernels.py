@@ -134,6 +134,16 @@ def minimum(a: float, b: float) -> float:  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
+def counted_on_lane(
+    s: float, r: float, length: float, half_width: float, vehicle_length: float, margin: float
+) -> bool:  # pragma: no cover - compiled
+    """Whether an object at `s` along and `r` across a lane of `length` and `half_width` [m] is on it
+    as `Road.neighbour_vehicles` counts it: highway-env's `on_lane` with a lateral `margin` [m],
+    `vehicle_length` [m] beyond both ends."""
+    return -vehicle_length <= s and s < length + vehicle_length and abs(r) <= half_width + margin
+
+
+@njit(cache=True, nogil=True, inline="always")
 def wrap_to_pi(angle: float) -> float:  # pragma: no cover - compiled
     """highway-env's `utils.wrap_to_pi` [rad]: ((angle + pi) mod 2 pi) - pi, numpy's float modulo."""
     return ((angle + np.pi) % (2 * np.pi)) - np.pi
@@ -201,11 +211,9 @@ def lane_order(
     last_before = np.empty((lanes, count + 1), dtype=np.int64)
     on = np.empty(count, dtype=np.bool_)
     for lane in range(lanes):
-        low, high = -vehicle_length, length[lane] + vehicle_length
-        reach = half_width[lane] + margin
         for p in range(count):
             i = order[p]
-            on[p] = low <= s[i] and s[i] < high and abs(r[lane, i]) <= reach
+            on[p] = counted_on_lane(s[i], r[lane, i], length[lane], half_width[lane], vehicle_length, margin)
         following = count
         next_on[lane, count] = count
         for p in range(count - 1, -1, -1):
