@@ -8,6 +8,9 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 ARGS ?=
+# pytest-xdist: one worker per core of the 2-core CI machine; each test file stays in one worker so
+# its module fixtures are built once. `make test PYTEST_WORKERS=` runs serially.
+PYTEST_WORKERS ?= -n 2 --dist loadfile
 
 .PHONY: run test test-slow bench lint clean
 
@@ -23,10 +26,10 @@ run: $(STAMP)
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest $(PYTEST_WORKERS)
 
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest -m slow
+	$(BIN)/python -m pytest $(PYTEST_WORKERS) -m slow
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/cli_startup.py
