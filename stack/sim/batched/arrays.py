@@ -219,21 +219,30 @@ class BatchArrays:
         self.lane_columns["direction"][world] = table.direction
         self.lane_columns["lane_count"][world] = lanes
         self.count[world], self.ego[world] = n, spawned.ego
+        self.__dict__.pop("_rows", None)
 
     def lane_args(self) -> tuple[np.ndarray, ...]:
         """Lane count, start, direction and lateral of every world's lanes."""
         lanes = self.lane_columns
         return lanes["lane_count"], lanes["start"], lanes["direction"], lanes["lateral"]
 
+    def _batch_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(world index (W, 1), each batch row's vehicle row (W, V), whether it holds a vehicle):
+        row 0 the ego, then the others in road order; kept until a world is loaded."""
+        kept = self.__dict__.get("_rows")
+        if kept is None or kept[1].shape != (self.worlds, self.vehicles):
+            worlds, slots = np.arange(self.worlds)[:, None], np.arange(self.vehicles)[None, :]
+            ego = self.ego[:, None]
+            order = np.where(slots == 0, ego, slots - 1 + (slots - 1 >= ego))
+            present = slots < self.count[:, None]
+            kept = self.__dict__["_rows"] = (worlds, np.where(present, order, 0), present)
+        return kept
+
     def world_batch(self) -> WorldBatch:
         """The worlds as the batched layers read them (`records.WorldBatch`): row 0 the ego, then the
         other vehicles in road order, s and d [m] in the frame of lane 0, as `HighwayAdapter`'s
         snapshot computes them (on axis-aligned lanes every product is by 0 or +-1: exact)."""
-        worlds, slots = np.arange(self.worlds)[:, None], np.arange(self.vehicles)[None, :]
-        ego = self.ego[:, None]
-        order = np.where(slots == 0, ego, slots - 1 + (slots - 1 >= ego))
-        present = slots < self.count[:, None]
-        order = np.where(present, order, 0)
+        worlds, order, present = self._batch_rows()
         lanes = self.lane_columns
         start, direction = lanes["start"][:, 0], lanes["direction"]
         lateral = lanes["lateral"][:, 0]
