@@ -92,6 +92,7 @@ def assert_same_world(env: HierarchicalHighwayEnv, batch: DecisionBatch, k: int)
     ("scenario", "worlds", "decisions", "extra"),
     [
         ("highway-v0", 1, 8, {}),
+        ("highway-v0", 4, 5, {}),
         ("overtaking", 3, 10, {"highway": {"duration": 6}}),
         ("incident", 3, 8, {}),
     ],
