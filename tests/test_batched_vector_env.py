@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
+import pytest
 from stable_baselines3 import DQN
 from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -78,3 +79,8 @@ def test_sb3_dqn_learns_on_the_batched_vec_env():
     assert buffer.dones[:stored].any()
     assert model.predict(env.reset(), deterministic=True)[0].shape == (4,)
     env.close()
+
+
+def test_make_vec_names_the_way_out_for_a_config_the_batch_refuses():
+    with pytest.raises(ValueError, match="PID tracker.*vectorization_mode='sync'"):
+        gym.make_vec(ID, num_envs=2, config={"controller": {"type": "mpc"}})

@@ -86,7 +86,10 @@ class HierarchicalHighwayVectorEnv(VectorEnv):
             raise ValueError(
                 "the batched decision MDP does not render: use the per-world env (vectorization_mode='sync')"
             )
-        self.batch = DecisionBatch(config, num_envs)
+        try:
+            self.batch = DecisionBatch(config, num_envs)
+        except ValueError as refused:
+            raise ValueError(f"{refused}; vectorization_mode='sync' steps them one at a time") from None
         self.num_envs = num_envs
         self.render_mode = None
         self.single_observation_space = self.batch.observation_space
