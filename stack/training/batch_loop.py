@@ -105,17 +105,17 @@ class ClosedLoopBatch:
         self.counts = np.zeros((worlds, 3), dtype=np.int64)
         self.lateral, self.speed_pi = np.zeros((worlds, 4)), np.zeros((worlds, 3))
         self.flags = np.zeros((worlds, 2), dtype=np.int64)
-        self._memory(1)
+        self.seen = np.zeros((worlds, 0), dtype=np.int64)
+        self.seen_speed, self.seen_slowing = np.zeros((worlds, 0)), np.zeros((worlds, 0))
         self.departed = np.zeros(worlds, dtype=bool)
         self.crashed = np.zeros(worlds, dtype=bool)
         self.truncated = np.zeros(worlds, dtype=bool)
         self.batch: WorldBatch | None = None
 
     def _memory(self, vehicles: int) -> None:
-        """Emergency braking's per-vehicle memory, grown to room for `vehicles` a world."""
-        if not hasattr(self, "seen"):
-            self.seen = np.zeros((self.worlds, 0), dtype=np.int64)
-            self.seen_speed, self.seen_slowing = np.zeros((self.worlds, 0)), np.zeros((self.worlds, 0))
+        """Emergency braking's per-vehicle memory (`seen`, `seen_speed`, `seen_slowing`: what it
+        kept of each vehicle row, `controllers.batch_control.emergency_acceleration`), grown to room
+        for `vehicles` a world."""
         more = vehicles - self.seen.shape[1]
         if more > 0:
             self.seen = np.pad(self.seen, ((0, 0), (0, more)))
