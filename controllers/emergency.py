@@ -48,11 +48,16 @@ class EmergencyBraking:
                 continue
             room = max(leader.gap - self.STOP_MARGIN_M, 0.01)
             slowing = (braking or {}).get(leader.vehicle, 0.0)
-            stops_in = leader.speed**2 / (2 * slowing) if slowing > self.BRAKING_SEEN_MPS2 else None
+            stops_in = (
+                leader.speed * leader.speed / (2 * slowing) if slowing > self.BRAKING_SEEN_MPS2 else None
+            )
             if (
-                closing**2 / (2 * room) > self.comfort_deceleration
+                closing * closing / (2 * room) > self.comfort_deceleration
                 or leader.gap / closing < self.trigger_ttc_s
-                or (stops_in is not None and speed**2 / (2 * (room + stops_in)) > self.comfort_deceleration)
+                or (
+                    stops_in is not None
+                    and speed * speed / (2 * (room + stops_in)) > self.comfort_deceleration
+                )
             ):
                 self.cause = leader.vehicle
                 return True

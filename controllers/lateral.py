@@ -67,7 +67,7 @@ def scheduled_gains(gains: PIDGains, speed: float) -> tuple[float, float, float]
     sigma = bandwidth_scale(speed)
     if sigma == 1.0:
         return gains.kp_lateral, gains.ki_lateral, gains.kp_heading
-    return gains.kp_lateral * sigma, gains.ki_lateral * sigma**2, gains.kp_heading * sigma
+    return gains.kp_lateral * sigma, gains.ki_lateral * (sigma * sigma), gains.kp_heading * sigma
 
 
 def closed_loop(gains: PIDGains, speed: float = 25.0) -> control.StateSpace:

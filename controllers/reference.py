@@ -9,6 +9,50 @@ from functools import cached_property
 
 import numpy as np
 
+PEAK_SAMPLES = 64
+"""Points a profile's peak lateral speed is sampled on (evenly over its duration, end excluded)."""
+
+
+def quintic_coefficients(
+    d0: float, d1: float, duration: float, v0: float, a0: float
+) -> tuple[float, float, float, float, float, float]:
+    """c0..c5 [m/s^k] of the quintic from (d0 [m], v0 [m/s], a0 [m/s^2]) to (d1, 0, 0) over
+    `duration` [s], in closed form: sums, products and quotients only, so the per-world profile and
+    the batched kernels (`controllers.batch_control` compiles this very function) get the same bits."""
+    t = duration
+    t2 = t * t
+    t3 = t2 * t
+    h = d1 - d0
+    c3 = (20.0 * h - 12.0 * v0 * t - 3.0 * a0 * t2) / (2.0 * t3)
+    c4 = (-30.0 * h + 16.0 * v0 * t + 3.0 * a0 * t2) / (2.0 * t3 * t)
+    c5 = (12.0 * h - 6.0 * v0 * t - a0 * t2) / (2.0 * t3 * t2)
+    return d0, v0, a0 / 2.0, c3, c4, c5
+
+
+def quintic_at(
+    c0: float, c1: float, c2: float, c3: float, c4: float, c5: float, tau: float
+) -> tuple[float, float, float]:
+    """(d [m], d_dot [m/s], d_ddot [m/s^2]) of the quintic c0..c5 at `tau` [s] by Horner's rule
+    (no dot product: BLAS's summation order is not a compiled loop's)."""
+    d = c0 + tau * (c1 + tau * (c2 + tau * (c3 + tau * (c4 + tau * c5))))
+    d_dot = c1 + tau * (2.0 * c2 + tau * (3.0 * c3 + tau * (4.0 * c4 + tau * (5.0 * c5))))
+    d_ddot = 2.0 * c2 + tau * (6.0 * c3 + tau * (12.0 * c4 + tau * (20.0 * c5)))
+    return d, d_dot, d_ddot
+
+
+def quintic_peak_speed(
+    c0: float, c1: float, c2: float, c3: float, c4: float, c5: float, duration: float
+) -> float:
+    """Largest |d_dot| [m/s] of the quintic c0..c5 over `PEAK_SAMPLES` points of [0, duration) [s]
+    (`quintic_at`'s d_dot, written out: numba compiles this function alone)."""
+    step = duration / PEAK_SAMPLES
+    peak = 0.0
+    for k in range(PEAK_SAMPLES):
+        tau = k * step
+        d_dot = c1 + tau * (2.0 * c2 + tau * (3.0 * c3 + tau * (4.0 * c4 + tau * (5.0 * c5))))
+        peak = max(peak, abs(d_dot))
+    return peak
+
 
 @dataclass(frozen=True)
 class QuinticProfile:
@@ -28,32 +72,23 @@ class QuinticProfile:
 
     @cached_property
     def coefficients(self) -> np.ndarray:
-        T = self.duration
-        c0, c1, c2 = self.d0, self.v0, self.a0 / 2.0
-        A = np.array([[T**3, T**4, T**5], [3 * T**2, 4 * T**3, 5 * T**4], [6 * T, 12 * T**2, 20 * T**3]])
-        b = np.array([self.d1 - (c0 + c1 * T + c2 * T**2), -(c1 + 2 * c2 * T), -2 * c2])
-        return np.concatenate([[c0, c1, c2], np.linalg.solve(A, b)])
+        """c0..c5 of d(tau) = sum c_k tau^k, tau = t - t0 [s] (`quintic_coefficients`)."""
+        return np.array(quintic_coefficients(self.d0, self.d1, self.duration, self.v0, self.a0))
 
     def sample(self, t: float) -> tuple[float, float, float]:
         """(d, d_dot, d_ddot) at absolute time t [s]."""
         if self.finished(t):
             return self.d1, 0.0, 0.0
-        tau = max(t - self.t0, 0.0)
-        c = self.coefficients
-        powers = tau ** np.arange(6)
-        d = float(c @ powers)
-        d_dot = float(sum(k * c[k] * tau ** (k - 1) for k in range(1, 6)))
-        d_ddot = float(sum(k * (k - 1) * c[k] * tau ** (k - 2) for k in range(2, 6)))
-        return d, d_dot, d_ddot
+        c0, c1, c2, c3, c4, c5 = self.coefficients.tolist()
+        return quintic_at(c0, c1, c2, c3, c4, c5, max(t - self.t0, 0.0))
 
     def samples(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(d [m], d_dot [m/s]) at each of the absolute `times` [s]: `sample` for a whole preview
-        at once (the MPC's 20 ticks in 10 us instead of 120)."""
-        c = self.coefficients
+        at once (the MPC's 20 ticks), the same Horner sums elementwise."""
+        c0, c1, c2, c3, c4, c5 = self.coefficients.tolist()
         tau = np.maximum(times - self.t0, 0.0)
-        powers = tau[:, None] ** np.arange(6)
-        d = powers @ c
-        d_dot = powers[:, :5] @ (np.arange(1, 6) * c[1:])
+        d = c0 + tau * (c1 + tau * (c2 + tau * (c3 + tau * (c4 + tau * c5))))
+        d_dot = c1 + tau * (2.0 * c2 + tau * (3.0 * c3 + tau * (4.0 * c4 + tau * (5.0 * c5))))
         finished = times - self.t0 >= self.duration
         return np.where(finished, self.d1, d), np.where(finished, 0.0, d_dot)
 
@@ -62,9 +97,9 @@ class QuinticProfile:
 
     @cached_property
     def peak_lateral_speed(self) -> float:
-        """Largest |d_dot| [m/s] over the profile (sampled on 64 points)."""
-        _, d_dot = self.samples(self.t0 + np.linspace(0.0, self.duration, 64, endpoint=False))
-        return float(np.max(np.abs(d_dot)))
+        """Largest |d_dot| [m/s] over the profile (`quintic_peak_speed`: 64 points)."""
+        c0, c1, c2, c3, c4, c5 = self.coefficients.tolist()
+        return quintic_peak_speed(c0, c1, c2, c3, c4, c5, self.duration)
 
 
 QUINTIC_PEAK_SPEED = 15.0 / 8.0
@@ -94,7 +129,7 @@ class WarpedProfile:
 
     def sample(self, t: float) -> tuple[float, float, float]:
         d, d_dot, d_ddot = self.profile.sample(self.profile_time(t))
-        return d, d_dot * self.rate, d_ddot * self.rate**2
+        return d, d_dot * self.rate, d_ddot * (self.rate * self.rate)
 
     def samples(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         d, d_dot = self.profile.samples(self.profile_anchor + (times - self.anchor) * self.rate)

@@ -19,6 +19,13 @@ from records import N_ACTIONS
 from records.batch import WorldBatch
 
 
+def lateral_extents(batch: WorldBatch) -> np.ndarray:
+    """(worlds, vehicles): each vehicle's footprint width across the road [m], its rectangle
+    turned by its heading to the lane (`common.neighbours.lateral_extent`, over the whole batch)."""
+    relative_heading = batch.heading - batch.lane_heading[:, None]
+    return np.abs(batch.length * np.sin(relative_heading)) + np.abs(batch.width * np.cos(relative_heading))
+
+
 def permitted_batch(
     config: SafetyConfig,
     perceived: WorldBatch,
@@ -31,11 +38,7 @@ def permitted_batch(
     lane change when the maneuver of that world keeps its `lane` (not `changing`), its ego's true
     `speed` [m/s] is at least `min_speed` and the safety layer passes the gap it leads into, on
     what the sensor reports (`perceived`)."""
-    relative_heading = perceived.heading - perceived.lane_heading[:, None]
-    extent = np.abs(perceived.length * np.sin(relative_heading)) + np.abs(
-        perceived.width * np.cos(relative_heading)
-    )
-    reach = (perceived.lane_width + extent) / 2
+    reach = (perceived.lane_width + lateral_extents(perceived)) / 2
     permitted = np.zeros((perceived.worlds, N_ACTIONS), dtype=np.float32)
     _permitted(
         permitted,
@@ -62,6 +65,48 @@ def _clear(gap: float, min_gap: float, closing: float, min_ttc: float) -> bool: 
     return gap >= min_gap and ttc >= min_ttc
 
 
+@njit(cache=True, nogil=True)
+def lane_is_safe(
+    n: int,
+    s: np.ndarray,
+    d: np.ndarray,
+    speed: np.ndarray,
+    length: np.ndarray,
+    reach: np.ndarray,
+    centre: float,
+    min_gap: float,
+    min_ttc: float,
+    front_time_gap: float,
+    rear_time_gap: float,
+) -> bool:  # pragma: no cover - compiled
+    """`SafetyLayer.gap_is_safe` of one world's `n` vehicles (row 0 the ego, each reaching `reach`
+    [m] across the road from its centre) for the lane centred at `centre` [m]: the nearest vehicle
+    ahead and behind (the first on ties) leave `min_gap` [m], or the time gaps when they are
+    non-zero (the strict rule), and `min_ttc` [s]."""
+    ahead, behind = -1, -1
+    best_ahead, best_behind = np.inf, np.inf
+    for v in range(1, n):
+        if not abs(d[v] - centre) < reach[v]:
+            continue
+        rel = s[v] - s[0]
+        if rel > 0:
+            if ahead < 0 or abs(rel) < best_ahead:
+                ahead, best_ahead = v, abs(rel)
+        elif behind < 0 or abs(rel) < best_behind:
+            behind, best_behind = v, abs(rel)
+    ego_speed = speed[0]
+    if ahead >= 0:
+        gap = abs(s[ahead] - s[0]) - (length[ahead] + length[0]) / 2
+        if not _clear(gap, max(min_gap, front_time_gap * ego_speed), ego_speed - speed[ahead], min_ttc):
+            return False
+    if behind >= 0:
+        gap = abs(s[behind] - s[0]) - (length[behind] + length[0]) / 2
+        needed = max(min_gap, rear_time_gap * speed[behind])
+        if not _clear(gap, needed, speed[behind] - ego_speed, min_ttc):
+            return False
+    return True
+
+
 @Kernel
 def _permitted(
     out: np.ndarray,
@@ -82,7 +127,6 @@ def _permitted(
         out[w, 1] = 1.0
         if changing[w] or true_speed[w] < min_speed:
             continue
-        ego_speed = speed[w, 0]
         for command in (0, 2):
             target = lane[w] + command - 1
             if not enabled:
@@ -90,25 +134,17 @@ def _permitted(
                 continue
             if target < 0 or target >= lanes_count[w]:
                 continue
-            ahead, behind = -1, -1
-            best_ahead, best_behind = np.inf, np.inf
-            for v in range(1, count[w]):
-                if not abs(d[w, v] - lane_offsets[w, target]) < reach[w, v]:
-                    continue
-                rel = s[w, v] - s[w, 0]
-                if rel > 0:
-                    if ahead < 0 or abs(rel) < best_ahead:
-                        ahead, best_ahead = v, abs(rel)
-                elif behind < 0 or abs(rel) < best_behind:
-                    behind, best_behind = v, abs(rel)
-            safe = True
-            if ahead >= 0:
-                gap = abs(s[w, ahead] - s[w, 0]) - (length[w, ahead] + length[w, 0]) / 2
-                needed = max(min_gap, front_time_gap * ego_speed)
-                safe = _clear(gap, needed, ego_speed - speed[w, ahead], min_ttc)
-            if safe and behind >= 0:
-                gap = abs(s[w, behind] - s[w, 0]) - (length[w, behind] + length[w, 0]) / 2
-                needed = max(min_gap, rear_time_gap * speed[w, behind])
-                safe = _clear(gap, needed, speed[w, behind] - ego_speed, min_ttc)
-            if safe:
+            if lane_is_safe(
+                count[w],
+                s[w],
+                d[w],
+                speed[w],
+                length[w],
+                reach[w],
+                lane_offsets[w, target],
+                min_gap,
+                min_ttc,
+                front_time_gap,
+                rear_time_gap,
+            ):
                 out[w, command] = 1.0

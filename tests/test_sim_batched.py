@@ -210,6 +210,29 @@ def test_a_step_needs_reset_worlds_and_one_actuation_per_world():
     batch.close()
 
 
+def test_stepping_only_some_worlds_leaves_the_others_as_they_are():
+    highway = HighwayConfig(vehicles_count=8, duration=1)
+    together, alone = TrafficBatch(highway, 2), TrafficBatch(highway, 1)
+    together.reset([3, 4])
+    alone.reset([3])
+    frozen = world_states(together, 1)
+    only, steps = np.array([True, False]), 0
+    while steps < 20:
+        ended = together.step([1.0, 1.0], [0.0, 0.0], only)
+        steps += 1
+        alone.step([1.0], [0.0])
+        np.testing.assert_array_equal(world_states(together, 0), world_states(alone, 0))
+        np.testing.assert_array_equal(world_states(together, 1), frozen)
+        assert not ended.truncated[1]
+        if ended.truncated[0]:
+            break
+    assert ended.truncated[0] and steps == 16
+    with pytest.raises(ValueError, match=r"worlds \[0\] ended their episode"):
+        together.step([0.0, 0.0], [0.0, 0.0], only)
+    together.close()
+    alone.close()
+
+
 @pytest.mark.parametrize("scenario", ["overtaking", "random"])
 def test_the_world_batch_is_the_adapters_snapshots_stacked(scenario):
     """`BatchArrays.world_batch()` (what the batched grid and safety layer read) against

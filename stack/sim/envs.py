@@ -28,7 +28,11 @@ def register_envs() -> None:
     gym.register(VECTOR_HIGHWAY, entry_point="stack.sim.vector.road:VectorHighwayEnv")
     gym.register(FAST_HIGHWAY_FAST, entry_point="stack.sim.fast_road:FastHighwayEnvFast")
     gym.register(FAST_EXIT, entry_point="stack.sim.fast_road:FastExitEnv")
-    gym.register(HIERARCHICAL_HIGHWAY, entry_point="stack.training.decision_env:HierarchicalHighwayEnv")
+    gym.register(
+        HIERARCHICAL_HIGHWAY,
+        entry_point="stack.training.decision_env:HierarchicalHighwayEnv",
+        vector_entry_point="stack.training.vector_env:HierarchicalHighwayVectorEnv",
+    )
     gym.register(DEEPCARS, entry_point="stack.deepcars.world:DeepCarsEnv")
 
 

@@ -13,6 +13,7 @@ from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
+from common.compiled import Kernel
 from records.batch import WorldBatch
 from stack.sim.traffic import TrafficVehicle
 from stack.sim.vector.lanes import LaneTable
@@ -229,38 +230,63 @@ class BatchArrays:
         """The worlds as the batched layers read them (`records.WorldBatch`): row 0 the ego, then the
         other vehicles in road order, s and d [m] in the frame of lane 0, as `HighwayAdapter`'s
         snapshot computes them (on axis-aligned lanes every product is by 0 or +-1: exact)."""
-        worlds, slots = np.arange(self.worlds)[:, None], np.arange(self.vehicles)[None, :]
-        ego = self.ego[:, None]
-        order = np.where(slots == 0, ego, slots - 1 + (slots - 1 >= ego))
-        present = slots < self.count[:, None]
-        order = np.where(present, order, 0)
         lanes = self.lane_columns
-        start, direction = lanes["start"][:, 0], lanes["direction"]
-        lateral = lanes["lateral"][:, 0]
-        delta_x = self.x[worlds, order] - start[:, 0, None]
-        delta_y = self.y[worlds, order] - start[:, 1, None]
-        s = delta_x * direction[:, 0, None] + delta_y * direction[:, 1, None]
-        d = delta_x * lateral[:, 0, None] + delta_y * lateral[:, 1, None]
-        offsets = lanes["start"] - start[:, None, :]
-        lane_offsets = offsets[..., 0] * lateral[:, 0, None] + offsets[..., 1] * lateral[:, 1, None]
-
-        def rows(column: np.ndarray) -> np.ndarray:
-            return np.where(present, column[worlds, order], 0)
-
+        columns = (self.x, self.y, self.speed, self.heading, self.length, self.width, self.lane)
+        lane_count, start, direction, lateral = self.lane_args()
+        s, d, speed, heading, length, width, lane, offsets = world_rows(
+            self.count, self.ego, columns, lane_count, start, direction, lateral
+        )
         return WorldBatch(
             count=self.count.copy(),
-            s=np.where(present, s, 0.0),
-            d=np.where(present, d, 0.0),
-            speed=rows(self.speed),
-            heading=rows(self.heading),
-            length=rows(self.length),
-            width=rows(self.width),
-            lane=rows(self.lane),
+            s=s,
+            d=d,
+            speed=speed,
+            heading=heading,
+            length=length,
+            width=width,
+            lane=lane,
             lanes_count=lanes["lane_count"].copy(),
-            lane_offsets=np.where(np.arange(self.lanes) < lanes["lane_count"][:, None], lane_offsets, 0.0),
+            lane_offsets=offsets,
             lane_heading=lanes["lane_heading"][:, 0].copy(),
             lane_width=float(2 * lanes["half_width"][0, 0]),
         )
+
+
+@Kernel
+def world_rows(
+    count: np.ndarray,
+    ego: np.ndarray,
+    columns: tuple[np.ndarray, ...],
+    lane_count: np.ndarray,
+    start: np.ndarray,
+    direction: np.ndarray,
+    lateral: np.ndarray,
+) -> tuple[np.ndarray, ...]:  # pragma: no cover - compiled
+    """`BatchArrays.world_batch`'s rows: per world (`count` vehicles, the ego in row `ego`) its
+    vehicles with the ego first, then the others in road order: s and d [m] in lane 0's frame
+    (`start` (W, L, 2), unit `direction` (W, 2), unit `lateral` (W, L, 2)), then each of `columns`
+    (x, y, speed, heading, length, width [floats], lane [ints]) but x and y; and each lane's
+    centre offset [m] (W, L). Zeros in the rows and lanes past the counts."""
+    x, y, speed, heading, length, width, lane = columns
+    worlds, vehicles = x.shape
+    s, d = np.zeros((worlds, vehicles)), np.zeros((worlds, vehicles))
+    speeds, headings = np.zeros((worlds, vehicles)), np.zeros((worlds, vehicles))
+    lengths, widths = np.zeros((worlds, vehicles)), np.zeros((worlds, vehicles))
+    lanes = np.zeros((worlds, vehicles), dtype=np.int64)
+    offsets = np.zeros((worlds, start.shape[1]))
+    for w in range(worlds):
+        start_x, start_y = start[w, 0, 0], start[w, 0, 1]
+        lateral_x, lateral_y = lateral[w, 0, 0], lateral[w, 0, 1]
+        for k in range(count[w]):
+            i = ego[w] if k == 0 else k - 1 + (1 if k - 1 >= ego[w] else 0)
+            delta_x, delta_y = x[w, i] - start_x, y[w, i] - start_y
+            s[w, k] = delta_x * direction[w, 0] + delta_y * direction[w, 1]
+            d[w, k] = delta_x * lateral_x + delta_y * lateral_y
+            speeds[w, k], headings[w, k] = speed[w, i], heading[w, i]
+            lengths[w, k], widths[w, k], lanes[w, k] = length[w, i], width[w, i], lane[w, i]
+        for j in range(lane_count[w]):
+            offsets[w, j] = (start[w, j, 0] - start_x) * lateral_x + (start[w, j, 1] - start_y) * lateral_y
+    return s, d, speeds, headings, lengths, widths, lanes, offsets
 
 
 def road_of(

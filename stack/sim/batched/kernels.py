@@ -332,7 +332,9 @@ def collision_candidates(
     `stack.sim.vector.kernels.could_touch` keeps (a superset of the pairs highway-env's collision
     test finds touching or about to over `dt` [s]), from a sweep along each world's lane
     `direction` (an axis): no pair further apart along it than the largest reach is tested."""
-    found = np.empty((0, 3), dtype=np.int64)
+    found = np.empty((16, 3), dtype=np.int64)
+    total = 0
+    pairs = np.empty((16, 2), dtype=np.int64)
     for w in range(x.shape[0]):
         n = count[w]
         if n < 2:
@@ -342,7 +344,7 @@ def collision_candidates(
         along = x_w * direction[w, 0] + y_w * direction[w, 1]
         order = np.argsort(along, kind="mergesort")
         reach = (diagonal[w, :n].max() + max(speed_w.max(), 0.0) * dt + broad_margin) * (1 + 1e-9)
-        pairs = np.empty((0, 2), dtype=np.int64)
+        kept = 0
         for p in range(n):
             for q in range(p + 1, n):
                 if along[order[q]] - along[order[p]] > reach:
@@ -364,13 +366,15 @@ def collision_candidates(
                     separation_margin,
                 )
                 if close:
-                    pair = np.empty((1, 2), dtype=np.int64)
-                    pair[0, 0], pair[0, 1] = a, b
-                    pairs = np.concatenate((pairs, pair))
-        if pairs.shape[0]:
-            pairs = pairs[np.argsort(pairs[:, 0] * n + pairs[:, 1])]
-            rows = np.empty((pairs.shape[0], 3), dtype=np.int64)
-            rows[:, 0] = w
-            rows[:, 1:] = pairs
-            found = np.concatenate((found, rows))
-    return found
+                    if kept == pairs.shape[0]:
+                        pairs = np.concatenate((pairs, np.empty_like(pairs)))
+                    pairs[kept, 0], pairs[kept, 1] = a, b
+                    kept += 1
+        if kept:
+            sorted_pairs = pairs[:kept][np.argsort(pairs[:kept, 0] * n + pairs[:kept, 1])]
+            while total + kept > found.shape[0]:
+                found = np.concatenate((found, np.empty_like(found)))
+            found[total : total + kept, 0] = w
+            found[total : total + kept, 1:] = sorted_pairs
+            total += kept
+    return found[:total]

@@ -115,21 +115,31 @@ class TrafficBatch:
         self.ended.terminated[world] = self.ended.truncated[world] = False
         self._pending_reset[world] = False
 
-    def step(self, acceleration: npt.ArrayLike, steering: npt.ArrayLike) -> Ended:
+    def step(
+        self, acceleration: npt.ArrayLike, steering: npt.ArrayLike, only: np.ndarray | None = None
+    ) -> Ended:
         """One frame of every world, the ego of world k actuated with `acceleration[k]` [m/s^2] and
         `steering[k]` [rad] (through `ContinuousAction`'s normalised range, as `HighwayAdapter`
         applies an `Actuation`: +-5 m/s^2, +-pi/4 rad at most). Worlds that ended at the last step
-        are reset instead (their actuation is ignored)."""
+        are reset instead (their actuation is ignored). With `only` (a flag per world), just those
+        worlds step and none is reset: the others stay as they are (a caller that resets ended
+        worlds itself)."""
         accelerations, steerings = self._per_world(acceleration), self._per_world(steering)
         unset = [world for world, rng in enumerate(self._rngs) if rng is None]
         if unset:
             raise ValueError(f"worlds {unset} have not been reset: call reset(seeds) first")
-        resetting = self._pending_reset.nonzero()[0]
-        for world in resetting.tolist():
-            self.reset_world(world)
+        if only is None:
+            resetting = self._pending_reset.nonzero()[0]
+            for world in resetting.tolist():
+                self.reset_world(world)
+            stepping = np.ones(self.worlds, dtype=bool)
+            stepping[resetting] = False
+        else:
+            stepping = np.asarray(only, dtype=bool)
+            if (stepping & self._pending_reset).any():
+                ended = np.flatnonzero(stepping & self._pending_reset).tolist()
+                raise ValueError(f"worlds {ended} ended their episode: reset them before stepping")
         arrays, worlds = self.arrays, np.arange(self.worlds)
-        stepping = np.ones(self.worlds, dtype=bool)
-        stepping[resetting] = False
         active = np.where(stepping, arrays.count, 0)
         self.time[stepping] += self._time_step
         ego_rows = worlds * arrays.vehicles + arrays.ego
@@ -140,7 +150,7 @@ class TrafficBatch:
         terminated = stepping & ego_crashed
         truncated = stepping & (self.time >= self._duration)
         self.ended = Ended(terminated, truncated)
-        self._pending_reset = terminated | truncated
+        self._pending_reset = self._pending_reset & ~stepping | terminated | truncated
         return self.ended
 
     def _per_world(self, values: npt.ArrayLike) -> np.ndarray:

@@ -1,0 +1,226 @@
+"""N closed loops stepped together: `ClosedLoopBatch`, the batched `ClosedLoop.act` of the default
+run config (PID tracker, kinematic plant, the sensor off), each world the loop the `vector`
+backend drives alone, bit for bit.
+
+The traffic is a `TrafficBatch`; the ego's side of every tick (reference, leaders, PID, cruise,
+emergency braking, the safety layer's abort, road departure) is three compiled calls over all the
+worlds (`stack.training.batch_kernels`); between them numpy computes what it computes for one
+world (the snapshot's lane frame, each footprint's sine and cosine) over the whole batch. No
+Python runs per world per tick: only a world's reset (highway-env spawns its road) is per world."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.reference import lane_keeping
+from planner.batch_safety import lateral_extents
+from records.batch import WorldBatch
+from stack.settings.run import RunConfig
+from stack.sim.batched.traffic import TrafficBatch
+from stack.training.batch_kernels import control, decide, settle
+
+
+def refusal(config: RunConfig) -> str | None:
+    """Why a batch cannot run `config` (one line), or None: the batch drives the PID tracker on
+    the kinematic plant, without sensor noise, on the highway road; MPC and plug-in controllers,
+    the dynamic plant and a sensor model run one world at a time (`HierarchicalHighwayEnv`)."""
+    control_config, pid = config.controller, config.controller.pid
+    if control_config.type != "pid":
+        return f"batched worlds run the PID tracker, not controller.type {control_config.type!r}"
+    if config.sim.plant != "kinematic" or pid.model not in ("plant", "kinematic"):
+        return "batched worlds run the kinematic plant and a PID inverting it (sim.plant: kinematic)"
+    if config.perception.sensor.enabled:
+        return "batched worlds see the simulator's truth: perception.sensor must be off"
+    if config.highway.random_traffic is not None:
+        return "batched worlds run one configured traffic, not highway.random_traffic"
+    return None
+
+
+@dataclass(frozen=True, eq=False)
+class ActedBatch:
+    """Per world, one decision's outcome: control ticks run, whether the command was considered
+    (no lane change ran), masked by the safety layer, refused by the maneuver, and the ego's mean
+    speed over the ticks [m/s] (its speed when none ran)."""
+
+    ticks: np.ndarray
+    considered: np.ndarray
+    masked: np.ndarray
+    refused: np.ndarray
+    mean_speed: np.ndarray
+
+
+class ClosedLoopBatch:
+    """`worlds` closed loops of one run config: `reset_world`, `act(commands, ticks)`, the worlds as
+    the layers see them (`batch`, a `WorldBatch`), and per world `crashed` / `done`."""
+
+    def __init__(self, config: RunConfig, worlds: int) -> None:
+        refused = refusal(config)
+        if refused is not None:
+            raise ValueError(refused)
+        self.config = config
+        self.traffic = TrafficBatch(config.highway, worlds)
+        self.worlds, self.dt = worlds, self.traffic.dt
+        control_config, pid, safety = config.controller, config.controller.pid, config.planner.safety
+        self.min_speed = control_config.min_lane_change_speed_mps
+        max_course = math.radians(control_config.lane_change_max_course_deg)
+        self.settings = np.array(
+            [
+                control_config.lane_change_duration_s,
+                self.min_speed,
+                math.tan(max_course),
+                control_config.set_speed_mps,
+            ]
+        )
+        self.safety = np.array(
+            [
+                float(safety.enabled),
+                safety.min_gap_m,
+                safety.min_ttc_s,
+                safety.front_time_gap_s,
+                safety.rear_time_gap_s,
+                safety.abort_gap_m,
+                safety.abort_ttc_s,
+            ]
+        )
+        comfort = control_config.comfort_decel_mps2
+        self.gains = np.array(
+            [
+                *(pid.kp_lateral, pid.ki_lateral, pid.kp_heading, pid.steering_rate, pid.max_steering),
+                *(pid.kp_speed, pid.ki_speed, comfort, pid.max_acceleration),
+                *(control_config.time_gap_s, control_config.standstill_gap_m),
+                *(control_config.emergency_decel_mps2, comfort, control_config.emergency_ttc_s),
+            ]
+        )
+        self.lane = np.zeros(worlds, dtype=np.int64)
+        self.target = np.zeros(worlds, dtype=np.int64)
+        self.coef, self.profile, self.clock = (
+            np.zeros((worlds, 6)),
+            np.zeros((worlds, 4)),
+            np.zeros((worlds, 3)),
+        )
+        self.counts = np.zeros((worlds, 3), dtype=np.int64)
+        self.lateral, self.speed_pi = np.zeros((worlds, 4)), np.zeros((worlds, 3))
+        self.flags = np.zeros((worlds, 2), dtype=np.int64)
+        self.seen = np.zeros((worlds, 0), dtype=np.int64)
+        self.seen_speed, self.seen_slowing = np.zeros((worlds, 0)), np.zeros((worlds, 0))
+        self.departed = np.zeros(worlds, dtype=bool)
+        self.crashed = np.zeros(worlds, dtype=bool)
+        self.truncated = np.zeros(worlds, dtype=bool)
+        self.batch: WorldBatch | None = None
+
+    def _memory(self, vehicles: int) -> None:
+        """Emergency braking's per-vehicle memory (`seen`, `seen_speed`, `seen_slowing`: what it
+        kept of each vehicle row, `controllers.batch_control.emergency_acceleration`), grown to room
+        for `vehicles` a world."""
+        more = vehicles - self.seen.shape[1]
+        if more > 0:
+            self.seen = np.pad(self.seen, ((0, 0), (0, more)))
+            self.seen_speed = np.pad(self.seen_speed, ((0, 0), (0, more)))
+            self.seen_slowing = np.pad(self.seen_slowing, ((0, 0), (0, more)))
+
+    @property
+    def done(self) -> np.ndarray:
+        """Per world: its episode ended (crash, duration, road departure) and it awaits a reset."""
+        return self.crashed | self.truncated | self.departed
+
+    @property
+    def changing(self) -> np.ndarray:
+        """Per world: a lane change runs (a command given now is ignored)."""
+        return self.lane != self.target
+
+    def close(self) -> None:
+        self.traffic.close()
+
+    def reset(self, seeds: Sequence[int]) -> None:
+        """Reset every world, world k with traffic seed `seeds[k]`."""
+        if len(seeds) != self.worlds:
+            raise ValueError(f"one seed per world: {self.worlds} worlds, {len(seeds)} seeds")
+        self.reset_worlds(range(self.worlds), seeds)
+
+    def reset_worlds(self, worlds: Sequence[int], seeds: Sequence[int]) -> None:
+        """Reset the worlds `worlds`, each with its traffic seed: its road spawned anew and its
+        ego's maneuver, controllers, emergency braking and counts as `ClosedLoop.reset` leaves them."""
+        for world, seed in zip(worlds, seeds, strict=True):
+            self.traffic.reset_world(world, int(seed))
+        self._memory(self.traffic.arrays.vehicles)
+        self.batch = self.traffic.arrays.world_batch()
+        arrays = self.traffic.arrays
+        for world in worlds:
+            lane = int(arrays.lane[world, arrays.ego[world]])
+            self.lane[world] = self.target[world] = lane
+            keeping = lane_keeping(
+                float(self.batch.lane_offsets[world, lane]), float(self.traffic.time[world])
+            )
+            self.coef[world] = keeping.coefficients
+            self.profile[world] = (keeping.t0, keeping.duration, keeping.d1, keeping.peak_lateral_speed)
+            self.clock[world] = (0.0, 0.0, 1.0)
+            self.counts[world] = self.flags[world] = 0
+            self.lateral[world] = self.speed_pi[world] = 0.0
+            self.seen[world], self.seen_speed[world], self.seen_slowing[world] = 0, 0.0, 0.0
+            self.departed[world] = self.crashed[world] = self.truncated[world] = False
+
+    def _maneuver(self) -> tuple[np.ndarray, ...]:
+        return self.lane, self.target, self.coef, self.profile, self.clock, self.counts
+
+    def act(self, commands: np.ndarray, ticks: int, only: np.ndarray | None = None) -> ActedBatch:
+        """`ClosedLoop.act(command, ticks)` in every world at once (or in the worlds flagged in
+        `only`, the others left as they are): world k's command `commands[k]` (`Command` values)
+        through the safety layer to the maneuver, then `ticks` control ticks, or fewer in a world
+        whose episode ends first. Every world acting must be live (reset once done)."""
+        batch = self.batch
+        if batch is None:
+            raise ValueError("reset the worlds before acting")
+        traffic, worlds = self.traffic, self.worlds
+        live = np.ones(worlds, dtype=bool) if only is None else np.array(only, dtype=bool)
+        if (self.done & live).any():
+            gone = np.flatnonzero(self.done & live).tolist()
+            raise ValueError(f"worlds {gone} ended their episode: reset them before acting")
+        commands = np.asarray(commands, dtype=np.int64)
+        if commands.shape != (self.worlds,) or ((commands < 0) | (commands > 2)).any():
+            raise ValueError(f"one command (0, 1, 2) per world: {self.worlds} worlds, got {commands!r}")
+        outcome = np.zeros((worlds, 3), dtype=np.int64)
+        reach = (batch.lane_width + lateral_extents(batch)) / 2
+        decide(
+            live, commands, traffic.time, batch.columns(), reach, batch.lane_width,
+            self._maneuver(), self.safety, self.settings, outcome,
+        )  # fmt: skip
+        controller = (self.lateral, self.speed_pi, self.seen, self.seen_speed, self.seen_slowing, self.flags)
+        actuation = np.zeros((worlds, 2))
+        speeds = np.zeros((worlds, ticks))
+        ran = np.zeros(worlds, dtype=np.int64)
+        for tick in range(ticks):
+            if not live.any():
+                break
+            control(
+                live, traffic.time, batch.columns(), batch.heading, batch.lane_heading,
+                lateral_extents(batch), batch.lane_width, self._maneuver(), controller,
+                self.safety, self.settings, self.gains, self.dt, actuation,
+            )  # fmt: skip
+            ended = traffic.step(actuation[:, 0], actuation[:, 1], live)
+            batch = self.batch = traffic.arrays.world_batch()
+            settle(
+                live, traffic.time, batch.columns(), batch.heading, batch.lane_heading,
+                batch.lane_width, self._maneuver(), self.departed,
+            )  # fmt: skip
+            speeds[live, tick] = batch.speed[live, 0]
+            ran[live] += 1
+            self.crashed |= ended.terminated
+            self.truncated |= ended.truncated
+            live &= ~self.done
+        return ActedBatch(
+            ran, outcome[:, 0] == 1, outcome[:, 1] == 1, outcome[:, 2] == 1, _mean_speeds(speeds, ran, batch)
+        )
+
+
+def _mean_speeds(speeds: np.ndarray, ran: np.ndarray, batch: WorldBatch) -> np.ndarray:
+    """Each world's mean of its first `ran` speeds, as `np.mean` of that world's list (the same
+    pairwise sum per row); its ego's speed now where no tick ran."""
+    means = batch.speed[:, 0].copy()
+    for count in set(ran.tolist()) - {0}:
+        rows = np.flatnonzero(ran == count)
+        means[rows] = np.mean(speeds[rows, :count], axis=1)
+    return means

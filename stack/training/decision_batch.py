@@ -1,0 +1,123 @@
+"""The decision MDP (`HierarchicalHighway-v0`) of N worlds at once: `DecisionBatch.step(commands)`
+advances every world by one decision period (`ClosedLoopBatch`) and returns the observations,
+rewards and end flags the per-world env returns for each, bit for bit, with what the safety layer
+and the maneuver made of each command."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from gymnasium import spaces
+
+from perception.batch_grid import observe_batch
+from perception.grid import OccupancyGridBuilder
+from planner.batch_safety import permitted_batch
+from records import Command
+from stack.settings.run import RunConfig, build_config, grid_config
+from stack.training.batch_loop import ClosedLoopBatch
+from stack.training.decision_env import with_permitted
+
+
+@dataclass(frozen=True, eq=False)
+class Decided:
+    """One decision of every world: observations (worlds, size) float32, rewards, `terminated`
+    (the ego crashed) and `truncated` (the duration ran out or the ego left the road); per world
+    `permitted` (worlds, 3), the commands the loop would carry out now, and for the command given:
+    `masked` (the safety layer replaced it by STAY) and `refused` (the maneuver did not start it:
+    below the lane-change speed, off the road)."""
+
+    observations: np.ndarray
+    rewards: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    permitted: np.ndarray
+    masked: np.ndarray
+    refused: np.ndarray
+
+
+def batch_config(config: RunConfig | dict | None) -> RunConfig:
+    """`config` validated as the decision MDP's, or ValueError (one line) for what a batch does not
+    run: a mix of scenarios, an encoding other than `observation` (see also `batch_loop.refusal`)."""
+    if not isinstance(config, RunConfig):
+        config = build_config(config or {}, "HierarchicalHighway-v0 config")
+    if config.train.scenarios:
+        raise ValueError("batched worlds run one world config, not a train.scenarios mix")
+    if config.train.encoding != "observation":
+        raise ValueError(f"batched worlds encode train.encoding observation, not {config.train.encoding!r}")
+    return config
+
+
+class DecisionBatch:
+    """`worlds` decision MDPs of one run config, stepped together; `reset(seeds)` with one traffic
+    seed per world, `step(commands)`, and `reset_worlds` for the worlds whose episode ended."""
+
+    def __init__(self, config: RunConfig | dict | None, worlds: int) -> None:
+        self.config = config = batch_config(config)
+        self.loop = ClosedLoopBatch(config, worlds)
+        self.worlds = worlds
+        self.grid = grid_config(config)
+        self.action_mask = config.train.action_mask
+        space = OccupancyGridBuilder(self.grid).space("observation", config.highway.lanes_count)
+        self.observation_space: spaces.Box = with_permitted(space) if self.action_mask else space
+        self.ticks = config.decision_ticks
+
+    def close(self) -> None:
+        self.loop.close()
+
+    def reset(self, seeds: Sequence[int]) -> np.ndarray:
+        """Every world reset, world k with traffic seed `seeds[k]`: the observations."""
+        self.loop.reset(seeds)
+        return self.observe()
+
+    def reset_worlds(self, worlds: Sequence[int], seeds: Sequence[int]) -> None:
+        """The worlds `worlds` reset, each with its traffic seed (`observe` reads them after)."""
+        self.loop.reset_worlds(worlds, seeds)
+
+    def permitted(self) -> np.ndarray:
+        """(worlds, 3) float32: `ClosedLoop.permitted()` of every world."""
+        loop, batch = self.loop, self.loop.batch
+        assert batch is not None
+        return permitted_batch(
+            self.config.planner.safety, batch, loop.lane, loop.changing, batch.speed[:, 0], loop.min_speed
+        )
+
+    def observe(self) -> np.ndarray:
+        """(worlds, size) float32: what the per-world env observes in each world now."""
+        batch = self.loop.batch
+        if batch is None:
+            raise ValueError("reset the worlds before observing them")
+        encoded = observe_batch(self.grid, batch)
+        return np.concatenate([encoded, self.permitted()], axis=1) if self.action_mask else encoded
+
+    def step(self, commands: Sequence[int] | np.ndarray, only: np.ndarray | None = None) -> Decided:
+        """One decision period in every world (`HierarchicalHighwayEnv.step` of each), or in those
+        flagged in `only` (the others: reward 0, no end): world k commanded `commands[k]`. Every
+        world stepped must be live: reset those that ended first."""
+        commands = np.asarray(commands, dtype=np.int64)
+        loop = self.loop
+        acted = loop.act(commands, self.ticks, only)
+        stepped = np.ones(self.worlds, dtype=bool) if only is None else np.asarray(only, dtype=bool)
+        reward = self.config.train.reward
+        low, high = reward.speed_range
+        score = np.clip((acted.mean_speed - low) / (high - low), 0.0, 1.0)
+        fraction = acted.ticks / self.ticks
+        rewards = np.where(
+            loop.crashed, reward.collision, fraction * (reward.alive + reward.speed_weight * score)
+        )
+        rewards = rewards - reward.lane_change * (acted.considered & (commands != Command.STAY))
+        terminated = loop.crashed & stepped
+        permitted = self.permitted()
+        encoded = observe_batch(self.grid, loop.batch) if loop.batch is not None else None
+        assert encoded is not None
+        observations = np.concatenate([encoded, permitted], axis=1) if self.action_mask else encoded
+        return Decided(
+            observations,
+            np.where(stepped, rewards, 0.0),
+            terminated,
+            loop.done & stepped & ~terminated,
+            permitted,
+            acted.masked,
+            acted.refused,
+        )

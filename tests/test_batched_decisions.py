@@ -1,0 +1,168 @@
+"""Each world of a `DecisionBatch` is the decision MDP (`HierarchicalHighwayEnv`) the `vector`
+backend drives alone: every vehicle's s, d, speed and heading, the maneuver's lane and target, the
+observation, reward and end flags and the safety layer's and maneuver's counts, at every decision,
+bit for bit, across lane changes, masked commands, aborts, emergency braking, crashes and resets,
+for any batch size. The configs a batch does not run are refused in one line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from records.batch import WorldBatch
+from stack.settings.run import build_config
+from stack.training.batch_loop import ClosedLoopBatch
+from stack.training.decision_batch import DecisionBatch
+from stack.training.decision_env import HierarchicalHighwayEnv
+
+
+def cycling(world: int, decision: int) -> int:
+    """Commands that change lane often, differently per world (LEFT, STAY, RIGHT)."""
+    return (world * 7 + decision * 3 + decision // 4) % 3
+
+
+def weaving(world: int, decision: int) -> int:
+    """Only lane changes, left and right by turns: masks, aborts and (unguarded) crashes."""
+    return (0, 2)[(world + decision) % 2]
+
+
+def drive_both(data: dict, worlds: int, decisions: int, policy=cycling) -> dict[str, int]:
+    """Drive `worlds` per-world envs and one batch of them side by side for `decisions` decisions
+    (a world whose episode ends is reset in both with the env's next traffic seed), asserting
+    identity at every decision; what happened on the way, summed over the worlds."""
+    config = build_config(data, "test")
+    envs = [HierarchicalHighwayEnv(config) for _ in range(worlds)]
+    for k, env in enumerate(envs):
+        env.reset(seed=k)
+    batch = DecisionBatch(config, worlds)
+    observations = batch.reset([env.loop.seed for env in envs])
+    for k, env in enumerate(envs):
+        np.testing.assert_array_equal(observations[k], env._observe())
+    seen = {"ends": 0, "crashes": 0}
+    for decision in range(decisions):
+        commands = [policy(k, decision) for k in range(worlds)]
+        decided = batch.step(commands)
+        ended = []
+        for k, env in enumerate(envs):
+            observation, reward, terminated, truncated, _ = env.step(commands[k])
+            assert_same_world(env, batch, k)
+            np.testing.assert_array_equal(decided.observations[k], observation)
+            assert (decided.rewards[k], decided.terminated[k], decided.truncated[k]) == (
+                reward,
+                terminated,
+                truncated,
+            )
+            np.testing.assert_array_equal(decided.permitted[k], env.loop.permitted())
+            if terminated or truncated:
+                seen["ends"] += 1
+                seen["crashes"] += terminated
+                env.reset()
+                ended.append(k)
+        if ended:
+            batch.reset_worlds(ended, [envs[k].loop.seed for k in ended])
+            observations = batch.observe()
+            for k in ended:
+                np.testing.assert_array_equal(observations[k], envs[k]._observe())
+    counts = batch.loop.counts.sum(axis=0)
+    batch.close()
+    return seen | {
+        "lane_changes": int(counts[0]),
+        "masked": int(counts[1]),
+        "aborted": int(counts[2]),
+        "emergencies": int(batch.loop.flags[:, 1].sum()),
+    }
+
+
+def assert_same_world(env: HierarchicalHighwayEnv, batch: DecisionBatch, k: int) -> None:
+    alone, together = WorldBatch.of([env.loop.world]), batch.loop.batch
+    assert together is not None
+    n = int(alone.count[0])
+    assert together.count[k] == n
+    for name in ("s", "d", "speed", "heading", "lane"):
+        np.testing.assert_array_equal(getattr(together, name)[k, :n], getattr(alone, name)[0], err_msg=name)
+    loop, maneuver = batch.loop, env.loop.maneuver
+    assert (loop.lane[k], loop.target[k]) == (maneuver.lane, maneuver.target)
+    safety = env.loop.safety.counts
+    assert tuple(loop.counts[k]) == (maneuver.lane_changes, safety.masked, safety.aborted)
+    assert loop.flags[k, 1] == env.loop.emergency.activations
+    assert loop.crashed[k] == env.loop.crashed
+
+
+@pytest.mark.parametrize(
+    ("scenario", "worlds", "decisions", "extra"),
+    [
+        ("highway-v0", 1, 8, {}),
+        ("highway-v0", 4, 5, {}),
+        ("overtaking", 3, 10, {"highway": {"duration": 6}}),
+        ("incident", 3, 8, {}),
+    ],
+)
+def test_each_world_of_a_batch_is_the_decision_env_alone(scenario, worlds, decisions, extra):
+    seen = drive_both({"scenario": scenario, **extra}, worlds, decisions)
+    assert seen["lane_changes"] + seen["masked"] > 0
+    if "highway" in extra:
+        assert seen["ends"] == worlds
+
+
+def test_masked_observations_shaped_rewards_and_aborts_stay_identical():
+    data = {
+        "scenario": "dense",
+        "train": {"action_mask": True, "reward": {"speed_weight": 0.5, "lane_change": 0.1}},
+    }
+    seen = drive_both(data, 3, 12, weaving)
+    assert seen["masked"] > 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "scenario", ["highway-v0", "dense", "jam", "lanes-3", "lanes-5", "overtaking", "incident"]
+)
+def test_every_batched_scenario_matches_over_whole_episodes(scenario):
+    seen = drive_both({"scenario": scenario}, 4, 45)
+    assert seen["ends"] >= 4
+
+
+@pytest.mark.slow
+def test_crashes_without_the_safety_layer_match():
+    data = {
+        "scenario": "dense",
+        "planner": {"safety": {"enabled": False}},
+        "controller": {"emergency_ttc_s": 0.0},
+    }
+    seen = drive_both(data, 4, 30, weaving)
+    assert seen["crashes"] >= 1
+
+
+@pytest.mark.slow
+def test_aborts_match():
+    data = {"scenario": "dense", "train": {"action_mask": True}}
+    seen = drive_both(data, 4, 30, weaving)
+    assert seen["aborted"] >= 1
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"controller": {"type": "mpc"}}, "PID tracker"),
+        ({"controller": {"type": "stanley"}}, "PID tracker"),
+        ({"sim": {"plant": "dynamic"}}, "kinematic plant"),
+        ({"scenario": "noisy"}, "sensor"),
+        ({"scenario": "random"}, "random_traffic"),
+        ({"train": {"encoding": "binary"}}, "encoding"),
+        ({"train": {"scenarios": {"dense": 1.0, "jam": 1.0}}}, "mix"),
+    ],
+)
+def test_what_a_batch_does_not_run_is_refused_in_one_line(data, message):
+    with pytest.raises(ValueError, match=message) as refused:
+        DecisionBatch(data, 2)
+    assert "\n" not in str(refused.value)
+
+
+def test_acting_in_an_ended_world_is_refused():
+    loop = ClosedLoopBatch(build_config({"highway": {"duration": 1}}, "test"), 2)
+    loop.reset([1, 2])
+    acted = loop.act(np.array([1, 1]), 30)
+    assert loop.done.all() and (acted.ticks < 30).all()
+    with pytest.raises(ValueError, match="reset them"):
+        loop.act(np.array([1, 1]), 15)
+    loop.close()
