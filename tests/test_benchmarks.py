@@ -44,10 +44,10 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
     assert "env steps/s" in run("train_rate.py", "--steps", "510")
     assert "| batch 4 |" in run("batched_decisions.py", "--runs", "1", "--duration", "2", "--sizes", "1,4")
     assert "of them between floors of stack: 0\n" in run("config_path.py")
-    training = yaml.safe_load((ROOT / "configs" / "train" / "ddqn.yaml").read_text())
+    training = yaml.safe_load((ROOT / "configs" / "train" / "ddqn-stage1.yaml").read_text())
     training |= {"scenario": None, "highway": {"vehicles_count": 10, "duration": 3}}
     training["train"] |= {"envs": 1, "learning_starts": 10, "scenarios": {}, "checkpoint_every": 20}
-    del training["train"]["init_model"]
+    training["train"].pop("init_model", None)
     training["train"]["validation"] |= {"short_every": 20, "short_episodes": 1, "long_episodes": 1}
     (tmp_path / "train.yaml").write_text(yaml.safe_dump(training))
     ablation = run(
