@@ -32,6 +32,17 @@ def check_memory(config: RunConfig) -> None:
         fail(refusal)
 
 
+def check_batched(config: RunConfig) -> None:
+    """Refuse, before the run folder exists, `train.worlds` for a loop the batch does not run
+    (MPC, the dynamic plant, a sensor model, random traffic)."""
+    if config.train.worlds is None:
+        return
+    from stack.training.batch_loop import refusal
+
+    if reason := refusal(config):
+        fail(f"train.worlds: {reason}; train.envs steps such worlds one at a time")
+
+
 WORKER_BYTES = 450 * 2**20
 """Memory one episode process takes at most [bytes] (240-440 MB measured: simulator, torch)."""
 

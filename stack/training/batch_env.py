@@ -1,0 +1,90 @@
+"""The batched training env (`train.worlds`): one `DecisionVecEnv` of N worlds in the learner's
+process that also keeps each world's episode under way as an `EpisodeRecord`, so a checkpoint
+holds it and a resumed run replays it, as the per-world envs do."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecMonitor
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
+
+from records import Command
+from stack.settings.run import RunConfig
+from stack.training.decision_env import EpisodeRecord
+from stack.training.vector_env import DecisionVecEnv, SeededWorlds
+
+
+class RecordedWorlds(SeededWorlds):
+    """`SeededWorlds` that keeps each world's generator state from before its last draw: where the
+    world's episode under way began."""
+
+    def __init__(self, worlds: int) -> None:
+        super().__init__(worlds)
+        self.starts: list[dict] = [dict(g.bit_generator.state) for g in self.generators]
+
+    def draw(self, worlds: Sequence[int]) -> list[int]:
+        for k in worlds:
+            self.starts[k] = dict(self.generators[k].bit_generator.state)
+        return super().draw(worlds)
+
+
+class TrainingWorlds(DecisionVecEnv):
+    """`DecisionVecEnv` of `worlds` worlds of `config` whose episodes under way are plain data:
+    `episode_records()` for a checkpoint, `replay(records)` to rebuild them."""
+
+    def __init__(self, config: RunConfig, worlds: int) -> None:
+        super().__init__(config, worlds)
+        self.worlds: RecordedWorlds = RecordedWorlds(worlds)
+        self.actions: list[list[int]] = [[] for _ in range(worlds)]
+
+    def reset(self) -> np.ndarray:
+        observations = super().reset()
+        self.actions = [[] for _ in range(self.num_envs)]
+        return observations
+
+    def step_wait(self) -> VecEnvStepReturn:
+        given = self._actions.tolist()
+        observations, rewards, done, infos = super().step_wait()
+        for k, action in enumerate(given):
+            self.actions[k] = [] if done[k] else [*self.actions[k], action]
+        return observations, rewards, done, infos
+
+    def episode_records(self) -> tuple[EpisodeRecord, ...]:
+        """Each world's episode under way: its generator's state when it began, the actions since."""
+        return tuple(
+            EpisodeRecord(dict(start), list(actions))
+            for start, actions in zip(self.worlds.starts, self.actions, strict=True)
+        )
+
+    def replay(self, records: Sequence[EpisodeRecord]) -> np.ndarray:
+        """Rebuild the episodes `records` describe, one per world, and return the observations:
+        each world's generator is put back where its episode began (it draws the same traffic seed)
+        and its actions drive it alone (the other worlds wait) to the same state, since a world's
+        episode depends on its seed and actions only."""
+        if len(records) != self.num_envs:
+            raise ValueError(f"{len(records)} episodes under way for {self.num_envs} worlds")
+        for generator, record in zip(self.worlds.generators, records, strict=True):
+            generator.bit_generator.state = record.generator_state
+        self.batch.reset(self.worlds.draw(range(self.num_envs)))
+        lengths = np.array([len(record.actions) for record in records])
+        for tick in range(int(lengths.max(initial=0))):
+            commands = [r.actions[tick] if tick < len(r.actions) else Command.STAY for r in records]
+            self.batch.step(commands, only=lengths > tick)
+        self.actions = [list(record.actions) for record in records]
+        return self.batch.observe()
+
+
+def batched_worlds(env: VecEnv | object) -> TrainingWorlds | None:
+    """The `TrainingWorlds` under `env`'s vec-env wrappers, or None for another env."""
+    while isinstance(env, VecEnvWrapper):
+        env = env.venv
+    return env if isinstance(env, TrainingWorlds) else None
+
+
+def batched_training_env(config: RunConfig) -> VecMonitor:
+    """`train.worlds` worlds of `config` in one env (SB3's `VecMonitor` keeps the episode returns
+    for the logs); ValueError (one line) for a config the batch does not run."""
+    assert config.train.worlds is not None, "a batched training env has its worlds"
+    return VecMonitor(TrainingWorlds(config, config.train.worlds))
