@@ -1,0 +1,112 @@
+"""Training on batched worlds (`train.worlds`): the CLI run, its refusals, resume and determinism,
+the replay ratio, and the per-world path left as it was."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from planner.learned import load_agent
+from planner.model_file import load_model
+from stack.apps.cli import app
+from stack.settings.run import build_config
+from stack.training.batch_env import TrainingWorlds, batched_worlds
+from stack.training.checkpoint import DqnCounters, read_checkpoint
+from stack.training.model import build_dqn
+from stack.training.summary import TrainSummary
+from stack.training.trainer import Trainer
+from tests.test_train import TINY
+
+WORLDS = {**TINY, "train": {**TINY["train"], "worlds": 4, "target_update_interval": 8}}
+
+
+def written(tmp_path: Path, data: dict) -> Path:
+    config = tmp_path / "worlds.yaml"
+    config.write_text(yaml.safe_dump(data))
+    return config
+
+
+def test_the_cli_trains_on_batched_worlds_with_the_action_mask(tmp_path):
+    data = {**WORLDS, "train": {**WORLDS["train"], "worlds": None, "action_mask": True, "replay_ratio": 0.5}}
+    out = tmp_path / "out"
+    args = ["train", "-c", str(written(tmp_path, data)), "--worlds", "4", "--out", str(out)]
+    result = CliRunner().invoke(app, [*args, "--no-progress"])
+    assert result.exit_code == 0, result.output
+    summary = TrainSummary.from_json(json.loads((out / "summary.json").read_text()))
+    assert summary.steps == 40 and summary.worlds == 4 and summary.validations == 5
+    assert summary.gradient_steps_per_decision == 0.5, "2 gradient steps after each step of 4 worlds"
+    assert summary.best_model is not None and summary.best_validation is not None
+    final = load_agent(out / "final.npz")
+    assert final.metadata.trained_steps == 40 and final.metadata.action_mask
+    assert load_agent(out / "best.npz").metadata.validation is not None
+
+
+def test_the_replay_ratio_sets_the_gradient_steps_and_defaults_to_today_s(tmp_path):
+    for envs in (1, 2):
+        config = build_config({**TINY, "train": {**TINY["train"], "envs": envs}})
+        assert config.train.gradient_steps == envs, "one gradient step per transition, as before"
+    config = build_config({**WORLDS, "train": {**WORLDS["train"], "replay_ratio": 0.25}})
+    env = TrainingWorlds(config, 4)
+    try:
+        assert build_dqn(config, env, tmp_path).gradient_steps == 1
+    finally:
+        env.close()
+
+
+REFUSED = [
+    ({"train.algorithm": "tabular", "train.encoding": "tabular"}, "tabular Q-learning steps one environment"),
+    ({"train.envs": 2}, "replace train.envs"),
+    ({"train.scenarios": "{overtaking: 1, dense: 1}"}, "not a train.scenarios mix"),
+    ({"train.encoding": "paper"}, "train.encoding observation, not 'paper'"),
+    ({"controller.type": "mpc"}, "batched worlds run the PID tracker"),
+    ({"train.replay_ratio": 0.1}, "a whole number of gradient steps"),
+]
+
+
+@pytest.mark.parametrize(("sets", "message"), REFUSED)
+def test_what_the_batch_does_not_run_is_refused_in_one_line(tmp_path, sets, message):
+    args = ["train", "-c", str(written(tmp_path, WORLDS)), "--out", str(tmp_path / "o"), "--no-progress"]
+    for key, value in sets.items():
+        args += ["--set", f"{key}={value}"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2 and message in result.output, result.output
+    assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+
+
+def test_a_stopped_and_resumed_batched_run_gives_the_model_of_an_uninterrupted_one(tmp_path):
+    """Stopped mid-episode, the checkpoint holds each world's episode under way (its generator's
+    state when it began and its actions): the resumed run replays them and ends with the counts and
+    the very weights of the run never stopped, which is also the same model file for the same
+    config and seed."""
+    config = build_config(WORLDS)
+    Trainer(config, tmp_path / "whole", progress=False).run()
+    trainer = Trainer(config, tmp_path / "cut", progress=False)
+    worlds = batched_worlds(trainer.env)
+    assert worlds is not None
+    real_step, calls = worlds.step_wait, []
+
+    def step_then_signal():
+        calls.append(1)
+        if len(calls) == 3:
+            trainer._request_stop(15, None)
+        return real_step()
+
+    worlds.step_wait = step_then_signal  # type: ignore[method-assign]
+    assert trainer.run().interrupted
+    stopped = read_checkpoint(load_model(tmp_path / "cut" / "checkpoint.npz", 2**31)[1], DqnCounters)
+    assert 0 < stopped.counters.num_timesteps < 40
+    assert stopped.counters.episodes is not None and len(stopped.counters.episodes) == 4
+    assert any(episode.actions for episode in stopped.counters.episodes), "stopped mid-episode"
+    resumed = Trainer.resume(tmp_path / "cut", steps=None, progress=False).run()
+    assert resumed.steps == 40 and not resumed.interrupted
+    for name in ("checkpoint.npz", "final.npz"):
+        whole_arrays, whole = load_model(tmp_path / "whole" / name, 2**31)
+        cut_arrays, cut = load_model(tmp_path / "cut" / name, 2**31)
+        if name == "checkpoint.npz":
+            assert read_checkpoint(cut, DqnCounters).counters == read_checkpoint(whole, DqnCounters).counters
+        assert cut_arrays.keys() == whole_arrays.keys()
+        for key, value in whole_arrays.items():
+            np.testing.assert_array_equal(cut_arrays[key], value, err_msg=f"{name}: {key}")
