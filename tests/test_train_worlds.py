@@ -62,6 +62,7 @@ REFUSED = [
     ({"train.scenarios": "{overtaking: 1, dense: 1}"}, "not a train.scenarios mix"),
     ({"train.encoding": "paper"}, "train.encoding observation, not 'paper'"),
     ({"controller.type": "mpc"}, "batched worlds run the PID tracker"),
+    ({"perception.features": "[ttc, ego_lateral]"}, "not perception.features ego_lateral"),
     ({"train.replay_ratio": 0.1}, "a whole number of gradient steps"),
 ]
 

@@ -34,12 +34,19 @@ def check_memory(config: RunConfig) -> None:
 
 def check_batched(config: RunConfig) -> None:
     """Refuse, before the run folder exists, `train.worlds` for a loop the batch does not run
-    (MPC, the dynamic plant, a sensor model, random traffic)."""
+    (MPC, the dynamic plant, a sensor model, random traffic) or a grid feature it does not encode."""
     if config.train.worlds is None:
         return
+    from perception.batch_grid import BATCHED_FEATURES
     from stack.training.batch_loop import refusal
 
-    if reason := refusal(config):
+    reason: str | None
+    if unbatched := [name for name in config.perception.features if name not in BATCHED_FEATURES]:
+        computed = ", ".join(BATCHED_FEATURES)
+        reason = f"the batched grid computes {computed}, not perception.features {unbatched[0]}"
+    else:
+        reason = refusal(config)
+    if reason:
         fail(f"train.worlds: {reason}; train.envs steps such worlds one at a time")
 
 
