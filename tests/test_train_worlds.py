@@ -131,3 +131,4 @@ def test_a_stopped_and_resumed_batched_run_gives_the_model_of_an_uninterrupted_o
         assert cut_arrays.keys() == whole_arrays.keys()
         for key, value in whole_arrays.items():
             np.testing.assert_array_equal(cut_arrays[key], value, err_msg=f"{name}: {key}")
+    assert (tmp_path / "cut" / "final.npz").read_bytes() == (tmp_path / "whole" / "final.npz").read_bytes()
