@@ -29,16 +29,20 @@ def written(tmp_path: Path, data: dict) -> Path:
     return config
 
 
-def test_the_cli_trains_on_batched_worlds_with_the_action_mask(tmp_path):
-    data = {**WORLDS, "train": {**WORLDS["train"], "worlds": None, "action_mask": True, "replay_ratio": 0.5}}
+def test_the_cli_trains_on_batched_worlds_with_the_action_mask_and_demonstrations(tmp_path):
+    train = {**WORLDS["train"], "worlds": None, "action_mask": True, "replay_ratio": 0.5}
+    train["demonstrations"] = {"expert": "mobil", "episodes": 2, "pretrain_steps": 5}
+    data = {**WORLDS, "train": train}
     out = tmp_path / "out"
     args = ["train", "-c", str(written(tmp_path, data)), "--worlds", "4", "--out", str(out)]
     result = CliRunner().invoke(app, [*args, "--no-progress"])
     assert result.exit_code == 0, result.output
     summary = TrainSummary.from_json(json.loads((out / "summary.json").read_text()))
-    assert summary.steps == 40 and summary.worlds == 4 and summary.validations == 5
+    assert summary.steps == 40 and summary.worlds == 4
+    assert summary.validations == 6, "the pre-trained start at step 0, then at 10, 20, 30, 40 (10: twice)"
     assert summary.gradient_steps_per_decision == 0.5, "2 gradient steps after each step of 4 worlds"
     assert summary.best_model is not None and summary.best_validation is not None
+    assert summary.demonstrations is not None and summary.demonstrations.episodes == 2
     final = load_agent(out / "final.npz")
     assert final.metadata.trained_steps == 40 and final.metadata.action_mask
     assert load_agent(out / "best.npz").metadata.validation is not None
