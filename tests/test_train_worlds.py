@@ -30,7 +30,7 @@ def written(tmp_path: Path, data: dict) -> Path:
 
 
 def test_the_cli_trains_on_batched_worlds_with_the_action_mask_and_demonstrations(tmp_path):
-    train = {**WORLDS["train"], "worlds": None, "action_mask": True, "replay_ratio": 0.5}
+    train = {**WORLDS["train"], "worlds": None, "envs": 2, "action_mask": True, "replay_ratio": 0.5}
     train["demonstrations"] = {"expert": "mobil", "episodes": 2, "pretrain_steps": 5}
     data = {**WORLDS, "train": train}
     out = tmp_path / "out"
@@ -38,7 +38,7 @@ def test_the_cli_trains_on_batched_worlds_with_the_action_mask_and_demonstration
     result = CliRunner().invoke(app, [*args, "--no-progress"])
     assert result.exit_code == 0, result.output
     summary = TrainSummary.from_json(json.loads((out / "summary.json").read_text()))
-    assert summary.steps == 40 and summary.worlds == 4
+    assert summary.steps == 40 and summary.worlds == 4, "--worlds replaces the config's 2 envs"
     assert summary.validations == 6, "the pre-trained start at step 0, then at 10, 20, 30, 40 (10: twice)"
     assert summary.gradient_steps_per_decision == 0.5, "2 gradient steps after each step of 4 worlds"
     assert summary.best_model is not None and summary.best_validation is not None

@@ -319,7 +319,7 @@ def train(
     steps: int | None = typer.Option(None, help="Total environment steps (train.steps)."),
     envs: int | None = typer.Option(None, help="Environments in parallel processes (train.envs)."),
     worlds: int | None = typer.Option(
-        None, help="Worlds stepped together in this process, one batched env (train.worlds)."
+        None, help="Worlds stepped together in this process, one batched env (train.worlds; train.envs 1)."
     ),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
     seed: int | None = typer.Option(None, help="Training seed."),
@@ -349,7 +349,7 @@ def train(
         fail("--adopt: has no effect without --resume DIR (it takes over a folder made before owner records)")
     else:
         options = {"scenario": scenario, "train__algorithm": agent, "train__envs": envs, "seed": seed}
-        options |= {"train__worlds": worlds}
+        options |= {"train__worlds": worlds} | ({"train__envs": 1} if worlds and envs is None else {})
         cfg = configured(config or TRAIN_CONFIG, sets, None, train__steps=steps, sim__plant=plant, **options)
     check_memory(cfg)
     check_batched(cfg)
