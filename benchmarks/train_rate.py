@@ -9,7 +9,8 @@ Every variant drives the one world `--scenario` (not the config's mix) seen thro
 features the batch encodes, with validation and checkpoints out of the way. The per-world ones
 train `--steps` steps (the first 500 fill the buffer, then one gradient step per transition); the
 batched one `--world-steps` with `--replay-ratio` gradient steps per decision (batch size 64 each).
-The figure is steps / wall seconds, start-up (env processes, model, replay buffer) included.
+The figure is steps / wall seconds, start-up (env processes, model, replay buffer) included, and
+steps per CPU-second of the learner and its env processes (a machine's load barely moves it).
 With `--profile`, the `vector, 2 envs` variant alone, its wall time split between waiting for the
 env processes' steps, handing them the actions, the gradient steps, the start-up (env processes,
 model) and the rest.
@@ -20,6 +21,7 @@ from __future__ import annotations
 import argparse
 import collections
 import platform
+import resource
 import tempfile
 import time
 from pathlib import Path
@@ -43,6 +45,12 @@ COMPONENTS = [
 """(label, module:Owner.method) whose wall time the profile adds up."""
 
 
+def cpu_seconds() -> float:
+    """CPU time [s] of this process and its ended children (the env worker processes)."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--steps", type=int, default=1500)
@@ -56,8 +64,8 @@ def main() -> None:
     spent: collections.Counter[str] = collections.Counter()
     if args.profile:
         instrument(spent, COMPONENTS, time.perf_counter_ns)
-    print("| backend | envs | gradient steps / decision | env steps/s | vs fast, 1 env |")
-    print("|---|---|---|---|---|")
+    print("| backend | envs | gradient steps / decision | env steps/s | vs fast, 1 env | per CPU-s |")
+    print("|---|---|---|---|---|---|")
     baseline = None
     for backend, envs, worlds in VARIANTS[2:3] if args.profile else VARIANTS:
         steps = args.world_steps if worlds else args.steps
@@ -79,13 +87,14 @@ def main() -> None:
             train__validation__long_every=never,
         )
         with tempfile.TemporaryDirectory() as out:
-            start = time.perf_counter()
+            start, cpu = time.perf_counter(), cpu_seconds()
             Trainer(config, Path(out), progress=False).run()
-            wall = time.perf_counter() - start
+            wall, cpu = time.perf_counter() - start, cpu_seconds() - cpu
         rate = steps / wall
         baseline = baseline or rate
         named = f"{worlds} batched worlds" if worlds else str(envs)
-        print(f"| {backend} | {named} | {ratio:g} | {rate:.1f} | {rate / baseline:.2f}x |", flush=True)
+        row = f"| {backend} | {named} | {ratio:g} | {rate:.1f} | {rate / baseline:.2f}x | {steps / cpu:.1f} |"
+        print(row, flush=True)
     if args.profile:
         print(f"\n| component (wall, {args.steps} steps) | s | ms per env step | share |\n|---|---|---|---|")
         seconds_in = {label: ns / 1e9 for label, ns in spent.items()}
