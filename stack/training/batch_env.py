@@ -52,7 +52,10 @@ class TrainingWorlds(DecisionVecEnv):
         given = self._actions.tolist()
         observations, rewards, done, infos = super().step_wait()
         for k, action in enumerate(given):
-            self.actions[k] = [] if done[k] else [*self.actions[k], action]
+            if done[k]:
+                self.actions[k] = []
+            else:
+                self.actions[k].append(action)
         return observations, rewards, done, infos
 
     def episode_records(self) -> tuple[EpisodeRecord, ...]:
