@@ -10,7 +10,7 @@ features the batch encodes, with validation and checkpoints out of the way. The 
 train `--steps` steps (the first 500 fill the buffer, then one gradient step per transition); the
 batched one `--world-steps` with `--replay-ratio` gradient steps per decision (batch size 64 each).
 The figure is steps / wall seconds, start-up (env processes, model, replay buffer) included, and
-steps per CPU-second of the learner and its env processes (a machine's load barely moves it).
+for the variants in one process steps per CPU-second (a machine's load barely moves it).
 With `--profile`, the `vector, 2 envs` variant alone, its wall time split between waiting for the
 env processes' steps, handing them the actions, the gradient steps, the start-up (env processes,
 model) and the rest.
@@ -46,9 +46,9 @@ COMPONENTS = [
 
 
 def cpu_seconds() -> float:
-    """CPU time [s] of this process and its ended children (the env worker processes)."""
-    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+    """CPU time [s] of this process (not of env worker processes, which the forkserver starts)."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    return own.ru_utime + own.ru_stime
 
 
 def main() -> None:
@@ -93,7 +93,8 @@ def main() -> None:
         rate = steps / wall
         baseline = baseline or rate
         named = f"{worlds} batched worlds" if worlds else str(envs)
-        row = f"| {backend} | {named} | {ratio:g} | {rate:.1f} | {rate / baseline:.2f}x | {steps / cpu:.1f} |"
+        per_cpu = f"{steps / cpu:.1f}" if envs == 1 else "-"
+        row = f"| {backend} | {named} | {ratio:g} | {rate:.1f} | {rate / baseline:.2f}x | {per_cpu} |"
         print(row, flush=True)
     if args.profile:
         print(f"\n| component (wall, {args.steps} steps) | s | ms per env step | share |\n|---|---|---|---|")
