@@ -318,6 +318,9 @@ def train(
     sets: list[str] = typer.Option([], "--set", help=SET_HELP),
     steps: int | None = typer.Option(None, help="Total environment steps (train.steps)."),
     envs: int | None = typer.Option(None, help="Environments in parallel processes (train.envs)."),
+    worlds: int | None = typer.Option(
+        None, help="Worlds stepped together in this process, one batched env (train.worlds; train.envs 1)."
+    ),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
     seed: int | None = typer.Option(None, help="Training seed."),
     scenario: str | None = typer.Option(None, help="Named world to train in (drivestack scenarios)."),
@@ -330,6 +333,7 @@ def train(
 ) -> None:
     """Train a decision agent inside the closed loop, keeping the best model by real-time validation."""
     from stack.apps.training import (
+        check_batched,
         check_init_model,
         check_memory,
         resumed_training,
@@ -338,14 +342,17 @@ def train(
     )
 
     if resume is not None:
-        given = {"--agent": agent, "--config": config, "--envs": envs, "--plant": plant, "--seed": seed}
+        given = {"--agent": agent, "--config": config, "--envs": envs, "--worlds": worlds, "--seed": seed}
+        given |= {"--plant": plant}
         cfg = resumed_training(resume, sets, steps, given | {"--scenario": scenario, "--out": out}, adopt)
     elif adopt:
         fail("--adopt: has no effect without --resume DIR (it takes over a folder made before owner records)")
     else:
         options = {"scenario": scenario, "train__algorithm": agent, "train__envs": envs, "seed": seed}
+        options |= {"train__worlds": worlds} | ({"train__envs": 1} if worlds and envs is None else {})
         cfg = configured(config or TRAIN_CONFIG, sets, None, train__steps=steps, sim__plant=plant, **options)
     check_memory(cfg)
+    check_batched(cfg)
     if not cfg.train.scenarios:
         try:
             cfg.check_one_encoding({cfg.scenario or "highway": cfg.highway}, "perception.lanes")

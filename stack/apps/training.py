@@ -32,6 +32,27 @@ def check_memory(config: RunConfig) -> None:
         fail(refusal)
 
 
+def check_batched(config: RunConfig) -> None:
+    """Refuse, before the run folder exists, `train.worlds` for a loop the batch does not run
+    (MPC, the dynamic plant, a sensor model, random traffic) in any world of the training mix, or a
+    grid feature it does not encode."""
+    if config.train.worlds is None:
+        return
+    from perception.batch_grid import BATCHED_FEATURES
+    from stack.settings.run import training_worlds
+    from stack.training.batch_loop import refusal
+
+    reason: str | None
+    if unbatched := [name for name in config.perception.features if name not in BATCHED_FEATURES]:
+        computed = ", ".join(BATCHED_FEATURES)
+        reason = f"the batched grid computes {computed}, not perception.features {unbatched[0]}"
+    else:
+        worlds = training_worlds(config)
+        reason = next((f"{name}: {why}" for name, world in worlds.items() if (why := refusal(world))), None)
+    if reason:
+        fail(f"train.worlds: {reason}; train.envs steps such worlds one at a time")
+
+
 WORKER_BYTES = 450 * 2**20
 """Memory one episode process takes at most [bytes] (240-440 MB measured: simulator, torch)."""
 

@@ -20,6 +20,10 @@ MAX_SPEED_RANGE = 100.0
 MAX_SHARE = 1e6
 """Largest share of a scenario in a mix (`train.scenarios`, `train.demonstrations.scenarios`; shares
 are relative: they are divided by their sum, which must stay finite)."""
+MAX_WORLDS = 1_024
+"""Most worlds one batched training env steps together (`train.worlds`)."""
+MAX_REPLAY_RATIO = 64.0
+"""Most gradient steps per decision collected (`train.replay_ratio`)."""
 MAX_REWARD = 1_000.0
 """Upper bound of every reward term and loss weight, by magnitude: well past any useful value,
 far from where float32 arithmetic overflows."""
@@ -113,6 +117,21 @@ class TrainConfig(Strict):
     algorithm: Annotated[LearnedAgentName, one_of("algorithm", LEARNED_AGENTS)] = "ddqn"
     steps: int = Field(50_000, ge=1, le=MAX_STEPS)
     envs: int = Field(1, ge=1, le=64, description="environments stepped in parallel processes (DDQN / DQN)")
+    worlds: int | None = Field(
+        None,
+        ge=1,
+        le=MAX_WORLDS,
+        description="worlds stepped together in the learner's process, one batched env instead of "
+        "train.envs per-world ones, split over a train.scenarios mix by share (DDQN / DQN; none: "
+        "the per-world envs)",
+    )
+    replay_ratio: float = Field(
+        1.0,
+        gt=0,
+        le=MAX_REPLAY_RATIO,
+        description="gradient steps per decision collected (per train_freq decisions): each step of "
+        "the N worlds or envs is followed by replay_ratio x N of them, a whole number",
+    )
     scenarios: ScenarioMix = Field(
         default_factory=dict,
         description="a mix of named scenarios with their shares: each training and validation "
@@ -178,3 +197,37 @@ class TrainConfig(Strict):
         if self.algorithm != "ddqn" and self.action_mask:
             raise ValueError("action_mask: only the ddqn algorithm learns with one")
         return self
+
+    @model_validator(mode="after")
+    def _batched_worlds_run_it(self) -> TrainConfig:
+        if self.worlds is not None and (refusal := self._batch_refusal()):
+            raise ValueError(f"worlds: {refusal}")
+        steps = self.replay_ratio * self.parallel
+        if abs(steps - round(steps)) > 1e-9 or round(steps) < 1:
+            raise ValueError(
+                f"replay_ratio: {self.replay_ratio:g} x {self.parallel} decisions a step must be a whole "
+                "number of gradient steps, at least 1"
+            )
+        return self
+
+    def _batch_refusal(self) -> str | None:
+        """What batched worlds do not train (one line), or None."""
+        if self.algorithm == "tabular":
+            return "tabular Q-learning steps one environment; batched worlds train ddqn or dqn"
+        if self.envs > 1:
+            return "the batched worlds replace train.envs' processes: set one of the two"
+        if self.worlds is not None and self.worlds < (mixed := len(self.scenarios)):
+            return f"{self.worlds} worlds cannot hold a mix of {mixed} scenarios, one world each"
+        if self.encoding != "observation":
+            return f"batched worlds encode train.encoding observation, not {self.encoding!r}"
+        return None
+
+    @property
+    def parallel(self) -> int:
+        """Decisions one step of the training env brings: its worlds or its envs."""
+        return self.worlds or self.envs
+
+    @property
+    def gradient_steps(self) -> int:
+        """Gradient steps after each step of the training env (`replay_ratio` x `parallel`)."""
+        return round(self.replay_ratio * self.parallel)

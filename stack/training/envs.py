@@ -9,6 +9,7 @@ import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +19,7 @@ from stable_baselines3.common.vec_env import SubprocVecEnv, VecEnv
 from planner.model_file import CHECKPOINT
 from stack.runtime.interrupts import handled_by, note_stop
 from stack.settings.run import RunConfig
+from stack.training.batch_env import batched_training_env
 from stack.training.decision_env import HierarchicalHighwayEnv
 
 
@@ -49,6 +51,16 @@ def stop_signals(handler: Callable[[int, Any], None]) -> Iterator[None]:
 def monitored_env(config: RunConfig) -> Monitor:
     """The training env (SB3's `Monitor` keeps episode returns for the logs)."""
     return Monitor(HierarchicalHighwayEnv(config))
+
+
+def training_env(config: RunConfig) -> Monitor | VecEnv:
+    """What a DDQN / DQN run steps: `train.worlds` batched worlds in this process, else one
+    monitored env here or `train.envs` of them in worker processes."""
+    if config.train.worlds is not None:
+        return batched_training_env(config)
+    if config.train.envs == 1:
+        return monitored_env(config)
+    return SubprocVecEnv([partial(worker_env, config)] * config.train.envs)
 
 
 def worker_env(config: RunConfig) -> Monitor:

@@ -61,8 +61,9 @@ class Checkpoints(BaseCallback):
 def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQN:
     """The SB3 model. Torch gets one thread: the Q-networks hold a few thousand weights, where
     more threads only add overhead and steal cores from the simulator (and one thread makes the
-    result independent of the machine). With N environments each step of the vectorised env
-    brings N transitions, so N gradient steps follow it: the replay ratio stays that of one env."""
+    result independent of the machine). With N environments or worlds each step of the vectorised
+    env brings N transitions, and `train.replay_ratio` x N gradient steps follow it (1: the replay
+    ratio of one env)."""
     th.set_num_threads(1)
     train = config.train
     algorithm = ALGORITHMS[train.algorithm]
@@ -84,7 +85,7 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
         gamma=train.gamma,
         n_steps=train.n_steps,
         train_freq=train.train_freq,
-        gradient_steps=train.envs,
+        gradient_steps=train.gradient_steps,
         target_update_interval=train.target_update_interval,
         exploration_fraction=train.exploration_fraction,
         exploration_initial_eps=train.exploration_initial_eps,

@@ -37,6 +37,14 @@ def plot_training_curve(history: list[Validation], path: Path, title: str) -> No
     plt.close(figure)
 
 
+def gradient_steps_per_decision(config: RunConfig) -> float | None:
+    """Gradient steps a DDQN / DQN run takes per decision collected; None for a table."""
+    train = config.train
+    if train.algorithm == "tabular":
+        return None
+    return train.gradient_steps / (train.parallel * train.train_freq)
+
+
 def write_training_summary(
     config: RunConfig,
     out: Path,
@@ -63,6 +71,8 @@ def write_training_summary(
         steps=steps,
         wall_time_s=wall_time_s,
         interrupted=interrupted,
+        worlds=config.train.worlds,
+        gradient_steps_per_decision=gradient_steps_per_decision(config),
         demonstrations=demonstrations,
         best_validation=kept[-1] if kept else None,
         validations=len(history),

@@ -10,11 +10,14 @@ import torch as th
 from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import VecEnv
 
 from planner.ddqn import Demonstrations, DoubleDQN
 from planner.tabular import QLearning
 from records import N_ACTIONS
+from stack.training.batch_env import batched_worlds
 from stack.training.checkpoint import DqnCounters, TabularCounters, generator_state
+from stack.training.decision_env import EpisodeRecord
 
 BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
 
@@ -50,7 +53,7 @@ def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], DqnCounters]:
         param_groups=optimizer["param_groups"],
         numpy_random=(int(numpy_random[0]), int(numpy_random[1]), float(numpy_random[2])),
         action_space_random=dict(model.action_space.np_random.bit_generator.state),
-        episodes=tuple(env.env_method("episode_record")),
+        episodes=episodes_under_way(env),
     )
     return arrays, counters
 
@@ -109,17 +112,27 @@ class ContinueEpisodes(BaseCallback):
             return
         env = self.model.get_env()
         assert env is not None, "a model in training has its env"
-        observations = [
-            env.env_method("replay_episode", record, indices=[index])[0]
-            for index, record in enumerate(self.episodes)
-        ]
-        self.model._last_obs = np.stack(observations)
+        if (worlds := batched_worlds(env)) is not None:
+            self.model._last_obs = worlds.replay(self.episodes)
+        else:
+            observations = [
+                env.env_method("replay_episode", record, indices=[index])[0]
+                for index, record in enumerate(self.episodes)
+            ]
+            self.model._last_obs = np.stack(observations)
         self.model._last_episode_starts = np.array([not record.actions for record in self.episodes])
         np.random.set_state(self.numpy_random)
         self.model.action_space.np_random.bit_generator.state = self.action_space_random
 
     def _on_step(self) -> bool:
         return True
+
+
+def episodes_under_way(env: VecEnv) -> tuple[EpisodeRecord, ...]:
+    """Each env's (or batched world's) episode under way."""
+    if (worlds := batched_worlds(env)) is not None:
+        return worlds.episode_records()
+    return tuple(env.env_method("episode_record"))
 
 
 def tabular_state(model: QLearning, env: Monitor) -> tuple[dict[str, np.ndarray], TabularCounters]:

@@ -26,9 +26,10 @@ class DemonstrationsUsed:
 class TrainSummary:
     """A training run's `summary.json`: `algorithm` and `network`, the steps it was to train
     (`target_steps`) and did (`steps`) in `wall_time_s` [s] (over every resumed part), whether a
-    signal `interrupted` it (resumable), the demonstrations it learnt from, its best (kept)
-    validation, the number of validations, the kept model's path and the training curve's file
-    (or why there is none)."""
+    signal `interrupted` it (resumable), the batched `worlds` it stepped (None: per-world envs),
+    its `gradient_steps_per_decision` (DDQN / DQN), the demonstrations it learnt from, its best
+    (kept) validation, the number of validations, the kept model's path and the training curve's
+    file (or why there is none)."""
 
     algorithm: str
     network: str
@@ -36,6 +37,8 @@ class TrainSummary:
     steps: int
     wall_time_s: float
     interrupted: bool
+    worlds: int | None = None
+    gradient_steps_per_decision: float | None = None
     demonstrations: DemonstrationsUsed | None = None
     best_validation: Validation | None
     validations: int
@@ -43,7 +46,8 @@ class TrainSummary:
     training_curve: str
 
     def to_json(self) -> dict[str, Any]:
-        """The keys of `summary.json` in their order; `demonstrations` only when there were some."""
+        """The keys of `summary.json` in their order; `worlds`, `gradient_steps_per_decision` and
+        `demonstrations` only when there are some."""
         data: dict[str, Any] = {
             "algorithm": self.algorithm,
             "network": self.network,
@@ -52,6 +56,10 @@ class TrainSummary:
             "wall_time_s": self.wall_time_s,
             "interrupted": self.interrupted,
         }
+        if self.worlds is not None:
+            data["worlds"] = self.worlds
+        if self.gradient_steps_per_decision is not None:
+            data["gradient_steps_per_decision"] = self.gradient_steps_per_decision
         if self.demonstrations is not None:
             data["demonstrations"] = asdict(self.demonstrations)
         return data | {
@@ -72,6 +80,8 @@ class TrainSummary:
             steps=data["steps"],
             wall_time_s=data["wall_time_s"],
             interrupted=data["interrupted"],
+            worlds=data.get("worlds"),
+            gradient_steps_per_decision=data.get("gradient_steps_per_decision"),
             demonstrations=_demonstrations(demonstrations) if demonstrations else None,
             best_validation=Validation.from_json(best) if best else None,
             validations=data["validations"],

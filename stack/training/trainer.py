@@ -12,7 +12,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +19,7 @@ import numpy as np
 from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ProgressBarCallback
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.vec_env import SubprocVecEnv
+from stable_baselines3.common.vec_env import VecEnv
 from tqdm import tqdm
 
 from planner.learned import export_q_network, save_q_table
@@ -38,10 +37,9 @@ from stack.training.envs import (
     EnvWorkerDied,
     StopTraining,
     close_env,
-    monitored_env,
     stop_signals,
+    training_env,
     worker_death,
-    worker_env,
 )
 from stack.training.model import Checkpoints, build_dqn, initial_model, model_metadata, warm_start
 from stack.training.report import write_training_summary
@@ -71,10 +69,7 @@ class Trainer:
         self.config, self.out, self.progress = config, Path(out), progress
         self.on_validation = on_validation
         self.start = initial_model(config)
-        envs = config.train.envs
-        self.env: Monitor | SubprocVecEnv = (
-            monitored_env(config) if envs == 1 else SubprocVecEnv([partial(worker_env, config)] * envs)
-        )
+        self.env: Monitor | VecEnv = training_env(config)
         self.validation_env = HierarchicalHighwayEnv(config)
         self.history: list[Validation] = []
         self.best: dict[str, tuple[float, float] | None] | None = None

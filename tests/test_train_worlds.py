@@ -1,0 +1,138 @@
+"""Training on batched worlds (`train.worlds`): the CLI run, its refusals, resume and determinism,
+the replay ratio, and the per-world path left as it was."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from planner.learned import load_agent
+from planner.model_file import load_model
+from stack.apps.cli import app
+from stack.settings.run import build_config
+from stack.training.batch_env import TrainingWorlds, batched_worlds, world_split
+from stack.training.checkpoint import DqnCounters, read_checkpoint
+from stack.training.model import build_dqn
+from stack.training.summary import TrainSummary
+from stack.training.trainer import Trainer
+from tests.test_train import TINY
+
+WORLDS = {**TINY, "train": {**TINY["train"], "worlds": 4, "target_update_interval": 8}}
+
+
+def written(tmp_path: Path, data: dict) -> Path:
+    config = tmp_path / "worlds.yaml"
+    config.write_text(yaml.safe_dump(data))
+    return config
+
+
+def test_the_cli_trains_on_batched_worlds_with_the_action_mask_and_demonstrations(tmp_path):
+    train = {**WORLDS["train"], "worlds": None, "envs": 2, "action_mask": True, "replay_ratio": 0.5}
+    train["demonstrations"] = {"expert": "mobil", "episodes": 2, "pretrain_steps": 5}
+    data = {**WORLDS, "train": train}
+    out = tmp_path / "out"
+    args = ["train", "-c", str(written(tmp_path, data)), "--worlds", "4", "--out", str(out)]
+    result = CliRunner().invoke(app, [*args, "--no-progress"])
+    assert result.exit_code == 0, result.output
+    summary = TrainSummary.from_json(json.loads((out / "summary.json").read_text()))
+    assert summary.steps == 40 and summary.worlds == 4, "--worlds replaces the config's 2 envs"
+    assert summary.validations == 6, "the pre-trained start at step 0, then at 10, 20, 30, 40 (10: twice)"
+    assert summary.gradient_steps_per_decision == 0.5, "2 gradient steps after each step of 4 worlds"
+    assert summary.best_model is not None and summary.best_validation is not None
+    assert summary.demonstrations is not None and summary.demonstrations.episodes == 2
+    final = load_agent(out / "final.npz")
+    assert final.metadata.trained_steps == 40 and final.metadata.action_mask
+    assert load_agent(out / "best.npz").metadata.validation is not None
+
+
+def test_the_replay_ratio_sets_the_gradient_steps_and_defaults_to_today_s(tmp_path):
+    for envs in (1, 2):
+        config = build_config({**TINY, "train": {**TINY["train"], "envs": envs}})
+        assert config.train.gradient_steps == envs, "one gradient step per transition, as before"
+    config = build_config({**WORLDS, "train": {**WORLDS["train"], "replay_ratio": 0.25}})
+    env = TrainingWorlds(config, 4)
+    try:
+        assert build_dqn(config, env, tmp_path).gradient_steps == 1
+    finally:
+        env.close()
+
+
+def test_a_mix_splits_the_worlds_by_share_one_world_each_at_least():
+    assert world_split([1.0], 64) == [64]
+    assert world_split([0.5, 0.25, 0.25], 64) == [32, 16, 16]
+    assert world_split([100.0, 1.0], 4) == [3, 1]
+    assert world_split([1.0, 1.0, 1.0], 4) == [2, 1, 1]
+    with pytest.raises(ValueError, match="cannot hold a mix of 3"):
+        world_split([1.0, 1.0, 1.0], 2)
+
+
+REFUSED = [
+    ({"train.algorithm": "tabular", "train.encoding": "tabular"}, "tabular Q-learning steps one environment"),
+    ({"train.envs": 2}, "replace train.envs"),
+    ({"train.scenarios": "{overtaking: 1, noisy: 1}"}, "noisy: batched worlds see the simulator's truth"),
+    ({"train.scenarios": "{overtaking: 1, dense: 1, jam: 1}", "train.worlds": 2}, "cannot hold a mix of 3"),
+    ({"train.encoding": "paper"}, "train.encoding observation, not 'paper'"),
+    ({"controller.type": "mpc"}, "batched worlds run the PID tracker"),
+    ({"perception.features": "[ttc, ego_lateral]"}, "not perception.features ego_lateral"),
+    ({"train.replay_ratio": 0.1}, "a whole number of gradient steps"),
+]
+
+
+@pytest.mark.parametrize(("sets", "message"), REFUSED)
+def test_what_the_batch_does_not_run_is_refused_in_one_line(tmp_path, sets, message):
+    args = ["train", "-c", str(written(tmp_path, WORLDS)), "--out", str(tmp_path / "o"), "--no-progress"]
+    for key, value in sets.items():
+        args += ["--set", f"{key}={value}"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2 and message in result.output, result.output
+    assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+
+
+MIX = {
+    **WORLDS,
+    "perception": {**TINY["perception"], "lane_code": "sides"},
+    "train": {**WORLDS["train"], "scenarios": {"lanes-3": 3.0, "lanes-5": 1.0}},
+}
+
+
+@pytest.mark.parametrize("data", [WORLDS, MIX], ids=["one-world", "mix"])
+def test_a_stopped_and_resumed_batched_run_gives_the_model_of_an_uninterrupted_one(tmp_path, data):
+    """Stopped mid-episode, the checkpoint holds each world's episode under way (its generator's
+    state when it began and its actions): the resumed run replays them and ends with the counts and
+    the very weights of the run never stopped, which is also the same model file for the same
+    config and seed. A mix splits the worlds by share, here 3 on three lanes and 1 on five."""
+    config = build_config(data)
+    Trainer(config, tmp_path / "whole", progress=False).run()
+    trainer = Trainer(config, tmp_path / "cut", progress=False)
+    worlds = batched_worlds(trainer.env)
+    assert worlds is not None
+    parts = [(part.num_envs, part.batch.config.highway.lanes_count) for part in worlds.parts]
+    assert parts == ([(3, 3), (1, 5)] if data is MIX else [(4, config.highway.lanes_count)])
+    real_step, calls = worlds.step_wait, []
+
+    def step_then_signal():
+        calls.append(1)
+        if len(calls) == 3:
+            trainer._request_stop(15, None)
+        return real_step()
+
+    worlds.step_wait = step_then_signal  # type: ignore[method-assign]
+    assert trainer.run().interrupted
+    stopped = read_checkpoint(load_model(tmp_path / "cut" / "checkpoint.npz", 2**31)[1], DqnCounters)
+    assert 0 < stopped.counters.num_timesteps < 40
+    assert stopped.counters.episodes is not None and len(stopped.counters.episodes) == 4
+    assert any(episode.actions for episode in stopped.counters.episodes), "stopped mid-episode"
+    resumed = Trainer.resume(tmp_path / "cut", steps=None, progress=False).run()
+    assert resumed.steps == 40 and not resumed.interrupted
+    for name in ("checkpoint.npz", "final.npz"):
+        whole_arrays, whole = load_model(tmp_path / "whole" / name, 2**31)
+        cut_arrays, cut = load_model(tmp_path / "cut" / name, 2**31)
+        if name == "checkpoint.npz":
+            assert read_checkpoint(cut, DqnCounters).counters == read_checkpoint(whole, DqnCounters).counters
+        assert cut_arrays.keys() == whole_arrays.keys()
+        for key, value in whole_arrays.items():
+            np.testing.assert_array_equal(cut_arrays[key], value, err_msg=f"{name}: {key}")
+    assert (tmp_path / "cut" / "final.npz").read_bytes() == (tmp_path / "whole" / "final.npz").read_bytes()
