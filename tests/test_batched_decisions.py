@@ -80,6 +80,12 @@ def assert_same_world(env: HierarchicalHighwayEnv, batch: DecisionBatch, k: int)
     assert together.count[k] == n
     for name in ("s", "d", "speed", "heading", "lane"):
         np.testing.assert_array_equal(getattr(together, name)[k, :n], getattr(alone, name)[0], err_msg=name)
+    seen, perceived = WorldBatch.of([env.loop.perceived]), batch.loop.perceived
+    assert perceived is not None
+    m = int(seen.count[0])
+    assert perceived.count[k] == m
+    for name in ("s", "d", "speed", "heading", "lane", "length", "width"):
+        np.testing.assert_array_equal(getattr(perceived, name)[k, :m], getattr(seen, name)[0], err_msg=name)
     loop, maneuver = batch.loop, env.loop.maneuver
     assert (loop.lane[k], loop.target[k]) == (maneuver.lane, maneuver.target)
     safety = env.loop.safety.counts
@@ -95,6 +101,7 @@ def assert_same_world(env: HierarchicalHighwayEnv, batch: DecisionBatch, k: int)
         ("highway-v0", 4, 5, {}),
         ("overtaking", 3, 10, {"highway": {"duration": 6}}),
         ("incident", 3, 8, {}),
+        ("noisy", 3, 10, {}),
     ],
 )
 def test_each_world_of_a_batch_is_the_decision_env_alone(scenario, worlds, decisions, extra):
@@ -111,6 +118,29 @@ def test_masked_observations_shaped_rewards_and_aborts_stay_identical():
     }
     seen = drive_both(data, 3, 12, weaving)
     assert seen["masked"] > 0
+
+
+POOR_SENSOR = {
+    "range_m": 80.0,
+    "position_noise_m": 1.5,
+    "miss_probability": 0.3,
+    "false_positives": 2.0,
+    "false_positive_range_m": 40.0,
+}
+"""A sensor that misses, drifts and imagines often: phantoms ahead brake the ego, gaps flicker."""
+
+
+def test_a_poor_sensor_seen_through_matches():
+    data = {"scenario": "dense", "perception": {"sensor": POOR_SENSOR}, "train": {"action_mask": True}}
+    seen = drive_both(data, 3, 10, weaving)
+    assert seen["masked"] > 0 and seen["emergencies"] > 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", ["noisy", "dense"])
+def test_sensed_worlds_match_over_whole_episodes(scenario):
+    seen = drive_both({"scenario": scenario, "perception": {"sensor": POOR_SENSOR}}, 4, 45, weaving)
+    assert seen["ends"] >= 4
 
 
 @pytest.mark.slow
@@ -146,7 +176,7 @@ def test_aborts_match():
         ({"controller": {"type": "mpc"}}, "PID tracker"),
         ({"controller": {"type": "stanley"}}, "PID tracker"),
         ({"sim": {"plant": "dynamic"}}, "kinematic plant"),
-        ({"scenario": "noisy"}, "sensor"),
+        ({"scenario": "noisy", "perception": {"control_on_ground_truth": True}}, "ground_truth"),
         ({"scenario": "random"}, "random_traffic"),
         ({"train": {"encoding": "binary"}}, "encoding"),
         ({"train": {"scenarios": {"dense": 1.0, "jam": 1.0}}}, "mix"),

@@ -77,18 +77,18 @@ class DecisionBatch:
 
     def permitted(self) -> np.ndarray:
         """(worlds, 3) float32: `ClosedLoop.permitted()` of every world."""
-        loop, batch = self.loop, self.loop.batch
-        assert batch is not None
+        loop, batch, perceived = self.loop, self.loop.batch, self.loop.perceived
+        assert batch is not None and perceived is not None
         return permitted_batch(
-            self.config.planner.safety, batch, loop.lane, loop.changing, batch.speed[:, 0], loop.min_speed
+            self.config.planner.safety, perceived, loop.lane, loop.changing, batch.speed[:, 0], loop.min_speed
         )
 
     def observe(self) -> np.ndarray:
         """(worlds, size) float32: what the per-world env observes in each world now."""
-        batch = self.loop.batch
-        if batch is None:
+        perceived = self.loop.perceived
+        if perceived is None:
             raise ValueError("reset the worlds before observing them")
-        encoded = observe_batch(self.grid, batch)
+        encoded = observe_batch(self.grid, perceived)
         return np.concatenate([encoded, self.permitted()], axis=1) if self.action_mask else encoded
 
     def step(self, commands: Sequence[int] | np.ndarray, only: np.ndarray | None = None) -> Decided:
@@ -109,7 +109,7 @@ class DecisionBatch:
         rewards = rewards - reward.lane_change * (acted.considered & (commands != Command.STAY))
         terminated = loop.crashed & stepped
         permitted = self.permitted()
-        encoded = observe_batch(self.grid, loop.batch) if loop.batch is not None else None
+        encoded = observe_batch(self.grid, loop.perceived) if loop.perceived is not None else None
         assert encoded is not None
         observations = np.concatenate([encoded, permitted], axis=1) if self.action_mask else encoded
         return Decided(
