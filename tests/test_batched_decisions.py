@@ -38,7 +38,8 @@ def drive_both(data: dict, worlds: int, decisions: int, policy=cycling) -> dict[
     observations = batch.reset([env.loop.seed for env in envs])
     for k, env in enumerate(envs):
         np.testing.assert_array_equal(observations[k], env._observe())
-    seen = {"ends": 0, "crashes": 0}
+    assert batch.loop.batch is not None
+    seen = {"ends": 0, "crashes": 0, "roads": len(set(batch.loop.batch.lanes_count.tolist()))}
     for decision in range(decisions):
         commands = [policy(k, decision) for k in range(worlds)]
         decided = batch.step(commands)
@@ -120,6 +121,22 @@ def test_masked_observations_shaped_rewards_and_aborts_stay_identical():
     assert seen["masked"] > 0
 
 
+RANDOM = {"scenario": "random", "perception": {"lanes": "ego", "lane_code": "sides"}}
+"""The random family, on a grid of one size on every road (its own lane and the sides)."""
+
+
+def test_random_worlds_each_draw_their_road_and_sensor_as_the_env_does():
+    seen = drive_both(RANDOM, 3, 6)
+    assert seen["roads"] >= 2
+
+
+@pytest.mark.slow
+def test_random_worlds_match_over_whole_episodes():
+    data = {**RANDOM, "highway": {"duration": 15}, "train": {"action_mask": True}}
+    seen = drive_both(data, 6, 40, weaving)
+    assert seen["roads"] >= 3 and seen["ends"] >= 6
+
+
 POOR_SENSOR = {
     "range_m": 80.0,
     "position_noise_m": 1.5,
@@ -177,7 +194,6 @@ def test_aborts_match():
         ({"controller": {"type": "stanley"}}, "PID tracker"),
         ({"sim": {"plant": "dynamic"}}, "kinematic plant"),
         ({"scenario": "noisy", "perception": {"control_on_ground_truth": True}}, "ground_truth"),
-        ({"scenario": "random"}, "random_traffic"),
         ({"train": {"encoding": "binary"}}, "encoding"),
         ({"train": {"scenarios": {"dense": 1.0, "jam": 1.0}}}, "mix"),
     ],

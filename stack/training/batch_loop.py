@@ -39,8 +39,6 @@ def refusal(config: RunConfig) -> str | None:
         return "batched worlds run the kinematic plant and a PID inverting it (sim.plant: kinematic)"
     if config.perception.control_on_ground_truth and _sensed(config):
         return "batched worlds act on what the sensor reports: perception.control_on_ground_truth must be off"
-    if config.highway.random_traffic is not None:
-        return "batched worlds run one configured traffic, not highway.random_traffic"
     return None
 
 
