@@ -35,11 +35,12 @@ def drive_both(data: dict, worlds: int, decisions: int, policy=cycling) -> dict[
     for k, env in enumerate(envs):
         env.reset(seed=k)
     batch = DecisionBatch(config, worlds)
-    observations = batch.reset([env.loop.seed for env in envs])
+    observations = batch.reset([env.loop.seed for env in envs], [member(env) for env in envs])
     for k, env in enumerate(envs):
         np.testing.assert_array_equal(observations[k], env._observe())
     assert batch.loop.batch is not None
     seen = {"ends": 0, "crashes": 0, "roads": len(set(batch.loop.batch.lanes_count.tolist()))}
+    members = {member(env) for env in envs}
     for decision in range(decisions):
         commands = [policy(k, decision) for k in range(worlds)]
         decided = batch.step(commands)
@@ -60,18 +61,25 @@ def drive_both(data: dict, worlds: int, decisions: int, policy=cycling) -> dict[
                 env.reset()
                 ended.append(k)
         if ended:
-            batch.reset_worlds(ended, [envs[k].loop.seed for k in ended])
+            members |= {member(envs[k]) for k in ended}
+            batch.reset_worlds(ended, [envs[k].loop.seed for k in ended], [member(envs[k]) for k in ended])
             observations = batch.observe()
             for k in ended:
                 np.testing.assert_array_equal(observations[k], envs[k]._observe())
     counts = batch.loop.counts.sum(axis=0)
     batch.close()
     return seen | {
+        "members": len(members),
         "lane_changes": int(counts[0]),
         "masked": int(counts[1]),
         "aborted": int(counts[2]),
         "emergencies": int(batch.loop.flags[:, 1].sum()),
     }
+
+
+def member(env: HierarchicalHighwayEnv) -> int:
+    """The mix member `env`'s episode drew (0 without a mix)."""
+    return env.world_names.index(env.world_name)
 
 
 def assert_same_world(env: HierarchicalHighwayEnv, batch: DecisionBatch, k: int) -> None:
@@ -137,6 +145,24 @@ def test_random_worlds_match_over_whole_episodes():
     assert seen["roads"] >= 3 and seen["ends"] >= 6
 
 
+MIX = {
+    "perception": {"lanes": "ego", "lane_code": "sides"},
+    "train": {"scenarios": {"dense": 2.0, "lanes-3": 1.0, "noisy": 1.0, "random": 1.0}},
+}
+"""A training mix of roads, traffic, lane counts and sensors, each world drawing its member."""
+
+
+def test_a_mix_draws_each_episode_s_member_as_the_env_does():
+    seen = drive_both(MIX, 4, 6)
+    assert seen["members"] >= 2
+
+
+@pytest.mark.slow
+def test_a_mix_matches_over_whole_episodes():
+    seen = drive_both(MIX, 6, 45, weaving)
+    assert seen["ends"] >= 6 and seen["members"] >= 3
+
+
 POOR_SENSOR = {
     "range_m": 80.0,
     "position_noise_m": 1.5,
@@ -195,7 +221,7 @@ def test_aborts_match():
         ({"sim": {"plant": "dynamic"}}, "kinematic plant"),
         ({"scenario": "noisy", "perception": {"control_on_ground_truth": True}}, "ground_truth"),
         ({"train": {"encoding": "binary"}}, "encoding"),
-        ({"train": {"scenarios": {"dense": 1.0, "jam": 1.0}}}, "mix"),
+        ({**MIX, "train": {"scenarios": {"dense": 1.0, "exit": 1.0}}}, "highway road"),
     ],
 )
 def test_what_a_batch_does_not_run_is_refused_in_one_line(data, message):

@@ -22,7 +22,7 @@ from perception.sensor import SensorModel
 from planner.batch_safety import lateral_extents
 from records.batch import WorldBatch
 from stack.loop.closed_loop import episode_sensor
-from stack.settings.run import RunConfig
+from stack.settings.run import RunConfig, training_worlds
 from stack.sim.batched.traffic import TrafficBatch
 from stack.training.batch_kernels import control, decide, settle
 
@@ -37,7 +37,7 @@ def refusal(config: RunConfig) -> str | None:
         return f"batched worlds run the PID tracker, not controller.type {control_config.type!r}"
     if config.sim.plant != "kinematic" or pid.model not in ("plant", "kinematic"):
         return "batched worlds run the kinematic plant and a PID inverting it (sim.plant: kinematic)"
-    if config.perception.control_on_ground_truth and _sensed(config):
+    if config.perception.control_on_ground_truth and any(map(_sensed, training_worlds(config).values())):
         return "batched worlds act on what the sensor reports: perception.control_on_ground_truth must be off"
     return None
 
@@ -70,7 +70,9 @@ class ClosedLoopBatch:
         if refused is not None:
             raise ValueError(refused)
         self.config = config
-        self.traffic = TrafficBatch(config.highway, worlds)
+        self.members = list(training_worlds(config).values())
+        """The worlds an episode is one of: `config` alone, or the members of its `train.scenarios`."""
+        self.traffic = TrafficBatch([member.highway for member in self.members], worlds)
         self.worlds, self.dt = worlds, self.traffic.dt
         control_config, pid, safety = config.controller, config.controller.pid, config.planner.safety
         self.min_speed = control_config.min_lane_change_speed_mps
@@ -120,7 +122,7 @@ class ClosedLoopBatch:
         self.truncated = np.zeros(worlds, dtype=bool)
         self.batch: WorldBatch | None = None
         self.perceived: WorldBatch | None = None
-        self.sensor = SensorBatch(worlds) if _sensed(config) else None
+        self.sensor = SensorBatch(worlds) if any(map(_sensed, self.members)) else None
         self.slots = np.zeros((worlds, 0), dtype=np.int64)
         self.vehicle_room = 0
 
@@ -170,19 +172,27 @@ class ClosedLoopBatch:
     def close(self) -> None:
         self.traffic.close()
 
-    def reset(self, seeds: Sequence[int]) -> None:
-        """Reset every world, world k with traffic seed `seeds[k]`."""
+    def reset(self, seeds: Sequence[int], members: Sequence[int] | None = None) -> None:
+        """Reset every world, world k with traffic seed `seeds[k]` (as mix member `members[k]`)."""
         if len(seeds) != self.worlds:
             raise ValueError(f"one seed per world: {self.worlds} worlds, {len(seeds)} seeds")
-        self.reset_worlds(range(self.worlds), seeds)
+        self.reset_worlds(range(self.worlds), seeds, members)
 
-    def reset_worlds(self, worlds: Sequence[int], seeds: Sequence[int]) -> None:
-        """Reset the worlds `worlds`, each with its traffic seed: its road spawned anew and its
-        ego's maneuver, controllers, emergency braking and counts as `ClosedLoop.reset` leaves them."""
-        for world, seed in zip(worlds, seeds, strict=True):
-            self.traffic.reset_world(world, int(seed))
+    def reset_worlds(
+        self, worlds: Sequence[int], seeds: Sequence[int], members: Sequence[int] | None = None
+    ) -> None:
+        """Reset the worlds `worlds`, each with its traffic seed and, in a mix, its member (an index
+        of `members`): its road spawned anew and its ego's maneuver, controllers, emergency braking
+        and counts as `ClosedLoop.reset` leaves them."""
+        if members is None:
+            if len(self.members) > 1:
+                raise ValueError("a train.scenarios mix: name each world's member (members=)")
+            members = [0] * len(seeds)
+        for world, seed, member in zip(worlds, seeds, members, strict=True):
+            self.traffic.reset_world(world, int(seed), int(member))
             if self.sensor is not None:
-                self.sensor.reset_world(world, SensorModel(episode_sensor(self.config, int(seed)), int(seed)))
+                sensor = episode_sensor(self.members[member], int(seed))
+                self.sensor.reset_world(world, SensorModel(sensor, int(seed)))
         self._memory(self.traffic.arrays.vehicles)
         self.batch = self.traffic.arrays.world_batch()
         reset = np.zeros(self.worlds, dtype=bool)

@@ -17,7 +17,7 @@ from planner.batch_safety import permitted_batch
 from records import Command
 from stack.settings.run import RunConfig, build_config, grid_config
 from stack.training.batch_loop import ClosedLoopBatch
-from stack.training.decision_env import with_permitted
+from stack.training.decision_env import drawn_episode, mix_shares, with_permitted
 
 
 @dataclass(frozen=True, eq=False)
@@ -39,11 +39,9 @@ class Decided:
 
 def batch_config(config: RunConfig | dict | None) -> RunConfig:
     """`config` validated as the decision MDP's, or ValueError (one line) for what a batch does not
-    run: a mix of scenarios, an encoding other than `observation` (see also `batch_loop.refusal`)."""
+    run: an encoding other than `observation` (see also `batch_loop.refusal`)."""
     if not isinstance(config, RunConfig):
         config = build_config(config or {}, "HierarchicalHighway-v0 config")
-    if config.train.scenarios:
-        raise ValueError("batched worlds run one world config, not a train.scenarios mix")
     if config.train.encoding != "observation":
         raise ValueError(f"batched worlds encode train.encoding observation, not {config.train.encoding!r}")
     return config
@@ -51,7 +49,9 @@ def batch_config(config: RunConfig | dict | None) -> RunConfig:
 
 class DecisionBatch:
     """`worlds` decision MDPs of one run config, stepped together; `reset(seeds)` with one traffic
-    seed per world, `step(commands)`, and `reset_worlds` for the worlds whose episode ended."""
+    seed per world, `step(commands)`, and `reset_worlds` for the worlds whose episode ended. With a
+    `train.scenarios` mix, each reset names each world's member too (`draw` draws both as the
+    per-world env draws them)."""
 
     def __init__(self, config: RunConfig | dict | None, worlds: int) -> None:
         self.config = config = batch_config(config)
@@ -62,18 +62,28 @@ class DecisionBatch:
         space = OccupancyGridBuilder(self.grid).space("observation", config.highway.lanes_count)
         self.observation_space: spaces.Box = with_permitted(space) if self.action_mask else space
         self.ticks = config.decision_ticks
+        self.shares = mix_shares(config)
+
+    def draw(self, generator: np.random.Generator) -> tuple[int, int]:
+        """An episode's mix member and traffic seed from a world's `generator`, as
+        `HierarchicalHighwayEnv` draws them from its own."""
+        return drawn_episode(generator, self.shares)
 
     def close(self) -> None:
         self.loop.close()
 
-    def reset(self, seeds: Sequence[int]) -> np.ndarray:
-        """Every world reset, world k with traffic seed `seeds[k]`: the observations."""
-        self.loop.reset(seeds)
+    def reset(self, seeds: Sequence[int], members: Sequence[int] | None = None) -> np.ndarray:
+        """Every world reset, world k with traffic seed `seeds[k]` (and mix member `members[k]`):
+        the observations."""
+        self.loop.reset(seeds, members)
         return self.observe()
 
-    def reset_worlds(self, worlds: Sequence[int], seeds: Sequence[int]) -> None:
-        """The worlds `worlds` reset, each with its traffic seed (`observe` reads them after)."""
-        self.loop.reset_worlds(worlds, seeds)
+    def reset_worlds(
+        self, worlds: Sequence[int], seeds: Sequence[int], members: Sequence[int] | None = None
+    ) -> None:
+        """The worlds `worlds` reset, each with its traffic seed (and mix member): `observe` reads
+        them after."""
+        self.loop.reset_worlds(worlds, seeds, members)
 
     def permitted(self) -> np.ndarray:
         """(worlds, 3) float32: `ClosedLoop.permitted()` of every world."""
