@@ -36,6 +36,8 @@ class SensorBatch:
 
     def __init__(self, worlds: int) -> None:
         self.models: list[SensorModel | None] = [None] * worlds
+        self.settings: list[tuple[float, float, float, float] | None] = [None] * worlds
+        self.ranges = np.full(worlds, np.inf)
         self.kept = np.zeros(worlds, dtype=np.int64)
         self.total = np.zeros(worlds, dtype=np.int64)
         self.source = np.zeros((worlds, 1), dtype=np.int64)
@@ -45,7 +47,20 @@ class SensorBatch:
         self.phantom_lane = np.zeros((worlds, 1), dtype=np.int64)
 
     def reset_world(self, world: int, model: SensorModel) -> None:
+        """World `world`'s episode seen through `model` (its generator as the episode seeded it)."""
+        config = model.config
         self.models[world] = model
+        self.ranges[world] = config.range_m
+        self.settings[world] = (
+            (
+                config.miss_probability,
+                config.position_noise_m,
+                config.false_positives,
+                config.false_positive_range_m,
+            )
+            if config.enabled
+            else None
+        )
 
     def _room(self, rows: int) -> None:
         more = rows - self.source.shape[1]
@@ -57,43 +72,39 @@ class SensorBatch:
 
     def _draw(self, world: int, truth: WorldBatch, in_range: np.ndarray) -> None:
         """World `world`'s draws, as `SensorModel.observe` draws them from its truth."""
-        model = self.models[world]
+        model, settings = self.models[world], self.settings[world]
         n = int(truth.count[world])
-        if model is None or not model.config.enabled:
+        if model is None or settings is None:
             self.kept[world] = self.total[world] = n
-            self._room(n)
             self.source[world, :n] = np.arange(n)
             self.noised[world] = False
             return
-        config, rng = model.config, model.rng
-        keep = in_range[world, :n] & (rng.random(n) >= config.miss_probability)
+        miss, noise_m, false_positives, reach = settings
+        rng = model.rng
+        keep = rng.random(n) >= miss
+        keep &= in_range[world, :n]
         keep[0] = True
-        rows = np.flatnonzero(keep)
+        rows = keep.nonzero()[0]
         kept = len(rows)
-        noise = (
-            rng.normal(0.0, config.position_noise_m, size=(2, kept)) if config.position_noise_m > 0 else None
-        )
-        phantoms = int(rng.poisson(config.false_positives)) if config.false_positives > 0 else 0
-        self._room(kept + phantoms)
+        noise = rng.normal(0.0, noise_m, size=(2, kept)) if noise_m > 0 else None
+        phantoms = int(rng.poisson(false_positives)) if false_positives > 0 else 0
+        if kept + phantoms > self.source.shape[1]:
+            self._room(kept + phantoms)
         self.source[world, :kept] = rows
         self.noised[world] = noise is not None
         if noise is not None:
             noise[:, 0] = 0.0
             self.noise[:, world, :kept] = noise
         if phantoms:
-            reach = config.false_positive_range_m
-            self.phantom_s[world, kept : kept + phantoms] = truth.s[world, 0] + rng.uniform(
-                -reach, reach, phantoms
-            )
-            self.phantom_lane[world, kept : kept + phantoms] = rng.integers(
-                0, int(truth.lanes_count[world]), phantoms
-            )
+            added = slice(kept, kept + phantoms)
+            self.phantom_s[world, added] = truth.s[world, 0] + rng.uniform(-reach, reach, phantoms)
+            self.phantom_lane[world, added] = rng.integers(0, int(truth.lanes_count[world]), phantoms)
         self.kept[world], self.total[world] = kept, kept + phantoms
 
     def sense(self, truth: WorldBatch, worlds: np.ndarray) -> Sensed:
         """Every world as its sensor reports it, observing the worlds flagged in `worlds` anew."""
-        ranges = np.array([model.config.range_m if model is not None else np.inf for model in self.models])
-        in_range = np.abs(truth.s - truth.s[:, :1]) <= ranges[:, None]
+        self._room(truth.s.shape[1])
+        in_range = np.abs(truth.s - truth.s[:, :1]) <= self.ranges[:, None]
         for world in np.flatnonzero(worlds).tolist():
             self._draw(world, truth, in_range)
         rows = int(self.total.max())
@@ -101,26 +112,25 @@ class SensorBatch:
         real = column < self.kept[:, None]
         phantom = (column >= self.kept[:, None]) & (column < self.total[:, None])
         source = np.where(real, self.source[:, :rows], 0)
-
-        def gathered(values: np.ndarray) -> np.ndarray:
-            return np.where(real, np.take_along_axis(values, source, axis=1), 0)
-
+        floats = np.stack([truth.s, truth.d, truth.speed, truth.heading, truth.length, truth.width])
+        s, d, speed, heading, length, width = np.where(
+            real, np.take_along_axis(floats, source[None], axis=2), 0.0
+        )
         noised = self.noised[:, None] & real
-        s, d = gathered(truth.s), gathered(truth.d)
         s = np.where(noised, s + self.noise[0, :, :rows], s)
         d = np.where(noised, d + self.noise[1, :, :rows], d)
         lanes = self.phantom_lane[:, :rows]
         phantom_d = np.take_along_axis(truth.lane_offsets, np.where(phantom, lanes, 0), axis=1)
-        ego = truth.speed[:, :1], truth.length[:, :1], truth.width[:, :1]
+        lane = np.where(real, np.take_along_axis(truth.lane, source, axis=1), 0)
         batch = replace(
             truth,
             count=self.total.copy(),
             s=np.where(phantom, self.phantom_s[:, :rows], s),
             d=np.where(phantom, phantom_d, d),
-            speed=np.where(phantom, ego[0], gathered(truth.speed)),
-            heading=gathered(truth.heading),
-            length=np.where(phantom, ego[1], gathered(truth.length)),
-            width=np.where(phantom, ego[2], gathered(truth.width)),
-            lane=np.where(phantom, lanes, gathered(truth.lane)),
+            speed=np.where(phantom, truth.speed[:, :1], speed),
+            heading=heading,
+            length=np.where(phantom, truth.length[:, :1], length),
+            width=np.where(phantom, truth.width[:, :1], width),
+            lane=np.where(phantom, lanes, lane),
         )
         return Sensed(batch, source, np.where(phantom, column - self.kept[:, None], -1))
