@@ -222,6 +222,7 @@ def test_aborts_match():
         ({"scenario": "noisy", "perception": {"control_on_ground_truth": True}}, "ground_truth"),
         ({"train": {"encoding": "binary"}}, "encoding"),
         ({**MIX, "train": {"scenarios": {"dense": 1.0, "exit": 1.0}}}, "highway road"),
+        ({"scenario": "random"}, "batched worlds: the observation encoding has a different size"),
     ],
 )
 def test_what_a_batch_does_not_run_is_refused_in_one_line(data, message):

@@ -15,7 +15,7 @@ from perception.batch_grid import observe_batch
 from perception.grid import OccupancyGridBuilder
 from planner.batch_safety import permitted_batch
 from records import Command
-from stack.settings.run import RunConfig, build_config, grid_config
+from stack.settings.run import RunConfig, build_config, grid_config, training_worlds
 from stack.training.batch_loop import ClosedLoopBatch
 from stack.training.decision_env import drawn_episode, mix_shares, with_permitted
 
@@ -39,11 +39,14 @@ class Decided:
 
 def batch_config(config: RunConfig | dict | None) -> RunConfig:
     """`config` validated as the decision MDP's, or ValueError (one line) for what a batch does not
-    run: an encoding other than `observation` (see also `batch_loop.refusal`)."""
+    run: an encoding other than `observation`, or one of another size on some road an episode
+    may draw (see also `batch_loop.refusal`)."""
     if not isinstance(config, RunConfig):
         config = build_config(config or {}, "HierarchicalHighway-v0 config")
     if config.train.encoding != "observation":
         raise ValueError(f"batched worlds encode train.encoding observation, not {config.train.encoding!r}")
+    roads = {name: world.highway for name, world in training_worlds(config).items()}
+    config.check_one_encoding(roads, "batched worlds")
     return config
 
 
