@@ -50,7 +50,10 @@ MIX = {
 """A training mix: each world's generator draws its member, then its traffic seed."""
 
 
-@pytest.mark.parametrize(("data", "worlds", "steps", "least_ends"), [(SHORT, 2, 14, 2), (MIX, 3, 5, 0)])
+@pytest.mark.parametrize(
+    ("data", "worlds", "steps", "least_ends"),
+    [(SHORT, 2, 14, 2), (MIX, 3, 5, 0), pytest.param(MIX, 3, 50, 3, marks=pytest.mark.slow)],
+)
 def test_the_sb3_vec_env_is_dummy_vec_env_of_the_per_world_env(data, worlds, steps, least_ends):
     config = build_config(data, "test")
     mine = DecisionVecEnv(config, worlds, seed=7)
@@ -75,6 +78,7 @@ def test_the_sb3_vec_env_is_dummy_vec_env_of_the_per_world_env(data, worlds, ste
                 np.testing.assert_array_equal(info["terminal_observation"], other["terminal_observation"])
                 assert info["TimeLimit.truncated"] == other["TimeLimit.truncated"]
     assert ends >= least_ends
+    assert [names[k] for k in mine.worlds.members] == [env.world_name for env in theirs.envs]  # type: ignore[attr-defined]
     mine.close()
     theirs.close()
 
