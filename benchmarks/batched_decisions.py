@@ -3,7 +3,10 @@ the decision MDP per CPU-second, N worlds stepped together against one world of 
 (`HierarchicalHighwayEnv` on the `vector` backend), measured in one sitting.
 
     .venv/bin/python benchmarks/batched_decisions.py [--scenario highway-v0] [--runs 3] [--episodes 1]
-        [--duration S] [--sizes 1,16,64,256]
+        [--duration S] [--sizes 1,16,64,256] [--sides]
+
+`--sides`: the grid of one size on every road (`lanes: ego`, `lane_code: sides`), which `random`
+(2-6 lanes an episode) needs.
 
 Both paths take seeded random commands (the agent's cost is not measured) and run whole episodes
 (`--episodes` of the scenario's duration, one decision a second), so each world's reset (highway-env
@@ -70,8 +73,11 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=1)
     parser.add_argument("--duration", type=float, help="episode duration [s] (default: the scenario's)")
     parser.add_argument("--sizes", default=",".join(map(str, SIZES)), help="batch sizes, comma-separated")
+    parser.add_argument("--sides", action="store_true", help="perception lanes: ego, lane_code: sides")
     args = parser.parse_args()
-    data = {"highway": {"duration": args.duration}} if args.duration else {}
+    data: dict = {"highway": {"duration": args.duration}} if args.duration else {}
+    if args.sides:
+        data["perception"] = {"lanes": "ego", "lane_code": "sides"}
     config = build_config(data, scenario=args.scenario)
     sizes = [int(size) for size in args.sizes.split(",")]
     steps = args.episodes * decisions_per_episode(config)

@@ -35,10 +35,12 @@ def drive_both(data: dict, worlds: int, decisions: int, policy=cycling) -> dict[
     for k, env in enumerate(envs):
         env.reset(seed=k)
     batch = DecisionBatch(config, worlds)
-    observations = batch.reset([env.loop.seed for env in envs])
+    observations = batch.reset([env.loop.seed for env in envs], [member(env) for env in envs])
     for k, env in enumerate(envs):
         np.testing.assert_array_equal(observations[k], env._observe())
-    seen = {"ends": 0, "crashes": 0}
+    assert batch.loop.batch is not None
+    seen = {"ends": 0, "crashes": 0, "roads": len(set(batch.loop.batch.lanes_count.tolist()))}
+    members = {member(env) for env in envs}
     for decision in range(decisions):
         commands = [policy(k, decision) for k in range(worlds)]
         decided = batch.step(commands)
@@ -59,18 +61,25 @@ def drive_both(data: dict, worlds: int, decisions: int, policy=cycling) -> dict[
                 env.reset()
                 ended.append(k)
         if ended:
-            batch.reset_worlds(ended, [envs[k].loop.seed for k in ended])
+            members |= {member(envs[k]) for k in ended}
+            batch.reset_worlds(ended, [envs[k].loop.seed for k in ended], [member(envs[k]) for k in ended])
             observations = batch.observe()
             for k in ended:
                 np.testing.assert_array_equal(observations[k], envs[k]._observe())
     counts = batch.loop.counts.sum(axis=0)
     batch.close()
     return seen | {
+        "members": len(members),
         "lane_changes": int(counts[0]),
         "masked": int(counts[1]),
         "aborted": int(counts[2]),
         "emergencies": int(batch.loop.flags[:, 1].sum()),
     }
+
+
+def member(env: HierarchicalHighwayEnv) -> int:
+    """The mix member `env`'s episode drew (0 without a mix)."""
+    return env.world_names.index(env.world_name)
 
 
 def assert_same_world(env: HierarchicalHighwayEnv, batch: DecisionBatch, k: int) -> None:
@@ -80,6 +89,12 @@ def assert_same_world(env: HierarchicalHighwayEnv, batch: DecisionBatch, k: int)
     assert together.count[k] == n
     for name in ("s", "d", "speed", "heading", "lane"):
         np.testing.assert_array_equal(getattr(together, name)[k, :n], getattr(alone, name)[0], err_msg=name)
+    seen, perceived = WorldBatch.of([env.loop.perceived]), batch.loop.perceived
+    assert perceived is not None
+    m = int(seen.count[0])
+    assert perceived.count[k] == m
+    for name in ("s", "d", "speed", "heading", "lane", "length", "width"):
+        np.testing.assert_array_equal(getattr(perceived, name)[k, :m], getattr(seen, name)[0], err_msg=name)
     loop, maneuver = batch.loop, env.loop.maneuver
     assert (loop.lane[k], loop.target[k]) == (maneuver.lane, maneuver.target)
     safety = env.loop.safety.counts
@@ -95,6 +110,7 @@ def assert_same_world(env: HierarchicalHighwayEnv, batch: DecisionBatch, k: int)
         ("highway-v0", 4, 5, {}),
         ("overtaking", 3, 10, {"highway": {"duration": 6}}),
         ("incident", 3, 8, {}),
+        ("noisy", 3, 10, {}),
     ],
 )
 def test_each_world_of_a_batch_is_the_decision_env_alone(scenario, worlds, decisions, extra):
@@ -111,6 +127,63 @@ def test_masked_observations_shaped_rewards_and_aborts_stay_identical():
     }
     seen = drive_both(data, 3, 12, weaving)
     assert seen["masked"] > 0
+
+
+RANDOM = {"scenario": "random", "perception": {"lanes": "ego", "lane_code": "sides"}}
+"""The random family, on a grid of one size on every road (its own lane and the sides)."""
+
+
+def test_random_worlds_each_draw_their_road_and_sensor_as_the_env_does():
+    seen = drive_both(RANDOM, 3, 6)
+    assert seen["roads"] >= 2
+
+
+@pytest.mark.slow
+def test_random_worlds_match_over_whole_episodes():
+    data = {**RANDOM, "highway": {"duration": 15}, "train": {"action_mask": True}}
+    seen = drive_both(data, 6, 40, weaving)
+    assert seen["roads"] >= 3 and seen["ends"] >= 6
+
+
+MIX = {
+    "perception": {"lanes": "ego", "lane_code": "sides"},
+    "train": {"scenarios": {"dense": 2.0, "lanes-3": 1.0, "noisy": 1.0, "random": 1.0}},
+}
+"""A training mix of roads, traffic, lane counts and sensors, each world drawing its member."""
+
+
+def test_a_mix_draws_each_episode_s_member_as_the_env_does():
+    seen = drive_both(MIX, 4, 6)
+    assert seen["members"] >= 2
+
+
+@pytest.mark.slow
+def test_a_mix_matches_over_whole_episodes():
+    seen = drive_both(MIX, 6, 45, weaving)
+    assert seen["ends"] >= 6 and seen["members"] >= 3
+
+
+POOR_SENSOR = {
+    "range_m": 80.0,
+    "position_noise_m": 1.5,
+    "miss_probability": 0.3,
+    "false_positives": 2.0,
+    "false_positive_range_m": 40.0,
+}
+"""A sensor that misses, drifts and imagines often: phantoms ahead brake the ego, gaps flicker."""
+
+
+def test_a_poor_sensor_seen_through_matches():
+    data = {"scenario": "dense", "perception": {"sensor": POOR_SENSOR}, "train": {"action_mask": True}}
+    seen = drive_both(data, 3, 10, weaving)
+    assert seen["masked"] > 0 and seen["emergencies"] > 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", ["noisy", "dense"])
+def test_sensed_worlds_match_over_whole_episodes(scenario):
+    seen = drive_both({"scenario": scenario, "perception": {"sensor": POOR_SENSOR}}, 4, 45, weaving)
+    assert seen["ends"] >= 4
 
 
 @pytest.mark.slow
@@ -146,10 +219,10 @@ def test_aborts_match():
         ({"controller": {"type": "mpc"}}, "PID tracker"),
         ({"controller": {"type": "stanley"}}, "PID tracker"),
         ({"sim": {"plant": "dynamic"}}, "kinematic plant"),
-        ({"scenario": "noisy"}, "sensor"),
-        ({"scenario": "random"}, "random_traffic"),
+        ({"scenario": "noisy", "perception": {"control_on_ground_truth": True}}, "ground_truth"),
         ({"train": {"encoding": "binary"}}, "encoding"),
-        ({"train": {"scenarios": {"dense": 1.0, "jam": 1.0}}}, "mix"),
+        ({**MIX, "train": {"scenarios": {"dense": 1.0, "exit": 1.0}}}, "highway road"),
+        ({"scenario": "random"}, "batched worlds: the observation encoding has a different size"),
     ],
 )
 def test_what_a_batch_does_not_run_is_refused_in_one_line(data, message):

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from perception.batch_grid import observe_batch
+from perception.batch_sensor import SensorBatch
 from perception.grid import OccupancyGridBuilder
+from perception.sensor import SensorConfig, SensorModel
 from planner.agents import decide
 from planner.batch_safety import permitted_batch
 from planner.lookahead_scene import lookahead_grid
@@ -132,3 +134,38 @@ def test_the_safety_layer_s_verdicts_for_a_batch_are_each_loop_s():
     np.testing.assert_array_equal(batched, np.array(expected))
     refused = (batched[:, [0, 2]] == 0) & ~np.array(changing)[:, None]
     assert refused.any() and (batched[:, [0, 2]] == 1).any() and any(changing), "every verdict occurs"
+
+
+SENSORS = {
+    "noisy's": SensorConfig(position_noise_m=0.5, miss_probability=0.05, false_positives=0.2),
+    "poor, short range": SensorConfig(
+        range_m=60.0, position_noise_m=2.0, miss_probability=0.4, false_positives=3.0
+    ),
+    "phantoms only": SensorConfig(false_positives=1.5, false_positive_range_m=100.0),
+    "perfect": SensorConfig(),
+}
+
+
+def assert_reported(sensed: WorldBatch, reported: list[WorldState]) -> None:
+    expected = WorldBatch.of(reported)
+    np.testing.assert_array_equal(sensed.count, expected.count)
+    for name in ("s", "d", "speed", "heading", "length", "width", "lane"):
+        for k, n in enumerate(expected.count.tolist()):
+            np.testing.assert_array_equal(getattr(sensed, name)[k, :n], getattr(expected, name)[k, :n], name)
+
+
+@pytest.mark.parametrize("sensor", SENSORS.values(), ids=SENSORS.keys())
+def test_batched_sensor_reports_what_each_world_s_sensor_model_reports(worlds, sensor):
+    """Every world observed, then every other one (the rest keep their last report)."""
+    alone = [SensorModel(sensor, seed) for seed in range(len(worlds))]
+    together = SensorBatch(len(worlds))
+    for seed in range(len(worlds)):
+        together.reset_world(seed, SensorModel(sensor, seed))
+    truth = WorldBatch.of(worlds)
+    reported = [model.observe(world) for model, world in zip(alone, worlds, strict=True)]
+    assert_reported(together.sense(truth, np.ones(len(worlds), dtype=bool)).batch, reported)
+    odd = np.arange(len(worlds)) % 2 == 1
+    reported = [alone[k].observe(world) if odd[k] else reported[k] for k, world in enumerate(worlds)]
+    sensed = together.sense(truth, odd).batch
+    assert_reported(sensed, reported)
+    assert (sensed.count != truth.count).any() == sensor.enabled

@@ -11,7 +11,7 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 import stack  # noqa: F401 - registers the envs
-from stack.settings.run import build_config
+from stack.settings.run import build_config, training_worlds
 from stack.training.decision_env import HierarchicalHighwayEnv
 from stack.training.vector_env import DecisionVecEnv, HierarchicalHighwayVectorEnv
 
@@ -43,15 +43,29 @@ def test_make_vec_vector_entry_point_is_the_sync_vector_env_of_the_per_world_env
     synced.close()
 
 
-def test_the_sb3_vec_env_is_dummy_vec_env_of_the_per_world_env():
-    config = build_config(SHORT, "test")
-    mine = DecisionVecEnv(config, 2, seed=7)
-    theirs = DummyVecEnv([lambda: HierarchicalHighwayEnv(config)] * 2)
+MIX = {
+    "perception": {"lanes": "ego", "lane_code": "sides"},
+    "train": {"scenarios": {"dense": 1.0, "lanes-3": 1.0, "random": 1.0}},
+}
+"""A training mix: each world's generator draws its member, then its traffic seed."""
+
+
+@pytest.mark.parametrize(
+    ("data", "worlds", "steps", "least_ends"),
+    [(SHORT, 2, 14, 2), (MIX, 3, 5, 0), pytest.param(MIX, 3, 50, 3, marks=pytest.mark.slow)],
+)
+def test_the_sb3_vec_env_is_dummy_vec_env_of_the_per_world_env(data, worlds, steps, least_ends):
+    config = build_config(data, "test")
+    mine = DecisionVecEnv(config, worlds, seed=7)
+    theirs = DummyVecEnv([lambda: HierarchicalHighwayEnv(config)] * worlds)
     theirs.seed(7)
     np.testing.assert_array_equal(mine.reset(), theirs.reset())
+    drawn = [env.world_name for env in theirs.envs]  # type: ignore[attr-defined]
+    names = list(training_worlds(config))
+    assert [names[k] for k in mine.worlds.members] == drawn
     rng, ends = np.random.default_rng(1), 0
-    for _ in range(14):
-        actions = rng.integers(0, 3, 2)
+    for _ in range(steps):
+        actions = rng.integers(0, 3, worlds)
         mine.step_async(actions)
         theirs.step_async(actions)
         found, expected = mine.step_wait(), theirs.step_wait()
@@ -63,7 +77,8 @@ def test_the_sb3_vec_env_is_dummy_vec_env_of_the_per_world_env():
                 ends += 1
                 np.testing.assert_array_equal(info["terminal_observation"], other["terminal_observation"])
                 assert info["TimeLimit.truncated"] == other["TimeLimit.truncated"]
-    assert ends >= 2
+    assert ends >= least_ends
+    assert [names[k] for k in mine.worlds.members] == [env.world_name for env in theirs.envs]  # type: ignore[attr-defined]
     mine.close()
     theirs.close()
 

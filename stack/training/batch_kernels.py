@@ -135,6 +135,7 @@ def control(
     lane_heading: np.ndarray,
     extent: np.ndarray,
     lane_width: float,
+    slots: np.ndarray,
     maneuver: tuple[np.ndarray, ...],
     controller: tuple[np.ndarray, ...],
     safety: np.ndarray,
@@ -148,7 +149,8 @@ def control(
     leaders, the lateral PID, the adaptive cruise and emergency braking; writes (acceleration
     [m/s^2], steering [rad]) to `actuation` (W, 2). `settings`: nominal duration [s], minimum
     speed [m/s], tan of the largest course, set speed [m/s]; `gains`: the lateral PID's five, the
-    cruise's six, emergency braking's three (`EgoState`)."""
+    cruise's six, emergency braking's three (`EgoState`); `slots` (W, rows): the column of emergency
+    braking's memory each row's vehicle keeps (its id, as the per-world memory keys it)."""
     count, s, d, speed, length, width, _, _, offsets = columns
     lane, target, coef, profile, clock, counts = maneuver
     lateral, speed_pi, seen, seen_speed, seen_slowing, flags = controller
@@ -186,6 +188,8 @@ def control(
             lanes, n, s[w], d[w], speed[w], heading[w], length[w], width[w], extent[w], offsets[w],
             lane_width, lane_heading[w], gaps, speeds, rows,
         )  # fmt: skip
+        for k in range(found):
+            rows[k] = slots[w, rows[k]]
         ego_speed = speed[w, 0]
         relative = heading[w, 0] - lane_heading[w]
         curvature = (lane_heading[w] - lane_heading[w]) / 2.0

@@ -1,6 +1,6 @@
-"""N closed loops stepped together: `ClosedLoopBatch`, the batched `ClosedLoop.act` of the default
-run config (PID tracker, kinematic plant, the sensor off), each world the loop the `vector`
-backend drives alone, bit for bit.
+"""N closed loops stepped together: `ClosedLoopBatch`, the batched `ClosedLoop.act` of a run config
+on the PID tracker and the kinematic plant, each world the loop the `vector` backend drives alone,
+bit for bit, through its sensor model when it has one (`perception.batch_sensor`).
 
 The traffic is a `TrafficBatch`; the ego's side of every tick (reference, leaders, PID, cruise,
 emergency braking, the safety layer's abort, road departure) is three compiled calls over all the
@@ -17,27 +17,34 @@ from dataclasses import dataclass
 import numpy as np
 
 from controllers.reference import lane_keeping
+from perception.batch_sensor import SensorBatch
+from perception.sensor import SensorModel
 from planner.batch_safety import lateral_extents
 from records.batch import WorldBatch
-from stack.settings.run import RunConfig
+from stack.loop.closed_loop import episode_sensor
+from stack.settings.run import RunConfig, training_worlds
 from stack.sim.batched.traffic import TrafficBatch
 from stack.training.batch_kernels import control, decide, settle
 
 
 def refusal(config: RunConfig) -> str | None:
     """Why a batch cannot run `config` (one line), or None: the batch drives the PID tracker on
-    the kinematic plant, without sensor noise, on the highway road; MPC and plug-in controllers,
-    the dynamic plant and a sensor model run one world at a time (`HierarchicalHighwayEnv`)."""
+    the kinematic plant, its layers acting on what the sensor reports; MPC and plug-in
+    controllers, the dynamic plant and the ground-truth ablation run one world at a time
+    (`HierarchicalHighwayEnv`)."""
     control_config, pid = config.controller, config.controller.pid
     if control_config.type != "pid":
         return f"batched worlds run the PID tracker, not controller.type {control_config.type!r}"
     if config.sim.plant != "kinematic" or pid.model not in ("plant", "kinematic"):
         return "batched worlds run the kinematic plant and a PID inverting it (sim.plant: kinematic)"
-    if config.perception.sensor.enabled:
-        return "batched worlds see the simulator's truth: perception.sensor must be off"
-    if config.highway.random_traffic is not None:
-        return "batched worlds run one configured traffic, not highway.random_traffic"
+    if config.perception.control_on_ground_truth and any(map(_sensed, training_worlds(config).values())):
+        return "batched worlds act on what the sensor reports: perception.control_on_ground_truth must be off"
     return None
+
+
+def _sensed(config: RunConfig) -> bool:
+    """Whether some episode of `config` may be seen through a sensor model (`episode_sensor`)."""
+    return config.perception.sensor.enabled or config.highway.random_traffic is not None
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,14 +62,17 @@ class ActedBatch:
 
 class ClosedLoopBatch:
     """`worlds` closed loops of one run config: `reset_world`, `act(commands, ticks)`, the worlds as
-    the layers see them (`batch`, a `WorldBatch`), and per world `crashed` / `done`."""
+    the layers see them (`batch`, the truth, and `perceived`, what the sensor reports: both
+    `WorldBatch`), and per world `crashed` / `done`."""
 
     def __init__(self, config: RunConfig, worlds: int) -> None:
         refused = refusal(config)
         if refused is not None:
             raise ValueError(refused)
         self.config = config
-        self.traffic = TrafficBatch(config.highway, worlds)
+        self.members = list(training_worlds(config).values())
+        """The worlds an episode is one of: `config` alone, or the members of its `train.scenarios`."""
+        self.traffic = TrafficBatch([member.highway for member in self.members], worlds)
         self.worlds, self.dt = worlds, self.traffic.dt
         control_config, pid, safety = config.controller, config.controller.pid, config.planner.safety
         self.min_speed = control_config.min_lane_change_speed_mps
@@ -111,16 +121,43 @@ class ClosedLoopBatch:
         self.crashed = np.zeros(worlds, dtype=bool)
         self.truncated = np.zeros(worlds, dtype=bool)
         self.batch: WorldBatch | None = None
+        self.perceived: WorldBatch | None = None
+        self.sensor = SensorBatch(worlds) if any(map(_sensed, self.members)) else None
+        self.slots = np.zeros((worlds, 0), dtype=np.int64)
+        self.vehicle_room = 0
 
-    def _memory(self, vehicles: int) -> None:
+    def _memory(self, vehicles: int, phantoms: int = 0) -> None:
         """Emergency braking's per-vehicle memory (`seen`, `seen_speed`, `seen_slowing`: what it
-        kept of each vehicle row, `controllers.batch_control.emergency_acceleration`), grown to room
-        for `vehicles` a world."""
-        more = vehicles - self.seen.shape[1]
+        kept of each vehicle, `controllers.batch_control.emergency_acceleration`), grown to room
+        for `vehicles` a world (a column per snapshot row), then `phantoms` (a column per false
+        positive's id)."""
+        more = vehicles - self.vehicle_room
+        if more > 0:
+            at = [self.vehicle_room] * more
+            self.seen = np.insert(self.seen, at, 0, axis=1)
+            self.seen_speed = np.insert(self.seen_speed, at, 0.0, axis=1)
+            self.seen_slowing = np.insert(self.seen_slowing, at, 0.0, axis=1)
+            self.vehicle_room = vehicles
+        more = self.vehicle_room + phantoms - self.seen.shape[1]
         if more > 0:
             self.seen = np.pad(self.seen, ((0, 0), (0, more)))
             self.seen_speed = np.pad(self.seen_speed, ((0, 0), (0, more)))
             self.seen_slowing = np.pad(self.seen_slowing, ((0, 0), (0, more)))
+
+    def _sense(self, worlds: np.ndarray) -> None:
+        """`perceived` and the memory `slots` of its rows after a frame: the worlds flagged observed
+        anew through their sensors (the truth itself without a sensor model)."""
+        batch = self.batch
+        assert batch is not None
+        if self.sensor is None:
+            self.perceived = batch
+            if self.slots.shape[1] != batch.s.shape[1]:
+                self.slots = np.tile(np.arange(batch.s.shape[1]), (self.worlds, 1))
+            return
+        sensed = self.sensor.sense(batch, worlds)
+        self._memory(self.traffic.arrays.vehicles, int(sensed.phantom.max(initial=-1)) + 1)
+        self.perceived = sensed.batch
+        self.slots = np.where(sensed.phantom >= 0, self.vehicle_room + sensed.phantom, sensed.source)
 
     @property
     def done(self) -> np.ndarray:
@@ -135,19 +172,32 @@ class ClosedLoopBatch:
     def close(self) -> None:
         self.traffic.close()
 
-    def reset(self, seeds: Sequence[int]) -> None:
-        """Reset every world, world k with traffic seed `seeds[k]`."""
+    def reset(self, seeds: Sequence[int], members: Sequence[int] | None = None) -> None:
+        """Reset every world, world k with traffic seed `seeds[k]` (as mix member `members[k]`)."""
         if len(seeds) != self.worlds:
             raise ValueError(f"one seed per world: {self.worlds} worlds, {len(seeds)} seeds")
-        self.reset_worlds(range(self.worlds), seeds)
+        self.reset_worlds(range(self.worlds), seeds, members)
 
-    def reset_worlds(self, worlds: Sequence[int], seeds: Sequence[int]) -> None:
-        """Reset the worlds `worlds`, each with its traffic seed: its road spawned anew and its
-        ego's maneuver, controllers, emergency braking and counts as `ClosedLoop.reset` leaves them."""
-        for world, seed in zip(worlds, seeds, strict=True):
-            self.traffic.reset_world(world, int(seed))
+    def reset_worlds(
+        self, worlds: Sequence[int], seeds: Sequence[int], members: Sequence[int] | None = None
+    ) -> None:
+        """Reset the worlds `worlds`, each with its traffic seed and, in a mix, its member (an index
+        of `members`): its road spawned anew and its ego's maneuver, controllers, emergency braking
+        and counts as `ClosedLoop.reset` leaves them."""
+        if members is None:
+            if len(self.members) > 1:
+                raise ValueError("a train.scenarios mix: name each world's member (members=)")
+            members = [0] * len(seeds)
+        for world, seed, member in zip(worlds, seeds, members, strict=True):
+            self.traffic.reset_world(world, int(seed), int(member))
+            if self.sensor is not None:
+                sensor = episode_sensor(self.members[member], int(seed))
+                self.sensor.reset_world(world, SensorModel(sensor, int(seed)))
         self._memory(self.traffic.arrays.vehicles)
         self.batch = self.traffic.arrays.world_batch()
+        reset = np.zeros(self.worlds, dtype=bool)
+        reset[list(worlds)] = True
+        self._sense(reset)
         arrays = self.traffic.arrays
         for world in worlds:
             lane = int(arrays.lane[world, arrays.ego[world]])
@@ -171,8 +221,8 @@ class ClosedLoopBatch:
         `only`, the others left as they are): world k's command `commands[k]` (`Command` values)
         through the safety layer to the maneuver, then `ticks` control ticks, or fewer in a world
         whose episode ends first. Every world acting must be live (reset once done)."""
-        batch = self.batch
-        if batch is None:
+        batch, perceived = self.batch, self.perceived
+        if batch is None or perceived is None:
             raise ValueError("reset the worlds before acting")
         traffic, worlds = self.traffic, self.worlds
         live = np.ones(worlds, dtype=bool) if only is None else np.array(only, dtype=bool)
@@ -183,25 +233,35 @@ class ClosedLoopBatch:
         if commands.shape != (self.worlds,) or ((commands < 0) | (commands > 2)).any():
             raise ValueError(f"one command (0, 1, 2) per world: {self.worlds} worlds, got {commands!r}")
         outcome = np.zeros((worlds, 3), dtype=np.int64)
-        reach = (batch.lane_width + lateral_extents(batch)) / 2
+        reach = (perceived.lane_width + lateral_extents(perceived)) / 2
         decide(
-            live, commands, traffic.time, batch.columns(), reach, batch.lane_width,
+            live, commands, traffic.time, perceived.columns(), reach, perceived.lane_width,
             self._maneuver(), self.safety, self.settings, outcome,
         )  # fmt: skip
-        controller = (self.lateral, self.speed_pi, self.seen, self.seen_speed, self.seen_slowing, self.flags)
         actuation = np.zeros((worlds, 2))
         speeds = np.zeros((worlds, ticks))
         ran = np.zeros(worlds, dtype=np.int64)
         for tick in range(ticks):
             if not live.any():
                 break
+            controller = (
+                self.lateral,
+                self.speed_pi,
+                self.seen,
+                self.seen_speed,
+                self.seen_slowing,
+                self.flags,
+            )
             control(
-                live, traffic.time, batch.columns(), batch.heading, batch.lane_heading,
-                lateral_extents(batch), batch.lane_width, self._maneuver(), controller,
+                live, traffic.time, perceived.columns(), perceived.heading, perceived.lane_heading,
+                lateral_extents(perceived), perceived.lane_width, self.slots, self._maneuver(), controller,
                 self.safety, self.settings, self.gains, self.dt, actuation,
             )  # fmt: skip
             ended = traffic.step(actuation[:, 0], actuation[:, 1], live)
             batch = self.batch = traffic.arrays.world_batch()
+            self._sense(live)
+            perceived = self.perceived
+            assert perceived is not None
             settle(
                 live, traffic.time, batch.columns(), batch.heading, batch.lane_heading,
                 batch.lane_width, self._maneuver(), self.departed,

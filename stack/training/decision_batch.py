@@ -15,9 +15,9 @@ from perception.batch_grid import observe_batch
 from perception.grid import OccupancyGridBuilder
 from planner.batch_safety import permitted_batch
 from records import Command
-from stack.settings.run import RunConfig, build_config, grid_config
+from stack.settings.run import RunConfig, build_config, grid_config, training_worlds
 from stack.training.batch_loop import ClosedLoopBatch
-from stack.training.decision_env import with_permitted
+from stack.training.decision_env import drawn_episode, mix_shares, with_permitted
 
 
 @dataclass(frozen=True, eq=False)
@@ -39,19 +39,22 @@ class Decided:
 
 def batch_config(config: RunConfig | dict | None) -> RunConfig:
     """`config` validated as the decision MDP's, or ValueError (one line) for what a batch does not
-    run: a mix of scenarios, an encoding other than `observation` (see also `batch_loop.refusal`)."""
+    run: an encoding other than `observation`, or one of another size on some road an episode
+    may draw (see also `batch_loop.refusal`)."""
     if not isinstance(config, RunConfig):
         config = build_config(config or {}, "HierarchicalHighway-v0 config")
-    if config.train.scenarios:
-        raise ValueError("batched worlds run one world config, not a train.scenarios mix")
     if config.train.encoding != "observation":
         raise ValueError(f"batched worlds encode train.encoding observation, not {config.train.encoding!r}")
+    roads = {name: world.highway for name, world in training_worlds(config).items()}
+    config.check_one_encoding(roads, "batched worlds")
     return config
 
 
 class DecisionBatch:
     """`worlds` decision MDPs of one run config, stepped together; `reset(seeds)` with one traffic
-    seed per world, `step(commands)`, and `reset_worlds` for the worlds whose episode ended."""
+    seed per world, `step(commands)`, and `reset_worlds` for the worlds whose episode ended. With a
+    `train.scenarios` mix, each reset names each world's member too (`draw` draws both as the
+    per-world env draws them)."""
 
     def __init__(self, config: RunConfig | dict | None, worlds: int) -> None:
         self.config = config = batch_config(config)
@@ -62,33 +65,43 @@ class DecisionBatch:
         space = OccupancyGridBuilder(self.grid).space("observation", config.highway.lanes_count)
         self.observation_space: spaces.Box = with_permitted(space) if self.action_mask else space
         self.ticks = config.decision_ticks
+        self.shares = mix_shares(config)
+
+    def draw(self, generator: np.random.Generator) -> tuple[int, int]:
+        """An episode's mix member and traffic seed from a world's `generator`, as
+        `HierarchicalHighwayEnv` draws them from its own."""
+        return drawn_episode(generator, self.shares)
 
     def close(self) -> None:
         self.loop.close()
 
-    def reset(self, seeds: Sequence[int]) -> np.ndarray:
-        """Every world reset, world k with traffic seed `seeds[k]`: the observations."""
-        self.loop.reset(seeds)
+    def reset(self, seeds: Sequence[int], members: Sequence[int] | None = None) -> np.ndarray:
+        """Every world reset, world k with traffic seed `seeds[k]` (and mix member `members[k]`):
+        the observations."""
+        self.loop.reset(seeds, members)
         return self.observe()
 
-    def reset_worlds(self, worlds: Sequence[int], seeds: Sequence[int]) -> None:
-        """The worlds `worlds` reset, each with its traffic seed (`observe` reads them after)."""
-        self.loop.reset_worlds(worlds, seeds)
+    def reset_worlds(
+        self, worlds: Sequence[int], seeds: Sequence[int], members: Sequence[int] | None = None
+    ) -> None:
+        """The worlds `worlds` reset, each with its traffic seed (and mix member): `observe` reads
+        them after."""
+        self.loop.reset_worlds(worlds, seeds, members)
 
     def permitted(self) -> np.ndarray:
         """(worlds, 3) float32: `ClosedLoop.permitted()` of every world."""
-        loop, batch = self.loop, self.loop.batch
-        assert batch is not None
+        loop, batch, perceived = self.loop, self.loop.batch, self.loop.perceived
+        assert batch is not None and perceived is not None
         return permitted_batch(
-            self.config.planner.safety, batch, loop.lane, loop.changing, batch.speed[:, 0], loop.min_speed
+            self.config.planner.safety, perceived, loop.lane, loop.changing, batch.speed[:, 0], loop.min_speed
         )
 
     def observe(self) -> np.ndarray:
         """(worlds, size) float32: what the per-world env observes in each world now."""
-        batch = self.loop.batch
-        if batch is None:
+        perceived = self.loop.perceived
+        if perceived is None:
             raise ValueError("reset the worlds before observing them")
-        encoded = observe_batch(self.grid, batch)
+        encoded = observe_batch(self.grid, perceived)
         return np.concatenate([encoded, self.permitted()], axis=1) if self.action_mask else encoded
 
     def step(self, commands: Sequence[int] | np.ndarray, only: np.ndarray | None = None) -> Decided:
@@ -109,7 +122,7 @@ class DecisionBatch:
         rewards = rewards - reward.lane_change * (acted.considered & (commands != Command.STAY))
         terminated = loop.crashed & stepped
         permitted = self.permitted()
-        encoded = observe_batch(self.grid, loop.batch) if loop.batch is not None else None
+        encoded = observe_batch(self.grid, loop.perceived) if loop.perceived is not None else None
         assert encoded is not None
         observations = np.concatenate([encoded, permitted], axis=1) if self.action_mask else encoded
         return Decided(

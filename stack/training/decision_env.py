@@ -42,6 +42,19 @@ def with_permitted(space: spaces.Box) -> spaces.Box:
     return spaces.Box(np.concatenate([space.low, low]), np.concatenate([space.high, high]))
 
 
+def mix_shares(config: RunConfig) -> np.ndarray:
+    """The chance an episode is each world of `training_worlds(config)` (its `train.scenarios`
+    weights normalised; one world: 1)."""
+    mix = config.train.scenarios
+    return np.array(list(mix.values()) if mix else [1.0]) / sum(mix.values() or [1.0])
+
+
+def drawn_episode(rng: np.random.Generator, shares: np.ndarray) -> tuple[int, int]:
+    """An episode's world (an index of `shares`) and traffic seed, drawn from `rng` in this order."""
+    world = int(rng.choice(len(shares), p=shares)) if len(shares) > 1 else 0
+    return world, drawn_seed(rng, TRAINING_SEED_FLOOR)
+
+
 class HierarchicalHighwayEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"]}
     observation_space: spaces.Box
@@ -52,9 +65,9 @@ class HierarchicalHighwayEnv(gym.Env):
             config = build_config(config or {}, "HierarchicalHighway-v0 config")
         self.config = config
         self.render_mode = render_mode
-        mix, worlds = config.train.scenarios, training_worlds(config)
+        worlds = training_worlds(config)
         self.worlds, self.world_names = list(worlds.values()), list(worlds)
-        self.shares = np.array(list(mix.values()) if mix else [1.0]) / sum(mix.values() or [1.0])
+        self.shares = mix_shares(config)
         self.adapters = [
             HighwayAdapter(
                 world.highway, world.sim.backend, render=render_mode == "rgb_array", plant=world.sim.plant
@@ -84,10 +97,10 @@ class HierarchicalHighwayEnv(gym.Env):
 
     def _begin_episode(self, generator_state: dict) -> None:
         self.episode = EpisodeRecord(generator_state, [])
-        world = int(self.np_random.choice(len(self.loops), p=self.shares)) if len(self.loops) > 1 else 0
+        world, seed = drawn_episode(self.np_random, self.shares)
         self.adapter, self.loop = self.adapters[world], self.loops[world]
         self.world_name = self.world_names[world]
-        self.loop.reset(drawn_seed(self.np_random, TRAINING_SEED_FLOOR))
+        self.loop.reset(seed)
 
     def episode_record(self) -> EpisodeRecord:
         """The episode under way as data (for a checkpoint)."""

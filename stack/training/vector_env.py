@@ -30,10 +30,13 @@ from stack.training.decision_batch import Decided, DecisionBatch
 
 class SeededWorlds:
     """One generator per world, seeded as gymnasium seeds a vector env's k-th env (`seed + k`, or
-    fresh entropy with None), drawing each episode's traffic seed as `HierarchicalHighwayEnv` does."""
+    fresh entropy with None), drawing each episode's mix member (kept in `members`) and traffic
+    seed as `HierarchicalHighwayEnv` does (`batch.draw`)."""
 
-    def __init__(self, worlds: int) -> None:
+    def __init__(self, worlds: int, batch: DecisionBatch | None = None) -> None:
         self.generators = [seeding.np_random()[0] for _ in range(worlds)]
+        self.batch = batch
+        self.members = [0] * worlds
 
     def seed(self, seed: int | Sequence[int | None] | None) -> None:
         worlds = len(self.generators)
@@ -47,8 +50,14 @@ class SeededWorlds:
                 self.generators[k] = seeding.np_random(value)[0]
 
     def draw(self, worlds: Sequence[int]) -> list[int]:
-        """The next traffic seed of each world in `worlds`."""
-        return [drawn_seed(self.generators[k], TRAINING_SEED_FLOOR) for k in worlds]
+        """The next traffic seed of each world in `worlds` (its member drawn first, in a mix)."""
+        if self.batch is None:
+            return [drawn_seed(self.generators[k], TRAINING_SEED_FLOOR) for k in worlds]
+        seeds = []
+        for k in worlds:
+            self.members[k], seed = self.batch.draw(self.generators[k])
+            seeds.append(seed)
+        return seeds
 
 
 def world_infos(batch: DecisionBatch, decided: Decided | None = None) -> dict[str, np.ndarray]:
@@ -96,14 +105,15 @@ class HierarchicalHighwayVectorEnv(VectorEnv):
         self.single_action_space = spaces.Discrete(N_ACTIONS)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
-        self.worlds = SeededWorlds(num_envs)
+        self.worlds = SeededWorlds(num_envs, self.batch)
         self._autoreset = np.zeros(num_envs, dtype=bool)
 
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         self.worlds.seed(seed)
-        observations = self.batch.reset(self.worlds.draw(range(self.num_envs)))
+        seeds = self.worlds.draw(range(self.num_envs))
+        observations = self.batch.reset(seeds, self.worlds.members)
         self._autoreset[:] = False
         return observations, _with_masks(world_infos(self.batch))
 
@@ -111,7 +121,8 @@ class HierarchicalHighwayVectorEnv(VectorEnv):
         resetting = self._autoreset.copy()
         ended = np.flatnonzero(resetting).tolist()
         if ended:
-            self.batch.reset_worlds(ended, self.worlds.draw(ended))
+            seeds = self.worlds.draw(ended)
+            self.batch.reset_worlds(ended, seeds, [self.worlds.members[k] for k in ended])
         commands = np.where(resetting, 1, np.asarray(actions, dtype=np.int64))
         decided = self.batch.step(commands, only=~resetting)
         self._autoreset = decided.terminated | decided.truncated
@@ -142,16 +153,17 @@ class DecisionVecEnv(VecEnv):
     def __init__(self, config: RunConfig | dict | None, num_envs: int, seed: int | None = None) -> None:
         self.batch = DecisionBatch(config, num_envs)
         super().__init__(num_envs, self.batch.observation_space, spaces.Discrete(N_ACTIONS))
-        self.worlds = SeededWorlds(num_envs)
+        self.worlds = SeededWorlds(num_envs, self.batch)
         self.worlds.seed(seed)
         self._actions = np.ones(num_envs, dtype=np.int64)
 
     def reset(self) -> np.ndarray:
-        seeds = [seed for seed in self._seeds]
-        if any(seed is not None for seed in seeds):
-            self.worlds.seed(seeds)
+        given = [seed for seed in self._seeds]
+        if any(seed is not None for seed in given):
+            self.worlds.seed(given)
         self._reset_seeds()
-        observations = self.batch.reset(self.worlds.draw(range(self.num_envs)))
+        seeds = self.worlds.draw(range(self.num_envs))
+        observations = self.batch.reset(seeds, self.worlds.members)
         self.reset_infos = [{} for _ in range(self.num_envs)]
         return observations
 
@@ -175,7 +187,8 @@ class DecisionVecEnv(VecEnv):
             for k in ended:
                 infos[k]["terminal_observation"] = observations[k].copy()
                 infos[k]["TimeLimit.truncated"] = bool(decided.truncated[k])
-            self.batch.reset_worlds(ended, self.worlds.draw(ended))
+            seeds = self.worlds.draw(ended)
+            self.batch.reset_worlds(ended, seeds, [self.worlds.members[k] for k in ended])
             observations = observations.copy()
             observations[ended] = self.batch.observe()[ended]
         return observations, decided.rewards.astype(np.float32), done, infos

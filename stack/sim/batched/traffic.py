@@ -59,23 +59,35 @@ class Ended:
 class TrafficBatch:
     """N worlds of one highway config (`HighwayConfig`, kinematic ego), stepped together."""
 
-    def __init__(self, highway: HighwayConfig, worlds: int) -> None:
+    def __init__(self, highway: HighwayConfig | Sequence[HighwayConfig], worlds: int) -> None:
+        """`worlds` worlds of `highway`, or of the configs `highway` lists (a mix: each world's
+        reset names its member; they must share one frame rate)."""
         if worlds < 1:
             raise ValueError(f"a batch needs at least one world, got {worlds}")
-        if highway.road != "highway":
-            raise ValueError(
-                f"batched traffic runs the highway road, not {highway.road!r} (a curved exit lane)"
-            )
-        self.highway = highway
+        members = [highway] if isinstance(highway, HighwayConfig) else list(highway)
+        for member in members:
+            if member.road != "highway":
+                raise ValueError(
+                    f"batched traffic runs the highway road, not {member.road!r} (a curved exit lane)"
+                )
+        self.highway = members[0]
         self.worlds = worlds
-        self._spawner = gym.make(HIGHWAY, config=env_config(highway), disable_env_checker=True)
-        self._env = cast(ScenarioTraffic, self._spawner.unwrapped)
-        config = self._env.config
+        self._spawners = [
+            gym.make(HIGHWAY, config=env_config(member), disable_env_checker=True) for member in members
+        ]
+        self._envs = [cast(ScenarioTraffic, spawner.unwrapped) for spawner in self._spawners]
+        configs = [env.config for env in self._envs]
+        rates = {(config["simulation_frequency"], config["policy_frequency"]) for config in configs}
+        if len(rates) != 1:
+            raise ValueError("batched worlds share one simulation and policy frequency")
+        config = configs[0]
         self.dt = 1 / config["simulation_frequency"]
         self._time_step = 1 / config["policy_frequency"]
-        self._duration = config["duration"]
-        if config["offroad_terminal"]:
+        self._durations = [float(config["duration"]) for config in configs]
+        if any(config["offroad_terminal"] for config in configs):
             raise ValueError("batched traffic ends an episode on the ego's crash or the duration only")
+        self._member = np.zeros(worlds, dtype=np.int64)
+        self._duration = np.full(worlds, self._durations[0])
         self._rngs: list[np.random.Generator | None] = [None] * worlds
         self._lane_tables: list[LaneTable | None] = [None] * worlds
         self._networks: list[RoadNetwork | None] = [None] * worlds
@@ -87,7 +99,8 @@ class TrafficBatch:
         self._pending_reset = np.zeros(worlds, dtype=bool)
 
     def close(self) -> None:
-        self._spawner.close()
+        for spawner in self._spawners:
+            spawner.close()
 
     def reset(self, seeds: Sequence[int]) -> None:
         """Reset every world, world k with `seeds[k]`."""
@@ -96,15 +109,19 @@ class TrafficBatch:
         for world, seed in enumerate(seeds):
             self.reset_world(world, seed)
 
-    def reset_world(self, world: int, seed: int | None = None) -> None:
-        """Spawn world `world` anew: with `seed`, or (None) with the generator its last reset left."""
-        env = self._env
+    def reset_world(self, world: int, seed: int | None = None, member: int | None = None) -> None:
+        """Spawn world `world` anew: with `seed`, or (None) with the generator its last reset left;
+        as the mix's `member` (an index of the configs given), or as the member it was."""
+        if member is not None:
+            self._member[world] = member
+            self._duration[world] = self._durations[member]
+        env = self._envs[int(self._member[world])]
         if seed is None:
             rng = self._rngs[world]
             if rng is None:
                 raise ValueError(f"world {world} has no generator yet: reset it with a seed first")
             env._np_random = rng
-        self._spawner.reset(seed=seed)
+        self._spawners[int(self._member[world])].reset(seed=seed)
         self._rngs[world] = env.np_random
         if type(env.vehicle) is not Vehicle:
             raise ValueError("batched traffic drives a kinematic ego (plant: kinematic)")
