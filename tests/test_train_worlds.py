@@ -13,7 +13,7 @@ from planner.learned import load_agent
 from planner.model_file import load_model
 from stack.apps.cli import app
 from stack.settings.run import build_config
-from stack.training.batch_env import TrainingWorlds, batched_worlds, world_split
+from stack.training.batch_env import TrainingWorlds, batched_worlds
 from stack.training.checkpoint import DqnCounters, read_checkpoint
 from stack.training.model import build_dqn
 from stack.training.summary import TrainSummary
@@ -60,20 +60,9 @@ def test_the_replay_ratio_sets_the_gradient_steps_and_defaults_to_today_s(tmp_pa
         env.close()
 
 
-def test_a_mix_splits_the_worlds_by_share_one_world_each_at_least():
-    assert world_split([1.0], 64) == [64]
-    assert world_split([0.5, 0.25, 0.25], 64) == [32, 16, 16]
-    assert world_split([100.0, 1.0], 4) == [3, 1]
-    assert world_split([1.0, 1.0, 1.0], 4) == [2, 1, 1]
-    with pytest.raises(ValueError, match="cannot hold a mix of 3"):
-        world_split([1.0, 1.0, 1.0], 2)
-
-
 REFUSED = [
     ({"train.algorithm": "tabular", "train.encoding": "tabular"}, "tabular Q-learning steps one environment"),
     ({"train.envs": 2}, "replace train.envs"),
-    ({"train.scenarios": "{overtaking: 1, noisy: 1}"}, "noisy: batched worlds see the simulator's truth"),
-    ({"train.scenarios": "{overtaking: 1, dense: 1, jam: 1}", "train.worlds": 2}, "cannot hold a mix of 3"),
     ({"train.encoding": "paper"}, "train.encoding observation, not 'paper'"),
     ({"controller.type": "mpc"}, "batched worlds run the PID tracker"),
     ({"perception.features": "[ttc, ego_lateral]"}, "not perception.features ego_lateral"),
@@ -103,14 +92,14 @@ def test_a_stopped_and_resumed_batched_run_gives_the_model_of_an_uninterrupted_o
     """Stopped mid-episode, the checkpoint holds each world's episode under way (its generator's
     state when it began and its actions): the resumed run replays them and ends with the counts and
     the very weights of the run never stopped, which is also the same model file for the same
-    config and seed. A mix splits the worlds by share, here 3 on three lanes and 1 on five."""
+    config and seed. In a mix each world's episode draws its member (three or five lanes) as the
+    per-world env does."""
     config = build_config(data)
     Trainer(config, tmp_path / "whole", progress=False).run()
     trainer = Trainer(config, tmp_path / "cut", progress=False)
     worlds = batched_worlds(trainer.env)
     assert worlds is not None
-    parts = [(part.num_envs, part.batch.config.highway.lanes_count) for part in worlds.parts]
-    assert parts == ([(3, 3), (1, 5)] if data is MIX else [(4, config.highway.lanes_count)])
+    assert worlds.num_envs == 4 and len(worlds.batch.shares) == (2 if data is MIX else 1)
     real_step, calls = worlds.step_wait, []
 
     def step_then_signal():

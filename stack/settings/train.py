@@ -122,8 +122,8 @@ class TrainConfig(Strict):
         ge=1,
         le=MAX_WORLDS,
         description="worlds stepped together in the learner's process, one batched env instead of "
-        "train.envs per-world ones, split over a train.scenarios mix by share (DDQN / DQN; none: "
-        "the per-world envs)",
+        "train.envs per-world ones, each episode drawing its world of a train.scenarios mix as they "
+        "do (DDQN / DQN; none: the per-world envs)",
     )
     replay_ratio: float = Field(
         1.0,
@@ -216,8 +216,6 @@ class TrainConfig(Strict):
             return "tabular Q-learning steps one environment; batched worlds train ddqn or dqn"
         if self.envs > 1:
             return "the batched worlds replace train.envs' processes: set one of the two"
-        if self.worlds is not None and self.worlds < (mixed := len(self.scenarios)):
-            return f"{self.worlds} worlds cannot hold a mix of {mixed} scenarios, one world each"
         if self.encoding != "observation":
             return f"batched worlds encode train.encoding observation, not {self.encoding!r}"
         return None
