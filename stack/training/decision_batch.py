@@ -96,13 +96,16 @@ class DecisionBatch:
             self.config.planner.safety, perceived, loop.lane, loop.changing, batch.speed[:, 0], loop.min_speed
         )
 
-    def observe(self) -> np.ndarray:
-        """(worlds, size) float32: what the per-world env observes in each world now."""
+    def observe(self, permitted: np.ndarray | None = None) -> np.ndarray:
+        """(worlds, size) float32: what the per-world env observes in each world now (`permitted`:
+        `self.permitted()` when the caller already holds it)."""
         perceived = self.loop.perceived
         if perceived is None:
             raise ValueError("reset the worlds before observing them")
         encoded = observe_batch(self.grid, perceived)
-        return np.concatenate([encoded, self.permitted()], axis=1) if self.action_mask else encoded
+        if not self.action_mask:
+            return encoded
+        return np.concatenate([encoded, self.permitted() if permitted is None else permitted], axis=1)
 
     def step(self, commands: Sequence[int] | np.ndarray, only: np.ndarray | None = None) -> Decided:
         """One decision period in every world (`HierarchicalHighwayEnv.step` of each), or in those
@@ -122,11 +125,8 @@ class DecisionBatch:
         rewards = rewards - reward.lane_change * (acted.considered & (commands != Command.STAY))
         terminated = loop.crashed & stepped
         permitted = self.permitted()
-        encoded = observe_batch(self.grid, loop.perceived) if loop.perceived is not None else None
-        assert encoded is not None
-        observations = np.concatenate([encoded, permitted], axis=1) if self.action_mask else encoded
         return Decided(
-            observations,
+            self.observe(permitted),
             np.where(stepped, rewards, 0.0),
             terminated,
             loop.done & stepped & ~terminated,
