@@ -7,7 +7,8 @@ divisions, floor and ceil give numpy's bits in numba); the one transcendental ca
 each vehicle's heading to the lane, runs in numpy over the whole batch, as the per-world code runs
 it over one world. Where two vehicles at exactly the same distance from the ego cover one cell, the
 per-world code keeps the one numpy's sort puts last and this kernel the one with the higher row; no
-simulated world has shown such a tie. The `traffic` and `ego_lateral` features are not batched.
+simulated world has shown such a tie. `ego_lateral` runs per world in numpy, as `perception.features`
+runs it (its sine, cosine and arctangent on one world's scalars); the `traffic` feature is not batched.
 """
 
 from __future__ import annotations
@@ -17,10 +18,10 @@ import math
 import numpy as np
 
 from common.compiled import Kernel
-from records import FEATURES, MAX_SPEED, SIDE_LANES_SEEN, GridConfig
+from records import EGO_HEADING_SCALE, FEATURES, MAX_SPEED, SIDE_LANES_SEEN, GridConfig
 from records.batch import WorldBatch
 
-BATCHED_FEATURES = tuple(name for name in FEATURES if name in ("relative_speed", "ttc", "ego_speed"))
+BATCHED_FEATURES = tuple(name for name in FEATURES if name != "traffic")
 """The grid features the batched encoding computes (in the observation's order)."""
 
 
@@ -59,6 +60,8 @@ def observe_batch(config: GridConfig, batch: WorldBatch) -> np.ndarray:
         )
     longitudinal = batch.speed * np.cos(batch.heading - batch.lane_heading[:, None])
     observations = np.zeros((batch.worlds, size), dtype=np.float32)
+    with_lateral = "ego_lateral" in config.features
+    lateral = ego_lateral(batch) if with_lateral else np.zeros((batch.worlds, 2), dtype=np.float32)
     _observe(
         observations,
         batch.columns(),
@@ -73,6 +76,8 @@ def observe_batch(config: GridConfig, batch: WorldBatch) -> np.ndarray:
         "relative_speed" in config.features,
         "ttc" in config.features,
         "ego_speed" in config.features,
+        with_lateral,
+        lateral,
         config.speed_scale,
         config.ttc_horizon,
         config.lane_code == "sides",
@@ -80,6 +85,20 @@ def observe_batch(config: GridConfig, batch: WorldBatch) -> np.ndarray:
         SIDE_LANES_SEEN,
     )
     return observations
+
+
+def ego_lateral(batch: WorldBatch) -> np.ndarray:
+    """(worlds, 2) float32: each world's `features.ego_lateral`, the ego's offset from its lane's
+    centre / lane width and its heading error / EGO_HEADING_SCALE, in [-1, 1]. A batch's lanes are
+    parallel straight lanes of one segment, so the ego's lane has lane 0's heading."""
+    lateral = np.empty((batch.worlds, 2), dtype=np.float32)
+    for w in range(batch.worlds):
+        ego_lane = int(batch.lane[w, 0])
+        offset = (batch.d[w, 0] - batch.lane_offsets[w, ego_lane]) / batch.lane_width
+        error = batch.heading[w, 0] - batch.lane_heading[w]
+        heading = np.arctan2(np.sin(error), np.cos(error))
+        lateral[w] = np.clip([offset, heading / EGO_HEADING_SCALE], -1, 1).astype(np.float32)
+    return lateral
 
 
 @Kernel
@@ -97,6 +116,8 @@ def _observe(
     with_relative_speed: bool,
     with_ttc: bool,
     with_ego_speed: bool,
+    with_ego_lateral: bool,
+    ego_lateral: np.ndarray,
     speed_scale: float,
     ttc_horizon: float,
     sides: bool,
@@ -180,6 +201,10 @@ def _observe(
         if with_ego_speed:
             out[w, cursor] = min(max(speed[w, 0] / max_speed, 0.0), 1.0)
             cursor += 1
+        if with_ego_lateral:
+            out[w, cursor] = ego_lateral[w, 0]
+            out[w, cursor + 1] = ego_lateral[w, 1]
+            cursor += 2
         if sides:
             out[w, cursor] = min(ego_lane, side_lanes_seen) / side_lanes_seen
             out[w, cursor + 1] = min(lanes - 1 - ego_lane, side_lanes_seen) / side_lanes_seen

@@ -103,6 +103,15 @@ def assert_same_world(env: HierarchicalHighwayEnv, batch: DecisionBatch, k: int)
     assert loop.crashed[k] == env.loop.crashed
 
 
+STAGE_GRID = {
+    "lanes": "ego",
+    "lateral_reach": 2,
+    "lane_code": "sides",
+    "features": ["relative_speed", "ttc", "ego_speed", "ego_lateral"],
+}
+"""The shipped stage configs' grid: the ego's offset and heading error in the lane show a change."""
+
+
 @pytest.mark.parametrize(
     ("scenario", "worlds", "decisions", "extra"),
     [
@@ -111,6 +120,7 @@ def assert_same_world(env: HierarchicalHighwayEnv, batch: DecisionBatch, k: int)
         ("overtaking", 3, 10, {"highway": {"duration": 6}}),
         ("incident", 3, 8, {}),
         ("noisy", 3, 10, {}),
+        ("overtaking", 3, 10, {"perception": STAGE_GRID}),
     ],
 )
 def test_each_world_of_a_batch_is_the_decision_env_alone(scenario, worlds, decisions, extra):

@@ -25,7 +25,10 @@ from stack.sim.highway import HighwayAdapter
 GRIDS = {
     "default": GridConfig(),
     "ego rows, every batched feature": GridConfig(
-        lanes="ego", lateral_reach=2, features=("relative_speed", "ttc", "ego_speed"), lane_code="sides"
+        lanes="ego",
+        lateral_reach=2,
+        features=("relative_speed", "ttc", "ego_speed", "ego_lateral"),
+        lane_code="sides",
     ),
     "centre cells only": GridConfig(
         lanes="ego", footprint=False, features=("ttc", "relative_speed"), lane_code="sides", cell_length=3.0
@@ -95,7 +98,7 @@ def test_a_world_alone_and_in_any_batch_is_encoded_the_same(worlds):
 def test_what_the_batch_cannot_encode_is_refused_in_one_line(worlds):
     batch = WorldBatch.of(worlds)
     with pytest.raises(
-        ValueError, match="the batched grid computes relative_speed, ttc, ego_speed, not traffic"
+        ValueError, match="the batched grid computes relative_speed, ttc, ego_speed, ego_lateral, not traffic"
     ):
         observe_batch(GridConfig(lanes="ego", lane_code="sides", features=("traffic",)), batch)
     with pytest.raises(ValueError, match="need lanes: ego and lane_code: sides"):

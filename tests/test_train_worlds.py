@@ -65,7 +65,7 @@ REFUSED = [
     ({"train.envs": 2}, "replace train.envs"),
     ({"train.encoding": "paper"}, "train.encoding observation, not 'paper'"),
     ({"controller.type": "mpc"}, "batched worlds run the PID tracker"),
-    ({"perception.features": "[ttc, ego_lateral]"}, "not perception.features ego_lateral"),
+    ({"perception.features": "[ttc, traffic]"}, "not perception.features traffic"),
     ({"train.replay_ratio": 0.1}, "a whole number of gradient steps"),
 ]
 
