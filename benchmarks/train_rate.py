@@ -1,6 +1,7 @@
 """Training throughput: environment steps (decisions) per second of `drivestack train` (DDQN, the
 shipped network), on the `fast` and `vector` backends with 1 and 2 environments and on 64 batched
-worlds (`train.worlds`), in one sitting.
+worlds (`train.worlds`) in the learner's process and split over 2 worker processes (`train.envs`
+2), in one sitting.
 
     .venv/bin/python benchmarks/train_rate.py [--steps 1500] [--world-steps 20000]
         [--replay-ratio 0.0625] [--scenario overtaking] [--profile]
@@ -8,9 +9,10 @@ worlds (`train.worlds`), in one sitting.
 Every variant drives the one world `--scenario` (not the config's mix) seen through the grid
 features the batch encodes, with validation and checkpoints out of the way. The per-world ones
 train `--steps` steps (the first 500 fill the buffer, then one gradient step per transition); the
-batched one `--world-steps` with `--replay-ratio` gradient steps per decision (batch size 64 each).
+batched ones `--world-steps` with `--replay-ratio` gradient steps per decision (batch size 64 each).
 The figure is steps / wall seconds, start-up (env processes, model, replay buffer) included, and
-for the variants in one process steps per CPU-second (a machine's load barely moves it).
+for the variants in one process steps per CPU-second (a machine's load barely moves it; '-' where
+env processes work too, whose CPU time this process does not see).
 With `--profile`, the `vector, 2 envs` variant alone, its wall time split between waiting for the
 env processes' steps, handing them the actions, the gradient steps, the start-up (env processes,
 model) and the rest.
@@ -34,8 +36,14 @@ from stack.training.trainer import Trainer
 
 WORLDS = 64
 """Worlds of the batched variant."""
-VARIANTS = [("fast", 1, None), ("vector", 1, None), ("vector", 2, None), ("vector", 1, WORLDS)]
-"""(backend, envs, batched worlds or None)."""
+VARIANTS = [
+    ("fast", 1, None),
+    ("vector", 1, None),
+    ("vector", 2, None),
+    ("vector", 1, WORLDS),
+    ("vector", 2, WORLDS),
+]
+"""(backend, env processes, batched worlds or None)."""
 COMPONENTS = [
     ["waiting for the env processes' steps", "stable_baselines3.common.vec_env:SubprocVecEnv.step_wait"],
     ["handing the env processes the actions", "stable_baselines3.common.vec_env:SubprocVecEnv.step_async"],
@@ -92,7 +100,9 @@ def main() -> None:
             wall, cpu = time.perf_counter() - start, cpu_seconds() - cpu
         rate = steps / wall
         baseline = baseline or rate
-        named = f"{worlds} batched worlds" if worlds else str(envs)
+        named = str(envs)
+        if worlds:
+            named = f"{worlds} batched worlds" + (f" in {envs} processes" if envs > 1 else "")
         per_cpu = f"{steps / cpu:.1f}" if envs == 1 else "-"
         row = f"| {backend} | {named} | {ratio:g} | {rate:.1f} | {rate / baseline:.2f}x | {per_cpu} |"
         print(row, flush=True)

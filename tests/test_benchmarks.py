@@ -41,7 +41,8 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
     assert "p95" in run("lookahead_cost.py", "--episodes", "1", "--duration", "2", "--scenarios", "jam")
     assert "| control ticks" in run("oracle_cost.py", "--profile", "--seeds", "0", "--duration", "2")
     assert "| all |" in run("record_cost.py", "--seeds", "0", "--duration", "2", "--repeats", "1")
-    assert "| 64 batched worlds |" in run("train_rate.py", "--steps", "510", "--world-steps", "640")
+    rates = run("train_rate.py", "--steps", "510", "--world-steps", "640")
+    assert "| 64 batched worlds |" in rates and "| 64 batched worlds in 2 processes | 0.0625 |" in rates
     assert "| batch 4 |" in run("batched_decisions.py", "--runs", "1", "--duration", "2", "--sizes", "1,4")
     assert "of them between floors of stack: 0\n" in run("config_path.py")
     training = yaml.safe_load((ROOT / "configs" / "train" / "ddqn-stage1.yaml").read_text())

@@ -18,6 +18,7 @@ from stack.training.checkpoint import DqnCounters, read_checkpoint
 from stack.training.model import build_dqn
 from stack.training.summary import TrainSummary
 from stack.training.trainer import Trainer
+from stack.training.world_shards import WorldShards
 from tests.test_train import TINY
 
 WORLDS = {**TINY, "train": {**TINY["train"], "worlds": 4, "target_update_interval": 8}}
@@ -62,7 +63,7 @@ def test_the_replay_ratio_sets_the_gradient_steps_and_defaults_to_today_s(tmp_pa
 
 REFUSED = [
     ({"train.algorithm": "tabular", "train.encoding": "tabular"}, "tabular Q-learning steps one environment"),
-    ({"train.envs": 2}, "replace train.envs"),
+    ({"train.envs": 3}, "train.worlds 4 does not split evenly over train.envs 3 processes"),
     ({"train.encoding": "paper"}, "train.encoding observation, not 'paper'"),
     ({"controller.type": "mpc"}, "batched worlds run the PID tracker"),
     ({"perception.features": "[ttc, traffic]"}, "not perception.features traffic"),
@@ -87,19 +88,21 @@ MIX = {
 }
 
 
-@pytest.mark.parametrize("data", [WORLDS, MIX], ids=["one-world", "mix"])
-def test_a_stopped_and_resumed_batched_run_gives_the_model_of_an_uninterrupted_one(tmp_path, data):
+@pytest.mark.parametrize(
+    ("data", "envs"), [(WORLDS, 1), (MIX, 1), (MIX, 2)], ids=["one-world", "mix", "mix-on-2-shards"]
+)
+def test_a_stopped_and_resumed_batched_run_gives_the_model_of_an_uninterrupted_one(tmp_path, data, envs):
     """Stopped mid-episode, the checkpoint holds each world's episode under way (its generator's
     state when it began and its actions): the resumed run replays them and ends with the counts and
     the very weights of the run never stopped, which is also the same model file for the same
     config and seed. In a mix each world's episode draws its member (three or five lanes) as the
-    per-world env does."""
-    config = build_config(data)
+    per-world env does. Split over two processes (`envs: 2`), the shards' episodes are gathered
+    into the checkpoint and each replays its own."""
+    config = build_config({**data, "train": {**data["train"], "envs": envs}})
     Trainer(config, tmp_path / "whole", progress=False).run()
     trainer = Trainer(config, tmp_path / "cut", progress=False)
     worlds = batched_worlds(trainer.env)
-    assert worlds is not None
-    assert worlds.num_envs == 4 and len(worlds.batch.shares) == (2 if data is MIX else 1)
+    assert isinstance(worlds, TrainingWorlds if envs == 1 else WorldShards) and worlds.num_envs == 4
     real_step, calls = worlds.step_wait, []
 
     def step_then_signal():

@@ -319,7 +319,9 @@ def train(
     steps: int | None = typer.Option(None, help="Total environment steps (train.steps)."),
     envs: int | None = typer.Option(None, help="Environments in parallel processes (train.envs)."),
     worlds: int | None = typer.Option(
-        None, help="Worlds stepped together in this process, one batched env (train.worlds; train.envs 1)."
+        None,
+        help="Worlds stepped together as one batched env (train.worlds): in this process, or split "
+        "over --envs processes (train.envs 1 unless --envs is given).",
     ),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
     seed: int | None = typer.Option(None, help="Training seed."),

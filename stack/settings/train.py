@@ -116,14 +116,21 @@ class TrainConfig(Strict):
 
     algorithm: Annotated[LearnedAgentName, one_of("algorithm", LEARNED_AGENTS)] = "ddqn"
     steps: int = Field(50_000, ge=1, le=MAX_STEPS)
-    envs: int = Field(1, ge=1, le=64, description="environments stepped in parallel processes (DDQN / DQN)")
+    envs: int = Field(
+        1,
+        ge=1,
+        le=64,
+        description="processes stepping the environments in parallel (DDQN / DQN): one per-world env "
+        "each, or with train.worlds a shard of worlds / envs batched worlds each",
+    )
     worlds: int | None = Field(
         None,
         ge=1,
         le=MAX_WORLDS,
-        description="worlds stepped together in the learner's process, one batched env instead of "
-        "train.envs per-world ones, each episode drawing its world of a train.scenarios mix as they "
-        "do (DDQN / DQN; none: the per-world envs)",
+        description="worlds stepped together as one batched env, each episode drawing its world of a "
+        "train.scenarios mix as the per-world envs do: in the learner's process (train.envs 1) or "
+        "split evenly over train.envs worker processes, the same run either way (DDQN / DQN; none: "
+        "the per-world envs)",
     )
     replay_ratio: float = Field(
         1.0,
@@ -214,8 +221,8 @@ class TrainConfig(Strict):
         """What batched worlds do not train (one line), or None."""
         if self.algorithm == "tabular":
             return "tabular Q-learning steps one environment; batched worlds train ddqn or dqn"
-        if self.envs > 1:
-            return "the batched worlds replace train.envs' processes: set one of the two"
+        if self.worlds and self.worlds % self.envs:
+            return f"train.worlds {self.worlds} does not split evenly over train.envs {self.envs} processes"
         if self.encoding != "observation":
             return f"batched worlds encode train.encoding observation, not {self.encoding!r}"
         return None

@@ -1,13 +1,14 @@
-"""The batched training env (`train.worlds`): N worlds of the training mix in the learner's
-process, one `DecisionVecEnv` keeping its worlds' episodes under way as `EpisodeRecord`s, so a
-checkpoint holds them and a resumed run replays them, as the per-world envs do."""
+"""The batched training env (`train.worlds`): N worlds of the training mix, one `DecisionVecEnv`
+keeping its worlds' episodes under way as `EpisodeRecord`s, so a checkpoint holds them and a
+resumed run replays them, as the per-world envs do (`world_shards` splits them over processes)."""
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Sequence
 
 import numpy as np
-from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecMonitor
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
 from records import Command
@@ -31,7 +32,20 @@ class RecordedWorlds(SeededWorlds):
         return super().draw(worlds)
 
 
-class TrainingWorlds(DecisionVecEnv):
+class ReplayableWorlds(ABC):
+    """Batched worlds whose episodes under way are plain data, in world order: what a checkpoint
+    keeps of them and how a resumed run rebuilds them."""
+
+    @abstractmethod
+    def episode_records(self) -> tuple[EpisodeRecord, ...]:
+        """Each world's episode under way."""
+
+    @abstractmethod
+    def replay(self, records: Sequence[EpisodeRecord]) -> np.ndarray:
+        """Rebuild the episodes `records` describe, one per world: the observations."""
+
+
+class TrainingWorlds(DecisionVecEnv, ReplayableWorlds):
     """`DecisionVecEnv` of `worlds` worlds of `config` whose episodes under way are plain data:
     `episode_records()` for a checkpoint, `replay(records)` to rebuild them."""
 
@@ -80,16 +94,9 @@ class TrainingWorlds(DecisionVecEnv):
         return self.batch.observe()
 
 
-def batched_worlds(env: VecEnv | object) -> TrainingWorlds | None:
-    """The `TrainingWorlds` under `env`'s vec-env wrappers, or None for another env."""
+def batched_worlds(env: VecEnv | object) -> ReplayableWorlds | None:
+    """The batched worlds (in this process or sharded over several) under `env`'s vec-env
+    wrappers, or None for another env."""
     while isinstance(env, VecEnvWrapper):
         env = env.venv
-    return env if isinstance(env, TrainingWorlds) else None
-
-
-def batched_training_env(config: RunConfig) -> VecMonitor:
-    """`train.worlds` worlds of `config`, each episode of a `train.scenarios` mix drawing its
-    member as the per-world env does (SB3's `VecMonitor` keeps the episode returns for the logs);
-    ValueError (one line) for a config the batch does not run."""
-    assert config.train.worlds is not None, "a batched training env has its worlds"
-    return VecMonitor(TrainingWorlds(config, config.train.worlds))
+    return env if isinstance(env, ReplayableWorlds) else None

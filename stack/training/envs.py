@@ -14,13 +14,13 @@ from pathlib import Path
 from typing import Any
 
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.vec_env import SubprocVecEnv, VecEnv
+from stable_baselines3.common.vec_env import SubprocVecEnv, VecEnv, VecEnvWrapper
 
 from planner.model_file import CHECKPOINT
 from stack.runtime.interrupts import handled_by, note_stop
 from stack.settings.run import RunConfig
-from stack.training.batch_env import batched_training_env
 from stack.training.decision_env import HierarchicalHighwayEnv
+from stack.training.world_shards import WorldShards, batched_training_env
 
 
 class StopTraining(Exception):
@@ -54,8 +54,9 @@ def monitored_env(config: RunConfig) -> Monitor:
 
 
 def training_env(config: RunConfig) -> Monitor | VecEnv:
-    """What a DDQN / DQN run steps: `train.worlds` batched worlds in this process, else one
-    monitored env here or `train.envs` of them in worker processes."""
+    """What a DDQN / DQN run steps: `train.worlds` batched worlds (in this process, or as
+    `train.envs` shards in worker processes), else one monitored env here or `train.envs` of them
+    in worker processes."""
     if config.train.worlds is not None:
         return batched_training_env(config)
     if config.train.envs == 1:
@@ -76,7 +77,7 @@ class EnvWorkerDied(RuntimeError):
 
 def worker_death(env: object, out: Path, error: BaseException) -> str:
     """One line: that an env worker of `env` died, how, and what the run in `out` keeps."""
-    codes = [p.exitcode for p in getattr(env, "processes", []) if p.exitcode not in (None, 0)]
+    codes = [p.exitcode for p in getattr(innermost(env), "processes", []) if p.exitcode not in (None, 0)]
     how = f" (exit code {codes[0]})" if codes else f" ({type(error).__name__})"
     kept = (
         f"its last checkpoint ({out / CHECKPOINT}) is kept: --resume {out} continues from it"
@@ -90,7 +91,8 @@ def close_env(env: Monitor | VecEnv, a_worker_died: bool = False) -> None:
     """Close `env` and its worker processes. After `a_worker_died` the workers are ended without
     SB3's goodbye exchange: a reply of a live worker may already have been read while `waiting`
     is still set, and `close()` would wait for it forever."""
-    processes = getattr(env, "processes", [])
+    inner = innermost(env)
+    processes = getattr(inner, "processes", [])
     if not a_worker_died:
         try:
             env.close()
@@ -100,7 +102,12 @@ def close_env(env: Monitor | VecEnv, a_worker_died: bool = False) -> None:
     for process in processes:
         process.kill()
         process.join(timeout=10)
-    for remote in getattr(env, "remotes", []):
+    for remote in getattr(inner, "remotes", []):
         remote.close()
-    if isinstance(env, SubprocVecEnv):
-        env.closed = True
+    if isinstance(inner, SubprocVecEnv | WorldShards):
+        inner.closed = True
+
+
+def innermost(env: object) -> object:
+    """The vec env under `env`'s vec-env wrappers (SB3's `VecMonitor` of batched worlds), or `env`."""
+    return env.unwrapped if isinstance(env, VecEnvWrapper) else env
