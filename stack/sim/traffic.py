@@ -19,6 +19,7 @@ highway-v0's traffic, vehicle for vehicle.
 
 from __future__ import annotations
 
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -141,14 +142,29 @@ def make_room(env: HighwayEnv, vehicle: Vehicle) -> None:
         vehicle.position = lane.position(s_new, 0.0)
 
 
-def _spawn_other(env: HighwayEnv, classes: list[dict[str, Any]], spawn_speed: float | None) -> None:
-    """One traffic vehicle of a class drawn by share, behind-the-last rule of highway-env."""
-    rng = env.np_random
+@cache
+def vehicle_class(path: str) -> type[Vehicle]:
+    """highway-env's `utils.class_from_path(path)`, imported once per path rather than per vehicle."""
+    return utils.class_from_path(path)
+
+
+def class_odds(classes: list[dict[str, Any]]) -> np.ndarray:
+    """Each vehicle class's probability: its share over their sum."""
     shares = np.array([c["share"] for c in classes])
-    kind = classes[int(rng.choice(len(classes), p=shares / shares.sum()))]
+    odds: np.ndarray = shares / shares.sum()
+    return odds
+
+
+def _spawn_other(
+    env: HighwayEnv, classes: list[dict[str, Any]], odds: np.ndarray, spawn_speed: float | None
+) -> None:
+    """One traffic vehicle of a class drawn by its odds (`class_odds`), behind-the-last rule of
+    highway-env."""
+    rng = env.np_random
+    kind = classes[int(rng.choice(len(classes), p=odds))]
     desired = float(rng.uniform(*kind["speed_mps"]))
     length = float(rng.uniform(*kind["length_m"]))
-    vehicle_type = utils.class_from_path(env.config["other_vehicles_type"])
+    vehicle_type = vehicle_class(env.config["other_vehicles_type"])
     lane = int(rng.choice(kind["lanes"])) if kind.get("lanes") else None
     vehicle = vehicle_type.create_random(
         env.road, speed=spawn_speed or desired, lane_id=lane, spacing=1 / env.config["vehicles_density"]
@@ -262,7 +278,7 @@ class ScenarioTraffic(HighwayEnv):
         """highway-env's own `_create_vehicles` (the ego at 25 m/s behind all the traffic, the same
         draws in the same order), with every start made feasible by `make_room` when
         `feasible_spawns` is set."""
-        other_type = utils.class_from_path(self.config["other_vehicles_type"])
+        other_type = vehicle_class(self.config["other_vehicles_type"])
         spawned = Vehicle.create_random(
             self.road,
             speed=EGO_SPAWN_SPEED,
@@ -285,11 +301,12 @@ class ScenarioTraffic(HighwayEnv):
             self._create_highway_env_vehicles()
             return
         classes = list(traffic["classes"])
+        odds = class_odds(classes)
         spawn_speed = traffic.get("spawn_speed_mps")
         count = self.config["vehicles_count"]
         behind = round(traffic["ego_position"] * count)
         for _ in range(behind):
-            _spawn_other(self, classes, spawn_speed)
+            _spawn_other(self, classes, odds, spawn_speed)
         spawned = Vehicle.create_random(
             self.road,
             speed=spawn_speed or EGO_SPAWN_SPEED,
@@ -301,6 +318,6 @@ class ScenarioTraffic(HighwayEnv):
         make_room(self, ego)
         self.road.vehicles.append(ego)
         for _ in range(count - behind):
-            _spawn_other(self, classes, spawn_speed)
+            _spawn_other(self, classes, odds, spawn_speed)
         if traffic.get("incident"):
             _place_incident(self, traffic["incident"])
