@@ -12,6 +12,7 @@ import multiprocessing as mp
 import signal
 from collections.abc import Sequence
 from multiprocessing.connection import Connection
+from multiprocessing.context import BaseContext
 from multiprocessing.process import BaseProcess
 from typing import Any
 
@@ -80,7 +81,7 @@ class WorldShards(VecEnv, ReplayableWorlds):
         batch_config(config)
         size = worlds // shards
         self.parts = [slice(first, first + size) for first in range(0, worlds, size)]
-        context = mp.get_context(start_method or _default_start_method())
+        context = shard_context(start_method)
         self.remotes: list[Connection] = []
         self.processes: list[BaseProcess] = []
         self.waiting = self.closed = False
@@ -166,10 +167,16 @@ class WorldShards(VecEnv, ReplayableWorlds):
         return [False] * len(list(self._get_indices(indices)))
 
 
-def _default_start_method() -> str:
-    """SB3's `SubprocVecEnv` default, which the per-world workers use: forkserver where there is
-    one (fork is not safe beside torch's threads), else spawn."""
-    return "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
+def shard_context(start_method: str | None = None) -> BaseContext:
+    """The processes' start method: `start_method`, else SB3's `SubprocVecEnv` default, which the
+    per-world workers use (forkserver where there is one: fork is not safe beside torch's threads;
+    else spawn). A forkserver not yet started imports the shards' modules (the simulator, SB3,
+    torch: ~3 CPU-s) once, before it forks the shards, instead of each shard importing them."""
+    method = start_method or ("forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn")
+    context = mp.get_context(method)
+    if method == "forkserver":
+        context.set_forkserver_preload(["__main__", __name__])
+    return context
 
 
 def batched_training_env(config: RunConfig) -> VecMonitor:
