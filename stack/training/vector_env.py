@@ -144,7 +144,26 @@ def _with_masks(infos: dict[str, np.ndarray]) -> dict[str, Any]:
     return {**infos, **masks}
 
 
-class DecisionVecEnv(VecEnv):
+class WorldsVecEnv(VecEnv):
+    """An SB3 `VecEnv` whose worlds are one object, not N gym envs: an attribute or method asked of
+    any world is the whole env's, and no world is wrapped."""
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        return [getattr(self, attr_name)] * len(list(self._get_indices(indices)))
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        setattr(self, attr_name, value)
+
+    def env_method(
+        self, method_name: str, *args: Any, indices: VecEnvIndices = None, **kwargs: Any
+    ) -> list[Any]:
+        return [getattr(self, method_name)(*args, **kwargs)] * len(list(self._get_indices(indices)))
+
+    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
+        return [False] * len(list(self._get_indices(indices)))
+
+
+class DecisionVecEnv(WorldsVecEnv):
     """`DecisionBatch` behind stable-baselines3's `VecEnv`: `num_envs` worlds of the decision MDP,
     each reset as soon as its episode ends (its last observation in `terminal_observation`)."""
 
@@ -195,17 +214,3 @@ class DecisionVecEnv(VecEnv):
 
     def close(self) -> None:
         self.batch.close()
-
-    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
-        return [getattr(self, attr_name)] * len(list(self._get_indices(indices)))
-
-    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
-        setattr(self, attr_name, value)
-
-    def env_method(
-        self, method_name: str, *args: Any, indices: VecEnvIndices = None, **kwargs: Any
-    ) -> list[Any]:
-        return [getattr(self, method_name)(*args, **kwargs)] * len(list(self._get_indices(indices)))
-
-    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
-        return [False] * len(list(self._get_indices(indices)))

@@ -16,17 +16,17 @@ from multiprocessing.context import BaseContext
 from multiprocessing.process import BaseProcess
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from stable_baselines3.common.vec_env import VecEnv, VecMonitor
-from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
+from stable_baselines3.common.vec_env import VecMonitor
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
 from records import N_ACTIONS
 from stack.settings.run import RunConfig
 from stack.training.batch_env import ReplayableWorlds, TrainingWorlds
 from stack.training.decision_batch import batch_config
 from stack.training.decision_env import EpisodeRecord
+from stack.training.vector_env import WorldsVecEnv
 
 
 def shard_worker(remote: Connection, learner_end: Connection, config: RunConfig, worlds: int) -> None:
@@ -68,7 +68,7 @@ def answer(shard: TrainingWorlds, request: str, data: Any) -> Any:
     raise ValueError(f"a shard of worlds does not answer {request!r}")
 
 
-class WorldShards(VecEnv, ReplayableWorlds):
+class WorldShards(WorldsVecEnv, ReplayableWorlds):
     """`worlds` worlds of `config` in `shards` worker processes of `worlds / shards` worlds each,
     world k in shard k // (worlds / shards); `processes`, `remotes` and `closed` as SB3's
     `SubprocVecEnv` has them, so a dead worker is found and ended as one of its workers is."""
@@ -151,20 +151,6 @@ class WorldShards(VecEnv, ReplayableWorlds):
         for remote in self.remotes:
             remote.close()
         self.closed = True
-
-    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
-        return [getattr(self, attr_name)] * len(list(self._get_indices(indices)))
-
-    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
-        setattr(self, attr_name, value)
-
-    def env_method(
-        self, method_name: str, *args: Any, indices: VecEnvIndices = None, **kwargs: Any
-    ) -> list[Any]:
-        return [getattr(self, method_name)(*args, **kwargs)] * len(list(self._get_indices(indices)))
-
-    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
-        return [False] * len(list(self._get_indices(indices)))
 
 
 def shard_context(start_method: str | None = None) -> BaseContext:
