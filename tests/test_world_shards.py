@@ -69,7 +69,9 @@ def test_the_shards_step_the_worlds_of_the_one_process_env_bit_for_bit():
     assert not any(process.is_alive() for process in sharded.processes)
 
 
-@pytest.mark.parametrize("data", [WORLDS, MIX], ids=["one-world", "mix"])
+@pytest.mark.parametrize(
+    "data", [WORLDS, pytest.param(MIX, marks=pytest.mark.slow)], ids=["one-world", "mix"]
+)
 def test_a_run_on_shards_writes_the_model_of_the_run_in_one_process(tmp_path, data):
     one = build_config(data)
     sharded = build_config({**data, "train": {**data["train"], "envs": 2}})
@@ -128,7 +130,7 @@ def test_a_dead_shard_ends_training_in_one_line_with_its_checkpoint_kept(tmp_pat
     assert shards.closed and not any(process.is_alive() for process in shards.processes)
 
 
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("signum", [pytest.param(signal.SIGINT, marks=pytest.mark.slow), signal.SIGTERM])
 def test_ctrl_c_or_sigterm_checkpoints_and_ends_every_shard(tmp_path, signum):
     """Ctrl-C reaches the whole process group: the shards ignore it, the learner writes its
     checkpoint (which asks the shards for their episodes) and closes them; so does SIGTERM to the
