@@ -18,7 +18,8 @@ import math
 import numpy as np
 
 from common.compiled import Kernel
-from records import EGO_HEADING_SCALE, FEATURES, MAX_SPEED, SIDE_LANES_SEEN, GridConfig
+from perception.features import lateral_feature
+from records import FEATURES, MAX_SPEED, SIDE_LANES_SEEN, GridConfig
 from records.batch import WorldBatch
 
 BATCHED_FEATURES = tuple(name for name in FEATURES if name != "traffic")
@@ -93,11 +94,10 @@ def ego_lateral(batch: WorldBatch) -> np.ndarray:
     parallel straight lanes of one segment, so the ego's lane has lane 0's heading."""
     lateral = np.empty((batch.worlds, 2), dtype=np.float32)
     for w in range(batch.worlds):
-        ego_lane = int(batch.lane[w, 0])
-        offset = (batch.d[w, 0] - batch.lane_offsets[w, ego_lane]) / batch.lane_width
-        error = batch.heading[w, 0] - batch.lane_heading[w]
-        heading = np.arctan2(np.sin(error), np.cos(error))
-        lateral[w] = np.clip([offset, heading / EGO_HEADING_SCALE], -1, 1).astype(np.float32)
+        centre = batch.lane_offsets[w, int(batch.lane[w, 0])]
+        lateral[w] = lateral_feature(
+            batch.d[w, 0], centre, batch.lane_width, batch.heading[w, 0], batch.lane_heading[w]
+        )
     return lateral
 
 

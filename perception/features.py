@@ -73,10 +73,21 @@ def time_to_collision(
 def ego_lateral(world: WorldState) -> np.ndarray:
     """[offset from the ego lane's centre / lane width, heading error / EGO_HEADING_SCALE], in [-1, 1]."""
     ego_lane = int(world.lane[0])
-    offset = (world.d[0] - world.lane_offsets[ego_lane]) / world.lane_width
     lane_heading = world.lanes[ego_lane].heading_at(float(world.s[0]))
-    heading = np.arctan2(np.sin(world.heading[0] - lane_heading), np.cos(world.heading[0] - lane_heading))
-    return np.clip([offset, heading / EGO_HEADING_SCALE], -1, 1).astype(np.float32)
+    return lateral_feature(
+        world.d[0], world.lane_offsets[ego_lane], world.lane_width, world.heading[0], lane_heading
+    )
+
+
+def lateral_feature(
+    d: float, lane_centre: float, lane_width: float, heading: float, lane_heading: float
+) -> np.ndarray:
+    """`ego_lateral` of an ego at lateral position `d` [m] and `heading` [rad] in a lane centred at
+    `lane_centre` [m] heading `lane_heading` [rad]: float32 [offset / lane width, heading error /
+    EGO_HEADING_SCALE], in [-1, 1]."""
+    offset = (d - lane_centre) / lane_width
+    error = np.arctan2(np.sin(heading - lane_heading), np.cos(heading - lane_heading))
+    return np.clip([offset, error / EGO_HEADING_SCALE], -1, 1).astype(np.float32)
 
 
 def relative_longitudinal_speed(config: GridConfig, world: WorldState) -> np.ndarray:
