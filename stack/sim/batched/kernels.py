@@ -12,7 +12,13 @@ import numpy as np
 from numba import njit
 
 from common.compiled import Kernel
-from stack.sim.vector.kernels import closest_lanes, could_touch, counted_on_lane, lane_coordinates
+from stack.sim.vector.kernels import (
+    closest_lanes,
+    could_touch,
+    counted_on_lane,
+    lane_coordinates,
+    within_reach,
+)
 
 _closest_lanes = closest_lanes.compiled
 
@@ -350,6 +356,8 @@ def collision_candidates(
                 if along[order[q]] - along[order[p]] > reach:
                     break
                 a, b = min(order[p], order[q]), max(order[p], order[q])
+                if not within_reach(a, b, x_w, y_w, speed_w, diagonal[w, :n], dt, broad_margin):
+                    continue
                 close = could_touch(
                     a,
                     b,
