@@ -13,6 +13,7 @@ from stable_baselines3.common.torch_layers import create_mlp
 from torch import nn
 
 from planner.agents import Action, Policy
+from planner.lane_network import LaneFeatures, LaneQNetwork
 from planner.mobil import MobilPrior
 from planner.model_check import checked_model
 from planner.model_file import save_model
@@ -32,7 +33,7 @@ class LearnedAgent(Policy):
     layer's permitted commands to it (a model trained with an action mask): it then decides among
     them."""
 
-    def __init__(self, network: nn.Sequential, metadata: ModelMetadata, source: str = "model") -> None:
+    def __init__(self, network: nn.Module, metadata: ModelMetadata, source: str = "model") -> None:
         assert metadata.observation_size is not None, "a Q-network's metadata names its input size"
         self.network = network.eval()
         self.metadata = metadata
@@ -112,11 +113,26 @@ class TabularAgent(Policy):
         return np.int64(np.argmax(self.table[index]))
 
 
+def q_network_weights(model: DQN) -> dict[str, th.Tensor]:
+    """An SB3 (Double) DQN's online Q-network weights under the names `load_agent`'s network has:
+    the MLP's (`0.weight`, ...), or a lane network's `features.*` and `head.*`."""
+    q_net = model.policy.q_net
+    if isinstance(q_net.features_extractor, LaneFeatures):
+        features = q_net.features_extractor.state_dict()
+        head = q_net.q_net.state_dict()
+        return {
+            **{f"features.{k}": v for k, v in features.items()},
+            **{f"head.{k}": v for k, v in head.items()},
+        }
+    return dict(q_net.q_net.state_dict())
+
+
 def export_q_network(model: DQN, path: Path | str, metadata: ModelMetadata) -> Path:
-    """Save an SB3 (Double) DQN's online Q-network weights with `metadata` (of kind `mlp`)."""
-    state = model.policy.q_net.q_net.state_dict()
-    weights = {k: v.detach().cpu().numpy() for k, v in state.items()}
-    return save_model(path, weights, replace(metadata, kind="mlp").to_json())
+    """Save an SB3 (Double) DQN's online Q-network weights with `metadata` (of kind `mlp`, or
+    `lane-mlp` for a lane network)."""
+    weights = {k: v.detach().cpu().numpy() for k, v in q_network_weights(model).items()}
+    kind = "lane-mlp" if isinstance(model.policy.q_net.features_extractor, LaneFeatures) else "mlp"
+    return save_model(path, weights, replace(metadata, kind=kind).to_json())
 
 
 def save_q_table(agent: QLearning, path: Path | str, metadata: ModelMetadata) -> Path:
@@ -134,7 +150,10 @@ def load_agent(
     if metadata.kind == "qtable":
         return TabularAgent(arrays["q_table"].astype(np.float64), metadata, str(path))
     assert metadata.observation_size is not None, "checked_model checks a Q-network's input size"
-    sizes = [metadata.observation_size, *metadata.hidden, N_ACTIONS]
-    network = q_network(sizes[0], N_ACTIONS, sizes[1:-1])
+    network: nn.Module
+    if metadata.kind == "lane-mlp":
+        network = LaneQNetwork(metadata.grid, metadata.observation_size, list(metadata.hidden))
+    else:
+        network = q_network(metadata.observation_size, N_ACTIONS, list(metadata.hidden))
     network.load_state_dict({k: th.as_tensor(v, dtype=th.float32) for k, v in arrays.items()}, strict=True)
     return LearnedAgent(network, metadata, str(path))

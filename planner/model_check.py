@@ -14,6 +14,7 @@ from pydantic import ValidationError
 from planner.mobil import prior_problem
 from planner.model_file import ModelFileError, load_model
 from planner.model_metadata import ModelMetadata
+from planner.networks import lane_network_shapes, lane_problem
 from records import ENCODINGS, N_ACTIONS, Encoding, GridConfig
 
 MAX_INPUTS = 100_000
@@ -44,25 +45,37 @@ def checked_model(
                 f"{path}: expected one q_table array whose last axis has {N_ACTIONS} actions"
             )
         return arrays, ModelMetadata.from_json(metadata)
-    sizes = [int(metadata["observation_size"]), *map(int, metadata["hidden"]), N_ACTIONS]
-    expected: dict[str, tuple[int, ...]] = {}
-    for layer, (inputs, outputs) in enumerate(zip(sizes[:-1], sizes[1:], strict=True)):
-        expected[f"{2 * layer}.weight"], expected[f"{2 * layer}.bias"] = (outputs, inputs), (outputs,)
+    checked = ModelMetadata.from_json(metadata)
+    assert checked.observation_size is not None, "_check_metadata checks a Q-network's input size"
+    if checked.kind == "lane-mlp":
+        expected = lane_network_shapes(
+            checked.grid, checked.observation_size, list(checked.hidden), N_ACTIONS
+        )
+    else:
+        expected = mlp_shapes([checked.observation_size, *checked.hidden, N_ACTIONS])
     actual = {name: value.shape for name, value in arrays.items()}
     if actual != expected:
         raise ModelFileError(f"{path}: model arrays do not match its metadata (expected {expected})"[:300])
-    return arrays, ModelMetadata.from_json(metadata)
+    return arrays, checked
+
+
+def mlp_shapes(sizes: list[int]) -> dict[str, tuple[int, ...]]:
+    """The arrays (name: shape) of SB3's MLP through layers of `sizes` (inputs first)."""
+    expected: dict[str, tuple[int, ...]] = {}
+    for layer, (inputs, outputs) in enumerate(zip(sizes[:-1], sizes[1:], strict=True)):
+        expected[f"{2 * layer}.weight"], expected[f"{2 * layer}.bias"] = (outputs, inputs), (outputs,)
+    return expected
 
 
 def _check_metadata(path: Path | str, metadata: dict) -> None:
     """One line for the first metadata field the loop cannot use."""
     kind, encoding = metadata.get("kind"), metadata.get("encoding", "tabular")
     problem = None
-    if kind not in ("mlp", "qtable"):
-        problem = "kind: expected 'mlp' or 'qtable'"
+    if kind not in ("mlp", "lane-mlp", "qtable"):
+        problem = "kind: expected 'mlp', 'lane-mlp' or 'qtable'"
     elif encoding not in ENCODINGS:
         problem = f"encoding: expected one of {', '.join(ENCODINGS)}"
-    elif kind == "mlp":
+    elif kind != "qtable":
         size, hidden, actions = (metadata.get(k) for k in ("observation_size", "hidden", "actions"))
         if not isinstance(size, int) or not 1 <= size <= MAX_INPUTS:
             problem = f"observation_size: expected an integer in 1..{MAX_INPUTS}"
@@ -82,6 +95,8 @@ def _check_metadata(path: Path | str, metadata: dict) -> None:
             problem = f"grid.{'.'.join(map(str, first['loc']))}: {first['msg']}"[:200]
         else:
             problem = _prior_problem(metadata.get("mobil_prior", 0.0), grid, encoding)
+            if problem is None and kind == "lane-mlp" and (lanes := lane_problem(grid, encoding)):
+                problem = f"grid: {lanes}"
     if problem is None and metadata.get("action_mask", False) not in (True, False):
         problem = "action_mask: expected true or false"
     if problem:

@@ -10,21 +10,21 @@ from typing import Any, Literal
 from planner.scores import Validation
 from records import N_ACTIONS, Encoding, GridConfig
 
-ModelKind = Literal["mlp", "qtable"]
+ModelKind = Literal["mlp", "lane-mlp", "qtable"]
 
 
 @dataclass(frozen=True, kw_only=True)
 class ModelMetadata:
-    """`kind` (a Q-network `mlp` or a Q-`qtable`), the `algorithm` that trained it, the
-    `encoding` and `grid` of the observations it takes (`observation_size` values), its `actions`
-    and `hidden` layer widths, the `network` size name, the `lanes_count` of the road it trained
-    on, the `trained_steps`, the training `seed` and the `validation` that kept it. Only `kind`,
-    `grid`, for a Q-network the sizes and its `mobil_prior` (the bonus its greedy decision gives
-    MOBIL's proposed change, `planner.mobil.MobilPrior`; 0: none, and not written) and its
-    `action_mask` (its observations end with the safety layer's permitted commands, and it decides
-    among them; False: not written) are needed to use it (`planner.model_check` checks them); the
-    rest describes where it came from and is None
-    in a file that does not say."""
+    """`kind` (a Q-network `mlp`, a lane network `lane-mlp` or a Q-`qtable`), the `algorithm`
+    that trained it, the `encoding` and `grid` of the observations it takes (`observation_size`
+    values), its `actions` and `hidden` layer widths (a lane network's: its head's), the `network`
+    size name, the `lanes_count` of the road it trained on, the `trained_steps`, the training
+    `seed` and the `validation` that kept it. Only `kind`, `grid`, for a Q-network the sizes and
+    its `mobil_prior` (the bonus its greedy decision gives MOBIL's proposed change,
+    `planner.mobil.MobilPrior`; 0: none, and not written) and its `action_mask` (its observations
+    end with the safety layer's permitted commands, and it decides among them; False: not
+    written) are needed to use it (`planner.model_check` checks them); the rest describes where it
+    came from and is None in a file that does not say."""
 
     kind: ModelKind
     algorithm: str | None = None

@@ -1,4 +1,11 @@
-"""The paper's network sizes by name (hidden layer widths); no torch import, so configs load fast."""
+"""The paper's network sizes by name (hidden layer widths), and the columns the lane network reads
+each grid row from; no torch import, so configs load and model files are checked fast."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from records import GridConfig
 
 NET_ARCHS: dict[str, list[int]] = {
     "shallow": [32],
@@ -6,10 +13,60 @@ NET_ARCHS: dict[str, list[int]] = {
     "deep": [64, 128, 128, 64],
     "16": [16],
     "16x16": [16, 16],
+    "lanes": [128, 64],
 }
+"""Hidden widths of the Q-network's MLP; for `lanes` (`LANE_NETWORK`), of its head."""
+LANE_NETWORK = "lanes"
+"""The network that encodes every grid row (lane) with one shared MLP before its head
+(`planner.lane_network`)."""
+LANE_ENCODER: tuple[int, ...] = (64, 32)
+"""Widths of the shared lane encoder's layers (ReLU after each): 32 values a lane."""
+ROW_PARTS = ("presence", "relative_speed", "ttc", "traffic")
+"""The observation parts (`GridConfig.observation_parts`) that hold one block of values a grid row."""
 
 
 def net_arch(name: str) -> list[int]:
     if name not in NET_ARCHS:
         raise ValueError(f"unknown network {name!r}; available: {', '.join(NET_ARCHS)}")
     return NET_ARCHS[name]
+
+
+def lane_problem(grid: GridConfig, encoding: str) -> str | None:
+    """Why the lane network cannot read this grid's observations (None: it can): it needs rows
+    centred on the ego (`lanes: ego`, any road) in the `observation` encoding."""
+    if encoding != "observation" or grid.lanes != "ego" or grid.lane_code != "sides":
+        return "the lanes network reads the observation encoding of perception lanes: ego, lane_code: sides"
+    return None
+
+
+def lane_columns(grid: GridConfig, observation_size: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, values a row) columns of each grid row's values in an observation of `grid` (its
+    presence, relative speeds, TTC and traffic, row by row), and the columns of the rest (the ego's
+    own values, the lane part, and whatever follows the grid's encoding: the permitted commands)."""
+    parts = grid.observation_parts(lanes_count=grid.rows(1))
+    rows = grid.rows(1)
+    blocks = []
+    for name in ROW_PARTS:
+        if name in parts:
+            columns = np.arange(parts[name].start, parts[name].stop)
+            blocks.append(columns.reshape(rows, -1))
+    row_columns = np.concatenate(blocks, axis=1)
+    rest = np.setdiff1d(np.arange(observation_size), row_columns.ravel())
+    return row_columns, rest
+
+
+def lane_network_shapes(
+    grid: GridConfig, observation_size: int, head: list[int], actions: int
+) -> dict[str, tuple[int, ...]]:
+    """The arrays (name: shape) a lane network of `head` widths holds (`planner.lane_network`)."""
+    row_columns, rest = lane_columns(grid, observation_size)
+    shapes: dict[str, tuple[int, ...]] = {}
+    widths = [row_columns.shape[1], *LANE_ENCODER]
+    for layer, (inputs, outputs) in enumerate(zip(widths[:-1], widths[1:], strict=True)):
+        shapes[f"features.encoder.{2 * layer}.weight"] = (outputs, inputs)
+        shapes[f"features.encoder.{2 * layer}.bias"] = (outputs,)
+    widths = [row_columns.shape[0] * LANE_ENCODER[-1] + rest.size, *head, actions]
+    for layer, (inputs, outputs) in enumerate(zip(widths[:-1], widths[1:], strict=True)):
+        shapes[f"head.{2 * layer}.weight"] = (outputs, inputs)
+        shapes[f"head.{2 * layer}.bias"] = (outputs,)
+    return shapes

@@ -27,7 +27,7 @@ def checked_run(
         try:
             if (path := model_path(config.planner.agent, config.planner.model)) is not None:
                 _, metadata = checked_model(path, (config.planner.agent,))
-                if metadata.kind == "mlp" and metadata.observation_size is not None:
+                if metadata.kind != "qtable" and metadata.observation_size is not None:
                     lanes = config.highway.lane_counts
                     check_file_fit(path, metadata, lanes)
         except ValueError as error:

@@ -20,6 +20,7 @@ from perception.grid import OccupancyGridBuilder
 from perception.sensor import SensorConfig
 from planner.lookahead_config import LookaheadConfig
 from planner.mobil import prior_problem
+from planner.networks import LANE_NETWORK, lane_problem
 from planner.safety import SafetyConfig
 from records import AGENT_NAMES, SEED_LIMIT, GridConfig
 from stack.runtime.files import write_text
@@ -95,6 +96,14 @@ class RunConfig(Strict):
     def _mobil_sees_its_lanes(self) -> RunConfig:
         if problem := prior_problem(grid_config(self), self.train.encoding, self.train.mobil_prior):
             raise ValueError(f"train.mobil_prior: {problem}")
+        return self
+
+    @model_validator(mode="after")
+    def _lane_network_reads_its_grid(self) -> RunConfig:
+        if self.train.network == LANE_NETWORK and (
+            problem := lane_problem(grid_config(self), self.train.encoding)
+        ):
+            raise ValueError(f"train.network: {problem}")
         return self
 
     @model_validator(mode="after")

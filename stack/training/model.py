@@ -16,10 +16,11 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv
 
 from planner.ddqn import DoubleDQN
+from planner.lane_network import LaneFeatures, LaneQNetwork
 from planner.learned import LearnedAgent, load_agent
 from planner.mobil import MobilPrior
 from planner.model_metadata import ModelMetadata
-from planner.networks import net_arch
+from planner.networks import LANE_NETWORK, net_arch
 from records import N_ACTIONS, GridConfig
 from stack.loop.closed_loop import grid_config
 from stack.runs.model_fit import checked_start_model
@@ -90,7 +91,7 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
         exploration_fraction=train.exploration_fraction,
         exploration_initial_eps=train.exploration_initial_eps,
         exploration_final_eps=train.exploration_final_eps,
-        policy_kwargs={"net_arch": net_arch(train.network)},
+        policy_kwargs=policy_options(config),
         tensorboard_log=str(tensorboard),
         seed=config.seed,
         verbose=0,
@@ -99,13 +100,25 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
     )
 
 
+def policy_options(config: RunConfig) -> dict[str, Any]:
+    """SB3's `policy_kwargs`: the MLP's widths, and for the lane network its features extractor
+    (`planner.lane_network`) on the run's grid, the widths then its head's."""
+    options: dict[str, Any] = {"net_arch": net_arch(config.train.network)}
+    if config.train.network == LANE_NETWORK:
+        options |= {
+            "features_extractor_class": LaneFeatures,
+            "features_extractor_kwargs": {"grid": grid_config(config)},
+        }
+    return options
+
+
 def model_metadata(config: RunConfig, env: HierarchicalHighwayEnv, trained_steps: int) -> ModelMetadata:
     """What a model file of this run says about its model: algorithm, encoding, sizes, grid,
     training (its validation is added to the kept model's)."""
     train = config.train
     tabular = train.algorithm == "tabular"
     return ModelMetadata(
-        kind="qtable" if tabular else "mlp",
+        kind="qtable" if tabular else "lane-mlp" if train.network == LANE_NETWORK else "mlp",
         algorithm=train.algorithm,
         encoding=train.encoding,
         observation_size=int(np.prod(env.observation_space.shape)),
@@ -136,6 +149,12 @@ def warm_start(model: DQN, start: LearnedAgent, grid: GridConfig | None = None, 
     fewer of `grid`'s features than the run (so fewer observation values, on a road of
     `lanes_count` lanes) has its first layer widened: each input it knows keeps its weights, the new
     ones start at zero, so the model starts deciding as `start` does."""
+    if isinstance(start.network, LaneQNetwork):
+        with th.no_grad():
+            for q_net in (model.policy.q_net, model.policy.q_net_target):
+                q_net.features_extractor.load_state_dict(start.network.features.state_dict())
+                q_net.q_net.load_state_dict(start.network.head.state_dict())
+        return
     weights = start.network.state_dict()
     if weights["0.weight"].shape[1] != model.policy.q_net.q_net[0].in_features:
         assert grid is not None, "a start of another input size is widened onto the run's grid"
