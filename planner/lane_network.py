@@ -29,8 +29,8 @@ class LaneFeatures(BaseFeaturesExtractor):
         super().__init__(observation_space, row_columns.shape[0] * LANE_ENCODER[-1] + rest.size)
         layers = create_mlp(row_columns.shape[1], LANE_ENCODER[-1], list(LANE_ENCODER[:-1]))
         self.encoder = nn.Sequential(*layers, nn.ReLU())
-        self.register_buffer("row_columns", th.as_tensor(row_columns), persistent=False)
-        self.register_buffer("rest", th.as_tensor(rest), persistent=False)
+        self.row_columns = th.as_tensor(row_columns)
+        self.rest = th.as_tensor(rest)
 
     def forward(self, observations: th.Tensor) -> th.Tensor:
         lanes = self.encoder(observations[:, self.row_columns])

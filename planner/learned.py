@@ -17,7 +17,7 @@ from planner.lane_network import LaneFeatures, LaneQNetwork
 from planner.mobil import MobilPrior
 from planner.model_check import checked_model
 from planner.model_file import save_model
-from planner.model_metadata import ModelMetadata
+from planner.model_metadata import ModelKind, ModelMetadata
 from planner.tabular import QLearning
 from records import N_ACTIONS, Encoding, GridConfig
 
@@ -131,7 +131,7 @@ def export_q_network(model: DQN, path: Path | str, metadata: ModelMetadata) -> P
     """Save an SB3 (Double) DQN's online Q-network weights with `metadata` (of kind `mlp`, or
     `lane-mlp` for a lane network)."""
     weights = {k: v.detach().cpu().numpy() for k, v in q_network_weights(model).items()}
-    kind = "lane-mlp" if isinstance(model.policy.q_net.features_extractor, LaneFeatures) else "mlp"
+    kind: ModelKind = "lane-mlp" if isinstance(model.policy.q_net.features_extractor, LaneFeatures) else "mlp"
     return save_model(path, weights, replace(metadata, kind=kind).to_json())
 
 
