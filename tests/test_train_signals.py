@@ -8,6 +8,8 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
+from typing import Any
 
 import pytest
 import yaml
@@ -22,28 +24,45 @@ from tests.test_hostile_inputs import one_line_refusal
 from tests.test_train import TINY
 
 
-def test_repeated_signals_end_training_with_its_files_and_exit_130(tmp_path):
+def started_training(
+    tmp_path: Path, data: dict, deadline_s: float = 60.0, **popen: Any
+) -> tuple[subprocess.Popen, Path]:
+    """`drivestack train` of config `data` in a subprocess (`popen`: more of Popen's options), once
+    it has written its first checkpoint: the process and its folder."""
     config = tmp_path / "long.yaml"
-    config.write_text(yaml.safe_dump({**TINY, "train": {**TINY["train"], "steps": 5_000}}))
+    config.write_text(yaml.safe_dump(data))
     out = tmp_path / "t"
     process = subprocess.Popen(
         [sys.executable, "-m", "stack", "train", "-c", str(config), "--out", str(out), "--no-progress"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
+        **popen,
     )
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + deadline_s
     while not (out / "checkpoint.npz").is_file():
         assert process.poll() is None and time.monotonic() < deadline, process.communicate()
         time.sleep(0.05)
-    for _ in range(6):
-        process.send_signal(signal.SIGTERM)
-        time.sleep(0.03)
+    return process, out
+
+
+def stopped_with_its_checkpoint(process: subprocess.Popen, out: Path) -> dict:
+    """The stopped run's checkpoint metadata, once asserted that it ended with exit 130, no
+    traceback, and a summary of the checkpoint's steps."""
     _, errors = process.communicate(timeout=60)
     assert process.returncode == 130, errors.decode()
     assert "Traceback" not in errors.decode(), errors.decode()
     summary = json.loads((out / "summary.json").read_text())
     _, checkpoint = load_checkpoint(out / "checkpoint.npz", arrays=False)
     assert summary["interrupted"] and summary["steps"] == checkpoint["counters"]["num_timesteps"]
+    return checkpoint
+
+
+def test_repeated_signals_end_training_with_its_files_and_exit_130(tmp_path):
+    process, out = started_training(tmp_path, {**TINY, "train": {**TINY["train"], "steps": 5_000}})
+    for _ in range(6):
+        process.send_signal(signal.SIGTERM)
+        time.sleep(0.03)
+    stopped_with_its_checkpoint(process, out)
 
 
 def test_a_finished_training_is_not_resumed_and_more_steps_continue_it(tmp_path):

@@ -5,23 +5,19 @@ shard processes end with the env."""
 
 from __future__ import annotations
 
-import json
 import os
 import signal
-import subprocess
-import sys
 import time
 
 import numpy as np
 import pytest
-import yaml
 
-from planner.model_file import load_checkpoint
 from stack.settings.run import build_config
 from stack.training.batch_env import TrainingWorlds, batched_worlds
 from stack.training.envs import EnvWorkerDied
 from stack.training.trainer import Trainer
 from stack.training.world_shards import WorldShards
+from tests.test_train_signals import started_training, stopped_with_its_checkpoint
 from tests.test_train_worlds import MIX, WORLDS
 
 SHORT = {"highway": {"duration": 6}}
@@ -135,29 +131,13 @@ def test_ctrl_c_or_sigterm_checkpoints_and_ends_every_shard(tmp_path, signum):
     """Ctrl-C reaches the whole process group: the shards ignore it, the learner writes its
     checkpoint (which asks the shards for their episodes) and closes them; so does SIGTERM to the
     learner."""
-    config = tmp_path / "long.yaml"
-    config.write_text(yaml.safe_dump({**WORLDS, "train": {**WORLDS["train"], "envs": 2, "steps": 50_000}}))
-    out = tmp_path / "t"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "stack", "train", "-c", str(config), "--out", str(out), "--no-progress"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        start_new_session=True,
-    )
-    deadline = time.monotonic() + 90
-    while not (out / "checkpoint.npz").is_file():
-        assert process.poll() is None and time.monotonic() < deadline, process.communicate()
-        time.sleep(0.05)
+    data = {**WORLDS, "train": {**WORLDS["train"], "envs": 2, "steps": 50_000}}
+    process, out = started_training(tmp_path, data, deadline_s=90.0, start_new_session=True)
     if signum == signal.SIGINT:
         os.killpg(process.pid, signum)
     else:
         process.send_signal(signum)
-    _, errors = process.communicate(timeout=60)
-    assert process.returncode == 130, errors.decode()
-    assert "Traceback" not in errors.decode(), errors.decode()
-    summary = json.loads((out / "summary.json").read_text())
-    _, checkpoint = load_checkpoint(out / "checkpoint.npz", arrays=False)
-    assert summary["interrupted"] and summary["steps"] == checkpoint["counters"]["num_timesteps"]
+    checkpoint = stopped_with_its_checkpoint(process, out)
     assert len(checkpoint["counters"]["episodes"]) == 4
     deadline = time.monotonic() + 10
     while group_alive(process.pid):
