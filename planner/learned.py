@@ -113,25 +113,19 @@ class TabularAgent(Policy):
         return np.int64(np.argmax(self.table[index]))
 
 
-def q_network_weights(model: DQN) -> dict[str, th.Tensor]:
-    """An SB3 (Double) DQN's online Q-network weights under the names `load_agent`'s network has:
-    the MLP's (`0.weight`, ...), or a lane network's `features.*` and `head.*`."""
-    q_net = model.policy.q_net
-    if isinstance(q_net.features_extractor, LaneFeatures):
-        features = q_net.features_extractor.state_dict()
-        head = q_net.q_net.state_dict()
-        return {
-            **{f"features.{k}": v for k, v in features.items()},
-            **{f"head.{k}": v for k, v in head.items()},
-        }
-    return dict(q_net.q_net.state_dict())
-
-
 def export_q_network(model: DQN, path: Path | str, metadata: ModelMetadata) -> Path:
-    """Save an SB3 (Double) DQN's online Q-network weights with `metadata` (of kind `mlp`, or
-    `lane-mlp` for a lane network)."""
-    weights = {k: v.detach().cpu().numpy() for k, v in q_network_weights(model).items()}
-    kind: ModelKind = "lane-mlp" if isinstance(model.policy.q_net.features_extractor, LaneFeatures) else "mlp"
+    """Save an SB3 (Double) DQN's online Q-network weights with `metadata`: of kind `mlp` (the
+    MLP's `0.weight`, ...), or `lane-mlp` for a lane network (its `features.*` and `head.*`)."""
+    q_net = model.policy.q_net
+    kind: ModelKind = "mlp"
+    parts: dict[str, nn.Module] = {"": q_net.q_net}
+    if isinstance(q_net.features_extractor, LaneFeatures):
+        kind, parts = "lane-mlp", {"features.": q_net.features_extractor, "head.": q_net.q_net}
+    weights = {
+        prefix + name: value.detach().cpu().numpy()
+        for prefix, part in parts.items()
+        for name, value in part.state_dict().items()
+    }
     return save_model(path, weights, replace(metadata, kind=kind).to_json())
 
 

@@ -14,7 +14,7 @@ from pydantic import ValidationError
 from planner.mobil import prior_problem
 from planner.model_file import ModelFileError, load_model
 from planner.model_metadata import ModelMetadata
-from planner.networks import lane_network_shapes, lane_problem
+from planner.networks import lane_network_shapes, lane_problem, mlp_shapes
 from records import ENCODINGS, N_ACTIONS, Encoding, GridConfig
 
 MAX_INPUTS = 100_000
@@ -57,14 +57,6 @@ def checked_model(
     if actual != expected:
         raise ModelFileError(f"{path}: model arrays do not match its metadata (expected {expected})"[:300])
     return arrays, checked
-
-
-def mlp_shapes(sizes: list[int]) -> dict[str, tuple[int, ...]]:
-    """The arrays (name: shape) of SB3's MLP through layers of `sizes` (inputs first)."""
-    expected: dict[str, tuple[int, ...]] = {}
-    for layer, (inputs, outputs) in enumerate(zip(sizes[:-1], sizes[1:], strict=True)):
-        expected[f"{2 * layer}.weight"], expected[f"{2 * layer}.bias"] = (outputs, inputs), (outputs,)
-    return expected
 
 
 def _check_metadata(path: Path | str, metadata: dict) -> None:

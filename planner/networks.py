@@ -55,18 +55,23 @@ def lane_columns(grid: GridConfig, observation_size: int) -> tuple[np.ndarray, n
     return row_columns, rest
 
 
+def mlp_shapes(sizes: list[int], prefix: str = "") -> dict[str, tuple[int, ...]]:
+    """The arrays (name: shape) of SB3's MLP through layers of `sizes` (inputs first), their names
+    after `prefix`."""
+    shapes: dict[str, tuple[int, ...]] = {}
+    for layer, (inputs, outputs) in enumerate(zip(sizes[:-1], sizes[1:], strict=True)):
+        shapes[f"{prefix}{2 * layer}.weight"], shapes[f"{prefix}{2 * layer}.bias"] = (
+            (outputs, inputs),
+            (outputs,),
+        )
+    return shapes
+
+
 def lane_network_shapes(
     grid: GridConfig, observation_size: int, head: list[int], actions: int
 ) -> dict[str, tuple[int, ...]]:
     """The arrays (name: shape) a lane network of `head` widths holds (`planner.lane_network`)."""
     row_columns, rest = lane_columns(grid, observation_size)
-    shapes: dict[str, tuple[int, ...]] = {}
-    widths = [row_columns.shape[1], *LANE_ENCODER]
-    for layer, (inputs, outputs) in enumerate(zip(widths[:-1], widths[1:], strict=True)):
-        shapes[f"features.encoder.{2 * layer}.weight"] = (outputs, inputs)
-        shapes[f"features.encoder.{2 * layer}.bias"] = (outputs,)
-    widths = [row_columns.shape[0] * LANE_ENCODER[-1] + rest.size, *head, actions]
-    for layer, (inputs, outputs) in enumerate(zip(widths[:-1], widths[1:], strict=True)):
-        shapes[f"head.{2 * layer}.weight"] = (outputs, inputs)
-        shapes[f"head.{2 * layer}.bias"] = (outputs,)
-    return shapes
+    encoder = mlp_shapes([row_columns.shape[1], *LANE_ENCODER], "features.encoder.")
+    inputs = row_columns.shape[0] * LANE_ENCODER[-1] + rest.size
+    return encoder | mlp_shapes([inputs, *head, actions], "head.")
