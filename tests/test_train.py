@@ -332,8 +332,12 @@ def test_a_stopped_and_resumed_run_ends_as_an_uninterrupted_one(
         trainer.validation_env.step = types.MethodType(step_then_signal, trainer.validation_env)
     assert trainer.run().interrupted
     counters = TabularCounters if algorithm == "tabular" else DqnCounters
-    stopped = read_checkpoint(load_model(tmp_path / "cut" / "checkpoint.npz", 2**31)[1], counters).counters
+    stopped_arrays, stopped_metadata = load_model(tmp_path / "cut" / "checkpoint.npz", 2**31)
+    stopped = read_checkpoint(stopped_metadata, counters).counters
     assert 0 < stopped.num_timesteps < 40
+    if algorithm != "tabular":
+        assert isinstance(stopped, DqnCounters) and not stopped.buffer_full
+        assert len(stopped_arrays["buffer/observations"]) == stopped.buffer_pos < 200, "filled rows only"
     assert stopped.episodes is not None and any(episode.actions for episode in stopped.episodes), (
         "stopped mid-episode"
     )

@@ -23,10 +23,11 @@ BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "don
 
 
 def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], DqnCounters]:
-    """(arrays, counters) of `model`, for a safe model file: networks, optimizer, replay buffer,
-    the demonstrations learnt from, the counters SB3 schedules by, numpy's global generator
-    (exploration and replay sampling draw from it), the action space's generator (random actions
-    before learning starts) and each env's episode under way."""
+    """(arrays, counters) of `model`, for a safe model file: networks, optimizer, the replay
+    buffer's filled rows (the rest are zeros, as in a new buffer: early in a run of a large buffer
+    the checkpoint stays small), the demonstrations learnt from, the counters SB3 schedules by,
+    numpy's global generator (exploration and replay sampling draw from it), the action space's
+    generator (random actions before learning starts) and each env's episode under way."""
     arrays = {f"q/{k}": v.cpu().numpy() for k, v in model.policy.q_net.state_dict().items()}
     arrays |= {f"target/{k}": v.cpu().numpy() for k, v in model.policy.q_net_target.state_dict().items()}
     optimizer = model.policy.optimizer.state_dict()
@@ -35,8 +36,9 @@ def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], DqnCounters]:
             arrays[f"optimizer/{index}/{name}"] = th.as_tensor(value).cpu().numpy()
     buffer = model.replay_buffer
     assert buffer is not None, "SB3 builds the replay buffer with the model"
+    filled = buffer.buffer_size if buffer.full else buffer.pos
     for name in BUFFER_FIELDS:
-        arrays[f"buffer/{name}"] = getattr(buffer, name)
+        arrays[f"buffer/{name}"] = getattr(buffer, name)[:filled]
     if isinstance(model, DoubleDQN) and model.demonstrations is not None:
         arrays |= {f"demonstrations/{k}": v for k, v in model.demonstrations.arrays().items()}
     _, arrays["random/numpy_keys"], *numpy_random = np.random.get_state()
@@ -72,7 +74,7 @@ def restore_dqn_state(model: DQN, arrays: dict[str, np.ndarray], counters: DqnCo
     buffer = model.replay_buffer
     assert buffer is not None, "SB3 builds the replay buffer with the model"
     for name, value in _prefixed(arrays, "buffer/").items():
-        getattr(buffer, name)[...] = value.numpy()
+        getattr(buffer, name)[: len(value)] = value.numpy()
     buffer.pos, buffer.full = counters.buffer_pos, counters.buffer_full
     model.num_timesteps, model._n_updates = counters.num_timesteps, counters.n_updates
     model._episode_num = counters.episode_num
