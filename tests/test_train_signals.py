@@ -15,9 +15,11 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
+from planner.ddqn import DoubleDQN
 from planner.model_file import load_checkpoint
 from stack.apps.cli import app
 from stack.settings.run import build_config
+from stack.training import demonstrations as demonstrations_module
 from stack.training.envs import EnvWorkerDied
 from stack.training.trainer import Trainer
 from tests.test_hostile_inputs import one_line_refusal
@@ -97,3 +99,37 @@ def test_a_dead_env_worker_ends_training_in_one_line_with_its_checkpoint_kept(tm
     assert time.monotonic() - started < 60, "no hang"
     assert (tmp_path / "t" / "checkpoint.npz").is_file()
     assert not any(p.is_alive() for p in trainer.env.processes)
+
+
+@pytest.mark.parametrize("phase", ["recording", "pre-training"])
+def test_a_stop_while_learning_from_demonstrations_ends_there_and_a_resume_starts_again(
+    tmp_path, monkeypatch, phase
+):
+    """SIGTERM while the expert's episodes are recorded (or pre-trained on) ends the run at the next
+    episode (gradient step), not minutes later: interrupted at step 0, no checkpoint; `--resume`
+    records them again and trains to the end."""
+    demonstrations = {"expert": "mobil", "episodes": 3, "pretrain_steps": 20}
+    config = build_config({**TINY, "train": {**TINY["train"], "demonstrations": demonstrations}})
+    trainer = Trainer(config, tmp_path / "t", progress=False)
+    if phase == "recording":
+        real_episode = demonstrations_module.expert_episode
+
+        def episode_then_signal(*args):
+            trainer._request_stop(15, None)
+            return real_episode(*args)
+
+        monkeypatch.setattr(demonstrations_module, "expert_episode", episode_then_signal)
+    else:
+        real_pretrain = DoubleDQN.pretrain
+
+        def pretrain_after_a_signal(self, steps, batch_size, stepped):
+            trainer._request_stop(15, None)
+            return real_pretrain(self, steps, batch_size, stepped)
+
+        monkeypatch.setattr(DoubleDQN, "pretrain", pretrain_after_a_signal)
+    summary = trainer.run()
+    assert summary.interrupted and summary.steps == 0
+    assert not (tmp_path / "t" / "checkpoint.npz").exists()
+    monkeypatch.undo()
+    resumed = Trainer.resume(tmp_path / "t", steps=None, progress=False).run()
+    assert not resumed.interrupted and resumed.steps == 40

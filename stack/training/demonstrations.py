@@ -24,6 +24,7 @@ from stack.runs.episodes import lookahead_setup
 from stack.runtime.executors import completed
 from stack.settings.run import RunConfig, grid_config
 from stack.training.decision_env import HierarchicalHighwayEnv
+from stack.training.envs import StopTraining
 from stack.training.summary import DemonstrationsUsed
 
 
@@ -78,10 +79,13 @@ def demonstration_worlds(config: RunConfig) -> RunConfig:
     )
 
 
-def collect_demonstrations(config: RunConfig, progress: bool = True) -> Demonstrations:
+def collect_demonstrations(
+    config: RunConfig, progress: bool = True, stop_requested: Callable[[], bool] = lambda: False
+) -> Demonstrations:
     """`train.demonstrations.episodes` expert episodes over `train.envs` processes, in seed order
     (the result does not depend on the number of processes), in the worlds of
-    `train.demonstrations.scenarios` (by default the training mix)."""
+    `train.demonstrations.scenarios` (by default the training mix). `StopTraining` after the
+    episode under way once `stop_requested()` (nothing is kept: a resumed run records them again)."""
     demonstrations = config.train.demonstrations
     assert demonstrations is not None, "the run names no demonstrations"
     seeds = [child_seed(demonstrations.seed, k) for k in range(demonstrations.episodes)]
@@ -91,20 +95,33 @@ def collect_demonstrations(config: RunConfig, progress: bool = True) -> Demonstr
         for index, episode in completed(task, seeds, config.train.envs):
             episodes[index] = episode
             bar.update(1)
+            if stop_requested():
+                raise StopTraining
     return Demonstrations.concatenate([episodes[index] for index in range(len(seeds))])
 
 
 def start_from_demonstrations(
-    model: DoubleDQN, config: RunConfig, validation: RealTimeValidation, progress: bool = True
+    model: DoubleDQN,
+    config: RunConfig,
+    validation: RealTimeValidation,
+    progress: bool = True,
+    stop_requested: Callable[[], bool] = lambda: False,
 ) -> None:
     """Before the first episode: record the expert, pre-train on its episodes, and validate the
-    pre-trained model as the first candidate to keep (at step 0)."""
+    pre-trained model as the first candidate to keep (at step 0). A stop (`stop_requested()`)
+    ends recording or pre-training at the next episode or gradient step with `StopTraining`."""
     settings = config.train.demonstrations
     assert settings is not None, "the run names no demonstrations"
-    model.demonstrations = collect_demonstrations(config, progress)
+    model.demonstrations = collect_demonstrations(config, progress, stop_requested)
+
+    def stepped(bar: tqdm) -> None:
+        bar.update(1)
+        if stop_requested():
+            raise StopTraining
+
     steps = settings.pretrain_steps
     with tqdm(total=steps, unit="step", desc="pre-training", disable=not progress) as bar:
-        model.pretrain(steps, config.train.batch_size, lambda: bar.update(1))
+        model.pretrain(steps, config.train.batch_size, partial(stepped, bar))
     validation.validate_start(model)
 
 

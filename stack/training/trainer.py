@@ -165,7 +165,13 @@ class Trainer:
             warm_start(self.model, self.start, grid_config(self.config), self.config.highway.lanes_count)
         self.validation = self._validation_callback(export_q_network)
         if not resumed and self.config.train.demonstrations is not None:
-            start_from_demonstrations(self.model, self.config, self.validation, self.progress)  # type: ignore[arg-type]
+            start_from_demonstrations(
+                self.model,  # type: ignore[arg-type]
+                self.config,
+                self.validation,
+                self.progress,
+                lambda: self.stop_requested,
+            )
         elif not resumed and self.start is not None:
             self.validation.validate_start(self.model)
         checkpoints = Checkpoints(
