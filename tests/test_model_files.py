@@ -61,7 +61,7 @@ def test_a_member_that_inflates_beyond_the_limit_is_refused_before_inflating(tmp
         ({"hidden": [4_000_000]}, "hidden: expected at most 8 layer widths in 1..4096"),
         ({"actions": 5}, r"actions: the loop commands LEFT, STAY, RIGHT \(3\), not 5"),
         ({"encoding": "telepathy"}, "encoding: expected one of"),
-        ({"kind": "forest"}, "kind: expected 'mlp' or 'qtable'"),
+        ({"kind": "forest"}, "kind: expected 'mlp', 'lane-mlp' or 'qtable'"),
         ({"observation_size": 10**9}, "observation_size: expected an integer"),
         ({"grid": {"cells_ahead": 10**8}}, "grid.cells_ahead: Input should be less than or equal to 200"),
         ({"observation_size": 50}, "model arrays do not match its metadata"),
