@@ -69,12 +69,15 @@ def _check_metadata(path: Path | str, metadata: dict) -> None:
         problem = f"encoding: expected one of {', '.join(ENCODINGS)}"
     elif kind != "qtable":
         size, hidden, actions = (metadata.get(k) for k in ("observation_size", "hidden", "actions"))
-        if not isinstance(size, int) or not 1 <= size <= MAX_INPUTS:
+        if not isinstance(size, int) or isinstance(size, bool) or not 1 <= size <= MAX_INPUTS:
             problem = f"observation_size: expected an integer in 1..{MAX_INPUTS}"
         elif (
             not isinstance(hidden, list)
             or len(hidden) > MAX_LAYERS
-            or not all(isinstance(width, int) and 1 <= width <= MAX_WIDTH for width in hidden)
+            or not all(
+                isinstance(width, int) and not isinstance(width, bool) and 1 <= width <= MAX_WIDTH
+                for width in hidden
+            )
         ):
             problem = f"hidden: expected at most {MAX_LAYERS} layer widths in 1..{MAX_WIDTH}"
         elif actions != N_ACTIONS:
