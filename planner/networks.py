@@ -3,6 +3,8 @@ each grid row from; no torch import, so configs load and model files are checked
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 
 from records import GridConfig
@@ -39,12 +41,16 @@ def lane_problem(grid: GridConfig, encoding: str) -> str | None:
     return None
 
 
+def network_kind(network: str) -> Literal["mlp", "lane-mlp"]:
+    """The model file kind (`planner.model_metadata.ModelKind`) of a Q-network named `network`."""
+    return "lane-mlp" if network == LANE_NETWORK else "mlp"
+
+
 def lane_columns(grid: GridConfig, observation_size: int) -> tuple[np.ndarray, np.ndarray]:
     """(rows, values a row) columns of each grid row's values in an observation of `grid` (its
     presence, relative speeds, TTC and traffic, row by row), and the columns of the rest (the ego's
     own values, the lane part, and whatever follows the grid's encoding: the permitted commands)."""
-    parts = grid.observation_parts(lanes_count=grid.rows(1))
-    rows = grid.rows(1)
+    rows, parts = grid.rows(1), grid.observation_parts(1)  # lanes: ego, sides: one layout on every road
     blocks = []
     for name in ROW_PARTS:
         if name in parts:

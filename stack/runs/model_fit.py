@@ -11,7 +11,7 @@ from planner.factory import model_path
 from planner.model_check import checked_model
 from planner.model_file import ModelFileError
 from planner.model_metadata import ModelMetadata
-from planner.networks import LANE_NETWORK, net_arch
+from planner.networks import net_arch, network_kind
 from records import N_ACTIONS, Encoding, GridConfig
 from stack.settings.run import RunConfig, grid_config
 
@@ -62,11 +62,10 @@ def checked_start_model(config: RunConfig) -> Path | None:
     metadata = checked_model(path, ("ddqn", "dqn"))[1]
     assert metadata.observation_size is not None, "DDQN / DQN files hold Q-networks"
     grid = grid_config(config)
-    lanes_network = train.network == LANE_NETWORK
     start_grid = metadata.grid if metadata.kind == "lane-mlp" else widened_grid(metadata.grid, grid)
     theirs = (metadata.kind, metadata.encoding, start_grid, list(metadata.hidden), metadata.action_mask)
     ours = (
-        "lane-mlp" if lanes_network else "mlp",
+        network_kind(train.network),
         train.encoding,
         grid,
         net_arch(train.network),

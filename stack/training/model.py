@@ -20,7 +20,7 @@ from planner.lane_network import LaneFeatures, LaneQNetwork
 from planner.learned import LearnedAgent, load_agent
 from planner.mobil import MobilPrior
 from planner.model_metadata import ModelMetadata
-from planner.networks import LANE_NETWORK, net_arch
+from planner.networks import LANE_NETWORK, net_arch, network_kind
 from records import N_ACTIONS, GridConfig
 from stack.loop.closed_loop import grid_config
 from stack.runs.model_fit import checked_start_model
@@ -118,7 +118,7 @@ def model_metadata(config: RunConfig, env: HierarchicalHighwayEnv, trained_steps
     train = config.train
     tabular = train.algorithm == "tabular"
     return ModelMetadata(
-        kind="qtable" if tabular else "lane-mlp" if train.network == LANE_NETWORK else "mlp",
+        kind="qtable" if tabular else network_kind(train.network),
         algorithm=train.algorithm,
         encoding=train.encoding,
         observation_size=int(np.prod(env.observation_space.shape)),
