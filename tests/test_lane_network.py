@@ -20,6 +20,7 @@ from planner.model_metadata import ModelMetadata
 from planner.networks import LANE_ENCODER, NET_ARCHS, lane_columns
 from records import N_ACTIONS, GridConfig
 from stack.apps.cli import app
+from stack.training.model import warm_start
 from tests.helpers import scene
 from tests.test_train import TINY, trained
 
@@ -74,7 +75,7 @@ def test_one_encoder_serves_every_lane():
     assert not np.array_equal(codes[0, lane[1]], codes[0, lane[3]]), "different lanes, different codes"
 
 
-def lane_dqn() -> DoubleDQN:
+def lane_dqn(steps: int = 64) -> DoubleDQN:
     space = gym.spaces.Box(-1.0, 1.0, (SIZE,), np.float32)
     start = observation()
 
@@ -92,7 +93,7 @@ def lane_dqn() -> DoubleDQN:
         "MlpPolicy", OneScene(), learning_starts=0, batch_size=8, seed=0,
         policy_kwargs={"net_arch": NET_ARCHS["lanes"], **options},
     )  # fmt: skip
-    model.learn(64)
+    model.learn(steps)
     return model
 
 
@@ -109,6 +110,22 @@ def test_a_trained_lane_network_saves_and_loads_to_the_same_q_values(tmp_path):
     with th.no_grad():
         expected = model.policy.q_net(th.as_tensor(batch)).numpy()
     np.testing.assert_array_equal(agent.q_values(batch), expected)
+
+
+def test_a_lane_network_file_starts_a_run_as_the_network_it_saved(tmp_path):
+    trained_model = lane_dqn()
+    metadata = ModelMetadata(
+        kind="mlp", algorithm="ddqn", encoding="observation", observation_size=SIZE,
+        hidden=tuple(NET_ARCHS["lanes"]), grid=GRID, action_mask=True,
+    )  # fmt: skip
+    start = load_agent(export_q_network(trained_model, tmp_path / "lanes.npz", metadata))
+    fresh = lane_dqn(steps=0)
+    warm_start(fresh, start)
+    batch = th.as_tensor(np.random.default_rng(4).uniform(-1, 1, (16, SIZE)).astype(np.float32))
+    with th.no_grad():
+        expected = trained_model.policy.q_net(batch).numpy()
+        np.testing.assert_array_equal(fresh.policy.q_net(batch).numpy(), expected)
+        np.testing.assert_array_equal(fresh.policy.q_net_target(batch).numpy(), expected)
 
 
 def test_a_lane_network_file_that_does_not_fit_is_refused_in_one_line(tmp_path):
