@@ -31,6 +31,11 @@ GRID = GridConfig(
 SIZE = 5 * 10 * 2 + 5 + 1 + 2 + N_ACTIONS
 """Presence and relative speed of 5 rows x 10 cells, a TTC a row, the ego speed, the lane part and
 the permitted commands."""
+METADATA = ModelMetadata(
+    kind="mlp", algorithm="ddqn", encoding="observation", observation_size=SIZE,
+    hidden=tuple(NET_ARCHS["lanes"]), grid=GRID, action_mask=True,
+)  # fmt: skip
+"""What a lane network of GRID's observations is saved with (`export_q_network` sets the kind)."""
 LANES = {
     **TINY,
     "perception": {**TINY["perception"], "lane_code": "sides"},
@@ -99,11 +104,7 @@ def lane_dqn(steps: int = 64) -> DoubleDQN:
 
 def test_a_trained_lane_network_saves_and_loads_to_the_same_q_values(tmp_path):
     model = lane_dqn()
-    metadata = ModelMetadata(
-        kind="mlp", algorithm="ddqn", encoding="observation", observation_size=SIZE,
-        hidden=tuple(NET_ARCHS["lanes"]), grid=GRID, action_mask=True,
-    )  # fmt: skip
-    path = export_q_network(model, tmp_path / "lanes.npz", metadata)
+    path = export_q_network(model, tmp_path / "lanes.npz", METADATA)
     assert load_model(path)[1]["kind"] == "lane-mlp"
     agent = load_agent(path)
     batch = np.random.default_rng(3).uniform(-1, 1, (16, SIZE)).astype(np.float32)
@@ -114,11 +115,7 @@ def test_a_trained_lane_network_saves_and_loads_to_the_same_q_values(tmp_path):
 
 def test_a_lane_network_file_starts_a_run_as_the_network_it_saved(tmp_path):
     trained_model = lane_dqn()
-    metadata = ModelMetadata(
-        kind="mlp", algorithm="ddqn", encoding="observation", observation_size=SIZE,
-        hidden=tuple(NET_ARCHS["lanes"]), grid=GRID, action_mask=True,
-    )  # fmt: skip
-    start = load_agent(export_q_network(trained_model, tmp_path / "lanes.npz", metadata))
+    start = load_agent(export_q_network(trained_model, tmp_path / "lanes.npz", METADATA))
     fresh = lane_dqn(steps=0)
     warm_start(fresh, start)
     batch = th.as_tensor(np.random.default_rng(4).uniform(-1, 1, (16, SIZE)).astype(np.float32))
