@@ -13,7 +13,7 @@ from pydantic import ValidationError
 
 from planner.mobil import prior_problem
 from planner.model_file import ModelFileError, load_model
-from planner.model_metadata import ModelMetadata
+from planner.model_metadata import ModelMetadata, whole_number
 from planner.networks import lane_network_shapes, lane_problem, mlp_shapes
 from records import ENCODINGS, N_ACTIONS, Encoding, GridConfig
 
@@ -69,15 +69,12 @@ def _check_metadata(path: Path | str, metadata: dict) -> None:
         problem = f"encoding: expected one of {', '.join(ENCODINGS)}"
     elif kind != "qtable":
         size, hidden, actions = (metadata.get(k) for k in ("observation_size", "hidden", "actions"))
-        if not isinstance(size, int) or isinstance(size, bool) or not 1 <= size <= MAX_INPUTS:
+        if not whole_number(size, 1, MAX_INPUTS):
             problem = f"observation_size: expected an integer in 1..{MAX_INPUTS}"
         elif (
             not isinstance(hidden, list)
             or len(hidden) > MAX_LAYERS
-            or not all(
-                isinstance(width, int) and not isinstance(width, bool) and 1 <= width <= MAX_WIDTH
-                for width in hidden
-            )
+            or not all(whole_number(width, 1, MAX_WIDTH) for width in hidden)
         ):
             problem = f"hidden: expected at most {MAX_LAYERS} layer widths in 1..{MAX_WIDTH}"
         elif actions != N_ACTIONS:

@@ -90,8 +90,15 @@ def _typed(data: dict[str, Any], key: str, kind: type) -> Any:
     return value if isinstance(value, kind) and not isinstance(value, bool) else None
 
 
+def whole_number(value: object, low: int | None = None, high: int | None = None) -> bool:
+    """Whether `value` is an int, not a bool (JSON's true is not 1 layer), within [low, high]."""
+    if not isinstance(value, int) or isinstance(value, bool):
+        return False
+    return (low is None or value >= low) and (high is None or value <= high)
+
+
 def _all_int(values: list[Any]) -> bool:
-    return all(isinstance(value, int) and not isinstance(value, bool) for value in values)
+    return all(map(whole_number, values))
 
 
 def _validation(data: object) -> Validation | None:
