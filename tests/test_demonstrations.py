@@ -8,6 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+import yaml
 
 from perception.grid import OccupancyGridBuilder
 from planner.agents import decide
@@ -124,8 +125,8 @@ def test_a_run_with_demonstrations_validates_its_pretrained_model_first(tmp_path
     [
         ({"algorithm": "dqn"}, "demonstrations: only the ddqn algorithm learns from them"),
         (
-            {"demonstrations": {"expert": "ddqn"}},
-            "unknown expert 'ddqn'; available: mobil, rule, lookahead, oracle",
+            {"demonstrations": {"expert": "tabular"}},
+            "unknown expert 'tabular'; available: mobil, rule, lookahead, oracle, ddqn, dqn",
         ),
         ({"demonstrations": {"share": 1.0}}, "share"),
     ],
@@ -233,3 +234,86 @@ def test_a_run_s_own_road_is_checked_even_when_its_scenario_is_demonstrated():
     data = {**TINY, "train": {**TINY["train"], "demonstrations": {"scenarios": {"lanes-3": 1.0}}}}
     with pytest.raises(ValueError, match=r"lanes-3 and lanes-3 \(the run's road\) \(lane counts \[3, 5\]\)"):
         build_config(data, scenario="lanes-3", highway__lanes_count=5)
+
+
+def _taught(demonstrations: dict, **highway) -> dict:
+    """TINY learning from `demonstrations` (on a road with `highway`'s keys changed)."""
+    return {
+        **TINY,
+        "highway": {**TINY["highway"], **highway},
+        "train": {**TINY["train"], "demonstrations": demonstrations},
+    }
+
+
+def test_each_world_is_demonstrated_by_the_expert_named_for_it():
+    """`experts` gives some worlds a teacher of their own (the one worth copying there): an episode
+    drawn in a jam is the rule agent's, one drawn on highway-v0 MOBIL's, action for action."""
+    demonstrations = {
+        "expert": "mobil",
+        "experts": {"jam": "rule"},
+        "scenarios": {"jam": 1.0, "highway-v0": 1.0},
+    }
+    config = build_config(_taught(demonstrations, duration=15))
+    world, settings = demonstration_worlds(config), config.train.demonstrations
+    drawn, differs = set(), False
+    for seed in range(200_000, 200_006):
+        env = HierarchicalHighwayEnv(world)
+        env.reset(seed=seed)
+        scenario = env.loop.config.scenario
+        env.close()
+        drawn.add(scenario)
+        own = {"jam": "rule", "highway-v0": "mobil"}[scenario]
+        taught = expert_episode(world, settings, seed).actions
+        np.testing.assert_array_equal(taught, expert_episode(world, own, seed).actions)
+        if scenario == "jam":
+            differs |= not np.array_equal(taught, expert_episode(world, "mobil", seed).actions)
+    assert drawn == {"jam", "highway-v0"} and differs, (
+        "both worlds drawn; in a jam the rule agent is not MOBIL"
+    )
+
+
+def test_a_learned_expert_decides_with_the_model_file_named():
+    """A Q-network teaches with `expert_model` (by default its shipped file): the shipped DQN named
+    by path demonstrates what the shipped DQN does; a DDQN named with the DQN's file is refused
+    before any episode, in one line, as is a model file for no learned expert."""
+    from planner.factory import model_path
+    from planner.model_file import ModelFileError
+    from stack.runs.model_fit import checked_expert_model
+
+    shipped = model_path("dqn", None)
+    named = build_config(_taught({"expert": "dqn", "expert_model": str(shipped)}))
+    default = build_config(_taught({"expert": "dqn"}))
+    assert checked_expert_model(named) == shipped == checked_expert_model(default)
+    episode = expert_episode(named, named.train.demonstrations, 200_001)
+    np.testing.assert_array_equal(episode.actions, expert_episode(default, "dqn", 200_001).actions)
+    wrong = build_config(_taught({"expert": "ddqn", "expert_model": str(shipped)}))
+    with pytest.raises(ModelFileError, match="dqn.npz"):
+        checked_expert_model(wrong)
+    assert checked_expert_model(build_config(_taught({"expert": "lookahead"}))) is None
+
+
+@pytest.mark.parametrize(
+    ("demonstrations", "message"),
+    [
+        ({"experts": {"jam": "rule"}}, "experts: 'jam' is not a world the demonstrations are drawn from"),
+        ({"experts": {"jam": "driver"}}, "experts"),
+        ({"expert": "rule", "expert_model": "planner/models/dqn.npz"}, "expert_model: no learned expert"),
+        ({"expert": "dqn", "expert_model": "nowhere.npz"}, "no such model file nowhere.npz"),
+        ({"expert": "dqn", "experts": {"configured": "ddqn"}}, "at most one learned expert"),
+    ],
+)
+def test_experts_are_checked_with_the_config(demonstrations, message):
+    with pytest.raises(ValueError, match=message):
+        build_config(_taught(demonstrations))
+
+
+def test_a_config_names_its_expert_model_beside_it(tmp_path, monkeypatch):
+    from stack.settings.run import load_config
+
+    folder = tmp_path / "configs"
+    folder.mkdir()
+    (folder / "teacher.npz").write_bytes(b"")
+    taught = {"demonstrations": {"expert": "ddqn", "expert_model": "teacher.npz"}}
+    (folder / "train.yaml").write_text(yaml.safe_dump({"train": taught}))
+    monkeypatch.chdir(tmp_path)
+    assert load_config("configs/train.yaml").train.demonstrations.expert_model == str(folder / "teacher.npz")

@@ -73,12 +73,13 @@ def check_jobs(jobs: int) -> None:
 
 def check_init_model(config: RunConfig) -> None:
     """Refuse, before the run folder exists and before torch is imported, a `train.init_model`
-    that does not fit the run."""
+    that does not fit the run, or a learned expert's model that does not fit the roads it teaches on."""
     from planner.model_file import ModelFileError
-    from stack.runs.model_fit import checked_start_model
+    from stack.runs.model_fit import checked_expert_model, checked_start_model
 
     try:
         checked_start_model(config)
+        checked_expert_model(config)
     except ModelFileError as error:
         fail(str(error))
 

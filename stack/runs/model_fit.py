@@ -13,7 +13,8 @@ from planner.model_file import ModelFileError
 from planner.model_metadata import ModelMetadata
 from planner.networks import net_arch, network_kind
 from records import N_ACTIONS, Encoding, GridConfig
-from stack.settings.run import RunConfig, grid_config
+from stack.settings.run import RunConfig, demonstration_worlds, grid_config, training_worlds
+from stack.settings.train import LEARNED_EXPERTS
 
 
 def check_road_fit(
@@ -86,3 +87,22 @@ def widened_grid(start: GridConfig, grid: GridConfig) -> GridConfig:
     if set(start.features) <= set(grid.features):
         return start.model_copy(update={"features": grid.features})
     return start
+
+
+def checked_expert_model(config: RunConfig) -> Path | None:
+    """The model file of the learned expert `train.demonstrations` names (`expert_model`, by default
+    its shipped file), None without one; refused (ModelFileError, one line) unless it holds that
+    agent's Q-network and takes its observations on every road it teaches on: from the file's
+    metadata and arrays alone, before torch is imported."""
+    settings = config.train.demonstrations
+    learned = [name for name in settings.named_experts() if name in LEARNED_EXPERTS] if settings else []
+    if settings is None or not learned:
+        return None
+    path = model_path(learned[0], settings.expert_model)
+    assert path is not None, "a learned expert has a model file"
+    metadata = checked_model(path, (learned[0],))[1]
+    worlds = training_worlds(demonstration_worlds(config))
+    taught = [world for name, world in worlds.items() if settings.expert_of(name) == learned[0]]
+    lanes = tuple(sorted({count for world in taught for count in world.highway.lane_counts}))
+    check_file_fit(path, metadata, lanes, "train.demonstrations.expert_model")
+    return path

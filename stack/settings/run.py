@@ -107,6 +107,17 @@ class RunConfig(Strict):
         return self
 
     @model_validator(mode="after")
+    def _experts_teach_demonstrated_worlds(self) -> RunConfig:
+        if (demonstrations := self.train.demonstrations) is not None and demonstrations.experts:
+            worlds = demonstrations.scenarios or self.train.scenarios or {self.scenario or "configured": 1}
+            if unknown := sorted(set(demonstrations.experts) - set(worlds)):
+                raise ValueError(
+                    f"train.demonstrations.experts: {unknown[0]!r} is not a world the demonstrations "
+                    f"are drawn from ({', '.join(worlds)})"
+                )
+        return self
+
+    @model_validator(mode="after")
     def _one_encoding_for_the_mix(self) -> RunConfig:
         roads = named_roads(self.train.scenarios)
         self.check_one_encoding(roads)
@@ -250,6 +261,16 @@ def training_worlds(config: RunConfig) -> dict[str, RunConfig]:
     return {name: in_scenario(config, name) for name in config.train.scenarios}
 
 
+def demonstration_worlds(config: RunConfig) -> RunConfig:
+    """`config` with `train.demonstrations.scenarios` as its world mix, if it names one."""
+    demonstrations = config.train.demonstrations
+    if demonstrations is None or not demonstrations.scenarios:
+        return config
+    return config.model_copy(
+        update={"train": config.train.model_copy(update={"scenarios": demonstrations.scenarios})}
+    )
+
+
 def build_config(
     data: dict[str, Any], source: str = "config", labels: dict[str, str] | None = None, **overrides: Any
 ) -> RunConfig:
@@ -315,14 +336,22 @@ def read_mapping(path: Path | str) -> dict[str, Any]:
 
 def load_config(path: Path | str, labels: dict[str, str] | None = None, **overrides: Any) -> RunConfig:
     """Read a YAML run config, apply CLI overrides, validate; raise ConfigError on any problem. A
-    relative `train.init_model` in the file that names a file beside it is that file, so a packaged
-    training config finds its starting model from any working directory."""
+    relative `train.init_model` or `train.demonstrations.expert_model` in the file that names a
+    file beside it is that file, so a packaged training config finds its models from any working
+    directory."""
     data = read_mapping(path)
     train = data.get("train")
-    if isinstance(train, dict) and isinstance(start := train.get("init_model"), str):
-        if (beside := Path(path).parent / start).is_file():
-            train["init_model"] = str(beside.resolve())
+    if isinstance(train, dict):
+        _beside(train, "init_model", Path(path))
+        if isinstance(demonstrations := train.get("demonstrations"), dict):
+            _beside(demonstrations, "expert_model", Path(path))
     return build_config(data, str(path), labels, **overrides)
+
+
+def _beside(section: dict[str, Any], key: str, config_file: Path) -> None:
+    """`section[key]`, a relative model file that lies beside `config_file`, made that file."""
+    if isinstance(name := section.get(key), str) and (beside := config_file.parent / name).is_file():
+        section[key] = str(beside.resolve())
 
 
 def grid_config(config: RunConfig) -> GridConfig:

@@ -13,6 +13,8 @@ from planner.networks import NET_ARCHS
 from records import ENCODINGS, LEARNED_AGENTS, SEED_LIMIT, Encoding, LearnedAgentName, one_of, unknown_name
 from stack.settings import scenarios
 
+LEARNED_EXPERTS = ("ddqn", "dqn")
+"""The learned agents that can teach (`train.demonstrations.expert_model` names their file)."""
 MAX_STEPS = 1_000_000_000
 """Upper bound of every step count and period [environment steps] (the largest `train.steps`)."""
 MAX_SPEED_RANGE = 100.0
@@ -84,9 +86,16 @@ ScenarioMix = Annotated[dict[str, float], AfterValidator(checked_mix)]
 """Named scenarios with their shares (relative weights)."""
 
 
-EXPERTS = ("mobil", "rule", "lookahead", "oracle")
-"""Agents whose decisions can be demonstrations: the classical baselines, the lookahead planner and
-the oracle."""
+EXPERTS = ("mobil", "rule", "lookahead", "oracle", *LEARNED_EXPERTS)
+"""Agents whose decisions can be demonstrations: the classical baselines, the lookahead planner, the
+oracle and a Q-network (deciding with `train.demonstrations.expert_model`)."""
+
+
+def existing_model_file(path: str | None, expected: str = "") -> str | None:
+    """`path` unless it names no file (ValueError saying what was `expected`)."""
+    if path is not None and not Path(path).is_file():
+        raise ValueError(f"no such model file {path}{expected}")
+    return path
 
 
 class DemonstrationConfig(Strict):
@@ -95,9 +104,20 @@ class DemonstrationConfig(Strict):
     on them alone precede the first episode of training, and afterwards `share` of every batch is
     drawn from them. On those rows a large-margin loss (weight `margin_weight`) keeps the expert's
     action `margin` above the others. The expert drives the worlds of `scenarios` (by default the
-    training mix): an expert worth copying on some worlds only demonstrates there."""
+    training mix): an expert worth copying on some worlds only demonstrates there; `experts` names
+    another expert for some of those worlds (a teacher per world: the one worth copying there)."""
 
     expert: Annotated[str, one_of("expert", EXPERTS)] = "mobil"
+    experts: dict[str, Annotated[str, one_of("experts", EXPERTS)]] = Field(
+        default_factory=dict,
+        description="scenario -> the expert of its episodes instead of `expert` (scenarios of the "
+        "worlds the demonstrations are drawn from)",
+    )
+    expert_model: str | None = Field(
+        None,
+        description="the model file a learned expert (ddqn, dqn) decides with, relative to the "
+        "config file beside it (none: the agent's shipped file)",
+    )
     episodes: int = Field(200, ge=1, le=100_000)
     pretrain_steps: int = Field(10_000, ge=0, le=10_000_000)
     share: float = Field(0.25, ge=0, lt=1)
@@ -109,6 +129,28 @@ class DemonstrationConfig(Strict):
         description="the worlds the expert drives, with their shares (empty: the training mix): "
         "demonstrations only where the expert is the one to copy",
     )
+
+    @field_validator("expert_model")
+    @classmethod
+    def _existing_model(cls, path: str | None) -> str | None:
+        return existing_model_file(path)
+
+    @model_validator(mode="after")
+    def _model_for_a_learned_expert(self) -> DemonstrationConfig:
+        learned = set(self.named_experts()) & set(LEARNED_EXPERTS)
+        if self.expert_model is not None and not learned:
+            raise ValueError(f"expert_model: no learned expert ({', '.join(LEARNED_EXPERTS)}) is named")
+        if len(learned) > 1:
+            raise ValueError("experts: at most one learned expert, the one expert_model names")
+        return self
+
+    def named_experts(self) -> tuple[str, ...]:
+        """Every expert named: `expert`, then those of `experts`, once each."""
+        return tuple(dict.fromkeys([self.expert, *self.experts.values()]))
+
+    def expert_of(self, scenario: str | None) -> str:
+        """The expert of an episode in `scenario`'s world."""
+        return self.experts.get(scenario or "", self.expert)
 
 
 class TrainConfig(Strict):
@@ -187,9 +229,7 @@ class TrainConfig(Strict):
     @field_validator("init_model")
     @classmethod
     def _existing_model(cls, path: str | None) -> str | None:
-        if path not in (None, "shipped") and not Path(path).is_file():
-            raise ValueError(f"no such model file {path} (a model file or 'shipped')")
-        return path
+        return path if path == "shipped" else existing_model_file(path, " (a model file or 'shipped')")
 
     @model_validator(mode="after")
     def _one_env_for_tables(self) -> TrainConfig:

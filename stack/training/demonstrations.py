@@ -22,36 +22,46 @@ from stack.agents.oracle import Oracle
 from stack.loop.closed_loop import ClosedLoop
 from stack.runs.episodes import lookahead_setup
 from stack.runtime.executors import completed
-from stack.settings.run import RunConfig, grid_config
+from stack.settings.run import RunConfig, demonstration_worlds, grid_config
+from stack.settings.train import LEARNED_EXPERTS, DemonstrationConfig
 from stack.training.decision_env import HierarchicalHighwayEnv
 from stack.training.envs import StopTraining
 from stack.training.summary import DemonstrationsUsed
 
 
-def expert_policy(world: RunConfig, expert_name: str) -> Callable[[ClosedLoop], int]:
+def expert_policy(
+    world: RunConfig, expert_name: str, model: str | None = None
+) -> Callable[[ClosedLoop], int]:
     """The expert, built once for a loop of `world`, as a function of the loop's state to its
     decision: the oracle plans on copies of the loop (whose rollouts perceive on its base agent's
-    grid), a policy decides on its own view of what the controllers act on (the sensor's report)."""
+    grid), a policy decides on its own view of what the controllers act on (the sensor's report);
+    a learned expert with the Q-network of `model` (by default its shipped file)."""
     lanes, grid = world.highway.lanes_count, grid_config(world)
     if expert_name == "oracle":
         oracle = Oracle.for_road(world.planner.oracle, lanes, grid)
         return lambda loop: oracle.plan(loop).value
     setup = lookahead_setup(world) if expert_name == "lookahead" else None
-    expert = make_agent(expert_name, lanes, grid, lookahead=setup)
+    learned = model if expert_name in LEARNED_EXPERTS else None
+    expert = make_agent(expert_name, lanes, grid, model=learned, lookahead=setup)
     view = OccupancyGridBuilder(expert.grid_config or grid)
     return lambda loop: decide(expert, view.build(loop.perceived).encode(expert.encoding)).value
 
 
-def expert_episode(config: RunConfig, expert_name: str, seed: int) -> Demonstrations:
+def expert_episode(config: RunConfig, experts: DemonstrationConfig | str, seed: int) -> Demonstrations:
     """One episode of the decision MDP (its world and traffic drawn from `seed`) driven by the
-    expert, with the learner's observations and rewards; with an action mask, an expert's command
-    the loop would not carry out is recorded as the STAY it becomes. In a worker process it is deaf to Ctrl-C,
-    as the training env workers are: the learner stops the run (with a checkpoint) itself."""
+    expert of its world (`experts`; a name: that expert on every world), with the learner's
+    observations and rewards; with an action mask, an expert's command the loop would not carry
+    out is recorded as the STAY it becomes. In a worker process it is deaf to Ctrl-C, as the
+    training env workers are: the learner stops the run (with a checkpoint) itself."""
     if multiprocessing.parent_process() is not None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     env = HierarchicalHighwayEnv(config)
     observation, _ = env.reset(seed=seed)
-    expert = expert_policy(env.loop.config, expert_name)
+    world = env.loop.config
+    if isinstance(experts, str):
+        expert = expert_policy(world, experts)
+    else:
+        expert = expert_policy(world, experts.expert_of(world.scenario), experts.expert_model)
     observations, actions, rewards = [observation], [], []
     terminated = truncated = False
     while not (terminated or truncated):
@@ -69,16 +79,6 @@ def expert_episode(config: RunConfig, expert_name: str, seed: int) -> Demonstrat
     )
 
 
-def demonstration_worlds(config: RunConfig) -> RunConfig:
-    """`config` with `train.demonstrations.scenarios` as its world mix, if it names one."""
-    demonstrations = config.train.demonstrations
-    if demonstrations is None or not demonstrations.scenarios:
-        return config
-    return config.model_copy(
-        update={"train": config.train.model_copy(update={"scenarios": demonstrations.scenarios})}
-    )
-
-
 def collect_demonstrations(
     config: RunConfig, progress: bool = True, stop_requested: Callable[[], bool] = lambda: False
 ) -> Demonstrations:
@@ -90,7 +90,7 @@ def collect_demonstrations(
     assert demonstrations is not None, "the run names no demonstrations"
     seeds = [child_seed(demonstrations.seed, k) for k in range(demonstrations.episodes)]
     episodes: dict[int, Demonstrations] = {}
-    task = partial(expert_episode, demonstration_worlds(config), demonstrations.expert)
+    task = partial(expert_episode, demonstration_worlds(config), demonstrations)
     with tqdm(total=len(seeds), unit="episode", desc="demonstrations", disable=not progress) as bar:
         for index, episode in completed(task, seeds, config.train.envs):
             episodes[index] = episode
@@ -132,6 +132,7 @@ def demonstrations_used(config: RunConfig, model: object) -> DemonstrationsUsed 
         return None
     return DemonstrationsUsed(
         expert=settings.expert,
+        experts=settings.experts,
         episodes=settings.episodes,
         transitions=len(demonstrations),
         scenarios=tuple(settings.scenarios),

@@ -3,7 +3,7 @@ report, a sweep's trials and `--resume`; written by `stack.training.report`)."""
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from planner.scores import Validation
@@ -13,13 +13,14 @@ NO_CURVE = "not drawn: no validation ran yet"
 
 @dataclass(frozen=True, kw_only=True)
 class DemonstrationsUsed:
-    """The expert a run learnt from first, its episodes, the transitions they gave and the worlds
-    it drove (named scenarios; empty: the training mix)."""
+    """The expert a run learnt from first, its episodes, the transitions they gave, the worlds
+    it drove (named scenarios; empty: the training mix) and the experts of some of them instead."""
 
     expert: str
     episodes: int
     transitions: int
     scenarios: tuple[str, ...] = ()
+    experts: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, kw_only=True)
