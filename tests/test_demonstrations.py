@@ -295,11 +295,11 @@ def test_a_learned_expert_decides_with_the_model_file_named():
 @pytest.mark.parametrize(
     ("demonstrations", "message"),
     [
-        ({"experts": {"jam": "rule"}}, "experts: 'jam' is not a world the demonstrations are drawn from"),
+        ({"experts": {"jams": "rule"}}, "experts: unknown scenario 'jams'"),
         ({"experts": {"jam": "driver"}}, "experts"),
         ({"expert": "rule", "expert_model": "planner/models/dqn.npz"}, "expert_model: no learned expert"),
         ({"expert": "dqn", "expert_model": "nowhere.npz"}, "no such model file nowhere.npz"),
-        ({"expert": "dqn", "experts": {"configured": "ddqn"}}, "at most one learned expert"),
+        ({"expert": "dqn", "experts": {"jam": "ddqn"}}, "at most one learned expert"),
     ],
 )
 def test_experts_are_checked_with_the_config(demonstrations, message):

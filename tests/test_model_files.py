@@ -5,11 +5,11 @@ import io
 import json
 import resource
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from planner.factory import SHIPPED_MODELS
 from planner.learned import load_agent
 from planner.model_file import FORMAT, ModelFileError, load_model, save_model
 
@@ -24,8 +24,12 @@ def metadata_bytes(metadata: object) -> bytes:
     return npy(np.frombuffer(json.dumps(metadata).encode(), dtype=np.uint8))
 
 
-def shipped() -> tuple[dict[str, np.ndarray], dict]:
-    return load_model(SHIPPED_MODELS["ddqn"])
+PLAIN_MLP = Path(__file__).parents[1] / "configs" / "train" / "ddqn-stage4.npz"
+"""A Double DQN on a plain MLP (arrays `0.weight`, ...): the former shipped model, now a teacher."""
+
+
+def plain_mlp() -> tuple[dict[str, np.ndarray], dict]:
+    return load_model(PLAIN_MLP)
 
 
 def write(path, members: dict[str, bytes], compression=zipfile.ZIP_DEFLATED) -> None:
@@ -35,7 +39,7 @@ def write(path, members: dict[str, bytes], compression=zipfile.ZIP_DEFLATED) -> 
 
 
 def with_metadata(path, **changes) -> None:
-    arrays, metadata = shipped()
+    arrays, metadata = plain_mlp()
     save_model(path, arrays, {**metadata, **changes})
 
 
@@ -122,7 +126,7 @@ def test_a_header_claiming_more_than_the_member_holds_is_refused(tmp_path):
 
 
 def test_nan_weights_are_refused(tmp_path):
-    arrays, metadata = shipped()
+    arrays, metadata = plain_mlp()
     arrays["0.weight"] = arrays["0.weight"].copy()
     arrays["0.weight"][0, 0] = np.nan
     path = save_model(tmp_path / "nan.npz", arrays, metadata)
@@ -158,7 +162,7 @@ def test_a_model_that_does_not_fit_the_road_is_refused_alike_everywhere(tmp_path
     from stack.training.model import initial_model
     from tests.test_cli import tiny_config_file
 
-    arrays, metadata = shipped()
+    arrays, metadata = plain_mlp()
     grid = {**metadata["grid"], "lanes": "absolute", "lane_code": "binary", "features": []}
     builder = OccupancyGridBuilder(GridConfig(**grid))
     size, given = (int(builder.space("observation", lanes).shape[0]) for lanes in (4, 2))

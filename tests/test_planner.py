@@ -11,7 +11,7 @@ from stable_baselines3 import DQN
 from typer.testing import CliRunner
 
 from perception.grid import GridConfig, OccupancyGridBuilder
-from planner.agents import decide
+from planner.agents import decide, sees_permitted
 from planner.ddqn import DoubleDQN, double_q_target
 from planner.factory import SHIPPED_MODELS, make_agent
 from planner.learned import LearnedAgent, export_q_network, load_agent
@@ -254,9 +254,15 @@ def test_shipped_default_model_loads_safely():
     assert SHIPPED_MODELS["ddqn"].stat().st_size <= 2_000_000
     assert agent.metadata.actions == N_ACTIONS
     world = scene(4, (0.0, 1), [(15.0, 4.0), (30.0, 0.0)])
-    observation = OccupancyGridBuilder(agent.grid_config).build(world).encode(agent.encoding)
+    grid = OccupancyGridBuilder(agent.grid_config).build(world).encode(agent.encoding)
+    assert sees_permitted(agent), "it decides among the commands the safety layer permits"
+    observation = np.concatenate([grid, np.ones(N_ACTIONS, np.float32)])
     assert observation.size == agent.metadata.observation_size, "it reads the grid it declares"
     assert decide(agent, observation) in tuple(Command)
+    for only in Command:
+        permitted = np.zeros(N_ACTIONS, np.float32)
+        permitted[only] = 1.0
+        assert decide(agent, np.concatenate([grid, permitted])) is only, "a refused command is never chosen"
 
 
 def test_export_writes_an_sb3_zip_that_dqn_load_opens_and_drives_alike(tmp_path):
@@ -298,7 +304,7 @@ def test_the_ddqn_ships_one_small_data_only_model_for_every_road(tmp_path):
 def test_every_shipped_model_s_metadata_reads_as_model_metadata_and_writes_its_keys_back(path):
     _, stored = load_model(path, arrays=False)
     metadata = ModelMetadata.from_json(stored)
-    assert metadata.kind in ("mlp", "qtable") and metadata.grid == GridConfig(**stored["grid"])
+    assert metadata.kind in ("mlp", "lane-mlp", "qtable") and metadata.grid == GridConfig(**stored["grid"])
     assert metadata.trained_steps is not None and metadata.validation is not None
     assert metadata.validation.step == metadata.trained_steps, "the kept model's validation"
     written = metadata.to_json()

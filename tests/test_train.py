@@ -493,9 +493,10 @@ def test_a_mobil_prior_decides_in_rollouts_validation_and_the_written_files(tmp_
 
 
 def test_a_config_names_its_starting_model_beside_it_from_any_working_directory(tmp_path, monkeypatch):
-    """A relative `train.init_model` naming a file beside the config file is that file (the shipped
-    config starts from `ddqn-stage3.npz` beside it, which started from `ddqn-stage2.npz` and that from
-    `ddqn-stage1.npz`, also from an installed wheel)."""
+    """A relative `train.init_model` naming a file beside the config file is that file (the former
+    shipped model's config starts from `ddqn-stage3.npz` beside it, which started from
+    `ddqn-stage2.npz` and that from `ddqn-stage1.npz`; the shipped config is taught by
+    `ddqn-stage4.npz` beside it; also from an installed wheel)."""
     from stack.settings.run import load_config
 
     folder = tmp_path / "configs"
@@ -506,11 +507,13 @@ def test_a_config_names_its_starting_model_beside_it_from_any_working_directory(
     assert load_config("configs/train.yaml").train.init_model == str(folder / "start.npz")
     shipped = Path(__file__).parents[1] / "configs" / "train"
     for config, start in (
-        ("ddqn.yaml", "ddqn-stage3.npz"),
+        ("ddqn-stage4.yaml", "ddqn-stage3.npz"),
         ("ddqn-stage3.yaml", "ddqn-stage2.npz"),
         ("ddqn-stage2.yaml", "ddqn-stage1.npz"),
     ):
         assert Path(load_config(shipped / config).train.init_model).samefile(shipped / start)
+    teacher = load_config(shipped / "ddqn.yaml").train.demonstrations
+    assert teacher is not None and Path(teacher.expert_model or "").samefile(shipped / "ddqn-stage4.npz")
 
 
 def test_validation_scores_every_world_of_a_mix_and_shows_it():

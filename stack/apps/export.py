@@ -7,12 +7,15 @@ classes); drivestack itself never loads it: its model files stay data-only. A mo
 (`planner.mobil.MobilPrior`) is drivestack's decision rule, not SB3's: `DQN.predict` on the zip
 decides on the bare Q-values (the CLI says so). So is an action mask: a model trained with one takes
 observations that end with the safety layer's permitted commands (the zip's observation space has
-them, in [0, 1]), and drivestack decides among the permitted ones only.
+them, in [0, 1]), and drivestack decides among the permitted ones only. A lane network's zip
+names its features extractor, `planner.lane_network.LaneFeatures`: `DQN.load` needs drivestack
+importable to open it.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 from stable_baselines3 import DQN
@@ -25,7 +28,7 @@ from records import N_ACTIONS
 from stack.apps.folders import check_destination
 from stack.runs.model_fit import check_road_fit
 from stack.training.decision_env import with_permitted
-from stack.training.model import warm_start
+from stack.training.model import lane_features_options, warm_start
 
 
 class _Spaces(gym.Env):
@@ -52,13 +55,10 @@ def export_sb3(model: Path, out: Path) -> tuple[Path, ModelMetadata]:
     space = OccupancyGridBuilder(grid).space(agent.encoding, lanes)
     if agent.sees_permitted:
         space = with_permitted(space)
-    sb3 = DQN(
-        "MlpPolicy",
-        _Spaces(space),
-        policy_kwargs={"net_arch": list(agent.metadata.hidden)},
-        device="cpu",
-        verbose=0,
-    )
+    options: dict[str, Any] = {"net_arch": list(agent.metadata.hidden)}
+    if agent.metadata.kind == "lane-mlp":
+        options |= lane_features_options(grid)
+    sb3 = DQN("MlpPolicy", _Spaces(space), policy_kwargs=options, device="cpu", verbose=0)
     warm_start(sb3, agent)
     written = out if out.suffix == ".zip" else out.with_suffix(out.suffix + ".zip")
     try:

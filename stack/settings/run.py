@@ -107,17 +107,6 @@ class RunConfig(Strict):
         return self
 
     @model_validator(mode="after")
-    def _experts_teach_demonstrated_worlds(self) -> RunConfig:
-        if (demonstrations := self.train.demonstrations) is not None and demonstrations.experts:
-            worlds = demonstrations.scenarios or self.train.scenarios or {self.scenario or "configured": 1}
-            if unknown := sorted(set(demonstrations.experts) - set(worlds)):
-                raise ValueError(
-                    f"train.demonstrations.experts: {unknown[0]!r} is not a world the demonstrations "
-                    f"are drawn from ({', '.join(worlds)})"
-                )
-        return self
-
-    @model_validator(mode="after")
     def _one_encoding_for_the_mix(self) -> RunConfig:
         roads = named_roads(self.train.scenarios)
         self.check_one_encoding(roads)

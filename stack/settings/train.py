@@ -110,8 +110,8 @@ class DemonstrationConfig(Strict):
     expert: Annotated[str, one_of("expert", EXPERTS)] = "mobil"
     experts: dict[str, Annotated[str, one_of("experts", EXPERTS)]] = Field(
         default_factory=dict,
-        description="scenario -> the expert of its episodes instead of `expert` (scenarios of the "
-        "worlds the demonstrations are drawn from)",
+        description="scenario -> the expert of its episodes instead of `expert` (a scenario the "
+        "demonstrations are not drawn from has none)",
     )
     expert_model: str | None = Field(
         None,
@@ -134,6 +134,13 @@ class DemonstrationConfig(Strict):
     @classmethod
     def _existing_model(cls, path: str | None) -> str | None:
         return existing_model_file(path)
+
+    @field_validator("experts")
+    @classmethod
+    def _named_scenarios(cls, experts: dict[str, str]) -> dict[str, str]:
+        if unknown := [name for name in experts if name not in scenarios.names()]:
+            raise ValueError(unknown_name("scenario", unknown[0], scenarios.names()))
+        return experts
 
     @model_validator(mode="after")
     def _model_for_a_learned_expert(self) -> DemonstrationConfig:

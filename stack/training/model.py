@@ -105,11 +105,13 @@ def policy_options(config: RunConfig) -> dict[str, Any]:
     (`planner.lane_network`) on the run's grid, the widths then its head's."""
     options: dict[str, Any] = {"net_arch": net_arch(config.train.network)}
     if config.train.network == LANE_NETWORK:
-        options |= {
-            "features_extractor_class": LaneFeatures,
-            "features_extractor_kwargs": {"grid": grid_config(config)},
-        }
+        options |= lane_features_options(grid_config(config))
     return options
+
+
+def lane_features_options(grid: GridConfig) -> dict[str, Any]:
+    """SB3's `policy_kwargs` that make the lane network's features extractor read `grid`."""
+    return {"features_extractor_class": LaneFeatures, "features_extractor_kwargs": {"grid": grid}}
 
 
 def model_metadata(config: RunConfig, env: HierarchicalHighwayEnv, trained_steps: int) -> ModelMetadata:
