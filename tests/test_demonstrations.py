@@ -151,8 +151,9 @@ def test_a_checkpoint_s_demonstrations_are_checked_before_use():
         Demonstrations.from_arrays({"actions": np.zeros(2)}, 4, 3)
 
 
-@pytest.mark.parametrize("expert", ["rule", "lookahead", "oracle"])
+@pytest.mark.parametrize("expert", ["rule", "lookahead", "oracle", "ddqn", "dqn"])
 def test_every_expert_drives_a_recorded_episode(expert):
+    """A learned expert sees its own grid (with the permitted commands, for the masked shipped ddqn)."""
     config = build_config(TINY)
     episode = expert_episode(config, expert, 200_001)
     assert len(episode) == 5 and set(episode.actions) <= {0, 1, 2}

@@ -1,6 +1,7 @@
 """Whether a Q-network model can drive a road: the one check of a model file against the road it is
 to drive, made by every command that takes a model (`run` and `compare` from the file's metadata
-before torch is imported, every agent as built, `train.init_model` before torch too, `export`)."""
+before torch is imported, every agent as built, `train.init_model` and a learned teacher's
+`train.demonstrations.expert_model` before torch too, `export`)."""
 
 from __future__ import annotations
 
@@ -92,11 +93,11 @@ def widened_grid(start: GridConfig, grid: GridConfig) -> GridConfig:
 def checked_expert_model(config: RunConfig) -> Path | None:
     """The model file of the learned expert `train.demonstrations` names (`expert_model`, by default
     its shipped file), None without one; refused (ModelFileError, one line) unless it holds that
-    agent's Q-network and takes its observations on every road it teaches on: from the file's
-    metadata and arrays alone, before torch is imported."""
+    agent's Q-network and its grid (with the permitted commands, for a masked model) gives the
+    values it expects on every road it teaches on: from the file's metadata and arrays alone,
+    before torch is imported."""
     settings = config.train.demonstrations
-    learned = [name for name in settings.named_experts() if name in LEARNED_EXPERTS] if settings else []
-    if settings is None or not learned:
+    if settings is None or not (learned := [n for n in settings.named_experts() if n in LEARNED_EXPERTS]):
         return None
     path = model_path(learned[0], settings.expert_model)
     assert path is not None, "a learned expert has a model file"

@@ -115,8 +115,8 @@ class DemonstrationConfig(Strict):
     )
     expert_model: str | None = Field(
         None,
-        description="the model file a learned expert (ddqn, dqn) decides with, relative to the "
-        "config file beside it (none: the agent's shipped file)",
+        description="the model file a learned expert (ddqn, dqn) decides with (none: the agent's "
+        "shipped file); in a config file, a name of a file beside it is that file",
     )
     episodes: int = Field(200, ge=1, le=100_000)
     pretrain_steps: int = Field(10_000, ge=0, le=10_000_000)
@@ -133,7 +133,11 @@ class DemonstrationConfig(Strict):
     @field_validator("expert_model")
     @classmethod
     def _existing_model(cls, path: str | None) -> str | None:
-        return existing_model_file(path)
+        """The file, as an absolute path: the run's config.yaml names it from any directory."""
+        if path is None:
+            return None
+        existing_model_file(path)
+        return str(Path(path).resolve())
 
     @field_validator("experts")
     @classmethod

@@ -13,7 +13,7 @@ import numpy as np
 from tqdm import tqdm
 
 from perception.grid import OccupancyGridBuilder
-from planner.agents import decide
+from planner.agents import decide, sees_permitted
 from planner.ddqn import Demonstrations, DoubleDQN
 from planner.factory import make_agent
 from planner.validation import RealTimeValidation
@@ -21,6 +21,7 @@ from records import N_ACTIONS, Command, child_seed
 from stack.agents.oracle import Oracle
 from stack.loop.closed_loop import ClosedLoop
 from stack.runs.episodes import lookahead_setup
+from stack.runs.model_fit import checked_expert_model
 from stack.runtime.executors import completed
 from stack.settings.run import RunConfig, demonstration_worlds, grid_config
 from stack.settings.train import LEARNED_EXPERTS, DemonstrationConfig
@@ -43,8 +44,10 @@ def expert_policy(
     setup = lookahead_setup(world) if expert_name == "lookahead" else None
     learned = model if expert_name in LEARNED_EXPERTS else None
     expert = make_agent(expert_name, lanes, grid, model=learned, lookahead=setup)
-    view = OccupancyGridBuilder(expert.grid_config or grid)
-    return lambda loop: decide(expert, view.build(loop.perceived).encode(expert.encoding)).value
+    view, masked = OccupancyGridBuilder(expert.grid_config or grid), sees_permitted(expert)
+    return lambda loop: (
+        decide(expert, loop.observation(view.build(loop.perceived), expert.encoding, masked)).value
+    )
 
 
 def expert_episode(config: RunConfig, experts: DemonstrationConfig | str, seed: int) -> Demonstrations:
@@ -58,10 +61,8 @@ def expert_episode(config: RunConfig, experts: DemonstrationConfig | str, seed: 
     env = HierarchicalHighwayEnv(config)
     observation, _ = env.reset(seed=seed)
     world = env.loop.config
-    if isinstance(experts, str):
-        expert = expert_policy(world, experts)
-    else:
-        expert = expert_policy(world, experts.expert_of(world.scenario), experts.expert_model)
+    name = experts if isinstance(experts, str) else experts.expert_of(world.scenario)
+    expert = expert_policy(world, name, None if isinstance(experts, str) else experts.expert_model)
     observations, actions, rewards = [observation], [], []
     terminated = truncated = False
     while not (terminated or truncated):
@@ -88,6 +89,7 @@ def collect_demonstrations(
     episode under way once `stop_requested()` (nothing is kept: a resumed run records them again)."""
     demonstrations = config.train.demonstrations
     assert demonstrations is not None, "the run names no demonstrations"
+    checked_expert_model(config)
     seeds = [child_seed(demonstrations.seed, k) for k in range(demonstrations.episodes)]
     episodes: dict[int, Demonstrations] = {}
     task = partial(expert_episode, demonstration_worlds(config), demonstrations)
@@ -132,7 +134,7 @@ def demonstrations_used(config: RunConfig, model: object) -> DemonstrationsUsed 
         return None
     return DemonstrationsUsed(
         expert=settings.expert,
-        experts=settings.experts,
+        experts=dict(settings.experts),
         episodes=settings.episodes,
         transitions=len(demonstrations),
         scenarios=tuple(settings.scenarios),
