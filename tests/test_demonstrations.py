@@ -2,6 +2,7 @@
 large-margin loss, pre-training that makes the greedy policy the expert's, recording in the decision
 MDP, and the config and checkpoint checks."""
 
+import json
 import signal
 
 import gymnasium as gym
@@ -318,3 +319,21 @@ def test_a_config_names_its_expert_model_beside_it(tmp_path, monkeypatch):
     (folder / "train.yaml").write_text(yaml.safe_dump({"train": taught}))
     monkeypatch.chdir(tmp_path)
     assert load_config("configs/train.yaml").train.demonstrations.expert_model == str(folder / "teacher.npz")
+
+
+def test_summary_json_keeps_the_teachers_of_each_world():
+    """summary.json names every teacher: the default expert, those of some worlds and the file a
+    learned one decided with; an older summary without them reads back with none."""
+    from stack.training.summary import TrainSummary
+
+    teachers = {"experts": {"jam": "ddqn"}, "expert_model": "/t/teacher.npz"}
+    used = DemonstrationsUsed(expert="lookahead", episodes=6, transitions=240, **teachers)
+    summary = TrainSummary(
+        algorithm="ddqn", network="lanes", target_steps=10, steps=10, wall_time_s=1.0, interrupted=False,
+        demonstrations=used, best_validation=None, validations=0, best_model=None, training_curve="-",
+    )  # fmt: skip
+    written = json.loads(json.dumps(summary.to_json()))
+    assert TrainSummary.from_json(written).demonstrations == used
+    older_record = {"expert": "mobil", "episodes": 2, "transitions": 10, "scenarios": []}
+    older = {**written, "demonstrations": older_record}
+    assert TrainSummary.from_json(older).demonstrations == DemonstrationsUsed(expert="mobil", episodes=2, transitions=10)

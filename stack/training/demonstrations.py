@@ -135,6 +135,7 @@ def demonstrations_used(config: RunConfig, model: object) -> DemonstrationsUsed 
     return DemonstrationsUsed(
         expert=settings.expert,
         experts=dict(settings.experts),
+        expert_model=settings.expert_model,
         episodes=settings.episodes,
         transitions=len(demonstrations),
         scenarios=tuple(settings.scenarios),

@@ -14,13 +14,15 @@ NO_CURVE = "not drawn: no validation ran yet"
 @dataclass(frozen=True, kw_only=True)
 class DemonstrationsUsed:
     """The expert a run learnt from first, its episodes, the transitions they gave, the worlds
-    it drove (named scenarios; empty: the training mix) and the experts of some of them instead."""
+    it drove (named scenarios; empty: the training mix), the experts of some of them instead and
+    the model file a learned expert decided with (None: its shipped file, or no learned expert)."""
 
     expert: str
     episodes: int
     transitions: int
     scenarios: tuple[str, ...] = ()
     experts: dict[str, str] = field(default_factory=dict)
+    expert_model: str | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
