@@ -334,6 +334,6 @@ def test_summary_json_keeps_the_teachers_of_each_world():
     )  # fmt: skip
     written = json.loads(json.dumps(summary.to_json()))
     assert TrainSummary.from_json(written).demonstrations == used
-    older_record = {"expert": "mobil", "episodes": 2, "transitions": 10, "scenarios": []}
-    older = {**written, "demonstrations": older_record}
-    assert TrainSummary.from_json(older).demonstrations == DemonstrationsUsed(expert="mobil", episodes=2, transitions=10)
+    older_record = {"expert": "mobil", "episodes": 2, "transitions": 10}
+    older = {**written, "demonstrations": {**older_record, "scenarios": []}}
+    assert TrainSummary.from_json(older).demonstrations == DemonstrationsUsed(**older_record)
