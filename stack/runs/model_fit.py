@@ -15,7 +15,6 @@ from planner.model_metadata import ModelMetadata
 from planner.networks import net_arch, network_kind
 from records import N_ACTIONS, Encoding, GridConfig
 from stack.settings.run import RunConfig, demonstration_worlds, grid_config, training_worlds
-from stack.settings.train import LEARNED_EXPERTS
 
 
 def check_road_fit(
@@ -97,13 +96,14 @@ def checked_expert_model(config: RunConfig) -> Path | None:
     values it expects on every road it teaches on: from the file's metadata and arrays alone,
     before torch is imported."""
     settings = config.train.demonstrations
-    if settings is None or not (learned := [n for n in settings.named_experts() if n in LEARNED_EXPERTS]):
+    if settings is None or not (learned := settings.learned_experts()):
         return None
-    path = model_path(learned[0], settings.expert_model)
+    expert = learned[0]
+    path = model_path(expert, settings.expert_model)
     assert path is not None, "a learned expert has a model file"
-    metadata = checked_model(path, (learned[0],))[1]
+    metadata = checked_model(path, (expert,))[1]
     worlds = training_worlds(demonstration_worlds(config))
-    taught = [world for name, world in worlds.items() if settings.expert_of(name) == learned[0]]
+    taught = [world for name, world in worlds.items() if settings.expert_of(name) == expert]
     lanes = tuple(sorted({count for world in taught for count in world.highway.lane_counts}))
     check_file_fit(path, metadata, lanes, "train.demonstrations.expert_model")
     return path

@@ -148,7 +148,7 @@ class DemonstrationConfig(Strict):
 
     @model_validator(mode="after")
     def _model_for_a_learned_expert(self) -> DemonstrationConfig:
-        learned = set(self.named_experts()) & set(LEARNED_EXPERTS)
+        learned = self.learned_experts()
         if self.expert_model is not None and not learned:
             raise ValueError(f"expert_model: no learned expert ({', '.join(LEARNED_EXPERTS)}) is named")
         if len(learned) > 1:
@@ -158,6 +158,10 @@ class DemonstrationConfig(Strict):
     def named_experts(self) -> tuple[str, ...]:
         """Every expert named: `expert`, then those of `experts`, once each."""
         return tuple(dict.fromkeys([self.expert, *self.experts.values()]))
+
+    def learned_experts(self) -> tuple[str, ...]:
+        """The Q-networks among the experts named (at most one once validated)."""
+        return tuple(name for name in self.named_experts() if name in LEARNED_EXPERTS)
 
     def expert_of(self, scenario: str | None) -> str:
         """The expert of an episode in `scenario`'s world."""

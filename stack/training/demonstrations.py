@@ -60,9 +60,9 @@ def expert_episode(config: RunConfig, experts: DemonstrationConfig | str, seed: 
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     env = HierarchicalHighwayEnv(config)
     observation, _ = env.reset(seed=seed)
+    teachers = DemonstrationConfig(expert=experts) if isinstance(experts, str) else experts
     world = env.loop.config
-    name = experts if isinstance(experts, str) else experts.expert_of(world.scenario)
-    expert = expert_policy(world, name, None if isinstance(experts, str) else experts.expert_model)
+    expert = expert_policy(world, teachers.expert_of(world.scenario), teachers.expert_model)
     observations, actions, rewards = [observation], [], []
     terminated = truncated = False
     while not (terminated or truncated):
