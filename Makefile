@@ -52,6 +52,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/mpc_solve.py
 	$(BIN)/python benchmarks/decision_ceiling.py
 	$(BIN)/python benchmarks/ray_scaling.py
+	$(BIN)/python benchmarks/compare_rate.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

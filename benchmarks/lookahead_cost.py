@@ -19,7 +19,7 @@ import numpy as np
 
 from planner.agents import decide
 from stack.loop.closed_loop import ClosedLoop
-from stack.runs.episodes import build_agent
+from stack.runs.kept import build_agent
 from stack.settings import scenarios
 from stack.settings.run import build_config
 from stack.sim.highway import HighwayAdapter

@@ -1,7 +1,8 @@
 """The import rules of docs/architecture.md, read from the source: the layers share only `records` and
-`common`, `records` holds data and names only, `stack` imports downwards (apps -> training -> assessment ->
-runs -> agents -> loop -> rrd -> sim -> settings -> runtime), no import circle closes, no two classes share a
-name, no module grows past a sitting's reading, and no folder of `stack` grows into a catch-all."""
+`common`, `records` holds data and names only, `stack` imports downwards (apps -> training ->
+assessment -> runs -> agents -> batch -> loop -> results -> rrd -> sim -> settings -> runtime), no
+import circle closes, no two classes share a name, no module grows past a sitting's reading, and no
+folder of `stack` grows into a catch-all."""
 
 import ast
 import math
@@ -25,6 +26,7 @@ STACK_FLOORS = (
     "rrd",
     "results",
     "loop",
+    "batch",
     "agents",
     "runs",
     "assessment",
@@ -198,7 +200,7 @@ def test_stack_imports_point_downwards(floor):
         assert not upward, f"{path.relative_to(ROOT)} imports {sorted(upward)}"
 
 
-ONE_ROLE_FOLDERS = ("runtime", "settings", "rrd", "results", "loop", "agents", "runs", "assessment")
+ONE_ROLE_FOLDERS = ("runtime", "settings", "rrd", "results", "loop", "batch", "agents", "runs", "assessment")
 """The folders the run core was cut into (once `stack/core`, 4.1k lines); `apps` (a module per
 command), `sim` (three backends) and `training` are held by `MAX_LINES` per module instead."""
 

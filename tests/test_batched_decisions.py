@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from records.batch import WorldBatch
+from stack.batch.closed_loop import ClosedLoopBatch
 from stack.settings.run import build_config
-from stack.training.batch_loop import ClosedLoopBatch
 from stack.training.decision_batch import DecisionBatch
 from stack.training.decision_env import HierarchicalHighwayEnv
 

@@ -18,7 +18,7 @@ from planner.lookahead_scene import lookahead_grid
 from records import GridConfig, WorldState
 from records.batch import WorldBatch
 from stack.loop.closed_loop import ClosedLoop
-from stack.runs.episodes import build_agent
+from stack.runs.kept import build_agent
 from stack.settings.run import build_config
 from stack.sim.highway import HighwayAdapter
 

@@ -157,7 +157,7 @@ def test_a_model_that_does_not_fit_the_road_is_refused_alike_everywhere(tmp_path
     from records import GridConfig
     from stack.apps.cli import app
     from stack.apps.export import export_sb3
-    from stack.runs.episodes import build_agent
+    from stack.runs.kept import build_agent
     from stack.settings.run import build_config
     from stack.training.model import initial_model
     from tests.test_cli import tiny_config_file

@@ -8,7 +8,8 @@ import pytest
 from records import Command
 from stack.agents.oracle import Oracle
 from stack.loop.closed_loop import ClosedLoop
-from stack.runs.episodes import build_agent, run
+from stack.runs.episodes import run
+from stack.runs.kept import build_agent
 from stack.settings.run import build_config
 from stack.sim.highway import HighwayAdapter
 

@@ -165,7 +165,7 @@ def test_a_plug_in_that_a_worker_process_cannot_load_is_one_line(tmp_path):
     """Every plug-in is checked here before any episode; one that still fails where the episodes run
     is one line naming it and why, exit code 2 (was: internal error, exit 1)."""
     out = tmp_path / "out"
-    arguments = ["run", "--agent", fails_on_workers(tmp_path), "--episodes", "2", "--jobs", "2"]
+    arguments = ["run", "--agent", fails_on_workers(tmp_path), "--episodes", "3", "--jobs", "2"]
     result = invoke(*arguments, *TINY, "--out", str(out))
     assert result.exit_code == 2, result.output
     lines = result.output.strip().splitlines()
@@ -245,7 +245,7 @@ def test_entry_points_add_names_to_the_listings_and_the_configs(user_files, monk
     assert "heading-pd" in invoke("controllers").output
     from controllers.config import ControllerConfig
     from controllers.tracker import make_controller
-    from stack.runs.episodes import build_agent
+    from stack.runs.kept import build_agent
     from stack.settings.run import build_config
 
     config = build_config({"planner": {"agent": "leftie"}, "controller": {"type": "heading-pd"}})

@@ -30,11 +30,16 @@ def test_a_run_beside_another_agent_resumes_each_agent_from_its_own_journal(tmp_
     beside = load_config(config, planner__agent="keep-lane", episodes=3)
     (out / "keep-lane.episodes.partial.jsonl").write_text(json.dumps(run_episode(beside, 1).row()) + "\n")
     ran: list[tuple[str, int]] = []
-    real = episodes.run_episode
+    alone, batched = episodes.run_episode, episodes.run_batched
     monkeypatch.setattr(
         episodes,
         "run_episode",
-        lambda c, e, *more, **kw: ran.append((c.planner.agent, e)) or real(c, e, *more, **kw),
+        lambda c, e, *more, **kw: ran.append((c.planner.agent, e)) or alone(c, e, *more, **kw),
+    )
+    monkeypatch.setattr(
+        episodes,
+        "run_batched",
+        lambda c, es: ran.extend((c.planner.agent, e) for e in es) or batched(c, es),
     )
     resumed = CliRunner().invoke(app, [*arguments, "--out", str(out), "--resume", "--no-progress"])
     assert resumed.exit_code == 0, resumed.output

@@ -89,7 +89,8 @@ def test_a_stopped_run_keeps_its_finished_episodes_and_resume_finishes_it(tmp_pa
 
 def test_a_stopped_comparison_keeps_the_agents_run_so_far_and_resume_finishes_it(tmp_path, monkeypatch):
     out = tmp_path / "compare"
-    arguments = ["compare", "--agents", "keep-lane,rule", "--episodes", "12", *SHORT]
+    one_at_a_time = ["--set", "sim.batched=false"]
+    arguments = ["compare", "--agents", "keep-lane,rule", "--episodes", "12", *SHORT, *one_at_a_time]
     journal = out / "rule.episodes.partial.jsonl"
     assert stopped_after_first_episode([*arguments, "--out", str(out)], journal, signal.SIGTERM) == 130
     rows = json.loads((out / "comparison.json").read_text())

@@ -10,7 +10,7 @@ import pytest
 from common.neighbours import neighbours, scanned_neighbours
 from records import Actuation
 from stack.results.episode_result import TIMING_FIELDS
-from stack.runs import episodes
+from stack.runs import kept
 from stack.runs.episodes import run_episode
 from stack.settings.run import HighwayConfig, build_config
 from stack.sim.fast_road import FastRoad
@@ -112,22 +112,22 @@ def test_an_episode_s_result_does_not_depend_on_what_its_process_ran_before(agen
         {"planner": {"agent": agent}, "seed": 3}, scenario="overtaking", highway__duration=4
     )
     other = build_config({"planner": {"agent": agent}, "seed": 8}, scenario="dense", highway__duration=3)
-    episodes._adapters.clear()
-    episodes._agents.clear()
+    kept._adapters.clear()
+    kept._agents.clear()
     fresh = [_record(run_episode(config, episode)) for episode in (0, 1)]
-    assert len(episodes._adapters) == 1
+    assert len(kept._adapters) == 1
     run_episode(other, 0)
     assert [_record(run_episode(config, episode)) for episode in (1, 0)] == fresh[::-1]
-    assert len(episodes._adapters) == 2
-    assert len(episodes._agents) == (2 if agent == "ddqn" else 0)
+    assert len(kept._adapters) == 2
+    assert len(kept._agents) == (2 if agent == "ddqn" else 0)
 
 
 def test_a_process_keeps_a_bounded_number_of_envs():
-    episodes._adapters.clear()
-    for vehicles in range(episodes.KEPT_PER_PROCESS + 2):
+    kept._adapters.clear()
+    for vehicles in range(kept.KEPT_PER_PROCESS + 2):
         config = build_config({"planner": {"agent": "keep-lane"}}, highway__vehicles_count=5 + vehicles)
-        assert episodes.kept_adapter(config) is episodes.kept_adapter(config)
-    assert len(episodes._adapters) == episodes.KEPT_PER_PROCESS
+        assert kept.kept_adapter(config) is kept.kept_adapter(config)
+    assert len(kept._adapters) == kept.KEPT_PER_PROCESS
 
 
 def test_what_a_snapshot_derived_stays_out_of_its_fields():

@@ -251,7 +251,7 @@ def safety(
     if cfg.highway.lanes_count < 3:
         fail(f"highway.lanes_count: the safety scenarios need 3 or more lanes, got {cfg.highway.lanes_count}")
     plugins_or_fail([cfg], ["--agent" if agent else "planner.agent"])
-    from stack.runs.episodes import build_agent
+    from stack.runs.kept import build_agent
 
     try:
         build_agent(cfg, cfg.seed)

@@ -91,6 +91,7 @@ def compare(
                         on_finished=journal.record,
                         done=finished,
                         record=record / folders[config.planner.agent] if record is not None else None,
+                        snapshot=False,
                     )
                 )
             except KeyboardInterrupt:

@@ -33,7 +33,7 @@ def plugins_or_fail(configs: Sequence[RunConfig], options: Sequence[str]) -> Non
     if all(c.planner.agent in AGENT_NAMES and c.controller.type in CONTROLLER_NAMES for c in configs):
         return
     from controllers.tracker import make_controller
-    from stack.runs.episodes import build_agent
+    from stack.runs.kept import build_agent
 
     for config, option in zip(configs, options, strict=False):
         try:

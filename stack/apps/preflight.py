@@ -42,7 +42,7 @@ def checked_run(
 
     if why := refusal(folder, run_owner(configs, prefix), resuming):
         fail(why)
-    from stack.runs.episodes import build_agent
+    from stack.runs.kept import build_agent
 
     for config in configs:
         try:

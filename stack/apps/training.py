@@ -39,8 +39,8 @@ def check_batched(config: RunConfig) -> None:
     if config.train.worlds is None:
         return
     from perception.batch_grid import BATCHED_FEATURES
+    from stack.batch.closed_loop import refusal
     from stack.settings.run import training_worlds
-    from stack.training.batch_loop import refusal
 
     reason: str | None
     if unbatched := [name for name in config.perception.features if name not in BATCHED_FEATURES]:

@@ -2,71 +2,27 @@
 
 from __future__ import annotations
 
-import math
-from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from contextlib import closing
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from tqdm import tqdm
 
 from planner.agents import Agent, Scored, decide, sees_permitted
-from planner.factory import make_agent, model_label, model_path
-from records import LEARNED_AGENTS, child_seed
+from planner.factory import model_label, model_path
+from records import child_seed
 from stack.agents.oracle import Oracle
-from stack.loop.closed_loop import ClosedLoop, grid_config
+from stack.loop.closed_loop import ClosedLoop
 from stack.loop.recording import episode_recording
 from stack.results.episode_result import EpisodeResult, summarize
-from stack.runs.model_fit import check_road_fit
+from stack.runs.batched_episodes import batch_refusal, batches, run_batched
+from stack.runs.kept import kept_adapter, kept_agent
 from stack.runtime.executors import completed
 from stack.settings.run import RunConfig
 from stack.sim.highway import HighwayAdapter
-
-if TYPE_CHECKING:
-    from planner.lookahead import LookaheadSetup
-
-
-def build_agent(config: RunConfig, seed: int) -> Agent:
-    """The agent `config.planner` names, for the run's road and grid; raises ValueError (one line)
-    for a missing, unsafe or mismatched model file."""
-    planner, lanes = config.planner, config.highway.lanes_count
-    if planner.agent == "oracle":
-        return Oracle.for_road(planner.oracle, lanes, grid_config(config))
-    path = model_path(planner.agent, planner.model)
-    setup = lookahead_setup(config) if planner.agent == "lookahead" else None
-    agent = make_agent(planner.agent, lanes, grid_config(config), seed, path or planner.model, setup)
-    expected = getattr(agent, "observation_size", None)
-    grid = agent.grid_config or grid_config(config)
-    if expected is not None:
-        counts = config.highway.lane_counts
-        check_road_fit(path or "", grid, agent.encoding, expected, counts, permitted=sees_permitted(agent))
-    return agent
-
-
-def lookahead_setup(config: RunConfig) -> LookaheadSetup:
-    """What the lookahead agent takes from `config`: its settings, the maneuver's and the adaptive
-    cruise's parameters, the safety layer's gaps."""
-    from planner.lookahead import DrivingModel, LookaheadSetup
-
-    control = config.controller
-    driving = DrivingModel(
-        set_speed=control.set_speed_mps,
-        time_gap=control.time_gap_s,
-        standstill_gap=control.standstill_gap_m,
-        comfort_decel=control.comfort_decel_mps2,
-        max_accel=control.pid.max_acceleration,
-        kp_speed=control.pid.kp_speed,
-        emergency_decel=control.emergency_decel_mps2,
-        emergency_ttc=control.emergency_ttc_s,
-        lane_change_s=control.lane_change_duration_s,
-        max_course=math.radians(control.lane_change_max_course_deg),
-        min_change_speed=control.min_lane_change_speed_mps,
-    )
-    return LookaheadSetup(config.planner.lookahead, driving, config.planner.safety)
 
 
 def agent_step(loop: ClosedLoop, agent: Agent) -> int:
@@ -127,58 +83,6 @@ def run_episode(
     return result
 
 
-KEPT_PER_PROCESS = 4
-"""Envs, and agents, a process keeps for the configs it ran last (a sweep's worker runs several)."""
-_adapters: OrderedDict[tuple[str, ...], HighwayAdapter] = OrderedDict()
-_agents: OrderedDict[tuple[object, ...], Agent] = OrderedDict()
-
-
-def kept_adapter(config: RunConfig) -> HighwayAdapter:
-    """This process's env for `config`'s road, backend and plant (made on first use)."""
-    key = (config.highway.model_dump_json(), config.sim.backend, config.sim.plant)
-    adapter = _adapters.get(key)
-    if adapter is None:
-        adapter = HighwayAdapter(config.highway, config.sim.backend, plant=config.sim.plant)
-        _keep(_adapters, key, adapter).close()
-    _adapters.move_to_end(key)
-    return adapter
-
-
-def kept_agent(config: RunConfig, seed: int) -> Agent:
-    """`build_agent(config, seed)`; a learned agent (or an oracle over one) comes from this
-    process's cache while its model file is unchanged: the seed does not reach it."""
-    planner = config.planner
-    learned = planner.agent if planner.agent != "oracle" else planner.oracle.base
-    path = model_path(learned, planner.model if planner.agent != "oracle" else None)
-    if learned not in LEARNED_AGENTS or path is None:
-        return build_agent(config, seed)
-    try:
-        stat = Path(path).stat()
-    except OSError:
-        return build_agent(config, seed)
-    road = config.model_dump_json(include={"planner", "perception", "highway", "scenario"})
-    key = (road, str(path), stat.st_mtime_ns, stat.st_size, stat.st_ino)
-    agent = _agents.get(key)
-    if agent is None:
-        agent = build_agent(config, seed)
-        _keep(_agents, key, agent)
-    _agents.move_to_end(key)
-    return agent
-
-
-def _keep(kept: OrderedDict, key: Any, value: Any) -> Any:
-    """Keep `value` under `key`, at most `KEPT_PER_PROCESS` entries; the one dropped (or a dummy)."""
-    kept[key] = value
-    if len(kept) > KEPT_PER_PROCESS:
-        return kept.popitem(last=False)[1]
-    return _Nothing()
-
-
-class _Nothing:
-    def close(self) -> None:
-        pass
-
-
 def run(
     config: RunConfig,
     video: bool = False,
@@ -188,13 +92,18 @@ def run(
     on_finished: Callable[[EpisodeResult], None] | None = None,
     done: Sequence[EpisodeResult] = (),
     record: Path | None = None,
+    snapshot: bool = True,
 ) -> RunResults:
     """Run `config.episodes` seeded episodes over `jobs` processes, or as Ray tasks with `ray` (an
-    address, see `stack.runtime.executors`); results are ordered by episode, identical for any `jobs`
-    or `ray`. With `video`, episode 0 (unless done) runs here and keeps its frames. `done` are
-    episodes an earlier run of `config` finished: they count as they are and are not run again.
-    Ctrl-C keeps the finished episodes (`summary["interrupted"]`); `on_finished` sees each as it
-    finishes (if it raises, the episodes still running are stopped before the error goes on).
+    address, see `stack.runtime.executors`), as batches of worlds where the config allows
+    (`stack.runs.batched_episodes`); results are ordered by episode, identical for any `jobs`, `ray`
+    or batching. Here a batch hands on each episode as it ends; over processes or Ray a batch comes
+    whole, and a stop loses the batches under way. With `video`, episode 0 (unless done) runs here
+    and keeps its frames; with `snapshot` (the default), it runs alone and keeps its road's
+    snapshot (a batch keeps none). `done` are episodes an earlier run of `config` finished: they
+    count as they are and are not run again. Ctrl-C keeps the finished episodes
+    (`summary["interrupted"]`); `on_finished` sees each as it finishes (if it raises, the episodes
+    still running are stopped before the error goes on).
     `record`: a folder each episode run writes its recording into (`run_episode`)."""
     frames: list[np.ndarray] = []
     results: dict[int, EpisodeResult] = {episode.episode: episode for episode in done}
@@ -210,12 +119,24 @@ def run(
             on_finished(result)
 
     try:
-        if video and pending and pending[0] == 0:
-            finished(run_episode(config, pending.pop(0), frames, record))
-        task = partial(run_episode, config, record=record)
-        with closing(completed(task, pending, jobs, ray)) as results_coming:
-            for _, result in results_coming:
-                finished(result)
+        if (video or snapshot) and pending and pending[0] == 0:
+            finished(run_episode(config, pending.pop(0), frames if video else None, record))
+        if record is None and batch_refusal(config) is None:
+            split = batches(pending, jobs)
+            if ray is None and (jobs <= 1 or len(split) <= 1):
+                for batch in split:
+                    run_batched(config, batch, on_finished=finished)
+            else:
+                batched = partial(run_batched, config)
+                with closing(completed(batched, split, jobs, ray)) as batches_coming:
+                    for _, results_of_batch in batches_coming:
+                        for result in results_of_batch:
+                            finished(result)
+        else:
+            task = partial(run_episode, config, record=record)
+            with closing(completed(task, pending, jobs, ray)) as results_coming:
+                for _, result in results_coming:
+                    finished(result)
     except KeyboardInterrupt:
         interrupted = True
     finally:

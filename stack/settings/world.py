@@ -228,3 +228,8 @@ class SimConfig(BaseModel):
 
     backend: Annotated[Backend, one_of("backend", BACKENDS)] = "vector"
     plant: Annotated[PlantName, one_of("plant", PLANTS)] = "kinematic"
+    batched: bool = Field(
+        True,
+        description="run and compare step their episodes together as batches of worlds where the "
+        "config allows (the same results; false: one world at a time)",
+    )

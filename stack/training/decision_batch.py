@@ -13,10 +13,9 @@ from gymnasium import spaces
 
 from perception.batch_grid import observe_batch
 from perception.grid import OccupancyGridBuilder
-from planner.batch_safety import permitted_batch
 from records import Command
+from stack.batch.closed_loop import ClosedLoopBatch
 from stack.settings.run import RunConfig, build_config, grid_config, training_worlds
-from stack.training.batch_loop import ClosedLoopBatch
 from stack.training.decision_env import drawn_episode, mix_shares, with_permitted
 
 
@@ -40,7 +39,7 @@ class Decided:
 def batch_config(config: RunConfig | dict | None) -> RunConfig:
     """`config` validated as the decision MDP's, or ValueError (one line) for what a batch does not
     run: an encoding other than `observation`, or one of another size on some road an episode
-    may draw (see also `batch_loop.refusal`)."""
+    may draw (see also `stack.batch.closed_loop.refusal`)."""
     if not isinstance(config, RunConfig):
         config = build_config(config or {}, "HierarchicalHighway-v0 config")
     if config.train.encoding != "observation":
@@ -90,11 +89,7 @@ class DecisionBatch:
 
     def permitted(self) -> np.ndarray:
         """(worlds, 3) float32: `ClosedLoop.permitted()` of every world."""
-        loop, batch, perceived = self.loop, self.loop.batch, self.loop.perceived
-        assert batch is not None and perceived is not None
-        return permitted_batch(
-            self.config.planner.safety, perceived, loop.lane, loop.changing, batch.speed[:, 0], loop.min_speed
-        )
+        return self.loop.permitted()
 
     def observe(self, permitted: np.ndarray | None = None) -> np.ndarray:
         """(worlds, size) float32: what the per-world env observes in each world now (`permitted`:

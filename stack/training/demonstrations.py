@@ -20,7 +20,7 @@ from planner.validation import RealTimeValidation
 from records import N_ACTIONS, Command, child_seed
 from stack.agents.oracle import Oracle
 from stack.loop.closed_loop import ClosedLoop
-from stack.runs.episodes import lookahead_setup
+from stack.runs.kept import lookahead_setup
 from stack.runs.model_fit import checked_expert_model
 from stack.runtime.executors import completed
 from stack.settings.run import RunConfig, demonstration_worlds, grid_config

@@ -4,7 +4,7 @@ bit for bit, through its sensor model when it has one (`perception.batch_sensor`
 
 The traffic is a `TrafficBatch`; the ego's side of every tick (reference, leaders, PID, cruise,
 emergency braking, the safety layer's abort, road departure) is three compiled calls over all the
-worlds (`stack.training.batch_kernels`); between them numpy computes what it computes for one
+worlds (`stack.batch.kernels`); between them numpy computes what it computes for one
 world (the snapshot's lane frame, each footprint's sine and cosine) over the whole batch. No
 Python runs per world per tick: only a world's reset (highway-env spawns its road) is per world."""
 
@@ -19,12 +19,18 @@ import numpy as np
 from controllers.reference import lane_keeping
 from perception.batch_sensor import SensorBatch
 from perception.sensor import SensorModel
-from planner.batch_safety import lateral_extents
+from planner.batch_safety import lateral_extents, permitted_batch
+from records import WorldState
 from records.batch import WorldBatch
+from stack.batch.kernels import control, decide, settle
+from stack.batch.metrics import EpisodeMetricsBatch
 from stack.loop.closed_loop import episode_sensor
+from stack.loop.safety_metrics import classify_collision
+from stack.results.episode_fields import record_fields
+from stack.results.episode_result import EpisodeResult
 from stack.settings.run import RunConfig, training_worlds
 from stack.sim.batched.traffic import TrafficBatch
-from stack.training.batch_kernels import control, decide, settle
+from stack.sim.highway import snapshot
 
 
 def refusal(config: RunConfig) -> str | None:
@@ -65,7 +71,9 @@ class ClosedLoopBatch:
     the layers see them (`batch`, the truth, and `perceived`, what the sensor reports: both
     `WorldBatch`), and per world `crashed` / `done`."""
 
-    def __init__(self, config: RunConfig, worlds: int) -> None:
+    def __init__(self, config: RunConfig, worlds: int, metrics: bool = False) -> None:
+        """With `metrics`, each world's episode is measured as the per-world loop measures it
+        (`result`); training needs none of it."""
         refused = refusal(config)
         if refused is not None:
             raise ValueError(refused)
@@ -125,6 +133,7 @@ class ClosedLoopBatch:
         self.sensor = SensorBatch(worlds) if any(map(_sensed, self.members)) else None
         self.slots = np.zeros((worlds, 0), dtype=np.int64)
         self.vehicle_room = 0
+        self.metrics = EpisodeMetricsBatch(worlds, self.dt) if metrics else None
 
     def _memory(self, vehicles: int, phantoms: int = 0) -> None:
         """Emergency braking's per-vehicle memory (`seen`, `seen_speed`, `seen_slowing`: what it
@@ -172,6 +181,14 @@ class ClosedLoopBatch:
     def close(self) -> None:
         self.traffic.close()
 
+    def permitted(self) -> np.ndarray:
+        """(worlds, 3) float32: `ClosedLoop.permitted()` of every world."""
+        batch, perceived = self.batch, self.perceived
+        if batch is None or perceived is None:
+            raise ValueError("reset the worlds before asking what they permit")
+        safety = self.config.planner.safety
+        return permitted_batch(safety, perceived, self.lane, self.changing, batch.speed[:, 0], self.min_speed)
+
     def reset(self, seeds: Sequence[int], members: Sequence[int] | None = None) -> None:
         """Reset every world, world k with traffic seed `seeds[k]` (as mix member `members[k]`)."""
         if len(seeds) != self.worlds:
@@ -212,6 +229,8 @@ class ClosedLoopBatch:
             self.lateral[world] = self.speed_pi[world] = 0.0
             self.seen[world], self.seen_speed[world], self.seen_slowing[world] = 0, 0.0, 0.0
             self.departed[world] = self.crashed[world] = self.truncated[world] = False
+        if self.metrics is not None:
+            self.metrics.reset(worlds, self.batch, self.traffic.time)
 
     def _maneuver(self) -> tuple[np.ndarray, ...]:
         return self.lane, self.target, self.coef, self.profile, self.clock, self.counts
@@ -221,59 +240,104 @@ class ClosedLoopBatch:
         `only`, the others left as they are): world k's command `commands[k]` (`Command` values)
         through the safety layer to the maneuver, then `ticks` control ticks, or fewer in a world
         whose episode ends first. Every world acting must be live (reset once done)."""
-        batch, perceived = self.batch, self.perceived
-        if batch is None or perceived is None:
+        live = np.ones(self.worlds, dtype=bool) if only is None else np.array(only, dtype=bool)
+        outcome = self.command(commands, live)
+        speeds = np.zeros((self.worlds, ticks))
+        ran = np.zeros(self.worlds, dtype=np.int64)
+        for tick in range(ticks):
+            if not live.any():
+                break
+            self.tick(live)
+            batch = self.batch
+            assert batch is not None
+            speeds[live, tick] = batch.speed[live, 0]
+            ran[live] += 1
+            live &= ~self.done
+        assert self.batch is not None
+        return ActedBatch(
+            ran,
+            outcome[:, 0] == 1,
+            outcome[:, 1] == 1,
+            outcome[:, 2] == 1,
+            _mean_speeds(speeds, ran, self.batch),
+        )
+
+    def command(self, commands: np.ndarray, live: np.ndarray) -> np.ndarray:
+        """A decision point in each world flagged `live` (`ClosedLoop.act`'s first part): world k's
+        command `commands[k]` (`Command` values) through the safety layer to the maneuver, unless
+        a lane change runs there. Per world (worlds, 3) 0/1: the command was considered, masked
+        by the safety layer, refused by the maneuver."""
+        perceived = self.perceived
+        if perceived is None:
             raise ValueError("reset the worlds before acting")
-        traffic, worlds = self.traffic, self.worlds
-        live = np.ones(worlds, dtype=bool) if only is None else np.array(only, dtype=bool)
         if (self.done & live).any():
             gone = np.flatnonzero(self.done & live).tolist()
             raise ValueError(f"worlds {gone} ended their episode: reset them before acting")
         commands = np.asarray(commands, dtype=np.int64)
         if commands.shape != (self.worlds,) or ((commands < 0) | (commands > 2)).any():
             raise ValueError(f"one command (0, 1, 2) per world: {self.worlds} worlds, got {commands!r}")
-        outcome = np.zeros((worlds, 3), dtype=np.int64)
+        outcome = np.zeros((self.worlds, 3), dtype=np.int64)
         reach = (perceived.lane_width + lateral_extents(perceived)) / 2
         decide(
-            live, commands, traffic.time, perceived.columns(), reach, perceived.lane_width,
+            live, commands, self.traffic.time, perceived.columns(), reach, perceived.lane_width,
             self._maneuver(), self.safety, self.settings, outcome,
         )  # fmt: skip
-        actuation = np.zeros((worlds, 2))
-        speeds = np.zeros((worlds, ticks))
-        ran = np.zeros(worlds, dtype=np.int64)
-        for tick in range(ticks):
-            if not live.any():
-                break
-            controller = (
-                self.lateral,
-                self.speed_pi,
-                self.seen,
-                self.seen_speed,
-                self.seen_slowing,
-                self.flags,
-            )
-            control(
-                live, traffic.time, perceived.columns(), perceived.heading, perceived.lane_heading,
-                lateral_extents(perceived), perceived.lane_width, self.slots, self._maneuver(), controller,
-                self.safety, self.settings, self.gains, self.dt, actuation,
-            )  # fmt: skip
-            ended = traffic.step(actuation[:, 0], actuation[:, 1], live)
-            batch = self.batch = traffic.arrays.world_batch()
-            self._sense(live)
-            perceived = self.perceived
-            assert perceived is not None
-            settle(
-                live, traffic.time, batch.columns(), batch.heading, batch.lane_heading,
-                batch.lane_width, self._maneuver(), self.departed,
-            )  # fmt: skip
-            speeds[live, tick] = batch.speed[live, 0]
-            ran[live] += 1
-            self.crashed |= ended.terminated
-            self.truncated |= ended.truncated
-            live &= ~self.done
-        return ActedBatch(
-            ran, outcome[:, 0] == 1, outcome[:, 1] == 1, outcome[:, 2] == 1, _mean_speeds(speeds, ran, batch)
+        return outcome
+
+    def tick(self, live: np.ndarray) -> np.ndarray:
+        """One control tick in each world flagged `live` (`ClosedLoop.tick` and what `act` does
+        after it): reference, actuation, the plant's frame, the sensor, the road departure and the
+        maneuver's update, and the episode metrics when kept (`metrics`). Per world: a lane change
+        completed on this tick (`Maneuver.update`)."""
+        perceived, traffic = self.perceived, self.traffic
+        assert perceived is not None
+        actuation = np.zeros((self.worlds, 2))
+        controller = (self.lateral, self.speed_pi, self.seen, self.seen_speed, self.seen_slowing, self.flags)
+        control(
+            live, traffic.time, perceived.columns(), perceived.heading, perceived.lane_heading,
+            lateral_extents(perceived), perceived.lane_width, self.slots, self._maneuver(), controller,
+            self.safety, self.settings, self.gains, self.dt, actuation,
+        )  # fmt: skip
+        ended = traffic.step(actuation[:, 0], actuation[:, 1], live)
+        batch = self.batch = traffic.arrays.world_batch()
+        self._sense(live)
+        changing = self.changing
+        settle(
+            live, traffic.time, batch.columns(), batch.heading, batch.lane_heading,
+            batch.lane_width, self._maneuver(), self.departed,
+        )  # fmt: skip
+        self.crashed |= ended.terminated
+        self.truncated |= ended.truncated
+        if self.metrics is not None:
+            for world in self.metrics.record(live, batch, traffic.time, self.crashed):
+                self.metrics.collided(
+                    world, classify_collision(self.world_state(world), bool(changing[world]))
+                )
+        return changing & ~self.changing
+
+    def result(self, world: int, episode: int, seed: int) -> EpisodeResult:
+        """World `world`'s episode as `ClosedLoop.result` reports it (kept with `metrics`), run as
+        episode `episode` with traffic seed `seed`; no grid snapshot, no controller timings."""
+        if self.metrics is None:
+            raise ValueError("a batch measures its episodes when made with metrics=True")
+        counts, departed = self.counts[world], bool(self.departed[world])
+        return EpisodeResult(
+            episode=episode,
+            seed=seed,
+            crashed=bool(self.crashed[world]),
+            lane_changes=int(counts[0]),
+            masked_commands=int(counts[1]),
+            aborted_changes=int(counts[2]),
+            emergency_brakings=int(self.flags[world, 1]),
+            **record_fields(self.metrics.driven(world)),
+            **record_fields(self.metrics.measured(world, departed)),
         )
+
+    def world_state(self, world: int) -> WorldState:
+        """World `world` as it stands, as the per-world loop's snapshot (`stack.sim.highway.snapshot`)."""
+        vehicles, ego = self.traffic.road(world)
+        lanes = int(self.traffic.arrays.lane_count[world])
+        return snapshot(ego.road, ego, float(self.traffic.time[world]), lanes)
 
 
 def _mean_speeds(speeds: np.ndarray, ran: np.ndarray, batch: WorldBatch) -> np.ndarray:

@@ -1,0 +1,123 @@
+"""Seeded episodes run as one batch of worlds (`ClosedLoopBatch`): what `drivestack run` and
+`compare` use for every agent that decides on the grid alone, each episode's result the one the
+per-world loop reports, outcome for outcome (`tests/test_batched_episodes.py`).
+
+The worlds tick together; at a world's decision point (one decision period on, or the end of its
+lane change, as `ClosedLoop.act` decides) its agent decides on the batched encoding of what its
+sensor reports (`perception.batch_grid`) and the command goes through the batched safety layer.
+Agents that plan on copies of the loop (the oracle, the lookahead planner), the tabular encoding,
+the grid's `traffic` feature, other controllers and plants, recordings and videos run one world
+at a time (`batch_refusal` says why)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from perception.batch_grid import BATCHED_FEATURES, observe_batch
+from planner.agents import Agent, decide, sees_permitted
+from records import Command, GridConfig, child_seed
+from stack.batch.closed_loop import ClosedLoopBatch, refusal
+from stack.loop.closed_loop import grid_config
+from stack.results.episode_result import EpisodeResult
+from stack.runs.kept import kept_agent
+from stack.settings.run import RunConfig
+
+BATCH_WORLDS = 64
+"""The most episodes one batch runs at once."""
+PLANNING_AGENTS = ("oracle", "lookahead")
+"""Agents that plan on copies of the loop: they run one world at a time."""
+
+
+def batch_refusal(config: RunConfig) -> str | None:
+    """Why `config`'s episodes run one world at a time (one line), or None when they run as a
+    batch: `sim.batched` on, the `vector` backend, the PID tracker on the kinematic plant
+    (`stack.batch.closed_loop.refusal`), and an agent that decides on the run's grid in the
+    `observation` or `paper` encoding of features the batch computes, in one size on every road
+    the episodes draw."""
+    if not config.sim.batched:
+        return "sim.batched is off"
+    if config.highway.road != "highway":
+        return f"batched worlds run the highway road, not {config.highway.road!r}"
+    if config.sim.backend != "vector":
+        return f"batched worlds are the vector backend's, not sim.backend {config.sim.backend!r}"
+    refused = refusal(_alone(config))
+    if refused is not None:
+        return refused
+    if config.planner.agent in PLANNING_AGENTS:
+        return f"the {config.planner.agent} agent plans on copies of one world's loop"
+    agent = kept_agent(config, config.seed)
+    if agent.encoding not in ("observation", "paper"):
+        return f"batched worlds encode the grid as observation or paper, not {agent.encoding!r}"
+    grid = _grid(config, agent)
+    if unbatched := [name for name in grid.features if name not in BATCHED_FEATURES]:
+        return f"batched worlds do not compute the grid feature {unbatched[0]!r}"
+    if len(config.highway.lane_counts) > 1 and (grid.lanes != "ego" or grid.lane_code != "sides"):
+        return "roads of several lane counts give this agent observations of several sizes"
+    return None
+
+
+def _alone(config: RunConfig) -> RunConfig:
+    """`config` without a training mix: a run drives its own world."""
+    return config.model_copy(update={"train": config.train.model_copy(update={"scenarios": {}})})
+
+
+def _grid(config: RunConfig, agent: Agent) -> GridConfig:
+    """The grid `agent` decides on, as the batch encodes it: the paper state is the observation
+    encoding of the grid without its features (presence, then the lane part)."""
+    grid = agent.grid_config or grid_config(config)
+    return grid.model_copy(update={"features": ()}) if agent.encoding == "paper" else grid
+
+
+def run_batched(
+    config: RunConfig,
+    episodes: Sequence[int],
+    on_finished: Callable[[EpisodeResult], None] | None = None,
+) -> list[EpisodeResult]:
+    """Episodes `episodes` of `config` (seed = config.seed + episode), one world each, stepped
+    together: their results in the order given, each as `run_episode` reports it but for the grid
+    snapshot and the controller's timings (none). `on_finished` sees each as its world ends."""
+    seeds = [child_seed(config.seed, episode) for episode in episodes]
+    worlds = len(episodes)
+    loop = ClosedLoopBatch(_alone(config), worlds, metrics=True)
+    results: dict[int, EpisodeResult] = {}
+    try:
+        loop.reset(seeds)
+        agents = [kept_agent(config, seed) for seed in seeds]
+        grid, with_permitted = _grid(config, agents[0]), sees_permitted(agents[0])
+        deciding = np.ones(worlds, dtype=bool)
+        since = np.zeros(worlds, dtype=np.int64)
+        commands = np.full(worlds, Command.STAY.value, dtype=np.int64)
+        while len(results) < worlds:
+            if deciding.any():
+                assert loop.perceived is not None
+                seen = observe_batch(grid, loop.perceived)
+                if with_permitted:
+                    seen = np.concatenate([seen, loop.permitted()], axis=1)
+                for world in np.flatnonzero(deciding).tolist():
+                    commands[world] = decide(agents[world], seen[world]).value
+                loop.command(commands, deciding)
+                since[deciding] = 0
+            live = ~loop.done
+            completed = loop.tick(live)
+            since[live] += 1
+            for world in np.flatnonzero(live & loop.done).tolist():
+                results[world] = loop.result(world, episodes[world], seeds[world])
+                if on_finished is not None:
+                    on_finished(results[world])
+            deciding = ~loop.done & (completed | (~loop.changing & (since >= config.decision_ticks)))
+    finally:
+        loop.close()
+    return [results[world] for world in range(worlds)]
+
+
+def batches(episodes: Sequence[int], jobs: int) -> list[list[int]]:
+    """`episodes` split into batches of at most `BATCH_WORLDS`, as even as a multiple of `jobs`
+    batches makes them (every process gets as many, each as long)."""
+    if not episodes:
+        return []
+    rounds = -(-len(episodes) // (max(jobs, 1) * BATCH_WORLDS))
+    count = min(len(episodes), rounds * max(jobs, 1))
+    size = -(-len(episodes) // count)
+    return [list(episodes[start : start + size]) for start in range(0, len(episodes), size)]

@@ -1,0 +1,125 @@
+"""`drivestack run` and `compare` on batched worlds (`stack.runs.batched_episodes`): each episode's
+result, every outcome field and the per-tick trace, is the one the per-world loop reports (passed
+cars, comfort, TTC, R157, standstill, collision class, counts), for the agents that decide on the
+grid (learned, MOBIL, rule, keep-lane, random), through sensors, on roads of several lane counts;
+the configs a batch does not run are refused in one line and run one world at a time."""
+
+from __future__ import annotations
+
+import pytest
+
+from stack.results.episode_result import EpisodeResult
+from stack.runs.batched_episodes import BATCH_WORLDS, batch_refusal, batches, run_batched
+from stack.runs.episodes import run, run_episode
+from stack.settings.run import build_config
+from stack.settings.scenarios import names as scenario_names
+
+
+def assert_same_episodes(batched: list[EpisodeResult], alone: list[EpisodeResult]) -> None:
+    assert [e.episode for e in batched] == [e.episode for e in alone]
+    for mine, theirs in zip(batched, alone, strict=True):
+        assert mine.outcome_row() == theirs.outcome_row(), mine.episode
+        assert mine.trace == theirs.trace, mine.episode
+
+
+def both_ways(episodes: int, **overrides: object) -> tuple[list[EpisodeResult], list[EpisodeResult]]:
+    """`episodes` episodes of a config run as one batch and one world at a time."""
+    config = build_config({}, "test", seed=625000, episodes=episodes, **overrides)
+    assert batch_refusal(config) is None
+    return run_batched(config, list(range(episodes))), [run_episode(config, e) for e in range(episodes)]
+
+
+@pytest.mark.parametrize(
+    ("scenario", "agent"),
+    [("overtaking", "ddqn"), ("noisy", "mobil"), ("random", "ddqn"), ("incident", "rule")],
+)
+def test_each_episode_of_a_batch_is_the_episode_run_alone(scenario: str, agent: str) -> None:
+    batched, alone = both_ways(3, scenario=scenario, planner__agent=agent)
+    assert_same_episodes(batched, alone)
+    assert sum(e.passed_cars for e in batched) > 0
+    assert any(e.lane_changes for e in batched) or agent == "rule"
+
+
+def test_collisions_are_classified_as_one_world_classifies_them() -> None:
+    """Random commands, no safety layer, late emergency braking: the ego collides, at fault."""
+    batched, alone = both_ways(
+        8,
+        scenario="incident",
+        planner__agent="random",
+        planner__safety__enabled=False,
+        controller__emergency_ttc_s=0.01,
+    )
+    assert_same_episodes(batched, alone)
+    kinds = [e.collision_kind for e in batched if e.crashed]
+    assert kinds and all(kind for kind in kinds)
+    assert sum(e.at_fault_collision for e in batched) == sum(e.at_fault_collision for e in alone) > 0
+
+
+def test_a_run_is_the_same_in_batches_and_over_processes() -> None:
+    config = build_config({}, "test", scenario="jam", planner__agent="mobil", seed=625100, episodes=5)
+    one = run(config, progress=False, snapshot=False)
+    two = run(config, progress=False, jobs=2, snapshot=False)
+    assert [e.outcome_row() for e in one.episodes] == [e.outcome_row() for e in two.episodes]
+    assert one.summary["episodes"] == 5 and all(e.snapshot is None for e in one.episodes)
+    first = run(config, progress=False)
+    assert first.episodes[0].snapshot is not None
+    assert [e.outcome_row() for e in first.episodes] == [e.outcome_row() for e in one.episodes]
+
+
+@pytest.mark.parametrize(
+    ("overrides", "reason"),
+    [
+        ({"planner__agent": "lookahead"}, "plans on copies"),
+        ({"planner__agent": "oracle"}, "plans on copies"),
+        ({"planner__agent": "tabular"}, "not 'tabular'"),
+        ({"controller__type": "mpc"}, "PID tracker"),
+        ({"sim__backend": "fast"}, "vector backend"),
+        ({"sim__plant": "dynamic"}, "kinematic plant"),
+        ({"scenario": "random", "planner__agent": "rule"}, "several sizes"),
+    ],
+)
+def test_what_a_batch_does_not_run_is_refused_in_one_line(overrides: dict, reason: str) -> None:
+    refused = batch_refusal(build_config({}, "test", **overrides))
+    assert refused is not None and reason in refused and "\n" not in refused
+
+
+def test_batches_are_even_and_at_most_the_batch_size() -> None:
+    assert batches([], 2) == []
+    assert [len(b) for b in batches(list(range(200)), 2)] == [50, 50, 50, 50]
+    assert [len(b) for b in batches(list(range(5)), 2)] == [3, 2]
+    split = batches(list(range(300)), 1)
+    assert max(map(len, split)) <= BATCH_WORLDS and sum(split, []) == list(range(300))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", scenario_names())
+def test_every_scenario_and_default_agent_in_batches_is_the_same_run(scenario: str) -> None:
+    for agent in ("ddqn", "rule", "mobil", "keep-lane"):
+        overrides = {"scenario": scenario, "planner__agent": agent}
+        if batch_refusal(build_config({}, "test", **overrides)) is None:
+            assert_same_episodes(*both_ways(6, **overrides))
+
+
+def test_a_stopped_batch_keeps_each_episode_that_ended_before_the_stop() -> None:
+    """Crashes end some worlds' episodes early: each is handed on as it ends, so a Ctrl-C (here
+    raised where the journal records them) keeps them though their batch never finished."""
+    config = build_config(
+        {},
+        "test",
+        scenario="incident",
+        planner__agent="random",
+        planner__safety__enabled=False,
+        controller__emergency_ttc_s=0.01,
+        seed=625000,
+        episodes=8,
+    )
+    handed: list[int] = []
+
+    def stop_after_two(result: EpisodeResult) -> None:
+        handed.append(result.episode)
+        if len(handed) == 2:
+            raise KeyboardInterrupt
+
+    stopped = run(config, progress=False, on_finished=stop_after_two, snapshot=False)
+    assert stopped.summary["interrupted"] and [e.episode for e in stopped.episodes] == sorted(handed)
+    assert len(stopped.episodes) == 2 < config.episodes
