@@ -39,7 +39,7 @@ def test_a_run_beside_another_agent_resumes_each_agent_from_its_own_journal(tmp_
     monkeypatch.setattr(
         episodes,
         "run_batched",
-        lambda c, es: ran.extend((c.planner.agent, e) for e in es) or batched(c, es),
+        lambda c, es, **kw: ran.extend((c.planner.agent, e) for e in es) or batched(c, es, **kw),
     )
     resumed = CliRunner().invoke(app, [*arguments, "--out", str(out), "--resume", "--no-progress"])
     assert resumed.exit_code == 0, resumed.output

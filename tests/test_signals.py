@@ -25,6 +25,8 @@ from stack.runtime.files import EpisodeJournal, replacing, write_text
 from tests.test_cli import tiny_config_file
 
 SHORT = ["--set", "highway.duration=4", "--set", "highway.vehicles_count=8", "--no-progress"]
+ONE_AT_A_TIME = ["--set", "sim.batched=false"]
+"""Episodes one world at a time: a short batch of them ends before a test's signal reaches it."""
 
 
 def stopped_after_first_episode(arguments: list[str], journal: Path, sig: signal.Signals) -> int:
@@ -89,8 +91,7 @@ def test_a_stopped_run_keeps_its_finished_episodes_and_resume_finishes_it(tmp_pa
 
 def test_a_stopped_comparison_keeps_the_agents_run_so_far_and_resume_finishes_it(tmp_path, monkeypatch):
     out = tmp_path / "compare"
-    one_at_a_time = ["--set", "sim.batched=false"]
-    arguments = ["compare", "--agents", "keep-lane,rule", "--episodes", "12", *SHORT, *one_at_a_time]
+    arguments = ["compare", "--agents", "keep-lane,rule", "--episodes", "12", *SHORT, *ONE_AT_A_TIME]
     journal = out / "rule.episodes.partial.jsonl"
     assert stopped_after_first_episode([*arguments, "--out", str(out)], journal, signal.SIGTERM) == 130
     rows = json.loads((out / "comparison.json").read_text())
@@ -215,7 +216,8 @@ def started_with_workers(arguments: list[str], journal: Path, **popen: object) -
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="reads /proc")
 def test_pool_workers_end_when_their_driver_is_killed(tmp_path):
     out = tmp_path / "run"
-    arguments = ["run", "--agent", "keep-lane", "--episodes", "40", "--jobs", "2", *SHORT, "--out", str(out)]
+    arguments = ["run", "--agent", "keep-lane", "--episodes", "40", "--jobs", "2", *SHORT, *ONE_AT_A_TIME]
+    arguments += ["--out", str(out)]
     process = started_with_workers(arguments, out / "keep-lane.episodes.partial.jsonl")
     workers = children(process.pid)
     assert workers, "the run has its pool"
@@ -226,7 +228,8 @@ def test_pool_workers_end_when_their_driver_is_killed(tmp_path):
 
 def test_ctrl_c_on_a_terminal_during_jobs_shows_no_worker_traceback(tmp_path):
     out = tmp_path / "run"
-    arguments = ["run", "--agent", "keep-lane", "--episodes", "40", "--jobs", "2", *SHORT, "--out", str(out)]
+    arguments = ["run", "--agent", "keep-lane", "--episodes", "40", "--jobs", "2", *SHORT, *ONE_AT_A_TIME]
+    arguments += ["--out", str(out)]
     process = started_with_workers(
         arguments, out / "keep-lane.episodes.partial.jsonl", start_new_session=True
     )
