@@ -206,6 +206,22 @@ def control(
         actuation[w, 0], actuation[w, 1] = acceleration, steering
 
 
+@njit(cache=True, nogil=True)
+def ego_extent(
+    w: int,
+    d: np.ndarray,
+    length: np.ndarray,
+    width: np.ndarray,
+    heading: np.ndarray,
+    lane_heading: np.ndarray,
+) -> tuple[float, float]:  # pragma: no cover - compiled
+    """(lowest, highest) lateral coordinate [m] of world `w`'s ego footprint corners
+    (`safety_metrics.footprint_lateral_extent`: its rectangle turned by its heading to the lane)."""
+    relative = heading[w, 0] - lane_heading[w]
+    half = (length[w, 0] * abs(math.sin(relative)) + width[w, 0] * abs(math.cos(relative))) / 2
+    return d[w, 0] - half, d[w, 0] + half
+
+
 @Kernel
 def settle(
     stepped: np.ndarray,
@@ -225,9 +241,7 @@ def settle(
     for w in range(stepped.shape[0]):
         if not stepped[w]:
             continue
-        relative = heading[w, 0] - lane_heading[w]
-        half = (length[w, 0] * abs(math.sin(relative)) + width[w, 0] * abs(math.cos(relative))) / 2
-        low, high = d[w, 0] - half, d[w, 0] + half
+        low, high = ego_extent(w, d, length, width, heading, lane_heading)
         lowest, highest = offsets[w, 0], offsets[w, 0]
         for k in range(1, lanes_count[w]):
             if offsets[w, k] < lowest:

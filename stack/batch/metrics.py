@@ -20,6 +20,7 @@ import numpy as np
 from common.compiled import Kernel
 from planner.batch_safety import lateral_extents
 from records.batch import WorldBatch
+from stack.batch.kernels import ego_extent
 from stack.loop.metrics import Driven, lateral_comfort, longest_run
 from stack.loop.safety_metrics import (
     _R157_GAP,
@@ -190,9 +191,7 @@ def _monitor(
     for w in range(stepped.shape[0]):
         if not stepped[w]:
             continue
-        relative = heading[w, 0] - lane_heading[w]
-        half = (length[w, 0] * abs(math.sin(relative)) + width[w, 0] * abs(math.cos(relative))) / 2
-        low, high = d[w, 0] - half, d[w, 0] + half
+        low, high = ego_extent(w, d, length, width, heading, lane_heading)
         v, n, ego_lane = speed[w, 0], count[w], lane[w, 0]
         for j in range(lanes_count[w]):
             occupied = low < offsets[w, j] + half_lane and high > offsets[w, j] - half_lane
