@@ -123,3 +123,24 @@ def test_a_stopped_batch_keeps_each_episode_that_ended_before_the_stop() -> None
     stopped = run(config, progress=False, on_finished=stop_after_two, snapshot=False)
     assert stopped.summary["interrupted"] and [e.episode for e in stopped.episodes] == sorted(handed)
     assert len(stopped.episodes) == 2 < config.episodes
+
+
+def test_batching_is_not_part_of_a_folder_s_fingerprint() -> None:
+    """`--resume` goes on with a folder whether or not its episodes ran batched (the same results),
+    and with folders written before `sim.batched` existed (the fingerprint leaves it out)."""
+    from stack.apps.resume import run_owner
+    from stack.apps.training import training_owner
+    from stack.settings.run import HOW_NOT_WHAT, config_text
+
+    batched = build_config({}, "test", scenario="jam")
+    alone = build_config({}, "test", scenario="jam", sim__batched=False)
+    assert run_owner([batched], "run") == run_owner([alone], "run")
+    assert training_owner(batched) == training_owner(alone)
+    assert "batched" in config_text(alone) and "batched" not in config_text(batched, exclude=HOW_NOT_WHAT)
+    assert batch_refusal(alone) == "sim.batched is off"
+
+
+def test_a_batch_reports_each_world_s_share_of_the_control_step() -> None:
+    config = build_config({}, "test", scenario="jam", planner__agent="mobil", seed=625200, episodes=2)
+    for result in run_batched(config, [0, 1]):
+        assert 0.0 < result.solve_ms_p50 <= result.solve_ms_p95 < 1e3

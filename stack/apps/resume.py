@@ -13,24 +13,25 @@ from records import child_seed
 from stack.results.episode_result import EpisodeResult
 from stack.runtime.files import JOURNAL, EpisodeJournal, write_text
 from stack.runtime.owner import Owner, fingerprint, refusal
-from stack.settings.run import RunConfig, config_text, printable
+from stack.settings.run import HOW_NOT_WHAT, RunConfig, config_text, printable
 
 JOURNAL_ROW_BYTES = 2_000
 """Bytes one journaled episode takes at most (about 450 in practice): bounds what --resume reads."""
 
 
-def resolved_config(configs: list[RunConfig]) -> str:
+def resolved_config(configs: list[RunConfig], exclude: dict | None = None) -> str:
     """The config.yaml of a run or comparison of `configs`: the resolved config and, first, the
-    agents and models."""
+    agents and models (without the keys `exclude` names)."""
     agents = ", ".join(
         c.planner.agent + (f" ({c.planner.model})" if c.planner.model else "") for c in configs
     )
-    return config_text(configs[0], f"the resolved config; agents: {agents}")
+    return config_text(configs[0], f"the resolved config; agents: {agents}", exclude)
 
 
 def run_owner(configs: list[RunConfig], command: str) -> Owner:
-    """The owner a `run` or `compare` of `configs` records in its results folder."""
-    return Owner(command, fingerprint(resolved_config(configs)))
+    """The owner a `run` or `compare` of `configs` records in its results folder: the fingerprint
+    of what decides its results (`HOW_NOT_WHAT` left out: `--resume` may batch differently)."""
+    return Owner(command, fingerprint(resolved_config(configs, HOW_NOT_WHAT)))
 
 
 def journal_of(config: RunConfig, out: Path) -> EpisodeJournal:

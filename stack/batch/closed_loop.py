@@ -11,6 +11,7 @@ Python runs per world per tick: only a world's reset (highway-env spawns its roa
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -293,11 +294,13 @@ class ClosedLoopBatch:
         assert perceived is not None
         actuation = np.zeros((self.worlds, 2))
         controller = (self.lateral, self.speed_pi, self.seen, self.seen_speed, self.seen_slowing, self.flags)
+        started = time.perf_counter()
         control(
             live, traffic.time, perceived.columns(), perceived.heading, perceived.lane_heading,
             lateral_extents(perceived), perceived.lane_width, self.slots, self._maneuver(), controller,
             self.safety, self.settings, self.gains, self.dt, actuation,
         )  # fmt: skip
+        control_s = time.perf_counter() - started
         ended = traffic.step(actuation[:, 0], actuation[:, 1], live)
         batch = self.batch = traffic.arrays.world_batch()
         self._sense(live)
@@ -309,7 +312,7 @@ class ClosedLoopBatch:
         self.crashed |= ended.terminated
         self.truncated |= ended.truncated
         if self.metrics is not None:
-            for world in self.metrics.record(live, batch, traffic.time, self.crashed):
+            for world in self.metrics.record(live, batch, traffic.time, self.crashed, control_s):
                 self.metrics.collided(
                     world, classify_collision(self.world_state(world), bool(changing[world]))
                 )
@@ -317,10 +320,12 @@ class ClosedLoopBatch:
 
     def result(self, world: int, episode: int, seed: int) -> EpisodeResult:
         """World `world`'s episode as `ClosedLoop.result` reports it (kept with `metrics`), run as
-        episode `episode` with traffic seed `seed`; no grid snapshot, no controller timings."""
+        episode `episode` with traffic seed `seed`; no grid snapshot; the controller's time per tick
+        is the world's share of the batch's control step (reference, PID, cruise and braking)."""
         if self.metrics is None:
             raise ValueError("a batch measures its episodes when made with metrics=True")
         counts, departed = self.counts[world], bool(self.departed[world])
+        p50_ms, p95_ms = self.metrics.control_ms(world)
         return EpisodeResult(
             episode=episode,
             seed=seed,
@@ -329,6 +334,8 @@ class ClosedLoopBatch:
             masked_commands=int(counts[1]),
             aborted_changes=int(counts[2]),
             emergency_brakings=int(self.flags[world, 1]),
+            solve_ms_p50=p50_ms,
+            solve_ms_p95=p95_ms,
             **record_fields(self.metrics.driven(world)),
             **record_fields(self.metrics.measured(world, departed)),
         )

@@ -33,8 +33,9 @@ from stack.loop.safety_metrics import (
 )
 from stack.results.episode_result import TTC_CAP_S
 
-SERIES = ("time", "speed", "heading", "d", "lane")
-"""What the recorder keeps of every tick, per world."""
+SERIES = ("time", "speed", "heading", "d", "lane", "control_s")
+"""What the recorder keeps of every tick, per world (`control_s`: the batch's control step, its
+wall-clock time shared evenly by the worlds it ran for [s]; none at the first sample)."""
 
 
 class EpisodeMetricsBatch:
@@ -68,7 +69,6 @@ class EpisodeMetricsBatch:
         """The worlds `worlds` begin an episode at `batch` (the truth) and `time` [s]."""
         rows = np.asarray(worlds, dtype=np.int64)
         self.ticks[rows] = 0
-        self._room(1, batch.s.shape[1])
         self.passed[rows] = False
         self.was_ahead[rows] = False
         self.min_ttc_s[rows] = TTC_CAP_S
@@ -78,14 +78,15 @@ class EpisodeMetricsBatch:
             self.collision[world] = None
         flags = np.zeros(self.worlds, dtype=bool)
         flags[rows] = True
-        self._record_world(flags, batch, time)
+        self._record_world(flags, batch, time, 0.0)
 
     def record(
-        self, stepped: np.ndarray, batch: WorldBatch, time: np.ndarray, crashed: np.ndarray
+        self, stepped: np.ndarray, batch: WorldBatch, time: np.ndarray, crashed: np.ndarray, control_s: float
     ) -> list[int]:
-        """One tick of the worlds flagged `stepped`, at `batch` (the truth) and `time` [s]; the
-        worlds whose ego `crashed` on it for the first time: classify each (`collided`)."""
-        self._record_world(stepped, batch, time)
+        """One tick of the worlds flagged `stepped`, at `batch` (the truth) and `time` [s], whose
+        control step took `control_s` seconds of wall-clock time for them all; the worlds whose ego
+        `crashed` on it for the first time: classify each (`collided`)."""
+        self._record_world(stepped, batch, time, control_s / max(int(stepped.sum()), 1))
         reach = (batch.lane_width + lateral_extents(batch)) / 2
         ego_lane_gap = np.full(self.worlds, np.nan)
         below_floor = np.zeros(self.worlds, dtype=bool)
@@ -106,7 +107,7 @@ class EpisodeMetricsBatch:
         """World `world`'s ego collided: `collision` (`classify_collision` of its crash frame)."""
         self.collision[world] = collision
 
-    def _record_world(self, flags: np.ndarray, batch: WorldBatch, time: np.ndarray) -> None:
+    def _record_world(self, flags: np.ndarray, batch: WorldBatch, time: np.ndarray, control_s: float) -> None:
         """The worlds flagged in `flags`, one sample more: the recorder's series and passed cars."""
         self._room(int(self.ticks.max(initial=0)) + 1, batch.s.shape[1])
         rows = np.flatnonzero(flags)
@@ -117,6 +118,7 @@ class EpisodeMetricsBatch:
             "heading": batch.heading[:, 0] - batch.lane_heading,
             "d": batch.d[:, 0],
             "lane": batch.lane[:, 0],
+            "control_s": np.full(self.worlds, control_s),
         }
         for name, value in values.items():
             self.series[name][rows, at] = value[rows]
@@ -153,6 +155,15 @@ class EpisodeMetricsBatch:
                 "d": self._samples(world, "d").tolist(),
             },
         )
+
+    def control_ms(self, world: int) -> tuple[float, float]:
+        """(p50, p95) of world `world`'s share of the control step per tick [ms] this episode, as
+        `ClosedLoop.solve_statistics` reports the controller's time per tick."""
+        shares = 1e3 * self._samples(world, "control_s")[1:]
+        if not shares.size:
+            return 0.0, 0.0
+        p50, p95 = np.percentile(shares, [50, 95])
+        return float(p50), float(p95)
 
     def measured(self, world: int, departed: bool) -> SafetyMeasures:
         """`SafetyMonitor.measured` of world `world`'s episode so far, which `departed` the road or

@@ -18,7 +18,7 @@ from stack.agents.oracle import Oracle
 from stack.loop.closed_loop import ClosedLoop
 from stack.loop.recording import episode_recording
 from stack.results.episode_result import EpisodeResult, summarize
-from stack.runs.batched_episodes import batch_refusal, batches, run_batched
+from stack.runs.batched_episodes import RAY_BATCH_WORLDS, batch_refusal, batches, run_batched
 from stack.runs.kept import kept_adapter, kept_agent
 from stack.runtime.executors import completed
 from stack.settings.run import RunConfig
@@ -122,7 +122,7 @@ def run(
         if (video or snapshot) and pending and pending[0] == 0:
             finished(run_episode(config, pending.pop(0), frames if video else None, record))
         if record is None and batch_refusal(config) is None:
-            split = batches(pending, jobs)
+            split = batches(pending, jobs) if ray is None else batches(pending, 1, RAY_BATCH_WORLDS)
             if ray is None and (jobs <= 1 or len(split) <= 1):
                 for batch in split:
                     run_batched(config, batch, on_finished=finished)

@@ -131,8 +131,8 @@ def _worker_start(parent: int) -> None:
     the parent stops the run and ends the workers, no worker traceback), and ends when its parent
     dies, even by SIGKILL: the kernel tells it on Linux (PR_SET_PDEATHSIG), a watchdog thread
     elsewhere. One thread for torch's operators (and any OpenMP library): a worker is one of `jobs`
-    processes sharing the cores, and idle operator threads spinning beside the others' cost ~40 %
-    more CPU time on 2 cores (`drivestack compare`, 4 agents x 200 episodes: 45.7 s user, not 71.7)."""
+    processes sharing the cores, and idle operator threads spinning beside the others' cost ~57 %
+    more CPU time on 2 cores (`drivestack compare`, 4 agents x 200 episodes: 71.7 s user, not 45.7)."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if sys.platform.startswith("linux"):

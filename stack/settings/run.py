@@ -214,10 +214,16 @@ def _set_dotted(data: dict[str, Any], dotted: str, value: Any, source: str) -> N
     node[leaf] = value
 
 
-def config_text(config: RunConfig, comment: str = "") -> str:
-    """The resolved `config` as YAML, loadable with `--config` (a `# comment` first)."""
+HOW_NOT_WHAT = {"sim": {"batched"}}
+"""Config keys that change how a run is carried out, never its results: left out of the
+fingerprint that lets `--resume` go on with a folder (`stack.apps.resume`, `training_owner`)."""
+
+
+def config_text(config: RunConfig, comment: str = "", exclude: dict | None = None) -> str:
+    """The resolved `config` as YAML, loadable with `--config` (a `# comment` first), without the
+    keys `exclude` names (pydantic's nested form)."""
     header = "".join(f"# {line}\n" for line in comment.splitlines())
-    return header + yaml.safe_dump(config.model_dump(mode="json"), sort_keys=False)
+    return header + yaml.safe_dump(config.model_dump(mode="json", exclude=exclude), sort_keys=False)
 
 
 def write_config(config: RunConfig, path: Path, comment: str = "") -> None:
