@@ -28,8 +28,8 @@ from stack.settings.run import RunConfig
 BATCH_WORLDS = 64
 """The most episodes one batch runs at once."""
 RAY_BATCH_WORLDS = 8
-"""The most episodes one Ray task runs at once: a cluster gets many tasks (8 worlds a batch still
-step ~10x faster than one)."""
+"""The most episodes one Ray task runs at once: a cluster gets many tasks, each still a batch (the
+traffic alone: 16 worlds step 13x faster than one, BENCHMARKS.md)."""
 PLANNING_AGENTS = ("oracle", "lookahead")
 """Agents that plan on copies of the loop: they run one world at a time."""
 
