@@ -72,7 +72,15 @@ def run_and_report(
         try:
             beside_folder = folder / "beside" if folder is not None else None
             beside = run(
-                configs[1], False, progress, jobs, ray, journals[1].record, finished[1], beside_folder, False
+                configs[1],
+                False,
+                progress,
+                jobs,
+                ray,
+                journals[1].record,
+                finished[1],
+                beside_folder,
+                snapshot=False,
             )
             interrupted = bool(beside.summary["interrupted"])
             rows = comparison([results, beside], baseline=configs[1].planner.agent)

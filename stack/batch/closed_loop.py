@@ -342,7 +342,7 @@ class ClosedLoopBatch:
 
     def world_state(self, world: int) -> WorldState:
         """World `world` as it stands, as the per-world loop's snapshot (`stack.sim.highway.snapshot`)."""
-        vehicles, ego = self.traffic.road(world)
+        _, ego = self.traffic.road(world)
         lanes = int(self.traffic.arrays.lane_count[world])
         return snapshot(ego.road, ego, float(self.traffic.time[world]), lanes)
 
