@@ -6,6 +6,9 @@ y = r + gamma * (1 - done) * Q_target(s', argmax_a Q_online(s', a)). With demons
 of every batch is drawn from them and those rows add DQfD's large-margin loss,
 max_a [Q(s, a) + margin * (a != a_E)] - Q(s, a_E), which keeps the expert's action ahead of the
 others by `margin`; `pretrain` takes gradient steps on demonstrations alone before any episode.
+With `overlap`, the gradient steps due after a step of the environments run while the environments'
+processes take the next step (`LearningWhileStepping`), so the learner and the simulation share
+the cores instead of taking turns.
 """
 
 from __future__ import annotations
@@ -19,6 +22,8 @@ import torch as th
 from stable_baselines3 import DQN
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.utils import polyak_update
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 from stable_baselines3.dqn.policies import DQNPolicy, QNetwork
 from torch.nn import functional as F
 
@@ -194,7 +199,11 @@ class DoubleDQN(DQN):
     prior's (`planner.mobil.MobilPrior`); the TD target stays the Q-network's own. With
     `action_mask`, every observation ends with the safety layer's permitted commands
     (`permitted_columns`): greedy actions, exploration and the TD target's next action are chosen
-    among them, so the agent learns what it may do and is never taught by a refused command."""
+    among them, so the agent learns what it may do and is never taught by a refused command.
+    With `overlap`, the gradient steps SB3 asks for after a step of the environments are put off
+    until the next step's actions are on their way (`pending_gradient_steps` until then): they
+    learn from the transitions up to the step before while the environments' processes step, one
+    step staler than SB3's order and as deterministic (a different run from the one without)."""
 
     policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": PriorDQNPolicy}
 
@@ -206,11 +215,14 @@ class DoubleDQN(DQN):
         margin_weight: float = 1.0,
         mobil_prior: MobilPrior | None = None,
         action_mask: bool = False,
+        overlap: bool = False,
         **kwargs: Any,
     ) -> None:
         self.demonstrations: Demonstrations | None = None
         self.demonstration_share, self.margin, self.margin_weight = demonstration_share, margin, margin_weight
-        self.action_mask = action_mask
+        self.action_mask, self.overlap = action_mask, overlap
+        self.pending_gradient_steps = 0
+        self._stepping: LearningWhileStepping | None = None
         super().__init__(*args, **kwargs)
         if isinstance(self.q_net, PriorQNetwork):
             self.q_net.prior, self.q_net.action_mask = mobil_prior, action_mask
@@ -272,7 +284,30 @@ class DoubleDQN(DQN):
         polyak_update(self.q_net.parameters(), self.q_net_target.parameters(), 1.0)
         return loss
 
+    def collect_rollouts(self, env: VecEnv, *args: Any, **kwargs: Any) -> Any:
+        """SB3's rollout; with `overlap`, on `env` wrapped so that the pending gradient steps run
+        once each step's actions are sent."""
+        if self.overlap:
+            if self._stepping is None or self._stepping.venv is not env:
+                self._stepping = LearningWhileStepping(env, self.learn_pending)
+            env = self._stepping
+        return super().collect_rollouts(env, *args, **kwargs)
+
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
+        """`gradient_steps` steps on batches of `batch_size`; with `overlap`, put off to the next
+        step of the environments (`learn_pending`)."""
+        if self.overlap:
+            self.pending_gradient_steps += gradient_steps
+            return
+        self._train(gradient_steps, batch_size)
+
+    def learn_pending(self) -> None:
+        """The gradient steps put off (`overlap`), on the replay buffer as it stands."""
+        if self.pending_gradient_steps:
+            steps, self.pending_gradient_steps = self.pending_gradient_steps, 0
+            self._train(steps, self.batch_size)
+
+    def _train(self, gradient_steps: int, batch_size: int) -> None:
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
         demonstrated = round(batch_size * self.demonstration_share) if self.demonstrations else 0
@@ -321,3 +356,22 @@ class DoubleDQN(DQN):
         th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
         self.policy.optimizer.step()
         return float(loss.item())
+
+
+class LearningWhileStepping(VecEnvWrapper):
+    """`venv` whose `step_async` sends the actions, then calls `learn` before the step is awaited:
+    with the environments in other processes, `learn` runs while they step."""
+
+    def __init__(self, venv: VecEnv, learn: Callable[[], None]) -> None:
+        super().__init__(venv)
+        self.learn = learn
+
+    def reset(self) -> Any:
+        return self.venv.reset()
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self.venv.step_async(actions)
+        self.learn()
+
+    def step_wait(self) -> VecEnvStepReturn:
+        return self.venv.step_wait()

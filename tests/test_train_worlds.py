@@ -12,7 +12,9 @@ from typer.testing import CliRunner
 from planner.learned import load_agent
 from planner.model_file import load_model
 from stack.apps.cli import app
-from stack.settings.run import build_config
+from stack.apps.training import training_owner
+from stack.runtime.owner import fingerprint
+from stack.settings.run import HOW_NOT_WHAT, build_config
 from stack.training.batch_env import TrainingWorlds, batched_worlds
 from stack.training.checkpoint import DqnCounters, read_checkpoint
 from stack.training.model import build_dqn
@@ -88,8 +90,13 @@ MIX = {
 }
 
 
+OVERLAPPED = {**WORLDS, "train": {**WORLDS["train"], "overlap": True, "replay_ratio": 0.5}}
+
+
 @pytest.mark.parametrize(
-    ("data", "envs"), [(WORLDS, 1), (MIX, 1), (MIX, 2)], ids=["one-world", "mix", "mix-on-2-shards"]
+    ("data", "envs"),
+    [(WORLDS, 1), (MIX, 1), (MIX, 2), (OVERLAPPED, 2)],
+    ids=["one-world", "mix", "mix-on-2-shards", "overlapped-on-2-shards"],
 )
 def test_a_stopped_and_resumed_batched_run_gives_the_model_of_an_uninterrupted_one(tmp_path, data, envs):
     """Stopped mid-episode, the checkpoint holds each world's episode under way (its generator's
@@ -100,6 +107,9 @@ def test_a_stopped_and_resumed_batched_run_gives_the_model_of_an_uninterrupted_o
     into the checkpoint and each replays its own."""
     config = build_config({**data, "train": {**data["train"], "envs": envs}})
     Trainer(config, tmp_path / "whole", progress=False).run()
+    if config.train.overlap:
+        last = read_checkpoint(load_model(tmp_path / "whole" / "checkpoint.npz", 2**31)[1], DqnCounters)
+        assert last.counters.pending_gradient_steps, "the last step's gradient steps wait for a next step"
     trainer = Trainer(config, tmp_path / "cut", progress=False)
     worlds = batched_worlds(trainer.env)
     assert isinstance(worlds, TrainingWorlds if envs == 1 else WorldShards) and worlds.num_envs == 4
@@ -128,3 +138,38 @@ def test_a_stopped_and_resumed_batched_run_gives_the_model_of_an_uninterrupted_o
         for key, value in whole_arrays.items():
             np.testing.assert_array_equal(cut_arrays[key], value, err_msg=f"{name}: {key}")
     assert (tmp_path / "cut" / "final.npz").read_bytes() == (tmp_path / "whole" / "final.npz").read_bytes()
+
+
+def test_learning_while_the_worlds_step_is_one_run_on_any_split_and_another_run_than_in_turns(tmp_path):
+    """`train.overlap`: the gradient steps due after a step run while the shards take the next
+    one, on the transitions up to the step before. The same model file in one process and over
+    two (the order is the algorithm's, not the processes'); not the model of SB3's order, which
+    learns from the newest step first."""
+    files = {}
+    for name, overlap, envs in [("one", True, 1), ("two", True, 2), ("in-turns", False, 2)]:
+        train = {**OVERLAPPED["train"], "overlap": overlap, "envs": envs}
+        config = build_config({**OVERLAPPED, "train": train})
+        summary = Trainer(config, tmp_path / name, progress=False).run()
+        assert summary.steps == 40
+        files[name] = (tmp_path / name / "final.npz").read_bytes()
+    assert files["one"] == files["two"]
+    assert files["one"] != files["in-turns"]
+
+
+def test_overlap_is_refused_for_dqn_in_one_line(tmp_path):
+    data = {**WORLDS, "train": {**WORLDS["train"], "algorithm": "dqn", "overlap": True}}
+    args = ["train", "-c", str(written(tmp_path, data)), "--out", str(tmp_path / "o"), "--no-progress"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2 and "overlap: only the ddqn algorithm" in result.output, result.output
+    assert len(result.output.strip().splitlines()) == 1
+
+
+def test_a_folder_written_before_overlap_existed_keeps_its_fingerprint():
+    """A run folder records its config's fingerprint; one written before `train.overlap` existed
+    has none of it, and still resumes: the key is left out while it holds that run's value."""
+    config = build_config(WORLDS)
+    former = config.model_dump(mode="json", exclude=HOW_NOT_WHAT)
+    former["train"].pop("steps"), former["train"].pop("overlap")
+    assert training_owner(config).config == fingerprint(json.dumps(former, sort_keys=True))
+    overlapped = build_config({**WORLDS, "train": {**WORLDS["train"], "overlap": True}})
+    assert training_owner(overlapped).config != training_owner(config).config

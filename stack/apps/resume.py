@@ -13,7 +13,7 @@ from records import child_seed
 from stack.results.episode_result import EpisodeResult
 from stack.runtime.files import JOURNAL, EpisodeJournal, write_text
 from stack.runtime.owner import Owner, fingerprint, refusal
-from stack.settings.run import HOW_NOT_WHAT, RunConfig, config_text, printable
+from stack.settings.run import RunConfig, config_text, printable, unfingerprinted
 
 JOURNAL_ROW_BYTES = 2_000
 """Bytes one journaled episode takes at most (about 450 in practice): bounds what --resume reads."""
@@ -30,8 +30,9 @@ def resolved_config(configs: list[RunConfig], exclude: dict | None = None) -> st
 
 def run_owner(configs: list[RunConfig], command: str) -> Owner:
     """The owner a `run` or `compare` of `configs` records in its results folder: the fingerprint
-    of what decides its results (`HOW_NOT_WHAT` left out: `--resume` may batch differently)."""
-    return Owner(command, fingerprint(resolved_config(configs, HOW_NOT_WHAT)))
+    of what decides its results (the `unfingerprinted` keys left out: `--resume` may batch
+    differently, and a folder from before a key was added resumes)."""
+    return Owner(command, fingerprint(resolved_config(configs, unfingerprinted(configs[0]))))
 
 
 def journal_of(config: RunConfig, out: Path) -> EpisodeJournal:

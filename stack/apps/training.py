@@ -157,10 +157,10 @@ def report(summary: TrainSummary, folder: Path) -> None:
 
 def training_owner(config: RunConfig) -> Owner:
     """The owner a training run records in its folder: the hash of its config without
-    `train.steps`, the one key a resumed run may change (grow), and `HOW_NOT_WHAT`."""
-    from stack.settings.run import HOW_NOT_WHAT
+    `train.steps`, the one key a resumed run may change (grow), and the `unfingerprinted` ones."""
+    from stack.settings.run import unfingerprinted
 
-    data = config.model_dump(mode="json", exclude=HOW_NOT_WHAT)
+    data = config.model_dump(mode="json", exclude=unfingerprinted(config))
     data["train"].pop("steps")
     return Owner("train", fingerprint(json.dumps(data, sort_keys=True)))
 

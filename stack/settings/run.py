@@ -217,6 +217,19 @@ def _set_dotted(data: dict[str, Any], dotted: str, value: Any, source: str) -> N
 HOW_NOT_WHAT = {"sim": {"batched"}}
 """Config keys that change how a run is carried out, never its results: left out of the
 fingerprint that lets `--resume` go on with a folder (`stack.apps.resume`, `training_owner`)."""
+ADDED_LATER = {"train": {"overlap": False}}
+"""Config keys added after folders were written, with the value the runs of those folders had:
+left out of the fingerprint while they hold it, so such a folder still resumes."""
+
+
+def unfingerprinted(config: RunConfig) -> dict[str, set[str]]:
+    """The keys (pydantic's nested form) left out of `config`'s fingerprint: `HOW_NOT_WHAT`, and
+    the `ADDED_LATER` ones at their former value."""
+    exclude = {section: set(keys) for section, keys in HOW_NOT_WHAT.items()}
+    for section, former in ADDED_LATER.items():
+        values = getattr(config, section)
+        exclude.setdefault(section, set()).update(k for k, v in former.items() if getattr(values, k) == v)
+    return exclude
 
 
 def config_text(config: RunConfig, comment: str = "", exclude: dict | None = None) -> str:

@@ -241,6 +241,13 @@ class TrainConfig(Strict):
         "chooses among them, in acting, exploring and the Double-DQN target (ddqn only)",
     )
 
+    overlap: bool = Field(
+        False,
+        description="the gradient steps due after a step of the environments run while the env "
+        "processes (train.envs >= 2) take the next step, learning from the transitions up to the "
+        "step before: both cores busy, a run one step staler than without (ddqn only)",
+    )
+
     @field_validator("init_model")
     @classmethod
     def _existing_model(cls, path: str | None) -> str | None:
@@ -258,6 +265,8 @@ class TrainConfig(Strict):
             raise ValueError("mobil_prior: only the ddqn algorithm decides with one")
         if self.algorithm != "ddqn" and self.action_mask:
             raise ValueError("action_mask: only the ddqn algorithm learns with one")
+        if self.algorithm != "ddqn" and self.overlap:
+            raise ValueError("overlap: only the ddqn algorithm learns while its environments step")
         return self
 
     @model_validator(mode="after")

@@ -23,7 +23,8 @@ class DqnCounters:
     """A (Double) DQN run's counters: SB3's steps, updates, calls and episodes, the exploration
     rate, the replay buffer's position, the optimizer's parameter groups, numpy's global generator
     (`numpy_random`: position, gauss flag, cached gauss; its keys are an array of the file), the
-    action space's generator and each env's episode under way."""
+    action space's generator, each env's episode under way and the gradient steps put off to the
+    next step (`train.overlap`)."""
 
     num_timesteps: int
     n_updates: int
@@ -36,6 +37,7 @@ class DqnCounters:
     numpy_random: tuple[int, int, float] | None = None
     action_space_random: dict[str, Any] | None = None
     episodes: tuple[EpisodeRecord, ...] | None = None
+    pending_gradient_steps: int | None = None
 
     def to_json(self) -> dict[str, Any]:
         return _without_none(
@@ -51,6 +53,7 @@ class DqnCounters:
                 "numpy_random": list(self.numpy_random) if self.numpy_random is not None else None,
                 "action_space_random": self.action_space_random,
                 "episodes": _episodes_json(self.episodes),
+                "pending_gradient_steps": self.pending_gradient_steps,
             }
         )
 
@@ -65,6 +68,7 @@ class DqnCounters:
         if not isinstance(param_groups, list) or not all(isinstance(g, dict) for g in param_groups):
             raise TypeError("param_groups is not a list of objects")
         exploration_rate = data.get("exploration_rate")
+        pending = data.get("pending_gradient_steps")
         return cls(
             num_timesteps=_int(data["num_timesteps"]),
             n_updates=_int(data["n_updates"]),
@@ -77,6 +81,7 @@ class DqnCounters:
             numpy_random=numpy_random,
             action_space_random=_generator(data.get("action_space_random")),
             episodes=_episodes(data.get("episodes")),
+            pending_gradient_steps=None if pending is None else _count(pending),
         )
 
 
@@ -188,6 +193,12 @@ def _int(value: object) -> int:
     if not isinstance(value, int):
         raise TypeError(f"expected an integer, got {type(value).__name__}")
     return value
+
+
+def _count(value: object) -> int:
+    if _int(value) < 0:
+        raise ValueError(f"expected a count, got {value}")
+    return _int(value)
 
 
 def _number(value: object) -> float:

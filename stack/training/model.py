@@ -76,6 +76,8 @@ def build_dqn(config: RunConfig, env: gym.Env | VecEnv, tensorboard: Path) -> DQ
         own_options["mobil_prior"] = MobilPrior(grid_config(config), train.mobil_prior)
     if train.action_mask:
         own_options["action_mask"] = True
+    if train.overlap:
+        own_options["overlap"] = True
     return algorithm(
         "MlpPolicy",
         env,

@@ -56,6 +56,7 @@ def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], DqnCounters]:
         numpy_random=(int(numpy_random[0]), int(numpy_random[1]), float(numpy_random[2])),
         action_space_random=dict(model.action_space.np_random.bit_generator.state),
         episodes=episodes_under_way(env),
+        pending_gradient_steps=int(getattr(model, "pending_gradient_steps", 0)) or None,
     )
     return arrays, counters
 
@@ -79,6 +80,8 @@ def restore_dqn_state(model: DQN, arrays: dict[str, np.ndarray], counters: DqnCo
     model.num_timesteps, model._n_updates = counters.num_timesteps, counters.n_updates
     model._episode_num = counters.episode_num
     model._n_calls = counters.n_calls or 0
+    if isinstance(model, DoubleDQN):
+        model.pending_gradient_steps = counters.pending_gradient_steps or 0
     if counters.exploration_rate is not None:
         model.exploration_rate = counters.exploration_rate
     if isinstance(model, DoubleDQN) and (demonstrations := _prefixed(arrays, "demonstrations/")):
