@@ -196,9 +196,10 @@ def _int(value: object) -> int:
 
 
 def _count(value: object) -> int:
-    if _int(value) < 0:
-        raise ValueError(f"expected a count, got {value}")
-    return _int(value)
+    count = _int(value)
+    if count < 0:
+        raise ValueError(f"expected a count, got {count}")
+    return count
 
 
 def _number(value: object) -> float:

@@ -42,6 +42,7 @@ def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], DqnCounters]:
     if isinstance(model, DoubleDQN) and model.demonstrations is not None:
         arrays |= {f"demonstrations/{k}": v for k, v in model.demonstrations.arrays().items()}
     _, arrays["random/numpy_keys"], *numpy_random = np.random.get_state()
+    pending = model.pending_gradient_steps if isinstance(model, DoubleDQN) else 0
     env = model.get_env()
     assert env is not None, "a model in training has its env"
     counters = DqnCounters(
@@ -56,7 +57,7 @@ def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], DqnCounters]:
         numpy_random=(int(numpy_random[0]), int(numpy_random[1]), float(numpy_random[2])),
         action_space_random=dict(model.action_space.np_random.bit_generator.state),
         episodes=episodes_under_way(env),
-        pending_gradient_steps=int(getattr(model, "pending_gradient_steps", 0)) or None,
+        pending_gradient_steps=pending or None,
     )
     return arrays, counters
 
