@@ -160,6 +160,31 @@ def test_a_stop_lost_in_a_finalizer_still_ends_the_work_at_the_next_item(monkeyp
     assert interrupts.received()
 
 
+def test_a_stop_lost_in_a_finalizer_is_not_printed_as_a_traceback(capsys, monkeypatch):
+    """The CLI's `sys.unraisablehook` keeps Python from printing a first signal's KeyboardInterrupt
+    lost in a finalizer ("Exception ignored ... Traceback"); any other lost exception is printed."""
+    stops = interrupts.StopSignals()
+    monkeypatch.setattr(sys, "unraisablehook", stops.unraisable)
+
+    class Lost:
+        def __init__(self, error: BaseException) -> None:
+            self.error = error
+
+        def __del__(self) -> None:
+            raise self.error
+
+    def lose(error: BaseException) -> None:
+        Lost(error)
+
+    lose(KeyboardInterrupt())
+    assert "KeyboardInterrupt" in capsys.readouterr().err, "no stop was raised: Python's own hook"
+    stops.raised = True
+    lose(KeyboardInterrupt())
+    assert capsys.readouterr().err == ""
+    lose(RuntimeError("broken"))
+    assert "RuntimeError: broken" in capsys.readouterr().err
+
+
 def test_a_file_is_written_whole_or_left_as_it_was(tmp_path):
     path = tmp_path / "summary.json"
     write_text(path, "old")

@@ -52,6 +52,7 @@ class StopSignals:
         self.received, self.pending, self.raised = 0, False, False
         for sig in SIGNALS:
             signal.signal(sig, self)
+        sys.unraisablehook = self.unraisable
         held, self.held = self.held, False
         return held
 
@@ -71,6 +72,13 @@ class StopSignals:
         before each item, so that stop still ends the work there."""
         if self.raised:
             raise KeyboardInterrupt
+
+    def unraisable(self, unraisable: sys.UnraisableHookArgs) -> None:
+        """`sys.unraisablehook`: a first signal's KeyboardInterrupt lost in a finalizer is not
+        printed as "Exception ignored ... Traceback" (`raise_if_stopped` raises it again at the next
+        item); anything else goes to Python's own hook."""
+        if not (self.raised and isinstance(unraisable.exc_value, KeyboardInterrupt)):
+            sys.__unraisablehook__(unraisable)
 
     def interrupt(self) -> None:
         self.raised = True
