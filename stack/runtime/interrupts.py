@@ -67,8 +67,8 @@ class StopSignals:
 
     def raise_if_stopped(self) -> None:
         """KeyboardInterrupt again if a stop was raised before. Python ignores an exception raised
-        in a finalizer or a `__del__` (it prints "Exception ignored"), so the first signal's
-        KeyboardInterrupt is lost when it lands in one; work that runs item by item calls this
+        in a finalizer or a `__del__` (`unraisable` keeps it from printing it), so the first
+        signal's KeyboardInterrupt is lost when it lands in one; work that runs item by item calls this
         before each item, so that stop still ends the work there."""
         if self.raised:
             raise KeyboardInterrupt
