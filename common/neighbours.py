@@ -102,12 +102,31 @@ def _neighbour_rows(
     return rows.tolist(), found.tolist(), gap.tolist(), world.speed[1:].tolist(), world.ids[1:].tolist()
 
 
-def scanned_neighbours(world: WorldState, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
+def lateral_drift(world: WorldState, horizon_s: float) -> np.ndarray:
+    """How far each other vehicle moves across the road in `horizon_s` [s] at its present lateral
+    speed (its speed times the sine of its heading to the lane at the ego) [m]; positive towards
+    higher d."""
+    heading = world.heading[1:] - world.lanes[0].heading_at(float(world.s[0]))
+    return world.speed[1:] * np.sin(heading) * horizon_s
+
+
+def scanned_neighbours(
+    world: WorldState, lane: int, drift: np.ndarray | None = None
+) -> tuple[Neighbour | None, Neighbour | None]:
     """`neighbours` of one lane, found by scanning it alone (numpy, no kernel): what the compiled
-    pass answers where a distance is infinite, and what it is tested against."""
+    pass answers where a distance is infinite, and what it is tested against. With `drift`
+    (`lateral_drift`), a vehicle also counts when its footprint reaches into the lane anywhere on
+    its way from d to d + drift: a car about to cut in is a neighbour before it arrives."""
     rel_s = world.s[1:] - world.s[0]
     gap = np.abs(rel_s) - (world.length[1:] + world.length[0]) / 2
-    in_lane = np.abs(world.d[1:] - world.lane_offsets[lane]) < (world.lane_width + lateral_extent(world)) / 2
+    reach = (world.lane_width + lateral_extent(world)) / 2
+    centre, d = world.lane_offsets[lane], world.d[1:]
+    if drift is None:
+        in_lane = np.abs(d - centre) < reach
+    else:
+        low, high = np.minimum(d, d + drift), np.maximum(d, d + drift)
+        across = np.minimum(np.abs(low - centre), np.abs(high - centre))
+        in_lane = np.where((low <= centre) & (centre <= high), 0.0, across) < reach
     found: list[Neighbour | None] = []
     for side in (rel_s > 0, rel_s <= 0):
         candidates = np.flatnonzero(in_lane & side)

@@ -26,6 +26,12 @@ def lateral_extents(batch: WorldBatch) -> np.ndarray:
     return np.abs(batch.length * np.sin(relative_heading)) + np.abs(batch.width * np.cos(relative_heading))
 
 
+def lateral_drifts(batch: WorldBatch, horizon_s: float) -> np.ndarray:
+    """(worlds, vehicles): how far each vehicle moves across the road in `horizon_s` [s] at its
+    present lateral speed [m] (`common.neighbours.lateral_drift`, over the whole batch)."""
+    return batch.speed * np.sin(batch.heading - batch.lane_heading[:, None]) * horizon_s
+
+
 def permitted_batch(
     config: SafetyConfig,
     perceived: WorldBatch,
@@ -70,6 +76,7 @@ def lane_is_safe(
     n: int,
     s: np.ndarray,
     d: np.ndarray,
+    drift: np.ndarray,
     speed: np.ndarray,
     length: np.ndarray,
     reach: np.ndarray,
@@ -82,11 +89,14 @@ def lane_is_safe(
     """`SafetyLayer.gap_is_safe` of one world's `n` vehicles (row 0 the ego, each reaching `reach`
     [m] across the road from its centre) for the lane centred at `centre` [m]: the nearest vehicle
     ahead and behind (the first on ties) leave `min_gap` [m], or the time gaps when they are
-    non-zero (the strict rule), and `min_ttc` [s]."""
+    non-zero (the strict rule), and `min_ttc` [s]. A vehicle is in the lane when it reaches into it
+    anywhere between d and d + `drift` [m] (`common.neighbours.scanned_neighbours`; zeros: now)."""
     ahead, behind = -1, -1
     best_ahead, best_behind = np.inf, np.inf
     for v in range(1, n):
-        if not abs(d[v] - centre) < reach[v]:
+        low, high = min(d[v], d[v] + drift[v]), max(d[v], d[v] + drift[v])
+        across = 0.0 if low <= centre <= high else min(abs(low - centre), abs(high - centre))
+        if not across < reach[v]:
             continue
         rel = s[v] - s[0]
         if rel > 0:
@@ -123,6 +133,7 @@ def _permitted(
     min_ttc: float,
 ) -> None:  # pragma: no cover - compiled; covered through permitted_batch
     count, s, d, speed, length, _, _, lanes_count, lane_offsets = columns
+    now = np.zeros(s.shape[1])
     for w in range(out.shape[0]):
         out[w, 1] = 1.0
         if changing[w] or true_speed[w] < min_speed:
@@ -138,6 +149,7 @@ def _permitted(
                 count[w],
                 s[w],
                 d[w],
+                now,
                 speed[w],
                 length[w],
                 reach[w],

@@ -5,7 +5,9 @@ A gap is safe when, in the target lane, the vehicle ahead is at least
 max(min_gap, front_time_gap * v_ego) away and the ego would not reach it within min_ttc, and the
 vehicle behind is at least max(min_gap, rear_time_gap * v_rear) away and would not reach the ego
 within min_ttc. An abort uses the looser abort_gap / abort_ttc, so a change is not abandoned for
-the margin that made it start.
+the margin that made it start; it counts in the target lane every vehicle whose present sideways
+motion carries it there within abort_lookahead (a car cutting in from the far lane is met before
+it arrives, while the ego can still turn back).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from dataclasses import dataclass
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from common.neighbours import neighbours
+from common.neighbours import lateral_drift, neighbours, scanned_neighbours
 from records import Command, Neighbour, WorldState
 
 MAX_GAP_M = 200.0
@@ -36,6 +38,9 @@ class SafetyConfig(BaseModel):
     min_ttc_s: float = Field(4.0, ge=0, le=MAX_TIME_S, description="smallest time to collision [s]")
     abort_gap_m: float = Field(2.0, ge=0, le=MAX_GAP_M, description="gap that aborts a change [m]")
     abort_ttc_s: float = Field(1.5, ge=0, le=MAX_TIME_S, description="TTC that aborts a change [s]")
+    abort_lookahead_s: float = Field(
+        1.0, ge=0, le=MAX_TIME_S, description="an abort sees a car cutting in this early [s]"
+    )
 
 
 def _ttc(gap: float, closing: float) -> float:
@@ -127,12 +132,18 @@ class SafetyLayer:
         return Command.STAY
 
     def should_abort(self, world: WorldState, target: int) -> bool:
-        """True when the gap in `target` has closed below the abort margins."""
-        if not self.config.enabled:
+        """True when the gap in `target` has closed below the abort margins, counting the vehicles
+        that move into `target` within the abort's lookahead."""
+        config = self.config
+        if not config.enabled:
             return False
-        unsafe = self.unsafe_neighbours(
-            world, target, self.config.abort_gap_m, self.config.abort_ttc_s, False
-        )
+        if config.abort_lookahead_s > 0:
+            drift = lateral_drift(world, config.abort_lookahead_s)
+            ahead, behind = scanned_neighbours(world, target, drift)
+        else:
+            ahead, behind = neighbours(world, target)
+        gap, ttc = config.abort_gap_m, config.abort_ttc_s
+        unsafe = unsafe_neighbours(config, float(world.speed[0]), ahead, behind, gap, ttc, strict=False)
         if unsafe:
             self.aborted += 1
             self.reacted_to = unsafe

@@ -47,3 +47,12 @@ def scene(
         lanes=straight_lanes(lanes),
         lane_offsets=np.arange(lanes) * LANE_WIDTH,
     )
+
+
+def cutting_in(heading_rad: float) -> WorldState:
+    """Ego in lane 0 of 3, 8 m/s; a 3 m/s car 6 m ahead (gap 1 m) in lane 2, turned by
+    `heading_rad` (negative: towards lane 1). Turned 0.3 rad its footprint reaches 3.7 m across:
+    4 m from lane 1's centre it is not in lane 1 yet."""
+    world = scene(3, (0.0, 0), [(6.0, 8.0)], speed=8.0, other_speed=3.0)
+    heading = np.array([0.0, heading_rad])
+    return type(world)(**{**world.__dict__, "heading": heading})

@@ -1,7 +1,7 @@
 from common.neighbours import lateral_extent, neighbours
 from planner.safety import SafetyConfig, SafetyLayer
 from records import Command
-from tests.helpers import scene
+from tests.helpers import cutting_in, scene
 
 
 def layer(**overrides) -> SafetyLayer:
@@ -67,3 +67,12 @@ def test_a_car_nosing_into_the_lane_is_seen_there_by_its_turned_footprint():
     leader = neighbours(nosing, 2)[0]
     assert leader is not None and leader.gap == 3.0
     assert np.isclose(lateral_extent(nosing)[0], 5 * math.sin(heading[1]) + 2 * math.cos(heading[1]))
+
+
+def test_an_abort_sees_a_car_cutting_into_the_target_lane_before_it_arrives():
+    cut_in = cutting_in(-0.3)
+    assert neighbours(cut_in, 1)[0] is None
+    assert layer().should_abort(cut_in, target=1)
+    assert not layer(abort_lookahead_s=0.0).should_abort(cut_in, target=1)
+    assert not layer().should_abort(cutting_in(0.3), target=1), "a car turning away is no threat"
+    assert not layer(abort_lookahead_s=0.2).should_abort(cut_in, target=1), "0.9 m/s x 0.2 s: not yet"

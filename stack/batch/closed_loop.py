@@ -20,7 +20,7 @@ import numpy as np
 from controllers.reference import lane_keeping
 from perception.batch_sensor import SensorBatch
 from perception.sensor import SensorModel
-from planner.batch_safety import lateral_extents, permitted_batch
+from planner.batch_safety import lateral_drifts, lateral_extents, permitted_batch
 from records import WorldState
 from records.batch import WorldBatch
 from stack.batch.kernels import control, decide, settle
@@ -105,6 +105,7 @@ class ClosedLoopBatch:
                 safety.abort_ttc_s,
             ]
         )
+        self.abort_lookahead_s = safety.abort_lookahead_s
         comfort = control_config.comfort_decel_mps2
         self.gains = np.array(
             [
@@ -297,7 +298,8 @@ class ClosedLoopBatch:
         started = time.perf_counter()
         control(
             live, traffic.time, perceived.columns(), perceived.heading, perceived.lane_heading,
-            lateral_extents(perceived), perceived.lane_width, self.slots, self._maneuver(), controller,
+            lateral_extents(perceived), lateral_drifts(perceived, self.abort_lookahead_s),
+            perceived.lane_width, self.slots, self._maneuver(), controller,
             self.safety, self.settings, self.gains, self.dt, actuation,
         )  # fmt: skip
         control_s = time.perf_counter() - started

@@ -90,6 +90,7 @@ def decide(
     masked, refused (1 or 0)."""
     count, s, d, speed, length, _, _, lanes_count, offsets = columns
     lane, target, coef, profile, clock, counts = maneuver
+    now = np.zeros(s.shape[1])
     for w in range(live.shape[0]):
         outcome[w, 0] = outcome[w, 1] = outcome[w, 2] = 0
         if not live[w] or lane[w] != target[w]:
@@ -100,7 +101,7 @@ def decide(
         if command != STAY and safety[0] != 0.0:
             goal = lane[w] + command - 1
             permits = 0 <= goal < lanes_count[w] and lane_is_safe(
-                count[w], s[w], d[w], speed[w], length[w], reach[w], offsets[w, goal],
+                count[w], s[w], d[w], now, speed[w], length[w], reach[w], offsets[w, goal],
                 safety[1], safety[2], safety[3], safety[4],
             )  # fmt: skip
         if not permits:
@@ -134,6 +135,7 @@ def control(
     heading: np.ndarray,
     lane_heading: np.ndarray,
     extent: np.ndarray,
+    drift: np.ndarray,
     lane_width: float,
     slots: np.ndarray,
     maneuver: tuple[np.ndarray, ...],
@@ -145,7 +147,8 @@ def control(
     actuation: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
     """`ClosedLoop.tick` up to the plant in each `live` world: the maneuver's reference (a lane
-    change whose gap closed is aborted first: `safety[5:7]` the abort gap [m] and TTC [s]), the
+    change whose gap closed is aborted first: `safety[5:7]` the abort gap [m] and TTC [s], each
+    vehicle counted where it reaches within its lateral `drift` [m] over the abort's lookahead), the
     leaders, the lateral PID, the adaptive cruise and emergency braking; writes (acceleration
     [m/s^2], steering [rad]) to `actuation` (W, 2). `settings`: nominal duration [s], minimum
     speed [m/s], tan of the largest course, set speed [m/s]; `gains`: the lateral PID's five, the
@@ -166,7 +169,7 @@ def control(
         if lane[w] != target[w]:
             crossed = abs(d[w, 0] - offsets[w, lane[w]]) > lane_width / 2
             if not crossed and safety[0] != 0.0 and not lane_is_safe(
-                n, s[w], d[w], speed[w], length[w], reach[w], offsets[w, target[w]],
+                n, s[w], d[w], drift[w], speed[w], length[w], reach[w], offsets[w, target[w]],
                 safety[5], safety[6], 0.0, 0.0,
             ):  # fmt: skip
                 counts[w, 2] += 1
