@@ -130,7 +130,8 @@ def test_batching_is_not_part_of_a_folder_s_fingerprint() -> None:
     and with folders written before `sim.batched` existed (the fingerprint leaves it out)."""
     from stack.apps.resume import run_owner
     from stack.apps.training import training_owner
-    from stack.settings.run import HOW_NOT_WHAT, config_text
+    from stack.settings.history import HOW_NOT_WHAT
+    from stack.settings.run import config_text
 
     batched = build_config({}, "test", scenario="jam")
     alone = build_config({}, "test", scenario="jam", sim__batched=False)

@@ -14,7 +14,8 @@ from planner.model_file import load_model
 from stack.apps.cli import app
 from stack.apps.training import training_owner
 from stack.runtime.owner import fingerprint
-from stack.settings.run import HOW_NOT_WHAT, build_config
+from stack.settings.history import HOW_NOT_WHAT
+from stack.settings.run import build_config
 from stack.training.batch_env import TrainingWorlds, batched_worlds
 from stack.training.checkpoint import DqnCounters, read_checkpoint
 from stack.training.model import build_dqn
@@ -173,3 +174,25 @@ def test_a_folder_written_before_overlap_existed_keeps_its_fingerprint():
     assert training_owner(config).config == fingerprint(json.dumps(former, sort_keys=True))
     overlapped = build_config({**WORLDS, "train": {**WORLDS["train"], "overlap": True}})
     assert training_owner(overlapped).config != training_owner(config).config
+
+
+def test_a_resolved_config_written_before_the_abort_looked_ahead_reproduces_its_run():
+    """A folder's config.yaml written before `planner.safety.abort_lookahead_s` existed lists every
+    other safety key: it reads the key as 0 (how its run aborted) and keeps its fingerprint; a
+    config that names only some safety keys gets the default."""
+    then = build_config(WORLDS, planner__safety__abort_lookahead_s=0.0)
+    written = then.model_dump(mode="json")
+    written["planner"]["safety"].pop("abort_lookahead_s")
+    read = build_config(written)
+    assert read == then and read.planner.safety.abort_lookahead_s == 0.0
+    former = then.model_dump(mode="json", exclude=HOW_NOT_WHAT)
+    former["train"].pop("steps"), former["train"].pop("overlap")
+    former["planner"]["safety"].pop("abort_lookahead_s")
+    assert training_owner(read).config == fingerprint(json.dumps(former, sort_keys=True))
+    partial = build_config({**WORLDS, "planner": {"safety": {"abort_gap_m": 2.0}}})
+    assert (
+        partial.planner.safety.abort_lookahead_s
+        == build_config(WORLDS).planner.safety.abort_lookahead_s
+        == 1.0
+    )
+    assert training_owner(partial).config != training_owner(read).config

@@ -13,7 +13,8 @@ from records import child_seed
 from stack.results.episode_result import EpisodeResult
 from stack.runtime.files import JOURNAL, EpisodeJournal, write_text
 from stack.runtime.owner import Owner, fingerprint, refusal
-from stack.settings.run import RunConfig, config_text, printable, unfingerprinted
+from stack.settings.history import unfingerprinted
+from stack.settings.run import RunConfig, config_text, printable
 
 JOURNAL_ROW_BYTES = 2_000
 """Bytes one journaled episode takes at most (about 450 in practice): bounds what --resume reads."""

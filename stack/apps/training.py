@@ -158,7 +158,7 @@ def report(summary: TrainSummary, folder: Path) -> None:
 def training_owner(config: RunConfig) -> Owner:
     """The owner a training run records in its folder: the hash of its config without
     `train.steps`, the one key a resumed run may change (grow), and the `unfingerprinted` ones."""
-    from stack.settings.run import unfingerprinted
+    from stack.settings.history import unfingerprinted
 
     data = config.model_dump(mode="json", exclude=unfingerprinted(config))
     data["train"].pop("steps")

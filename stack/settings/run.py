@@ -26,6 +26,7 @@ from records import AGENT_NAMES, SEED_LIMIT, GridConfig
 from stack.runtime.files import write_text
 from stack.settings import scenarios
 from stack.settings.checks import boolean_mismatch
+from stack.settings.history import with_former_values
 from stack.settings.train import Strict, TrainConfig
 from stack.settings.world import HighwayConfig, SimConfig
 
@@ -214,24 +215,6 @@ def _set_dotted(data: dict[str, Any], dotted: str, value: Any, source: str) -> N
     node[leaf] = value
 
 
-HOW_NOT_WHAT = {"sim": {"batched"}}
-"""Config keys that change how a run is carried out, never its results: left out of the
-fingerprint that lets `--resume` go on with a folder (`stack.apps.resume`, `training_owner`)."""
-ADDED_LATER = {"train": {"overlap": False}}
-"""Config keys added after folders were written, with the value the runs of those folders had:
-left out of the fingerprint while they hold it, so such a folder still resumes."""
-
-
-def unfingerprinted(config: RunConfig) -> dict[str, set[str]]:
-    """The keys (pydantic's nested form) left out of `config`'s fingerprint: `HOW_NOT_WHAT`, and
-    the `ADDED_LATER` ones at their former value."""
-    exclude = {section: set(keys) for section, keys in HOW_NOT_WHAT.items()}
-    for section, former in ADDED_LATER.items():
-        values = getattr(config, section)
-        exclude.setdefault(section, set()).update(k for k, v in former.items() if getattr(values, k) == v)
-    return exclude
-
-
 def config_text(config: RunConfig, comment: str = "", exclude: dict | None = None) -> str:
     """The resolved `config` as YAML, loadable with `--config` (a `# comment` first), without the
     keys `exclude` names (pydantic's nested form)."""
@@ -289,7 +272,7 @@ def build_config(
     in a key that `labels` names (dotted key -> e.g. the CLI option that set it) blames that label
     instead of `source`."""
     labels = labels or {}
-    data = dict(data)
+    data = with_former_values(dict(data), RunConfig)
     moved_to = overrides.pop("scenario", None)
     scenario = moved_to or data.get("scenario")
     if scenario is not None:
