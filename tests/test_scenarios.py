@@ -186,6 +186,7 @@ def test_run_and_train_take_a_scenario_from_the_cli(tmp_path):
     assert json.loads((run_out / "summary.json").read_text())["scenario"] == "exit"
     small = ["--envs", "1", "--set", "train.buffer_size=1000", "--set", "highway.duration=5"]
     small += ["--set", "train.validation.short_episodes=1", "--set", "train.validation.long_episodes=1"]
+    small += ["--set", "train.demonstrations.episodes=2", "--set", "train.demonstrations.pretrain_steps=5"]
     trained = CliRunner().invoke(
         app,
         ["train", "--scenario", "lanes-3", "--steps", "20", *small, "--no-progress", "--out", str(train_out)],
