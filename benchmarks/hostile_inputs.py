@@ -28,7 +28,7 @@ from planner.model_file import FORMAT, save_model  # noqa: E402
 from records import GridConfig  # noqa: E402
 from stack.runtime.owner import MARKER  # noqa: E402
 from tests.test_hostile_inputs import BOMB, owned_training_folder  # noqa: E402
-from tests.test_model_files import metadata_bytes, npy, shipped, with_metadata, write  # noqa: E402
+from tests.test_model_files import metadata_bytes, npy, plain_mlp, with_metadata, write  # noqa: E402
 
 LIMIT_S, LIMIT_MB, LIMIT_CHARS = 5.0, 400.0, 300
 
@@ -38,7 +38,7 @@ def text(content: str) -> Callable[[Path], None]:
 
 
 def nan_weights(path: Path) -> None:
-    arrays, metadata = shipped()
+    arrays, metadata = plain_mlp()
     arrays["0.weight"] = arrays["0.weight"].copy()
     arrays["0.weight"][0, 0] = np.nan
     save_model(path, arrays, metadata)
@@ -47,7 +47,7 @@ def nan_weights(path: Path) -> None:
 def four_lane_paper_model(path: Path) -> None:
     """A model on the paper's state (every road lane, binary lane code), trained for 4 lanes: its
     observation size depends on the lane count, so a 2-lane road must be refused."""
-    arrays, metadata = shipped()
+    arrays, metadata = plain_mlp()
     grid = {**metadata["grid"], "lanes": "absolute", "lane_code": "binary", "features": []}
     size = int(OccupancyGridBuilder(GridConfig(**grid)).space("observation", 4).shape[0])
     arrays["0.weight"] = np.zeros((arrays["0.weight"].shape[0], size), dtype=arrays["0.weight"].dtype)
