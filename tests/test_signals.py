@@ -241,7 +241,7 @@ def started_with_workers(arguments: list[str], journal: Path, **popen: object) -
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="reads /proc")
 def test_pool_workers_end_when_their_driver_is_killed(tmp_path):
     out = tmp_path / "run"
-    arguments = ["run", "--agent", "keep-lane", "--episodes", "40", "--jobs", "2", *SHORT, *ONE_AT_A_TIME]
+    arguments = ["run", "--agent", "keep-lane", "--episodes", "4000", "--jobs", "2", *SHORT, *ONE_AT_A_TIME]
     arguments += ["--out", str(out)]
     process = started_with_workers(arguments, out / "keep-lane.episodes.partial.jsonl")
     workers = children(process.pid)
@@ -253,7 +253,7 @@ def test_pool_workers_end_when_their_driver_is_killed(tmp_path):
 
 def test_ctrl_c_on_a_terminal_during_jobs_shows_no_worker_traceback(tmp_path):
     out = tmp_path / "run"
-    arguments = ["run", "--agent", "keep-lane", "--episodes", "40", "--jobs", "2", *SHORT, *ONE_AT_A_TIME]
+    arguments = ["run", "--agent", "keep-lane", "--episodes", "4000", "--jobs", "2", *SHORT, *ONE_AT_A_TIME]
     arguments += ["--out", str(out)]
     process = started_with_workers(
         arguments, out / "keep-lane.episodes.partial.jsonl", start_new_session=True
