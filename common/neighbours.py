@@ -7,6 +7,7 @@ the snapshot and not in it, for as long as the snapshot lives."""
 
 from __future__ import annotations
 
+import math
 import weakref
 from typing import Any
 
@@ -45,10 +46,32 @@ def lateral_extent(world: WorldState) -> np.ndarray:
     kept = DERIVED.of(world)
     extent = kept.get("lateral_extent")
     if extent is None:
-        heading = world.heading[1:] - world.lanes[0].heading_at(float(world.s[0]))
+        heading = _heading_to_the_lane(world)
         extent = np.abs(world.length[1:] * np.sin(heading)) + np.abs(world.width[1:] * np.cos(heading))
         kept["lateral_extent"] = extent
     return extent
+
+
+def footprint_lateral_extent(world: WorldState) -> tuple[float, float]:
+    """(lowest, highest) lateral coordinate [m] of the ego's footprint corners in the reference lane
+    frame (its heading relative to the lane turns the rectangle)."""
+    ego = world.ego_state()
+    half = (
+        float(world.length[0] * abs(math.sin(ego.heading)) + world.width[0] * abs(math.cos(ego.heading))) / 2
+    )
+    return ego.d - half, ego.d + half
+
+
+def occupied_lanes(world: WorldState, extent: tuple[float, float] | None = None) -> tuple[int, ...]:
+    """The lanes the ego's footprint reaches into (its `footprint_lateral_extent`, or `extent` when
+    the caller has it already)."""
+    low, high = footprint_lateral_extent(world) if extent is None else extent
+    half = world.lane_width / 2
+    return tuple(
+        lane
+        for lane, centre in enumerate(world.lane_offsets.tolist())
+        if low < centre + half and high > centre - half
+    )
 
 
 def neighbours(world: WorldState, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
@@ -106,8 +129,12 @@ def lateral_drift(world: WorldState, horizon_s: float) -> np.ndarray:
     """How far each other vehicle moves across the road in `horizon_s` [s] at its present lateral
     speed (its speed times the sine of its heading to the lane at the ego) [m]; positive towards
     higher d."""
-    heading = world.heading[1:] - world.lanes[0].heading_at(float(world.s[0]))
-    return world.speed[1:] * np.sin(heading) * horizon_s
+    return world.speed[1:] * np.sin(_heading_to_the_lane(world)) * horizon_s
+
+
+def _heading_to_the_lane(world: WorldState) -> np.ndarray:
+    """Each other vehicle's heading relative to the lane at the ego [rad]."""
+    return world.heading[1:] - world.lanes[0].heading_at(float(world.s[0]))
 
 
 def scanned_neighbours(

@@ -22,14 +22,19 @@ from records.batch import WorldBatch
 def lateral_extents(batch: WorldBatch) -> np.ndarray:
     """(worlds, vehicles): each vehicle's footprint width across the road [m], its rectangle
     turned by its heading to the lane (`common.neighbours.lateral_extent`, over the whole batch)."""
-    relative_heading = batch.heading - batch.lane_heading[:, None]
+    relative_heading = _headings_to_the_lane(batch)
     return np.abs(batch.length * np.sin(relative_heading)) + np.abs(batch.width * np.cos(relative_heading))
 
 
 def lateral_drifts(batch: WorldBatch, horizon_s: float) -> np.ndarray:
     """(worlds, vehicles): how far each vehicle moves across the road in `horizon_s` [s] at its
     present lateral speed [m] (`common.neighbours.lateral_drift`, over the whole batch)."""
-    return batch.speed * np.sin(batch.heading - batch.lane_heading[:, None]) * horizon_s
+    return batch.speed * np.sin(_headings_to_the_lane(batch)) * horizon_s
+
+
+def _headings_to_the_lane(batch: WorldBatch) -> np.ndarray:
+    """(worlds, vehicles): each vehicle's heading relative to the lane at its world's ego [rad]."""
+    return batch.heading - batch.lane_heading[:, None]
 
 
 def permitted_batch(

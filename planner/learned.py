@@ -19,7 +19,10 @@ from planner.model_check import checked_model
 from planner.model_file import save_model
 from planner.model_metadata import ModelKind, ModelMetadata
 from planner.tabular import QLearning
-from records import N_ACTIONS, Encoding, GridConfig
+from records import N_ACTIONS, Command, Encoding, GridConfig
+
+_CHANGES = np.arange(N_ACTIONS) != Command.STAY
+"""The commands that change lane."""
 
 
 def q_network(observation_size: int, actions: int, hidden: list[int]) -> nn.Sequential:
@@ -31,9 +34,12 @@ class LearnedAgent(Policy):
     """Greedy agent over a Q-network (with the MOBIL prior its file declares); `grid_config` and
     `encoding` say what it must be shown, and `sees_permitted` whether the loop appends the safety
     layer's permitted commands to it (a model trained with an action mask): it then decides among
-    them."""
+    them. A lane change must beat STAY's Q-value by `change_margin`: a hysteresis, so near-ties
+    between lanes the network rates alike keep the lane instead of swinging between them."""
 
-    def __init__(self, network: nn.Module, metadata: ModelMetadata, source: str = "model") -> None:
+    def __init__(
+        self, network: nn.Module, metadata: ModelMetadata, source: str = "model", change_margin: float = 0.0
+    ) -> None:
         assert metadata.observation_size is not None, "a Q-network's metadata names its input size"
         self.network = network.eval()
         self.metadata = metadata
@@ -43,6 +49,7 @@ class LearnedAgent(Policy):
         self.grid_config: GridConfig = metadata.grid
         self.prior = MobilPrior(metadata.grid, metadata.mobil_prior) if metadata.mobil_prior else None
         self.sees_permitted = metadata.action_mask
+        self.change_margin = change_margin
         self.last_rated: tuple[np.ndarray | None, np.ndarray] = (None, np.zeros((1, N_ACTIONS)))
         """The last observation decided on and its `rated` values (`scores` reads them)."""
 
@@ -79,7 +86,7 @@ class LearnedAgent(Policy):
         if self.sees_permitted:
             permitted = np.asarray(observation).reshape(len(q_values), -1)[:, -N_ACTIONS:] >= 0.5
             q_values = np.where(permitted, q_values, -np.inf)
-        actions = q_values.argmax(axis=1)
+        actions = (q_values - self.change_margin * _CHANGES).argmax(axis=1)
         return actions[0] if np.asarray(observation).ndim == 1 else actions
 
 
@@ -135,11 +142,12 @@ def save_q_table(agent: QLearning, path: Path | str, metadata: ModelMetadata) ->
 
 
 def load_agent(
-    path: Path | str, expected_algorithms: tuple[str, ...] | None = None
+    path: Path | str, expected_algorithms: tuple[str, ...] | None = None, change_margin: float = 0.0
 ) -> LearnedAgent | TabularAgent:
-    """The agent stored in `path`. Its metadata is checked before anything is built: the kind,
-    algorithm, encoding, grid and action count the loop can use, network sizes within bounds and
-    the arrays' shapes equal to the ones those sizes give, every weight finite."""
+    """The agent stored in `path` (a Q-network decides with the hysteresis `change_margin`). Its
+    metadata is checked before anything is built: the kind, algorithm, encoding, grid and action
+    count the loop can use, network sizes within bounds and the arrays' shapes equal to the ones
+    those sizes give, every weight finite."""
     arrays, metadata = checked_model(path, expected_algorithms)
     if metadata.kind == "qtable":
         return TabularAgent(arrays["q_table"].astype(np.float64), metadata, str(path))
@@ -150,4 +158,4 @@ def load_agent(
     else:
         network = q_network(metadata.observation_size, N_ACTIONS, list(metadata.hidden))
     network.load_state_dict({k: th.as_tensor(v, dtype=th.float32) for k, v in arrays.items()}, strict=True)
-    return LearnedAgent(network, metadata, str(path))
+    return LearnedAgent(network, metadata, str(path), change_margin)

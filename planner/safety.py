@@ -102,10 +102,20 @@ class SafetyLayer:
         return not self.unsafe_neighbours(world, lane, min_gap, min_ttc, strict)
 
     def unsafe_neighbours(
-        self, world: WorldState, lane: int, min_gap: float, min_ttc: float, strict: bool
+        self,
+        world: WorldState,
+        lane: int,
+        min_gap: float,
+        min_ttc: float,
+        strict: bool,
+        lookahead_s: float = 0.0,
     ) -> tuple[int, ...]:
-        """The vehicles (ids) ahead and behind in `lane` closer than the gap [m] or TTC [s] allows."""
-        ahead, behind = neighbours(world, lane)
+        """The vehicles (ids) ahead and behind in `lane` closer than the gap [m] or TTC [s] allows,
+        counting those whose present lateral motion carries them into `lane` within `lookahead_s` [s]."""
+        if lookahead_s > 0:
+            ahead, behind = scanned_neighbours(world, lane, lateral_drift(world, lookahead_s))
+        else:
+            ahead, behind = neighbours(world, lane)
         return unsafe_neighbours(self.config, float(world.speed[0]), ahead, behind, min_gap, min_ttc, strict)
 
     def permits(self, command: Command, world: WorldState, lane: int) -> bool:
@@ -137,13 +147,8 @@ class SafetyLayer:
         config = self.config
         if not config.enabled:
             return False
-        if config.abort_lookahead_s > 0:
-            drift = lateral_drift(world, config.abort_lookahead_s)
-            ahead, behind = scanned_neighbours(world, target, drift)
-        else:
-            ahead, behind = neighbours(world, target)
         gap, ttc = config.abort_gap_m, config.abort_ttc_s
-        unsafe = unsafe_neighbours(config, float(world.speed[0]), ahead, behind, gap, ttc, strict=False)
+        unsafe = self.unsafe_neighbours(world, target, gap, ttc, False, config.abort_lookahead_s)
         if unsafe:
             self.aborted += 1
             self.reacted_to = unsafe

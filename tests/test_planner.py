@@ -174,6 +174,27 @@ def test_mobil_prior_raises_mobils_change_by_its_bonus_and_the_network_keeps_the
         assert agent.choose(batch).tolist() == [expected, Command.STAY]
 
 
+def test_a_change_margin_holds_near_ties_and_the_run_config_hands_it_to_the_agent():
+    """A network rating LEFT 0.5 above STAY changes lane with a margin of 0.5 or less, stays with
+    more; the scores stay the network's; `planner.change_margin` reaches the agent the run builds."""
+    network = th.nn.Sequential(th.nn.Linear(4, 3))
+    with th.no_grad():
+        network[0].weight.zero_()
+        network[0].bias.copy_(th.tensor([1.5, 1.0, -2.0]))
+    metadata = ModelMetadata(kind="mlp", encoding="observation", observation_size=4, grid=GRID)
+    observations = np.zeros((2, 4), dtype=np.float32)
+    for margin, expected in ((0.0, Command.LEFT), (0.5, Command.LEFT), (0.51, Command.STAY)):
+        agent = LearnedAgent(network, metadata, change_margin=margin)
+        assert agent.choose(observations).tolist() == [expected] * 2, margin
+        assert agent.scores(observations[0]).tolist() == [1.5, 1.0, -2.0]
+    from stack.runs.kept import build_agent
+    from stack.settings.run import build_config
+
+    built = build_agent(build_config({"planner": {"agent": "ddqn", "change_margin": 0.25}}, "test"), 0)
+    assert isinstance(built, LearnedAgent) and built.change_margin == 0.25
+    assert make_agent("ddqn", 4, GRID).change_margin == 0.0
+
+
 def test_double_q_target_uses_the_online_argmax_and_the_target_value():
     rewards, dones = th.tensor([[1.0], [0.0]]), th.tensor([[0.0], [1.0]])
     online = th.tensor([[0.0, 5.0, 1.0], [3.0, 0.0, 0.0]])

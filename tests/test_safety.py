@@ -76,3 +76,19 @@ def test_an_abort_sees_a_car_cutting_into_the_target_lane_before_it_arrives():
     assert not layer(abort_lookahead_s=0.0).should_abort(cut_in, target=1)
     assert not layer().should_abort(cutting_in(0.3), target=1), "a car turning away is no threat"
     assert not layer(abort_lookahead_s=0.2).should_abort(cut_in, target=1), "0.9 m/s x 0.2 s: not yet"
+
+
+def test_after_an_abort_the_cruise_follows_the_abandoned_lane_until_the_ego_is_out_of_it():
+    import numpy as np
+
+    from controllers.maneuver import Maneuver
+
+    world = scene(2, (0.0, 1), [(-8.0, 0.0), (12.0, 0.0)], speed=20.0, other_speed=30.0)
+    maneuver = Maneuver(world, 4.0, 30.0, should_abort=layer().should_abort)
+    assert maneuver.command(Command.LEFT, world)
+    straddling = type(world)(**{**world.__dict__, "d": np.array([2.5, 0.0, 0.0]), "time": 1.0})
+    reference = maneuver.reference(straddling)
+    assert not maneuver.changing_lane, "the car closing from behind aborts the change"
+    assert [leader.gap for leader in reference.leaders] == [7.0], "the abandoned lane's leader, 7 m ahead"
+    home = type(world)(**{**world.__dict__, "time": 2.0})
+    assert maneuver.reference(home).leaders == ()

@@ -149,18 +149,20 @@ def control(
     """`ClosedLoop.tick` up to the plant in each `live` world: the maneuver's reference (a lane
     change whose gap closed is aborted first: `safety[5:7]` the abort gap [m] and TTC [s], each
     vehicle counted where it reaches within its lateral `drift` [m] over the abort's lookahead), the
-    leaders, the lateral PID, the adaptive cruise and emergency braking; writes (acceleration
+    leaders (of the maneuver's lanes, then of every other lane the ego's footprint reaches), the
+    lateral PID, the adaptive cruise and emergency braking; writes (acceleration
     [m/s^2], steering [rad]) to `actuation` (W, 2). `settings`: nominal duration [s], minimum
     speed [m/s], tan of the largest course, set speed [m/s]; `gains`: the lateral PID's five, the
     cruise's six, emergency braking's three (`EgoState`); `slots` (W, rows): the column of emergency
     braking's memory each row's vehicle keeps (its id, as the per-world memory keys it)."""
-    count, s, d, speed, length, width, _, _, offsets = columns
+    count, s, d, speed, length, width, _, lanes_count, offsets = columns
     lane, target, coef, profile, clock, counts = maneuver
     lateral, speed_pi, seen, seen_speed, seen_slowing, flags = controller
-    vehicles = s.shape[1]
-    gaps = np.empty(2 * vehicles)
-    speeds = np.empty(2 * vehicles)
-    rows = np.empty(2 * vehicles, dtype=np.int64)
+    vehicles, most_lanes = s.shape[1], offsets.shape[1]
+    gaps = np.empty(most_lanes * vehicles)
+    speeds = np.empty(most_lanes * vehicles)
+    rows = np.empty(most_lanes * vehicles, dtype=np.int64)
+    lanes = np.empty(most_lanes, dtype=np.int64)
     reach = (lane_width + extent) / 2
     for w in range(live.shape[0]):
         if not live[w]:
@@ -185,10 +187,18 @@ def control(
         if rate != clock[w, 2]:
             clock[w, 1] = clock[w, 1] + (t - clock[w, 0]) * clock[w, 2]
             clock[w, 0], clock[w, 2] = t, rate
-        lanes = np.array([lane[w], target[w]]) if lane[w] != target[w] else np.array([lane[w]])
+        lanes[0], used = lane[w], 1
+        if lane[w] != target[w]:
+            lanes[1], used = target[w], 2
+        low, high = ego_extent(w, d, length, width, heading, lane_heading)
+        for other in range(lanes_count[w]):
+            centre, half = offsets[w, other], lane_width / 2
+            if other != lane[w] and other != target[w] and low < centre + half and high > centre - half:
+                lanes[used] = other
+                used += 1
         d_ref, d_dot_ref, d_ddot_ref = _sample(w, coef, profile, clock, t)
         found = leaders_of(
-            lanes, n, s[w], d[w], speed[w], heading[w], length[w], width[w], extent[w], offsets[w],
+            lanes[:used], n, s[w], d[w], speed[w], heading[w], length[w], width[w], extent[w], offsets[w],
             lane_width, lane_heading[w], gaps, speeds, rows,
         )  # fmt: skip
         for k in range(found):

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.neighbours import neighbours
+from common.neighbours import footprint_lateral_extent, neighbours, occupied_lanes
 from records import WorldState
 from stack.results.episode_result import TTC_CAP_S
 
@@ -58,16 +58,6 @@ def r157_min_following_distance(speed: float) -> float:
     return speed * float(np.interp(speed * 3.6, _R157_KMH, _R157_GAP))
 
 
-def footprint_lateral_extent(world: WorldState) -> tuple[float, float]:
-    """(lowest, highest) lateral coordinate [m] of the ego's footprint corners in the reference lane
-    frame (its heading relative to the lane turns the rectangle)."""
-    ego = world.ego_state()
-    half = (
-        float(world.length[0] * abs(math.sin(ego.heading)) + world.width[0] * abs(math.cos(ego.heading))) / 2
-    )
-    return ego.d - half, ego.d + half
-
-
 def road_edges(world: WorldState) -> tuple[float, float]:
     """(lowest, highest) lateral coordinate [m] of the drivable area: the outer edges of the outer lanes."""
     half, offsets = world.lane_width / 2, world.lane_offsets.tolist()
@@ -83,21 +73,6 @@ def _departed(world: WorldState, extent: tuple[float, float]) -> bool:
     low, high = extent
     edge_low, edge_high = road_edges(world)
     return bool(low < edge_low - DEPARTURE_TOLERANCE_M or high > edge_high + DEPARTURE_TOLERANCE_M)
-
-
-def occupied_lanes(world: WorldState) -> tuple[int, ...]:
-    """The lanes the ego's footprint reaches into."""
-    return _occupied_lanes(world, footprint_lateral_extent(world))
-
-
-def _occupied_lanes(world: WorldState, extent: tuple[float, float]) -> tuple[int, ...]:
-    low, high = extent
-    half = world.lane_width / 2
-    return tuple(
-        lane
-        for lane, centre in enumerate(world.lane_offsets.tolist())
-        if low < centre + half and high > centre - half
-    )
 
 
 @dataclass(frozen=True)
@@ -177,7 +152,7 @@ class SafetyMonitor:
         self.road_departure = self.road_departure or _departed(world, extent)
         v = float(world.speed[0])
         below_floor = False
-        for lane in _occupied_lanes(world, extent):
+        for lane in occupied_lanes(world, extent):
             leader = neighbours(world, lane)[0]
             if leader is not None and leader.gap > 0 and v > leader.speed:
                 ttc = leader.gap / (v - leader.speed)

@@ -29,7 +29,9 @@ def build_agent(config: RunConfig, seed: int) -> Agent:
         return Oracle.for_road(planner.oracle, lanes, grid_config(config))
     path = model_path(planner.agent, planner.model)
     setup = lookahead_setup(config) if planner.agent == "lookahead" else None
-    agent = make_agent(planner.agent, lanes, grid_config(config), seed, path or planner.model, setup)
+    agent = make_agent(
+        planner.agent, lanes, grid_config(config), seed, path or planner.model, setup, planner.change_margin
+    )
     expected = getattr(agent, "observation_size", None)
     grid = agent.grid_config or grid_config(config)
     if expected is not None:

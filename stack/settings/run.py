@@ -64,6 +64,13 @@ class PlannerConfig(Strict):
     safety: SafetyConfig = SafetyConfig()
     oracle: OracleConfig = OracleConfig()
     lookahead: LookaheadConfig = LookaheadConfig()
+    change_margin: float = Field(
+        0.0,
+        ge=0,
+        le=10,
+        description="[Q-value] the learned agents' hysteresis: ddqn and dqn change lane only when the "
+        "change's Q-value beats STAY's by at least this much",
+    )
 
 
 class RunConfig(Strict):
