@@ -103,7 +103,7 @@ class Maneuver:
         if self.changing_lane and not self._crossed(world) and self.should_abort(world, self.target):
             self._abort(world)
         self.clock = self.clock.at_rate(world.time, self._rate(float(world.speed[0])))
-        lanes = (self.lane, self.target) if self.changing_lane else (self.lane,)
+        lanes: tuple[int, ...] = (self.lane, self.target) if self.changing_lane else (self.lane,)
         lanes += tuple(lane for lane in occupied_lanes(world) if lane not in lanes)
         heading_for = self.target if self.clock.profile_time(world.time) >= self.profile.t0 else self.lane
         return Reference.sampled(
