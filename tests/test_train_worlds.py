@@ -169,9 +169,8 @@ def test_a_folder_written_before_overlap_existed_keeps_its_fingerprint():
     """A run folder records its config's fingerprint; one written before `train.overlap` existed
     has none of it, and still resumes: the key is left out while it holds that run's value."""
     config = build_config(WORLDS)
-    former = config.model_dump(mode="json", exclude=HOW_NOT_WHAT)
-    former["train"].pop("steps"), former["train"].pop("overlap")
-    assert training_owner(config).config == fingerprint(json.dumps(former, sort_keys=True))
+    former = _fingerprint_without(config, "train.overlap", "planner.change_margin")
+    assert training_owner(config).config == former
     overlapped = build_config({**WORLDS, "train": {**WORLDS["train"], "overlap": True}})
     assert training_owner(overlapped).config != training_owner(config).config
 
@@ -185,10 +184,9 @@ def test_a_resolved_config_written_before_the_abort_looked_ahead_reproduces_its_
     written["planner"]["safety"].pop("abort_lookahead_s")
     read = build_config(written)
     assert read == then and read.planner.safety.abort_lookahead_s == 0.0
-    former = then.model_dump(mode="json", exclude=HOW_NOT_WHAT)
-    former["train"].pop("steps"), former["train"].pop("overlap")
-    former["planner"]["safety"].pop("abort_lookahead_s")
-    assert training_owner(read).config == fingerprint(json.dumps(former, sort_keys=True))
+    assert training_owner(read).config == _fingerprint_without(
+        then, "train.overlap", "planner.safety.abort_lookahead_s", "planner.change_margin"
+    )
     partial = build_config({**WORLDS, "planner": {"safety": {"abort_gap_m": 2.0}}})
     assert (
         partial.planner.safety.abort_lookahead_s
@@ -196,3 +194,31 @@ def test_a_resolved_config_written_before_the_abort_looked_ahead_reproduces_its_
         == 1.0
     )
     assert training_owner(partial).config != training_owner(read).config
+
+
+def test_a_resolved_config_written_before_the_change_margin_reproduces_its_run():
+    """A folder's config.yaml written before `planner.change_margin` (and the abort's lookahead)
+    existed reads both as its run had them and keeps its fingerprint; a margin changes it."""
+    then = build_config(WORLDS, planner__safety__abort_lookahead_s=0.0)
+    written = then.model_dump(mode="json")
+    written["planner"].pop("change_margin"), written["planner"]["safety"].pop("abort_lookahead_s")
+    read = build_config(written)
+    assert read == then and read.planner.change_margin == 0.0
+    assert training_owner(read).config == _fingerprint_without(
+        then, "train.overlap", "planner.safety.abort_lookahead_s", "planner.change_margin"
+    )
+    held = build_config(WORLDS, planner__change_margin=0.4)
+    assert training_owner(held).config != training_owner(build_config(WORLDS)).config
+
+
+def _fingerprint_without(config, *dotted_keys: str) -> str:
+    """The fingerprint of `config` as a folder written before `dotted_keys` existed recorded it."""
+    former = config.model_dump(mode="json", exclude=HOW_NOT_WHAT)
+    former["train"].pop("steps")
+    for dotted in dotted_keys:
+        *sections, key = dotted.split(".")
+        node = former
+        for section in sections:
+            node = node[section]
+        node.pop(key)
+    return fingerprint(json.dumps(former, sort_keys=True))

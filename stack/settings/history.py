@@ -14,6 +14,7 @@ fingerprint that lets `--resume` go on with a folder (`stack.apps.resume`, `trai
 ADDED_LATER: dict[str, dict[str, Any]] = {
     "train": {"overlap": False},
     "planner.safety": {"abort_lookahead_s": 0.0},
+    "planner": {"change_margin": 0.0},
 }
 """Config keys (by dotted section) added after folders were written, with the value the runs of
 those folders had: a resolved config written before the key existed (its section holds every
@@ -53,16 +54,13 @@ def with_former_values(data: dict[str, Any], root: type[BaseModel]) -> dict[str,
 def unfingerprinted(config: BaseModel) -> dict[str, Any]:
     """The keys (pydantic's nested form) left out of `config`'s fingerprint: `HOW_NOT_WHAT`, and
     the `ADDED_LATER` ones at their former value."""
-    exclude: dict[str, Any] = {section: set(keys) for section, keys in HOW_NOT_WHAT.items()}
+    exclude: dict[str, Any] = {section: dict.fromkeys(keys, True) for section, keys in HOW_NOT_WHAT.items()}
     for dotted, former in ADDED_LATER.items():
         values: Any = config
         for part in dotted.split("."):
             values = getattr(values, part)
-        keys = {key for key, value in former.items() if getattr(values, key) == value}
-        if keys:
-            *parents, leaf = dotted.split(".")
-            node = exclude
-            for part in parents:
-                node = node.setdefault(part, {})
-            node.setdefault(leaf, set()).update(keys)
+        node = exclude
+        for part in dotted.split("."):
+            node = node.setdefault(part, {})
+        node.update({key: True for key, value in former.items() if getattr(values, key) == value})
     return exclude
