@@ -192,8 +192,11 @@ def control(
             lanes[1], used = target[w], 2
         low, high = ego_extent(w, d, length, width, heading, lane_heading)
         for other in range(lanes_count[w]):
-            centre, half = offsets[w, other], lane_width / 2
-            if other != lane[w] and other != target[w] and low < centre + half and high > centre - half:
+            if (
+                other != lane[w]
+                and other != target[w]
+                and reaches_lane(low, high, offsets[w, other], lane_width)
+            ):
                 lanes[used] = other
                 used += 1
         d_ref, d_dot_ref, d_ddot_ref = _sample(w, coef, profile, clock, t)
@@ -229,10 +232,19 @@ def ego_extent(
     lane_heading: np.ndarray,
 ) -> tuple[float, float]:  # pragma: no cover - compiled
     """(lowest, highest) lateral coordinate [m] of world `w`'s ego footprint corners
-    (`safety_metrics.footprint_lateral_extent`: its rectangle turned by its heading to the lane)."""
+    (`common.neighbours.footprint_lateral_extent`: its rectangle turned by its heading to the lane)."""
     relative = heading[w, 0] - lane_heading[w]
     half = (length[w, 0] * abs(math.sin(relative)) + width[w, 0] * abs(math.cos(relative))) / 2
     return d[w, 0] - half, d[w, 0] + half
+
+
+@njit(cache=True, nogil=True, inline="always")
+def reaches_lane(
+    low: float, high: float, centre: float, lane_width: float
+) -> bool:  # pragma: no cover - compiled
+    """Whether a footprint spanning [`low`, `high`] across the road [m] reaches into the lane
+    centred at `centre` (`common.neighbours.occupied_lanes`'s test)."""
+    return low < centre + lane_width / 2 and high > centre - lane_width / 2
 
 
 @Kernel

@@ -20,7 +20,7 @@ import numpy as np
 from common.compiled import Kernel
 from planner.batch_safety import lateral_extents
 from records.batch import WorldBatch
-from stack.batch.kernels import ego_extent
+from stack.batch.kernels import ego_extent, reaches_lane
 from stack.loop.metrics import Driven, lateral_comfort, longest_run
 from stack.loop.safety_metrics import (
     _R157_GAP,
@@ -198,14 +198,13 @@ def _monitor(
     smallest TTC kept in `min_ttc` and whether one is below `ttc_floor` [s] in `below_floor`, and
     the gap to the leader in the ego's own lane (NaN: none) in `ego_lane_gap`."""
     count, s, d, speed, length, width, lane, lanes_count, offsets = columns
-    half_lane = lane_width / 2
     for w in range(stepped.shape[0]):
         if not stepped[w]:
             continue
         low, high = ego_extent(w, d, length, width, heading, lane_heading)
         v, n, ego_lane = speed[w, 0], count[w], lane[w, 0]
         for j in range(lanes_count[w]):
-            occupied = low < offsets[w, j] + half_lane and high > offsets[w, j] - half_lane
+            occupied = reaches_lane(low, high, offsets[w, j], lane_width)
             if not occupied and j != ego_lane:
                 continue
             leader, nearest = -1, math.inf
