@@ -97,14 +97,14 @@ class Maneuver:
 
     def reference(self, world: WorldState) -> Reference:
         """This tick's reference: aborts a lane change first when its gap has closed, then samples
-        the lateral profile and lists the leaders of the maneuver's lanes and of every other lane
-        the ego's footprint still reaches into (the abandoned lane while an aborted change
-        returns)."""
+        the lateral profile and lists the leaders of the lane it heads for and of every other lane
+        the ego's footprint reaches into: the origin lane until the footprint has left it (a
+        stopped car there no longer holds a change that is past it), the abandoned lane while an
+        aborted change returns."""
         if self.changing_lane and not self._crossed(world) and self.should_abort(world, self.target):
             self._abort(world)
         self.clock = self.clock.at_rate(world.time, self._rate(float(world.speed[0])))
-        lanes: tuple[int, ...] = (self.lane, self.target) if self.changing_lane else (self.lane,)
-        lanes += tuple(lane for lane in occupied_lanes(world) if lane not in lanes)
+        lanes = (self.target, *(lane for lane in occupied_lanes(world) if lane != self.target))
         heading_for = self.target if self.clock.profile_time(world.time) >= self.profile.t0 else self.lane
         return Reference.sampled(
             self.clock, world.time, self.set_speed, leaders(world, lanes), target_lane=heading_for

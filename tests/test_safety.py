@@ -92,3 +92,19 @@ def test_after_an_abort_the_cruise_follows_the_abandoned_lane_until_the_ego_is_o
     assert [leader.gap for leader in reference.leaders] == [7.0], "the abandoned lane's leader, 7 m ahead"
     home = type(world)(**{**world.__dict__, "time": 2.0})
     assert maneuver.reference(home).leaders == ()
+
+
+def test_a_change_whose_footprint_has_left_the_origin_lane_no_longer_follows_that_lane():
+    """A car stopped 15 m ahead in the origin lane holds the cruise while the ego still reaches
+    into that lane, and no longer once its footprint has left it (else the braking slows the
+    change, which keeps the lane listed, down to a stop across the target lane)."""
+    import numpy as np
+
+    from controllers.maneuver import Maneuver
+
+    world = scene(2, (0.0, 1), [(15.0, 4.0)], speed=10.0, other_speed=0.0)
+    maneuver = Maneuver(world, 4.0, 30.0)
+    assert maneuver.command(Command.LEFT, world)
+    at = lambda d, t: type(world)(**{**world.__dict__, "d": np.array([d, 4.0]), "time": t})  # noqa: E731
+    assert [leader.gap for leader in maneuver.reference(at(3.0, 1.0)).leaders] == [10.0]
+    assert maneuver.changing_lane and maneuver.reference(at(0.5, 2.0)).leaders == ()

@@ -149,7 +149,7 @@ def control(
     """`ClosedLoop.tick` up to the plant in each `live` world: the maneuver's reference (a lane
     change whose gap closed is aborted first: `safety[5:7]` the abort gap [m] and TTC [s], each
     vehicle counted where it reaches within its lateral `drift` [m] over the abort's lookahead), the
-    leaders (of the maneuver's lanes, then of every other lane the ego's footprint reaches), the
+    leaders (of the lane it heads for, then of every other lane the ego's footprint reaches), the
     lateral PID, the adaptive cruise and emergency braking; writes (acceleration
     [m/s^2], steering [rad]) to `actuation` (W, 2). `settings`: nominal duration [s], minimum
     speed [m/s], tan of the largest course, set speed [m/s]; `gains`: the lateral PID's five, the
@@ -187,16 +187,10 @@ def control(
         if rate != clock[w, 2]:
             clock[w, 1] = clock[w, 1] + (t - clock[w, 0]) * clock[w, 2]
             clock[w, 0], clock[w, 2] = t, rate
-        lanes[0], used = lane[w], 1
-        if lane[w] != target[w]:
-            lanes[1], used = target[w], 2
+        lanes[0], used = target[w], 1
         low, high = ego_extent(w, d, length, width, heading, lane_heading)
         for other in range(lanes_count[w]):
-            if (
-                other != lane[w]
-                and other != target[w]
-                and reaches_lane(low, high, offsets[w, other], lane_width)
-            ):
+            if other != target[w] and reaches_lane(low, high, offsets[w, other], lane_width):
                 lanes[used] = other
                 used += 1
         d_ref, d_dot_ref, d_ddot_ref = _sample(w, coef, profile, clock, t)
