@@ -16,8 +16,9 @@ from planner.agents import Action, Policy
 from planner.lane_network import LaneFeatures, LaneQNetwork
 from planner.mobil import MobilPrior
 from planner.model_check import checked_model
-from planner.model_file import save_model
+from planner.model_file import ModelFileError, save_model
 from planner.model_metadata import ModelKind, ModelMetadata
+from planner.networks import MAX_MEMBERS, member_prefix
 from planner.tabular import QLearning
 from records import N_ACTIONS, Command, Encoding, GridConfig
 
@@ -28,6 +29,20 @@ _CHANGES = np.arange(N_ACTIONS) != Command.STAY
 def q_network(observation_size: int, actions: int, hidden: list[int]) -> nn.Sequential:
     """The MLP of SB3's `QNetwork` (ReLU between linear layers), so weights move between them."""
     return nn.Sequential(*create_mlp(observation_size, actions, hidden))
+
+
+class MeanQNetwork(nn.Module):
+    """An ensemble's Q-values: the mean of its members', networks of one shape trained apart (other
+    seeds). Where lanes are alike, one network's Q-values for a change and for STAY differ by less
+    than their error, and its greedy choice follows that error; the members' errors differ, so
+    their mean changes lane only where they agree the change pays."""
+
+    def __init__(self, members: list[nn.Module]) -> None:
+        super().__init__()
+        self.members = nn.ModuleList(members)
+
+    def forward(self, observations: th.Tensor) -> th.Tensor:
+        return th.stack([member(observations) for member in self.members]).mean(dim=0)
 
 
 class LearnedAgent(Policy):
@@ -151,6 +166,16 @@ def load_agent(
     arrays, metadata = checked_model(path, expected_algorithms)
     if metadata.kind == "qtable":
         return TabularAgent(arrays["q_table"].astype(np.float64), metadata, str(path))
+    networks = [
+        _q_network(metadata, _member_arrays(arrays, index, metadata.members))
+        for index in range(metadata.members)
+    ]
+    network = networks[0] if len(networks) == 1 else MeanQNetwork(networks)
+    return LearnedAgent(network, metadata, str(path), change_margin)
+
+
+def _q_network(metadata: ModelMetadata, arrays: dict[str, np.ndarray]) -> nn.Module:
+    """The Q-network of `metadata`'s kind and sizes holding `arrays` (checked by `checked_model`)."""
     assert metadata.observation_size is not None, "checked_model checks a Q-network's input size"
     network: nn.Module
     if metadata.kind == "lane-mlp":
@@ -158,4 +183,53 @@ def load_agent(
     else:
         network = q_network(metadata.observation_size, N_ACTIONS, list(metadata.hidden))
     network.load_state_dict({k: th.as_tensor(v, dtype=th.float32) for k, v in arrays.items()}, strict=True)
-    return LearnedAgent(network, metadata, str(path), change_margin)
+    return network
+
+
+def _member_arrays(arrays: dict[str, np.ndarray], index: int, members: int) -> dict[str, np.ndarray]:
+    """The arrays of an ensemble's member `index`, named as one network's."""
+    if members == 1:
+        return arrays
+    prefix = member_prefix(index)
+    return {name.removeprefix(prefix): value for name, value in arrays.items() if name.startswith(prefix)}
+
+
+_MUST_AGREE = (
+    "kind",
+    "algorithm",
+    "encoding",
+    "observation_size",
+    "hidden",
+    "grid",
+    "mobil_prior",
+    "action_mask",
+)
+"""What every member of an ensemble shares: one observation, one network shape, one decision rule."""
+
+
+def save_ensemble(paths: list[Path], out: Path) -> Path:
+    """Write the DDQN / DQN model files `paths` (2 to MAX_MEMBERS single networks, trained apart)
+    as one ensemble model file at `out`, deciding on the mean of their Q-values (`MeanQNetwork`).
+    A file that cannot load, is a Q-table or an ensemble, or differs from the first in what
+    `_MUST_AGREE` names is refused (ModelFileError, one line) before anything is written."""
+    if not 2 <= len(paths) <= MAX_MEMBERS:
+        raise ModelFileError(f"an ensemble takes 2 to {MAX_MEMBERS} model files, not {len(paths)}")
+    members = [checked_model(path, ("ddqn", "dqn")) for path in paths]
+    first = members[0][1]
+    for path, (_, metadata) in zip(paths, members, strict=True):
+        if metadata.members != 1:
+            raise ModelFileError(f"{path}: already an ensemble of {metadata.members}; give its members")
+        for field in _MUST_AGREE:
+            if (theirs := getattr(metadata, field)) != (ours := getattr(first, field)):
+                raise ModelFileError(f"{path}: {field} {theirs} differs from {paths[0]}'s {ours}"[:300])
+    arrays = {
+        member_prefix(index) + name: value
+        for index, (found, _) in enumerate(members)
+        for name, value in found.items()
+    }
+    steps = [metadata.trained_steps for _, metadata in members if metadata.trained_steps is not None]
+    metadata = replace(
+        first, members=len(paths), seed=None, validation=None,
+        trained_steps=sum(steps) if len(steps) == len(members) else None,
+    )  # fmt: skip
+    return save_model(out, arrays, metadata.to_json())

@@ -14,7 +14,7 @@ from pydantic import ValidationError
 from planner.mobil import prior_problem
 from planner.model_file import ModelFileError, load_model
 from planner.model_metadata import ModelMetadata, whole_number
-from planner.networks import lane_network_shapes, lane_problem, mlp_shapes
+from planner.networks import MAX_MEMBERS, ensemble_shapes, lane_network_shapes, lane_problem, mlp_shapes
 from records import ENCODINGS, N_ACTIONS, Encoding, GridConfig
 
 MAX_INPUTS = 100_000
@@ -53,6 +53,7 @@ def checked_model(
         )
     else:
         expected = mlp_shapes([checked.observation_size, *checked.hidden, N_ACTIONS])
+    expected = ensemble_shapes(expected, checked.members)
     actual = {name: value.shape for name, value in arrays.items()}
     if actual != expected:
         raise ModelFileError(f"{path}: model arrays do not match its metadata (expected {expected})"[:300])
@@ -91,6 +92,9 @@ def _check_metadata(path: Path | str, metadata: dict) -> None:
                 problem = f"grid: {lanes}"
     if problem is None and metadata.get("action_mask", False) not in (True, False):
         problem = "action_mask: expected true or false"
+    most = 1 if kind == "qtable" else MAX_MEMBERS
+    if problem is None and not whole_number(metadata.get("members", 1), 1, most):
+        problem = f"members: expected an integer in 1..{most}"
     if problem:
         raise ModelFileError(f"{path}: model metadata {problem}")
 

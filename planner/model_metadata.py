@@ -23,8 +23,10 @@ class ModelMetadata:
     its `mobil_prior` (the bonus its greedy decision gives MOBIL's proposed change,
     `planner.mobil.MobilPrior`; 0: none, and not written) and its `action_mask` (its observations
     end with the safety layer's permitted commands, and it decides among them; False: not
-    written) are needed to use it (`planner.model_check` checks them); the rest describes where it
-    came from and is None in a file that does not say."""
+    written) and its `members` (an ensemble of that many Q-networks of these sizes deciding on
+    their mean, `planner.learned.MeanQNetwork`; 1: not written) are needed to use it
+    (`planner.model_check` checks them); the rest describes where it came from and is None in a
+    file that does not say."""
 
     kind: ModelKind
     algorithm: str | None = None
@@ -40,6 +42,7 @@ class ModelMetadata:
     validation: Validation | None = None
     mobil_prior: float = 0.0
     action_mask: bool = False
+    members: int = 1
 
     def to_json(self) -> dict[str, Any]:
         """The metadata member's keys in the order drivestack has always written them; a field
@@ -59,6 +62,7 @@ class ModelMetadata:
             "validation": asdict(self.validation) if self.validation is not None else None,
             "mobil_prior": self.mobil_prior or None,
             "action_mask": self.action_mask or None,
+            "members": self.members if self.members > 1 else None,
         }
         return {key: value for key, value in data.items() if value is not None}
 
@@ -82,6 +86,7 @@ class ModelMetadata:
             validation=_validation(data.get("validation")),
             mobil_prior=float(data.get("mobil_prior", 0.0)),
             action_mask=data.get("action_mask", False) is True,
+            members=_typed(data, "members", int) or 1,
         )
 
 

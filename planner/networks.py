@@ -61,6 +61,22 @@ def lane_columns(grid: GridConfig, observation_size: int) -> tuple[np.ndarray, n
     return row_columns, rest
 
 
+MAX_MEMBERS = 16
+"""Most Q-networks an ensemble model file may hold."""
+
+
+def member_prefix(index: int) -> str:
+    """What the arrays of an ensemble's member `index` are named after (`member0.head.0.weight`)."""
+    return f"member{index}."
+
+
+def ensemble_shapes(shapes: dict[str, tuple[int, ...]], members: int) -> dict[str, tuple[int, ...]]:
+    """The arrays of `members` networks of `shapes` each (one network: `shapes` as they are)."""
+    if members == 1:
+        return shapes
+    return {member_prefix(index) + name: shape for index in range(members) for name, shape in shapes.items()}
+
+
 def mlp_shapes(sizes: list[int], prefix: str = "") -> dict[str, tuple[int, ...]]:
     """The arrays (name: shape) of SB3's MLP through layers of `sizes` (inputs first), their names
     after `prefix`."""

@@ -49,6 +49,10 @@ def export_sb3(model: Path, out: Path) -> tuple[Path, ModelMetadata]:
     agent = load_agent(model, expected_algorithms=("ddqn", "dqn"))
     if not isinstance(agent, LearnedAgent):
         raise ModelFileError(f"{model}: a Q-table has no SB3 counterpart; export a DDQN or DQN model")
+    if agent.metadata.members > 1:
+        raise ModelFileError(
+            f"{model}: an ensemble of {agent.metadata.members} has no SB3 counterpart; export a member"
+        )
     lanes = 4 if agent.metadata.lanes_count is None else agent.metadata.lanes_count
     grid = agent.grid_config
     check_road_fit(model, grid, agent.encoding, agent.observation_size, lanes, permitted=agent.sees_permitted)

@@ -84,18 +84,19 @@ def claimed_for(command: str, out: Path | None, arguments: str, config: RunConfi
     return claimed(location(out, prefix), prefix, Owner(command, asked))
 
 
-def check_destination(out: Path) -> None:
-    """Refuse (ValueError, one line) an `out` that exists, lies in no writable folder or has a
-    name the system refuses, before any work."""
-    written = out if out.suffix == ".zip" else out.with_suffix(out.suffix + ".zip")
+def check_destination(out: Path, option: str = "--sb3", suffix: str = ".zip") -> None:
+    """Refuse (ValueError, one line naming `option`) an `out` that exists (with or without the
+    `suffix` its writer appends; "": none), lies in no writable folder or has a name the system
+    refuses, before any work."""
+    written = out if out.suffix == suffix else out.with_suffix(out.suffix + suffix)
     if len(written.name.encode()) > os.pathconf(written.absolute().anchor, "PC_NAME_MAX"):
-        raise ValueError(f"--sb3: {str(written)[:80]}...: {os.strerror(errno.ENAMETOOLONG)}")
+        raise ValueError(f"{option}: {str(written)[:80]}...: {os.strerror(errno.ENAMETOOLONG)}")
     if out.exists() or written.exists():
-        raise ValueError(f"--sb3: {out} exists; choose a new file")
+        raise ValueError(f"{option}: {out} exists; choose a new file")
     if not out.parent.is_dir():
-        raise ValueError(f"--sb3: no folder {out.parent}")
+        raise ValueError(f"{option}: no folder {out.parent}")
     if not os.access(out.parent, os.W_OK | os.X_OK):
-        raise ValueError(f"--sb3: {out.parent} is not writable")
+        raise ValueError(f"{option}: {out.parent} is not writable")
 
 
 def episodes_kept(folder: Path) -> str:

@@ -62,6 +62,10 @@ def checked_start_model(config: RunConfig) -> Path | None:
     assert path is not None, "init_model is refused for tabular runs"
     metadata = checked_model(path, ("ddqn", "dqn"))[1]
     assert metadata.observation_size is not None, "DDQN / DQN files hold Q-networks"
+    if metadata.members > 1:
+        raise ModelFileError(
+            f"train.init_model: {path} is an ensemble of {metadata.members}; start from one member"
+        )
     grid = grid_config(config)
     start_grid = metadata.grid if metadata.kind == "lane-mlp" else widened_grid(metadata.grid, grid)
     theirs = (metadata.kind, metadata.encoding, start_grid, list(metadata.hidden), metadata.action_mask)
