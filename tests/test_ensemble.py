@@ -76,12 +76,12 @@ def test_members_that_do_not_share_one_observation_are_refused_in_one_line(membe
 
 
 def test_an_ensemble_of_one_network_twice_drives_as_that_network(tmp_path):
-    shipped = SHIPPED_MODELS["ddqn"]
+    shipped = SHIPPED_MODELS["dqn"]
     twice = tmp_path / "twice.npz"
     runner = CliRunner()
     assert runner.invoke(app, ["ensemble", str(shipped), str(shipped), "--out", str(twice)]).exit_code == 0
     rows = {}
-    options = ["--scenario", "overtaking", "--episodes", "1", "--seed", "3", "--set", "highway.duration=8"]
+    options = ["--agent", "dqn", "--scenario", "overtaking", "--episodes", "1", "--seed", "3"]
     for name, model in (("one", shipped), ("twice", twice)):
         result = runner.invoke(app, ["run", *options, "--model", str(model), "--out", str(tmp_path / name)])
         assert result.exit_code == 0, result.output
