@@ -4,6 +4,8 @@ when its members do not share one observation and one network, and never a train
 SB3 export (it has no single network)."""
 
 import csv
+import errno
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -73,6 +75,11 @@ def test_members_that_do_not_share_one_observation_are_refused_in_one_line(membe
     assert again.exit_code == 2 and "already an ensemble of 2; give its members" in again.output
     exists = runner.invoke(app, ["ensemble", *map(str, members), "--out", str(out)])
     assert exists.exit_code == 2 and f"--out: {out} exists" in exists.output
+    full = tmp_path / "full.npz"
+    with mock.patch("numpy.savez", side_effect=OSError(errno.ENOSPC, "No space left on device")):
+        disk = runner.invoke(app, ["ensemble", *map(str, members), "--out", str(full)])
+    assert disk.exit_code == 2 and "--out: cannot write" in disk.output and "No space left" in disk.output
+    assert len(disk.output.strip().splitlines()) == 1 and list(tmp_path.glob("full.npz*")) == []
 
 
 def test_an_ensemble_of_one_network_twice_drives_as_that_network(tmp_path):

@@ -133,6 +133,8 @@ def ensemble(
         written = save_ensemble(models, out)
     except ValueError as error:
         fail(str(error))
+    except OSError as error:
+        fail(f"--out: cannot write {out} ({error.strerror})")
     Console().print(f"wrote {written}: the mean of {len(models)} Q-networks", highlight=False)
 
 
