@@ -66,12 +66,17 @@ def occupied_lanes(world: WorldState, extent: tuple[float, float] | None = None)
     """The lanes the ego's footprint reaches into (its `footprint_lateral_extent`, or `extent` when
     the caller has it already)."""
     low, high = footprint_lateral_extent(world) if extent is None else extent
-    half = world.lane_width / 2
     return tuple(
         lane
         for lane, centre in enumerate(world.lane_offsets.tolist())
-        if low < centre + half and high > centre - half
+        if reaches_lane(low, high, centre, world.lane_width)
     )
+
+
+def reaches_lane(low: float, high: float, centre: float, lane_width: float) -> bool:
+    """Whether a footprint spanning [`low`, `high`] across the road [m] reaches into the lane
+    centred at `centre` (the batch compiles this same function: `stack.batch.kernels`)."""
+    return low < centre + lane_width / 2 and high > centre - lane_width / 2
 
 
 def neighbours(world: WorldState, lane: int) -> tuple[Neighbour | None, Neighbour | None]:

@@ -18,7 +18,7 @@ from planner.mobil import MobilPrior
 from planner.model_check import checked_model
 from planner.model_file import ModelFileError, save_model
 from planner.model_metadata import ModelKind, ModelMetadata
-from planner.networks import MAX_MEMBERS, member_prefix
+from planner.networks import MAX_MEMBERS, ensemble_named, member_prefix
 from planner.tabular import QLearning
 from records import N_ACTIONS, Command, Encoding, GridConfig
 
@@ -222,11 +222,7 @@ def save_ensemble(paths: list[Path], out: Path) -> Path:
         for field in _MUST_AGREE:
             if (theirs := getattr(metadata, field)) != (ours := getattr(first, field)):
                 raise ModelFileError(f"{path}: {field} {theirs} differs from {paths[0]}'s {ours}"[:300])
-    arrays = {
-        member_prefix(index) + name: value
-        for index, (found, _) in enumerate(members)
-        for name, value in found.items()
-    }
+    arrays = ensemble_named([found for found, _ in members])
     steps = [metadata.trained_steps for _, metadata in members if metadata.trained_steps is not None]
     metadata = replace(
         first, members=len(paths), seed=None, validation=None,

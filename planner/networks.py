@@ -3,7 +3,7 @@ each grid row from; no torch import, so configs load and model files are checked
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, TypeVar
 
 import numpy as np
 
@@ -61,6 +61,8 @@ def lane_columns(grid: GridConfig, observation_size: int) -> tuple[np.ndarray, n
     return row_columns, rest
 
 
+T = TypeVar("T")
+
 MAX_MEMBERS = 16
 """Most Q-networks an ensemble model file may hold."""
 
@@ -70,11 +72,19 @@ def member_prefix(index: int) -> str:
     return f"member{index}."
 
 
+def ensemble_named(members: list[dict[str, T]]) -> dict[str, T]:
+    """The members' arrays (or their shapes) in one ensemble file, each named after its
+    `member_prefix`."""
+    return {
+        member_prefix(index) + name: value
+        for index, member in enumerate(members)
+        for name, value in member.items()
+    }
+
+
 def ensemble_shapes(shapes: dict[str, tuple[int, ...]], members: int) -> dict[str, tuple[int, ...]]:
     """The arrays of `members` networks of `shapes` each (one network: `shapes` as they are)."""
-    if members == 1:
-        return shapes
-    return {member_prefix(index) + name: shape for index in range(members) for name, shape in shapes.items()}
+    return shapes if members == 1 else ensemble_named([shapes] * members)
 
 
 def mlp_shapes(sizes: list[int], prefix: str = "") -> dict[str, tuple[int, ...]]:

@@ -1,4 +1,9 @@
+import math
+
+import numpy as np
+
 from common.neighbours import lateral_extent, neighbours
+from controllers.maneuver import Maneuver
 from planner.safety import SafetyConfig, SafetyLayer
 from records import Command
 from tests.helpers import cutting_in, scene
@@ -55,10 +60,6 @@ def test_at_crawl_speed_a_gap_is_judged_in_metres():
 
 
 def test_a_car_nosing_into_the_lane_is_seen_there_by_its_turned_footprint():
-    import math
-
-    import numpy as np
-
     world = scene(3, (0.0, 2), [(8.0, 4.9)], speed=12.0, other_speed=0.0)
     assert neighbours(world, 2)[0] is None
     heading = world.heading.copy()
@@ -79,10 +80,6 @@ def test_an_abort_sees_a_car_cutting_into_the_target_lane_before_it_arrives():
 
 
 def test_after_an_abort_the_cruise_follows_the_abandoned_lane_until_the_ego_is_out_of_it():
-    import numpy as np
-
-    from controllers.maneuver import Maneuver
-
     world = scene(2, (0.0, 1), [(-8.0, 0.0), (12.0, 0.0)], speed=20.0, other_speed=30.0)
     maneuver = Maneuver(world, 4.0, 30.0, should_abort=layer().should_abort)
     assert maneuver.command(Command.LEFT, world)
@@ -98,10 +95,6 @@ def test_a_change_whose_footprint_has_left_the_origin_lane_no_longer_follows_tha
     """A car stopped 15 m ahead in the origin lane holds the cruise while the ego still reaches
     into that lane, and no longer once its footprint has left it (else the braking slows the
     change, which keeps the lane listed, down to a stop across the target lane)."""
-    import numpy as np
-
-    from controllers.maneuver import Maneuver
-
     world = scene(2, (0.0, 1), [(15.0, 4.0)], speed=10.0, other_speed=0.0)
     maneuver = Maneuver(world, 4.0, 30.0)
     assert maneuver.command(Command.LEFT, world)

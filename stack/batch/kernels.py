@@ -19,6 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
+from common import neighbours
 from common.compiled import Kernel
 from controllers.batch_control import (
     coefficients,
@@ -232,13 +233,8 @@ def ego_extent(
     return d[w, 0] - half, d[w, 0] + half
 
 
-@njit(cache=True, nogil=True, inline="always")
-def reaches_lane(
-    low: float, high: float, centre: float, lane_width: float
-) -> bool:  # pragma: no cover - compiled
-    """Whether a footprint spanning [`low`, `high`] across the road [m] reaches into the lane
-    centred at `centre` (`common.neighbours.occupied_lanes`'s test)."""
-    return low < centre + lane_width / 2 and high > centre - lane_width / 2
+reaches_lane = njit(cache=True, nogil=True, inline="always")(neighbours.reaches_lane)
+"""`common.neighbours.reaches_lane` compiled: the one footprint-reaches-lane test of both paths."""
 
 
 @Kernel
