@@ -224,8 +224,10 @@ def save_ensemble(paths: list[Path], out: Path) -> Path:
                 raise ModelFileError(f"{path}: {field} {theirs} differs from {paths[0]}'s {ours}"[:300])
     arrays = ensemble_named([found for found, _ in members])
     steps = [metadata.trained_steps for _, metadata in members if metadata.trained_steps is not None]
+    seeds = tuple(metadata.seed for _, metadata in members if metadata.seed is not None)
     metadata = replace(
         first, members=len(paths), seed=None, validation=None,
         trained_steps=sum(steps) if len(steps) == len(members) else None,
+        member_seeds=seeds if len(seeds) == len(members) else (),
     )  # fmt: skip
     return save_model(out, arrays, metadata.to_json())

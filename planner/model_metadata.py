@@ -19,14 +19,14 @@ class ModelMetadata:
     that trained it, the `encoding` and `grid` of the observations it takes (`observation_size`
     values), its `actions` and `hidden` layer widths (a lane network's: its head's), the `network`
     size name, the `lanes_count` of the road it trained on, the `trained_steps`, the training
-    `seed` and the `validation` that kept it. Only `kind`, `grid`, for a Q-network the sizes and
-    its `mobil_prior` (the bonus its greedy decision gives MOBIL's proposed change,
-    `planner.mobil.MobilPrior`; 0: none, and not written) and its `action_mask` (its observations
-    end with the safety layer's permitted commands, and it decides among them; False: not
-    written) and its `members` (an ensemble of that many Q-networks of these sizes deciding on
-    their mean, `planner.learned.MeanQNetwork`; 1: not written) are needed to use it
-    (`planner.model_check` checks them); the rest describes where it came from and is None in a
-    file that does not say."""
+    `seed` and the `validation` that kept it (an ensemble: its `member_seeds` instead). Only
+    `kind`, `grid`, for a Q-network the sizes and its `mobil_prior` (the bonus its greedy
+    decision gives MOBIL's proposed change, `planner.mobil.MobilPrior`; 0: none, and not
+    written) and its `action_mask` (its observations end with the safety layer's permitted
+    commands, and it decides among them; False: not written) and its `members` (an ensemble of
+    that many Q-networks of these sizes deciding on their mean, `planner.learned.MeanQNetwork`;
+    1: not written) are needed to use it (`planner.model_check` checks them); the rest describes
+    where it came from and is None (`member_seeds`: empty) in a file that does not say."""
 
     kind: ModelKind
     algorithm: str | None = None
@@ -43,6 +43,7 @@ class ModelMetadata:
     mobil_prior: float = 0.0
     action_mask: bool = False
     members: int = 1
+    member_seeds: tuple[int, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         """The metadata member's keys in the order drivestack has always written them; a field
@@ -63,6 +64,7 @@ class ModelMetadata:
             "mobil_prior": self.mobil_prior or None,
             "action_mask": self.action_mask or None,
             "members": self.members if self.members > 1 else None,
+            "member_seeds": list(self.member_seeds) or None,
         }
         return {key: value for key, value in data.items() if value is not None}
 
@@ -87,7 +89,16 @@ class ModelMetadata:
             mobil_prior=float(data.get("mobil_prior", 0.0)),
             action_mask=data.get("action_mask", False) is True,
             members=_typed(data, "members", int) or 1,
+            member_seeds=_member_seeds(data),
         )
+
+
+def _member_seeds(data: dict[str, Any]) -> tuple[int, ...]:
+    """An ensemble's training seeds, one a member (none when the file does not say them all)."""
+    seeds = data.get("member_seeds")
+    if isinstance(seeds, list) and _all_int(seeds) and len(seeds) == data.get("members"):
+        return tuple(seeds)
+    return ()
 
 
 def _typed(data: dict[str, Any], key: str, kind: type) -> Any:

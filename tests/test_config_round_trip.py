@@ -89,7 +89,7 @@ def test_every_sweep_trial_keeps_the_fixed_world_keys(tmp_path):
     from stack.apps.sweep import BASE, prepare
     from stack.settings.sweep import load_sweep, trial_config
 
-    fixed = {"train.scenarios": {}, "highway.duration": 6, "highway.vehicles_count": 12}
+    fixed = {"train.scenarios": {}, "train.members": 1, "highway.duration": 6, "highway.vehicles_count": 12}
     spec = {"config": str(TRAIN_CONFIG), "fixed": fixed, "space": {"train.gamma": [0.9, 0.95]}}
     (tmp_path / "sweep.yaml").write_text(yaml.safe_dump(spec))
     sweep, base, _ = load_sweep(tmp_path / "sweep.yaml")

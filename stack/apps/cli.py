@@ -335,6 +335,7 @@ def train(
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Train a decision agent inside the closed loop, keeping the best model by real-time validation."""
+    from stack.apps.members import check_unfinished, train_members
     from stack.apps.training import (
         check_batched,
         check_init_model,
@@ -348,6 +349,8 @@ def train(
         given = {"--agent": agent, "--config": config, "--envs": envs, "--worlds": worlds, "--seed": seed}
         given |= {"--plant": plant}
         cfg = resumed_training(resume, sets, steps, given | {"--scenario": scenario, "--out": out}, adopt)
+        if cfg.train.members > 1:
+            check_unfinished(resume, cfg)
     elif adopt:
         fail("--adopt: has no effect without --resume DIR (it takes over a folder made before owner records)")
     else:
@@ -364,5 +367,5 @@ def train(
     check_init_model(cfg)
     owner, resuming = training_owner(cfg), resume is not None
     folder = claimed(resume or out, f"train-{cfg.train.algorithm}", owner, resuming, restart=False)
-    if train_or_fail(cfg, folder, progress):
+    if (train_members if cfg.train.members > 1 else train_or_fail)(cfg, folder, progress):
         sys.exit(130)

@@ -165,6 +165,10 @@ def load_sweep(path: Path) -> tuple[SweepFile, Path, list[RunConfig]]:
                 )
         for value in candidates(values):
             configs.append(load_config(base, labels, **{**fixed, key.replace(".", "__"): value}))
+    if any(config.train.members > 1 for config in configs):
+        raise ConfigError(
+            f"{path}: train.members: a trial trains one model; add train.members: 1 to fixed, sweep the seed"
+        )
     return sweep, base, configs
 
 

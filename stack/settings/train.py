@@ -9,7 +9,7 @@ from typing import Annotated
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from planner.mobil import MAX_PRIOR
-from planner.networks import NET_ARCHS
+from planner.networks import MAX_MEMBERS, NET_ARCHS
 from records import ENCODINGS, LEARNED_AGENTS, SEED_LIMIT, Encoding, LearnedAgentName, one_of, unknown_name
 from stack.settings import scenarios
 
@@ -241,6 +241,14 @@ class TrainConfig(Strict):
         "chooses among them, in acting, exploring and the Double-DQN target (ddqn only)",
     )
 
+    members: int = Field(
+        1,
+        ge=1,
+        le=MAX_MEMBERS,
+        description="runs of this config trained one after the other, seeds `seed` to seed + members - 1, "
+        "each in its own folder seed-S, then deciding together on the mean of their Q-values (an "
+        "ensemble model file, `drivestack ensemble`; ddqn / dqn)",
+    )
     overlap: bool = Field(
         False,
         description="the gradient steps due after a step of the environments run while the env "
@@ -265,6 +273,8 @@ class TrainConfig(Strict):
             raise ValueError("mobil_prior: only the ddqn algorithm decides with one")
         if self.algorithm != "ddqn" and self.action_mask:
             raise ValueError("action_mask: only the ddqn algorithm learns with one")
+        if self.algorithm == "tabular" and self.members > 1:
+            raise ValueError("members: an ensemble is of Q-networks (ddqn, dqn), not Q-tables")
         if self.algorithm != "ddqn" and self.overlap:
             raise ValueError("overlap: only the ddqn algorithm learns while its environments step")
         return self

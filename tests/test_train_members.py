@@ -1,0 +1,97 @@
+"""`train.members`: one `drivestack train` makes an ensemble, its runs trained one after the other
+in the folder's `seed-S` folders (each the run `--seed S` would make alone), then one model file
+deciding on the mean of their Q-values; `--resume` keeps the members that finished."""
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from planner.learned import load_agent
+from planner.model_file import load_model
+from stack.apps.cli import app
+from tests.test_train import TINY
+
+ENSEMBLE = {**TINY, "seed": 5, "train": {**TINY["train"], "members": 2}}
+
+
+def train(*arguments: str) -> tuple[int, str]:
+    result = CliRunner().invoke(app, ["train", "--no-progress", *arguments])
+    return result.exit_code, result.output
+
+
+@pytest.fixture(scope="module")
+def ensemble(tmp_path_factory):
+    """The tiny config with two members (seeds 5 and 6) trained in one command, and its folder."""
+    folder = tmp_path_factory.mktemp("members")
+    (config := folder / "ensemble.yaml").write_text(yaml.safe_dump(ENSEMBLE))
+    code, output = train("--config", str(config), "--out", str(folder / "out"))
+    assert code == 0, output
+    return config, folder / "out"
+
+
+def test_one_command_trains_each_seed_in_its_folder_then_writes_their_ensemble(ensemble, tmp_path):
+    _, out = ensemble
+    for seed in (5, 6):
+        member = yaml.safe_load((out / f"seed-{seed}" / "config.yaml").read_text())
+        assert member["seed"] == seed and member["train"]["members"] == 1
+    assert yaml.safe_load((out / "config.yaml").read_text())["train"]["members"] == 2
+    for kind in ("best.npz", "final.npz"):
+        agent = load_agent(out / kind)
+        assert agent.metadata.members == 2 and agent.metadata.member_seeds == (5, 6)
+        batch = np.random.default_rng(1).uniform(-1, 1, (16, agent.metadata.observation_size))
+        members = [load_agent(out / f"seed-{seed}" / kind).q_values(batch) for seed in (5, 6)]
+        assert not np.allclose(*members), "two seeds, two networks"
+        np.testing.assert_allclose(agent.q_values(batch), np.mean(members, axis=0), rtol=1e-5, atol=1e-6)
+    summary = json.loads((out / "summary.json").read_text())
+    assert [member["seed"] for member in summary["members"]] == [5, 6]
+    assert all(member["steps"] == 40 and member["best_validation"] for member in summary["members"])
+    assert summary["best_model"].endswith("best.npz") and summary["final_model"].endswith("final.npz")
+
+    single = tmp_path / "single.yaml"
+    single.write_text(yaml.safe_dump({**TINY, "seed": 6}))
+    assert train("--config", str(single), "--out", str(tmp_path / "alone"))[0] == 0
+    alone, member = (load_model(path / "final.npz")[0] for path in (tmp_path / "alone", out / "seed-6"))
+    assert alone.keys() == member.keys()
+    for name, weights in alone.items():
+        np.testing.assert_array_equal(member[name], weights, err_msg=f"seed 6 alone is member 2: {name}")
+
+
+def test_resume_trains_only_the_missing_members_and_refuses_a_finished_ensemble(ensemble, tmp_path):
+    _, out = ensemble
+    code, output = train("--resume", str(out))
+    assert code == 2 and output.count("\n") == 1 and "finished its 2 members' 40 steps" in output, output
+
+    copy = tmp_path / "copy"
+    (copy / "seed-5").mkdir(parents=True)
+    for path in (out / "seed-5").iterdir():
+        if path.is_file():
+            (copy / "seed-5" / path.name).write_bytes(path.read_bytes())
+    for name in ("config.yaml", ".drivestack-owner.json"):
+        if (out / name).is_file():
+            (copy / name).write_bytes((out / name).read_bytes())
+    kept = (copy / "seed-5" / "final.npz").stat().st_mtime_ns
+    code, output = train("--resume", str(copy))
+    assert code == 0, output
+    assert "member 1 of 2 (seed 5): finished" in output
+    assert (copy / "seed-5" / "final.npz").stat().st_mtime_ns == kept, "a finished member is kept"
+    ours, theirs = load_model(copy / "final.npz"), load_model(out / "final.npz")
+    assert ours[1] == theirs[1]
+    for name, weights in theirs[0].items():
+        np.testing.assert_array_equal(ours[0][name], weights, err_msg=name)
+
+
+def test_an_ensemble_of_q_tables_or_in_a_sweep_is_refused_in_one_line(tmp_path):
+    tables = {**TINY, "train": {**TINY["train"], "members": 2, "algorithm": "tabular", "encoding": "tabular"}}
+    (config := tmp_path / "tables.yaml").write_text(yaml.safe_dump(tables))
+    code, output = train("--config", str(config), "--out", str(tmp_path / "o"))
+    assert code == 2 and output.count("\n") == 1 and "members: an ensemble is of Q-networks" in output, output
+    assert not (tmp_path / "o").exists()
+
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(ENSEMBLE))
+    sweep = tmp_path / "sweep.yaml"
+    sweep.write_text(yaml.safe_dump({"config": "base.yaml", "space": {"seed": [1, 2]}}))
+    result = CliRunner().invoke(app, ["sweep", "--config", str(sweep), "--out", str(tmp_path / "s")])
+    assert result.exit_code == 2 and "train.members: a trial trains one model" in result.output, result.output
