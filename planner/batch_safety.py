@@ -59,11 +59,7 @@ def permitted_batch(
         np.asarray(changing, dtype=np.bool_),
         np.asarray(speed, dtype=np.float64),
         min_speed,
-        config.enabled,
-        config.min_gap_m,
-        config.front_time_gap_s,
-        config.rear_time_gap_s,
-        config.min_ttc_s,
+        safety_settings(config),
     )
     return permitted
 
@@ -122,6 +118,55 @@ def lane_is_safe(
     return True
 
 
+@njit(cache=True, nogil=True)
+def change_is_safe(
+    n: int,
+    s: np.ndarray,
+    d: np.ndarray,
+    now: np.ndarray,
+    speed: np.ndarray,
+    length: np.ndarray,
+    reach: np.ndarray,
+    offsets: np.ndarray,
+    lanes_count: int,
+    lane: int,
+    goal: int,
+    safety: np.ndarray,
+) -> bool:  # pragma: no cover - compiled
+    """`SafetyLayer.permits` of one world's change from `lane` to `goal`: on the road, the strict
+    gap rule in `goal` (`safety`: enabled, min gap [m], min TTC [s], front and rear time gaps [s],
+    ..., `safety[7]` the far-lane gap [m], -inf: none) and, in the lane beyond it, no vehicle
+    nearer than the far-lane gap bumper to bumper. `now`: zeros, one a vehicle."""
+    if not 0 <= goal < lanes_count:
+        return False
+    if not lane_is_safe(
+        n, s, d, now, speed, length, reach, offsets[goal], safety[1], safety[2], safety[3], safety[4]
+    ):
+        return False
+    beyond = 2 * goal - lane
+    if safety[7] == -np.inf or not 0 <= beyond < lanes_count:
+        return True
+    return lane_is_safe(n, s, d, now, speed, length, reach, offsets[beyond], safety[7], 0.0, 0.0, 0.0)
+
+
+def safety_settings(config: SafetyConfig) -> np.ndarray:
+    """The safety layer's numbers as the compiled passes take them (`change_is_safe`; the abort
+    gap [m] and TTC [s] at 5 and 6)."""
+    far = -np.inf if config.far_lane_gap_m is None else config.far_lane_gap_m
+    return np.array(
+        [
+            float(config.enabled),
+            config.min_gap_m,
+            config.min_ttc_s,
+            config.front_time_gap_s,
+            config.rear_time_gap_s,
+            config.abort_gap_m,
+            config.abort_ttc_s,
+            far,
+        ]
+    )
+
+
 @Kernel
 def _permitted(
     out: np.ndarray,
@@ -131,11 +176,7 @@ def _permitted(
     changing: np.ndarray,
     true_speed: np.ndarray,
     min_speed: float,
-    enabled: bool,
-    min_gap: float,
-    front_time_gap: float,
-    rear_time_gap: float,
-    min_ttc: float,
+    safety: np.ndarray,
 ) -> None:  # pragma: no cover - compiled; covered through permitted_batch
     count, s, d, speed, length, _, _, lanes_count, lane_offsets = columns
     now = np.zeros(s.shape[1])
@@ -145,23 +186,10 @@ def _permitted(
             continue
         for command in (0, 2):
             target = lane[w] + command - 1
-            if not enabled:
+            if safety[0] == 0.0:
                 out[w, command] = 1.0
-                continue
-            if target < 0 or target >= lanes_count[w]:
-                continue
-            if lane_is_safe(
-                count[w],
-                s[w],
-                d[w],
-                now,
-                speed[w],
-                length[w],
-                reach[w],
-                lane_offsets[w, target],
-                min_gap,
-                min_ttc,
-                front_time_gap,
-                rear_time_gap,
-            ):
+            elif change_is_safe(
+                count[w], s[w], d[w], now, speed[w], length[w], reach[w], lane_offsets[w], lanes_count[w],
+                lane[w], target, safety,
+            ):  # fmt: skip
                 out[w, command] = 1.0

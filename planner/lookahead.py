@@ -120,21 +120,18 @@ class LookaheadAgent(Policy):
         return tuple(found)
 
     def _gap_clear(self, scene: Scene, shift: int) -> bool:
-        """The safety layer's gap rule (`planner.safety.unsafe_neighbours`) in lane `shift`."""
-        in_lane = scene.lane == shift
-        ahead, behind = in_lane & (scene.centre > 0), in_lane & (scene.centre <= 0)
-        gaps = np.abs(scene.centre) - (scene.length + EGO_LENGTH) / 2
-        neighbours: list[Neighbour | None] = []
-        for side in (ahead, behind):
-            rows = np.flatnonzero(side)
-            if rows.size == 0:
-                neighbours.append(None)
-                continue
-            row = rows[np.argmin(np.abs(scene.centre[rows]))]
-            neighbours.append(Neighbour(float(gaps[row]), float(scene.velocity[row])))
+        """The safety layer's rule for a change to lane `shift` (`planner.safety.SafetyLayer.permits`):
+        the gap rule there, and no vehicle alongside in the lane beyond it."""
         safety = self.setup.safety
-        return not safety.enabled or not unsafe_neighbours(
-            safety, scene.speed, neighbours[0], neighbours[1], safety.min_gap_m, safety.min_ttc_s, strict=True
+        if not safety.enabled:
+            return True
+        if unsafe_neighbours(
+            safety, scene.speed, *_neighbours(scene, shift), safety.min_gap_m, safety.min_ttc_s, strict=True
+        ):
+            return False
+        far = safety.far_lane_gap_m
+        return far is None or not unsafe_neighbours(
+            safety, scene.speed, *_neighbours(scene, 2 * shift), far, 0.0, strict=False
         )
 
     def rank(self, scene: Scene) -> Ranking:
@@ -189,3 +186,19 @@ class LookaheadAgent(Policy):
         if gated.all():
             return 1e-3 * (at_fault == 0) + 1e-4 * np.minimum(min_ttc, 10.0) / 10.0, True
         return np.where(gated, 0.0, score), False
+
+
+def _neighbours(scene: Scene, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
+    """The nearest vehicle ahead and behind (bumper gaps [m], speeds) in the lane `lane` lanes
+    from the ego's, as the scene reads them."""
+    in_lane = scene.lane == lane
+    gaps = np.abs(scene.centre) - (scene.length + EGO_LENGTH) / 2
+    found: list[Neighbour | None] = []
+    for side in (in_lane & (scene.centre > 0), in_lane & (scene.centre <= 0)):
+        rows = np.flatnonzero(side)
+        if rows.size == 0:
+            found.append(None)
+            continue
+        row = rows[np.argmin(np.abs(scene.centre[rows]))]
+        found.append(Neighbour(float(gaps[row]), float(scene.velocity[row])))
+    return found[0], found[1]

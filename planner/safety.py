@@ -7,7 +7,10 @@ vehicle behind is at least max(min_gap, rear_time_gap * v_rear) away and would n
 within min_ttc. An abort uses the looser abort_gap / abort_ttc, so a change is not abandoned for
 the margin that made it start; it counts in the target lane every vehicle whose present sideways
 motion carries it there within abort_lookahead (a car cutting in from the far lane is met before
-it arrives, while the ego can still turn back).
+it arrives, while the ego can still turn back). No change starts while a vehicle in the lane beyond
+the target is within far_lane_gap of the ego, bumper to bumper: alongside, it may take the same
+gap at the same moment, and a change under way cannot get out of its way (at 4 m/s an abort needs
+seconds to turn back).
 """
 
 from __future__ import annotations
@@ -40,6 +43,13 @@ class SafetyConfig(BaseModel):
     abort_ttc_s: float = Field(1.5, ge=0, le=MAX_TIME_S, description="TTC that aborts a change [s]")
     abort_lookahead_s: float = Field(
         1.0, ge=0, le=MAX_TIME_S, description="an abort sees a car cutting in this early [s]"
+    )
+    far_lane_gap_m: float | None = Field(
+        2.0,
+        ge=0,
+        le=MAX_GAP_M,
+        description="no change starts while a vehicle in the lane beyond the target is this close, "
+        "bumper to bumper [m] (none: no such check)",
     )
 
 
@@ -124,9 +134,19 @@ class SafetyLayer:
             return True
         target = lane + command.lane_shift
         config = self.config
-        return 0 <= target < world.lanes_count and self.gap_is_safe(
-            world, target, config.min_gap_m, config.min_ttc_s, strict=True
+        return (
+            0 <= target < world.lanes_count
+            and self.gap_is_safe(world, target, config.min_gap_m, config.min_ttc_s, strict=True)
+            and not self._alongside_beyond(world, target + command.lane_shift)
         )
+
+    def _alongside_beyond(self, world: WorldState, far_lane: int) -> tuple[int, ...]:
+        """The vehicles (ids) of `far_lane`, the lane beyond a change's target, closer to the ego
+        than `far_lane_gap_m` (none without the check or the lane)."""
+        gap = self.config.far_lane_gap_m
+        if gap is None or not 0 <= far_lane < world.lanes_count:
+            return ()
+        return self.unsafe_neighbours(world, far_lane, gap, 0.0, strict=False)
 
     def filter(self, command: Command, world: WorldState, lane: int) -> Command:
         """`command`, or STAY when it leads off the road or into an unsafe gap."""
@@ -136,7 +156,9 @@ class SafetyLayer:
         target = lane + command.lane_shift
         config = self.config
         if 0 <= target < world.lanes_count:
-            self.reacted_to = self.unsafe_neighbours(world, target, config.min_gap_m, config.min_ttc_s, True)
+            self.reacted_to = self.unsafe_neighbours(
+                world, target, config.min_gap_m, config.min_ttc_s, True
+            ) + self._alongside_beyond(world, target + command.lane_shift)
         else:
             self.reacted_to = ()
         return Command.STAY

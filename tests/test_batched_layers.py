@@ -112,13 +112,15 @@ def test_what_the_batch_cannot_encode_is_refused_in_one_line(worlds):
         observe_batch(GRIDS["ego rows, every batched feature"], WorldBatch.of([worlds[1], broken]))
 
 
-def test_the_safety_layer_s_verdicts_for_a_batch_are_each_loop_s():
+@pytest.mark.parametrize("far_lane_gap_m", [None, 2.0, 12.0])
+def test_the_safety_layer_s_verdicts_for_a_batch_are_each_loop_s(far_lane_gap_m: float | None):
     """At every decision period of MOBIL-driven episodes, stepped as the training MDP steps them
     (so also while a change runs; refusals, noise): `permitted_batch` over all of them equals each
-    loop's `permitted()`."""
+    loop's `permitted()`, with and without the check of the lane beyond the target."""
     expected, perceived, lanes, changing, speeds = [], [], [], [], []
+    planner = {"agent": "mobil", "safety": {"far_lane_gap_m": far_lane_gap_m}}
     for scenario, seeds in (("random", (0, 11)), ("jam", (0,)), ("incident", (1,))):
-        config = build_config({"highway": {"duration": 10}, "planner": {"agent": "mobil"}}, scenario=scenario)
+        config = build_config({"highway": {"duration": 10}, "planner": planner}, scenario=scenario)
         agent = build_agent(config, 0)
         with HighwayAdapter(config.highway, config.sim.backend) as adapter:
             loop = ClosedLoop(config, adapter, grid=agent.grid_config)

@@ -51,6 +51,12 @@ def test_a_lane_the_safety_layer_would_refuse_is_never_rolled_out():
     fast_from_behind = scene([(0, 120.0, 5.0, 0.0), (-1, -40.0, 5.0, 40.0)], right=False)
     assert Command.LEFT not in AGENT.permitted(fast_from_behind)
     assert AGENT.rank(fast_from_behind).chosen is Command.STAY
+    beside_beyond = scene([(0, 120.0, 5.0, 0.0), (-2, -1.0, 5.0, 25.0)], right=False)
+    assert AGENT.permitted(beside_beyond) == (Command.STAY,), "a car alongside in the lane beyond"
+    assert AGENT.permitted(scene([(0, 120.0, 5.0, 0.0), (-2, -12.0, 5.0, 25.0)], right=False)) == (
+        Command.STAY,
+        Command.LEFT,
+    )
 
 
 def test_a_car_stopped_ahead_in_the_left_lane_scores_the_change_into_it_lower():

@@ -28,6 +28,21 @@ def test_a_car_alongside_in_the_target_lane_masks_the_change():
     assert safety.filter(Command.RIGHT, world, lane=1) is Command.RIGHT
 
 
+def test_no_change_starts_while_a_car_is_alongside_in_the_lane_beyond_the_target():
+    """Seed 634449 of `jam` (MOBIL): a change from lane 2 to 1 started beside a car in lane 0, which
+    swerved into lane 1 at 0.6 rad; the abort could not turn the ego back in time at 4 m/s."""
+    beside = scene(4, (0.0, 2), [(-1.0, 0.0)], speed=4.0, other_speed=5.0)
+    safety = layer()
+    assert safety.filter(Command.LEFT, beside, lane=2) is Command.STAY and safety.reacted_to == (1,)
+    assert safety.filter(Command.RIGHT, beside, lane=2) is Command.RIGHT, "no lane beyond lane 3"
+    assert layer(far_lane_gap_m=None).filter(Command.LEFT, beside, lane=2) is Command.LEFT
+    # 10 m centre to centre, 5 m bumper to bumper: past the 2 m the default asks
+    assert layer().filter(Command.LEFT, scene(4, (0.0, 2), [(10.0, 0.0)], 4.0, 5.0), lane=2) is Command.LEFT
+    assert layer(far_lane_gap_m=6.0).filter(Command.LEFT, scene(4, (0.0, 2), [(10.0, 0.0)], 4.0, 5.0), 2) is (
+        Command.STAY
+    )
+
+
 def test_time_gap_and_ttc_to_the_vehicles_ahead_and_behind():
     # ahead in the target lane 15 m (gap 10 m) at 25 m/s: time gap 0.8 s x 25 = 20 m > 10 m -> unsafe
     assert layer().filter(Command.LEFT, scene(2, (0.0, 1), [(15.0, 0.0)], 25.0, 25.0), 1) is Command.STAY

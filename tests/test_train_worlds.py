@@ -169,7 +169,7 @@ def test_a_folder_written_before_overlap_existed_keeps_its_fingerprint():
     """A run folder records its config's fingerprint; one written before `train.overlap` existed
     has none of it, and still resumes: the key is left out while it holds that run's value."""
     config = build_config(WORLDS)
-    former = _fingerprint_without(config, "train.overlap", "planner.change_margin")
+    former = _fingerprint_without(config, "train.overlap", "train.members", "planner.change_margin")
     assert training_owner(config).config == former
     overlapped = build_config({**WORLDS, "train": {**WORLDS["train"], "overlap": True}})
     assert training_owner(overlapped).config != training_owner(config).config
@@ -185,7 +185,7 @@ def test_a_resolved_config_written_before_the_abort_looked_ahead_reproduces_its_
     read = build_config(written)
     assert read == then and read.planner.safety.abort_lookahead_s == 0.0
     assert training_owner(read).config == _fingerprint_without(
-        then, "train.overlap", "planner.safety.abort_lookahead_s", "planner.change_margin"
+        then, *FORMER, "planner.safety.abort_lookahead_s"
     )
     partial = build_config({**WORLDS, "planner": {"safety": {"abort_gap_m": 2.0}}})
     assert (
@@ -205,10 +205,28 @@ def test_a_resolved_config_written_before_the_change_margin_reproduces_its_run()
     read = build_config(written)
     assert read == then and read.planner.change_margin == 0.0
     assert training_owner(read).config == _fingerprint_without(
-        then, "train.overlap", "planner.safety.abort_lookahead_s", "planner.change_margin"
+        then, *FORMER, "planner.safety.abort_lookahead_s"
     )
     held = build_config(WORLDS, planner__change_margin=0.4)
     assert training_owner(held).config != training_owner(build_config(WORLDS)).config
+
+
+def test_a_resolved_config_written_before_the_far_lane_check_reproduces_its_run():
+    """A folder's config.yaml written before `planner.safety.far_lane_gap_m` and `train.members`
+    existed reads the check as off (how its run changed lanes) and one member, and keeps its
+    fingerprint; the check's default (2 m) changes it."""
+    then = build_config({**WORLDS, "planner": {"safety": {"far_lane_gap_m": None}}})
+    written = then.model_dump(mode="json")
+    written["planner"]["safety"].pop("far_lane_gap_m"), written["train"].pop("members")
+    read = build_config(written)
+    assert read == then and read.planner.safety.far_lane_gap_m is None and read.train.members == 1
+    assert training_owner(read).config == _fingerprint_without(then, *FORMER, "planner.safety.far_lane_gap_m")
+    assert build_config(WORLDS).planner.safety.far_lane_gap_m == 2.0
+    assert training_owner(build_config(WORLDS)).config != training_owner(read).config
+
+
+FORMER = ("train.overlap", "train.members", "planner.change_margin")
+"""The keys added later that `WORLDS` holds at their former values."""
 
 
 def _fingerprint_without(config, *dotted_keys: str) -> str:

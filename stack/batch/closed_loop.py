@@ -20,7 +20,7 @@ import numpy as np
 from controllers.reference import lane_keeping
 from perception.batch_sensor import SensorBatch
 from perception.sensor import SensorModel
-from planner.batch_safety import lateral_drifts, lateral_extents, permitted_batch
+from planner.batch_safety import lateral_drifts, lateral_extents, permitted_batch, safety_settings
 from records import WorldState
 from records.batch import WorldBatch
 from stack.batch.kernels import control, decide, settle
@@ -94,17 +94,7 @@ class ClosedLoopBatch:
                 control_config.set_speed_mps,
             ]
         )
-        self.safety = np.array(
-            [
-                float(safety.enabled),
-                safety.min_gap_m,
-                safety.min_ttc_s,
-                safety.front_time_gap_s,
-                safety.rear_time_gap_s,
-                safety.abort_gap_m,
-                safety.abort_ttc_s,
-            ]
-        )
+        self.safety = safety_settings(safety)
         self.abort_lookahead_s = safety.abort_lookahead_s
         comfort = control_config.comfort_decel_mps2
         self.gains = np.array(

@@ -31,7 +31,7 @@ from controllers.batch_control import (
     warped_sample,
 )
 from controllers.reference import QUINTIC_PEAK_SPEED
-from planner.batch_safety import lane_is_safe
+from planner.batch_safety import change_is_safe, lane_is_safe
 from stack.loop.safety_metrics import DEPARTURE_TOLERANCE_M
 
 STAY = 1
@@ -84,8 +84,8 @@ def decide(
     outcome: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
     """`ClosedLoop.act`'s decision point in each `live` world: a command given while no lane change
-    runs passes the safety layer (`safety`: enabled, min gap, min TTC, front and rear time gaps;
-    STAY when it fails: masked) to the maneuver, which starts the lane change unless it is refused
+    runs passes the safety layer (`safety`: `planner.batch_safety.safety_settings`; STAY when it
+    fails: masked) to the maneuver, which starts the lane change unless it is refused
     (off the road, below the lane-change speed). `settings`: nominal lane-change duration [s],
     minimum lane-change speed [m/s], tan of the largest course. `outcome` (W, 3): considered,
     masked, refused (1 or 0)."""
@@ -100,10 +100,9 @@ def decide(
         command = commands[w]
         permits = True
         if command != STAY and safety[0] != 0.0:
-            goal = lane[w] + command - 1
-            permits = 0 <= goal < lanes_count[w] and lane_is_safe(
-                count[w], s[w], d[w], now, speed[w], length[w], reach[w], offsets[w, goal],
-                safety[1], safety[2], safety[3], safety[4],
+            permits = change_is_safe(
+                count[w], s[w], d[w], now, speed[w], length[w], reach[w], offsets[w], lanes_count[w],
+                lane[w], lane[w] + command - 1, safety,
             )  # fmt: skip
         if not permits:
             counts[w, 1] += 1

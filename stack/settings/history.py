@@ -12,8 +12,8 @@ HOW_NOT_WHAT = {"sim": {"batched"}}
 """Config keys that change how a run is carried out, never its results: left out of the
 fingerprint that lets `--resume` go on with a folder (`stack.apps.resume`, `training_owner`)."""
 ADDED_LATER: dict[str, dict[str, Any]] = {
-    "train": {"overlap": False},
-    "planner.safety": {"abort_lookahead_s": 0.0},
+    "train": {"overlap": False, "members": 1},
+    "planner.safety": {"abort_lookahead_s": 0.0, "far_lane_gap_m": None},
     "planner": {"change_margin": 0.0},
 }
 """Config keys (by dotted section) added after folders were written, with the value the runs of
