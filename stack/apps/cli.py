@@ -334,7 +334,8 @@ def train(
     adopt: bool = typer.Option(False, "--adopt", help=ADOPT_HELP),
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
-    """Train a decision agent inside the closed loop, keeping the best model by real-time validation."""
+    """Train a decision agent inside the closed loop, keeping the best model by real-time validation
+    (train.members N > 1: N seeds one after the other, then their ensemble; the default config: 3)."""
     from stack.apps.members import check_unfinished, train_members
     from stack.apps.training import (
         check_batched,
