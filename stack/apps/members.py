@@ -14,7 +14,7 @@ from stack.apps.options import fail
 if TYPE_CHECKING:
     from stack.settings.run import RunConfig
 
-BEST, FINAL, SUMMARY = "best.npz", "final.npz", "summary.json"
+SUMMARY = "summary.json"
 
 
 def member_configs(config: RunConfig) -> dict[str, RunConfig]:
@@ -72,6 +72,7 @@ def write_ensemble(folder: Path, names: list[str]) -> None:
     every member kept one), and summary.json: each member's seed, steps, time and best validation."""
     from stack.apps.options import cannot_write
     from stack.runtime.files import write_json
+    from stack.training.trainer import BEST, FINAL
 
     summaries = [json.loads((folder / name / SUMMARY).read_bytes()) for name in names]
     try:
