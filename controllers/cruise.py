@@ -2,20 +2,44 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
+from numba.extending import register_jitable
+
 from controllers.pid import PID
 from records import Neighbour, clip
+
+KP_GAP = 0.25
+"""Gap-error gain [1/s^2]."""
+KP_CLOSING = 0.8
+"""Relative-speed gain [1/s]."""
+
+
+class GapKeeping(NamedTuple):
+    """The cruise's time-gap law: keep `standstill_gap` [m] + `time_gap` [s] x speed to a leader."""
+
+    time_gap: float
+    standstill_gap: float
+
+
+@register_jitable
+def gap_acceleration(law: GapKeeping, speed: float, gap: float, leader_speed: float) -> float:
+    """The acceleration [m/s^2] that keeps the time gap to one leader `gap` [m] ahead at
+    `leader_speed` [m/s] from the ego's `speed` [m/s]: KP_GAP on the gap error, KP_CLOSING on the
+    closing speed."""
+    desired_gap = law.standstill_gap + law.time_gap * speed
+    closing = speed - leader_speed
+    return KP_GAP * (gap - desired_gap) - KP_CLOSING * closing
 
 
 class AdaptiveCruise:
     """Hold a set speed; keep standstill_gap + time_gap * v to each leader (the ego lane's and,
     during a lane change, the target lane's), down to standstill at standstill_gap behind a stopped
-    leader, and off again when it leaves. Braking is limited to the comfort deceleration: beyond it
-    `controllers.emergency.EmergencyBraking` takes over."""
+    leader, and off again when it leaves (`gap_acceleration`). Braking is limited to the comfort
+    deceleration: beyond it `controllers.emergency.EmergencyBraking` takes over."""
 
-    KP_GAP = 0.25
-    """Gap-error gain [1/s^2]."""
-    KP_CLOSING = 0.8
-    """Relative-speed gain [1/s]."""
+    KP_GAP = KP_GAP
+    KP_CLOSING = KP_CLOSING
 
     def __init__(
         self,
@@ -28,6 +52,7 @@ class AdaptiveCruise:
     ) -> None:
         self.time_gap = time_gap
         self.standstill_gap = standstill_gap
+        self.law = GapKeeping(time_gap, standstill_gap)
         self.comfort_deceleration = comfort_deceleration
         self.max_acceleration = max_acceleration
         self.speed_pid = PID(kp=kp_speed, ki=ki_speed, limits=(-comfort_deceleration, max_acceleration))
@@ -39,7 +64,5 @@ class AdaptiveCruise:
         """Acceleration command [m/s^2]."""
         command = self.speed_pid.update(set_speed - speed, dt)
         for leader in leaders:
-            desired_gap = self.standstill_gap + self.time_gap * speed
-            closing = speed - leader.speed
-            command = min(command, self.KP_GAP * (leader.gap - desired_gap) - self.KP_CLOSING * closing)
+            command = min(command, gap_acceleration(self.law, speed, leader.gap, leader.speed))
         return clip(command, -self.comfort_deceleration, self.max_acceleration)

@@ -4,7 +4,65 @@ the car at standstill instead of reversing it."""
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
+from numba.extending import register_jitable
+
 from records import Actuation, Neighbour
+
+STOP_MARGIN_M = 1.0
+"""Gap kept when stopping behind a leader [m]."""
+BRAKING_SEEN_MPS2 = 0.5
+"""A leader slowing faster than this is braking: the ego must stop behind where it stops [m/s^2]."""
+
+
+class BrakingLimits(NamedTuple):
+    """Emergency braking's settings: full braking [m/s^2], the comfort deceleration it steps in
+    beyond [m/s^2], and the time to collision that triggers it [s]."""
+
+    max_deceleration: float
+    comfort_deceleration: float
+    trigger_ttc_s: float
+
+
+@register_jitable
+def leader_braking(
+    previous_speed: float, speed: float, previous_slowing: float, dt: float
+) -> tuple[float, float]:
+    """(slowing, braking) of a leader seen at `previous_speed` last tick and at `speed` [m/s] now:
+    its slowing this tick [m/s^2], and the braking it shows, the lesser of this tick's slowing and
+    `previous_slowing` (0 when it was not seen slowing: a one-tick dip is not braking)."""
+    slowing = (previous_speed - speed) / dt
+    return slowing, min(slowing, previous_slowing)
+
+
+@register_jitable
+def needs_full_braking(
+    limits: BrakingLimits, speed: float, gap: float, leader_speed: float, braking: float
+) -> bool:
+    """Whether the ego at `speed` [m/s] needs more than comfort braking for a leader `gap` [m] ahead
+    at `leader_speed` [m/s], braking at `braking` [m/s^2] (`EmergencyBraking.needed`)."""
+    closing = speed - leader_speed
+    if closing <= 0:
+        return False
+    room = max(gap - STOP_MARGIN_M, 0.01)
+    stopping = braking > BRAKING_SEEN_MPS2
+    stops_in = leader_speed * leader_speed / (2 * braking) if stopping else 0.0
+    return (
+        closing * closing / (2 * room) > limits.comfort_deceleration
+        or gap / closing < limits.trigger_ttc_s
+        or (stopping and speed * speed / (2 * (room + stops_in)) > limits.comfort_deceleration)
+    )
+
+
+@register_jitable
+def braked_acceleration(
+    limits: BrakingLimits, active: bool, acceleration: float, speed: float, dt: float
+) -> float:
+    """`acceleration` [m/s^2], full braking while an emergency is `active`, and never a deceleration
+    that would reverse the car within one tick of `dt` [s]."""
+    commanded = -limits.max_deceleration if active else acceleration
+    return max(commanded, -max(speed, 0.0) / dt)
 
 
 class EmergencyBraking:
@@ -15,15 +73,14 @@ class EmergencyBraking:
     The plant's braking authority is highway-env's ContinuousAction range, +-5 m/s^2 by default:
     the plant is left as highway-env defines it, so `max_deceleration` cannot exceed it."""
 
-    STOP_MARGIN_M = 1.0
-    """Gap kept when stopping behind a leader [m]."""
-    BRAKING_SEEN_MPS2 = 0.5
-    """A leader slowing faster than this is braking: the ego must stop behind where it stops [m/s^2]."""
+    STOP_MARGIN_M = STOP_MARGIN_M
+    BRAKING_SEEN_MPS2 = BRAKING_SEEN_MPS2
 
     def __init__(self, max_deceleration: float, comfort_deceleration: float, trigger_ttc_s: float) -> None:
         self.max_deceleration = max_deceleration
         self.comfort_deceleration = comfort_deceleration
         self.trigger_ttc_s = trigger_ttc_s
+        self.limits = BrakingLimits(max_deceleration, comfort_deceleration, trigger_ttc_s)
         self.reset()
 
     def reset(self) -> None:
@@ -43,21 +100,8 @@ class EmergencyBraking:
         deceleration within the gap plus the leader's own stopping distance (the constant-speed
         prediction alone sees a hard-braking leader too late)."""
         for leader in leaders:
-            closing = speed - leader.speed
-            if closing <= 0:
-                continue
-            room = max(leader.gap - self.STOP_MARGIN_M, 0.01)
-            slowing = (braking or {}).get(leader.vehicle, 0.0)
-            stops_in = (
-                leader.speed * leader.speed / (2 * slowing) if slowing > self.BRAKING_SEEN_MPS2 else None
-            )
-            if (
-                closing * closing / (2 * room) > self.comfort_deceleration
-                or leader.gap / closing < self.trigger_ttc_s
-                or (
-                    stops_in is not None
-                    and speed * speed / (2 * (room + stops_in)) > self.comfort_deceleration
-                )
+            if needs_full_braking(
+                self.limits, speed, leader.gap, leader.speed, (braking or {}).get(leader.vehicle, 0.0)
             ):
                 self.cause = leader.vehicle
                 return True
@@ -71,21 +115,23 @@ class EmergencyBraking:
     ) -> Actuation:
         """`actuation` with full braking while an emergency lasts, and never a deceleration that would
         reverse the car (speed [m/s] after one tick of `dt` [s] stays >= 0)."""
-        slowing = {
-            leader.vehicle: (self.speeds[leader.vehicle] - leader.speed) / dt
+        seen = {
+            leader.vehicle: leader_braking(
+                self.speeds[leader.vehicle], leader.speed, self.slowing.get(leader.vehicle, 0.0), dt
+            )
             for leader in leaders
             if leader.vehicle in self.speeds
         }
-        braking = {vehicle: min(rate, self.slowing.get(vehicle, 0.0)) for vehicle, rate in slowing.items()}
-        self.speeds, self.slowing = {leader.vehicle: leader.speed for leader in leaders}, slowing
+        braking = {vehicle: rates[1] for vehicle, rates in seen.items()}
+        self.speeds = {leader.vehicle: leader.speed for leader in leaders}
+        self.slowing = {vehicle: rates[0] for vehicle, rates in seen.items()}
         if self.active:
             self.active = self.closing_in(speed, leaders)
             self.cause = self.cause if self.active else None
         elif self.needed(speed, leaders, braking):
             self.active = True
             self.activations += 1
-        acceleration = -self.max_deceleration if self.active else actuation.acceleration
-        acceleration = max(acceleration, -max(speed, 0.0) / dt)
+        acceleration = braked_acceleration(self.limits, self.active, actuation.acceleration, speed, dt)
         if acceleration == actuation.acceleration:
             return actuation
         return Actuation(acceleration=acceleration, steering=actuation.steering)

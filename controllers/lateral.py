@@ -35,13 +35,14 @@ loop on that plant (poles and margins at 10, 22, 35 m/s in the tests and docs/ar
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
+from numba.extending import register_jitable
 
 from controllers.bicycle import CORNERING_STIFFNESS, LENGTH, MASS, SLIP_GRADIENT, YAW_POLE_SPEED
 from controllers.config import PIDGains
-from controllers.pid import PID
+from controllers.pid import PID_START, PIDMemory, PIDTerms, pid_output
 from records import EgoState, PlantName, Reference, clip
 
 if TYPE_CHECKING:  # python-control (and scipy under it) loads only for the loop analyses below
@@ -57,12 +58,26 @@ limited to +-v sin(MAX_COURSE), and its integrator clamps there (no windup at cr
 lane change's reference asks for at most `Maneuver.max_course`, 12 deg by default)."""
 
 
+class LateralGains(NamedTuple):
+    """The lateral PID's gains and steering limits (`controllers.config.PIDGains`' lateral part)."""
+
+    kp_lateral: float
+    ki_lateral: float
+    kp_heading: float
+    steering_rate: float
+    """Steering rate limit [rad/s]."""
+    max_steering: float
+    """Steering limit [rad]."""
+
+
+@register_jitable
 def bandwidth_scale(speed: float) -> float:
     """sigma in (0, 1]: how much the lateral loop's poles are slowed at `speed` [m/s]."""
     return min(1.0, max(speed, MIN_SPEED) / FULL_BANDWIDTH_SPEED)
 
 
-def scheduled_gains(gains: PIDGains, speed: float) -> tuple[float, float, float]:
+@register_jitable
+def scheduled_gains(gains: PIDGains | LateralGains, speed: float) -> tuple[float, float, float]:
     """(kp_lateral, ki_lateral, kp_heading) at `speed` [m/s]: every pole scaled by `bandwidth_scale`."""
     sigma = bandwidth_scale(speed)
     if sigma == 1.0:
@@ -97,56 +112,95 @@ def dynamic_loop(gains: PIDGains, speed: float) -> control.TransferFunction:
     return control.minreal((kp + ki / s) / v * heading_loop * offset, verbose=False)
 
 
+class LateralMemory(NamedTuple):
+    """What the lateral PID carries between ticks: the outer loop's PID, the last steering [rad]
+    and (dynamic plant) the last commanded yaw rate [rad/s], if any."""
+
+    lateral: PIDMemory
+    steering: float
+    yaw_rate: float
+    has_yaw_rate: bool
+
+
+LATERAL_START = LateralMemory(PID_START, 0.0, 0.0, False)
+"""The lateral PID's memory after `reset`."""
+
+
+@register_jitable
+def lateral_steering(
+    gains: LateralGains,
+    memory: LateralMemory,
+    d: float,
+    heading: float,
+    speed: float,
+    curvature: float,
+    d_ref: float,
+    d_dot_ref: float,
+    d_ddot_ref: float,
+    dt: float,
+    dynamic: bool,
+) -> tuple[float, LateralMemory]:
+    """The steering [rad] and the next memory for the ego at lateral offset `d` [m], `heading` to
+    the lane [rad], `speed` [m/s] on a lane of `curvature` [1/m], following the reference (d_ref
+    [m], d_dot_ref [m/s], d_ddot_ref [m/s^2]) on the kinematic bicycle, or the `dynamic` one (the
+    module docstring's law)."""
+    v = max(speed, MIN_SPEED)
+    kp, ki, kp_heading = scheduled_gains(gains, v)
+    high = v * math.sin(MAX_COURSE)
+    terms = PIDTerms(kp, ki, 0.0, -high, high, math.inf)
+    lateral_speed, lateral = pid_output(terms, memory.lateral, d_ref - d, 0.0, dt, d_dot_ref)
+    course = math.asin(clip(lateral_speed / v, -1.0, 1.0))
+    road_rate = curvature * v / (1 - curvature * d)
+    feedforward_rate = d_ddot_ref / v + road_rate
+    slip = math.asin(clip(LENGTH / 2 * feedforward_rate / v, -0.5, 0.5))
+    if dynamic:
+        slip -= SLIP_GRADIENT * v * feedforward_rate
+    heading_error = course - slip - heading
+    stoppable = math.sqrt(v * gains.steering_rate / LENGTH * abs(heading_error))
+    yaw_rate = feedforward_rate + math.copysign(
+        min(kp_heading * abs(heading_error), stoppable), heading_error
+    )
+    last_yaw_rate, has_yaw_rate = memory.yaw_rate, memory.has_yaw_rate
+    if dynamic:
+        previous = last_yaw_rate if has_yaw_rate else yaw_rate
+        last_yaw_rate, has_yaw_rate = yaw_rate, True
+        yaw_rate += v / YAW_POLE_SPEED * (yaw_rate - previous) / dt
+    beta = math.asin(clip(LENGTH / 2 * yaw_rate / v, -0.7, 0.7))
+    step = gains.steering_rate * dt
+    steering = clip(
+        math.atan(2 * math.tan(beta)),
+        max(-gains.max_steering, memory.steering - step),
+        min(gains.max_steering, memory.steering + step),
+    )
+    return steering, LateralMemory(lateral, steering, last_yaw_rate, has_yaw_rate)
+
+
 class LateralPID:
     """Steering command [rad] from lateral and heading errors for the bicycle `model` (kinematic
-    or dynamic); stateful (integrator, last steering and yaw-rate command)."""
+    or dynamic); stateful (`LateralMemory`), the law is `lateral_steering`."""
 
     def __init__(self, gains: PIDGains, model: PlantName = "kinematic") -> None:
         self.gains, self.model = gains, model
-        self.lateral = PID(kp=gains.kp_lateral, ki=gains.ki_lateral, limits=(-10.0, 10.0))
+        self.limits = LateralGains(
+            gains.kp_lateral, gains.ki_lateral, gains.kp_heading, gains.steering_rate, gains.max_steering
+        )
         self.reset()
 
     def reset(self) -> None:
-        self.lateral.reset()
-        self.last_steering = 0.0
-        self.last_yaw_rate: float | None = None
+        self.memory = LATERAL_START
 
-    def _stoppable_yaw_rate(self, heading_error: float, speed: float) -> float:
-        """The largest yaw rate [rad/s] that the rate-limited steering can still bring to zero
-        within `heading_error` [rad] at `speed` [m/s]: sqrt(2 r'_max |error|), with half the yaw
-        acceleration the steering rate gives, r'_max = v steering_rate / (2 L) (the time-optimal
-        stop, as a bang-bang position loop). Binds only at crawl speed or large heading errors:
-        without it the heading overshoots while the steering unwinds at its rate limit."""
-        return math.sqrt(speed * self.gains.steering_rate / LENGTH * heading_error)
+    @property
+    def lateral(self) -> PIDMemory:
+        """The outer loop's PID memory (integral [m], last lateral-speed output [m/s])."""
+        return self.memory.lateral
+
+    @property
+    def last_steering(self) -> float:
+        return self.memory.steering
 
     def update(self, state: EgoState, reference: Reference, dt: float) -> float:
-        gains = self.gains
-        v = max(state.speed, MIN_SPEED)
-        self.lateral.kp, self.lateral.ki, kp_heading = scheduled_gains(gains, v)
-        self.lateral.high = v * math.sin(MAX_COURSE)
-        self.lateral.low = -self.lateral.high
-        lateral_speed = self.lateral.update(reference.d - state.d, dt, feedforward=reference.d_dot)
-        course = math.asin(clip(lateral_speed / v, -1.0, 1.0))
-        road_rate = state.curvature * v / (1 - state.curvature * state.d)
-        feedforward_rate = reference.d_ddot / v + road_rate
-        slip = math.asin(clip(LENGTH / 2 * feedforward_rate / v, -0.5, 0.5))
-        if self.model == "dynamic":
-            slip -= SLIP_GRADIENT * v * feedforward_rate
-        heading_error = course - slip - state.heading
-        yaw_rate = feedforward_rate + math.copysign(
-            min(kp_heading * abs(heading_error), self._stoppable_yaw_rate(abs(heading_error), v)),
-            heading_error,
-        )
-        if self.model == "dynamic":
-            previous = yaw_rate if self.last_yaw_rate is None else self.last_yaw_rate
-            self.last_yaw_rate = yaw_rate
-            yaw_rate += v / YAW_POLE_SPEED * (yaw_rate - previous) / dt
-        beta = math.asin(clip(LENGTH / 2 * yaw_rate / v, -0.7, 0.7))
-        step = gains.steering_rate * dt
-        steering = clip(
-            math.atan(2 * math.tan(beta)),
-            max(-gains.max_steering, self.last_steering - step),
-            min(gains.max_steering, self.last_steering + step),
-        )
-        self.last_steering = steering
+        steering, self.memory = lateral_steering(
+            self.limits, self.memory, state.d, state.heading, state.speed, state.curvature,
+            reference.d, reference.d_dot, reference.d_ddot, dt, self.model == "dynamic",
+        )  # fmt: skip
         return steering

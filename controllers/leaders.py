@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba.extending import register_jitable
 
 from common.neighbours import lateral_extent
 from records import Neighbour, WorldState
@@ -20,21 +21,46 @@ SIDE_MARGIN_M = 0.3
 """Lateral room a passed vehicle must still have to the ego's side when the ego is by [m]."""
 
 
-def passed_before_reached(world: WorldState, row: int, margin: float = SIDE_MARGIN_M) -> bool:
-    """Whether the ego's rear passes the front of the vehicle in `row` (slower, beside or ahead)
-    before that vehicle, at its lateral speed towards the ego, comes within `margin` [m] of
-    the ego's side; both keep their speeds. Never while its turned footprint
-    (`lateral_extent`: a car nosing into the lane) is already that close sideways."""
-    rel_s, closing = float(world.s[row] - world.s[0]), float(world.speed[0] - world.speed[row])
-    clear_s = (rel_s + (world.length[0] + world.length[row]) / 2) / closing
-    lane_heading = world.lanes[0].heading_at(float(world.s[row]))
-    towards = math.copysign(1.0, float(world.d[0] - world.d[row]))
-    lateral = towards * float(world.speed[row]) * math.sin(float(world.heading[row]) - lane_heading)
-    apart = abs(float(world.d[row] - world.d[0])) - float(world.width[0]) / 2 - margin
-    if apart - float(lateral_extent(world)[row - 1]) / 2 <= 0:
+@register_jitable
+def passes_before_reached(
+    rel_s: float,
+    closing: float,
+    lengths: float,
+    towards: float,
+    speed: float,
+    heading_to_lane: float,
+    apart: float,
+    extent: float,
+    width: float,
+) -> bool:
+    """Whether the ego's rear passes the front of a vehicle `rel_s` [m] ahead, `closing` [m/s] slower
+    and `lengths` [m] (the two half lengths) long together, before that vehicle, at its `speed`
+    [m/s] and `heading_to_lane` [rad] towards the ego's side (`towards`: +-1), comes within the
+    side margin of the ego: `apart` [m] is its centre's distance to the ego's side less the margin,
+    `extent` [m] its turned footprint across the road, `width` [m] its width. Both keep their
+    speeds. Never while its turned footprint is already that close sideways."""
+    clear_s = (rel_s + lengths) / closing
+    lateral = towards * speed * math.sin(heading_to_lane)
+    if apart - extent / 2 <= 0:
         return False
-    side_gap = apart - float(world.width[row]) / 2
+    side_gap = apart - width / 2
     return lateral <= 0 or clear_s < side_gap / lateral
+
+
+def passed_before_reached(world: WorldState, row: int, margin: float = SIDE_MARGIN_M) -> bool:
+    """`passes_before_reached` for the vehicle in `row` of `world` (slower, beside or ahead)."""
+    lane_heading = world.lanes[0].heading_at(float(world.s[row]))
+    return passes_before_reached(
+        float(world.s[row] - world.s[0]),
+        float(world.speed[0] - world.speed[row]),
+        float(world.length[0] + world.length[row]) / 2,
+        math.copysign(1.0, float(world.d[0] - world.d[row])),
+        float(world.speed[row]),
+        float(world.heading[row]) - lane_heading,
+        abs(float(world.d[row] - world.d[0])) - float(world.width[0]) / 2 - margin,
+        float(lateral_extent(world)[row - 1]),
+        float(world.width[row]),
+    )
 
 
 def leaders(world: WorldState, lanes: tuple[int, ...]) -> tuple[Neighbour, ...]:
@@ -60,3 +86,57 @@ def leaders(world: WorldState, lanes: tuple[int, ...]) -> tuple[Neighbour, ...]:
             if offset[row] <= LEAVING_M:
                 break
     return tuple(found)
+
+
+@register_jitable
+def leaders_in_rows(
+    lanes: np.ndarray,
+    n: int,
+    s: np.ndarray,
+    d: np.ndarray,
+    speed: np.ndarray,
+    heading: np.ndarray,
+    length: np.ndarray,
+    width: np.ndarray,
+    extent: np.ndarray,
+    offsets: np.ndarray,
+    lane_width: float,
+    lane_heading: float,
+    gaps: np.ndarray,
+    speeds: np.ndarray,
+    rows: np.ndarray,
+) -> int:
+    """`leaders(world, lanes)` of one world's `n` vehicles as rows of arrays (row 0 the ego;
+    `extent`: each one's turned footprint across the road [m]; a straight road of `lane_heading`
+    [rad]): writes each leader's gap [m], speed [m/s] and row in order and returns how many."""
+    found = 0
+    candidates = np.empty(n, dtype=np.int64)
+    for lane in lanes:
+        m = 0
+        for row in range(1, n):
+            rel = s[row] - s[0]
+            offset = abs(d[row] - offsets[lane])
+            if not (offset < (lane_width + extent[row]) / 2 and rel > 0):
+                continue
+            if offset > LEAVING_M and speed[row] < speed[0]:
+                towards = math.copysign(1.0, d[0] - d[row])
+                apart = abs(d[row] - d[0]) - width[0] / 2 - SIDE_MARGIN_M
+                if passes_before_reached(
+                    rel, speed[0] - speed[row], (length[0] + length[row]) / 2, towards, speed[row],
+                    heading[row] - lane_heading, apart, extent[row], width[row],
+                ):  # fmt: skip
+                    continue
+            position = m
+            while position > 0 and s[candidates[position - 1]] - s[0] > rel:
+                candidates[position] = candidates[position - 1]
+                position -= 1
+            candidates[position] = row
+            m += 1
+        for k in range(m):
+            row = candidates[k]
+            gaps[found] = (s[row] - s[0]) - (length[row] + length[0]) / 2
+            speeds[found], rows[found] = speed[row], row
+            found += 1
+            if abs(d[row] - offsets[lane]) <= LEAVING_M:
+                break
+    return found

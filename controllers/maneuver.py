@@ -9,7 +9,14 @@ from dataclasses import dataclass
 
 from common.neighbours import occupied_lanes
 from controllers.leaders import leaders
-from controllers.reference import QuinticProfile, WarpedProfile, drivable_duration, lane_change, lane_keeping
+from controllers.reference import (
+    QuinticProfile,
+    WarpedProfile,
+    clock_rate,
+    drivable_duration,
+    lane_change,
+    lane_keeping,
+)
 from records import Command, Reference, WorldState
 
 AbortRule = Callable[[WorldState, int], bool]
@@ -112,10 +119,7 @@ class Maneuver:
 
     def _rate(self, speed: float) -> float:
         """How fast the profile's clock runs at `speed` [m/s] (see the class docstring)."""
-        peak = self.profile.peak_lateral_speed
-        if peak == 0.0:
-            return 1.0
-        return min(1.0, max(speed, 0.0) * math.tan(self.max_course) / peak)
+        return clock_rate(speed, math.tan(self.max_course), self.profile.peak_lateral_speed)
 
     def update(self, world: WorldState) -> bool:
         """Advance the state machine; True on the tick a lane change completes."""

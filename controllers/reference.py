@@ -6,19 +6,22 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
+from numba.extending import register_jitable
 
 PEAK_SAMPLES = 64
 """Points a profile's peak lateral speed is sampled on (evenly over its duration, end excluded)."""
 
 
+@register_jitable
 def quintic_coefficients(
     d0: float, d1: float, duration: float, v0: float, a0: float
 ) -> tuple[float, float, float, float, float, float]:
     """c0..c5 [m/s^k] of the quintic from (d0 [m], v0 [m/s], a0 [m/s^2]) to (d1, 0, 0) over
     `duration` [s], in closed form: sums, products and quotients only, so the per-world profile and
-    the batched kernels (`controllers.batch_control` compiles this very function) get the same bits."""
+    the batched kernels (which compile this very function) get the same bits."""
     t = duration
     t2 = t * t
     t3 = t2 * t
@@ -29,6 +32,7 @@ def quintic_coefficients(
     return d0, v0, a0 / 2.0, c3, c4, c5
 
 
+@register_jitable
 def quintic_at(
     c0: float, c1: float, c2: float, c3: float, c4: float, c5: float, tau: float
 ) -> tuple[float, float, float]:
@@ -40,11 +44,12 @@ def quintic_at(
     return d, d_dot, d_ddot
 
 
+@register_jitable
 def quintic_peak_speed(
     c0: float, c1: float, c2: float, c3: float, c4: float, c5: float, duration: float
 ) -> float:
     """Largest |d_dot| [m/s] of the quintic c0..c5 over `PEAK_SAMPLES` points of [0, duration) [s]
-    (`quintic_at`'s d_dot, written out: numba compiles this function alone)."""
+    (`quintic_at`'s d_dot, written out: the sum's order is the per-world code's)."""
     step = duration / PEAK_SAMPLES
     peak = 0.0
     for k in range(PEAK_SAMPLES):
@@ -52,6 +57,78 @@ def quintic_peak_speed(
         d_dot = c1 + tau * (2.0 * c2 + tau * (3.0 * c3 + tau * (4.0 * c4 + tau * (5.0 * c5))))
         peak = max(peak, abs(d_dot))
     return peak
+
+
+@register_jitable
+def quintic_sample(
+    c0: float,
+    c1: float,
+    c2: float,
+    c3: float,
+    c4: float,
+    c5: float,
+    t0: float,
+    duration: float,
+    d1: float,
+    t: float,
+) -> tuple[float, float, float]:
+    """(d [m], d_dot [m/s], d_ddot [m/s^2]) at absolute time `t` [s] of the quintic c0..c5 that
+    starts at `t0` and ends at `d1` after `duration` [s], constant afterwards."""
+    tau = t - t0
+    if tau >= duration:
+        return d1, 0.0, 0.0
+    return quintic_at(c0, c1, c2, c3, c4, c5, tau if tau > 0.0 else 0.0)
+
+
+class WarpClock(NamedTuple):
+    """A profile's own clock: profile time = `profile_anchor` + (t - `anchor`) x `rate` [s]."""
+
+    anchor: float
+    profile_anchor: float
+    rate: float
+
+
+@register_jitable
+def warped_time(clock: WarpClock, t: float) -> float:
+    """The profile time [s] of the `clock` at time `t` [s]."""
+    return clock.profile_anchor + (t - clock.anchor) * clock.rate
+
+
+@register_jitable
+def warped_sample(
+    c0: float,
+    c1: float,
+    c2: float,
+    c3: float,
+    c4: float,
+    c5: float,
+    t0: float,
+    duration: float,
+    d1: float,
+    clock: WarpClock,
+    t: float,
+) -> tuple[float, float, float]:
+    """`quintic_sample` on the `clock`'s profile time: d_dot scaled by its rate, d_ddot by the
+    rate squared (`WarpedProfile`)."""
+    d, d_dot, d_ddot = quintic_sample(c0, c1, c2, c3, c4, c5, t0, duration, d1, warped_time(clock, t))
+    return d, d_dot * clock.rate, d_ddot * (clock.rate * clock.rate)
+
+
+@register_jitable
+def rewarped(clock: WarpClock, t: float, rate: float) -> WarpClock:
+    """The `clock` from time `t` [s] on at `rate` (the same clock when the rate is unchanged)."""
+    if rate == clock.rate:
+        return clock
+    return WarpClock(t, warped_time(clock, t), rate)
+
+
+@register_jitable
+def clock_rate(speed: float, tan_max_course: float, peak_lateral_speed: float) -> float:
+    """How fast a profile whose peak lateral speed is `peak_lateral_speed` [m/s] may run at `speed`
+    [m/s] so that its course stays within atan(`tan_max_course`): at most 1."""
+    if peak_lateral_speed == 0.0:
+        return 1.0
+    return min(1.0, max(speed, 0.0) * tan_max_course / peak_lateral_speed)
 
 
 @dataclass(frozen=True)
@@ -77,10 +154,8 @@ class QuinticProfile:
 
     def sample(self, t: float) -> tuple[float, float, float]:
         """(d, d_dot, d_ddot) at absolute time t [s]."""
-        if self.finished(t):
-            return self.d1, 0.0, 0.0
         c0, c1, c2, c3, c4, c5 = self.coefficients.tolist()
-        return quintic_at(c0, c1, c2, c3, c4, c5, max(t - self.t0, 0.0))
+        return quintic_sample(c0, c1, c2, c3, c4, c5, self.t0, self.duration, self.d1, t)
 
     def samples(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(d [m], d_dot [m/s]) at each of the absolute `times` [s]: `sample` for a whole preview
@@ -109,7 +184,13 @@ QUINTIC_PEAK_SPEED = 15.0 / 8.0
 def drivable_duration(distance: float, speed: float, nominal: float, max_course: float) -> float:
     """The lane-change duration [s] for a lateral `distance` [m] at `speed` [m/s]: `nominal` [s],
     stretched so the quintic's peak lateral speed stays within speed * tan(max_course [rad])."""
-    return max(nominal, QUINTIC_PEAK_SPEED * abs(distance) / (speed * math.tan(max_course)))
+    return stretched_duration(distance, speed, nominal, math.tan(max_course))
+
+
+@register_jitable
+def stretched_duration(distance: float, speed: float, nominal: float, tan_max_course: float) -> float:
+    """`drivable_duration` with the course limit given as its tangent."""
+    return max(nominal, QUINTIC_PEAK_SPEED * abs(distance) / (speed * tan_max_course))
 
 
 @dataclass(frozen=True)
@@ -124,12 +205,17 @@ class WarpedProfile:
     profile_anchor: float = 0.0
     rate: float = 1.0
 
+    @property
+    def clock(self) -> WarpClock:
+        return WarpClock(self.anchor, self.profile_anchor, self.rate)
+
     def profile_time(self, t: float) -> float:
-        return self.profile_anchor + (t - self.anchor) * self.rate
+        return warped_time(self.clock, t)
 
     def sample(self, t: float) -> tuple[float, float, float]:
-        d, d_dot, d_ddot = self.profile.sample(self.profile_time(t))
-        return d, d_dot * self.rate, d_ddot * (self.rate * self.rate)
+        profile = self.profile
+        c0, c1, c2, c3, c4, c5 = profile.coefficients.tolist()
+        return warped_sample(c0, c1, c2, c3, c4, c5, profile.t0, profile.duration, profile.d1, self.clock, t)
 
     def samples(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         d, d_dot = self.profile.samples(self.profile_anchor + (times - self.anchor) * self.rate)
@@ -140,9 +226,8 @@ class WarpedProfile:
 
     def at_rate(self, t: float, rate: float) -> WarpedProfile:
         """This profile from time `t` [s] on at `rate` (itself when the rate is unchanged)."""
-        if rate == self.rate:
-            return self
-        return WarpedProfile(self.profile, t, self.profile_time(t), rate)
+        clock = rewarped(self.clock, t, rate)
+        return self if clock == self.clock else WarpedProfile(self.profile, *clock)
 
 
 def lane_change(

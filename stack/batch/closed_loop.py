@@ -17,13 +17,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controllers.emergency import EmergencyBraking
+from controllers.lateral import LateralPID
 from controllers.reference import lane_keeping
+from controllers.tracker import PIDTracker, make_controller
 from perception.batch_sensor import SensorBatch
 from perception.sensor import SensorModel
 from planner.batch_safety import lateral_drifts, lateral_extents, permitted_batch, safety_settings
 from records import WorldState
 from records.batch import WorldBatch
-from stack.batch.kernels import control, decide, settle
+from stack.batch.kernels import EgoLaws, control, decide, settle
 from stack.batch.metrics import EpisodeMetricsBatch
 from stack.loop.closed_loop import episode_sensor
 from stack.loop.safety_metrics import classify_collision
@@ -83,7 +86,7 @@ class ClosedLoopBatch:
         """The worlds an episode is one of: `config` alone, or the members of its `train.scenarios`."""
         self.traffic = TrafficBatch([member.highway for member in self.members], worlds)
         self.worlds, self.dt = worlds, self.traffic.dt
-        control_config, pid, safety = config.controller, config.controller.pid, config.planner.safety
+        control_config, safety = config.controller, config.planner.safety
         self.min_speed = control_config.min_lane_change_speed_mps
         max_course = math.radians(control_config.lane_change_max_course_deg)
         self.settings = np.array(
@@ -96,14 +99,17 @@ class ClosedLoopBatch:
         )
         self.safety = safety_settings(safety)
         self.abort_lookahead_s = safety.abort_lookahead_s
-        comfort = control_config.comfort_decel_mps2
-        self.gains = np.array(
-            [
-                *(pid.kp_lateral, pid.ki_lateral, pid.kp_heading, pid.steering_rate, pid.max_steering),
-                *(pid.kp_speed, pid.ki_speed, comfort, pid.max_acceleration),
-                *(control_config.time_gap_s, control_config.standstill_gap_m),
-                *(control_config.emergency_decel_mps2, comfort, control_config.emergency_ttc_s),
-            ]
+        tracker = make_controller(control_config, self.dt)
+        assert isinstance(tracker, PIDTracker) and isinstance(tracker.lateral, LateralPID)
+        self.laws = EgoLaws(
+            tracker.lateral.limits,
+            tracker.cruise.speed_pid.terms,
+            tracker.cruise.law,
+            EmergencyBraking(
+                control_config.emergency_decel_mps2,
+                control_config.comfort_decel_mps2,
+                control_config.emergency_ttc_s,
+            ).limits,
         )
         self.lane = np.zeros(worlds, dtype=np.int64)
         self.target = np.zeros(worlds, dtype=np.int64)
@@ -129,7 +135,7 @@ class ClosedLoopBatch:
 
     def _memory(self, vehicles: int, phantoms: int = 0) -> None:
         """Emergency braking's per-vehicle memory (`seen`, `seen_speed`, `seen_slowing`: what it
-        kept of each vehicle, `controllers.batch_control.emergency_acceleration`), grown to room
+        kept of each vehicle, `stack.batch.kernels.emergency_acceleration`), grown to room
         for `vehicles` a world (a column per snapshot row), then `phantoms` (a column per false
         positive's id)."""
         more = vehicles - self.vehicle_room
@@ -290,7 +296,7 @@ class ClosedLoopBatch:
             live, traffic.time, perceived.columns(), perceived.heading, perceived.lane_heading,
             lateral_extents(perceived), lateral_drifts(perceived, self.abort_lookahead_s),
             perceived.lane_width, self.slots, self._maneuver(), controller,
-            self.safety, self.settings, self.gains, self.dt, actuation,
+            self.safety, self.settings, self.laws, self.dt, actuation,
         )  # fmt: skip
         control_s = time.perf_counter() - started
         ended = traffic.step(actuation[:, 0], actuation[:, 1], live)

@@ -3,7 +3,7 @@ every world: `decide` (a decision point: the safety layer's filter, the maneuver
 `control` (one tick's reference, leaders, PID, cruise and emergency braking: the actuation) and
 `settle` (after the plant's frame: road departure, the maneuver's end). Each follows
 `ClosedLoop.act` / `ClosedLoop.tick` on one world, through the per-world functions of
-`controllers.batch_control` and `planner.batch_safety`.
+the layers' per-tick laws (`controllers`, `planner.batch_safety`), compiled.
 
 The state a kernel reads and writes is a tuple of arrays, one row per world (`EgoState`'s
 `arrays()`): maneuver (lane, target, quintic coefficients (W, 6), profile [t0, duration, end,
@@ -15,27 +15,43 @@ activations]) and the road departure flag."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from common import neighbours
 from common.compiled import Kernel
-from controllers.batch_control import (
-    coefficients,
-    cruise_acceleration,
-    emergency_acceleration,
-    lateral_steering,
-    leaders_of,
-    peak_speed,
+from controllers.cruise import GapKeeping, gap_acceleration
+from controllers.emergency import BrakingLimits, braked_acceleration, leader_braking, needs_full_braking
+from controllers.lateral import LateralGains, LateralMemory, lateral_steering
+from controllers.leaders import leaders_in_rows
+from controllers.pid import PIDMemory, PIDTerms, pid_output
+from controllers.reference import (
+    WarpClock,
+    clock_rate,
+    quintic_coefficients,
+    quintic_peak_speed,
+    rewarped,
+    stretched_duration,
     warped_sample,
 )
-from controllers.reference import QUINTIC_PEAK_SPEED
 from planner.batch_safety import change_is_safe, lane_is_safe
+from records import clip
 from stack.loop.safety_metrics import DEPARTURE_TOLERANCE_M
 
 STAY = 1
 """`Command.STAY`'s value (LEFT 0, RIGHT 2: the lane shift is the value - 1)."""
+
+
+class EgoLaws(NamedTuple):
+    """The settings of the ego's per-tick laws, as the per-world controllers hold them: the lateral
+    PID's gains, the cruise's speed PI and gap keeping, emergency braking's limits."""
+
+    lateral: LateralGains
+    speed: PIDTerms
+    gap: GapKeeping
+    braking: BrakingLimits
 
 
 @njit(cache=True, nogil=True)
@@ -53,11 +69,11 @@ def _set_profile(
 ) -> None:  # pragma: no cover - compiled
     """World `w`'s maneuver takes the quintic from (d0, v0, a0) at t0 to d1 over `duration` on a
     fresh clock (`WarpedProfile(QuinticProfile(...))`)."""
-    c = coefficients(d0, d1, duration, v0, a0)
+    c = quintic_coefficients(d0, d1, duration, v0, a0)
     for k in range(6):
         coef[w, k] = c[k]
     profile[w, 0], profile[w, 1], profile[w, 2] = t0, duration, d1
-    profile[w, 3] = peak_speed(c[0], c[1], c[2], c[3], c[4], c[5], duration)
+    profile[w, 3] = quintic_peak_speed(c[0], c[1], c[2], c[3], c[4], c[5], duration)
     clock[w, 0], clock[w, 1], clock[w, 2] = 0.0, 0.0, 1.0
 
 
@@ -65,8 +81,10 @@ def _set_profile(
 def _sample(
     w: int, coef: np.ndarray, profile: np.ndarray, clock: np.ndarray, t: float
 ) -> tuple[float, float, float]:  # pragma: no cover - compiled
+    c = coef[w]
+    warp = WarpClock(clock[w, 0], clock[w, 1], clock[w, 2])
     return warped_sample(
-        coef[w], profile[w, 0], profile[w, 1], profile[w, 2], clock[w, 0], clock[w, 1], clock[w, 2], t
+        c[0], c[1], c[2], c[3], c[4], c[5], profile[w, 0], profile[w, 1], profile[w, 2], warp, t
     )
 
 
@@ -115,13 +133,7 @@ def decide(
             continue
         d0, d_dot, _ = _sample(w, coef, profile, clock, time[w])
         distance = offsets[w, goal] - d0
-        drive_speed = ego_speed
-        if settings[1] > drive_speed:
-            drive_speed = settings[1]
-        if 1e-3 > drive_speed:
-            drive_speed = 1e-3
-        stretched = QUINTIC_PEAK_SPEED * abs(distance) / (drive_speed * settings[2])
-        duration = stretched if stretched > settings[0] else settings[0]
+        duration = stretched_duration(distance, max(ego_speed, settings[1], 1e-3), settings[0], settings[2])
         _set_profile(w, coef, profile, clock, d0, offsets[w, goal], time[w], duration, d_dot, 0.0)
         target[w] = goal
         counts[w, 0] += 1
@@ -142,7 +154,7 @@ def control(
     controller: tuple[np.ndarray, ...],
     safety: np.ndarray,
     settings: np.ndarray,
-    gains: np.ndarray,
+    laws: EgoLaws,
     dt: float,
     actuation: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
@@ -150,11 +162,11 @@ def control(
     change whose gap closed is aborted first: `safety[5:7]` the abort gap [m] and TTC [s], each
     vehicle counted where it reaches within its lateral `drift` [m] over the abort's lookahead), the
     leaders (of the lane it heads for, then of every other lane the ego's footprint reaches), the
-    lateral PID, the adaptive cruise and emergency braking; writes (acceleration
-    [m/s^2], steering [rad]) to `actuation` (W, 2). `settings`: nominal duration [s], minimum
-    speed [m/s], tan of the largest course, set speed [m/s]; `gains`: the lateral PID's five, the
-    cruise's six, emergency braking's three (`EgoState`); `slots` (W, rows): the column of emergency
-    braking's memory each row's vehicle keeps (its id, as the per-world memory keys it)."""
+    lateral PID, the adaptive cruise and emergency braking, each the per-world law on the world's
+    row; writes (acceleration [m/s^2], steering [rad]) to `actuation` (W, 2). `settings`: nominal
+    duration [s], minimum speed [m/s], tan of the largest course, set speed [m/s]; `slots` (W,
+    rows): the column of emergency braking's memory each row's vehicle keeps (its id, as the
+    per-world memory keys it)."""
     count, s, d, speed, length, width, _, lanes_count, offsets = columns
     lane, target, coef, profile, clock, counts = maneuver
     lateral, speed_pi, seen, seen_speed, seen_slowing, flags = controller
@@ -179,14 +191,12 @@ def control(
                 target[w] = lane[w]
                 home = offsets[w, lane[w]]
                 _set_profile(w, coef, profile, clock, d[w, 0], home, t, settings[0] / 2, d_dot, d_ddot)
-        peak = profile[w, 3]
-        rate = 1.0
-        if peak != 0.0:
-            rate = max(speed[w, 0], 0.0) * settings[2] / peak
-            rate = rate if rate < 1.0 else 1.0
-        if rate != clock[w, 2]:
-            clock[w, 1] = clock[w, 1] + (t - clock[w, 0]) * clock[w, 2]
-            clock[w, 0], clock[w, 2] = t, rate
+        warp = rewarped(
+            WarpClock(clock[w, 0], clock[w, 1], clock[w, 2]),
+            t,
+            clock_rate(speed[w, 0], settings[2], profile[w, 3]),
+        )
+        clock[w, 0], clock[w, 1], clock[w, 2] = warp
         lanes[0], used = target[w], 1
         low, high = ego_extent(w, d, length, width, heading, lane_heading)
         for other in range(lanes_count[w]):
@@ -194,26 +204,103 @@ def control(
                 lanes[used] = other
                 used += 1
         d_ref, d_dot_ref, d_ddot_ref = _sample(w, coef, profile, clock, t)
-        found = leaders_of(
+        found = leaders_in_rows(
             lanes[:used], n, s[w], d[w], speed[w], heading[w], length[w], width[w], extent[w], offsets[w],
             lane_width, lane_heading[w], gaps, speeds, rows,
         )  # fmt: skip
         for k in range(found):
             rows[k] = slots[w, rows[k]]
         ego_speed = speed[w, 0]
-        relative = heading[w, 0] - lane_heading[w]
-        curvature = (lane_heading[w] - lane_heading[w]) / 2.0
-        steering = lateral_steering(
-            lateral[w], gains[:5], d[w, 0], relative, ego_speed, curvature, d_ref, d_dot_ref, d_ddot_ref, dt
+        memory = LateralMemory(
+            PIDMemory(lateral[w, 0], lateral[w, 1], lateral[w, 2] != 0.0), lateral[w, 3], 0.0, False
         )
-        acceleration = cruise_acceleration(
-            speed_pi[w], gains[5:11], ego_speed, settings[3], gaps, speeds, found, dt
+        steering, memory = lateral_steering(
+            laws.lateral, memory, d[w, 0], heading[w, 0] - lane_heading[w], ego_speed, 0.0,
+            d_ref, d_dot_ref, d_ddot_ref, dt, False,
+        )  # fmt: skip
+        lateral[w, 0], lateral[w, 1], lateral[w, 2], lateral[w, 3] = (
+            memory.lateral.integral,
+            memory.lateral.output,
+            1.0,
+            memory.steering,
         )
+        acceleration = cruise_acceleration(speed_pi[w], laws, ego_speed, settings[3], gaps, speeds, found, dt)
         acceleration = emergency_acceleration(
             acceleration, ego_speed, gaps, speeds, rows, found,
-            seen[w], seen_speed[w], seen_slowing[w], flags[w], gains[11:14], dt,
+            seen[w], seen_speed[w], seen_slowing[w], flags[w], laws.braking, dt,
         )  # fmt: skip
         actuation[w, 0], actuation[w, 1] = acceleration, steering
+
+
+@njit(cache=True, nogil=True)
+def cruise_acceleration(
+    state: np.ndarray,
+    laws: EgoLaws,
+    speed: float,
+    set_speed: float,
+    gaps: np.ndarray,
+    speeds: np.ndarray,
+    leaders: int,
+    dt: float,
+) -> float:  # pragma: no cover - compiled
+    """`AdaptiveCruise.update` on one world's row: the speed PI (`state`: [integral, output, has
+    output]) capped by the gap law of each of the first `leaders` (gap [m], speed [m/s])."""
+    command, memory = pid_output(
+        laws.speed, PIDMemory(state[0], state[1], state[2] != 0.0), set_speed - speed, 0.0, dt, 0.0
+    )
+    state[0], state[1], state[2] = memory.integral, memory.output, 1.0
+    for k in range(leaders):
+        command = min(command, gap_acceleration(laws.gap, speed, gaps[k], speeds[k]))
+    return clip(command, laws.speed.low, laws.speed.high)
+
+
+@njit(cache=True, nogil=True)
+def emergency_acceleration(
+    acceleration: float,
+    speed: float,
+    gaps: np.ndarray,
+    speeds: np.ndarray,
+    rows: np.ndarray,
+    leaders: int,
+    seen: np.ndarray,
+    seen_speed: np.ndarray,
+    seen_slowing: np.ndarray,
+    flags: np.ndarray,
+    limits: BrakingLimits,
+    dt: float,
+) -> float:  # pragma: no cover - compiled
+    """`EmergencyBraking.apply` on one world's row: its memory per vehicle slot (`seen` 1 where it
+    was a leader last tick, its speed then in `seen_speed`; 2 where it was one the tick before too,
+    its slowing then in `seen_slowing` [m/s^2]) and `flags` = [active, activations]."""
+    braking = np.zeros(leaders)
+    rates = np.zeros(leaders)
+    rated = np.zeros(leaders, dtype=np.bool_)
+    for k in range(leaders):
+        row = rows[k]
+        if seen[row] >= 1:
+            previous_slowing = seen_slowing[row] if seen[row] == 2 else 0.0
+            rates[k], braking[k] = leader_braking(seen_speed[row], speeds[k], previous_slowing, dt)
+            rated[k] = True
+    seen[:] = 0
+    for k in range(leaders):
+        seen_speed[rows[k]] = speeds[k]
+        seen[rows[k]] = 1
+    for k in range(leaders):
+        if rated[k]:
+            seen_slowing[rows[k]] = rates[k]
+            seen[rows[k]] = 2
+    if flags[0] != 0:
+        closing_in = False
+        for k in range(leaders):
+            closing_in = closing_in or speed > speeds[k]
+        flags[0] = 1 if closing_in else 0
+    else:
+        for k in range(leaders):
+            if needs_full_braking(limits, speed, gaps[k], speeds[k], braking[k]):
+                flags[0] = 1
+                flags[1] += 1
+                break
+    return braked_acceleration(limits, flags[0] != 0, acceleration, speed, dt)
 
 
 @njit(cache=True, nogil=True)
