@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 from numba.extending import register_jitable
 
 from common.neighbours import lateral_extent
@@ -47,45 +48,30 @@ def passes_before_reached(
     return lateral <= 0 or clear_s < side_gap / lateral
 
 
-def passed_before_reached(world: WorldState, row: int, margin: float = SIDE_MARGIN_M) -> bool:
-    """`passes_before_reached` for the vehicle in `row` of `world` (slower, beside or ahead)."""
-    lane_heading = world.lanes[0].heading_at(float(world.s[row]))
-    return passes_before_reached(
-        float(world.s[row] - world.s[0]),
-        float(world.speed[0] - world.speed[row]),
-        float(world.length[0] + world.length[row]) / 2,
-        math.copysign(1.0, float(world.d[0] - world.d[row])),
-        float(world.speed[row]),
-        float(world.heading[row]) - lane_heading,
-        abs(float(world.d[row] - world.d[0])) - float(world.width[0]) / 2 - margin,
-        float(lateral_extent(world)[row - 1]),
-        float(world.width[row]),
-    )
-
-
 def leaders(world: WorldState, lanes: tuple[int, ...]) -> tuple[Neighbour, ...]:
     """For each lane in `lanes`, the closest vehicle ahead reaching into it (none if nobody) and,
     while that one is leaving or entering the lane (centre more than `LEAVING_M` off the lane's
     centre), the next one ahead that it no longer hides, and so on: a cut-out reveals the car
     beyond at once. A slower vehicle entering the lane that the ego passes before it reaches
-    the ego's side (`passed_before_reached`) is not followed: braking for it would only keep
-    the two side by side for longer."""
-    rel_s = world.s[1:] - world.s[0]
-    gap = rel_s - (world.length[1:] + world.length[0]) / 2
-    reach, d, ahead = (world.lane_width + lateral_extent(world)) / 2, world.d[1:], rel_s > 0
-    slower = world.speed[1:] < world.speed[0]
-    found: list[Neighbour] = []
-    for lane in lanes:
-        offset = np.abs(d - world.lane_offsets[lane])
-        in_lane = (offset < reach) & ahead
-        for row in (in_lane & (offset > LEAVING_M) & slower).nonzero()[0].tolist():
-            in_lane[row] = not passed_before_reached(world, row + 1)
-        rows = in_lane.nonzero()[0]
-        for row in rows[np.argsort(rel_s[rows], kind="stable")].tolist():
-            found.append(Neighbour(float(gap[row]), float(world.speed[row + 1]), int(world.ids[row + 1])))
-            if offset[row] <= LEAVING_M:
-                break
-    return tuple(found)
+    the ego's side (`passes_before_reached`) is not followed: braking for it would only keep
+    the two side by side for longer. `leaders_in_rows`, compiled, on the world's rows."""
+    n = world.count
+    found_most = n * len(lanes)
+    gaps, speeds, rows = np.empty(found_most), np.empty(found_most), np.empty(found_most, dtype=np.int64)
+    reference = world.lanes[0]
+    found = _leaders_in_rows(
+        np.array(lanes, dtype=np.int64), n, world.s, world.d, world.speed,
+        world.heading - np.array([reference.heading_at(s) for s in world.s.tolist()]),
+        world.length, world.width, np.concatenate(((0.0,), lateral_extent(world))),
+        world.lane_offsets, world.lane_width, gaps, speeds, rows,
+    )  # fmt: skip
+    ids = world.ids
+    return tuple(
+        Neighbour(gap, speed, int(ids[row]))
+        for gap, speed, row in zip(
+            gaps[:found].tolist(), speeds[:found].tolist(), rows[:found].tolist(), strict=True
+        )
+    )
 
 
 @register_jitable
@@ -95,20 +81,20 @@ def leaders_in_rows(
     s: np.ndarray,
     d: np.ndarray,
     speed: np.ndarray,
-    heading: np.ndarray,
+    heading_to_lane: np.ndarray,
     length: np.ndarray,
     width: np.ndarray,
     extent: np.ndarray,
     offsets: np.ndarray,
     lane_width: float,
-    lane_heading: float,
     gaps: np.ndarray,
     speeds: np.ndarray,
     rows: np.ndarray,
 ) -> int:
     """`leaders(world, lanes)` of one world's `n` vehicles as rows of arrays (row 0 the ego;
-    `extent`: each one's turned footprint across the road [m]; a straight road of `lane_heading`
-    [rad]): writes each leader's gap [m], speed [m/s] and row in order and returns how many."""
+    `heading_to_lane`: each one's heading to the lane at its position [rad]; `extent`: its turned
+    footprint across the road [m]): writes each leader's gap [m], speed [m/s] and row in order
+    and returns how many."""
     found = 0
     candidates = np.empty(n, dtype=np.int64)
     for lane in lanes:
@@ -123,7 +109,7 @@ def leaders_in_rows(
                 apart = abs(d[row] - d[0]) - width[0] / 2 - SIDE_MARGIN_M
                 if passes_before_reached(
                     rel, speed[0] - speed[row], (length[0] + length[row]) / 2, towards, speed[row],
-                    heading[row] - lane_heading, apart, extent[row], width[row],
+                    heading_to_lane[row], apart, extent[row], width[row],
                 ):  # fmt: skip
                     continue
             position = m
@@ -140,3 +126,6 @@ def leaders_in_rows(
             if abs(d[row] - offsets[lane]) <= LEAVING_M:
                 break
     return found
+
+
+_leaders_in_rows = njit(cache=True, nogil=True)(leaders_in_rows)

@@ -64,6 +64,15 @@ def test_a_run_is_the_same_in_batches_and_over_processes() -> None:
     first = run(config, progress=False)
     assert first.episodes[0].snapshot is not None
     assert [e.outcome_row() for e in first.episodes] == [e.outcome_row() for e in one.episodes]
+    assert one.summary["stepping"] == "batched" and "stepping_reason" not in one.summary
+    alone = run(config.model_copy(update={"episodes": 2}), progress=False, snapshot=False, jobs=1)
+    assert alone.summary["stepping"] == "batched"
+
+
+def test_a_run_stepped_one_world_at_a_time_says_why_in_its_summary() -> None:
+    config = build_config({}, "test", scenario="jam", seed=625100, episodes=1, sim__batched=False)
+    summary = run(config, progress=False, snapshot=False).summary
+    assert summary["stepping"] == "per-world" and summary["stepping_reason"] == "sim.batched is off"
 
 
 @pytest.mark.parametrize(

@@ -205,8 +205,8 @@ def control(
                 used += 1
         d_ref, d_dot_ref, d_ddot_ref = _sample(w, coef, profile, clock, t)
         found = leaders_in_rows(
-            lanes[:used], n, s[w], d[w], speed[w], heading[w], length[w], width[w], extent[w], offsets[w],
-            lane_width, lane_heading[w], gaps, speeds, rows,
+            lanes[:used], n, s[w], d[w], speed[w], heading[w] - lane_heading[w], length[w], width[w],
+            extent[w], offsets[w], lane_width, gaps, speeds, rows,
         )  # fmt: skip
         for k in range(found):
             rows[k] = slots[w, rows[k]]

@@ -334,9 +334,14 @@ TIMING_FIELDS = timing_fields(EpisodeResult)
 """Summary and episode fields measured in wall-clock time: never part of a result's identity."""
 
 
+STEPPING_FIELDS = ("stepping", "stepping_reason")
+"""How a run's worlds were stepped (batched or one at a time, and why): the same episodes either way."""
+
+
 def outcome(summary: dict) -> dict:
-    """`summary` without its timing fields: what two runs of one seed must agree on."""
-    return {key: value for key, value in summary.items() if key not in TIMING_FIELDS}
+    """`summary` without its timing fields and how it was stepped: what two runs of one seed must
+    agree on."""
+    return {key: value for key, value in summary.items() if key not in TIMING_FIELDS + STEPPING_FIELDS}
 
 
 def summarize(results: list[EpisodeResult], **identity: object) -> dict:

@@ -118,10 +118,11 @@ def run(
         if on_finished is not None:
             on_finished(result)
 
+    stepped_alone = stepping_reason(config, record)
     try:
         if (video or snapshot) and pending and pending[0] == 0:
             finished(run_episode(config, pending.pop(0), frames if video else None, record))
-        if record is None and batch_refusal(config) is None:
+        if stepped_alone is None:
             split = batches(pending, jobs) if ray is None else batches(pending, 1, RAY_BATCH_WORLDS)
             if ray is None and (jobs <= 1 or len(split) <= 1):
                 for batch in split:
@@ -153,6 +154,17 @@ def run(
         backend=config.sim.backend,
         plant=config.sim.plant,
         seed=config.seed,
+        stepping="per-world" if stepped_alone else "batched",
+        **({"stepping_reason": stepped_alone} if stepped_alone else {}),
         interrupted=interrupted,
     )
     return RunResults(summary=summary, episodes=ordered, frames=frames)
+
+
+def stepping_reason(config: RunConfig, record: Path | None) -> str | None:
+    """Why `config`'s episodes run one world at a time (one line), or None: they run as batches of
+    worlds (`batch_refusal`; a recorded run steps each world alone to record it). A batched run
+    still runs its episode 0 alone when it keeps that episode's video or road snapshot."""
+    if record is not None:
+        return "recorded episodes (--record) run one world at a time"
+    return batch_refusal(config)
