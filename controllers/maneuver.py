@@ -7,6 +7,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from numba.extending import register_jitable
+
 from common.neighbours import occupied_lanes
 from controllers.leaders import leaders
 from controllers.reference import (
@@ -25,6 +27,23 @@ AbortRule = Callable[[WorldState, int], bool]
 
 def never_abort(world: WorldState, target: int) -> bool:
     return False
+
+
+@register_jitable
+def lane_change_target(lane: int, shift: int, lanes_count: int, speed: float, min_speed: float) -> int:
+    """The lane a lane change `shift` lanes (-1 left, +1 right, 0 none) from `lane` heads for, or -1
+    when none starts: no shift, off the road, or the ego slower than `min_speed` [m/s]."""
+    target = lane + shift
+    if shift == 0 or not 0 <= target < lanes_count or speed < min_speed:
+        return -1
+    return target
+
+
+@register_jitable
+def left_origin(d: float, origin_offset: float, lane_width: float) -> bool:
+    """Whether the ego's centre at lateral offset `d` [m] has left the origin lane centred at
+    `origin_offset` [m]: past it, a lane change is no longer aborted."""
+    return abs(d - origin_offset) > lane_width / 2
 
 
 @dataclass(frozen=True)
@@ -80,9 +99,9 @@ class Maneuver:
         from where the reference is now (its offset and lateral speed), so the reference stays
         smooth whatever the car's own tracking error; False when it is STAY, off the road, the
         ego is slower than `min_speed`, a lane change runs already or `start_time` is past."""
-        target = self.lane + command.lane_shift
         speed = float(world.speed[0])
-        if command is Command.STAY or not 0 <= target < world.lanes_count or speed < self.min_speed:
+        target = lane_change_target(self.lane, command.lane_shift, world.lanes_count, speed, self.min_speed)
+        if target < 0:
             return False
         if self.changing_lane or (start_time is not None and start_time < world.time):
             return False
@@ -145,4 +164,4 @@ class Maneuver:
 
     def _crossed(self, world: WorldState) -> bool:
         """The ego's centre has left the origin lane."""
-        return abs(world.d[0] - world.lane_offsets[self.lane]) > world.lane_width / 2
+        return left_origin(float(world.d[0]), float(world.lane_offsets[self.lane]), world.lane_width)

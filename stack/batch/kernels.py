@@ -26,6 +26,7 @@ from controllers.cruise import GapKeeping, gap_acceleration
 from controllers.emergency import BrakingLimits, braked_acceleration, leader_braking, needs_full_braking
 from controllers.lateral import LateralGains, LateralMemory, lateral_steering
 from controllers.leaders import leaders_in_rows
+from controllers.maneuver import lane_change_target, left_origin
 from controllers.pid import PIDMemory, PIDTerms, pid_output
 from controllers.reference import (
     WarpClock,
@@ -35,6 +36,7 @@ from controllers.reference import (
     rewarped,
     stretched_duration,
     warped_sample,
+    warped_time,
 )
 from planner.batch_safety import change_is_safe, lane_is_safe
 from records import clip
@@ -126,9 +128,9 @@ def decide(
             counts[w, 1] += 1
             outcome[w, 1] = 1
             continue
-        goal = lane[w] + command - 1
         ego_speed = speed[w, 0]
-        if command == STAY or not 0 <= goal < lanes_count[w] or ego_speed < settings[1]:
+        goal = lane_change_target(lane[w], command - 1, lanes_count[w], ego_speed, settings[1])
+        if goal < 0:
             outcome[w, 2] = 1 if command != STAY else 0
             continue
         d0, d_dot, _ = _sample(w, coef, profile, clock, time[w])
@@ -181,7 +183,7 @@ def control(
             continue
         t, n = time[w], count[w]
         if lane[w] != target[w]:
-            crossed = abs(d[w, 0] - offsets[w, lane[w]]) > lane_width / 2
+            crossed = left_origin(d[w, 0], offsets[w, lane[w]], lane_width)
             if not crossed and safety[0] != 0.0 and not lane_is_safe(
                 n, s[w], d[w], drift[w], speed[w], length[w], reach[w], offsets[w, target[w]],
                 safety[5], safety[6], 0.0, 0.0,
@@ -353,6 +355,6 @@ def settle(
         if low < edge_low - DEPARTURE_TOLERANCE_M or high > edge_high + DEPARTURE_TOLERANCE_M:
             departed[w] = True
         if lane[w] != target[w]:
-            profile_time = clock[w, 1] + (time[w] - clock[w, 0]) * clock[w, 2]
+            profile_time = warped_time(WarpClock(clock[w, 0], clock[w, 1], clock[w, 2]), time[w])
             if profile_time - profile[w, 0] >= profile[w, 1]:
                 lane[w] = target[w]
