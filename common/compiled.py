@@ -8,6 +8,13 @@ from functools import update_wrapper
 from typing import Any
 
 from numba import njit
+from numba.extending import register_jitable
+
+from records import clip as _clip
+
+clip = register_jitable(_clip)
+"""`records.clip` (numpy's rule for one number), which per-tick laws call as plain Python for one
+world and numba compiles where a batch kernel calls such a law."""
 
 
 class Kernel:

@@ -40,10 +40,11 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numba.extending import register_jitable
 
+from common.compiled import clip
 from controllers.bicycle import CORNERING_STIFFNESS, LENGTH, MASS, SLIP_GRADIENT, YAW_POLE_SPEED
 from controllers.config import PIDGains
 from controllers.pid import PID_START, PIDMemory, PIDTerms, pid_output
-from records import EgoState, PlantName, Reference, clip
+from records import EgoState, PlantName, Reference
 
 if TYPE_CHECKING:  # python-control (and scipy under it) loads only for the loop analyses below
     import control

@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 from numba.extending import register_jitable
 
-from records import clip
+from common.compiled import clip
 
 
 class PIDTerms(NamedTuple):

@@ -7,7 +7,6 @@ from enum import IntEnum
 from typing import Protocol
 
 import numpy as np
-from numba.extending import register_jitable
 
 from records.world import Neighbour
 
@@ -84,10 +83,8 @@ class Actuation:
     steering: float
 
 
-@register_jitable
 def clip(x: float, low: float, high: float) -> float:
     """`float(np.clip(x, low, high))` for one number, without numpy's dispatch (a few microseconds a
-    call, several calls a tick): numpy's own rule, a NaN `x` stays NaN, a tie keeps the bound. Plain
-    Python for one world; compiled where a batch kernel calls it (`register_jitable`)."""
+    call, several calls a tick): numpy's own rule, a NaN `x` stays NaN, a tie keeps the bound."""
     x = x if x != x or x > low else low
     return float(x if x != x or x < high else high)

@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 from common import neighbours
-from common.compiled import Kernel
+from common.compiled import Kernel, clip
 from controllers.cruise import GapKeeping, gap_acceleration
 from controllers.emergency import BrakingLimits, braked_acceleration, leader_braking, needs_full_braking
 from controllers.lateral import LateralGains, LateralMemory, lateral_steering
@@ -39,7 +39,6 @@ from controllers.reference import (
     warped_time,
 )
 from planner.batch_safety import change_is_safe, lane_is_safe
-from records import clip
 from stack.loop.safety_metrics import DEPARTURE_TOLERANCE_M
 
 STAY = 1
