@@ -8,9 +8,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from perception.batch_grid import observe_batch
 from perception.batch_sensor import SensorBatch
-from perception.grid import OccupancyGridBuilder
+from perception.grid import OccupancyGridBuilder, observe_batch
 from perception.sensor import SensorConfig, SensorModel
 from planner.agents import decide
 from planner.batch_safety import lane_is_safe, lateral_drifts, lateral_extents, permitted_batch
