@@ -25,30 +25,35 @@ Optional features (`features`):
   grid's sight: their mean and lowest relative speed (as `relative_speed`; 0 when there are none) and
   the share of the range their lengths fill, in [0, 1]; [0, 0, 1] off the road.
 
-One law, two paths: `fill_grid` is the grid of one world (presence, relative speed, TTC), a plain
-function that numba compiles; `OccupancyGridBuilder.build` calls it on its own world and
-`observe_batch` loops over the worlds of a `WorldBatch` around it, writing each world's `observation`
-encoding in place, to the same bits. Where two vehicles at exactly the same distance from the ego
-cover one cell, the one with the higher row gives its relative speed.
+One law, two paths: the grid of one world (presence, relative speed, TTC) is
+`perception.grid_law.fill_grid`; `OccupancyGridBuilder.build` calls it compiled on its own world
+and `observe_batch` on every world of a `WorldBatch`, each world's `observation` encoding written
+in place, to the same bits.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 from gymnasium import spaces
-from numba import njit
 
-from common import neighbours
-from common.compiled import Kernel
 from perception import features
+from perception.grid_law import (
+    GridLaw,
+    GridParts,
+    GridWorld,
+    GridWorlds,
+    ObservationLayout,
+    ego_speed_value,
+    fill_grid_compiled,
+    longitudinal_speed,
+    observe_worlds,
+    write_lane_part,
+)
 from records import (
     ENCODINGS,
     FEATURES,
-    MAX_SPEED,
-    SIDE_LANES_SEEN,
     TRAFFIC_VALUES,
     Encoding,
     GridConfig,
@@ -59,168 +64,6 @@ from records.batch import WorldBatch
 
 BATCHED_FEATURES = tuple(name for name in FEATURES if name != "traffic")
 """The grid features `observe_batch` computes (in the observation's order)."""
-
-
-class GridLaw(NamedTuple):
-    """A `GridConfig` as `fill_grid` reads it: cells of `cell_length` [m], the ego's in column
-    `ego_column` of `cells`; rows centred on the ego's lane (`ego_rows`, `reach` lanes each side)
-    or one per road lane; `footprint`: a vehicle fills every cell and lane its footprint overlaps,
-    else the cell and lane of its centre; relative speeds scaled by `speed_scale` [m/s], times to
-    collision by `ttc_horizon` [s]."""
-
-    cell_length: float
-    ego_column: int
-    cells: int
-    ego_rows: bool
-    reach: int
-    footprint: bool
-    speed_scale: float
-    ttc_horizon: float
-
-    @classmethod
-    def of(cls, config: GridConfig) -> GridLaw:
-        return cls(
-            float(config.cell_length),
-            config.ego_column,
-            config.cells,
-            config.lanes == "ego",
-            config.lateral_reach,
-            config.footprint,
-            float(config.speed_scale),
-            float(config.ttc_horizon),
-        )
-
-
-class GridWorld(NamedTuple):
-    """One world as `fill_grid` reads it: `vehicles` rows (row 0 the ego) at `s`, `d` [m] in the
-    reference lane's frame, their `speed` [m/s], `longitudinal` speed along the lane at the ego
-    (`longitudinal_speed`) [m/s], `length` and `width` [m]; lane k's centre at `lane_offsets[k]`
-    of `lanes_count` lanes `lane_width` [m] wide; the ego in lane `ego_lane`."""
-
-    vehicles: int
-    s: np.ndarray
-    d: np.ndarray
-    speed: np.ndarray
-    longitudinal: np.ndarray
-    length: np.ndarray
-    width: np.ndarray
-    lane_offsets: np.ndarray
-    lanes_count: int
-    lane_width: float
-    ego_lane: int
-
-
-class GridParts(NamedTuple):
-    """What `fill_grid` writes of one world of `rows` grid rows and `vehicles` rows: `presence` and
-    `relative_speed` (rows, cells) float32 (zeros on entry), `ttc` (rows,) float32, `road` (rows,)
-    the road lane of each row (-1 off the road), `value` (vehicles,) each vehicle's relative speed
-    (`relative_speed`'s value, clipped to [-1, 1]) and `in_row` (rows, vehicles) the rows each
-    vehicle covers (the ego's column unused)."""
-
-    presence: np.ndarray
-    relative_speed: np.ndarray
-    ttc: np.ndarray
-    road: np.ndarray
-    value: np.ndarray
-    in_row: np.ndarray
-
-
-def longitudinal_speed(
-    speed: np.ndarray, heading: np.ndarray, lane_heading: np.ndarray | float
-) -> np.ndarray:
-    """Each vehicle's `speed` [m/s] along the lane heading at the ego `lane_heading` [rad], in
-    numpy over one world or a batch (numpy's cosine: one element's bits on any array)."""
-    return np.asarray(speed * np.cos(heading - lane_heading))
-
-
-def ego_speed_value(speed: float) -> float:
-    """The `ego_speed` feature of an ego at `speed` [m/s]: speed / MAX_SPEED in [0, 1]."""
-    return min(max(speed / MAX_SPEED, 0.0), 1.0)
-
-
-def write_lane_part(out: np.ndarray, lane: int, lanes: int, sides: bool) -> None:
-    """The lane part of the encodings into `out`: with `sides`, [lanes left of `lane`, lanes right
-    of it] each capped at SIDE_LANES_SEEN and scaled to [0, 1]; else `lane` as a binary code of
-    len(out) bits, most significant first."""
-    if sides:
-        out[0] = min(lane, SIDE_LANES_SEEN) / SIDE_LANES_SEEN
-        out[1] = min(lanes - 1 - lane, SIDE_LANES_SEEN) / SIDE_LANES_SEEN
-        return
-    bits = len(out)
-    for bit in range(bits):
-        out[bit] = (lane >> (bits - 1 - bit)) & 1
-
-
-_reaches_lane = njit(cache=True, nogil=True, inline="always")(neighbours.reaches_lane)
-_ego_speed_value = njit(cache=True, nogil=True, inline="always")(ego_speed_value)
-_write_lane_part = njit(cache=True, nogil=True)(write_lane_part)
-
-
-def fill_grid(world: GridWorld, law: GridLaw, parts: GridParts) -> None:
-    """The grid of one world into `parts`: each row's road lane; each other vehicle's columns
-    (ego-relative, cells of `cell_length`) and rows, marked present; per cell the relative speed
-    of its nearest occupant; per row min(TTC with the nearest vehicle ahead the ego closes on,
-    horizon) / horizon, 1 with none, 0 off the road. Compiled for both paths (`_fill_grid`)."""
-    n, half_lane = world.vehicles, world.lane_width / 2
-    rows, cells = parts.presence.shape
-    for row in range(rows):
-        lane = world.ego_lane - law.reach + row if law.ego_rows else row
-        parts.road[row] = lane if 0 <= lane < world.lanes_count else -1
-    first = np.empty(n)
-    last = np.empty(n)
-    for v in range(1, n):
-        rel = world.s[v] - world.s[0]
-        if law.footprint:
-            first[v] = np.floor((rel - world.length[v] / 2) / law.cell_length + 0.5)
-            last[v] = np.ceil((rel + world.length[v] / 2) / law.cell_length + 0.5) - 1
-        else:
-            first[v] = last[v] = np.floor(rel / law.cell_length + 0.5)
-        value = (world.longitudinal[v] - world.longitudinal[0]) / law.speed_scale
-        parts.value[v] = min(max(value, -1.0), 1.0)
-    nearest = np.full((rows, cells), np.inf)
-    for row in range(rows):
-        parts.ttc[row] = 0.0
-        for v in range(n):
-            parts.in_row[row, v] = False
-        lane = parts.road[row]
-        if lane < 0:
-            parts.presence[row] = 1.0
-            continue
-        parts.ttc[row] = 1.0
-        centre = world.lane_offsets[lane]
-        closest, closest_at = np.inf, -1
-        for v in range(1, n):
-            if law.footprint:
-                half_width = world.width[v] / 2
-                inside = _reaches_lane(
-                    world.d[v] - half_width, world.d[v] + half_width, centre, world.lane_width
-                )
-            else:
-                inside = abs(world.d[v] - centre) < half_lane
-            if not inside:
-                continue
-            parts.in_row[row, v] = True
-            rel = world.s[v] - world.s[0]
-            if 0 < rel < closest:
-                closest, closest_at = rel, v
-            for column in range(cells):
-                offset = column - law.ego_column
-                if offset < first[v] or offset > last[v]:
-                    continue
-                parts.presence[row, column] = 1.0
-                if abs(rel) <= nearest[row, column]:
-                    nearest[row, column] = abs(rel)
-                    parts.relative_speed[row, column] = parts.value[v]
-        if closest_at > 0:
-            closing = world.speed[0] - world.speed[closest_at]
-            if closing > 0:
-                gap = closest - (world.length[closest_at] + world.length[0]) / 2
-                seconds = max(gap, 0.0) / closing
-                parts.ttc[row] = min(seconds, law.ttc_horizon) / law.ttc_horizon
-
-
-_fill_grid = Kernel(fill_grid)
-_fill_grid_compiled = _fill_grid.compiled
 
 
 def _observation_low(name: str, size: int) -> np.ndarray:
@@ -359,7 +202,7 @@ class OccupancyGridBuilder:
             world.lane_width,
             ego_lane,
         )
-        _fill_grid(one, self.law, parts)
+        fill_grid_compiled(one, self.law, parts)
         features_on = config.features
         traffic = None
         if "traffic" in features_on:
@@ -391,35 +234,6 @@ def _reject_non_finite(world: WorldState) -> None:
         row = int(np.flatnonzero(~finite)[0])
         name = "the ego" if row == 0 else f"vehicle id {int(world.ids[row])}"
         raise ValueError(f"{name} has a non-finite state (s, d, speed or heading); refusing to grid it")
-
-
-class ObservationLayout(NamedTuple):
-    """Where each part of the `observation` encoding starts in a world's row (-1: not encoded):
-    `GridConfig.observation_layout` as `_observe` reads it."""
-
-    presence: int
-    relative_speed: int
-    ttc: int
-    ego_speed: int
-    ego_lateral: int
-    lane: int
-    sides: bool
-
-    @classmethod
-    def of(cls, config: GridConfig, lanes_count: int) -> ObservationLayout:
-        starts, at = {}, 0
-        for name, size in config.observation_layout(lanes_count):
-            starts[name] = at
-            at += size
-        return cls(
-            presence=starts["presence"],
-            relative_speed=starts.get("relative_speed", -1),
-            ttc=starts.get("ttc", -1),
-            ego_speed=starts.get("ego_speed", -1),
-            ego_lateral=starts.get("ego_lateral", -1),
-            lane=starts["lane"],
-            sides=config.lane_code == "sides",
-        )
 
 
 def batched_size(config: GridConfig, batch: WorldBatch) -> int:
@@ -462,7 +276,20 @@ def observe_batch(config: GridConfig, batch: WorldBatch) -> np.ndarray:
     layout = ObservationLayout.of(config, int(batch.lanes_count[0]))
     with_lateral = layout.ego_lateral >= 0
     lateral = _ego_lateral(batch) if with_lateral else np.zeros((batch.worlds, 2), dtype=np.float32)
-    _observe(observations, batch, longitudinal, GridLaw.of(config), layout, lateral)
+    worlds = GridWorlds(
+        batch.count,
+        batch.s,
+        batch.d,
+        batch.speed,
+        longitudinal,
+        batch.length,
+        batch.width,
+        batch.lane_offsets,
+        batch.lanes_count,
+        batch.lane_width,
+        np.ascontiguousarray(batch.lane[:, 0]),
+    )
+    observe_worlds(observations, worlds, GridLaw.of(config), layout, lateral)
     return observations
 
 
@@ -476,71 +303,3 @@ def _ego_lateral(batch: WorldBatch) -> np.ndarray:
             batch.d[w, 0], centre, batch.lane_width, batch.heading[w, 0], batch.lane_heading[w]
         )
     return lateral
-
-
-def _observe(
-    out: np.ndarray,
-    batch: WorldBatch,
-    longitudinal: np.ndarray,
-    law: GridLaw,
-    layout: ObservationLayout,
-    lateral: np.ndarray,
-) -> None:
-    """`out[w]`: world w's observation (`_observe_worlds`)."""
-    count, s, d, speed, length, width, lane, lanes_count, lane_offsets = batch.columns()
-    _observe_worlds(
-        out, count, s, d, speed, longitudinal, length, width, lane, lanes_count, lane_offsets,
-        batch.lane_width, law, layout, lateral,
-    )  # fmt: skip
-
-
-@Kernel
-def _observe_worlds(
-    out: np.ndarray,
-    count: np.ndarray,
-    s: np.ndarray,
-    d: np.ndarray,
-    speed: np.ndarray,
-    longitudinal: np.ndarray,
-    length: np.ndarray,
-    width: np.ndarray,
-    lane: np.ndarray,
-    lanes_count: np.ndarray,
-    lane_offsets: np.ndarray,
-    lane_width: float,
-    law: GridLaw,
-    layout: ObservationLayout,
-    lateral: np.ndarray,
-) -> None:  # pragma: no cover - compiled; covered through observe_batch
-    """Each world's `fill_grid` written into its row of `out` where `layout` puts each part, then
-    the ego's speed and lateral state (`lateral`) and the lane part."""
-    vehicles = s.shape[1]
-    for w in range(out.shape[0]):
-        row, lanes, ego_lane = out[w], lanes_count[w], lane[w, 0]
-        rows = 2 * law.reach + 1 if law.ego_rows else lanes
-        grid = rows * law.cells
-        presence = row[layout.presence : layout.presence + grid].reshape((rows, law.cells))
-        if layout.relative_speed >= 0:
-            relative = row[layout.relative_speed : layout.relative_speed + grid].reshape((rows, law.cells))
-        else:
-            relative = np.zeros((rows, law.cells), dtype=np.float32)
-        ttc = row[layout.ttc : layout.ttc + rows] if layout.ttc >= 0 else np.empty(rows, dtype=np.float32)
-        parts = GridParts(
-            presence,
-            relative,
-            ttc,
-            np.empty(rows, dtype=np.int64),
-            np.zeros(vehicles),
-            np.empty((rows, vehicles), dtype=np.bool_),
-        )
-        world = GridWorld(
-            count[w], s[w], d[w], speed[w], longitudinal[w], length[w], width[w], lane_offsets[w],
-            lanes, lane_width, ego_lane,
-        )  # fmt: skip
-        _fill_grid_compiled(world, law, parts)
-        if layout.ego_speed >= 0:
-            row[layout.ego_speed] = _ego_speed_value(speed[w, 0])
-        if layout.ego_lateral >= 0:
-            row[layout.ego_lateral] = lateral[w, 0]
-            row[layout.ego_lateral + 1] = lateral[w, 1]
-        _write_lane_part(row[layout.lane :], ego_lane, lanes, layout.sides)
