@@ -34,6 +34,7 @@ in place, to the same bits.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from gymnasium import spaces
@@ -236,33 +237,34 @@ def _reject_non_finite(world: WorldState) -> None:
         raise ValueError(f"{name} has a non-finite state (s, d, speed or heading); refusing to grid it")
 
 
-def batched_size(config: GridConfig, batch: WorldBatch) -> int:
-    """Values of one world's observation; ValueError (one line) for what the batch cannot encode:
-    a feature not in `BATCHED_FEATURES`, or observations of different sizes (absolute rows or the
-    binary lane code on roads of different lane counts)."""
+@lru_cache(maxsize=64)
+def _batched_encoding(
+    config: GridConfig, lanes_counts: frozenset[int]
+) -> tuple[int, GridLaw, ObservationLayout]:
+    """The values of one world's observation, the law and the layout of a batch of roads of
+    `lanes_counts` lanes; ValueError (one line) for what the batch cannot encode: a feature not in
+    `BATCHED_FEATURES`, or observations of different sizes (absolute rows or the binary lane code
+    on roads of different lane counts)."""
     unbatched = [name for name in config.features if name not in BATCHED_FEATURES]
     if unbatched:
         raise ValueError(
             f"perception.features: the batched grid computes {', '.join(BATCHED_FEATURES)}, "
             f"not {unbatched[0]}"
         )
-    sizes = {
-        sum(size for _, size in config.observation_layout(int(lanes)))
-        for lanes in set(batch.lanes_count.tolist())
-    }
+    sizes = {sum(size for _, size in config.observation_layout(lanes)) for lanes in lanes_counts}
     if len(sizes) != 1:
         raise ValueError(
             "perception: observations of one size on every road of a batch need lanes: ego and "
             "lane_code: sides"
         )
-    return sizes.pop()
+    return sizes.pop(), GridLaw.of(config), ObservationLayout.of(config, min(lanes_counts))
 
 
 def observe_batch(config: GridConfig, batch: WorldBatch) -> np.ndarray:
     """(worlds, values) float32: each world's `observation` encoding of the grid `config`
     describes, `OccupancyGridBuilder.build(world).encode("observation")` of every world to the
     same bits."""
-    size = batched_size(config, batch)
+    size, law, layout = _batched_encoding(config, frozenset(batch.lanes_count.tolist()))
     states = np.stack([batch.s, batch.d, batch.speed, batch.heading])
     padding = np.arange(batch.s.shape[1])[None, :] >= batch.count[:, None]
     finite = (np.isfinite(states).all(axis=0) | padding).all(axis=1)
@@ -273,7 +275,6 @@ def observe_batch(config: GridConfig, batch: WorldBatch) -> np.ndarray:
         )
     longitudinal = longitudinal_speed(batch.speed, batch.heading, batch.lane_heading[:, None])
     observations = np.zeros((batch.worlds, size), dtype=np.float32)
-    layout = ObservationLayout.of(config, int(batch.lanes_count[0]))
     with_lateral = layout.ego_lateral >= 0
     lateral = _ego_lateral(batch) if with_lateral else np.zeros((batch.worlds, 2), dtype=np.float32)
     worlds = GridWorlds(
@@ -289,7 +290,7 @@ def observe_batch(config: GridConfig, batch: WorldBatch) -> np.ndarray:
         batch.lane_width,
         np.ascontiguousarray(batch.lane[:, 0]),
     )
-    observe_worlds(observations, worlds, GridLaw.of(config), layout, lateral)
+    observe_worlds(observations, worlds, law, layout, lateral)
     return observations
 
 

@@ -161,10 +161,9 @@ def fill_grid(world: GridWorld, law: GridLaw, parts: GridParts) -> None:
             rel = world.s[v] - world.s[0]
             if 0 < rel < closest:
                 closest, closest_at = rel, v
-            for column in range(cells):
-                offset = column - law.ego_column
-                if offset < first[v] or offset > last[v]:
-                    continue
+            start = min(max(first[v] + law.ego_column, 0.0), cells)
+            stop = min(max(last[v] + law.ego_column + 1, 0.0), cells)
+            for column in range(int(start), int(stop)):
                 parts.presence[row, column] = 1.0
                 if abs(rel) <= nearest[row, column]:
                     nearest[row, column] = abs(rel)
@@ -179,7 +178,7 @@ def fill_grid(world: GridWorld, law: GridLaw, parts: GridParts) -> None:
 
 fill_grid_compiled = Kernel(fill_grid)
 """`fill_grid` compiled: what the per-world builder calls (`Kernel`: a stop interrupts it)."""
-_fill_grid = fill_grid_compiled.compiled
+_fill_grid = njit(cache=True, nogil=True, inline="always")(fill_grid)
 
 
 class ObservationLayout(NamedTuple):
@@ -234,24 +233,25 @@ def observe_worlds(
 ) -> None:  # pragma: no cover - compiled; covered through perception.grid.observe_batch
     """Each world's `fill_grid` written into its row of `out` where `layout` puts each part, then
     the ego's speed and lateral state (`lateral`) and the lane part."""
-    vehicles = worlds.s.shape[1]
+    vehicles, cells = worlds.s.shape[1], law.cells
+    rows_most = 2 * law.reach + 1 if law.ego_rows else max(worlds.lanes_count)
+    road = np.empty(rows_most, dtype=np.int64)
+    value = np.zeros(vehicles)
+    in_row = np.empty(rows_most * vehicles, dtype=np.bool_)
+    spare_relative = np.empty(rows_most * cells, dtype=np.float32)
+    spare_ttc = np.empty(rows_most, dtype=np.float32)
     for w in range(out.shape[0]):
         row, lanes, ego_lane = out[w], worlds.lanes_count[w], worlds.ego_lane[w]
         rows = 2 * law.reach + 1 if law.ego_rows else lanes
-        grid = rows * law.cells
-        presence = row[layout.presence : layout.presence + grid].reshape((rows, law.cells))
+        grid = rows * cells
+        presence = row[layout.presence : layout.presence + grid].reshape((rows, cells))
         if layout.relative_speed >= 0:
-            relative = row[layout.relative_speed : layout.relative_speed + grid].reshape((rows, law.cells))
+            relative = row[layout.relative_speed : layout.relative_speed + grid].reshape((rows, cells))
         else:
-            relative = np.zeros((rows, law.cells), dtype=np.float32)
-        ttc = row[layout.ttc : layout.ttc + rows] if layout.ttc >= 0 else np.empty(rows, dtype=np.float32)
+            relative = spare_relative[:grid].reshape((rows, cells))
+        ttc = row[layout.ttc : layout.ttc + rows] if layout.ttc >= 0 else spare_ttc[:rows]
         parts = GridParts(
-            presence,
-            relative,
-            ttc,
-            np.empty(rows, dtype=np.int64),
-            np.zeros(vehicles),
-            np.empty((rows, vehicles), dtype=np.bool_),
+            presence, relative, ttc, road[:rows], value, in_row[: rows * vehicles].reshape((rows, vehicles))
         )
         world = GridWorld(
             worlds.vehicles[w],
