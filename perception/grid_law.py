@@ -179,6 +179,7 @@ def fill_grid(world: GridWorld, law: GridLaw, parts: GridParts) -> None:
 fill_grid_compiled = Kernel(fill_grid)
 """`fill_grid` compiled: what the per-world builder calls (`Kernel`: a stop interrupts it)."""
 _fill_grid = njit(cache=True, nogil=True, inline="always")(fill_grid)
+"""`fill_grid` compiled into `observe_worlds` (inlined: the batch's loop pays no call per world)."""
 
 
 class ObservationLayout(NamedTuple):
