@@ -24,28 +24,47 @@ Optional features (`features`):
 - `traffic`: per row, the vehicles within TRAFFIC_RANGE [m] ahead of the ego in that lane, beyond the
   grid's sight: their mean and lowest relative speed (as `relative_speed`; 0 when there are none) and
   the share of the range their lengths fill, in [0, 1]; [0, 0, 1] off the road.
+
+One law, two paths: the grid of one world (presence, relative speed, TTC) is
+`perception.grid_law.fill_grid`; `OccupancyGridBuilder.build` calls it compiled on its own world
+and `observe_batch` on every world of a `WorldBatch`, each world's `observation` encoding written
+in place, to the same bits.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from gymnasium import spaces
 
 from perception import features
+from perception.grid_law import (
+    GridLaw,
+    GridParts,
+    GridWorld,
+    GridWorlds,
+    ObservationLayout,
+    ego_speed_value,
+    fill_grid_compiled,
+    longitudinal_speed,
+    observe_worlds,
+    write_lane_part,
+)
 from records import (
     ENCODINGS,
     FEATURES,
-    MAX_SPEED,
-    SIDE_LANES_SEEN,
     TRAFFIC_VALUES,
     Encoding,
     GridConfig,
     WorldState,
-    lane_code_bits,
     unknown_name,
 )
+from records.batch import WorldBatch
+
+BATCHED_FEATURES = tuple(name for name in FEATURES if name != "traffic")
+"""The grid features `observe_batch` computes (in the observation's order)."""
 
 
 def _observation_low(name: str, size: int) -> np.ndarray:
@@ -55,18 +74,6 @@ def _observation_low(name: str, size: int) -> np.ndarray:
     if name == "traffic":
         return np.tile(np.array([-1, -1, 0], dtype=np.float32), size // TRAFFIC_VALUES)
     return np.zeros(size, dtype=np.float32)
-
-
-def lane_code(lane: int, lanes: int) -> np.ndarray:
-    """`lane` as a binary code, most significant bit first."""
-    bits = lane_code_bits(lanes)
-    return np.array([(lane >> (bits - 1 - i)) & 1 for i in range(bits)], dtype=np.float32)
-
-
-def side_lanes_code(lane: int, lanes: int) -> np.ndarray:
-    """[lanes left of `lane`, lanes right of it], each capped at SIDE_LANES_SEEN and scaled to [0, 1]."""
-    sides = np.array([lane, lanes - 1 - lane], dtype=np.float32)
-    return np.minimum(sides, SIDE_LANES_SEEN) / SIDE_LANES_SEEN
 
 
 @dataclass(frozen=True)
@@ -100,9 +107,9 @@ class OccupancyGrid:
 
     def lane_part(self) -> np.ndarray:
         """Where the ego is, as `config.lane_code` says: its lane in binary, or its side lanes."""
-        if self.config.lane_code == "sides":
-            return side_lanes_code(self.ego_lane, self.lanes_count)
-        return lane_code(self.ego_lane, self.lanes_count)
+        part = np.zeros(self.config.lane_code_size(self.lanes_count), dtype=np.float32)
+        write_lane_part(part, self.ego_lane, self.lanes_count, self.config.lane_code == "sides")
+        return part
 
     def to_paper_state(self) -> np.ndarray:
         """Flattened presence grid followed by the ego lane as a binary code (the paper's DQN state)."""
@@ -135,10 +142,12 @@ class OccupancyGrid:
 
 
 class OccupancyGridBuilder:
-    """`build(world)`: the lane-aligned, ego-relative grid, vectorised over vehicles."""
+    """`build(world)`: the lane-aligned, ego-relative grid (`fill_grid`, compiled)."""
 
     def __init__(self, config: GridConfig) -> None:
         self.config = config
+        self.law = GridLaw.of(config)
+        self.with_speeds = bool({"relative_speed", "traffic"} & set(config.features))
 
     def paper_space(self, lanes_count: int) -> spaces.Box:
         size = self.config.rows(lanes_count) * self.config.cells + self.config.lane_code_size(lanes_count)
@@ -165,70 +174,58 @@ class OccupancyGridBuilder:
     def build(self, world: WorldState) -> OccupancyGrid:
         config = self.config
         _reject_non_finite(world)
-        ego_lane = int(world.lane[0])
-        rel_s = world.s[1:] - world.s[0]
-        along = self._columns(rel_s, world.length[1:])
-        across = self._lanes(world)
+        ego_lane, n = int(world.lane[0]), world.count
+        speed = _floats(world.speed)
+        if self.with_speeds:
+            lane_heading = world.lanes[0].heading_at(float(world.s[0]))
+            longitudinal = _floats(longitudinal_speed(speed, _floats(world.heading), lane_heading))
+        else:
+            longitudinal = np.zeros(n)
         rows = config.rows(world.lanes_count)
-        road_rows = self._road_rows(ego_lane, world.lanes_count)
-        occupancy = np.zeros((rows, config.cells), dtype=np.float32)
-        on_road = road_rows >= 0
-        occupancy[on_road] = (
-            across[:, road_rows[on_road]].T.astype(np.float32) @ along.astype(np.float32)
-        ) > 0
-        occupancy[~on_road] = 1.0
-        relative_speed = ttc = traffic = None
-        if {"relative_speed", "traffic"} & set(config.features):
-            value = features.relative_longitudinal_speed(config, world)
-        if "relative_speed" in config.features:
-            relative_speed = features.relative_speed(config, value, rel_s, along, across, road_rows)
-        if "ttc" in config.features:
-            ttc = features.time_to_collision(config, world, rel_s, across, road_rows)
-        ego_speed = (
-            float(np.clip(world.speed[0] / MAX_SPEED, 0, 1)) if "ego_speed" in config.features else None
+        parts = GridParts(
+            np.zeros((rows, config.cells), dtype=np.float32),
+            np.zeros((rows, config.cells), dtype=np.float32),
+            np.empty(rows, dtype=np.float32),
+            np.empty(rows, dtype=np.int64),
+            np.zeros(n),
+            np.empty((rows, n), dtype=np.bool_),
         )
-        ego_lateral = features.ego_lateral(world) if "ego_lateral" in config.features else None
-        if "traffic" in config.features:
-            traffic = features.traffic(world, value, rel_s, across, road_rows)
+        one = GridWorld(
+            n,
+            _floats(world.s),
+            _floats(world.d),
+            speed,
+            longitudinal,
+            _floats(world.length),
+            _floats(world.width),
+            _floats(world.lane_offsets),
+            world.lanes_count,
+            world.lane_width,
+            ego_lane,
+        )
+        fill_grid_compiled(one, self.law, parts)
+        features_on = config.features
+        traffic = None
+        if "traffic" in features_on:
+            rel_s = world.s[1:] - world.s[0]
+            traffic = features.traffic(world, parts.value[1:], rel_s, parts.in_row[:, 1:], parts.road)
         return OccupancyGrid(
-            occupancy,
+            parts.presence,
             ego_lane,
             world.lanes_count,
             config,
-            relative_speed,
-            ttc,
-            ego_speed,
-            ego_lateral,
+            parts.relative_speed if "relative_speed" in features_on else None,
+            parts.ttc if "ttc" in features_on else None,
+            ego_speed_value(float(world.speed[0])) if "ego_speed" in features_on else None,
+            features.ego_lateral(world) if "ego_lateral" in features_on else None,
             traffic,
         )
 
-    def _road_rows(self, ego_lane: int, lanes_count: int) -> np.ndarray:
-        """Road lane index of each grid row, -1 where the lane does not exist."""
-        if self.config.lanes == "absolute":
-            return np.arange(lanes_count)
-        lanes = ego_lane + np.arange(-self.config.lateral_reach, self.config.lateral_reach + 1)
-        return np.where((lanes >= 0) & (lanes < lanes_count), lanes, -1)
 
-    def _columns(self, rel_s: np.ndarray, length: np.ndarray) -> np.ndarray:
-        """(vehicles, cells) mask of the columns each vehicle covers."""
-        config = self.config
-        offsets = np.arange(config.cells) - config.ego_column
-        if config.footprint:
-            first = np.floor((rel_s - length / 2) / config.cell_length + 0.5)
-            last = np.ceil((rel_s + length / 2) / config.cell_length + 0.5) - 1
-        else:
-            first = last = np.floor(rel_s / config.cell_length + 0.5)
-        return (offsets[None, :] >= first[:, None]) & (offsets[None, :] <= last[:, None])
-
-    def _lanes(self, world: WorldState) -> np.ndarray:
-        """(vehicles, road lanes) mask of the lanes each vehicle covers."""
-        d = world.d[1:]
-        half_lane = world.lane_width / 2
-        if not self.config.footprint:
-            return np.abs(d[:, None] - world.lane_offsets[None, :]) < half_lane
-        half_width = world.width[1:, None] / 2
-        low, high = world.lane_offsets - half_lane, world.lane_offsets + half_lane
-        return (d[:, None] - half_width < high[None, :]) & (d[:, None] + half_width > low[None, :])
+def _floats(values: np.ndarray) -> np.ndarray:
+    """`values` as a contiguous float64 array (no copy when they are one): what `fill_grid` is
+    compiled for."""
+    return np.ascontiguousarray(values, dtype=np.float64)
 
 
 def _reject_non_finite(world: WorldState) -> None:
@@ -238,3 +235,72 @@ def _reject_non_finite(world: WorldState) -> None:
         row = int(np.flatnonzero(~finite)[0])
         name = "the ego" if row == 0 else f"vehicle id {int(world.ids[row])}"
         raise ValueError(f"{name} has a non-finite state (s, d, speed or heading); refusing to grid it")
+
+
+@lru_cache(maxsize=64)
+def _batched_encoding(
+    config: GridConfig, lanes_counts: frozenset[int]
+) -> tuple[int, GridLaw, ObservationLayout]:
+    """The values of one world's observation, the law and the layout of a batch of roads of
+    `lanes_counts` lanes; ValueError (one line) for what the batch cannot encode: a feature not in
+    `BATCHED_FEATURES`, or observations of different sizes (absolute rows or the binary lane code
+    on roads of different lane counts)."""
+    unbatched = [name for name in config.features if name not in BATCHED_FEATURES]
+    if unbatched:
+        raise ValueError(
+            f"perception.features: the batched grid computes {', '.join(BATCHED_FEATURES)}, "
+            f"not {unbatched[0]}"
+        )
+    sizes = {sum(size for _, size in config.observation_layout(lanes)) for lanes in lanes_counts}
+    if len(sizes) != 1:
+        raise ValueError(
+            "perception: observations of one size on every road of a batch need lanes: ego and "
+            "lane_code: sides"
+        )
+    return sizes.pop(), GridLaw.of(config), ObservationLayout.of(config, min(lanes_counts))
+
+
+def observe_batch(config: GridConfig, batch: WorldBatch) -> np.ndarray:
+    """(worlds, values) float32: each world's `observation` encoding of the grid `config`
+    describes, `OccupancyGridBuilder.build(world).encode("observation")` of every world to the
+    same bits."""
+    size, law, layout = _batched_encoding(config, frozenset(batch.lanes_count.tolist()))
+    states = np.stack([batch.s, batch.d, batch.speed, batch.heading])
+    padding = np.arange(batch.s.shape[1])[None, :] >= batch.count[:, None]
+    finite = (np.isfinite(states).all(axis=0) | padding).all(axis=1)
+    if not finite.all():
+        world = int(np.flatnonzero(~finite)[0])
+        raise ValueError(
+            f"world {world} has a non-finite state (s, d, speed or heading); refusing to grid it"
+        )
+    longitudinal = longitudinal_speed(batch.speed, batch.heading, batch.lane_heading[:, None])
+    observations = np.zeros((batch.worlds, size), dtype=np.float32)
+    with_lateral = layout.ego_lateral >= 0
+    lateral = _ego_lateral(batch) if with_lateral else np.zeros((batch.worlds, 2), dtype=np.float32)
+    worlds = GridWorlds(
+        batch.count,
+        batch.s,
+        batch.d,
+        batch.speed,
+        longitudinal,
+        batch.length,
+        batch.width,
+        batch.lane_offsets,
+        batch.lanes_count,
+        batch.lane_width,
+        np.ascontiguousarray(batch.lane[:, 0]),
+    )
+    observe_worlds(observations, worlds, law, layout, lateral)
+    return observations
+
+
+def _ego_lateral(batch: WorldBatch) -> np.ndarray:
+    """(worlds, 2) float32: each world's `features.ego_lateral`. A batch's lanes are parallel
+    straight lanes of one segment, so the ego's lane has lane 0's heading."""
+    lateral = np.empty((batch.worlds, 2), dtype=np.float32)
+    for w in range(batch.worlds):
+        centre = batch.lane_offsets[w, int(batch.lane[w, 0])]
+        lateral[w] = features.lateral_feature(
+            batch.d[w, 0], centre, batch.lane_width, batch.heading[w, 0], batch.lane_heading[w]
+        )
+    return lateral

@@ -3,17 +3,24 @@
 All effects are off by default and seeded. Applied to a `WorldState` before gridding, in order:
 limited range, missed detections, position noise, false positives. The ego (row 0) is never
 touched: it knows where it is.
+
+One law, two paths: `detect` is one observation's draws from one world's generator; `SensorModel`
+calls it on its world and `SensorBatch` on each world of a batch it observes anew (one generator
+draws for one world only, so that is one short Python step per world), then makes every world's
+report from the draws in numpy over the batch, to the bits `SensorModel.observe` reports.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+from typing import NamedTuple
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from records import WorldState
+from records.batch import WorldBatch
 
 PHANTOM_ID_BASE = 1_000_000
 """Ids of false-positive detections start here, so they never collide with real vehicles."""
@@ -46,6 +53,16 @@ class SensorConfig(BaseModel):
         return range_m
 
     @property
+    def law(self) -> SensorLaw:
+        return SensorLaw(
+            self.range_m,
+            self.miss_probability,
+            self.position_noise_m,
+            self.false_positives,
+            self.false_positive_range_m,
+        )
+
+    @property
     def enabled(self) -> bool:
         return (
             math.isfinite(self.range_m)
@@ -53,6 +70,52 @@ class SensorConfig(BaseModel):
             or self.miss_probability > 0
             or self.false_positives > 0
         )
+
+
+class SensorLaw(NamedTuple):
+    """A `SensorConfig` as `detect` reads it (a record numba compiles too)."""
+
+    range_m: float
+    miss_probability: float
+    position_noise_m: float
+    false_positives: float
+    false_positive_range_m: float
+
+
+class Detections(NamedTuple):
+    """One observation's draws: `rows` the truth rows detected (the ego's, 0, first), `noise`
+    (2, rows) [m] added to their s and d when `noised` (0 on the ego's), and the false positives'
+    `phantom_s` [m] and `phantom_lane`."""
+
+    rows: np.ndarray
+    noised: bool
+    noise: np.ndarray
+    phantom_s: np.ndarray
+    phantom_lane: np.ndarray
+
+
+def detect(law: SensorLaw, rng: np.random.Generator, s: np.ndarray, lanes_count: int) -> Detections:
+    """What a sensor detects of vehicles at `s` [m] (row 0 the ego) on a road of `lanes_count`
+    lanes, drawn from `rng` in this order: a miss per vehicle, noise on each one kept, the number
+    of phantoms, their positions within +-false_positive_range_m of the ego and their lanes
+    (nothing drawn for an effect that is off). Plain numpy that numba also compiles, to the same
+    draws; both paths call it in Python, as each world's generator draws for that world only."""
+    keep = np.abs(s - s[0]) <= law.range_m
+    keep &= rng.random(len(s)) >= law.miss_probability
+    keep[0] = True
+    rows = np.flatnonzero(keep)
+    noised = law.position_noise_m > 0
+    noise = np.zeros((2, 0))
+    if noised:
+        noise = rng.normal(0.0, law.position_noise_m, size=(2, len(rows)))
+        noise[:, 0] = 0.0
+    phantoms = int(rng.poisson(law.false_positives)) if law.false_positives > 0 else 0
+    phantom_s, phantom_lane = np.empty(0), np.empty(0, dtype=np.int64)
+    if phantoms:
+        reach = law.false_positive_range_m
+        phantom_s = s[0] + rng.uniform(-reach, reach, phantoms)
+        phantom_lane = rng.integers(0, lanes_count, phantoms)
+    return Detections(rows, noised, noise, phantom_s, phantom_lane)
 
 
 class SensorModel:
@@ -65,14 +128,9 @@ class SensorModel:
     def observe(self, world: WorldState) -> WorldState:
         if not self.config.enabled:
             return world
-        config, rng = self.config, self.rng
-        n = world.count
-        keep = np.abs(world.s - world.s[0]) <= config.range_m
-        keep &= rng.random(n) >= config.miss_probability
-        keep[0] = True
-        rows = np.flatnonzero(keep)
+        found = detect(self.config.law, self.rng, world.s, world.lanes_count)
         fields = {
-            name: getattr(world, name)[rows]
+            name: getattr(world, name)[found.rows]
             for name in (
                 "ids",
                 "position",
@@ -87,23 +145,19 @@ class SensorModel:
                 "crashed",
             )
         }
-        if config.position_noise_m > 0:
-            noise = rng.normal(0.0, config.position_noise_m, size=(2, len(rows)))
-            noise[:, 0] = 0.0
-            fields["s"] = fields["s"] + noise[0]
-            fields["d"] = fields["d"] + noise[1]
-        phantoms = rng.poisson(config.false_positives) if config.false_positives > 0 else 0
-        if phantoms:
-            fields = _with_phantoms(fields, world, phantoms, config.false_positive_range_m, rng)
+        if found.noised:
+            fields["s"] = fields["s"] + found.noise[0]
+            fields["d"] = fields["d"] + found.noise[1]
+        if len(found.phantom_s):
+            fields = _with_phantoms(fields, world, found.phantom_s, found.phantom_lane)
         return dataclasses.replace(world, **fields)
 
 
 def _with_phantoms(
-    fields: dict[str, np.ndarray], world: WorldState, count: int, reach: float, rng: np.random.Generator
+    fields: dict[str, np.ndarray], world: WorldState, s: np.ndarray, lanes: np.ndarray
 ) -> dict[str, np.ndarray]:
-    """Append `count` phantom vehicles at uniform positions on the road, at the ego's speed."""
-    s = world.s[0] + rng.uniform(-reach, reach, count)
-    lanes = rng.integers(0, world.lanes_count, count)
+    """Append phantom vehicles at `s` [m] on the centres of `lanes`, at the ego's speed."""
+    count = len(s)
     d = world.lane_offsets[lanes]
     phantom = {
         "ids": PHANTOM_ID_BASE + np.arange(count),
@@ -119,3 +173,96 @@ def _with_phantoms(
         "crashed": np.zeros(count, dtype=bool),
     }
     return {name: np.concatenate([fields[name], phantom[name]]) for name in fields}
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Sensed:
+    """What the sensor reports of every world (`batch`, row 0 the ego) and where each reported row
+    came from: `source` (worlds, rows) the truth row of a real vehicle, `phantom` (worlds, rows)
+    the false positive's index in its observation (its id is `PHANTOM_ID_BASE` + it), else -1."""
+
+    batch: WorldBatch
+    source: np.ndarray
+    phantom: np.ndarray
+
+
+class SensorBatch:
+    """`worlds` sensor models: `reset_world(world, model)` at each episode, `sense(truth, worlds)`
+    after each frame (a fresh observation of the worlds flagged; the others keep their last)."""
+
+    def __init__(self, worlds: int) -> None:
+        self.models: list[SensorModel | None] = [None] * worlds
+        self.kept = np.zeros(worlds, dtype=np.int64)
+        self.total = np.zeros(worlds, dtype=np.int64)
+        self.source = np.zeros((worlds, 1), dtype=np.int64)
+        self.noise = np.zeros((2, worlds, 1))
+        self.noised = np.zeros(worlds, dtype=bool)
+        self.phantom_s = np.zeros((worlds, 1))
+        self.phantom_lane = np.zeros((worlds, 1), dtype=np.int64)
+
+    def reset_world(self, world: int, model: SensorModel) -> None:
+        """World `world`'s episode seen through `model` (its generator as the episode seeded it)."""
+        self.models[world] = model
+
+    def _room(self, rows: int) -> None:
+        more = rows - self.source.shape[1]
+        if more > 0:
+            pad = ((0, 0), (0, more))
+            self.source = np.pad(self.source, pad)
+            self.noise = np.pad(self.noise, ((0, 0), *pad))
+            self.phantom_s, self.phantom_lane = np.pad(self.phantom_s, pad), np.pad(self.phantom_lane, pad)
+
+    def _draw(self, world: int, truth: WorldBatch) -> None:
+        """World `world`'s draws (`detect`), as its `SensorModel.observe` draws them."""
+        model = self.models[world]
+        n = int(truth.count[world])
+        if model is None or not model.config.enabled:
+            self.kept[world] = self.total[world] = n
+            self.source[world, :n] = np.arange(n)
+            self.noised[world] = False
+            return
+        found = detect(model.config.law, model.rng, truth.s[world, :n], int(truth.lanes_count[world]))
+        kept, phantoms = len(found.rows), len(found.phantom_s)
+        if kept + phantoms > self.source.shape[1]:
+            self._room(kept + phantoms)
+        self.source[world, :kept] = found.rows
+        self.noised[world] = found.noised
+        if found.noised:
+            self.noise[:, world, :kept] = found.noise
+        added = slice(kept, kept + phantoms)
+        self.phantom_s[world, added] = found.phantom_s
+        self.phantom_lane[world, added] = found.phantom_lane
+        self.kept[world], self.total[world] = kept, kept + phantoms
+
+    def sense(self, truth: WorldBatch, worlds: np.ndarray) -> Sensed:
+        """Every world as its sensor reports it, observing the worlds flagged in `worlds` anew."""
+        self._room(truth.s.shape[1])
+        for world in np.flatnonzero(worlds).tolist():
+            self._draw(world, truth)
+        rows = int(self.total.max())
+        column = np.arange(rows)[None, :]
+        real = column < self.kept[:, None]
+        phantom = (column >= self.kept[:, None]) & (column < self.total[:, None])
+        source = np.where(real, self.source[:, :rows], 0)
+        floats = np.stack([truth.s, truth.d, truth.speed, truth.heading, truth.length, truth.width])
+        s, d, speed, heading, length, width = np.where(
+            real, np.take_along_axis(floats, source[None], axis=2), 0.0
+        )
+        noised = self.noised[:, None] & real
+        s = np.where(noised, s + self.noise[0, :, :rows], s)
+        d = np.where(noised, d + self.noise[1, :, :rows], d)
+        lanes = self.phantom_lane[:, :rows]
+        phantom_d = np.take_along_axis(truth.lane_offsets, np.where(phantom, lanes, 0), axis=1)
+        lane = np.where(real, np.take_along_axis(truth.lane, source, axis=1), 0)
+        batch = dataclasses.replace(
+            truth,
+            count=self.total.copy(),
+            s=np.where(phantom, self.phantom_s[:, :rows], s),
+            d=np.where(phantom, phantom_d, d),
+            speed=np.where(phantom, truth.speed[:, :1], speed),
+            heading=heading,
+            length=np.where(phantom, truth.length[:, :1], length),
+            width=np.where(phantom, truth.width[:, :1], width),
+            lane=np.where(phantom, lanes, lane),
+        )
+        return Sensed(batch, source, np.where(phantom, column - self.kept[:, None], -1))

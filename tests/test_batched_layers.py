@@ -1,17 +1,15 @@
 """The layers' batched kernels against their per-world code, on worlds the closed loop drove: the
-`observation` encoding (`perception.batch_grid`) to the bits of `OccupancyGridBuilder.build(world)
-.encode("observation")`, and the safety layer's verdicts (`planner.batch_safety`) to each loop's
-`permitted()`."""
+`observation` encoding (`perception.grid.observe_batch`) to the bits of `OccupancyGridBuilder
+.build(world).encode("observation")`, and the safety layer's verdicts (`planner.batch_safety`) to
+each loop's `permitted()`."""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
-from perception.batch_grid import observe_batch
-from perception.batch_sensor import SensorBatch
-from perception.grid import OccupancyGridBuilder
-from perception.sensor import SensorConfig, SensorModel
+from perception.grid import OccupancyGridBuilder, observe_batch
+from perception.sensor import SensorBatch, SensorConfig, SensorModel
 from planner.agents import decide
 from planner.batch_safety import lane_is_safe, lateral_drifts, lateral_extents, permitted_batch
 from planner.lookahead_scene import lookahead_grid

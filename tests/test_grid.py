@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from perception.grid import GridConfig, OccupancyGridBuilder, lane_code
+from perception.grid import GridConfig, OccupancyGridBuilder
+from records import lane_code_bits
 from tests.helpers import scene
 
 GRID = GridConfig(cell_length=5.0, cells_ahead=9, cells_behind=2)
@@ -71,9 +72,9 @@ def test_ego_in_the_outer_lanes_for_every_lane_count(lanes, ego_at):
     np.testing.assert_array_equal(grid.cells, expected_grid(lanes, [(k, 2 + k) for k in range(lanes)]))
     assert grid.ego_lane == ego_lane
     assert grid.to_paper_state().shape == (lanes * GRID.cells + max(1, int(np.ceil(np.log2(lanes)))),)
-    np.testing.assert_array_equal(
-        grid.to_paper_state()[-len(lane_code(0, lanes)) :], lane_code(ego_lane, lanes)
-    )
+    bits = lane_code_bits(lanes)
+    ego_lane_bits = [(ego_lane >> (bits - 1 - bit)) & 1 for bit in range(bits)]
+    np.testing.assert_array_equal(grid.to_paper_state()[-bits:], ego_lane_bits)
 
 
 def test_ego_relative_rows_mark_missing_lanes_occupied():

@@ -38,7 +38,7 @@ def check_batched(config: RunConfig) -> None:
     grid feature it does not encode."""
     if config.train.worlds is None:
         return
-    from perception.batch_grid import BATCHED_FEATURES
+    from perception.grid import BATCHED_FEATURES
     from stack.batch.closed_loop import refusal
     from stack.settings.run import training_worlds
 

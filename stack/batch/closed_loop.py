@@ -1,6 +1,6 @@
 """N closed loops stepped together: `ClosedLoopBatch`, the batched `ClosedLoop.act` of a run config
 on the PID tracker and the kinematic plant, each world the loop the `vector` backend drives alone,
-bit for bit, through its sensor model when it has one (`perception.batch_sensor`).
+bit for bit, through its sensor model when it has one (`perception.sensor.SensorBatch`).
 
 The traffic is a `TrafficBatch`; the ego's side of every tick (reference, leaders, PID, cruise,
 emergency braking, the safety layer's abort, road departure) is three compiled calls over all the
@@ -21,8 +21,7 @@ from controllers.emergency import EmergencyBraking
 from controllers.lateral import LateralPID
 from controllers.reference import lane_keeping
 from controllers.tracker import PIDTracker, make_controller
-from perception.batch_sensor import SensorBatch
-from perception.sensor import SensorModel
+from perception.sensor import SensorBatch, SensorModel
 from planner.batch_safety import lateral_drifts, lateral_extents, permitted_batch, safety_settings
 from records import WorldState
 from records.batch import WorldBatch

@@ -4,7 +4,7 @@ per-world loop reports, outcome for outcome (`tests/test_batched_episodes.py`).
 
 The worlds tick together; at a world's decision point (one decision period on, or the end of its
 lane change, as `ClosedLoop.act` decides) its agent decides on the batched encoding of what its
-sensor reports (`perception.batch_grid`) and the command goes through the batched safety layer.
+sensor reports (`perception.grid.observe_batch`) and the command goes through the batched safety layer.
 Agents that plan on copies of the loop (the oracle, the lookahead planner), the tabular encoding,
 the grid's `traffic` feature, other controllers and plants, recordings and videos run one world
 at a time (`batch_refusal` says why)."""
@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from perception.batch_grid import BATCHED_FEATURES, observe_batch
+from perception.grid import BATCHED_FEATURES, observe_batch
 from planner.agents import Agent, decide, sees_permitted
 from records import Command, GridConfig, child_seed
 from stack.batch.closed_loop import ClosedLoopBatch, refusal

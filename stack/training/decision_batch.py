@@ -11,8 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from gymnasium import spaces
 
-from perception.batch_grid import observe_batch
-from perception.grid import OccupancyGridBuilder
+from perception.grid import OccupancyGridBuilder, observe_batch
 from records import Command
 from stack.batch.closed_loop import ClosedLoopBatch
 from stack.settings.run import RunConfig, build_config, grid_config, training_worlds
