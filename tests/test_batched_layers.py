@@ -1,6 +1,6 @@
 """The layers' batched kernels against their per-world code, on worlds the closed loop drove: the
 `observation` encoding (`perception.batch_grid`) to the bits of `OccupancyGridBuilder.build(world)
-.encode("observation")`, and the safety layer's verdicts (`planner.batch_safety`) to each loop's
+.encode("observation")`, and the safety layer's verdicts (`planner.safety.permitted_batch`) to each loop's
 `permitted()`."""
 
 import dataclasses
@@ -8,14 +8,14 @@ import dataclasses
 import numpy as np
 import pytest
 
+from common.neighbours import lateral_drifts, lateral_extents
 from perception.batch_grid import observe_batch
 from perception.batch_sensor import SensorBatch
 from perception.grid import OccupancyGridBuilder
 from perception.sensor import SensorConfig, SensorModel
 from planner.agents import decide
-from planner.batch_safety import lane_is_safe, lateral_drifts, lateral_extents, permitted_batch
 from planner.lookahead_scene import lookahead_grid
-from planner.safety import SafetyConfig, SafetyLayer
+from planner.safety import SafetyConfig, SafetyLayer, lane_is_safe, permitted_batch
 from records import GridConfig, WorldState
 from records.batch import WorldBatch
 from stack.loop.closed_loop import ClosedLoop

@@ -17,15 +17,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from common.neighbours import lateral_drifts, lateral_extents
 from controllers.reference import lane_keeping
 from perception.batch_sensor import SensorBatch
 from perception.sensor import SensorModel
-from planner.batch_safety import lateral_drifts, lateral_extents, permitted_batch, safety_settings
+from planner.safety import permitted_batch, safety_settings
 from records import WorldState
 from records.batch import WorldBatch
 from stack.batch.kernels import control, decide, settle
-from stack.batch.metrics import EpisodeMetricsBatch
 from stack.loop.closed_loop import episode_sensor
+from stack.loop.metrics import EpisodeMetricsBatch
 from stack.loop.safety_metrics import classify_collision
 from stack.results.episode_fields import record_fields
 from stack.results.episode_result import EpisodeResult
