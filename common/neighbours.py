@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import weakref
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba.extending import register_jitable
@@ -62,30 +62,39 @@ def lateral_extents(batch: WorldBatch) -> np.ndarray:
     return turned_width(batch.length, batch.width, _headings_to_the_lane(batch))
 
 
-def still_rows(world: WorldState) -> np.ndarray:
-    """(count,) zeros: no vehicle's drift across the road, as compiled laws take it; one per snapshot."""
-    kept = DERIVED.of(world)
-    still = kept.get("still_rows")
-    if still is None:
-        still = kept["still_rows"] = np.zeros(world.count)
-    return still
-
-
 def turned_width(length: np.ndarray, width: np.ndarray, heading_to_lane: np.ndarray) -> np.ndarray:
     """Footprint widths across the road [m] of rectangles `length` by `width` [m] turned by
     `heading_to_lane` [rad]."""
     return np.abs(length * np.sin(heading_to_lane)) + np.abs(width * np.cos(heading_to_lane))
 
 
-def reach_rows(world: WorldState) -> np.ndarray:
-    """(count,) how far each vehicle reaches across the road from its centre into a lane, half a
-    lane plus half its `lateral_extent` [m], a row per vehicle as compiled laws take it (row 0, the
-    ego, 0: never read); computed once per snapshot."""
+class VehicleRows(NamedTuple):
+    """One world's vehicles as the compiled laws take them, a row each, row 0 the ego: `vehicles`
+    of them, centres `s` and `d` [m] (in lane 0's frame), `speed` [m/s], `length` [m], how far each
+    reaches across the road from its centre into a lane, `reach` [m] (half a lane plus half its
+    `lateral_extent`; the ego's never read), and how far it is taken to drift across, `drift` [m]
+    (zeros: where it is now)."""
+
+    vehicles: int
+    s: np.ndarray
+    d: np.ndarray
+    speed: np.ndarray
+    length: np.ndarray
+    reach: np.ndarray
+    drift: np.ndarray
+
+
+def vehicle_rows(world: WorldState) -> VehicleRows:
+    """`world`'s `VehicleRows`, where they are now; made once per snapshot."""
     kept = DERIVED.of(world)
-    reach = kept.get("reach_rows")
-    if reach is None:
-        reach = kept["reach_rows"] = np.concatenate(([0.0], (world.lane_width + lateral_extent(world)) / 2))
-    return reach
+    rows = kept.get("vehicle_rows")
+    if rows is None:
+        reach = np.concatenate(([0.0], (world.lane_width + lateral_extent(world)) / 2))
+        still = np.zeros(world.count)
+        rows = kept["vehicle_rows"] = VehicleRows(
+            world.count, world.s, world.d, world.speed, world.length, reach, still
+        )
+    return rows
 
 
 def footprint_lateral_extent(world: WorldState) -> tuple[float, float]:
@@ -201,16 +210,14 @@ def _headings_to_the_lane(batch: WorldBatch) -> np.ndarray:
 
 
 @register_jitable
-def nearest_in_lane(
-    n: int, s: np.ndarray, d: np.ndarray, drift: np.ndarray, reach: np.ndarray, centre: float
-) -> tuple[int, int]:
+def nearest_in_lane(rows: VehicleRows, centre: float) -> tuple[int, int]:
     """(row ahead, row behind; -1: none) of the vehicles nearest the ego along the road (the first on
-    ties) among one world's `n` (row 0 the ego; centres `s`, `d` [m]) that reach into the lane
-    centred at `centre` [m]: each reaches `reach` [m] across from its centre, anywhere between d and
-    d + `drift` [m] (zeros: where it is now). Ahead: s above the ego's; behind: at or below it."""
+    ties) among one world's `rows` that reach into the lane centred at `centre` [m], anywhere
+    between d and d + drift. Ahead: s above the ego's; behind: at or below it."""
+    s, d, drift, reach = rows.s, rows.d, rows.drift, rows.reach
     ahead, behind = -1, -1
     best_ahead, best_behind = math.inf, math.inf
-    for v in range(1, n):
+    for v in range(1, rows.vehicles):
         low, high = min(d[v], d[v] + drift[v]), max(d[v], d[v] + drift[v])
         across = 0.0 if low <= centre <= high else min(abs(low - centre), abs(high - centre))
         if not across < reach[v]:

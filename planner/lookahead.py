@@ -18,6 +18,7 @@ from dataclasses import astuple, dataclass, field
 
 import numpy as np
 
+from common.neighbours import VehicleRows
 from planner.agents import Action, Policy
 from planner.lookahead_config import LookaheadConfig
 from planner.lookahead_rollout import rollout
@@ -125,23 +126,8 @@ class LookaheadAgent(Policy):
         the vehicles as read: the gap rule there, and no vehicle alongside in the lane beyond it."""
         if not self._safety.enabled:
             return True
-        count, s, d, still, speed, length, reach, offsets, lane = _rows(scene)
-        return bool(
-            change_is_safe_compiled(
-                count,
-                s,
-                d,
-                still,
-                speed,
-                length,
-                reach,
-                offsets,
-                len(offsets),
-                lane,
-                lane + shift,
-                self._safety,
-            )
-        )
+        rows, offsets = _rows(scene), np.arange(-REACH, REACH + 1, dtype=np.float64)
+        return bool(change_is_safe_compiled(rows, offsets, len(offsets), REACH, REACH + shift, self._safety))
 
     def rank(self, scene: Scene) -> Ranking:
         """Roll out the permitted commands, score them, pick with hysteresis."""
@@ -197,17 +183,13 @@ class LookaheadAgent(Policy):
         return np.where(gated, 0.0, score), False
 
 
-def _rows(
-    scene: Scene,
-) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+def _rows(scene: Scene) -> VehicleRows:
     """The scene as the safety layer's compiled rule takes one world (`planner.safety.change_is_safe`):
-    (count, s, d, drift, speed, length, reach, lane offsets, the ego's lane); row 0 the ego at s 0,
-    each vehicle's d its lane relative to the ego's, reaching half a lane, on the scene's `REACH`
-    lanes on each side (whether a lane exists is the caller's to ask)."""
+    row 0 the ego at s 0, each vehicle's d its lane relative to the ego's (the scene's `REACH` lanes
+    on each side centred at -REACH .. REACH), reaching half a lane, where it is now."""
     count = scene.lane.size + 1
     s = np.concatenate(([0.0], scene.centre))
     d = np.concatenate(([0.0], scene.lane.astype(np.float64)))
     speed = np.concatenate(([scene.speed], scene.velocity))
     length = np.concatenate(([EGO_LENGTH], scene.length))
-    offsets = np.arange(-REACH, REACH + 1, dtype=np.float64)
-    return count, s, d, np.zeros(count), speed, length, np.full(count, 0.5), offsets, REACH
+    return VehicleRows(count, s, d, speed, length, np.full(count, 0.5), np.zeros(count))

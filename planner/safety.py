@@ -12,8 +12,8 @@ the target is within far_lane_gap of the ego, bumper to bumper: alongside, it ma
 gap at the same moment, and a change under way cannot get out of its way (at 4 m/s an abort needs
 seconds to turn back).
 
-The rule is written once, as plain functions of one world's rows (`unsafe_rows`, `lane_is_safe`,
-`change_is_safe`; row 0 the ego) that numba compiles: `SafetyLayer` calls them compiled on its
+The rule is written once, as plain functions of one world's `VehicleRows` (`unsafe_vehicles`,
+`lane_is_safe`, `change_is_safe`) that numba compiles: `SafetyLayer` calls them compiled on its
 snapshot, the lookahead on the scene it reads, and `permitted_batch` and the batch's kernels
 (`stack.batch.kernels`) loop over worlds around them.
 """
@@ -29,7 +29,7 @@ from numba.extending import register_jitable
 from pydantic import BaseModel, ConfigDict, Field
 
 from common.compiled import Kernel
-from common.neighbours import lateral_drift, lateral_extents, nearest_in_lane, reach_rows, still_rows
+from common.neighbours import VehicleRows, lateral_drift, lateral_extents, nearest_in_lane, vehicle_rows
 from records import N_ACTIONS, Command, WorldState
 from records.batch import WorldBatch
 
@@ -103,14 +103,8 @@ def gap_is_clear(gap: float, min_gap: float, closing: float, min_ttc: float) -> 
 
 
 @register_jitable
-def unsafe_rows(
-    n: int,
-    s: np.ndarray,
-    d: np.ndarray,
-    drift: np.ndarray,
-    speed: np.ndarray,
-    length: np.ndarray,
-    reach: np.ndarray,
+def unsafe_vehicles(
+    rows: VehicleRows,
     centre: float,
     min_gap: float,
     min_ttc: float,
@@ -118,11 +112,12 @@ def unsafe_rows(
     rear_time_gap: float,
 ) -> tuple[int, int]:
     """(row ahead, row behind; -1: none) of the vehicles that make the lane centred at `centre`
-    [m] unsafe for the ego (row 0 of one world's `n`): the nearest ahead and behind among those
-    reaching into it (`common.neighbours.nearest_in_lane`, over `drift` [m]), when closer than
-    `min_gap` [m] or the time gaps [s] at the ego's speed (ahead) or the follower's (behind; zero:
-    none, the loose rule) or than `min_ttc` [s]."""
-    ahead, behind = nearest_in_lane(n, s, d, drift, reach, centre)
+    [m] unsafe for the ego: the nearest ahead and behind among one world's `rows` reaching into it
+    (`common.neighbours.nearest_in_lane`), when closer than `min_gap` [m] or the time gaps [s] at
+    the ego's speed (ahead) or the follower's (behind; zero: none, the loose rule) or than
+    `min_ttc` [s]."""
+    s, speed, length = rows.s, rows.speed, rows.length
+    ahead, behind = nearest_in_lane(rows, centre)
     ego_speed = speed[0]
     unsafe_ahead, unsafe_behind = -1, -1
     if ahead >= 0:
@@ -139,62 +134,45 @@ def unsafe_rows(
 
 @register_jitable
 def lane_is_safe(
-    n: int,
-    s: np.ndarray,
-    d: np.ndarray,
-    drift: np.ndarray,
-    speed: np.ndarray,
-    length: np.ndarray,
-    reach: np.ndarray,
+    rows: VehicleRows,
     centre: float,
     min_gap: float,
     min_ttc: float,
     front_time_gap: float,
     rear_time_gap: float,
 ) -> bool:
-    """No vehicle makes the lane centred at `centre` unsafe (`unsafe_rows`)."""
-    ahead, behind = unsafe_rows(
-        n, s, d, drift, speed, length, reach, centre, min_gap, min_ttc, front_time_gap, rear_time_gap
-    )
+    """No vehicle makes the lane centred at `centre` unsafe (`unsafe_vehicles`)."""
+    ahead, behind = unsafe_vehicles(rows, centre, min_gap, min_ttc, front_time_gap, rear_time_gap)
     return ahead < 0 and behind < 0
 
 
 @register_jitable
 def change_is_safe(
-    n: int,
-    s: np.ndarray,
-    d: np.ndarray,
-    now: np.ndarray,
-    speed: np.ndarray,
-    length: np.ndarray,
-    reach: np.ndarray,
-    offsets: np.ndarray,
-    lanes_count: int,
-    lane: int,
-    goal: int,
-    safety: SafetySettings,
+    rows: VehicleRows, offsets: np.ndarray, lanes_count: int, lane: int, goal: int, safety: SafetySettings
 ) -> bool:
     """`SafetyLayer.permits` of one world's change from `lane` to `goal` (lanes centred at
-    `offsets` [m]): on the road, the strict gap rule in `goal` and, in the lane beyond it, no
-    vehicle nearer than the far-lane gap bumper to bumper. `now`: zeros, one a vehicle."""
+    `offsets` [m]), on its `rows` where they are now: on the road, the strict gap rule in `goal`
+    and, in the lane beyond it, no vehicle nearer than the far-lane gap bumper to bumper."""
     if not 0 <= goal < lanes_count:
         return False
     if not lane_is_safe(
-        n, s, d, now, speed, length, reach, offsets[goal], safety.min_gap_m, safety.min_ttc_s,
-        safety.front_time_gap_s, safety.rear_time_gap_s,
-    ):  # fmt: skip
+        rows,
+        offsets[goal],
+        safety.min_gap_m,
+        safety.min_ttc_s,
+        safety.front_time_gap_s,
+        safety.rear_time_gap_s,
+    ):
         return False
     beyond = 2 * goal - lane
     if not safety.checks_far_lane or not 0 <= beyond < lanes_count:
         return True
-    return lane_is_safe(
-        n, s, d, now, speed, length, reach, offsets[beyond], safety.far_lane_gap_m, 0.0, 0.0, 0.0
-    )
+    return lane_is_safe(rows, offsets[beyond], safety.far_lane_gap_m, 0.0, 0.0, 0.0)
 
 
 change_is_safe_compiled = Kernel(change_is_safe)
 """`change_is_safe` compiled, for Python callers: the per-world layer and the lookahead."""
-_unsafe_rows = Kernel(unsafe_rows)
+_unsafe_vehicles = Kernel(unsafe_vehicles)
 
 
 @dataclass(frozen=True)
@@ -227,13 +205,7 @@ class SafetyLayer:
             return True
         return bool(
             change_is_safe_compiled(
-                world.count,
-                world.s,
-                world.d,
-                still_rows(world),
-                world.speed,
-                world.length,
-                reach_rows(world),
+                vehicle_rows(world),
                 world.lane_offsets,
                 world.lanes_count,
                 lane,
@@ -277,7 +249,8 @@ class SafetyLayer:
         if not config.enabled:
             return False
         drift = np.concatenate(([0.0], lateral_drift(world, config.abort_lookahead_s)))
-        unsafe = self._unsafe(world, target, config.abort_gap_m, config.abort_ttc_s, 0.0, 0.0, drift)
+        rows = vehicle_rows(world)._replace(drift=drift)
+        unsafe = self._unsafe(world, target, config.abort_gap_m, config.abort_ttc_s, 0.0, 0.0, rows)
         if unsafe:
             self.aborted += 1
             self.reacted_to = unsafe
@@ -291,15 +264,15 @@ class SafetyLayer:
         min_ttc: float,
         front_time_gap: float,
         rear_time_gap: float,
-        drift: np.ndarray | None = None,
+        rows: VehicleRows | None = None,
     ) -> tuple[int, ...]:
-        """The vehicles (ids) that make `lane` unsafe (`unsafe_rows`; `drift`: none)."""
-        rows = _unsafe_rows(
-            world.count, world.s, world.d, still_rows(world) if drift is None else drift, world.speed,
-            world.length, reach_rows(world), float(world.lane_offsets[lane]), min_gap, min_ttc,
+        """The vehicles (ids) that make `lane` unsafe (`unsafe_vehicles`) among `rows` (none: the
+        world's where they are now)."""
+        found = _unsafe_vehicles(
+            vehicle_rows(world) if rows is None else rows, float(world.lane_offsets[lane]), min_gap, min_ttc,
             front_time_gap, rear_time_gap,
         )  # fmt: skip
-        return tuple(int(world.ids[row]) for row in rows if row >= 0)
+        return tuple(int(world.ids[row]) for row in found if row >= 0)
 
 
 def permitted_batch(
@@ -352,7 +325,7 @@ def _permitted(
             if not safety.enabled:
                 out[w, command] = 1.0
             elif change_is_safe(
-                count[w], s[w], d[w], now, speed[w], length[w], reach[w], lane_offsets[w], lanes_count[w],
-                lane[w], target, safety,
+                VehicleRows(count[w], s[w], d[w], speed[w], length[w], reach[w], now), lane_offsets[w],
+                lanes_count[w], lane[w], target, safety,
             ):  # fmt: skip
                 out[w, command] = 1.0

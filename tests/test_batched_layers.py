@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from common.neighbours import lateral_drifts, lateral_extents
+from common.neighbours import VehicleRows, lateral_drifts, lateral_extents
 from perception.batch_grid import observe_batch
 from perception.batch_sensor import SensorBatch
 from perception.grid import OccupancyGridBuilder
@@ -158,10 +158,8 @@ def test_the_abort_s_verdicts_for_a_batch_are_each_world_s(worlds: list[WorldSta
     for w, world in enumerate(worlds):
         for lane in range(int(lanes_count[w])):
             aborts = SafetyLayer(config).should_abort(world, lane)
-            safe = lane_is_safe(
-                count[w], s[w], d[w], drift[w], speed[w], length[w], reach[w], offsets[w, lane],
-                config.abort_gap_m, config.abort_ttc_s, 0.0, 0.0,
-            )  # fmt: skip
+            rows = VehicleRows(count[w], s[w], d[w], speed[w], length[w], reach[w], drift[w])
+            safe = lane_is_safe(rows, offsets[w, lane], config.abort_gap_m, config.abort_ttc_s, 0.0, 0.0)
             assert aborts is not safe, (w, lane)
             aborted.append(aborts)
     assert any(aborted) and not all(aborted)

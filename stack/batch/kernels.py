@@ -21,6 +21,7 @@ from numba import njit
 
 from common import neighbours
 from common.compiled import Kernel
+from common.neighbours import VehicleRows
 from controllers.batch_control import (
     coefficients,
     cruise_acceleration,
@@ -101,8 +102,8 @@ def decide(
         permits = True
         if command != STAY and safety.enabled:
             permits = change_is_safe(
-                count[w], s[w], d[w], now, speed[w], length[w], reach[w], offsets[w], lanes_count[w],
-                lane[w], lane[w] + command - 1, safety,
+                VehicleRows(count[w], s[w], d[w], speed[w], length[w], reach[w], now), offsets[w],
+                lanes_count[w], lane[w], lane[w] + command - 1, safety,
             )  # fmt: skip
         if not permits:
             counts[w, 1] += 1
@@ -171,7 +172,7 @@ def control(
         if lane[w] != target[w]:
             crossed = abs(d[w, 0] - offsets[w, lane[w]]) > lane_width / 2
             if not crossed and safety.enabled and not lane_is_safe(
-                n, s[w], d[w], drift[w], speed[w], length[w], reach[w], offsets[w, target[w]],
+                VehicleRows(n, s[w], d[w], speed[w], length[w], reach[w], drift[w]), offsets[w, target[w]],
                 safety.abort_gap_m, safety.abort_ttc_s, 0.0, 0.0,
             ):  # fmt: skip
                 counts[w, 2] += 1

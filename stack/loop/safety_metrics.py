@@ -37,13 +37,13 @@ from numba.extending import register_jitable
 
 from common.compiled import Kernel
 from common.neighbours import (
+    VehicleRows,
     footprint_across,
     footprint_lateral_extent,
     nearest_in_lane,
     occupied_lanes,
-    reach_rows,
     reaches_lane,
-    still_rows,
+    vehicle_rows,
 )
 from records import WorldState
 from stack.results.episode_result import TTC_CAP_S
@@ -187,9 +187,13 @@ class SafetyMonitor:
         extent = footprint_lateral_extent(world)
         self.road_departure = self.road_departure or _departed(world, extent)
         ttc, ego_lane_gap = _leaders_ahead(
-            world.count, world.s, world.d, still_rows(world), world.speed, world.length, reach_rows(world),
-            world.lane_offsets, world.lanes_count, world.ego_lane, *extent, world.lane_width,
-        )  # fmt: skip
+            vehicle_rows(world),
+            world.lane_offsets,
+            world.lanes_count,
+            world.ego_lane,
+            *extent,
+            world.lane_width,
+        )
         self.min_ttc_s = min(self.min_ttc_s, ttc)
         self.time_below_ttc_floor_s += self.dt * (ttc < TTC_FLOOR_S)
         if ego_lane_gap < r157_min_following_distance(float(world.speed[0])):
@@ -208,13 +212,7 @@ class SafetyMonitor:
 
 @register_jitable
 def leaders_ahead(
-    n: int,
-    s: np.ndarray,
-    d: np.ndarray,
-    now: np.ndarray,
-    speed: np.ndarray,
-    length: np.ndarray,
-    reach: np.ndarray,
+    rows: VehicleRows,
     offsets: np.ndarray,
     lanes_count: int,
     ego_lane: int,
@@ -222,18 +220,18 @@ def leaders_ahead(
     high: float,
     lane_width: float,
 ) -> tuple[float, float]:
-    """One tick of the monitor's leaders in one world of `n` vehicles (row 0 the ego, each reaching
-    `reach` [m] across from its centre; `now`: zeros, one a vehicle): the smallest TTC [s] to the
-    leader (`common.neighbours.nearest_in_lane`) of a lane (centred at `offsets` [m]) that the
-    ego's footprint [`low`, `high`] [m] reaches into, when a gap is open and closing (inf: none),
-    and the gap [m] to the leader of its lane `ego_lane` (NaN: none)."""
+    """One tick of the monitor's leaders in one world (`rows` where they are now): the smallest
+    TTC [s] to the leader (`common.neighbours.nearest_in_lane`) of a lane (centred at `offsets`
+    [m]) that the ego's footprint [`low`, `high`] [m] reaches into, when a gap is open and closing
+    (inf: none), and the gap [m] to the leader of its lane `ego_lane` (NaN: none)."""
+    s, speed, length = rows.s, rows.speed, rows.length
     ego_speed = speed[0]
     smallest, ego_lane_gap = math.inf, math.nan
     for lane in range(lanes_count):
         occupied = reaches_lane(low, high, offsets[lane], lane_width)
         if not occupied and lane != ego_lane:
             continue
-        leader = nearest_in_lane(n, s, d, now, reach, offsets[lane])[0]
+        leader = nearest_in_lane(rows, offsets[lane])[0]
         if leader < 0:
             continue
         gap = abs(s[leader] - s[0]) - (length[leader] + length[0]) / 2
@@ -268,9 +266,9 @@ def leaders_ahead_batch(
         if not stepped[w]:
             continue
         low, high = footprint_across(d[w, 0], length[w, 0], width[w, 0], heading[w, 0] - lane_heading[w])
+        rows = VehicleRows(count[w], s[w], d[w], speed[w], length[w], reach[w], now)
         ttc, ego_lane_gap[w] = leaders_ahead(
-            count[w], s[w], d[w], now, speed[w], length[w], reach[w], offsets[w], lanes_count[w], lane[w, 0],
-            low, high, lane_width,
-        )  # fmt: skip
+            rows, offsets[w], lanes_count[w], lane[w, 0], low, high, lane_width
+        )
         min_ttc[w] = min(min_ttc[w], ttc)
         below_floor[w] = ttc < TTC_FLOOR_S
