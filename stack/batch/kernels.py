@@ -33,7 +33,7 @@ from controllers.batch_control import (
 )
 from controllers.reference import QUINTIC_PEAK_SPEED
 from planner.safety import SafetySettings, change_is_safe, lane_is_safe
-from stack.loop.safety_metrics import DEPARTURE_TOLERANCE_M
+from stack.loop.safety_metrics import departs
 
 STAY = 1
 """`Command.STAY`'s value (LEFT 0, RIGHT 2: the lane shift is the value - 1)."""
@@ -257,14 +257,7 @@ def settle(
         if not stepped[w]:
             continue
         low, high = ego_extent(w, d, length, width, heading, lane_heading)
-        lowest, highest = offsets[w, 0], offsets[w, 0]
-        for k in range(1, lanes_count[w]):
-            if offsets[w, k] < lowest:
-                lowest = offsets[w, k]
-            if offsets[w, k] > highest:
-                highest = offsets[w, k]
-        edge_low, edge_high = lowest - lane_width / 2, highest + lane_width / 2
-        if low < edge_low - DEPARTURE_TOLERANCE_M or high > edge_high + DEPARTURE_TOLERANCE_M:
+        if departs(low, high, offsets[w], lanes_count[w], lane_width):
             departed[w] = True
         if lane[w] != target[w]:
             profile_time = clock[w, 1] + (time[w] - clock[w, 0]) * clock[w, 2]

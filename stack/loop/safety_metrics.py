@@ -75,21 +75,28 @@ def r157_min_following_distances(speed: np.ndarray | np.float64) -> np.ndarray:
     return np.where(speed < R157_MIN_SPEED_MPS, 0.0, speed * np.interp(speed * 3.6, _R157_KMH, _R157_GAP))
 
 
-def road_edges(world: WorldState) -> tuple[float, float]:
-    """(lowest, highest) lateral coordinate [m] of the drivable area: the outer edges of the outer lanes."""
-    half, offsets = world.lane_width / 2, world.lane_offsets.tolist()
-    return min(offsets) - half, max(offsets) + half
-
-
 def departed(world: WorldState) -> bool:
     """A footprint corner lies more than DEPARTURE_TOLERANCE_M beyond the road edges."""
     return _departed(world, footprint_lateral_extent(world))
 
 
 def _departed(world: WorldState, extent: tuple[float, float]) -> bool:
-    low, high = extent
-    edge_low, edge_high = road_edges(world)
-    return bool(low < edge_low - DEPARTURE_TOLERANCE_M or high > edge_high + DEPARTURE_TOLERANCE_M)
+    return bool(departs(*extent, world.lane_offsets, world.lanes_count, world.lane_width))
+
+
+@register_jitable
+def departs(low: float, high: float, offsets: np.ndarray, lanes_count: int, lane_width: float) -> bool:
+    """A footprint spanning [`low`, `high`] across the road [m] lies more than
+    `DEPARTURE_TOLERANCE_M` beyond the outer edges of the `lanes_count` lanes centred at `offsets`
+    [m], each `lane_width` [m] wide (the road departure of one world, for one world or many)."""
+    lowest, highest = offsets[0], offsets[0]
+    for lane in range(1, lanes_count):
+        if offsets[lane] < lowest:
+            lowest = offsets[lane]
+        if offsets[lane] > highest:
+            highest = offsets[lane]
+    edge_low, edge_high = lowest - lane_width / 2, highest + lane_width / 2
+    return low < edge_low - DEPARTURE_TOLERANCE_M or high > edge_high + DEPARTURE_TOLERANCE_M
 
 
 @dataclass(frozen=True)
@@ -196,7 +203,7 @@ class SafetyMonitor:
         )
         self.min_ttc_s = min(self.min_ttc_s, ttc)
         self.time_below_ttc_floor_s += self.dt * (ttc < TTC_FLOOR_S)
-        if ego_lane_gap < r157_min_following_distance(float(world.speed[0])):
+        if not math.isnan(ego_lane_gap) and ego_lane_gap < r157_min_following_distance(float(world.speed[0])):
             self.time_below_min_distance_s += self.dt
 
     def measured(self) -> SafetyMeasures:
