@@ -1,7 +1,7 @@
 """CPU time of the layers' batched kernels against their per-world code, on worlds the closed loop
 drove on `random` (2-6 lanes, trucks, incidents, sensor noise): the observation encoding
 (`perception.grid.observe_batch` against `OccupancyGridBuilder.build(world).encode`) and the
-safety layer's permitted commands (`planner.batch_safety.permitted_batch` against the same
+safety layer's permitted commands (`planner.safety.permitted_batch` against the same
 decisions made one world at a time by `SafetyLayer.permits` on a fresh copy of each snapshot, whose
 neighbour search would otherwise be kept from the last repeat), per world, at several batch sizes.
 
@@ -18,8 +18,7 @@ from collections.abc import Callable
 import numpy as np
 
 from perception.grid import OccupancyGridBuilder, observe_batch
-from planner.batch_safety import permitted_batch
-from planner.safety import SafetyLayer
+from planner.safety import SafetyLayer, permitted_batch
 from records import Command, GridConfig, WorldState
 from records.batch import WorldBatch
 from stack.loop.closed_loop import ClosedLoop

@@ -3,18 +3,23 @@ the recording (`stack`) and the adaptive cruise's leaders (`controllers.leaders`
 other vehicle's footprint across the road, and the closest vehicle ahead and behind in a lane.
 
 What a snapshot derives once (the footprints, every lane's neighbours) is kept in `DERIVED`, beside
-the snapshot and not in it, for as long as the snapshot lives."""
+the snapshot and not in it, for as long as the snapshot lives. The laws that compiled code runs too
+(`reaches_lane`, `footprint_across`, `nearest_in_lane`) are plain functions that numba compiles
+where a compiled caller calls them; `lateral_extents` and `lateral_drifts` are the footprints of a
+whole `WorldBatch`."""
 
 from __future__ import annotations
 
 import math
 import weakref
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
+from numba.extending import register_jitable
 
 from common.compiled import Kernel
 from records import Neighbour, WorldState
+from records.batch import WorldBatch
 
 
 class PerSnapshot:
@@ -46,20 +51,65 @@ def lateral_extent(world: WorldState) -> np.ndarray:
     kept = DERIVED.of(world)
     extent = kept.get("lateral_extent")
     if extent is None:
-        heading = _heading_to_the_lane(world)
-        extent = np.abs(world.length[1:] * np.sin(heading)) + np.abs(world.width[1:] * np.cos(heading))
-        kept["lateral_extent"] = extent
+        extent = kept["lateral_extent"] = turned_width(
+            world.length[1:], world.width[1:], _heading_to_the_lane(world)
+        )
     return extent
+
+
+def lateral_extents(batch: WorldBatch) -> np.ndarray:
+    """(worlds, vehicles): `lateral_extent` of every vehicle of every world of `batch` [m]."""
+    return turned_width(batch.length, batch.width, _headings_to_the_lane(batch))
+
+
+def turned_width(length: np.ndarray, width: np.ndarray, heading_to_lane: np.ndarray) -> np.ndarray:
+    """Footprint widths across the road [m] of rectangles `length` by `width` [m] turned by
+    `heading_to_lane` [rad]."""
+    return np.abs(length * np.sin(heading_to_lane)) + np.abs(width * np.cos(heading_to_lane))
+
+
+class VehicleRows(NamedTuple):
+    """One world's vehicles as the compiled laws take them, a row each, row 0 the ego: `vehicles`
+    of them, centres `s` and `d` [m] (in lane 0's frame), `speed` [m/s], `length` [m], how far each
+    reaches across the road from its centre into a lane, `reach` [m] (half a lane plus half its
+    `lateral_extent`; the ego's never read), and how far it is taken to drift across, `drift` [m]
+    (zeros: where it is now)."""
+
+    vehicles: int
+    s: np.ndarray
+    d: np.ndarray
+    speed: np.ndarray
+    length: np.ndarray
+    reach: np.ndarray
+    drift: np.ndarray
+
+
+def vehicle_rows(world: WorldState) -> VehicleRows:
+    """`world`'s `VehicleRows`, where they are now; made once per snapshot."""
+    kept = DERIVED.of(world)
+    rows = kept.get("vehicle_rows")
+    if rows is None:
+        reach = np.concatenate(([0.0], (world.lane_width + lateral_extent(world)) / 2))
+        still = np.zeros(world.count)
+        rows = kept["vehicle_rows"] = VehicleRows(
+            world.count, world.s, world.d, world.speed, world.length, reach, still
+        )
+    return rows
 
 
 def footprint_lateral_extent(world: WorldState) -> tuple[float, float]:
     """(lowest, highest) lateral coordinate [m] of the ego's footprint corners in the reference lane
     frame (its heading relative to the lane turns the rectangle)."""
     ego = world.ego_state()
-    half = (
-        float(world.length[0] * abs(math.sin(ego.heading)) + world.width[0] * abs(math.cos(ego.heading))) / 2
-    )
-    return ego.d - half, ego.d + half
+    return footprint_across(ego.d, world.length[0], world.width[0], ego.heading)
+
+
+@register_jitable
+def footprint_across(d: float, length: float, width: float, heading_to_lane: float) -> tuple[float, float]:
+    """(lowest, highest) lateral coordinate [m] of the corners of a `length` by `width` [m]
+    footprint centred at `d` [m], turned by `heading_to_lane` [rad]."""
+    half = float(length * abs(math.sin(heading_to_lane)) + width * abs(math.cos(heading_to_lane))) / 2
+    return d - half, d + half
 
 
 def occupied_lanes(world: WorldState, extent: tuple[float, float] | None = None) -> tuple[int, ...]:
@@ -73,6 +123,7 @@ def occupied_lanes(world: WorldState, extent: tuple[float, float] | None = None)
     )
 
 
+@register_jitable
 def reaches_lane(low: float, high: float, centre: float, lane_width: float) -> bool:
     """Whether a footprint spanning [`low`, `high`] across the road [m] reaches into the lane
     centred at `centre` (the batch compiles this same function: `stack.batch.kernels`)."""
@@ -134,12 +185,50 @@ def lateral_drift(world: WorldState, horizon_s: float) -> np.ndarray:
     """How far each other vehicle moves across the road in `horizon_s` [s] at its present lateral
     speed (its speed times the sine of its heading to the lane at the ego) [m]; positive towards
     higher d."""
-    return world.speed[1:] * np.sin(_heading_to_the_lane(world)) * horizon_s
+    return drift_across(world.speed[1:], _heading_to_the_lane(world), horizon_s)
+
+
+def lateral_drifts(batch: WorldBatch, horizon_s: float) -> np.ndarray:
+    """(worlds, vehicles): `lateral_drift` of every vehicle of every world of `batch` [m]."""
+    return drift_across(batch.speed, _headings_to_the_lane(batch), horizon_s)
+
+
+def drift_across(speed: np.ndarray, heading_to_lane: np.ndarray, horizon_s: float) -> np.ndarray:
+    """How far vehicles at `speed` [m/s] heading `heading_to_lane` [rad] move across the road in
+    `horizon_s` [s] [m]."""
+    return speed * np.sin(heading_to_lane) * horizon_s
 
 
 def _heading_to_the_lane(world: WorldState) -> np.ndarray:
     """Each other vehicle's heading relative to the lane at the ego [rad]."""
     return world.heading[1:] - world.lanes[0].heading_at(float(world.s[0]))
+
+
+def _headings_to_the_lane(batch: WorldBatch) -> np.ndarray:
+    """(worlds, vehicles): each vehicle's heading relative to the lane at its world's ego [rad]."""
+    return batch.heading - batch.lane_heading[:, None]
+
+
+@register_jitable
+def nearest_in_lane(rows: VehicleRows, centre: float) -> tuple[int, int]:
+    """(row ahead, row behind; -1: none) of the vehicles nearest the ego along the road (the first on
+    ties) among one world's `rows` that reach into the lane centred at `centre` [m], anywhere
+    between d and d + drift. Ahead: s above the ego's; behind: at or below it."""
+    s, d, drift, reach = rows.s, rows.d, rows.drift, rows.reach
+    ahead, behind = -1, -1
+    best_ahead, best_behind = math.inf, math.inf
+    for v in range(1, rows.vehicles):
+        low, high = min(d[v], d[v] + drift[v]), max(d[v], d[v] + drift[v])
+        across = 0.0 if low <= centre <= high else min(abs(low - centre), abs(high - centre))
+        if not across < reach[v]:
+            continue
+        rel = s[v] - s[0]
+        if rel > 0:
+            if ahead < 0 or abs(rel) < best_ahead:
+                ahead, best_ahead = v, abs(rel)
+        elif rel <= 0 and (behind < 0 or abs(rel) < best_behind):
+            behind, best_behind = v, abs(rel)
+    return ahead, behind
 
 
 def scanned_neighbours(

@@ -18,12 +18,13 @@ from dataclasses import astuple, dataclass, field
 
 import numpy as np
 
+from common.neighbours import VehicleRows
 from planner.agents import Action, Policy
 from planner.lookahead_config import LookaheadConfig
 from planner.lookahead_rollout import rollout
-from planner.lookahead_scene import EGO_LENGTH, Scene, lookahead_grid, read_scene
-from planner.safety import SafetyConfig, unsafe_neighbours
-from records import Command, Encoding, GridConfig, Neighbour
+from planner.lookahead_scene import EGO_LENGTH, REACH, Scene, lookahead_grid, read_scene
+from planner.safety import SafetyConfig, change_is_safe_compiled, safety_settings
+from records import Command, Encoding, GridConfig
 
 QUINTIC_PEAK_SPEED = 15.0 / 8.0
 """The quintic's peak lateral speed per (distance / duration) (`controllers.reference`)."""
@@ -99,6 +100,7 @@ class LookaheadAgent(Policy):
         self.grid_config = lookahead_grid(grid)
         self.setup = setup or LookaheadSetup()
         self._ego = self.setup.driving.ego()
+        self._safety = safety_settings(self.setup.safety)
         config = self.setup.config
         self._steps = max(1, round(config.horizon_s / config.step_s))
 
@@ -120,19 +122,12 @@ class LookaheadAgent(Policy):
         return tuple(found)
 
     def _gap_clear(self, scene: Scene, shift: int) -> bool:
-        """The safety layer's rule for a change to lane `shift` (`planner.safety.SafetyLayer.permits`):
-        the gap rule there, and no vehicle alongside in the lane beyond it."""
-        safety = self.setup.safety
-        if not safety.enabled:
+        """The safety layer's rule for a change to lane `shift` (`planner.safety.change_is_safe`) on
+        the vehicles as read: the gap rule there, and no vehicle alongside in the lane beyond it."""
+        if not self._safety.enabled:
             return True
-        if unsafe_neighbours(
-            safety, scene.speed, *_neighbours(scene, shift), safety.min_gap_m, safety.min_ttc_s, strict=True
-        ):
-            return False
-        far = safety.far_lane_gap_m
-        return far is None or not unsafe_neighbours(
-            safety, scene.speed, *_neighbours(scene, 2 * shift), far, 0.0, strict=False
-        )
+        rows, offsets = _rows(scene), np.arange(-REACH, REACH + 1, dtype=np.float64)
+        return bool(change_is_safe_compiled(rows, offsets, len(offsets), REACH, REACH + shift, self._safety))
 
     def rank(self, scene: Scene) -> Ranking:
         """Roll out the permitted commands, score them, pick with hysteresis."""
@@ -188,17 +183,13 @@ class LookaheadAgent(Policy):
         return np.where(gated, 0.0, score), False
 
 
-def _neighbours(scene: Scene, lane: int) -> tuple[Neighbour | None, Neighbour | None]:
-    """The nearest vehicle ahead and behind (bumper gaps [m], speeds) in the lane `lane` lanes
-    from the ego's, as the scene reads them."""
-    in_lane = scene.lane == lane
-    gaps = np.abs(scene.centre) - (scene.length + EGO_LENGTH) / 2
-    found: list[Neighbour | None] = []
-    for side in (in_lane & (scene.centre > 0), in_lane & (scene.centre <= 0)):
-        rows = np.flatnonzero(side)
-        if rows.size == 0:
-            found.append(None)
-            continue
-        row = rows[np.argmin(np.abs(scene.centre[rows]))]
-        found.append(Neighbour(float(gaps[row]), float(scene.velocity[row])))
-    return found[0], found[1]
+def _rows(scene: Scene) -> VehicleRows:
+    """The scene as the safety layer's compiled rule takes one world (`planner.safety.change_is_safe`):
+    row 0 the ego at s 0, each vehicle's d its lane relative to the ego's (the scene's `REACH` lanes
+    on each side centred at -REACH .. REACH), reaching half a lane, where it is now."""
+    count = scene.lane.size + 1
+    s = np.concatenate(([0.0], scene.centre))
+    d = np.concatenate(([0.0], scene.lane.astype(np.float64)))
+    speed = np.concatenate(([scene.speed], scene.velocity))
+    length = np.concatenate(([EGO_LENGTH], scene.length))
+    return VehicleRows(count, s, d, speed, length, np.full(count, 0.5), np.zeros(count))

@@ -11,17 +11,27 @@ it arrives, while the ego can still turn back). No change starts while a vehicle
 the target is within far_lane_gap of the ego, bumper to bumper: alongside, it may take the same
 gap at the same moment, and a change under way cannot get out of its way (at 4 m/s an abort needs
 seconds to turn back).
+
+The rule is written once, as plain functions of one world's `VehicleRows` (`unsafe_vehicles`,
+`lane_is_safe`, `change_is_safe`) that numba compiles: `SafetyLayer` calls them compiled on its
+snapshot, the lookahead on the scene it reads, and `permitted_batch` and the batch's kernels
+(`stack.batch.kernels`) loop over worlds around them.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
+import numpy as np
+from numba.extending import register_jitable
 from pydantic import BaseModel, ConfigDict, Field
 
-from common.neighbours import lateral_drift, neighbours, scanned_neighbours
-from records import Command, Neighbour, WorldState
+from common.compiled import Kernel
+from common.neighbours import VehicleRows, lateral_drift, lateral_extents, nearest_in_lane, vehicle_rows
+from records import N_ACTIONS, Command, WorldState
+from records.batch import WorldBatch
 
 MAX_GAP_M = 200.0
 """Largest gap the safety layer may ask for [m]: beyond any sensor's reach on a highway."""
@@ -53,36 +63,116 @@ class SafetyConfig(BaseModel):
     )
 
 
-def _ttc(gap: float, closing: float) -> float:
-    return math.inf if closing <= 0 else max(gap, 0.0) / closing
+class SafetySettings(NamedTuple):
+    """`SafetyConfig`'s numbers as compiled code takes them: gaps [m], TTCs and time gaps [s];
+    `checks_far_lane` false when `far_lane_gap_m` is none (then 0)."""
+
+    enabled: bool
+    min_gap_m: float
+    min_ttc_s: float
+    front_time_gap_s: float
+    rear_time_gap_s: float
+    abort_gap_m: float
+    abort_ttc_s: float
+    checks_far_lane: bool
+    far_lane_gap_m: float
 
 
-def unsafe_neighbours(
-    config: SafetyConfig,
-    speed: float,
-    ahead: Neighbour | None,
-    behind: Neighbour | None,
+def safety_settings(config: SafetyConfig) -> SafetySettings:
+    """`config` as the compiled rule takes it."""
+    far = config.far_lane_gap_m
+    return SafetySettings(
+        enabled=config.enabled,
+        min_gap_m=config.min_gap_m,
+        min_ttc_s=config.min_ttc_s,
+        front_time_gap_s=config.front_time_gap_s,
+        rear_time_gap_s=config.rear_time_gap_s,
+        abort_gap_m=config.abort_gap_m,
+        abort_ttc_s=config.abort_ttc_s,
+        checks_far_lane=far is not None,
+        far_lane_gap_m=0.0 if far is None else far,
+    )
+
+
+@register_jitable
+def gap_is_clear(gap: float, min_gap: float, closing: float, min_ttc: float) -> bool:
+    """The gap [m] is at least `min_gap` and the time to collision at `closing` [m/s] (infinite
+    when not closing) at least `min_ttc` [s]."""
+    ttc = math.inf if closing <= 0 else max(gap, 0.0) / closing
+    return gap >= min_gap and ttc >= min_ttc
+
+
+@register_jitable
+def unsafe_vehicles(
+    rows: VehicleRows,
+    centre: float,
     min_gap: float,
     min_ttc: float,
-    strict: bool,
-) -> tuple[int, ...]:
-    """The vehicles (ids) of `ahead` and `behind` closer than the gap [m] or TTC [s] allows for an
-    ego at `speed` [m/s]: the gap rule of the module docstring (time gaps only when `strict`); none
-    when the lane is safe. What a planner that checks gaps itself uses too."""
-    unsafe: tuple[int, ...] = ()
-    if ahead is not None and not _clear(
-        ahead, max(min_gap, config.front_time_gap_s * speed * strict), speed - ahead.speed, min_ttc
-    ):
-        unsafe += (ahead.vehicle,)
-    if behind is not None and not _clear(
-        behind, max(min_gap, config.rear_time_gap_s * behind.speed * strict), behind.speed - speed, min_ttc
-    ):
-        unsafe += (behind.vehicle,)
-    return unsafe
+    front_time_gap: float,
+    rear_time_gap: float,
+) -> tuple[int, int]:
+    """(row ahead, row behind; -1: none) of the vehicles that make the lane centred at `centre`
+    [m] unsafe for the ego: the nearest ahead and behind among one world's `rows` reaching into it
+    (`common.neighbours.nearest_in_lane`), when closer than `min_gap` [m] or the time gaps [s] at
+    the ego's speed (ahead) or the follower's (behind; zero: none, the loose rule) or than
+    `min_ttc` [s]."""
+    s, speed, length = rows.s, rows.speed, rows.length
+    ahead, behind = nearest_in_lane(rows, centre)
+    ego_speed = speed[0]
+    unsafe_ahead, unsafe_behind = -1, -1
+    if ahead >= 0:
+        gap = abs(s[ahead] - s[0]) - (length[ahead] + length[0]) / 2
+        if not gap_is_clear(gap, max(min_gap, front_time_gap * ego_speed), ego_speed - speed[ahead], min_ttc):
+            unsafe_ahead = ahead
+    if behind >= 0:
+        gap = abs(s[behind] - s[0]) - (length[behind] + length[0]) / 2
+        needed = max(min_gap, rear_time_gap * speed[behind])
+        if not gap_is_clear(gap, needed, speed[behind] - ego_speed, min_ttc):
+            unsafe_behind = behind
+    return unsafe_ahead, unsafe_behind
 
 
-def _clear(other: Neighbour, min_gap: float, closing: float, min_ttc: float) -> bool:
-    return other.gap >= min_gap and _ttc(other.gap, closing) >= min_ttc
+@register_jitable
+def lane_is_safe(
+    rows: VehicleRows,
+    centre: float,
+    min_gap: float,
+    min_ttc: float,
+    front_time_gap: float,
+    rear_time_gap: float,
+) -> bool:
+    """No vehicle makes the lane centred at `centre` unsafe (`unsafe_vehicles`)."""
+    ahead, behind = unsafe_vehicles(rows, centre, min_gap, min_ttc, front_time_gap, rear_time_gap)
+    return ahead < 0 and behind < 0
+
+
+@register_jitable
+def change_is_safe(
+    rows: VehicleRows, offsets: np.ndarray, lanes_count: int, lane: int, goal: int, safety: SafetySettings
+) -> bool:
+    """`SafetyLayer.permits` of one world's change from `lane` to `goal` (lanes centred at
+    `offsets` [m]), on its `rows` where they are now: on the road, the strict gap rule in `goal`
+    and, in the lane beyond it, no vehicle nearer than the far-lane gap bumper to bumper."""
+    if not 0 <= goal < lanes_count:
+        return False
+    if not lane_is_safe(
+        rows,
+        offsets[goal],
+        safety.min_gap_m,
+        safety.min_ttc_s,
+        safety.front_time_gap_s,
+        safety.rear_time_gap_s,
+    ):
+        return False
+    beyond = 2 * goal - lane
+    if not safety.checks_far_lane or not 0 <= beyond < lanes_count:
+        return True
+    return lane_is_safe(rows, offsets[beyond], safety.far_lane_gap_m, 0.0, 0.0, 0.0)
+
+
+change_is_safe_compiled = Kernel(change_is_safe)
+"""`change_is_safe` compiled, for Python callers: the per-world layer and the lookahead."""
+_unsafe_vehicles = Kernel(unsafe_vehicles)
 
 
 @dataclass(frozen=True)
@@ -100,6 +190,7 @@ class SafetyLayer:
 
     def __init__(self, config: SafetyConfig) -> None:
         self.config = config
+        self.settings = safety_settings(config)
         self.masked = 0
         self.aborted = 0
         self.reacted_to: tuple[int, ...] = ()
@@ -108,45 +199,20 @@ class SafetyLayer:
     def counts(self) -> SafetyCounts:
         return SafetyCounts(self.masked, self.aborted)
 
-    def gap_is_safe(self, world: WorldState, lane: int, min_gap: float, min_ttc: float, strict: bool) -> bool:
-        return not self.unsafe_neighbours(world, lane, min_gap, min_ttc, strict)
-
-    def unsafe_neighbours(
-        self,
-        world: WorldState,
-        lane: int,
-        min_gap: float,
-        min_ttc: float,
-        strict: bool,
-        lookahead_s: float = 0.0,
-    ) -> tuple[int, ...]:
-        """The vehicles (ids) ahead and behind in `lane` closer than the gap [m] or TTC [s] allows,
-        counting those whose present lateral motion carries them into `lane` within `lookahead_s` [s]."""
-        if lookahead_s > 0:
-            ahead, behind = scanned_neighbours(world, lane, lateral_drift(world, lookahead_s))
-        else:
-            ahead, behind = neighbours(world, lane)
-        return unsafe_neighbours(self.config, float(world.speed[0]), ahead, behind, min_gap, min_ttc, strict)
-
     def permits(self, command: Command, world: WorldState, lane: int) -> bool:
         """Whether `filter` lets `command` through (without counting a mask)."""
         if command is Command.STAY or not self.config.enabled:
             return True
-        target = lane + command.lane_shift
-        config = self.config
-        return (
-            0 <= target < world.lanes_count
-            and self.gap_is_safe(world, target, config.min_gap_m, config.min_ttc_s, strict=True)
-            and not self._alongside_beyond(world, target + command.lane_shift)
+        return bool(
+            change_is_safe_compiled(
+                vehicle_rows(world),
+                world.lane_offsets,
+                world.lanes_count,
+                lane,
+                lane + command.lane_shift,
+                self.settings,
+            )  # fmt: skip
         )
-
-    def _alongside_beyond(self, world: WorldState, far_lane: int) -> tuple[int, ...]:
-        """The vehicles (ids) of `far_lane`, the lane beyond a change's target, closer to the ego
-        than `far_lane_gap_m` (none without the check or the lane)."""
-        gap = self.config.far_lane_gap_m
-        if gap is None or not 0 <= far_lane < world.lanes_count:
-            return ()
-        return self.unsafe_neighbours(world, far_lane, gap, 0.0, strict=False)
 
     def filter(self, command: Command, world: WorldState, lane: int) -> Command:
         """`command`, or STAY when it leads off the road or into an unsafe gap."""
@@ -156,12 +222,25 @@ class SafetyLayer:
         target = lane + command.lane_shift
         config = self.config
         if 0 <= target < world.lanes_count:
-            self.reacted_to = self.unsafe_neighbours(
-                world, target, config.min_gap_m, config.min_ttc_s, True
+            self.reacted_to = self._unsafe(
+                world,
+                target,
+                config.min_gap_m,
+                config.min_ttc_s,
+                config.front_time_gap_s,
+                config.rear_time_gap_s,
             ) + self._alongside_beyond(world, target + command.lane_shift)
         else:
             self.reacted_to = ()
         return Command.STAY
+
+    def _alongside_beyond(self, world: WorldState, far_lane: int) -> tuple[int, ...]:
+        """The vehicles (ids) of `far_lane`, the lane beyond a change's target, closer to the ego
+        than `far_lane_gap_m` (none without the check or the lane)."""
+        gap = self.config.far_lane_gap_m
+        if gap is None or not 0 <= far_lane < world.lanes_count:
+            return ()
+        return self._unsafe(world, far_lane, gap, 0.0, 0.0, 0.0)
 
     def should_abort(self, world: WorldState, target: int) -> bool:
         """True when the gap in `target` has closed below the abort margins, counting the vehicles
@@ -169,9 +248,84 @@ class SafetyLayer:
         config = self.config
         if not config.enabled:
             return False
-        gap, ttc = config.abort_gap_m, config.abort_ttc_s
-        unsafe = self.unsafe_neighbours(world, target, gap, ttc, False, config.abort_lookahead_s)
+        drift = np.concatenate(([0.0], lateral_drift(world, config.abort_lookahead_s)))
+        rows = vehicle_rows(world)._replace(drift=drift)
+        unsafe = self._unsafe(world, target, config.abort_gap_m, config.abort_ttc_s, 0.0, 0.0, rows)
         if unsafe:
             self.aborted += 1
             self.reacted_to = unsafe
         return bool(unsafe)
+
+    @staticmethod
+    def _unsafe(
+        world: WorldState,
+        lane: int,
+        min_gap: float,
+        min_ttc: float,
+        front_time_gap: float,
+        rear_time_gap: float,
+        rows: VehicleRows | None = None,
+    ) -> tuple[int, ...]:
+        """The vehicles (ids) that make `lane` unsafe (`unsafe_vehicles`) among `rows` (none: the
+        world's where they are now)."""
+        found = _unsafe_vehicles(
+            vehicle_rows(world) if rows is None else rows, float(world.lane_offsets[lane]), min_gap, min_ttc,
+            front_time_gap, rear_time_gap,
+        )  # fmt: skip
+        return tuple(int(world.ids[row]) for row in found if row >= 0)
+
+
+def permitted_batch(
+    config: SafetyConfig,
+    perceived: WorldBatch,
+    lane: np.ndarray,
+    changing: np.ndarray,
+    speed: np.ndarray,
+    min_speed: float,
+) -> np.ndarray:
+    """(worlds, N_ACTIONS) float32, 1 where the loop would carry the command out
+    (`ClosedLoop.permitted()` of every world of a batch): STAY always; a lane change when the
+    maneuver of that world keeps its `lane` (not `changing`), its ego's true `speed` [m/s] is at
+    least `min_speed` and the safety layer passes the gap it leads into, on what the sensor
+    reports (`perceived`)."""
+    reach = (perceived.lane_width + lateral_extents(perceived)) / 2
+    permitted = np.zeros((perceived.worlds, N_ACTIONS), dtype=np.float32)
+    _permitted(
+        permitted,
+        perceived.columns(),
+        reach,
+        np.asarray(lane, dtype=np.int64),
+        np.asarray(changing, dtype=np.bool_),
+        np.asarray(speed, dtype=np.float64),
+        min_speed,
+        safety_settings(config),
+    )
+    return permitted
+
+
+@Kernel
+def _permitted(
+    out: np.ndarray,
+    columns: tuple[np.ndarray, ...],
+    reach: np.ndarray,
+    lane: np.ndarray,
+    changing: np.ndarray,
+    true_speed: np.ndarray,
+    min_speed: float,
+    safety: SafetySettings,
+) -> None:  # pragma: no cover - compiled; covered through permitted_batch
+    count, s, d, speed, length, _, _, lanes_count, lane_offsets = columns
+    now = np.zeros(s.shape[1])
+    for w in range(out.shape[0]):
+        out[w, 1] = 1.0
+        if changing[w] or true_speed[w] < min_speed:
+            continue
+        for command in (0, 2):
+            target = lane[w] + command - 1
+            if not safety.enabled:
+                out[w, command] = 1.0
+            elif change_is_safe(
+                VehicleRows(count[w], s[w], d[w], speed[w], length[w], reach[w], now), lane_offsets[w],
+                lanes_count[w], lane[w], target, safety,
+            ):  # fmt: skip
+                out[w, command] = 1.0

@@ -1,7 +1,7 @@
 """The layers' batched kernels against their per-world code, on worlds the closed loop drove: the
 `observation` encoding (`perception.grid.observe_batch`) to the bits of `OccupancyGridBuilder
-.build(world).encode("observation")`, and the safety layer's verdicts (`planner.batch_safety`) to
-each loop's `permitted()`."""
+.build(world).encode("observation")`, and the safety layer's verdicts (`planner.safety.permitted_batch`)
+to each loop's `permitted()`."""
 
 import dataclasses
 
@@ -11,16 +11,14 @@ import pytest
 from perception.grid import OccupancyGridBuilder, observe_batch
 from perception.sensor import SensorBatch, SensorConfig, SensorModel
 from planner.agents import decide
-from planner.batch_safety import lane_is_safe, lateral_drifts, lateral_extents, permitted_batch
 from planner.lookahead_scene import lookahead_grid
-from planner.safety import SafetyConfig, SafetyLayer
+from planner.safety import permitted_batch
 from records import GridConfig, WorldState
 from records.batch import WorldBatch
 from stack.loop.closed_loop import ClosedLoop
 from stack.runs.kept import build_agent
 from stack.settings.run import build_config
 from stack.sim.highway import HighwayAdapter
-from tests.helpers import cutting_in
 
 GRIDS = {
     "default": GridConfig(),
@@ -139,31 +137,6 @@ def test_the_safety_layer_s_verdicts_for_a_batch_are_each_loop_s(far_lane_gap_m:
     np.testing.assert_array_equal(batched, np.array(expected))
     refused = (batched[:, [0, 2]] == 0) & ~np.array(changing)[:, None]
     assert refused.any() and (batched[:, [0, 2]] == 1).any() and any(changing), "every verdict occurs"
-
-
-@pytest.mark.parametrize("lookahead_s", [0.0, 1.0, 3.0])
-def test_the_abort_s_verdicts_for_a_batch_are_each_world_s(worlds: list[WorldState], lookahead_s: float):
-    """In every driven world and lane, and in a car cutting in (`tests.helpers.cutting_in`), the
-    compiled gap check over the batch with each vehicle's lateral drift (`lane_is_safe`,
-    `lateral_drifts`) aborts exactly where the safety layer's `should_abort` does."""
-    config = SafetyConfig(abort_lookahead_s=lookahead_s)
-    worlds = [*worlds, cutting_in(-0.3)]
-    batch = WorldBatch.of(worlds)
-    reach = (batch.lane_width + lateral_extents(batch)) / 2
-    drift = lateral_drifts(batch, lookahead_s)
-    count, s, d, speed, length, _, _, lanes_count, offsets = batch.columns()
-    aborted = []
-    for w, world in enumerate(worlds):
-        for lane in range(int(lanes_count[w])):
-            aborts = SafetyLayer(config).should_abort(world, lane)
-            safe = lane_is_safe(
-                count[w], s[w], d[w], drift[w], speed[w], length[w], reach[w], offsets[w, lane],
-                config.abort_gap_m, config.abort_ttc_s, 0.0, 0.0,
-            )  # fmt: skip
-            assert aborts is not safe, (w, lane)
-            aborted.append(aborts)
-    assert any(aborted) and not all(aborted)
-    assert aborted[-2] is (lookahead_s > 0), "the cut-in into lane 1 is seen when looking ahead"
 
 
 SENSORS = {

@@ -17,17 +17,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from common.neighbours import lateral_drifts, lateral_extents
 from controllers.emergency import EmergencyBraking
 from controllers.lateral import LateralPID
 from controllers.reference import lane_keeping
 from controllers.tracker import PIDTracker, make_controller
 from perception.sensor import SensorBatch, SensorModel
-from planner.batch_safety import lateral_drifts, lateral_extents, permitted_batch, safety_settings
+from planner.safety import permitted_batch, safety_settings
 from records import WorldState
 from records.batch import WorldBatch
 from stack.batch.kernels import EgoLaws, control, decide, settle
-from stack.batch.metrics import EpisodeMetricsBatch
 from stack.loop.closed_loop import episode_sensor
+from stack.loop.metrics import EpisodeMetricsBatch
 from stack.loop.safety_metrics import classify_collision
 from stack.results.episode_fields import record_fields
 from stack.results.episode_result import EpisodeResult

@@ -3,7 +3,7 @@ every world: `decide` (a decision point: the safety layer's filter, the maneuver
 `control` (one tick's reference, leaders, PID, cruise and emergency braking: the actuation) and
 `settle` (after the plant's frame: road departure, the maneuver's end). Each follows
 `ClosedLoop.act` / `ClosedLoop.tick` on one world, through the per-world functions of
-the layers' per-tick laws (`controllers`, `planner.batch_safety`), compiled.
+the layers' per-tick laws (`controllers`, `planner.safety`), compiled.
 
 The state a kernel reads and writes is a tuple of arrays, one row per world (`EgoState`'s
 `arrays()`): maneuver (lane, target, quintic coefficients (W, 6), profile [t0, duration, end,
@@ -22,6 +22,7 @@ from numba import njit
 
 from common import neighbours
 from common.compiled import Kernel, clip
+from common.neighbours import VehicleRows
 from controllers.cruise import GapKeeping, gap_acceleration
 from controllers.emergency import BrakingLimits, braked_acceleration, leader_braking, needs_full_braking
 from controllers.lateral import LateralGains, LateralMemory, lateral_steering
@@ -38,8 +39,8 @@ from controllers.reference import (
     warped_sample,
     warped_time,
 )
-from planner.batch_safety import change_is_safe, lane_is_safe
-from stack.loop.safety_metrics import DEPARTURE_TOLERANCE_M
+from planner.safety import SafetySettings, change_is_safe, lane_is_safe
+from stack.loop.safety_metrics import departs
 
 STAY = 1
 """`Command.STAY`'s value (LEFT 0, RIGHT 2: the lane shift is the value - 1)."""
@@ -98,12 +99,12 @@ def decide(
     reach: np.ndarray,
     lane_width: float,
     maneuver: tuple[np.ndarray, ...],
-    safety: np.ndarray,
+    safety: SafetySettings,
     settings: np.ndarray,
     outcome: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
     """`ClosedLoop.act`'s decision point in each `live` world: a command given while no lane change
-    runs passes the safety layer (`safety`: `planner.batch_safety.safety_settings`; STAY when it
+    runs passes the safety layer (`safety`: `planner.safety.SafetySettings`; STAY when it
     fails: masked) to the maneuver, which starts the lane change unless it is refused
     (off the road, below the lane-change speed). `settings`: nominal lane-change duration [s],
     minimum lane-change speed [m/s], tan of the largest course. `outcome` (W, 3): considered,
@@ -118,10 +119,10 @@ def decide(
         outcome[w, 0] = 1
         command = commands[w]
         permits = True
-        if command != STAY and safety[0] != 0.0:
+        if command != STAY and safety.enabled:
             permits = change_is_safe(
-                count[w], s[w], d[w], now, speed[w], length[w], reach[w], offsets[w], lanes_count[w],
-                lane[w], lane[w] + command - 1, safety,
+                VehicleRows(count[w], s[w], d[w], speed[w], length[w], reach[w], now), offsets[w],
+                lanes_count[w], lane[w], lane[w] + command - 1, safety,
             )  # fmt: skip
         if not permits:
             counts[w, 1] += 1
@@ -153,14 +154,14 @@ def control(
     slots: np.ndarray,
     maneuver: tuple[np.ndarray, ...],
     controller: tuple[np.ndarray, ...],
-    safety: np.ndarray,
+    safety: SafetySettings,
     settings: np.ndarray,
     laws: EgoLaws,
     dt: float,
     actuation: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
     """`ClosedLoop.tick` up to the plant in each `live` world: the maneuver's reference (a lane
-    change whose gap closed is aborted first: `safety[5:7]` the abort gap [m] and TTC [s], each
+    change whose gap closed is aborted first, at the abort gap [m] and TTC [s] of `safety`, each
     vehicle counted where it reaches within its lateral `drift` [m] over the abort's lookahead), the
     leaders (of the lane it heads for, then of every other lane the ego's footprint reaches), the
     lateral PID, the adaptive cruise and emergency braking, each the per-world law on the world's
@@ -183,9 +184,9 @@ def control(
         t, n = time[w], count[w]
         if lane[w] != target[w]:
             crossed = left_origin(d[w, 0], offsets[w, lane[w]], lane_width)
-            if not crossed and safety[0] != 0.0 and not lane_is_safe(
-                n, s[w], d[w], drift[w], speed[w], length[w], reach[w], offsets[w, target[w]],
-                safety[5], safety[6], 0.0, 0.0,
+            if not crossed and safety.enabled and not lane_is_safe(
+                VehicleRows(n, s[w], d[w], speed[w], length[w], reach[w], drift[w]), offsets[w, target[w]],
+                safety.abort_gap_m, safety.abort_ttc_s, 0.0, 0.0,
             ):  # fmt: skip
                 counts[w, 2] += 1
                 _, d_dot, d_ddot = _sample(w, coef, profile, clock, t)
@@ -344,14 +345,7 @@ def settle(
         if not stepped[w]:
             continue
         low, high = ego_extent(w, d, length, width, heading, lane_heading)
-        lowest, highest = offsets[w, 0], offsets[w, 0]
-        for k in range(1, lanes_count[w]):
-            if offsets[w, k] < lowest:
-                lowest = offsets[w, k]
-            if offsets[w, k] > highest:
-                highest = offsets[w, k]
-        edge_low, edge_high = lowest - lane_width / 2, highest + lane_width / 2
-        if low < edge_low - DEPARTURE_TOLERANCE_M or high > edge_high + DEPARTURE_TOLERANCE_M:
+        if departs(low, high, offsets[w], lanes_count[w], lane_width):
             departed[w] = True
         if lane[w] != target[w]:
             profile_time = warped_time(WarpClock(clock[w, 0], clock[w, 1], clock[w, 2]), time[w])

@@ -5,19 +5,33 @@
 - comfort: peak |lateral acceleration| (a_y = v * yaw rate relative to the reference lane, so a
   bend's own v^2 / R is not counted) and peak lateral jerk, both over a 500 ms moving average, as
   UN R79 measures them.
+
+`EpisodeRecorder` records one world's episode; `EpisodeMetricsBatch` records those of many worlds at
+once as rows of arrays, measured with the same functions (`driven_of`, the safety monitor's
+`leaders_ahead`).
 """
 
 from __future__ import annotations
 
 import copy
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from common.neighbours import lateral_extents
 from records import WorldState
+from records.batch import WorldBatch
 from stack.loop.loop_records import Tick
-from stack.loop.safety_metrics import STOPPED_SPEED_MPS
+from stack.loop.safety_metrics import (
+    STOPPED_SPEED_MPS,
+    Collision,
+    SafetyMeasures,
+    leaders_ahead_batch,
+    r157_min_following_distances,
+)
+from stack.results.episode_result import TTC_CAP_S
 
 COMFORT_WINDOW_S = 0.5
 """Moving-average window for lateral acceleration and jerk [s] (UN R79)."""
@@ -182,21 +196,167 @@ class EpisodeRecorder:
 
     def driven(self, dt: float) -> Driven:
         """What was recorded, measured (ticks `dt` seconds apart)."""
-        peak_accel, peak_jerk = lateral_comfort(np.array(self.heading), np.array(self.speed), dt)
-        return Driven(
-            steps=len(self.time) - 1,
-            duration_s=self.time[-1] - self.time[0],
-            passed_cars=len(self.passed),
-            mean_speed=float(np.mean(self.speed)),
-            peak_lat_accel=peak_accel,
-            peak_lat_jerk=peak_jerk,
-            longest_standstill_s=longest_run(np.array(self.speed[1:]) < STOPPED_SPEED_MPS) * dt,
-            time_in_leftmost_lane_s=float(np.count_nonzero(np.array(self.lane[1:]) == 0) * dt),
-            trace={"time": self.time, "speed": self.speed, "d": self.d},
-        )
+        trace = {"time": self.time, "speed": self.speed, "d": self.d}
+        time, speed, heading, lane = map(np.array, (self.time, self.speed, self.heading, self.lane))
+        return driven_of(time, speed, heading, lane, len(self.passed), dt, trace)
+
+
+def driven_of(
+    time: np.ndarray,
+    speed: np.ndarray,
+    heading: np.ndarray,
+    lane: np.ndarray,
+    passed_cars: int,
+    dt: float,
+    trace: dict[str, list[float]],
+) -> Driven:
+    """An episode measured (`Driven`) from its samples `dt` seconds apart (at the start and after
+    every tick: time [s], the ego's speed [m/s], heading to the lane [rad] and lane), its
+    `passed_cars` and its `trace`."""
+    peak_accel, peak_jerk = lateral_comfort(heading, speed, dt)
+    return Driven(
+        steps=len(time) - 1,
+        duration_s=float(time[-1] - time[0]),
+        passed_cars=passed_cars,
+        mean_speed=float(np.mean(speed)),
+        peak_lat_accel=peak_accel,
+        peak_lat_jerk=peak_jerk,
+        longest_standstill_s=longest_run(speed[1:] < STOPPED_SPEED_MPS) * dt,
+        time_in_leftmost_lane_s=float(np.count_nonzero(lane[1:] == 0) * dt),
+        trace=trace,
+    )
 
 
 def longest_run(flags: np.ndarray) -> int:
     """Length of the longest run of True in `flags` (0 if none)."""
     edges = np.flatnonzero(np.diff(np.concatenate(([0], flags.astype(np.int8), [0]))))
     return int((edges[1::2] - edges[::2]).max(initial=0))
+
+
+SERIES = ("time", "speed", "heading", "d", "lane", "control_s")
+"""What the recorder keeps of every tick, per world (`control_s`: the batch's control step, its
+wall-clock time shared evenly by the worlds it ran for [s]; none at the first sample)."""
+
+
+class EpisodeMetricsBatch:
+    """Per world, the episode under way as `EpisodeRecorder` and `SafetyMonitor` see it: `reset`
+    at a world's reset, `record` after every tick, `collided` at its first crash frame, and
+    `driven(world)` / `measured(world)` when its episode ends. Ticks are `dt` seconds apart."""
+
+    def __init__(self, worlds: int, dt: float) -> None:
+        self.worlds, self.dt = worlds, dt
+        self.ticks = np.zeros(worlds, dtype=np.int64)
+        self.series = {name: np.zeros((worlds, 0)) for name in SERIES}
+        self.was_ahead = np.zeros((worlds, 0), dtype=bool)
+        self.passed = np.zeros((worlds, 0), dtype=bool)
+        self.min_ttc_s = np.full(worlds, TTC_CAP_S)
+        self.time_below_ttc_floor_s = np.zeros(worlds)
+        self.time_below_min_distance_s = np.zeros(worlds)
+        self.collision: list[Collision | None] = [None] * worlds
+
+    def _room(self, ticks: int, vehicles: int) -> None:
+        """Series rows of at least `ticks` samples and passing flags for `vehicles` rows a world."""
+        held = self.series["time"].shape[1]
+        if ticks > held:
+            more = max(ticks - held, held)
+            self.series = {name: np.pad(values, ((0, 0), (0, more))) for name, values in self.series.items()}
+        more = vehicles - self.was_ahead.shape[1]
+        if more > 0:
+            self.was_ahead = np.pad(self.was_ahead, ((0, 0), (0, more)))
+            self.passed = np.pad(self.passed, ((0, 0), (0, more)))
+
+    def reset(self, worlds: Sequence[int], batch: WorldBatch, time: np.ndarray) -> None:
+        """The worlds `worlds` begin an episode at `batch` (the truth) and `time` [s]."""
+        rows = np.asarray(worlds, dtype=np.int64)
+        self.ticks[rows] = 0
+        self.passed[rows] = False
+        self.was_ahead[rows] = False
+        self.min_ttc_s[rows] = TTC_CAP_S
+        self.time_below_ttc_floor_s[rows] = 0.0
+        self.time_below_min_distance_s[rows] = 0.0
+        for world in rows.tolist():
+            self.collision[world] = None
+        flags = np.zeros(self.worlds, dtype=bool)
+        flags[rows] = True
+        self._record_world(flags, batch, time, 0.0)
+
+    def record(
+        self, stepped: np.ndarray, batch: WorldBatch, time: np.ndarray, crashed: np.ndarray, control_s: float
+    ) -> list[int]:
+        """One tick of the worlds flagged `stepped`, at `batch` (the truth) and `time` [s], whose
+        control step took `control_s` seconds of wall-clock time for them all; the worlds whose ego
+        `crashed` on it for the first time: classify each (`collided`)."""
+        self._record_world(stepped, batch, time, control_s / max(int(stepped.sum()), 1))
+        reach = (batch.lane_width + lateral_extents(batch)) / 2
+        ego_lane_gap = np.full(self.worlds, np.nan)
+        below_floor = np.zeros(self.worlds, dtype=bool)
+        leaders_ahead_batch(
+            stepped, batch.columns(), batch.heading, batch.lane_heading, reach, batch.lane_width,
+            self.min_ttc_s, below_floor, ego_lane_gap,
+        )  # fmt: skip
+        self.time_below_ttc_floor_s[stepped] += self.dt * below_floor[stepped]
+        minimum = r157_min_following_distances(batch.speed[:, 0])
+        below_distance = stepped & (ego_lane_gap < minimum)
+        self.time_below_min_distance_s[below_distance] += self.dt
+        return [w for w in np.flatnonzero(stepped & crashed).tolist() if self.collision[w] is None]
+
+    def collided(self, world: int, collision: Collision) -> None:
+        """World `world`'s ego collided: `collision` (`classify_collision` of its crash frame)."""
+        self.collision[world] = collision
+
+    def _record_world(self, flags: np.ndarray, batch: WorldBatch, time: np.ndarray, control_s: float) -> None:
+        """The worlds flagged in `flags`, one sample more: the recorder's series and passed cars."""
+        self._room(int(self.ticks.max(initial=0)) + 1, batch.s.shape[1])
+        rows = np.flatnonzero(flags)
+        at = self.ticks[rows]
+        values = {
+            "time": time,
+            "speed": batch.speed[:, 0],
+            "heading": batch.heading[:, 0] - batch.lane_heading,
+            "d": batch.d[:, 0],
+            "lane": batch.lane[:, 0],
+            "control_s": np.full(self.worlds, control_s),
+        }
+        for name, value in values.items():
+            self.series[name][rows, at] = value[rows]
+        self.ticks[rows] += 1
+        vehicles = batch.s.shape[1]
+        others = np.arange(vehicles)[None, :]
+        present = (others >= 1) & (others < batch.count[:, None])
+        ahead = (batch.s > batch.s[:, :1]) & present
+        was_ahead = self.was_ahead[:, :vehicles]
+        passing = flags[:, None] & was_ahead & ~ahead & present
+        self.passed[:, :vehicles] |= passing
+        self.was_ahead[:, :vehicles] = np.where(flags[:, None], ahead, was_ahead)
+
+    def _samples(self, world: int, name: str) -> np.ndarray:
+        return self.series[name][world, : self.ticks[world]]
+
+    def driven(self, world: int) -> Driven:
+        """`EpisodeRecorder.driven` of world `world`'s episode so far."""
+        time, speed, d = (self._samples(world, name) for name in ("time", "speed", "d"))
+        trace = {"time": time.tolist(), "speed": speed.tolist(), "d": d.tolist()}
+        heading, lane = self._samples(world, "heading"), self._samples(world, "lane")
+        return driven_of(
+            time, speed, heading, lane, int(np.count_nonzero(self.passed[world])), self.dt, trace
+        )
+
+    def control_ms(self, world: int) -> tuple[float, float]:
+        """(p50, p95) of world `world`'s share of the control step per tick [ms] this episode, as
+        `ClosedLoop.solve_statistics` reports the controller's time per tick."""
+        shares = 1e3 * self._samples(world, "control_s")[1:]
+        if not shares.size:
+            return 0.0, 0.0
+        p50, p95 = np.percentile(shares, [50, 95])
+        return float(p50), float(p95)
+
+    def measured(self, world: int, departed: bool) -> SafetyMeasures:
+        """`SafetyMonitor.measured` of world `world`'s episode so far, which `departed` the road or
+        not (`ClosedLoopBatch.departed`)."""
+        return SafetyMeasures.of(
+            departed,
+            self.collision[world],
+            float(self.min_ttc_s[world]),
+            float(self.time_below_min_distance_s[world]),
+            float(self.time_below_ttc_floor_s[world]),
+        )

@@ -21,6 +21,10 @@
 - **time below the TTC floor** [s]: the TTC (as for the minimum) to a vehicle ahead in a lane the
   ego occupies is below `TTC_FLOOR_S` (nuPlan's TTC metric, whose floor is 0.95 s; the benchmark's
   share of time above a floor).
+
+The per-tick law of the leaders' TTC and gap is one plain function of one world's rows
+(`leaders_ahead`, which numba compiles): `SafetyMonitor` calls it compiled on its world, and
+`leaders_ahead_batch` loops over the worlds of a batch (`stack.loop.metrics.EpisodeMetricsBatch`).
 """
 
 from __future__ import annotations
@@ -29,8 +33,18 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba.extending import register_jitable
 
-from common.neighbours import footprint_lateral_extent, neighbours, occupied_lanes
+from common.compiled import Kernel
+from common.neighbours import (
+    VehicleRows,
+    footprint_across,
+    footprint_lateral_extent,
+    nearest_in_lane,
+    occupied_lanes,
+    reaches_lane,
+    vehicle_rows,
+)
 from records import WorldState
 from stack.results.episode_result import TTC_CAP_S
 
@@ -53,15 +67,12 @@ NOT_AT_FAULT_KINDS = ("ego stopped", "rear", "side swipe")
 
 def r157_min_following_distance(speed: float) -> float:
     """d_min = v * t_front(v) [m] at `speed` [m/s]; 0 below 7.2 km/h, where R157 sets none."""
-    if speed < R157_MIN_SPEED_MPS:
-        return 0.0
-    return speed * float(np.interp(speed * 3.6, _R157_KMH, _R157_GAP))
+    return float(r157_min_following_distances(np.float64(speed)))
 
 
-def road_edges(world: WorldState) -> tuple[float, float]:
-    """(lowest, highest) lateral coordinate [m] of the drivable area: the outer edges of the outer lanes."""
-    half, offsets = world.lane_width / 2, world.lane_offsets.tolist()
-    return min(offsets) - half, max(offsets) + half
+def r157_min_following_distances(speed: np.ndarray | np.float64) -> np.ndarray:
+    """`r157_min_following_distance` of each of `speed` [m/s]."""
+    return np.where(speed < R157_MIN_SPEED_MPS, 0.0, speed * np.interp(speed * 3.6, _R157_KMH, _R157_GAP))
 
 
 def departed(world: WorldState) -> bool:
@@ -70,9 +81,22 @@ def departed(world: WorldState) -> bool:
 
 
 def _departed(world: WorldState, extent: tuple[float, float]) -> bool:
-    low, high = extent
-    edge_low, edge_high = road_edges(world)
-    return bool(low < edge_low - DEPARTURE_TOLERANCE_M or high > edge_high + DEPARTURE_TOLERANCE_M)
+    return bool(departs(*extent, world.lane_offsets, world.lanes_count, world.lane_width))
+
+
+@register_jitable
+def departs(low: float, high: float, offsets: np.ndarray, lanes_count: int, lane_width: float) -> bool:
+    """A footprint spanning [`low`, `high`] across the road [m] lies more than
+    `DEPARTURE_TOLERANCE_M` beyond the outer edges of the `lanes_count` lanes centred at `offsets`
+    [m], each `lane_width` [m] wide (the road departure of one world, for one world or many)."""
+    lowest, highest = offsets[0], offsets[0]
+    for lane in range(1, lanes_count):
+        if offsets[lane] < lowest:
+            lowest = offsets[lane]
+        if offsets[lane] > highest:
+            highest = offsets[lane]
+    edge_low, edge_high = lowest - lane_width / 2, highest + lane_width / 2
+    return low < edge_low - DEPARTURE_TOLERANCE_M or high > edge_high + DEPARTURE_TOLERANCE_M
 
 
 @dataclass(frozen=True)
@@ -129,6 +153,25 @@ class SafetyMeasures:
     time_below_min_distance_s: float
     time_below_ttc_floor_s: float
 
+    @classmethod
+    def of(
+        cls,
+        road_departure: bool,
+        collision: Collision | None,
+        min_ttc_s: float,
+        time_below_min_distance_s: float,
+        time_below_ttc_floor_s: float,
+    ) -> SafetyMeasures:
+        """The measures of an episode that ended in `collision` (none: it did not collide)."""
+        return cls(
+            road_departure=road_departure,
+            at_fault_collision=collision is not None and collision.at_fault,
+            collision_kind=collision.kind if collision is not None else "",
+            min_ttc_s=min_ttc_s,
+            time_below_min_distance_s=time_below_min_distance_s,
+            time_below_ttc_floor_s=time_below_ttc_floor_s,
+        )
+
 
 class SafetyMonitor:
     """Per-episode safety record, fed the true world after every control tick."""
@@ -150,27 +193,89 @@ class SafetyMonitor:
             self.collision = classify_collision(world, changing_lane)
         extent = footprint_lateral_extent(world)
         self.road_departure = self.road_departure or _departed(world, extent)
-        v = float(world.speed[0])
-        below_floor = False
-        for lane in occupied_lanes(world, extent):
-            leader = neighbours(world, lane)[0]
-            if leader is not None and leader.gap > 0 and v > leader.speed:
-                ttc = leader.gap / (v - leader.speed)
-                self.min_ttc_s = min(self.min_ttc_s, ttc)
-                below_floor = below_floor or ttc < TTC_FLOOR_S
-        self.time_below_ttc_floor_s += self.dt * below_floor
-        leader = neighbours(world, world.ego_lane)[0] if 0 <= world.ego_lane < world.lanes_count else None
-        if leader is not None and leader.gap < r157_min_following_distance(v):
+        ttc, ego_lane_gap = _leaders_ahead(
+            vehicle_rows(world),
+            world.lane_offsets,
+            world.lanes_count,
+            world.ego_lane,
+            *extent,
+            world.lane_width,
+        )
+        self.min_ttc_s = min(self.min_ttc_s, ttc)
+        self.time_below_ttc_floor_s += self.dt * (ttc < TTC_FLOOR_S)
+        if not math.isnan(ego_lane_gap) and ego_lane_gap < r157_min_following_distance(float(world.speed[0])):
             self.time_below_min_distance_s += self.dt
 
     def measured(self) -> SafetyMeasures:
         """The episode so far (see `SafetyMeasures`)."""
-        collision = self.collision
-        return SafetyMeasures(
-            road_departure=self.road_departure,
-            at_fault_collision=collision is not None and collision.at_fault,
-            collision_kind=collision.kind if collision is not None else "",
-            min_ttc_s=self.min_ttc_s,
-            time_below_min_distance_s=self.time_below_min_distance_s,
-            time_below_ttc_floor_s=self.time_below_ttc_floor_s,
+        return SafetyMeasures.of(
+            self.road_departure,
+            self.collision,
+            self.min_ttc_s,
+            self.time_below_min_distance_s,
+            self.time_below_ttc_floor_s,
         )
+
+
+@register_jitable
+def leaders_ahead(
+    rows: VehicleRows,
+    offsets: np.ndarray,
+    lanes_count: int,
+    ego_lane: int,
+    low: float,
+    high: float,
+    lane_width: float,
+) -> tuple[float, float]:
+    """One tick of the monitor's leaders in one world (`rows` where they are now): the smallest
+    TTC [s] to the leader (`common.neighbours.nearest_in_lane`) of a lane (centred at `offsets`
+    [m]) that the ego's footprint [`low`, `high`] [m] reaches into, when a gap is open and closing
+    (inf: none), and the gap [m] to the leader of its lane `ego_lane` (NaN: none)."""
+    s, speed, length = rows.s, rows.speed, rows.length
+    ego_speed = speed[0]
+    smallest, ego_lane_gap = math.inf, math.nan
+    for lane in range(lanes_count):
+        occupied = reaches_lane(low, high, offsets[lane], lane_width)
+        if not occupied and lane != ego_lane:
+            continue
+        leader = nearest_in_lane(rows, offsets[lane])[0]
+        if leader < 0:
+            continue
+        gap = abs(s[leader] - s[0]) - (length[leader] + length[0]) / 2
+        if lane == ego_lane:
+            ego_lane_gap = gap
+        if occupied and gap > 0 and ego_speed > speed[leader]:
+            smallest = min(smallest, gap / (ego_speed - speed[leader]))
+    return smallest, ego_lane_gap
+
+
+_leaders_ahead = Kernel(leaders_ahead)
+
+
+@Kernel
+def leaders_ahead_batch(
+    stepped: np.ndarray,
+    columns: tuple[np.ndarray, ...],
+    heading: np.ndarray,
+    lane_heading: np.ndarray,
+    reach: np.ndarray,
+    lane_width: float,
+    min_ttc: np.ndarray,
+    below_floor: np.ndarray,
+    ego_lane_gap: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """`leaders_ahead` in each `stepped` world of a batch (`reach` (W, V)), as `SafetyMonitor.record`
+    takes it: the smallest TTC kept in `min_ttc` [s], whether it is below `TTC_FLOOR_S` in
+    `below_floor`, and the gap to the leader in the ego's lane (NaN: none) in `ego_lane_gap` [m]."""
+    count, s, d, speed, length, width, lane, lanes_count, offsets = columns
+    now = np.zeros(s.shape[1])
+    for w in range(stepped.shape[0]):
+        if not stepped[w]:
+            continue
+        low, high = footprint_across(d[w, 0], length[w, 0], width[w, 0], heading[w, 0] - lane_heading[w])
+        rows = VehicleRows(count[w], s[w], d[w], speed[w], length[w], reach[w], now)
+        ttc, ego_lane_gap[w] = leaders_ahead(
+            rows, offsets[w], lanes_count[w], lane[w, 0], low, high, lane_width
+        )
+        min_ttc[w] = min(min_ttc[w], ttc)
+        below_floor[w] = ttc < TTC_FLOOR_S
