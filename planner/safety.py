@@ -31,7 +31,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from common.compiled import Kernel
 from common.neighbours import VehicleRows, lateral_drift, lateral_extents, nearest_in_lane, vehicle_rows
 from records import N_ACTIONS, Command, WorldState
-from records.batch import WorldBatch
+from records.batch import BatchColumns, WorldBatch
 
 MAX_GAP_M = 200.0
 """Largest gap the safety layer may ask for [m]: beyond any sensor's reach on a highway."""
@@ -306,7 +306,7 @@ def permitted_batch(
 @Kernel
 def _permitted(
     out: np.ndarray,
-    columns: tuple[np.ndarray, ...],
+    columns: BatchColumns,
     reach: np.ndarray,
     lane: np.ndarray,
     changing: np.ndarray,
@@ -314,7 +314,8 @@ def _permitted(
     min_speed: float,
     safety: SafetySettings,
 ) -> None:  # pragma: no cover - compiled; covered through permitted_batch
-    count, s, d, speed, length, _, _, lanes_count, lane_offsets = columns
+    count, s, d, speed, length = columns.vehicles, columns.s, columns.d, columns.speed, columns.length
+    lanes_count, lane_offsets = columns.lanes_count, columns.lane_offsets
     now = np.zeros(s.shape[1])
     for w in range(out.shape[0]):
         out[w, 1] = 1.0

@@ -3,10 +3,26 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from records.world import WorldState
+
+
+class BatchColumns(NamedTuple):
+    """The [worlds, vehicles] arrays a compiled kernel takes as one record (`WorldBatch.columns`);
+    `vehicles` is each world's `count`."""
+
+    vehicles: np.ndarray
+    s: np.ndarray
+    d: np.ndarray
+    speed: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+    lane: np.ndarray
+    lanes_count: np.ndarray
+    lane_offsets: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -34,10 +50,9 @@ class WorldBatch:
     def worlds(self) -> int:
         return len(self.count)
 
-    def columns(self) -> tuple[np.ndarray, ...]:
-        """(count, s, d, speed, length, width, lane, lanes_count, lane_offsets): the arrays a
-        compiled kernel takes as one tuple."""
-        return (
+    def columns(self) -> BatchColumns:
+        """The arrays a compiled kernel takes as one record."""
+        return BatchColumns(
             self.count,
             self.s,
             self.d,

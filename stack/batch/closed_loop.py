@@ -26,7 +26,15 @@ from perception.sensor import SensorBatch, SensorModel
 from planner.safety import permitted_batch, safety_settings
 from records import WorldState
 from records.batch import WorldBatch
-from stack.batch.kernels import EgoLaws, control, decide, settle
+from stack.batch.kernels import (
+    ControllerArrays,
+    EgoLaws,
+    ManeuverArrays,
+    ManeuverSettings,
+    control,
+    decide,
+    settle,
+)
 from stack.loop.closed_loop import episode_sensor
 from stack.loop.metrics import EpisodeMetricsBatch
 from stack.loop.safety_metrics import classify_collision
@@ -89,13 +97,11 @@ class ClosedLoopBatch:
         control_config, safety = config.controller, config.planner.safety
         self.min_speed = control_config.min_lane_change_speed_mps
         max_course = math.radians(control_config.lane_change_max_course_deg)
-        self.settings = np.array(
-            [
-                control_config.lane_change_duration_s,
-                self.min_speed,
-                math.tan(max_course),
-                control_config.set_speed_mps,
-            ]
+        self.settings = ManeuverSettings(
+            control_config.lane_change_duration_s,
+            self.min_speed,
+            math.tan(max_course),
+            control_config.set_speed_mps,
         )
         self.safety = safety_settings(safety)
         self.abort_lookahead_s = safety.abort_lookahead_s
@@ -230,8 +236,8 @@ class ClosedLoopBatch:
         if self.metrics is not None:
             self.metrics.reset(worlds, self.batch, self.traffic.time)
 
-    def _maneuver(self) -> tuple[np.ndarray, ...]:
-        return self.lane, self.target, self.coef, self.profile, self.clock, self.counts
+    def _maneuver(self) -> ManeuverArrays:
+        return ManeuverArrays(self.lane, self.target, self.coef, self.profile, self.clock, self.counts)
 
     def act(self, commands: np.ndarray, ticks: int, only: np.ndarray | None = None) -> ActedBatch:
         """`ClosedLoop.act(command, ticks)` in every world at once (or in the worlds flagged in
@@ -290,7 +296,9 @@ class ClosedLoopBatch:
         perceived, traffic = self.perceived, self.traffic
         assert perceived is not None
         actuation = np.zeros((self.worlds, 2))
-        controller = (self.lateral, self.speed_pi, self.seen, self.seen_speed, self.seen_slowing, self.flags)
+        controller = ControllerArrays(
+            self.lateral, self.speed_pi, self.seen, self.seen_speed, self.seen_slowing, self.flags
+        )
         started = time.perf_counter()
         control(
             live, traffic.time, perceived.columns(), perceived.heading, perceived.lane_heading,

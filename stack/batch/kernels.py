@@ -15,7 +15,6 @@ activations]) and the road departure flag."""
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -23,12 +22,12 @@ from numba import njit
 from common import neighbours
 from common.compiled import Kernel, clip
 from common.neighbours import VehicleRows
-from controllers.cruise import GapKeeping, gap_acceleration
+from controllers.cruise import gap_acceleration
 from controllers.emergency import BrakingLimits, braked_acceleration, leader_braking, needs_full_braking
-from controllers.lateral import LateralGains, LateralMemory, lateral_steering
+from controllers.lateral import LateralMemory, lateral_steering
 from controllers.leaders import leaders_in_rows
 from controllers.maneuver import lane_change_target, left_origin
-from controllers.pid import PIDMemory, PIDTerms, pid_output
+from controllers.pid import PIDMemory, pid_output
 from controllers.reference import (
     WarpClock,
     clock_rate,
@@ -40,20 +39,12 @@ from controllers.reference import (
     warped_time,
 )
 from planner.safety import SafetySettings, change_is_safe, lane_is_safe
+from records.batch import BatchColumns
+from stack.batch.ego_records import ControllerArrays, EgoLaws, ManeuverArrays, ManeuverSettings
 from stack.loop.safety_metrics import departs
 
 STAY = 1
 """`Command.STAY`'s value (LEFT 0, RIGHT 2: the lane shift is the value - 1)."""
-
-
-class EgoLaws(NamedTuple):
-    """The settings of the ego's per-tick laws, as the per-world controllers hold them: the lateral
-    PID's gains, the cruise's speed PI and gap keeping, emergency braking's limits."""
-
-    lateral: LateralGains
-    speed: PIDTerms
-    gap: GapKeeping
-    braking: BrakingLimits
 
 
 @njit(cache=True, nogil=True)
@@ -95,12 +86,12 @@ def decide(
     live: np.ndarray,
     commands: np.ndarray,
     time: np.ndarray,
-    columns: tuple[np.ndarray, ...],
+    columns: BatchColumns,
     reach: np.ndarray,
     lane_width: float,
-    maneuver: tuple[np.ndarray, ...],
+    maneuver: ManeuverArrays,
     safety: SafetySettings,
-    settings: np.ndarray,
+    settings: ManeuverSettings,
     outcome: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
     """`ClosedLoop.act`'s decision point in each `live` world: a command given while no lane change
@@ -109,7 +100,8 @@ def decide(
     (off the road, below the lane-change speed). `settings`: nominal lane-change duration [s],
     minimum lane-change speed [m/s], tan of the largest course. `outcome` (W, 3): considered,
     masked, refused (1 or 0)."""
-    count, s, d, speed, length, _, _, lanes_count, offsets = columns
+    count, s, d, speed, length = columns.vehicles, columns.s, columns.d, columns.speed, columns.length
+    lanes_count, offsets = columns.lanes_count, columns.lane_offsets
     lane, target, coef, profile, clock, counts = maneuver
     now = np.zeros(s.shape[1])
     for w in range(live.shape[0]):
@@ -129,13 +121,15 @@ def decide(
             outcome[w, 1] = 1
             continue
         ego_speed = speed[w, 0]
-        goal = lane_change_target(lane[w], command - 1, lanes_count[w], ego_speed, settings[1])
+        goal = lane_change_target(lane[w], command - 1, lanes_count[w], ego_speed, settings.min_speed)
         if goal < 0:
             outcome[w, 2] = 1 if command != STAY else 0
             continue
         d0, d_dot, _ = _sample(w, coef, profile, clock, time[w])
         distance = offsets[w, goal] - d0
-        duration = stretched_duration(distance, max(ego_speed, settings[1], 1e-3), settings[0], settings[2])
+        duration = stretched_duration(
+            distance, max(ego_speed, settings.min_speed, 1e-3), settings.duration, settings.tan_max_course
+        )
         _set_profile(w, coef, profile, clock, d0, offsets[w, goal], time[w], duration, d_dot, 0.0)
         target[w] = goal
         counts[w, 0] += 1
@@ -145,17 +139,17 @@ def decide(
 def control(
     live: np.ndarray,
     time: np.ndarray,
-    columns: tuple[np.ndarray, ...],
+    columns: BatchColumns,
     heading: np.ndarray,
     lane_heading: np.ndarray,
     extent: np.ndarray,
     drift: np.ndarray,
     lane_width: float,
     slots: np.ndarray,
-    maneuver: tuple[np.ndarray, ...],
-    controller: tuple[np.ndarray, ...],
+    maneuver: ManeuverArrays,
+    controller: ControllerArrays,
     safety: SafetySettings,
-    settings: np.ndarray,
+    settings: ManeuverSettings,
     laws: EgoLaws,
     dt: float,
     actuation: np.ndarray,
@@ -169,7 +163,13 @@ def control(
     duration [s], minimum speed [m/s], tan of the largest course, set speed [m/s]; `slots` (W,
     rows): the column of emergency braking's memory each row's vehicle keeps (its id, as the
     per-world memory keys it)."""
-    count, s, d, speed, length, width, _, lanes_count, offsets = columns
+    count, s, d, speed = columns.vehicles, columns.s, columns.d, columns.speed
+    length, width, lanes_count, offsets = (
+        columns.length,
+        columns.width,
+        columns.lanes_count,
+        columns.lane_offsets,
+    )
     lane, target, coef, profile, clock, counts = maneuver
     lateral, speed_pi, seen, seen_speed, seen_slowing, flags = controller
     vehicles, most_lanes = s.shape[1], offsets.shape[1]
@@ -192,11 +192,11 @@ def control(
                 _, d_dot, d_ddot = _sample(w, coef, profile, clock, t)
                 target[w] = lane[w]
                 home = offsets[w, lane[w]]
-                _set_profile(w, coef, profile, clock, d[w, 0], home, t, settings[0] / 2, d_dot, d_ddot)
+                _set_profile(w, coef, profile, clock, d[w, 0], home, t, settings.duration / 2, d_dot, d_ddot)
         warp = rewarped(
             WarpClock(clock[w, 0], clock[w, 1], clock[w, 2]),
             t,
-            clock_rate(speed[w, 0], settings[2], profile[w, 3]),
+            clock_rate(speed[w, 0], settings.tan_max_course, profile[w, 3]),
         )
         clock[w, 0], clock[w, 1], clock[w, 2] = warp
         lanes[0], used = target[w], 1
@@ -226,7 +226,9 @@ def control(
             1.0,
             memory.steering,
         )
-        acceleration = cruise_acceleration(speed_pi[w], laws, ego_speed, settings[3], gaps, speeds, found, dt)
+        acceleration = cruise_acceleration(
+            speed_pi[w], laws, ego_speed, settings.set_speed, gaps, speeds, found, dt
+        )
         acceleration = emergency_acceleration(
             acceleration, ego_speed, gaps, speeds, rows, found,
             seen[w], seen_speed[w], seen_slowing[w], flags[w], laws.braking, dt,
@@ -329,18 +331,19 @@ reaches_lane = njit(cache=True, nogil=True, inline="always")(neighbours.reaches_
 def settle(
     stepped: np.ndarray,
     time: np.ndarray,
-    columns: tuple[np.ndarray, ...],
+    columns: BatchColumns,
     heading: np.ndarray,
     lane_heading: np.ndarray,
     lane_width: float,
-    maneuver: tuple[np.ndarray, ...],
+    maneuver: ManeuverArrays,
     departed: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
     """After the plant's frame, in each `stepped` world: the safety monitor's road departure (a
     footprint corner more than the tolerance beyond the outer lanes' edges) and the maneuver's
     update (a lane change whose clock has run out ends: the target is the lane)."""
-    _, _, d, _, length, width, _, lanes_count, offsets = columns
-    lane, target, _, profile, clock, _ = maneuver
+    d, length, width = columns.d, columns.length, columns.width
+    lanes_count, offsets = columns.lanes_count, columns.lane_offsets
+    lane, target, profile, clock = maneuver.lane, maneuver.target, maneuver.profile, maneuver.clock
     for w in range(stepped.shape[0]):
         if not stepped[w]:
             continue

@@ -46,6 +46,7 @@ from common.neighbours import (
     vehicle_rows,
 )
 from records import WorldState
+from records.batch import BatchColumns
 from stack.results.episode_result import TTC_CAP_S
 
 DEPARTURE_TOLERANCE_M = 0.3
@@ -255,7 +256,7 @@ _leaders_ahead = Kernel(leaders_ahead)
 @Kernel
 def leaders_ahead_batch(
     stepped: np.ndarray,
-    columns: tuple[np.ndarray, ...],
+    columns: BatchColumns,
     heading: np.ndarray,
     lane_heading: np.ndarray,
     reach: np.ndarray,
@@ -267,7 +268,15 @@ def leaders_ahead_batch(
     """`leaders_ahead` in each `stepped` world of a batch (`reach` (W, V)), as `SafetyMonitor.record`
     takes it: the smallest TTC kept in `min_ttc` [s], whether it is below `TTC_FLOOR_S` in
     `below_floor`, and the gap to the leader in the ego's lane (NaN: none) in `ego_lane_gap` [m]."""
-    count, s, d, speed, length, width, lane, lanes_count, offsets = columns
+    count, s, d, speed, length, width = (
+        columns.vehicles,
+        columns.s,
+        columns.d,
+        columns.speed,
+        columns.length,
+        columns.width,
+    )
+    lane, lanes_count, offsets = columns.lane, columns.lanes_count, columns.lane_offsets
     now = np.zeros(s.shape[1])
     for w in range(stepped.shape[0]):
         if not stepped[w]:

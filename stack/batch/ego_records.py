@@ -1,0 +1,62 @@
+"""The ego's state and settings in a batch of closed loops, as named records the compiled steps
+(`stack.batch.kernels`) take: one row a world of what `Maneuver` and the controllers hold."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from controllers.cruise import GapKeeping
+from controllers.emergency import BrakingLimits
+from controllers.lateral import LateralGains
+from controllers.pid import PIDTerms
+
+
+class ManeuverSettings(NamedTuple):
+    """The maneuver's settings as `controllers.maneuver.Maneuver` holds them."""
+
+    duration: float
+    """Nominal lane-change duration [s]."""
+    min_speed: float
+    """Slowest speed a lane change starts at [m/s]."""
+    tan_max_course: float
+    """Tangent of the largest course a lane change asks for."""
+    set_speed: float
+    """The cruise's set speed [m/s]."""
+
+
+class ManeuverArrays(NamedTuple):
+    """Each world's maneuver (`Maneuver`'s state, one row a world): lane and target, the quintic's
+    coefficients (W, 6), its profile [t0, duration, end, peak lateral speed] and clock [anchor,
+    profile anchor, rate], and the counts [lane changes, masked, aborted]."""
+
+    lane: np.ndarray
+    target: np.ndarray
+    coef: np.ndarray
+    profile: np.ndarray
+    clock: np.ndarray
+    counts: np.ndarray
+
+
+class ControllerArrays(NamedTuple):
+    """Each world's controller state (one row a world): the lateral PID [integral, output, has
+    output, last steering], the speed PI [integral, output, has output], emergency braking's
+    per-vehicle memory (`seen`, `seen_speed`, `seen_slowing`) and its [active, activations]."""
+
+    lateral: np.ndarray
+    speed_pi: np.ndarray
+    seen: np.ndarray
+    seen_speed: np.ndarray
+    seen_slowing: np.ndarray
+    flags: np.ndarray
+
+
+class EgoLaws(NamedTuple):
+    """The settings of the ego's per-tick laws, as the per-world controllers hold them: the lateral
+    PID's gains, the cruise's speed PI and gap keeping, emergency braking's limits."""
+
+    lateral: LateralGains
+    speed: PIDTerms
+    gap: GapKeeping
+    braking: BrakingLimits
