@@ -148,8 +148,10 @@ def _metadata(path: Path, raw: np.ndarray) -> dict:
         raise ModelFileError(f"{path}: metadata of {raw.nbytes} bytes; at most {MAX_METADATA_BYTES}")
     try:
         metadata = json.loads(raw.tobytes().decode())
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
-        raise ModelFileError(f"{path}: model metadata is not valid JSON") from None
+    except (ValueError, RecursionError):  # not UTF-8, not JSON, an integer over Python's digit limit
+        raise ModelFileError(
+            f"{path}: model metadata is not valid JSON (or holds an integer too long to read)"
+        ) from None
     if not isinstance(metadata, dict):
         raise ModelFileError(f"{path}: model metadata must be a JSON object, got {type(metadata).__name__}")
     if metadata.get("format") != FORMAT:

@@ -55,7 +55,7 @@ def owner_of(folder: Path) -> Owner | None:
         return Owner(str(data["command"]), str(data["config"]))
     except FileNotFoundError:
         return None
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError, RecursionError):
         return Owner("unknown command", "")
 
 
