@@ -239,3 +239,231 @@ def test_an_owner_record_nested_deep_is_an_unknown_owner(tmp_path):
 
     (tmp_path / MARKER).write_text("[" * 100_000 + "]" * 100_000)
     assert owner_of(tmp_path).command == "unknown command"
+
+
+QUITTER = """
+import sys
+
+
+class Agent:
+    encoding = "paper"
+    grid_config = None
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        sys.exit(0)
+
+
+class Controller:
+    fallbacks = 0
+    solve_times: list = []
+
+    def reset(self):
+        pass
+
+    def step(self, state, reference):
+        sys.exit(0)
+"""
+
+
+@pytest.mark.parametrize(
+    "arguments",
+    [
+        ["run", "--agent", "{file}:Agent", "--episodes", "1"],
+        ["run", "--controller", "{file}:Controller", "--episodes", "1"],
+        ["compare", "--agents", "{file}:Agent,keep-lane", "--episodes", "2", "--jobs", "2"],
+    ],
+)
+def test_a_plug_in_that_exits_while_running_is_one_line_and_exit_1(tmp_path, arguments, capsys):
+    from stack.apps.options import guarded
+
+    (quitter := tmp_path / "quitter.py").write_text(QUITTER)
+    filled = [argument.replace("{file}", str(quitter)) for argument in arguments]
+    config = ["-c", str(tiny_config_file(tmp_path)), "--out", str(tmp_path / "out"), "--no-progress"]
+    with pytest.raises(SystemExit) as stopped:
+        guarded(app, [*filled, *config])
+    output = capsys.readouterr()
+    assert stopped.value.code == 1, output
+    assert "raised SystemExit: 0" in output.err and str(quitter) in output.err
+    assert len(output.err.strip().splitlines()) == 1 and not output.out
+
+
+def finished_run(tmp_path, *options: str):
+    """A finished 2-episode keep-lane run with `options`, turned into an interrupted one."""
+    out = tmp_path / "run"
+    arguments = ["run", "-c", str(tiny_config_file(tmp_path)), "--agent", "keep-lane", "--episodes", "2"]
+    arguments += [*options, "--out", str(out), "--no-progress"]
+    result = CliRunner().invoke(app, arguments)
+    assert result.exit_code == 0, result.output
+    first = json.dumps(csv_rows(out / "episodes.csv")[0] | csv_rows(out / "timings.csv")[0])
+    (out / f"keep-lane.{JOURNAL}").write_text(first + "\n")
+    return out, [*arguments, "--resume"]
+
+
+def test_a_sub_folder_replaced_by_a_link_is_refused_before_anything_is_written_through_it(tmp_path):
+    out, resume = finished_run(tmp_path, "--record")
+    elsewhere = tmp_path / "elsewhere"
+    (out / "recordings").rename(elsewhere)
+    (out / "recordings").symlink_to(elsewhere)
+    before = {path.name: path.read_bytes() for path in elsewhere.iterdir()}
+    one_line_refusal(resume, f"{out / 'recordings'} is a link; a results folder holds no links")
+    assert {path.name: path.read_bytes() for path in elsewhere.iterdir()} == before
+
+
+def test_a_link_deep_in_a_training_folder_is_refused_on_resume(tmp_path):
+    from tests.test_hostile_inputs import owned_training_folder
+
+    folder = tmp_path / "run"
+    owned_training_folder(folder, {"train": {"steps": 10}, "highway": {"duration": 2}})
+    (folder / "seed-1").mkdir()
+    (folder / "seed-1" / "tensorboard").symlink_to(tmp_path)
+    one_line_refusal(["train", "--resume", str(folder), "--no-progress"], "tensorboard is a link")
+
+
+def test_a_plain_file_where_recordings_go_is_one_line_on_resume(tmp_path):
+    out, resume = finished_run(tmp_path, "--record")
+    shutil.rmtree(out / "recordings")
+    (out / "recordings").write_text("not a folder\n")
+    result = CliRunner().invoke(app, resume)
+    assert result.exit_code == 2, result.output
+    assert (
+        f"cannot write {out / 'recordings'} (something that is not a folder is in its place)" in result.output
+    )
+
+
+def test_train_refuses_more_env_processes_than_cpus_before_any(tmp_path, monkeypatch):
+    monkeypatch.setattr("stack.runtime.machine.usable_cpus", lambda: 2)
+    arguments = ["train", "--envs", "64", "--steps", "10", "--out", str(tmp_path / "t")]
+    one_line_refusal(arguments, "train.envs: 64 processes step one CPU each, but this machine has 2")
+    assert not (tmp_path / "t").exists()
+
+
+def test_a_checkpoint_declaring_more_than_the_run_can_hold_is_refused_before_inflating(tmp_path):
+    import tracemalloc
+
+    from tests.test_hostile_inputs import owned_training_folder
+    from tests.test_model_files import metadata_bytes, npy, write
+
+    folder = tmp_path / "run"
+    owned_training_folder(folder, {"train": {"steps": 10, "buffer_size": 1000}, "highway": {"duration": 2}})
+    zeros = npy(np.zeros(40 * 2**20, dtype=np.float64))  # 320 MB inflated, 0.3 MB packed
+    counters = {"format": "drivestack-model/1", "kind": "checkpoint", "counters": {"num_timesteps": 5}}
+    write(folder / "checkpoint.npz", {"metadata.npy": metadata_bytes(counters), "array/buffer/x.npy": zeros})
+    tracemalloc.start()
+    one_line_refusal(["train", "--resume", str(folder), "--no-progress"], "MB when unpacked; at most")
+    assert tracemalloc.get_traced_memory()[1] < 100 * 2**20
+    tracemalloc.stop()
+
+
+@pytest.mark.parametrize("kind", ["fifo", "zero device", "not rrd", "many"])
+def test_view_checks_what_it_opens_before_the_viewer_starts(tmp_path, kind):
+    import os
+
+    path = tmp_path / "x.rrd"
+    if kind == "fifo":
+        os.mkfifo(path)
+        expected = "not a regular file"
+    elif kind == "zero device":
+        path.symlink_to("/dev/zero")
+        expected = "not a regular file"
+    elif kind == "not rrd":
+        path.write_bytes(b"PK\x03\x04 not a recording")
+        expected = "not a rerun recording"
+    else:
+        (path := tmp_path / "folder").mkdir()
+        for index in range(1001):
+            (path / f"episode-{index:04d}.rrd").write_bytes(b"RRF2")
+        expected = "holds 1001 recordings; the viewer opens at most 1000"
+    one_line_refusal(["view", str(path)], expected)
+
+
+def test_view_without_a_display_suggests_web(tmp_path, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    (recording := tmp_path / "x.rrd").write_bytes(b"RRF2")
+    one_line_refusal(["view", str(recording)], "no display to open the viewer on (DISPLAY is not set); --web")
+
+
+def test_the_native_viewer_serves_on_the_loopback_only(tmp_path):
+    from stack.apps.view import viewer_command
+
+    command, _ = viewer_command([tmp_path / "x.rrd"], web=False)
+    assert command[1:3] == ["--bind", "127.0.0.1"]
+
+
+def test_the_printed_view_command_is_shell_quoted(tmp_path):
+    import shlex
+
+    out = tmp_path / "a b 'c' $HOME [x]"
+    result = CliRunner().invoke(
+        app,
+        ["run", "-c", str(tiny_config_file(tmp_path)), "--agent", "keep-lane", "--episodes", "1", "--record"]
+        + ["--out", str(out), "--no-progress"],
+    )
+    assert result.exit_code == 0, result.output
+    (line,) = [line for line in result.output.splitlines() if "drivestack view" in line]
+    assert shlex.split(line.split(": ", 1)[1]) == ["drivestack", "view", str(out), "--worst"]
+
+
+def test_export_reports_the_file_it_wrote(tmp_path):
+    """stable-baselines3 appends .zip to a name without a suffix only."""
+    from pathlib import Path
+
+    from planner.factory import SHIPPED_MODELS
+    from stack.apps.folders import written_file
+
+    assert (written_file(Path("plain")), written_file(Path("m.zip"))) == (Path("plain.zip"), Path("m.zip"))
+    result = CliRunner().invoke(
+        app, ["export", str(SHIPPED_MODELS["dqn"]), "--sb3", str(tmp_path / "x.tar.gz")]
+    )
+    assert result.exit_code == 0, result.output
+    assert f"wrote {tmp_path / 'x.tar.gz'}:" in result.output
+    assert [path.name for path in tmp_path.iterdir()] == ["x.tar.gz"]
+
+
+def test_export_to_an_empty_name_is_one_line():
+    from planner.factory import SHIPPED_MODELS
+
+    one_line_refusal(["export", str(SHIPPED_MODELS["dqn"]), "--sb3", ""], "--sb3: expected a file name")
+
+
+def test_the_same_command_into_its_own_finished_folder_says_so(tmp_path):
+    from stack.runtime.owner import MARKER, Owner, refusal
+
+    (tmp_path / "summary.json").write_text("{}")
+    owner = Owner("train-ddqn", "abc")
+    (tmp_path / MARKER).write_text(json.dumps({"command": owner.command, "config": owner.config}))
+    why = refusal(tmp_path, owner, resuming=False, restart=False)
+    assert why is not None and "with these arguments and config" in why and "other" not in why
+
+
+def test_a_safety_run_stopped_after_its_last_point_is_not_interrupted(tmp_path, monkeypatch, capsys):
+    import stack.apps.safety as safety
+
+    def every_point_then_stop(task, items, jobs, ray=None):
+        for index, item in enumerate(items):
+            yield index, task(item)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(safety, "completed", every_point_then_stop)
+    monkeypatch.setattr(safety, "grid", lambda kind, quick: safety_points(kind))
+    from stack.settings.run import build_config
+
+    config = build_config({"highway": {"lanes_count": 3}, "planner": {"agent": "keep-lane"}})
+    (out := tmp_path / "s").mkdir()
+    assert safety.assess_and_report(config, ("lead-braking",), True, out, 1, False) is False
+    assert "interrupted" not in capsys.readouterr().out
+
+
+def safety_points(kind):
+    from stack.sim.safety_scenarios import Point
+
+    return [Point(kind, (20.0, 2.0, 2.0))]
+
+
+def test_errors_about_worlds_name_the_option(tmp_path):
+    one_line_refusal(["train", "--worlds", "5000", "--out", str(tmp_path / "t")], "--worlds: train.worlds")
+
+
+def test_out_as_a_dangling_link_says_so(tmp_path):
+    (out := tmp_path / "out").symlink_to(tmp_path / "missing")
+    one_line_refusal(["run", "--out", str(out)], f"--out: {out} is a link to a missing folder")

@@ -47,6 +47,7 @@ OPTIONS = {
     "train__algorithm": "--agent",
     "train__steps": "--steps",
     "train__envs": "--envs",
+    "train__worlds": "--worlds",
 }
 """The CLI option behind each override (the others are named as their key: --seed, --scenario)."""
 MAX_SET_LENGTH = 1000
@@ -71,7 +72,7 @@ def configured(
     set_values = parsed_sets(sets)
     values = {**set_values, **given}
     blamed = {key.replace("__", "."): f"--set {key.replace('__', '.')}" for key in set_values}
-    blamed |= {key.replace("__", "."): OPTIONS.get(key, f"--{key}") for key in given}
+    blamed |= {key.replace("__", "."): OPTIONS.get(key, f"--{key.replace('__', '.')}") for key in given}
     blamed |= {key: label for key, label in (labels or {}).items() if key in blamed}
     from stack.settings.run import ConfigError, load_config
 
