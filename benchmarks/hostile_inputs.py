@@ -208,7 +208,7 @@ def coercion_and_resource_cases(folder: Path) -> dict[str, list[str]]:
     (null_sweep := folder / "null-sweep.yaml").write_text(
         f"config: {TRAIN_CONFIG}\nfixed: {{train.scenarios: null}}\nspace: {{seed: [1, 2]}}\n"
     )
-    ensemble = ["ensemble", str(SHIPPED_MODELS["ddqn"])]
+    ensemble = ["ensemble", "--out", str(folder / "ensemble.npz"), str(SHIPPED_MODELS["ddqn"])]
     for name, changes in (("negative-steps", {"trained_steps": -5}), ("string-seed", {"seed": "7"})):
         arrays, metadata = load_model(SHIPPED_MODELS["ddqn"])
         save_model(folder / f"{name}.npz", arrays, {**metadata, **changes})
@@ -279,35 +279,6 @@ def inflating_checkpoint() -> bytes:
     return buffer.getvalue()
 
 
-API_CASES: dict[str, str] = {
-    "DecisionVecEnv(cfg, 10**6)": "DecisionVecEnv({}, 10**6)",
-    "DecisionVecEnv(cfg, 1.5)": "DecisionVecEnv({}, 1.5)",
-    "make_vec float actions [1.7, 0.2, 1.0, 2.9]": "vector(4).step([1.7, 0.2, 1.0, 2.9])",
-    "make_vec boolean actions": "vector(4).step([True, False, True, True])",
-    "make_vec a scalar action for 4 worlds": "vector(4).step(1)",
-    "make_vec an action of -2^63": "vector(4).step([-(2**63)] * 4)",
-    "make_vec reset(seed=1.5)": "vector(2).reset(seed=1.5)",
-}
-"""Issue 73: the Python API as strict as the CLI; each a one-line ValueError (shown as exit 2)."""
-
-API_PRELUDE = """
-import sys
-import gymnasium as gym
-import stack
-from stack.training.vector_env import DecisionVecEnv
-def vector(worlds):
-    env = gym.make_vec("drivestack/HierarchicalHighway-v0", num_envs=worlds,
-        vectorization_mode="vector_entry_point", config={"highway": {"duration": 2, "vehicles_count": 5}})
-    env.reset(seed=1)
-    return env
-try:
-    CASE
-except ValueError as error:
-    print(f"error: {error}")
-    sys.exit(2)
-"""
-
-
 def round_three_cases(folder: Path) -> dict[str, list[str]]:
     """Issue 52: links in a results folder, over-long integers, empty lists and values, keys a
     --set created, a plug-in that exits at import."""
@@ -353,13 +324,66 @@ def folder_cases(folder: Path) -> dict[str, list[str]]:
     }
 
 
-def measure(arguments: list[str], scratch: Path) -> tuple[int, str, float, float]:
-    """(exit code, output, wall s, peak RSS MB) of one fresh CLI process (or, for arguments
-    starting with `-c`, Python code), measured by GNU time. No display: `view` must say so."""
-    report = scratch / "time.txt"
-    program = arguments if arguments[0] == "-c" else ["-m", "stack", *arguments]
+API_CASES: dict[str, tuple[str, str]] = {
+    "DecisionVecEnv(cfg, 10**6)": ("None", "DecisionVecEnv({}, 10**6)"),
+    "DecisionVecEnv(cfg, 1.5)": ("None", "DecisionVecEnv({}, 1.5)"),
+    "make_vec(num_envs=10**6)": ("None", "vector(10**6)"),
+    "make_vec float actions [1.7, 0.2, 1.0, 2.9]": ("vector(4)", "env.step([1.7, 0.2, 1.0, 2.9])"),
+    "make_vec boolean actions": ("vector(4)", "env.step([True, False, True, True])"),
+    "make_vec a scalar action for 4 worlds": ("vector(4)", "env.step(1)"),
+    "make_vec an action of -2^63": ("vector(4)", "env.step([-(2**63)] * 4)"),
+    "make_vec reset(seed=1.5)": ("vector(2)", "env.reset(seed=1.5)"),
+}
+"""Issue 73: the Python API as strict as the CLI. Each case: (what is built first, the call that
+must be refused); the refusal is a one-line ValueError, shown as exit 2. Importing the stack and
+building the env take seconds and hundreds of MB, so the targets are the call's own: wall time
+and the memory it allocates (tracemalloc), `API_LIMIT_S` and `API_LIMIT_MB`."""
+
+API_LIMIT_S, API_LIMIT_MB = 1.0, 50.0
+
+API_PROGRAM = """
+import sys, time, tracemalloc
+import gymnasium as gym
+import stack
+from stack.training.vector_env import DecisionVecEnv
+def vector(worlds):
+    made = gym.make_vec("drivestack/HierarchicalHighway-v0", num_envs=worlds,
+        vectorization_mode="vector_entry_point", config={"highway": {"duration": 2, "vehicles_count": 5}})
+    made.reset(seed=1)
+    return made
+env = SETUP
+tracemalloc.start()
+start = time.perf_counter()
+try:
+    CALL
+    code = 0
+except ValueError as error:
+    print(f"error: {error}")
+    code = 2
+with open(sys.argv[1], "w") as report:
+    report.write(f"{time.perf_counter() - start} {tracemalloc.get_traced_memory()[1] / 2**20}")
+sys.exit(code)
+"""
+
+
+def measure_call(setup: str, call: str, scratch: Path) -> tuple[int, str, float, float]:
+    """(exit code, output, the call's wall s, MB it allocated) of one API case in a fresh process."""
+    report = scratch / "call.txt"
+    program = API_PROGRAM.replace("SETUP", setup).replace("CALL", call)
     result = subprocess.run(
-        ["/usr/bin/time", "-o", str(report), "-f", "%e %M", sys.executable, *program],
+        [sys.executable, "-c", program, str(report)], capture_output=True, text=True, cwd=ROOT
+    )
+    wall, megabytes = report.read_text().split() if report.is_file() else ("nan", "nan")
+    report.unlink(missing_ok=True)
+    return result.returncode, result.stdout + result.stderr, float(wall), float(megabytes)
+
+
+def measure(arguments: list[str], scratch: Path) -> tuple[int, str, float, float]:
+    """(exit code, output, wall s, peak RSS MB) of one fresh CLI process, measured by GNU time.
+    No display: `view` must say so."""
+    report = scratch / "time.txt"
+    result = subprocess.run(
+        ["/usr/bin/time", "-o", str(report), "-f", "%e %M", sys.executable, "-m", "stack", *arguments],
         capture_output=True,
         text=True,
         env={key: value for key, value in os.environ.items() if key not in ("DISPLAY", "WAYLAND_DISPLAY")},
@@ -373,23 +397,37 @@ def main() -> None:
     print("| case | exit | lines | longest line | wall s | peak RSS MB | ok |\n|---|---|---|---|---|---|---|")
     failures = 0
     with tempfile.TemporaryDirectory() as scratch:
-        api = {f"API: {name}": ["-c", API_PRELUDE.replace("CASE", code)] for name, code in API_CASES.items()}
-        for name, arguments in (cases(Path(scratch)) | api).items():
-            code, output, wall, rss = measure(arguments, Path(scratch))
-            lines = output.strip().splitlines()
-            longest = max((len(line) for line in lines), default=0)
-            ok = (
-                code == 2
-                and len(lines) == 1
-                and longest <= LIMIT_CHARS
-                and wall <= LIMIT_S
-                and rss <= LIMIT_MB
-            )
-            failures += not ok
-            verdict = "yes" if ok else "NO: " + output.strip()[:120]
-            print(f"| {name} | {code} | {len(lines)} | {longest} | {wall:.2f} | {rss:.0f} | {verdict} |")
+        for name, arguments in cases(Path(scratch)).items():
+            failures += not report(name, *measure(arguments, Path(scratch)), LIMIT_S, LIMIT_MB)
+        print(
+            f"\nThe Python API (wall s and MB: the refused call's own; targets {API_LIMIT_S:g} s, "
+            f"{API_LIMIT_MB:g} MB)\n\n| case | exit | lines | longest line | wall s | MB allocated | ok |"
+            "\n|---|---|---|---|---|---|---|"
+        )
+        for name, (setup, call) in API_CASES.items():
+            measured = measure_call(setup, call, Path(scratch))
+            failures += not report(name, *measured, API_LIMIT_S, API_LIMIT_MB)
     print(f"\n{failures} of the cases miss a target")
     sys.exit(1 if failures else 0)
+
+
+def report(
+    name: str, code: int, output: str, wall: float, memory: float, wall_limit: float, memory_limit: float
+) -> bool:
+    """Print one case's row; whether it is on target (exit 2, one line of at most `LIMIT_CHARS`,
+    within `limits`: wall s and MB)."""
+    lines = output.strip().splitlines()
+    longest = max((len(line) for line in lines), default=0)
+    ok = (
+        code == 2
+        and len(lines) == 1
+        and longest <= LIMIT_CHARS
+        and wall <= wall_limit
+        and memory <= memory_limit
+    )
+    verdict = "yes" if ok else "NO: " + output.strip()[:120]
+    print(f"| {name} | {code} | {len(lines)} | {longest} | {wall:.2f} | {memory:.0f} | {verdict} |")
+    return ok
 
 
 if __name__ == "__main__":
