@@ -467,3 +467,17 @@ def test_errors_about_worlds_name_the_option(tmp_path):
 def test_out_as_a_dangling_link_says_so(tmp_path):
     (out := tmp_path / "out").symlink_to(tmp_path / "missing")
     one_line_refusal(["run", "--out", str(out)], f"--out: {out} is a link to a missing folder")
+
+
+def test_a_viewer_that_cannot_open_a_window_is_one_line_suggesting_web(tmp_path, monkeypatch, capsys):
+    import sys
+
+    import stack.apps.view as viewing
+
+    crash = "import sys; sys.stderr.write('\\x1b[31mwinit: no display\\n'); sys.exit(1)"
+    failing = [sys.executable, "-c", crash]
+    monkeypatch.setattr(viewing, "viewer_command", lambda recordings, web: (failing, None))
+    assert viewing.view([tmp_path / "x.rrd"], web=False) == 1
+    error = capsys.readouterr().err
+    assert len(error.strip().splitlines()) == 1 and "--web serves it to a browser" in error
+    assert "winit" not in error

@@ -10,6 +10,7 @@ the viewer's environment has it and drops `FORCE_RERUN_ANALYTICS`.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import importlib.util
 import os
@@ -19,6 +20,7 @@ import socket
 import stat
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 from stack.loop.recording import RECORDINGS, agent_folders
@@ -204,19 +206,36 @@ def _end_with_parent() -> None:  # pragma: no cover - runs in the child before e
 
 
 def view(recordings: list[Path], web: bool) -> int:
-    """Run the viewer on `recordings` until it closes or Ctrl-C; its exit code (0 on Ctrl-C)."""
+    """Run the viewer on `recordings` until it closes or Ctrl-C; its exit code (0 on Ctrl-C). The
+    native viewer's log goes to a file: when it fails (no window can open), one line names the
+    file and suggests `--web` instead of rerun's raw log."""
     command, address = viewer_command(recordings, web)
     shown = ", ".join(str(path) for path in recordings[:3]) + (" ..." if len(recordings) > 3 else "")
     print(f"opening {len(recordings)} recording(s): {shown}", flush=True)
-    process = subprocess.Popen(command, env=viewer_environment(), preexec_fn=_end_with_parent)
-    if address is not None:
-        print(f"web viewer (this machine only): {address}", flush=True)
-        print("Ctrl-C stops it", flush=True)
-    try:
-        return process.wait()
-    except KeyboardInterrupt:
-        stop(process)
-        return 0
+    log = (
+        None
+        if web
+        else tempfile.NamedTemporaryFile("wb", prefix="drivestack-viewer-", suffix=".log", delete=False)
+    )
+    with log or contextlib.nullcontext():
+        process = subprocess.Popen(command, env=viewer_environment(), preexec_fn=_end_with_parent, stderr=log)
+        if address is not None:
+            print(f"web viewer (this machine only): {address}", flush=True)
+            print("Ctrl-C stops it", flush=True)
+        try:
+            code = process.wait()
+        except KeyboardInterrupt:
+            stop(process)
+            return 0
+    if code and log is not None:
+        print(
+            f"error: rerun's viewer ended with exit code {code} (its log: {log.name}); "
+            "where no window can open, --web serves it to a browser",
+            file=sys.stderr,
+        )
+    elif log is not None:
+        Path(log.name).unlink(missing_ok=True)
+    return code
 
 
 def stop(process: subprocess.Popen, grace_s: float = 5.0) -> None:
