@@ -90,15 +90,13 @@ def test_a_null_in_a_sweeps_fixed_is_refused_where_null_is_not_allowed(tmp_path)
 
 
 def test_a_relative_model_is_written_as_the_file_it_named(tmp_path, monkeypatch):
-    from planner.factory import SHIPPED_MODELS
+    from stack.apps.options import configured
+    from stack.apps.resume import resolved_config
 
     monkeypatch.chdir(tmp_path)
-    shutil.copy(SHIPPED_MODELS["dqn"], tmp_path / "dqn.npz")
-    config = tiny_config_file(tmp_path)
-    arguments = ["run", "-c", str(config), "--agent", "dqn", "--model", "dqn.npz", "--episodes", "1"]
-    result = CliRunner().invoke(app, [*arguments, "--out", "out", "--no-progress"])
-    assert result.exit_code == 0, result.output
-    written = yaml.safe_load((tmp_path / "out" / "config.yaml").read_text())
+    (tmp_path / "dqn.npz").write_bytes(b"")
+    config = configured(None, [], planner__agent="dqn", planner__model="dqn.npz")
+    written = yaml.safe_load(resolved_config([config]))
     assert written["planner"]["model"] == str(tmp_path.resolve() / "dqn.npz")
 
 
