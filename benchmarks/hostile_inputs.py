@@ -10,7 +10,6 @@ Prints a markdown table and exits 1 if any case misses a target.
 from __future__ import annotations
 
 import io
-import json
 import os
 import subprocess
 import sys
@@ -31,6 +30,7 @@ from records import GridConfig  # noqa: E402
 from stack.apps.options import TRAIN_CONFIG  # noqa: E402
 from stack.runtime.owner import MARKER  # noqa: E402
 from tests.test_hostile_inputs import BOMB, owned_training_folder  # noqa: E402
+from tests.test_hostile_inputs_more import digits_model  # noqa: E402
 from tests.test_model_files import metadata_bytes, npy, plain_mlp, with_metadata, write  # noqa: E402
 
 LIMIT_S, LIMIT_MB, LIMIT_CHARS = 5.0, 400.0, 300
@@ -259,14 +259,6 @@ def coercion_and_resource_cases(folder: Path) -> dict[str, list[str]]:
         "export --sb3 ''": ["export", str(SHIPPED_MODELS["dqn"]), "--sb3", ""],
         "--out a dangling link": ["run", "--out", str(dangling)],
     }
-
-
-def digits_model(path: Path) -> None:
-    """A model file whose metadata holds an integer of 4,400 digits (more than Python converts)."""
-    arrays, metadata = plain_mlp()
-    text = json.dumps({"format": FORMAT, **metadata})[:-1] + ', "trained_steps": ' + "9" * 4400 + "}"
-    members = {"metadata.npy": npy(np.frombuffer(text.encode(), dtype=np.uint8))}
-    write(path, members | {f"array/{name}.npy": npy(value) for name, value in arrays.items()})
 
 
 def inflating_checkpoint() -> bytes:

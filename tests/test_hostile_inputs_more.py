@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -479,3 +480,23 @@ def test_a_viewer_that_cannot_open_a_window_is_one_line_suggesting_web(tmp_path,
     error = capsys.readouterr().err
     assert len(error.strip().splitlines()) == 1 and "--web serves it to a browser" in error
     assert "winit" not in error
+
+
+def digits_model(path: Path) -> None:
+    """A model file whose metadata holds an integer of 4,400 digits (more than Python converts)."""
+    from planner.model_file import FORMAT
+    from tests.test_model_files import npy, plain_mlp, write
+
+    arrays, metadata = plain_mlp()
+    text = json.dumps({"format": FORMAT, **metadata})[:-1] + ', "trained_steps": ' + "9" * 4400 + "}"
+    members = {"metadata.npy": npy(np.frombuffer(text.encode(), dtype=np.uint8))}
+    write(path, members | {f"array/{name}.npy": npy(value) for name, value in arrays.items()})
+
+
+def test_a_model_whose_metadata_holds_a_4400_digit_integer_is_one_line_naming_it(tmp_path):
+    digits_model(model := tmp_path / "digits.npz")
+    expected = f"{model}: model metadata is not valid JSON (or holds an integer too long to read)"
+    arguments = ["run", "--agent", "ddqn", "--model", str(model), "--out", str(tmp_path / "r")]
+    one_line_refusal(arguments, expected)
+    arguments = ["train", "--set", f"train.init_model={model}", "--out", str(tmp_path / "t")]
+    one_line_refusal(arguments, expected)
