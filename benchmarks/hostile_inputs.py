@@ -10,6 +10,7 @@ Prints a markdown table and exits 1 if any case misses a target.
 from __future__ import annotations
 
 import io
+import os
 import subprocess
 import sys
 import tempfile
@@ -24,10 +25,12 @@ sys.path.insert(0, str(ROOT))
 
 from perception.grid import OccupancyGridBuilder  # noqa: E402
 from planner.factory import SHIPPED_MODELS  # noqa: E402
-from planner.model_file import FORMAT, save_model  # noqa: E402
+from planner.model_file import FORMAT, load_model, save_model  # noqa: E402
 from records import GridConfig  # noqa: E402
+from stack.apps.options import TRAIN_CONFIG  # noqa: E402
 from stack.runtime.owner import MARKER  # noqa: E402
 from tests.test_hostile_inputs import BOMB, owned_training_folder  # noqa: E402
+from tests.test_hostile_inputs_more import digits_model  # noqa: E402
 from tests.test_model_files import metadata_bytes, npy, plain_mlp, with_metadata, write  # noqa: E402
 
 LIMIT_S, LIMIT_MB, LIMIT_CHARS = 5.0, 400.0, 300
@@ -78,12 +81,14 @@ def encrypted(path: Path) -> None:
     path.write_bytes(bytes(raw))
 
 
-def checkpoint_folder(content: bytes, owned: bool = True) -> Callable[[Path], None]:
-    """A training folder holding `content` as its checkpoint, with its owner record or (not
-    `owned`) as made before folders kept one."""
+def checkpoint_folder(
+    content: bytes, owned: bool = True, config: dict | None = None
+) -> Callable[[Path], None]:
+    """A training folder of `config` holding `content` as its checkpoint, with its owner record
+    or (not `owned`) as made before folders kept one."""
 
     def build(folder: Path) -> None:
-        owned_training_folder(folder, {"train": {"steps": 10}})
+        owned_training_folder(folder, config or {"train": {"steps": 10}})
         (folder / "checkpoint.npz").write_bytes(content)
         if not owned:
             (folder / MARKER).unlink()
@@ -190,7 +195,80 @@ def cases(folder: Path) -> dict[str, list[str]]:
     ]
     found.update(folder_cases(folder))
     found.update(round_three_cases(folder))
+    found.update(coercion_and_resource_cases(folder))
     return found
+
+
+def coercion_and_resource_cases(folder: Path) -> dict[str, list[str]]:
+    """Issue 73: duplicate keys, anchors and deep nesting; crafted model metadata and checkpoints;
+    links and missing folders in results folders; what `view` is given; options named as typed."""
+    deep = "[" * 500 + "]" * 500
+    (deep_config := folder / "deep.yaml").write_text(f"seed: {deep}\n")
+    (twice := folder / "twice.yaml").write_text("seed: 1\nseed: 2\n")
+    (null_sweep := folder / "null-sweep.yaml").write_text(
+        f"config: {TRAIN_CONFIG}\nfixed: {{train.scenarios: null}}\nspace: {{seed: [1, 2]}}\n"
+    )
+    ensemble = ["ensemble", "--out", str(folder / "ensemble.npz"), str(SHIPPED_MODELS["ddqn"])]
+    for name, changes in (("negative-steps", {"trained_steps": -5}), ("string-seed", {"seed": "7"})):
+        arrays, metadata = load_model(SHIPPED_MODELS["ddqn"])
+        save_model(folder / f"{name}.npz", arrays, {**metadata, **changes})
+    digits_model(digits := folder / "digits.npz")
+    checkpoint_folder(inflating_checkpoint(), config={"train": {"steps": 10, "buffer_size": 1000}})(
+        inflating := folder / "inflating"
+    )
+    (linked := folder / "linked-recordings").mkdir()
+    (linked / "recordings").symlink_to(folder)
+    owned_training_folder(deep_link := folder / "deep-link", {"train": {"steps": 10}})
+    (deep_link / "seed-1").mkdir()
+    (deep_link / "seed-1" / "tensorboard").symlink_to(folder)
+    os.mkfifo(fifo := folder / "fifo.rrd")
+    (zero := folder / "zero.rrd").symlink_to("/dev/zero")
+    (not_rrd := folder / "zip.rrd").write_bytes(b"PK\x03\x04 not a recording")
+    (many := folder / "many" / "recordings").mkdir(parents=True)
+    for index in range(1001):
+        (many / f"episode-{index:04d}.rrd").write_bytes(b"RRF2")
+    (dangling := folder / "dangling").symlink_to(folder / "missing")
+    return {
+        "--set a mapping with a duplicate key": ["run", "--set", "highway={duration: 3, duration: 5}"],
+        "--set an anchor": ["run", "--set", "highway.duration=&a 4"],
+        "--set nested 500 deep": ["run", "--set", f"seed={deep}"],
+        "a config nested 500 deep": ["run", "-c", str(deep_config)],
+        "a sweep file nested 500 deep": ["sweep", "-c", str(deep_config)],
+        "a config with a duplicate key": ["run", "-c", str(twice)],
+        "a sweep's fixed null where null is not allowed": ["sweep", "-c", str(null_sweep)],
+        "--point naming a parameter twice": [
+            "safety",
+            "--scenario",
+            "lead-braking",
+            "--point",
+            "speed=20,speed=30,time_gap=1,deceleration=4",
+        ],
+        "ensemble: a member's trained_steps -5": [*ensemble, str(folder / "negative-steps.npz")],
+        "ensemble: a member's seed a string": [*ensemble, str(folder / "string-seed.npz")],
+        "model metadata with a 4,400-digit integer": ["run", "--agent", "ddqn", "--model", str(digits)],
+        "train.init_model with a 4,400-digit integer": ["train", "--set", f"train.init_model={digits}"],
+        "train --envs 64": ["train", "--envs", "64", "--out", str(folder / "t64")],
+        "train --worlds 5000": ["train", "--worlds", "5000"],
+        "train --resume a 320-MB checkpoint of a 1000-transition run": ["train", "--resume", str(inflating)],
+        "run --resume with recordings/ a link": ["run", "--out", str(linked), "--resume"],
+        "train --resume with seed-1/tensorboard a link": ["train", "--resume", str(deep_link)],
+        "view a pipe": ["view", str(fifo)],
+        "view a link to the zero device": ["view", str(zero)],
+        "view a file that is not a recording": ["view", "--web", str(not_rrd)],
+        "view 1,001 recordings": ["view", str(many.parent)],
+        "export --sb3 ''": ["export", str(SHIPPED_MODELS["dqn"]), "--sb3", ""],
+        "--out a dangling link": ["run", "--out", str(dangling)],
+    }
+
+
+def inflating_checkpoint() -> bytes:
+    """A checkpoint whose one array inflates to 320 MB from 0.3 MB."""
+    buffer = io.BytesIO()
+    counters = {"format": FORMAT, "kind": "checkpoint", "counters": {"num_timesteps": 5}}
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr("metadata.npy", metadata_bytes(counters))
+        archive.writestr("array/buffer/x.npy", npy(np.zeros(40 * 2**20)))
+    return buffer.getvalue()
 
 
 def round_three_cases(folder: Path) -> dict[str, list[str]]:
@@ -238,13 +316,70 @@ def folder_cases(folder: Path) -> dict[str, list[str]]:
     }
 
 
+API_CASES: dict[str, tuple[str, str]] = {
+    "DecisionVecEnv(cfg, 10**6)": ("None", "DecisionVecEnv({}, 10**6)"),
+    "DecisionVecEnv(cfg, 1.5)": ("None", "DecisionVecEnv({}, 1.5)"),
+    "make_vec(num_envs=10**6)": ("None", "vector(10**6)"),
+    "make_vec float actions [1.7, 0.2, 1.0, 2.9]": ("vector(4)", "env.step([1.7, 0.2, 1.0, 2.9])"),
+    "make_vec boolean actions": ("vector(4)", "env.step([True, False, True, True])"),
+    "make_vec a scalar action for 4 worlds": ("vector(4)", "env.step(1)"),
+    "make_vec an action of -2^63": ("vector(4)", "env.step([-(2**63)] * 4)"),
+    "make_vec reset(seed=1.5)": ("vector(2)", "env.reset(seed=1.5)"),
+}
+"""Issue 73: the Python API as strict as the CLI. Each case: (what is built first, the call that
+must be refused); the refusal is a one-line ValueError, shown as exit 2. Importing the stack and
+building the env take seconds and hundreds of MB, so the targets are the call's own: wall time
+and the memory it allocates (tracemalloc), `API_LIMIT_S` and `API_LIMIT_MB`."""
+
+API_LIMIT_S, API_LIMIT_MB = 1.0, 50.0
+
+API_PROGRAM = """
+import sys, time, tracemalloc
+import gymnasium as gym
+import stack
+from stack.training.vector_env import DecisionVecEnv
+def vector(worlds):
+    made = gym.make_vec("drivestack/HierarchicalHighway-v0", num_envs=worlds,
+        vectorization_mode="vector_entry_point", config={"highway": {"duration": 2, "vehicles_count": 5}})
+    made.reset(seed=1)
+    return made
+env = SETUP
+tracemalloc.start()
+start = time.perf_counter()
+try:
+    CALL
+    code = 0
+except ValueError as error:
+    print(f"error: {error}")
+    code = 2
+with open(sys.argv[1], "w") as report:
+    report.write(f"{time.perf_counter() - start} {tracemalloc.get_traced_memory()[1] / 2**20}")
+sys.exit(code)
+"""
+
+
+def measure_call(setup: str, call: str, scratch: Path) -> tuple[int, str, float, float]:
+    """(exit code, output, the call's wall s, MB it allocated) of one API case in a fresh process."""
+    report = scratch / "call.txt"
+    program = API_PROGRAM.replace("SETUP", setup).replace("CALL", call)
+    result = subprocess.run(
+        [sys.executable, "-c", program, str(report)], capture_output=True, text=True, cwd=ROOT
+    )
+    wall, megabytes = report.read_text().split() if report.is_file() else ("nan", "nan")
+    report.unlink(missing_ok=True)
+    return result.returncode, result.stdout + result.stderr, float(wall), float(megabytes)
+
+
 def measure(arguments: list[str], scratch: Path) -> tuple[int, str, float, float]:
-    """(exit code, output, wall s, peak RSS MB) of one fresh CLI process, measured by GNU time."""
+    """(exit code, output, wall s, peak RSS MB) of one fresh CLI process, measured by GNU time.
+    No display: `view` must say so."""
     report = scratch / "time.txt"
     result = subprocess.run(
         ["/usr/bin/time", "-o", str(report), "-f", "%e %M", sys.executable, "-m", "stack", *arguments],
         capture_output=True,
         text=True,
+        env={key: value for key, value in os.environ.items() if key not in ("DISPLAY", "WAYLAND_DISPLAY")},
+        cwd=ROOT,
     )
     wall, kilobytes = report.read_text().split()[-2:]
     return result.returncode, result.stdout + result.stderr, float(wall), float(kilobytes) / 1024
@@ -255,21 +390,36 @@ def main() -> None:
     failures = 0
     with tempfile.TemporaryDirectory() as scratch:
         for name, arguments in cases(Path(scratch)).items():
-            code, output, wall, rss = measure(arguments, Path(scratch))
-            lines = output.strip().splitlines()
-            longest = max((len(line) for line in lines), default=0)
-            ok = (
-                code == 2
-                and len(lines) == 1
-                and longest <= LIMIT_CHARS
-                and wall <= LIMIT_S
-                and rss <= LIMIT_MB
-            )
-            failures += not ok
-            verdict = "yes" if ok else "NO: " + output.strip()[:120]
-            print(f"| {name} | {code} | {len(lines)} | {longest} | {wall:.2f} | {rss:.0f} | {verdict} |")
+            failures += not report(name, *measure(arguments, Path(scratch)), LIMIT_S, LIMIT_MB)
+        print(
+            f"\nThe Python API (wall s and MB: the refused call's own; targets {API_LIMIT_S:g} s, "
+            f"{API_LIMIT_MB:g} MB)\n\n| case | exit | lines | longest line | wall s | MB allocated | ok |"
+            "\n|---|---|---|---|---|---|---|"
+        )
+        for name, (setup, call) in API_CASES.items():
+            measured = measure_call(setup, call, Path(scratch))
+            failures += not report(name, *measured, API_LIMIT_S, API_LIMIT_MB)
     print(f"\n{failures} of the cases miss a target")
     sys.exit(1 if failures else 0)
+
+
+def report(
+    name: str, code: int, output: str, wall: float, memory: float, wall_limit: float, memory_limit: float
+) -> bool:
+    """Print one case's row; whether it is on target (exit 2, one line of at most `LIMIT_CHARS`,
+    within `limits`: wall s and MB)."""
+    lines = output.strip().splitlines()
+    longest = max((len(line) for line in lines), default=0)
+    ok = (
+        code == 2
+        and len(lines) == 1
+        and longest <= LIMIT_CHARS
+        and wall <= wall_limit
+        and memory <= memory_limit
+    )
+    verdict = "yes" if ok else "NO: " + output.strip()[:120]
+    print(f"| {name} | {code} | {len(lines)} | {longest} | {wall:.2f} | {memory:.0f} | {verdict} |")
+    return ok
 
 
 if __name__ == "__main__":

@@ -64,13 +64,13 @@ class GuardedController:
     def reset(self) -> None:
         try:
             self.controller.reset()
-        except Exception as error:  # noqa: BLE001 - user code may raise anything
+        except (Exception, SystemExit) as error:  # noqa: BLE001 - user code may raise or exit
             raise failed_call(self.name, "reset", error) from None
 
     def step(self, state: EgoState, reference: Reference) -> Actuation:
         try:
             actuation = self.controller.step(state, reference)
-        except Exception as error:  # noqa: BLE001 - user code may raise anything
+        except (Exception, SystemExit) as error:  # noqa: BLE001 - user code may raise or exit
             raise failed_call(self.name, "step", error) from None
         values = (getattr(actuation, "acceleration", None), getattr(actuation, "steering", None))
         if not isinstance(actuation, Actuation) or not all(

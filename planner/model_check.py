@@ -15,7 +15,7 @@ from planner.mobil import prior_problem
 from planner.model_file import ModelFileError, load_model
 from planner.model_metadata import ModelMetadata, whole_number
 from planner.networks import MAX_MEMBERS, ensemble_shapes, lane_network_shapes, lane_problem, mlp_shapes
-from records import ENCODINGS, N_ACTIONS, Encoding, GridConfig
+from records import ENCODINGS, MAX_LANES, N_ACTIONS, SEED_LIMIT, Encoding, GridConfig
 
 MAX_INPUTS = 100_000
 """Largest observation a Q-network model may declare [values]."""
@@ -95,8 +95,34 @@ def _check_metadata(path: Path | str, metadata: dict) -> None:
     most = 1 if kind == "qtable" else MAX_MEMBERS
     if problem is None and not whole_number(metadata.get("members", 1), 1, most):
         problem = f"members: expected an integer in 1..{most}"
+    if problem is None:
+        problem = _description_problem(metadata)
     if problem:
         raise ModelFileError(f"{path}: model metadata {problem}")
+
+
+def _description_problem(metadata: dict) -> str | None:
+    """What is wrong with the fields that say where the model came from (`trained_steps`, `seed`,
+    `lanes_count`, `member_seeds`), absent or null when a file does not say: summed or listed by an
+    ensemble, a crafted value must not pass as a count or a seed."""
+    for key, low, high in (
+        ("trained_steps", 0, None),
+        ("seed", 0, SEED_LIMIT - 1),
+        ("lanes_count", 1, MAX_LANES),
+    ):
+        value = metadata.get(key)
+        if value is not None and not whole_number(value, low, high):
+            bounds = f"{low}..{high}" if high is not None else f"at least {low}"
+            return f"{key}: expected an integer, {bounds}, got {str(value)[:20]}"
+    seeds = metadata.get("member_seeds")
+    members = metadata.get("members", 1)
+    if seeds is not None and (
+        not isinstance(seeds, list)
+        or len(seeds) != members
+        or not all(whole_number(seed, 0, SEED_LIMIT - 1) for seed in seeds)
+    ):
+        return f"member_seeds: expected one seed (an integer, 0..{SEED_LIMIT - 1}) per member ({members})"
+    return None
 
 
 def _prior_problem(bonus: object, grid: GridConfig, encoding: Encoding) -> str | None:

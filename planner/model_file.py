@@ -94,10 +94,13 @@ def load_model(
     return {name.removeprefix("array/"): value for name, value in data.items()}, metadata
 
 
-def load_checkpoint(path: Path | str, arrays: bool = True) -> tuple[dict[str, np.ndarray], dict]:
-    """A training checkpoint (`load_model` of at most CHECKPOINT_BYTES), refused in one line
-    unless it is one; `arrays=False` reads its metadata only."""
-    found, metadata = load_model(path, CHECKPOINT_BYTES, arrays)
+def load_checkpoint(
+    path: Path | str, arrays: bool = True, max_bytes: int = CHECKPOINT_BYTES
+) -> tuple[dict[str, np.ndarray], dict]:
+    """A training checkpoint (`load_model` of at most `max_bytes`, the run's own bound, at most
+    CHECKPOINT_BYTES), refused in one line unless it is one; `arrays=False` reads its metadata
+    only."""
+    found, metadata = load_model(path, min(max_bytes, CHECKPOINT_BYTES), arrays)
     if metadata.get("kind") != "checkpoint" or not isinstance(metadata.get("counters"), dict):
         raise ModelFileError(f"{path}: not a training checkpoint")
     return found, metadata
@@ -148,8 +151,10 @@ def _metadata(path: Path, raw: np.ndarray) -> dict:
         raise ModelFileError(f"{path}: metadata of {raw.nbytes} bytes; at most {MAX_METADATA_BYTES}")
     try:
         metadata = json.loads(raw.tobytes().decode())
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
-        raise ModelFileError(f"{path}: model metadata is not valid JSON") from None
+    except (ValueError, RecursionError):  # not UTF-8, not JSON, an integer over Python's digit limit
+        raise ModelFileError(
+            f"{path}: model metadata is not valid JSON (or holds an integer too long to read)"
+        ) from None
     if not isinstance(metadata, dict):
         raise ModelFileError(f"{path}: model metadata must be a JSON object, got {type(metadata).__name__}")
     if metadata.get("format") != FORMAT:

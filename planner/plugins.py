@@ -68,7 +68,7 @@ class GuardedAgent:
         try:
             prediction = self.agent.predict(observation, state, episode_start, deterministic)
             action, state = prediction
-        except Exception as error:  # noqa: BLE001 - user code may raise anything
+        except (Exception, SystemExit) as error:  # noqa: BLE001 - user code may raise or exit
             raise failed_call(self.name, "predict", error) from None
         values = np.asarray(action) if isinstance(action, np.ndarray | np.integer | int) else None
         if (

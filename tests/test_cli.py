@@ -274,7 +274,7 @@ def test_set_overrides_any_key_and_is_validated_like_the_file(tmp_path):
         ("highway.lanes_count=0", "highway.lanes_count: Input should be greater than or equal to 1"),
         ("highway.wings=2", "highway.wings"),
         ("lanes_count", "--set: expected KEY=VALUE"),
-        ("seed=[&a 1, *a]", "--set seed: expected a plain YAML value"),
+        ("seed=[&a 1, *a]", "--set seed: not a YAML value (anchors and aliases"),
     ]:
         result, _ = run_tiny(tmp_path, "--set", bad)
         assert result.exit_code == 2 and message in result.output, (bad, result.output)

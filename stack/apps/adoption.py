@@ -90,6 +90,6 @@ def recorded_settings(folder: Path, config: RunConfig) -> list[tuple[str, Any, A
 def _summary(path: Path) -> dict[str, Any]:
     try:
         summary = json.loads(path.read_bytes())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return {}
     return summary if isinstance(summary, dict) else {}

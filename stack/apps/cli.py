@@ -339,6 +339,7 @@ def train(
     from stack.apps.members import check_unfinished, train_members
     from stack.apps.training import (
         check_batched,
+        check_envs,
         check_init_model,
         check_memory,
         resumed_training,
@@ -359,6 +360,7 @@ def train(
         options |= {"train__worlds": worlds} | ({"train__envs": 1} if worlds and envs is None else {})
         cfg = configured(config or TRAIN_CONFIG, sets, None, train__steps=steps, sim__plant=plant, **options)
     check_memory(cfg)
+    check_envs(cfg)
     check_batched(cfg)
     if not cfg.train.scenarios:
         try:

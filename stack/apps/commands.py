@@ -178,13 +178,15 @@ def view(
     from stack.apps.options import rerun_or_fail
 
     rerun_or_fail("view")
-    from stack.apps.view import recordings_in, rerun_program, view
+    from stack.apps.view import display_problem, recordings_in, rerun_program, view
 
     try:
         recordings = recordings_in(path, worst, agent)
         rerun_program()
     except ValueError as error:
         fail(str(error))
+    if problem := display_problem(web):
+        fail(problem)
     code = view(recordings, web)
     if code:
         raise typer.Exit(code=code)

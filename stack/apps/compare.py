@@ -14,6 +14,7 @@ from matplotlib.axes import Axes
 
 from common.plugins import short_labels
 from stack.apps.resume import started
+from stack.apps.view import view_command_line
 from stack.loop.recording import RECORDINGS, agent_folders
 from stack.results.episode_fields import columns, interval_text
 from stack.results.episode_fields import intervals as declared_intervals
@@ -154,7 +155,7 @@ def compare_and_report(
         for results in runs:
             name = folders[results.summary["agent"]]
             if any((folder / name).glob("episode-*.rrd")):
-                print(f"worst episode of {name}: drivestack view {out} --worst --agent {name}")
+                print(f"worst episode of {name}: {view_command_line(out, '--worst', '--agent', name)}")
     return interrupted
 
 

@@ -25,7 +25,7 @@ from planner.learned import LearnedAgent, load_agent
 from planner.model_file import ModelFileError
 from planner.model_metadata import ModelMetadata
 from records import N_ACTIONS
-from stack.apps.folders import check_destination
+from stack.apps.folders import check_destination, written_file
 from stack.runs.model_fit import check_road_fit
 from stack.training.decision_env import with_permitted
 from stack.training.model import lane_features_options, warm_start
@@ -64,7 +64,7 @@ def export_sb3(model: Path, out: Path) -> tuple[Path, ModelMetadata]:
         options |= lane_features_options(grid)
     sb3 = DQN("MlpPolicy", _Spaces(space), policy_kwargs=options, device="cpu", verbose=0)
     warm_start(sb3, agent)
-    written = out if out.suffix == ".zip" else out.with_suffix(out.suffix + ".zip")
+    written = written_file(out)
     try:
         sb3.save(out)
     except OSError as error:

@@ -27,6 +27,11 @@ def location(out: Path | None, prefix: str) -> Path:
     user may write; a one-line error (exit 2) otherwise. Nothing is created."""
     folder = out or fresh_run_dir(prefix)
     try:
+        if folder.is_symlink() and not folder.exists():
+            fail(
+                f"--out: {folder} is a link to a missing folder ({os.readlink(folder)[:80]}); "
+                "make that folder or choose another"
+            )
         if folder.exists() and not folder.is_dir():
             fail(f"--out: {folder} is a file; expected a folder for the results")
     except OSError as error:
@@ -84,11 +89,19 @@ def claimed_for(command: str, out: Path | None, arguments: str, config: RunConfi
     return claimed(location(out, prefix), prefix, Owner(command, asked))
 
 
+def written_file(out: Path, suffix: str = ".zip") -> Path:
+    """The file a writer that appends `suffix` to a name without one (stable-baselines3's `save`)
+    writes for `out`."""
+    return out.with_name(out.name + suffix) if not out.suffix else out
+
+
 def check_destination(out: Path, option: str = "--sb3", suffix: str = ".zip") -> None:
-    """Refuse (ValueError, one line naming `option`) an `out` that exists (with or without the
-    `suffix` its writer appends; "": none), lies in no writable folder or has a name the system
-    refuses, before any work."""
-    written = out if out.suffix == suffix else out.with_suffix(out.suffix + suffix)
+    """Refuse (ValueError, one line naming `option`) an `out` that is no file name, exists (with or
+    without the `suffix` its writer appends to a name without one; "": none), lies in no writable
+    folder or has a name the system refuses, before any work."""
+    if out.name in ("", ".", "..") or str(out).endswith(os.sep):
+        raise ValueError(f"{option}: expected a file name, got {str(out)[:80]!r}")
+    written = written_file(out, suffix)
     if len(written.name.encode()) > os.pathconf(written.absolute().anchor, "PC_NAME_MAX"):
         raise ValueError(f"{option}: {str(written)[:80]}...: {os.strerror(errno.ENAMETOOLONG)}")
     if out.exists() or written.exists():

@@ -47,6 +47,7 @@ OPTIONS = {
     "train__algorithm": "--agent",
     "train__steps": "--steps",
     "train__envs": "--envs",
+    "train__worlds": "--worlds",
 }
 """The CLI option behind each override (the others are named as their key: --seed, --scenario)."""
 MAX_SET_LENGTH = 1000
@@ -71,7 +72,7 @@ def configured(
     set_values = parsed_sets(sets)
     values = {**set_values, **given}
     blamed = {key.replace("__", "."): f"--set {key.replace('__', '.')}" for key in set_values}
-    blamed |= {key.replace("__", "."): OPTIONS.get(key, f"--{key}") for key in given}
+    blamed |= {key.replace("__", "."): OPTIONS.get(key, f"--{key.replace('__', '.')}") for key in given}
     blamed |= {key: label for key, label in (labels or {}).items() if key in blamed}
     from stack.settings.run import ConfigError, load_config
 
@@ -110,7 +111,7 @@ def parsed_sets(sets: list[str]) -> dict[str, object]:
     """`--set` entries as config overrides (dotted keys as `a__b`); YAML values without anchors or
     aliases, so a short value cannot expand into a huge one. `null` (or `~`) sets the key to null
     (`NULL`: validation says where null is not allowed); an empty value is refused."""
-    from stack.settings.run import NULL
+    from stack.settings.run import NULL, strict_yaml
 
     values: dict[str, object] = {}
     for entry in sets:
@@ -119,12 +120,14 @@ def parsed_sets(sets: list[str]) -> dict[str, object]:
             fail(f"--set: expected KEY=VALUE with a dotted key (e.g. seed=3), got {entry[:80]!r}")
         if not raw.strip():
             fail(f"--set {key}: expected a value after '=' (null sets the key to null)")
-        if len(raw) > MAX_SET_LENGTH or "&" in raw or "*" in raw:
-            fail(f"--set {key}: expected a plain YAML value of at most {MAX_SET_LENGTH} characters")
+        if len(raw) > MAX_SET_LENGTH:
+            fail(f"--set {key}: expected a YAML value of at most {MAX_SET_LENGTH} characters, got {len(raw)}")
         try:
-            value = yaml.safe_load(raw)
-        except yaml.YAMLError:
-            fail(f"--set {key}: not a YAML value: {raw[:80]!r}")
+            value = strict_yaml(raw)
+        except yaml.YAMLError as error:
+            problem = getattr(error, "problem", None)
+            reason = f" ({str(problem)[:80]})" if problem else ""
+            fail(f"--set {key}: not a YAML value{reason}: {raw[:80]!r}")
         values[key.replace(".", "__")] = NULL if value is None else value
     return values
 

@@ -33,14 +33,15 @@ def checked_run(
         except ValueError as error:
             fail(str(error))
     from stack.apps.folders import claimed, location
-    from stack.apps.resume import run_owner
+    from stack.apps.resume import edited_code, run_owner
     from stack.apps.training import check_jobs
 
     check_jobs(jobs)
     folder = location(out, prefix)
     from stack.runtime.owner import refusal
 
-    if why := refusal(folder, run_owner(configs, prefix), resuming):
+    edited = edited_code(configs, folder) if resuming else None
+    if why := edited or refusal(folder, run_owner(configs, prefix), resuming):
         fail(why)
     from stack.runs.kept import build_agent
 

@@ -4,29 +4,84 @@ import: a refused `--resume` costs no simulator import."""
 
 from __future__ import annotations
 
+import hashlib
 import math
 import sys
 from pathlib import Path
 
-from common.plugins import file_safe
+from common.plugins import FILE_SPEC, file_safe
 from records import child_seed
 from stack.results.episode_result import EpisodeResult
 from stack.runtime.files import JOURNAL, EpisodeJournal, write_text
 from stack.runtime.owner import Owner, fingerprint, refusal
 from stack.settings.history import unfingerprinted
-from stack.settings.run import RunConfig, config_text, printable
+from stack.settings.run import MAX_CONFIG_BYTES, RunConfig, config_text, printable
 
 JOURNAL_ROW_BYTES = 2_000
 """Bytes one journaled episode takes at most (about 450 in practice): bounds what --resume reads."""
 
 
+CODE_FILE = "code file: "
+"""How config.yaml's header names a file whose content decides the episodes, with its digest."""
+
+
 def resolved_config(configs: list[RunConfig], exclude: dict | None = None) -> str:
     """The config.yaml of a run or comparison of `configs`: the resolved config and, first, the
-    agents and models (without the keys `exclude` names)."""
+    agents and models (without the keys `exclude` names) and the digest of every plug-in and
+    model file they load (`code_digests`), so `--resume` knows when one was edited."""
     agents = ", ".join(
         c.planner.agent + (f" ({c.planner.model})" if c.planner.model else "") for c in configs
     )
-    return config_text(configs[0], f"the resolved config; agents: {agents}", exclude)
+    files = "".join(f"\n{CODE_FILE}{path} sha256 {digest}" for path, digest in code_digests(configs).items())
+    return config_text(configs[0], f"the resolved config; agents: {agents}{files}", exclude)
+
+
+def code_digests(configs: list[RunConfig]) -> dict[str, str]:
+    """The SHA-256 of each file besides the config that decides the episodes of `configs`: the
+    agents' and controllers' plug-in files (`file.py:Class`) and the model files given, by path.
+    A file that cannot be read is left out (the run's own checks name it)."""
+    paths: list[str] = []
+    for config in configs:
+        for spec in (config.planner.agent, config.controller.type):
+            if match := FILE_SPEC.fullmatch(spec):
+                paths.append(match["file"])
+        if config.planner.model is not None:
+            paths.append(str(config.planner.model))
+    digests = {}
+    for path in dict.fromkeys(paths):
+        try:
+            with open(path, "rb") as handle:
+                digests[path] = hashlib.file_digest(handle, "sha256").hexdigest()
+        except OSError:
+            continue
+    return digests
+
+
+def edited_code(configs: list[RunConfig], out: Path) -> str | None:
+    """Why `--resume` into `out` must not go on (one line) when a plug-in or model file that its
+    config.yaml records was edited since the run started (its episodes would mix two versions of
+    the code), or None."""
+    stored = out / "config.yaml"
+    try:
+        if not stored.is_file() or stored.stat().st_size > MAX_CONFIG_BYTES:
+            return None
+        header = stored.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return None
+    recorded = {}
+    for line in header:
+        if not line.startswith("#"):
+            break
+        path, _, digest = line.removeprefix("# ").removeprefix(CODE_FILE).rpartition(" sha256 ")
+        if line.startswith(f"# {CODE_FILE}") and path:
+            recorded[path] = digest
+    now = code_digests(configs)
+    if edited := [path for path, digest in recorded.items() if path in now and now[path] != digest]:
+        return (
+            f"--resume: {edited[0]} was edited since the run in {out} started (its episodes would mix "
+            "two versions); restore it, or run again without --resume"
+        )
+    return None
 
 
 def run_owner(configs: list[RunConfig], command: str) -> Owner:
@@ -59,7 +114,7 @@ def resumable(configs: list[RunConfig], out: Path, command: str) -> dict[str, li
     folder must be that command's (`stack.runtime.owner`), its config.yaml the one `configs` write,
     and each journaled episode one of theirs (`journaled`). ValueError, naming the file, when `out`
     holds another run, none, or no journal (a finished run: nothing to resume)."""
-    if why := refusal(out, run_owner(configs, command), resuming=True):
+    if why := edited_code(configs, out) or refusal(out, run_owner(configs, command), resuming=True):
         raise ValueError(why)
     stored, expected = out / "config.yaml", resolved_config(configs).encode()
     if not stored.is_file():

@@ -15,6 +15,7 @@ from common.plugins import short_labels
 from perception.plot import plot_grid_over_road
 from stack.apps.compare import comparison, markdown
 from stack.apps.resume import started
+from stack.apps.view import view_command_line
 from stack.loop.closed_loop import VIDEO_FRAME_TICKS
 from stack.loop.recording import RECORDINGS
 from stack.results.episode_fields import columns, summary_rows
@@ -97,7 +98,10 @@ def run_and_report(
     Console().print(f"results: {out}" + (stopped if interrupted else ""))
     if folder is not None and any(folder.glob("episode-*.rrd")):
         Console().print(
-            f"replay the worst episode: drivestack view {out} --worst", highlight=False, soft_wrap=True
+            f"replay the worst episode: {view_command_line(out, '--worst')}",
+            highlight=False,
+            markup=False,
+            soft_wrap=True,
         )
     return interrupted
 

@@ -14,6 +14,7 @@ from rich.console import Console
 from tqdm import tqdm
 
 from stack.apps.safety_report import plot_map, print_summary, summary
+from stack.apps.view import shell_words, view_command_line
 from stack.assessment.safety_assessment import Assessed, assess, drive_reference, drive_stack, point_name
 from stack.loop.closed_loop import VIDEO_FRAME_TICKS
 from stack.loop.recording import RECORDINGS
@@ -27,7 +28,8 @@ from stack.sim.safety_scenarios import PARAMETERS, Point, ScenarioKind, grid
 def replay_command(out: Path) -> str:
     """The command that replays a point of the run in `out` as a video (the stack its config.yaml
     resolved), with `{kind}` and `{point}` to fill."""
-    return f"drivestack safety --config {out / 'config.yaml'} --scenario {{kind}} --point {{point}} --video"
+    config = shell_words(out / "config.yaml").replace("{", "{{").replace("}", "}}")
+    return f"drivestack safety --config {config} --scenario {{kind}} --point {{point}} --video"
 
 
 def assess_and_report(
@@ -58,7 +60,7 @@ def assess_and_report(
         except KeyboardInterrupt:
             if not done:
                 raise
-            interrupted = True
+            interrupted = len(done) < len(points)  # a stop after the last point stops nothing
     results = [done[index] for index in sorted(done)]
     summaries = {
         kind: summary(kind, [r for r in results if r.point.kind == kind], replay_command(out))
@@ -91,7 +93,10 @@ def assess_and_report(
     for path in kept:
         if path.is_file():
             Console().print(
-                f"failure: open its recording with  drivestack view {path}", highlight=False, soft_wrap=True
+                f"failure: open its recording with  {view_command_line(path)}",
+                highlight=False,
+                markup=False,
+                soft_wrap=True,
             )
     stopped = f" (interrupted: {len(results)} of {len(points)} points)" if interrupted else ""
     Console().print(f"results: {out}{stopped}")
@@ -131,7 +136,8 @@ def replay(config: RunConfig, point: Point, video: bool, out: Path, record: bool
     )
     Console().print(f"results: {out}", highlight=False)
     if folder is not None:
-        Console().print(f"open it: drivestack view {folder / point_name(point)}.rrd", highlight=False)
+        shown = view_command_line(folder / f"{point_name(point)}.rrd")
+        Console().print(f"open it: {shown}", highlight=False, markup=False, soft_wrap=True)
     return False
 
 

@@ -67,7 +67,10 @@ def print_summary(summaries: dict[ScenarioKind, dict[str, Any]], console: Consol
     for kind, s in summaries.items():
         for failure in s["failure_points"]:
             console.print(
-                f"failure ({kind}): replay with  {failure['replay']}", highlight=False, soft_wrap=True
+                f"failure ({kind}): replay with  {failure['replay']}",
+                highlight=False,
+                markup=False,
+                soft_wrap=True,
             )
 
 

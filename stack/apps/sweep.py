@@ -36,9 +36,10 @@ SCORE = "score"
 
 def prepare(sweep: SweepFile, base: Path, folder: Path) -> None:
     """A new sweep folder: the base config with the fixed overrides as config.yaml, and the sweep
-    file pointing at it as sweep.yaml."""
+    file pointing at it as sweep.yaml. The file keeps the fixed overrides too: every trial applies
+    them again over its params, since a `scenario` param moves the base to another world."""
     write_config(trial_config(base, sweep.fixed, {}), folder / BASE, "the base config of every trial")
-    spec = sweep.model_dump(mode="json") | {"config": BASE, "fixed": {}}
+    spec = sweep.model_dump(mode="json") | {"config": BASE}
     write_text(folder / SWEEP_FILE, yaml.safe_dump(spec, sort_keys=False))
 
 
@@ -61,10 +62,11 @@ TRIAL = "sweep trial"
 """The owner a trial's run folder records: `train --resume` refuses it, the sweep resumes it."""
 
 
-def train_trial(params: dict[str, Any], folder: Path, metric: str) -> None:
-    """One Tune trial: a training run in folder/trials/<trial id> with `params` over the sweep's
-    base config, resumed from that folder's checkpoint when an earlier attempt left one. The trial
-    owns and locks its folder while it trains (`stack.runtime.owner`)."""
+def train_trial(params: dict[str, Any], folder: Path, metric: str, fixed: dict[str, Any]) -> None:
+    """One Tune trial: a training run in folder/trials/<trial id> with `params` and the sweep's
+    `fixed` overrides over the sweep's base config, resumed from that folder's checkpoint when an
+    earlier attempt left one. The trial owns and locks its folder while it trains
+    (`stack.runtime.owner`)."""
     from ray import tune
 
     from stack.training.trainer import Trainer
@@ -78,7 +80,7 @@ def train_trial(params: dict[str, Any], folder: Path, metric: str) -> None:
             kept = getattr(validation, metric) if validation.improved else kept
             tune.report({"step": validation.step, SCORE: kept, "validation": getattr(validation, metric)})
 
-    config = trial_config(folder / BASE, {}, params)
+    config = trial_config(folder / BASE, fixed, params)
     owner = Owner(TRIAL, fingerprint(yaml.safe_dump(params, sort_keys=True)))
     with claim(out, owner, resuming=True):
         summary = Trainer(config, out, progress=False, on_validation=heard).run()
@@ -97,7 +99,7 @@ def tuner(sweep: SweepFile, folder: Path, resume: bool, progress: bool) -> Any:
     from ray import tune
 
     trainable = tune.with_resources(
-        tune.with_parameters(train_trial, folder=folder.resolve(), metric=sweep.metric),
+        tune.with_parameters(train_trial, folder=folder.resolve(), metric=sweep.metric, fixed=sweep.fixed),
         {"cpu": trial_config(folder / BASE, {}, {}).train.envs},
     )
     state = str((folder / TUNE).resolve())

@@ -31,6 +31,7 @@ from controllers.tracker import make_controller
 from records import CONTROLLER_NAMES, PLANTS, Command, PlantName
 from stack.apps.track_record import TrackedLaneChange
 from stack.apps.track_report import plot_maneuvers, print_tracking, speed_label
+from stack.apps.view import view_command_line
 from stack.loop.closed_loop import ClosedLoop
 from stack.loop.metrics import Tracking, lateral_series, tracking
 from stack.loop.recording import RECORDINGS, episode_recording
@@ -203,7 +204,8 @@ def track_and_report(
     stopped = f" (interrupted: the {len(maneuvers)} of {total} maneuvers finished)"
     Console().print(f"results: {out}" + (stopped if interrupted else ""))
     if record:
-        Console().print(f"replay a maneuver: drivestack view {out / RECORDINGS}/NAME.rrd", highlight=False)
+        hint = f"{view_command_line(out / RECORDINGS)}/NAME.rrd"
+        Console().print(f"replay a maneuver: {hint}", highlight=False, markup=False, soft_wrap=True)
     return interrupted
 
 

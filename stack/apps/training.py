@@ -71,6 +71,27 @@ def check_jobs(jobs: int) -> None:
             )
 
 
+def check_envs(config: RunConfig) -> None:
+    """Refuse, before any process starts, more env processes (`train.envs`, one CPU each) than this
+    machine has usable CPUs, or than its available memory holds (as `--jobs` and a sweep are)."""
+    from stack.runtime.machine import usable_cpus
+
+    envs, cpus = config.train.envs, usable_cpus()
+    if envs > 1 and envs > cpus:
+        fail(
+            f"train.envs: {envs} processes step one CPU each, but this machine has {cpus}; use at most {cpus}"
+        )
+    if (
+        envs > 1
+        and (available := available_memory_bytes()) is not None
+        and envs * WORKER_BYTES > 0.8 * available
+    ):
+        fail(
+            f"train.envs: {envs} processes need about {envs * WORKER_BYTES / 2**30:.1f} GB; "
+            f"{available / 2**30:.1f} GB of memory is available"
+        )
+
+
 def check_init_model(config: RunConfig) -> None:
     """Refuse, before the run folder exists and before torch is imported, a `train.init_model`
     that does not fit the run, or a learned expert's model that does not fit the roads it teaches on."""
@@ -88,10 +109,11 @@ def train_or_fail(config: RunConfig, folder: Path, progress: bool) -> bool:
     """`drivestack train` in `folder`; a checkpoint that cannot be resumed is a one-line error.
     True when interrupted (resumable)."""
     from planner.model_file import CHECKPOINT, ModelFileError, load_checkpoint
+    from stack.training.checks import checkpoint_bytes
 
     try:
         if (checkpoint := folder / CHECKPOINT).is_file():
-            load_checkpoint(checkpoint, arrays=False)
+            load_checkpoint(checkpoint, arrays=False, max_bytes=checkpoint_bytes(config))
         return train_and_report(config, folder, progress)
     except ModelFileError as error:
         fail(str(error))

@@ -10,18 +10,77 @@ the viewer's environment has it and drops `FORCE_RERUN_ANALYTICS`.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import importlib.util
 import os
+import shlex
 import signal
 import socket
+import stat
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 from stack.loop.recording import RECORDINGS, agent_folders
 
 LOOPBACK = "127.0.0.1"
+RRD_MAGIC = (b"RRF0", b"RRF1", b"RRF2")
+"""The first bytes of a rerun recording file (its stream header), by format version."""
+MAX_RECORDING_BYTES = 4 * 2**30
+"""Most bytes of recordings the viewer is given at once (it holds them in memory, and more)."""
+MAX_RECORDINGS = 1000
+"""Most recordings the viewer is given at once (their paths go on its command line)."""
+
+
+def shell_words(*words: str | Path) -> str:
+    """`words` as one shell command line, each quoted where the shell would split or expand it."""
+    return " ".join(shlex.quote(str(word)) for word in words)
+
+
+def view_command_line(*arguments: str | Path) -> str:
+    """The `drivestack view` command to paste into a shell, with `arguments` quoted."""
+    return shell_words("drivestack", "view", *arguments)
+
+
+def checked_recordings(paths: list[Path], where: Path) -> list[Path]:
+    """`paths`, each a regular file that starts as a rerun recording does, at most
+    `MAX_RECORDINGS` of them and `MAX_RECORDING_BYTES` in all; ValueError (one line) otherwise,
+    before the viewer starts (it would serve an empty viewer or read a huge file whole)."""
+    if len(paths) > MAX_RECORDINGS:
+        raise ValueError(
+            f"{where}: holds {len(paths)} recordings; the viewer opens at most {MAX_RECORDINGS} at once: "
+            "open a sub-folder, one file, or --worst"
+        )
+    total = 0
+    for path in paths:
+        try:
+            found = path.stat()
+            if not stat.S_ISREG(found.st_mode):  # a pipe would block the read below
+                raise ValueError(f"{path}: not a regular file; expected a rerun recording (.rrd)")
+            total += found.st_size
+            with path.open("rb") as handle:
+                header = handle.read(len(RRD_MAGIC[0]))
+        except OSError as error:
+            raise ValueError(f"{path}: cannot be read ({error.strerror or error})") from None
+        if header not in RRD_MAGIC:
+            raise ValueError(f"{path}: not a rerun recording (it does not start with rerun's header)")
+        if total > MAX_RECORDING_BYTES:
+            raise ValueError(
+                f"{where}: recordings of more than {MAX_RECORDING_BYTES / 2**30:.0f} GB; "
+                "the viewer holds them in memory: open fewer"
+            )
+    return paths
+
+
+def display_problem(web: bool) -> str | None:
+    """Why the native viewer cannot open a window here (one line suggesting `--web`), or None."""
+    if web or not sys.platform.startswith("linux"):
+        return None
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        return None
+    return "view: no display to open the viewer on (DISPLAY is not set); --web serves it to a browser instead"
 
 
 def worst_episode(folder: Path, agent: str | None = None) -> Path:
@@ -70,19 +129,23 @@ def recordings_in(path: Path, worst: bool, agent: str | None) -> list[Path]:
     if worst:
         if not path.is_dir():
             raise ValueError(f"--worst: expected a results folder, got {path}")
-        return [worst_episode(path, agent)]
+        return checked_recordings([worst_episode(path, agent)], path)
     if agent is not None:
         raise ValueError("--agent: chooses whose worst episode --worst opens; add --worst")
     if path.is_file():
         if path.suffix != ".rrd":
             raise ValueError(f"{path}: expected a rerun recording (.rrd) or a results folder")
-        return [path]
+        return checked_recordings([path], path)
     if not path.is_dir():
+        if path.exists():
+            raise ValueError(
+                f"{path}: not a regular file; expected a rerun recording (.rrd) or a results folder"
+            )
         raise ValueError(f"{path}: no such file or folder")
     found = sorted((path / RECORDINGS).rglob("*.rrd")) or sorted(path.glob("*.rrd"))
     if not found:
         raise ValueError(f"{path}: holds no recordings (.rrd; run with --record)")
-    return found
+    return checked_recordings(found, path)
 
 
 def rerun_program() -> Path:
@@ -118,7 +181,7 @@ def viewer_command(recordings: list[Path], web: bool) -> tuple[list[str], str | 
     program = str(rerun_program())
     files = [str(path) for path in recordings]
     if not web:
-        return [program, *files], None
+        return [program, "--bind", LOOPBACK, *files], None
     grpc, http = free_port(), free_port()
     command = [
         program,
@@ -143,19 +206,36 @@ def _end_with_parent() -> None:  # pragma: no cover - runs in the child before e
 
 
 def view(recordings: list[Path], web: bool) -> int:
-    """Run the viewer on `recordings` until it closes or Ctrl-C; its exit code (0 on Ctrl-C)."""
+    """Run the viewer on `recordings` until it closes or Ctrl-C; its exit code (0 on Ctrl-C). The
+    native viewer's log goes to a file: when it fails (no window can open), one line names the
+    file and suggests `--web` instead of rerun's raw log."""
     command, address = viewer_command(recordings, web)
     shown = ", ".join(str(path) for path in recordings[:3]) + (" ..." if len(recordings) > 3 else "")
     print(f"opening {len(recordings)} recording(s): {shown}", flush=True)
-    process = subprocess.Popen(command, env=viewer_environment(), preexec_fn=_end_with_parent)
-    if address is not None:
-        print(f"web viewer (this machine only): {address}", flush=True)
-        print("Ctrl-C stops it", flush=True)
-    try:
-        return process.wait()
-    except KeyboardInterrupt:
-        stop(process)
-        return 0
+    log = (
+        None
+        if web
+        else tempfile.NamedTemporaryFile("wb", prefix="drivestack-viewer-", suffix=".log", delete=False)
+    )
+    with log or contextlib.nullcontext():
+        process = subprocess.Popen(command, env=viewer_environment(), preexec_fn=_end_with_parent, stderr=log)
+        if address is not None:
+            print(f"web viewer (this machine only): {address}", flush=True)
+            print("Ctrl-C stops it", flush=True)
+        try:
+            code = process.wait()
+        except KeyboardInterrupt:
+            stop(process)
+            return 0
+    if code and log is not None:
+        print(
+            f"error: rerun's viewer ended with exit code {code} (its log: {log.name}); "
+            "where no window can open, --web serves it to a browser",
+            file=sys.stderr,
+        )
+    elif log is not None:
+        Path(log.name).unlink(missing_ok=True)
+    return code
 
 
 def stop(process: subprocess.Popen, grace_s: float = 5.0) -> None:

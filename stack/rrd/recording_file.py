@@ -18,6 +18,7 @@ import numpy as np
 from perception.grid import OccupancyGrid
 from records import Command, WorldState
 from stack.rrd.recording_geometry import box_corners, grid_cells, lane_points
+from stack.runtime.files import make_folder
 
 APPLICATION_ID = "drivestack"
 VIEW_AHEAD_M, VIEW_BEHIND_M = 150.0, 60.0
@@ -141,7 +142,7 @@ def write_recording(path: Path, title: str, buffers: Buffers) -> None:
     first = buffers.first
     if first is None:
         raise ValueError("a recording starts with its first world")
-    path.parent.mkdir(parents=True, exist_ok=True)
+    make_folder(path.parent)
     partial = path.with_name(path.name + ".part")
     recording = rr.RecordingStream(APPLICATION_ID, recording_id=path.stem + "-" + os.urandom(4).hex())
     recording.set_log_time_enabled(False)

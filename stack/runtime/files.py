@@ -39,6 +39,17 @@ def write_failure(error: BaseException) -> TypeGuard[OSError]:
     return isinstance(error, OSError) and (isinstance(error, WriteFailed) or error.errno in WRITE_ERRORS)
 
 
+def make_folder(folder: Path) -> None:
+    """`folder` made with its parents, if missing; `WriteFailed` naming it when a file (or anything
+    but a folder) stands in its place, as in a results folder whose sub-folder was replaced."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise WriteFailed(
+            errno.ENOTDIR, "something that is not a folder is in its place", str(folder)
+        ) from None
+
+
 @contextmanager
 def replacing(path: Path) -> Iterator[Path]:
     """A temporary path beside `path` (same suffix, for writers that go by it) that becomes `path`
@@ -121,7 +132,7 @@ class EpisodeJournal:
         line = (json.dumps(episode.row()) + "\n").encode()
         with deferred():
             try:
-                self.path.parent.mkdir(parents=True, exist_ok=True)
+                make_folder(self.path.parent)
                 with open_appending(self.path) as handle:
                     start = handle.seek(0, os.SEEK_END)
                     try:

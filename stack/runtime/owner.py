@@ -55,7 +55,7 @@ def owner_of(folder: Path) -> Owner | None:
         return Owner(str(data["command"]), str(data["config"]))
     except FileNotFoundError:
         return None
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError, RecursionError):
         return Owner("unknown command", "")
 
 
@@ -73,6 +73,8 @@ def refusal(folder: Path, wanted: Owner, resuming: bool, restart: bool = True) -
     `restart`, one it made itself with the same config."""
     if not plain_or_missing(folder / LOCK):
         return NOT_PLAIN.format(path=folder / LOCK)
+    if (link := first_link(folder)) is not None:
+        return LINKED.format(path=link)
     found = owner_of(folder)
     if resuming:
         if found is not None and found.command != wanted.command:
@@ -86,7 +88,9 @@ def refusal(folder: Path, wanted: Owner, resuming: bool, restart: bool = True) -
     if not holds_results(folder) or (restart and found == wanted):
         return None
     what = f"the results of `{found.command}`" if found is not None else "files drivestack did not write"
-    more = " with other arguments or config" if found is not None and found.command == wanted.command else ""
+    more = ""
+    if found is not None and found.command == wanted.command:
+        more = " with these arguments and config" if found == wanted else " with other arguments or config"
     hint = " (--resume continues an interrupted one)" if found is not None else ""
     return f"--out: {folder} already holds {what}{more}; choose a new folder{hint}"
 
@@ -136,6 +140,28 @@ def lock_file(path: Path) -> IO[str]:
 
 
 NOT_PLAIN = "--out: {path} is not a plain file; remove it or choose another folder"
+LINKED = (
+    "--out: {path} is a link; a results folder holds no links (its files would be written where "
+    "it points): remove it or choose another folder"
+)
+
+
+def first_link(folder: Path) -> Path | None:
+    """The first entry below `folder` (at any depth, `folder` itself aside) that is a symbolic
+    link, or None: a file written below a link lands outside the folder. Links are not followed."""
+    pending = [folder]
+    while pending:
+        try:
+            entries = os.scandir(pending.pop())
+        except OSError:
+            continue
+        with entries:
+            for entry in entries:
+                if entry.is_symlink():
+                    return Path(entry.path)
+                if entry.is_dir(follow_symlinks=False):
+                    pending.append(Path(entry.path))
+    return None
 
 
 def plain_or_missing(path: Path) -> bool:

@@ -6,13 +6,14 @@ Every error is one line naming the file and the dotted key, e.g.
 
 from __future__ import annotations
 
+from collections.abc import Hashable
 from functools import cache
 from itertools import chain
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
 from common.plugins import AGENT_GROUP, plugin_name
 from controllers.config import ControllerConfig
@@ -71,6 +72,13 @@ class PlannerConfig(Strict):
         description="[Q-value] the learned agents' hysteresis: ddqn and dqn change lane only when the "
         "change's Q-value beats STAY's by at least this much",
     )
+
+    @field_validator("model")
+    @classmethod
+    def _absolute_model(cls, model: Path | None) -> Path | None:
+        """The file as an absolute path (as plug-in files are): a run's config.yaml names the same
+        file from any directory."""
+        return None if model is None else model.expanduser().resolve()
 
 
 class RunConfig(Strict):
@@ -169,9 +177,16 @@ MAX_QUOTE = 80
 """Longest quote of an offending value in an error message [characters]."""
 
 
+MAX_YAML_DEPTH = 64
+"""Deepest nesting of sections and lists a config or `--set` value may have."""
+
+
 class _NoAliasLoader(yaml.SafeLoader):
     """PyYAML's safe loader without anchors and aliases, so a small file cannot expand into a huge
-    document (a "billion laughs")."""
+    document (a "billion laughs"), without duplicate keys in a mapping (PyYAML keeps the last one
+    silently) and nested at most `MAX_YAML_DEPTH` deep (deeper ends in Python's recursion limit)."""
+
+    _depth = 0
 
     def compose_node(self, parent: Any, index: Any) -> Any:
         if self.check_event(yaml.AliasEvent) or getattr(self.peek_event(), "anchor", None):
@@ -179,7 +194,32 @@ class _NoAliasLoader(yaml.SafeLoader):
             raise yaml.composer.ComposerError(
                 None, None, "anchors and aliases (&, *) are not accepted", event.start_mark
             )
-        return super().compose_node(parent, index)
+        if self._depth >= MAX_YAML_DEPTH:
+            raise yaml.composer.ComposerError(
+                None, None, f"nested more than {MAX_YAML_DEPTH} deep", self.peek_event().start_mark
+            )
+        self._depth += 1
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            if isinstance(key, Hashable):
+                if key in seen:
+                    raise yaml.constructor.ConstructorError(
+                        None, None, f"key {str(key)[:MAX_QUOTE]!r} given twice", key_node.start_mark
+                    )
+                seen.add(key)
+        return super().construct_mapping(node, deep)
+
+
+def strict_yaml(text: str) -> Any:
+    """`text` as YAML by the rules of `_NoAliasLoader`; yaml.YAMLError otherwise."""
+    return yaml.load(text, Loader=_NoAliasLoader)
 
 
 def one_line(error: ValidationError, source: str, labels: dict[str, str]) -> str:
@@ -314,7 +354,7 @@ def read_mapping(path: Path | str) -> dict[str, Any]:
     if path.stat().st_size > MAX_CONFIG_BYTES:
         raise ConfigError(f"{path}: {path.stat().st_size} bytes; a config is at most {MAX_CONFIG_BYTES}")
     try:
-        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_NoAliasLoader) or {}
+        data = strict_yaml(path.read_text(encoding="utf-8")) or {}
     except UnicodeDecodeError:
         raise ConfigError(f"{path}: not UTF-8 text") from None
     except OSError as error:

@@ -30,7 +30,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, Field, ValidationError, field_validator
 
 from stack.settings.checks import boolean_mismatch
-from stack.settings.run import ConfigError, RunConfig, load_config, one_line, printable, read_mapping
+from stack.settings.run import NULL, ConfigError, RunConfig, load_config, one_line, printable, read_mapping
 from stack.settings.train import Strict
 
 SWEEP_FILE = "sweep.yaml"
@@ -131,10 +131,16 @@ def candidates(values: list[Any] | dict[str, list[Any]]) -> list[Any]:
     return [bounds[0], bounds[1] - 1] if kind == "randint" else list(bounds)
 
 
+def overrides(settings: dict[str, Any]) -> dict[str, Any]:
+    """Dotted keys and values of a sweep (`fixed`, a trial's params) as `load_config` takes them: a
+    null sets null (`load_config` would skip a plain None)."""
+    return {key.replace(".", "__"): NULL if value is None else value for key, value in settings.items()}
+
+
 def trial_config(base: Path, fixed: dict[str, Any], params: dict[str, Any]) -> RunConfig:
-    """The training config of one trial: the base file with `fixed` then `params` applied."""
-    overrides = {key.replace(".", "__"): value for key, value in {**fixed, **params}.items()}
-    return load_config(base, **overrides)
+    """The training config of one trial: the base file with `params` and `fixed` applied (a
+    `scenario` among them moves the base to that world first, so every fixed key still holds)."""
+    return load_config(base, **overrides({**fixed, **params}))
 
 
 def load_sweep(path: Path) -> tuple[SweepFile, Path, list[RunConfig]]:
@@ -153,7 +159,7 @@ def load_sweep(path: Path) -> tuple[SweepFile, Path, list[RunConfig]]:
     base = sweep.config if sweep.config.is_absolute() else path.parent / sweep.config
     if not base.is_file():
         raise ConfigError(f"{path}: config: no such training config {base}")
-    fixed = {key.replace(".", "__"): value for key, value in sweep.fixed.items()}
+    fixed = overrides(sweep.fixed)
     labels = {key: f"{path}: fixed" for key in sweep.fixed}
     configs = [load_config(base, labels, **fixed)]
     for key, values in sweep.space.items():
@@ -164,7 +170,7 @@ def load_sweep(path: Path) -> tuple[SweepFile, Path, list[RunConfig]]:
                     f"{path}: space: {key}: an integer; draw it with randint or list its values"
                 )
         for value in candidates(values):
-            configs.append(load_config(base, labels, **{**fixed, key.replace(".", "__"): value}))
+            configs.append(load_config(base, labels, **{**fixed, **overrides({key: value})}))
     if any(config.train.members > 1 for config in configs):
         raise ConfigError(
             f"{path}: train.members: a trial trains one model; add train.members: 1 to fixed, sweep the seed"

@@ -259,7 +259,12 @@ class TrainConfig(Strict):
     @field_validator("init_model")
     @classmethod
     def _existing_model(cls, path: str | None) -> str | None:
-        return path if path == "shipped" else existing_model_file(path, " (a model file or 'shipped')")
+        """'shipped', or the file as an absolute path: the run's config.yaml names it from any
+        directory."""
+        if path is None or path == "shipped":
+            return path
+        existing_model_file(path, " (a model file or 'shipped')")
+        return str(Path(path).resolve())
 
     @model_validator(mode="after")
     def _one_env_for_tables(self) -> TrainConfig:

@@ -112,6 +112,8 @@ def parse_point(kind: ScenarioKind, text: str) -> Point:
         name, _, value = entry.partition("=")
         if name.strip() not in names:
             raise ValueError(f"expected {', '.join(f'{n}=VALUE' for n in names)} for {kind}, got {entry!r}")
+        if name.strip() in given:
+            raise ValueError(f"{name.strip()}: given twice; name each parameter of {kind} once")
         try:
             given[name.strip()] = float(value)
         except ValueError:

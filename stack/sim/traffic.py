@@ -259,6 +259,28 @@ def random_traffic(rng: np.random.Generator, ranges: dict[str, Any]) -> dict[str
     }
 
 
+ROAD_MARGIN_M = 1000.0
+"""How far past where the fastest vehicle can be at the episode's end the road still goes [m]."""
+
+
+def lengthen_for_episode(road: Road, duration: float) -> None:
+    """Stretch the road's straight lanes, in place, so that no vehicle reaches a lane's end within
+    `duration` [s] even at highway-env's top speed (`Vehicle.MAX_SPEED`, 40 m/s). highway-env's
+    lanes end 10 km on; past the end a vehicle no longer sees its leader (`is_reachable_from` stops
+    there), so long episodes ended in collisions. A road already long enough is left as it is."""
+    if not road.vehicles:
+        return
+    for lanes in (lanes for ends in road.network.graph.values() for lanes in ends.values()):
+        for lane in lanes:
+            if type(lane) is not StraightLane:
+                continue
+            front = max(float(lane.local_coordinates(vehicle.position)[0]) for vehicle in road.vehicles)
+            needed = front + Vehicle.MAX_SPEED * duration + ROAD_MARGIN_M
+            if needed > lane.length:
+                lane.end = lane.start + lane.direction * needed
+                lane.length = needed
+
+
 class ScenarioTraffic(HighwayEnv):
     """highway-v0 whose `_create_vehicles` reads `config["traffic"]` (see the module docstring), and
     whose `_reset` draws the road's traffic first when `config["random_traffic"]` is set. Without
@@ -273,6 +295,7 @@ class ScenarioTraffic(HighwayEnv):
         if ranges:
             self.config.update(random_traffic(self.np_random, ranges))
         super()._reset()
+        lengthen_for_episode(self.road, float(self.config["duration"]))
 
     def _create_highway_env_vehicles(self) -> None:
         """highway-env's own `_create_vehicles` (the ego at 25 m/s behind all the traffic, the same

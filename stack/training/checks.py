@@ -30,6 +30,23 @@ def replay_buffer_bytes(config: RunConfig) -> int:
     return config.train.buffer_size * transition_bytes(config)
 
 
+CHECKPOINT_SLACK_BYTES = 256 * 2**20
+"""What a checkpoint holds besides its transitions, at most: networks, optimizer moments, counters."""
+
+
+def checkpoint_bytes(config: RunConfig) -> int:
+    """Most bytes a DDQN / DQN checkpoint of `config` holds inflated: its replay buffer and
+    demonstrations (a quarter more, for the columns an action mask adds) and
+    `CHECKPOINT_SLACK_BYTES`; a file declaring more is not this run's, and is refused before
+    anything is inflated. A tabular run's: `CHECKPOINT_BYTES`."""
+    from planner.model_file import CHECKPOINT_BYTES
+
+    if config.train.algorithm == "tabular":
+        return CHECKPOINT_BYTES
+    transitions = replay_buffer_bytes(config) + demonstrations_bytes(config) // 2
+    return min(CHECKPOINT_BYTES, int(1.25 * transitions) + CHECKPOINT_SLACK_BYTES)
+
+
 def demonstrations_bytes(config: RunConfig) -> int:
     """Memory `train.demonstrations` take at most while recorded [bytes]: every episode's decisions
     (episode length / decision period), twice (the episodes and their concatenation)."""

@@ -12,9 +12,10 @@ import numpy as np
 from gymnasium import spaces
 
 from perception.grid import OccupancyGridBuilder, observe_batch
-from records import Command
-from stack.batch.closed_loop import ClosedLoopBatch
+from records import N_ACTIONS, Command
+from stack.batch.closed_loop import ClosedLoopBatch, refusal
 from stack.settings.run import RunConfig, build_config, grid_config, training_worlds
+from stack.settings.train import MAX_WORLDS
 from stack.training.decision_env import drawn_episode, mix_shares, with_permitted
 
 
@@ -35,6 +36,48 @@ class Decided:
     refused: np.ndarray
 
 
+class BatchRefused(ValueError):
+    """A valid config that the batch does not run and the per-world env does (one line)."""
+
+
+def checked_worlds(worlds: object) -> int:
+    """`worlds` (a vector env's `num_envs`) as an int from 1 to `MAX_WORLDS`, before anything is
+    allocated for them; ValueError (one line) otherwise."""
+    if isinstance(worlds, bool) or not isinstance(worlds, int | np.integer) or not 1 <= worlds <= MAX_WORLDS:
+        raise ValueError(
+            f"num_envs: expected a whole number of worlds from 1 to {MAX_WORLDS}, got {worlds!r:.60}"
+        )
+    return int(worlds)
+
+
+def checked_commands(commands: object, worlds: int) -> np.ndarray:
+    """`commands` as one int64 command per world: integers (not booleans, not floats, which would
+    be truncated) from 0 to N_ACTIONS - 1, exactly `worlds` of them (a scalar is not broadcast);
+    ValueError (one line) otherwise."""
+    try:
+        values = np.asarray(commands)
+    except (TypeError, ValueError):
+        values = np.asarray(None)
+    if values.dtype.kind not in "iu" or values.ndim == 0 or values.size != worlds:
+        shown = _shown(values) if values.dtype.kind != "O" else repr(commands)[:80]
+        raise ValueError(
+            f"actions: expected {worlds} integer commands, one per world, each 0..{N_ACTIONS - 1}, "
+            f"got {shown} ({values.dtype.name}, shape {values.shape})"
+        )
+    values = values.reshape(worlds)
+    if ((values < 0) | (values >= N_ACTIONS)).any():
+        raise ValueError(
+            f"actions: expected commands 0..{N_ACTIONS - 1} ({', '.join(c.name for c in Command)}), "
+            f"got {_shown(values)}"
+        )
+    return values.astype(np.int64)
+
+
+def _shown(values: np.ndarray) -> str:
+    """`values` on one line, at most 80 characters."""
+    return np.array2string(values, threshold=8, max_line_width=10**6)[:80]
+
+
 def batch_config(config: RunConfig | dict | None) -> RunConfig:
     """`config` validated as the decision MDP's, or ValueError (one line) for what a batch does not
     run: an encoding other than `observation`, or one of another size on some road an episode
@@ -42,7 +85,7 @@ def batch_config(config: RunConfig | dict | None) -> RunConfig:
     if not isinstance(config, RunConfig):
         config = build_config(config or {}, "HierarchicalHighway-v0 config")
     if config.train.encoding != "observation":
-        raise ValueError(f"batched worlds encode train.encoding observation, not {config.train.encoding!r}")
+        raise BatchRefused(f"batched worlds encode train.encoding observation, not {config.train.encoding!r}")
     roads = {name: world.highway for name, world in training_worlds(config).items()}
     config.check_one_encoding(roads, "batched worlds")
     return config
@@ -55,7 +98,10 @@ class DecisionBatch:
     per-world env draws them)."""
 
     def __init__(self, config: RunConfig | dict | None, worlds: int) -> None:
+        worlds = checked_worlds(worlds)
         self.config = config = batch_config(config)
+        if (refused := refusal(config)) is not None:
+            raise BatchRefused(refused)
         self.loop = ClosedLoopBatch(config, worlds)
         self.worlds = worlds
         self.grid = grid_config(config)
@@ -105,7 +151,7 @@ class DecisionBatch:
         """One decision period in every world (`HierarchicalHighwayEnv.step` of each), or in those
         flagged in `only` (the others: reward 0, no end): world k commanded `commands[k]`. Every
         world stepped must be live: reset those that ended first."""
-        commands = np.asarray(commands, dtype=np.int64)
+        commands = checked_commands(commands, self.worlds)
         loop = self.loop
         acted = loop.act(commands, self.ticks, only)
         stepped = np.ones(self.worlds, dtype=bool) if only is None else np.asarray(only, dtype=bool)

@@ -31,6 +31,7 @@ from planner.validation import RealTimeValidation
 from records import child_seed
 from stack.settings.run import RunConfig, grid_config, load_config, write_config
 from stack.training.checkpoint import Checkpoint, DqnCounters, TabularCounters, read_checkpoint
+from stack.training.checks import checkpoint_bytes
 from stack.training.decision_env import HierarchicalHighwayEnv
 from stack.training.demonstrations import demonstrations_used, start_from_demonstrations
 from stack.training.envs import (
@@ -231,7 +232,7 @@ class Trainer:
     def _checkpoint(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """The run's checkpoint file (arrays, metadata), refused in one line (ModelFileError)
         unless it is one."""
-        return load_checkpoint(self.out / CHECKPOINT)
+        return load_checkpoint(self.out / CHECKPOINT, max_bytes=checkpoint_bytes(self.config))
 
     def _restore_common(self, checkpoint: Checkpoint[DqnCounters] | Checkpoint[TabularCounters]) -> None:
         self.history, self.best = RealTimeValidation.restore(checkpoint.validation)

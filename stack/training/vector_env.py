@@ -12,7 +12,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -25,7 +25,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvS
 
 from records import N_ACTIONS, TRAINING_SEED_FLOOR, drawn_seed
 from stack.settings.run import RunConfig
-from stack.training.decision_batch import Decided, DecisionBatch
+from stack.training.decision_batch import BatchRefused, Decided, DecisionBatch, checked_commands
 
 
 class SeededWorlds:
@@ -39,12 +39,22 @@ class SeededWorlds:
         self.members = [0] * worlds
 
     def seed(self, seed: int | Sequence[int | None] | None) -> None:
+        """Seed world k with `seed + k`, or with `seed[k]` (None: left as it is); ValueError (one
+        line) for anything but an integer, None or one integer or None per world."""
         worlds = len(self.generators)
-        seeds = [seed + k for k in range(worlds)] if isinstance(seed, int) else seed
-        if seeds is None:
+        if seed is None:
             return
-        if len(seeds) != worlds:
-            raise ValueError(f"one seed per world: {worlds} worlds, {len(seeds)} seeds")
+        seeds = [int(cast(int, seed)) + k for k in range(worlds)] if _integer(seed) else seed
+        if (
+            isinstance(seeds, str | bytes)
+            or not isinstance(seeds, Sequence | np.ndarray)
+            or len(seeds) != worlds
+            or not all(value is None or _integer(value) for value in seeds)
+        ):
+            raise ValueError(
+                f"seed: expected an integer, None or one integer (or None) per world ({worlds}), "
+                f"got {repr(seed)[:60]}"
+            )
         for k, value in enumerate(seeds):
             if value is not None:
                 self.generators[k] = seeding.np_random(value)[0]
@@ -58,6 +68,10 @@ class SeededWorlds:
             self.members[k], seed = self.batch.draw(self.generators[k])
             seeds.append(seed)
         return seeds
+
+
+def _integer(value: object) -> bool:
+    return isinstance(value, int | np.integer) and not isinstance(value, bool)
 
 
 def world_infos(batch: DecisionBatch, decided: Decided | None = None) -> dict[str, np.ndarray]:
@@ -97,9 +111,9 @@ class HierarchicalHighwayVectorEnv(VectorEnv):
             )
         try:
             self.batch = DecisionBatch(config, num_envs)
-        except ValueError as refused:
+        except BatchRefused as refused:
             raise ValueError(f"{refused}; vectorization_mode='sync' steps them one at a time") from None
-        self.num_envs = num_envs
+        self.num_envs = num_envs = self.batch.worlds
         self.render_mode = None
         self.single_observation_space = self.batch.observation_space
         self.single_action_space = spaces.Discrete(N_ACTIONS)
@@ -123,7 +137,7 @@ class HierarchicalHighwayVectorEnv(VectorEnv):
         if ended:
             seeds = self.worlds.draw(ended)
             self.batch.reset_worlds(ended, seeds, [self.worlds.members[k] for k in ended])
-        commands = np.where(resetting, 1, np.asarray(actions, dtype=np.int64))
+        commands = np.where(resetting, 1, checked_commands(actions, self.num_envs))
         decided = self.batch.step(commands, only=~resetting)
         self._autoreset = decided.terminated | decided.truncated
         return (
@@ -171,6 +185,7 @@ class DecisionVecEnv(WorldsVecEnv):
 
     def __init__(self, config: RunConfig | dict | None, num_envs: int, seed: int | None = None) -> None:
         self.batch = DecisionBatch(config, num_envs)
+        num_envs = self.batch.worlds
         super().__init__(num_envs, self.batch.observation_space, spaces.Discrete(N_ACTIONS))
         self.worlds = SeededWorlds(num_envs, self.batch)
         self.worlds.seed(seed)
@@ -187,7 +202,7 @@ class DecisionVecEnv(WorldsVecEnv):
         return observations
 
     def step_async(self, actions: np.ndarray) -> None:
-        self._actions = np.asarray(actions, dtype=np.int64).reshape(self.num_envs)
+        self._actions = checked_commands(actions, self.num_envs)
 
     def step_wait(self) -> VecEnvStepReturn:
         decided = self.batch.step(self._actions)
