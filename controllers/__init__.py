@@ -5,6 +5,8 @@ first use: python-control and CasADi are heavy, and the configs only need `contr
 from importlib import import_module
 from typing import Any
 
+import common.numba_cache  # noqa: F401  numba's cache folder is set before anything here compiles
+
 _PUBLIC = {
     "ControllerConfig": "controllers.config",
     "Maneuver": "controllers.maneuver",

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import casadi as ca
 
+from common.numba_cache import drivestack_cache
+
 FLAGS = ("-O1", "-ffp-contract=off", "-fPIC", "-shared")
 """-O1: a dynamic-model linearisation compiles in 4 s (-O2: 9 s, 15 % faster to run)."""
 COMPILE_TIMEOUT_S = 300
@@ -28,12 +30,9 @@ COMPILE_TIMEOUT_S = 300
 
 
 def cache_directory() -> Path:
-    """Where compiled libraries are kept: `$DRIVESTACK_CACHE/casadi`, else
-    `$XDG_CACHE_HOME/drivestack/casadi`, else `~/.cache/drivestack/casadi`."""
-    explicit = os.environ.get("DRIVESTACK_CACHE")
-    if explicit:
-        return Path(explicit) / "casadi"
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "drivestack" / "casadi"
+    """Where compiled libraries are kept: drivestack's cache folder's `casadi`
+    (`common.numba_cache.drivestack_cache`)."""
+    return drivestack_cache() / "casadi"
 
 
 def compiler() -> str | None:

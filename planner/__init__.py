@@ -1,6 +1,7 @@
 """The decision layer: agents behind one protocol (`predict` on an encoding of the grid), built by
 name (`make_agent`) or loaded from a safe model file (`load_agent`), and `decide` -> a `Command`."""
 
+import common.numba_cache  # noqa: F401  numba's cache folder is set before anything here compiles
 from planner.agents import Agent, decide
 from planner.factory import make_agent
 from records import Command

@@ -19,6 +19,8 @@ import os
 from importlib import import_module
 from typing import Any
 
+import common.numba_cache  # noqa: F401  numba's cache folder is set before anything here compiles
+
 os.environ.setdefault("MPLBACKEND", "Agg")  # figures are written to files; chosen here, once
 
 from stack.sim.envs import register_when_imported  # noqa: E402

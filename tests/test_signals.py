@@ -244,7 +244,9 @@ def test_pool_workers_end_when_their_driver_is_killed(tmp_path):
     arguments = ["run", "--agent", "keep-lane", "--episodes", "4000", "--jobs", "2", *SHORT, *ONE_AT_A_TIME]
     arguments += ["--out", str(out)]
     process = started_with_workers(arguments, out / "keep-lane.episodes.partial.jsonl")
-    workers = children(process.pid)
+    deadline = time.monotonic() + 60  # episode 0 runs in the driver, then the pool starts: wait for it
+    while not (workers := children(process.pid)) and time.monotonic() < deadline:
+        time.sleep(0.05)
     assert workers, "the run has its pool"
     process.kill()
     process.communicate(timeout=30)

@@ -103,7 +103,9 @@ def export(
         written, metadata = export_sb3(model, sb3)
     except ValueError as error:
         fail(str(error))
-    Console().print(f"wrote {written}: stable_baselines3.DQN.load({str(written)!r})", highlight=False)
+    Console().print(
+        f"wrote {written}: stable_baselines3.DQN.load({str(written)!r})", highlight=False, soft_wrap=True
+    )
     if metadata.mobil_prior:
         Console().print(
             f"note: the zip's DQN.predict decides on the bare Q-values; drivestack adds "
@@ -135,7 +137,7 @@ def ensemble(
         fail(str(error))
     except OSError as error:
         fail(f"--out: cannot write {out} ({error.strerror})")
-    Console().print(f"wrote {written}: the mean of {len(models)} Q-networks", highlight=False)
+    Console().print(f"wrote {written}: the mean of {len(models)} Q-networks", highlight=False, soft_wrap=True)
 
 
 def agents() -> None:
