@@ -226,7 +226,14 @@ def test_importing_stack_registers_its_envs_whether_gymnasium_comes_first_or_lat
         "print(sorted(name for name in gymnasium.registry if name.startswith('drivestack/')))"
     )
     completed = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
-    ids = [envs.HIGHWAY, envs.FAST_HIGHWAY, envs.VECTOR_HIGHWAY, envs.FAST_HIGHWAY_FAST, envs.FAST_EXIT]
+    ids = [
+        envs.HIGHWAY,
+        envs.FAST_HIGHWAY,
+        envs.VECTOR_HIGHWAY,
+        envs.FAST_HIGHWAY_FAST,
+        envs.EXIT,
+        envs.FAST_EXIT,
+    ]
     assert completed.stdout.strip() == str(sorted([*ids, envs.HIERARCHICAL_HIGHWAY, envs.DEEPCARS]))
     alone = subprocess.run(
         [sys.executable, "-c", "import sys, stack; print('gymnasium' in sys.modules)"],

@@ -31,6 +31,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from common.neighbours import footprint_lateral_extent, neighbours, occupied_lanes
+from common.r157 import R157_GAP as _R157_GAP  # noqa: F401  (the batched metrics read R157's table here)
+from common.r157 import R157_KMH as _R157_KMH  # noqa: F401
+from common.r157 import R157_MIN_SPEED_MPS, R157_TIME_GAP, r157_min_following_distance  # noqa: F401
 from records import WorldState
 from stack.results.episode_result import TTC_CAP_S
 
@@ -40,22 +43,9 @@ STOPPED_SPEED_MPS = 0.5
 """Below this speed a vehicle counts as stopped [m/s]."""
 TTC_FLOOR_S = 1.5
 """Time to collision below which a tick counts towards the time below the TTC floor [s]."""
-R157_TIME_GAP = ((7.2, 1.0), (10.0, 1.1), (20.0, 1.2), (30.0, 1.3), (40.0, 1.4), (50.0, 1.5), (60.0, 1.6))
-"""UN R157 paragraph 5.2.3.3: (present speed [km/h], minimum time gap t_front [s])."""
-R157_MIN_SPEED_MPS = 7.2 / 3.6
-"""The table starts at 7.2 km/h [m/s]."""
-
-_R157_KMH, _R157_GAP = (np.array(column, dtype=float) for column in zip(*R157_TIME_GAP, strict=True))
 
 AT_FAULT_KINDS = ("front", "stopped vehicle", "lane change", "off road")
 NOT_AT_FAULT_KINDS = ("ego stopped", "rear", "side swipe")
-
-
-def r157_min_following_distance(speed: float) -> float:
-    """d_min = v * t_front(v) [m] at `speed` [m/s]; 0 below 7.2 km/h, where R157 sets none."""
-    if speed < R157_MIN_SPEED_MPS:
-        return 0.0
-    return speed * float(np.interp(speed * 3.6, _R157_KMH, _R157_GAP))
 
 
 def road_edges(world: WorldState) -> tuple[float, float]:
