@@ -17,13 +17,17 @@ R157_KMH, R157_GAP = (np.array(column, dtype=float) for column in zip(*R157_TIME
 """The table's columns: speed [km/h] and t_front [s]."""
 
 START_CLEARANCE_M = 5.0
-"""Least bumper-to-bumper gap at spawn [m]: highway-env's IDM jam distance beyond both half-lengths."""
+"""Gap at spawn beyond the rest [m]: highway-env's IDM jam distance, and the margin a follower that
+speeds up in its first second (its cruise still reacting) eats into before R157's distance."""
 START_REACTION_S = 1.0
 """Time a follower closing in on its leader at spawn drives on before it brakes [s]: the stack
 decides once a second and its cruise then reacts."""
 START_BRAKING_MPS2 = 3.0
-"""Deceleration a follower closing in at spawn is given room to slow to its leader's speed at [m/s^2]:
-the stack's comfort deceleration, so no start needs emergency braking."""
+"""Deceleration a follower is given room to brake at from its spawn on [m/s^2]: the stack's comfort
+deceleration, so no start needs emergency braking."""
+LEADER_BRAKING_MPS2 = 6.0
+"""Strongest deceleration of a traffic vehicle [m/s^2] (highway-env's IDM `ACC_MAX`): how hard a
+leader spawned above its desired speed may brake towards it from its first frame."""
 
 
 def r157_min_following_distance(speed: float) -> float:
@@ -33,23 +37,35 @@ def r157_min_following_distance(speed: float) -> float:
     return speed * float(np.interp(speed * 3.6, R157_KMH, R157_GAP))
 
 
-def start_gap(follower_speed: float, leader_speed: float) -> float:
-    """Least bumper-to-bumper gap [m] behind a leader that a vehicle may spawn at: R157's minimum
-    following distance at its speed [m/s] (at least `START_CLEARANCE_M`), plus, when it is faster
-    than its leader (`leader_speed`: the speed the leader is heading for, if slower), the road it
-    covers closing in for `START_REACTION_S` and then braking at `START_BRAKING_MPS2` to the
-    leader's speed."""
-    closing = max(follower_speed - leader_speed, 0.0)
-    return (
-        max(r157_min_following_distance(follower_speed), START_CLEARANCE_M)
+def start_gap(follower_speed: float, leader_speed: float, leader_heading_for: float | None = None) -> float:
+    """Least bumper-to-bumper gap [m] behind a leader that a vehicle may spawn at, speeds in m/s:
+    `START_CLEARANCE_M` beyond the larger of
+    - R157's minimum following distance at its speed, plus, when it is faster than the speed the
+      leader is heading for (`leader_heading_for`, default its speed), the road it covers closing
+      in for `START_REACTION_S` and braking at `START_BRAKING_MPS2` to that speed;
+    - when the leader brakes from its spawn on (heading for a lower speed), the room to stop at
+      `START_BRAKING_MPS2` behind it braking to a standstill at `LEADER_BRAKING_MPS2` (what the
+      stack's emergency braking predicts of a leader seen braking)."""
+    heading_for = leader_speed if leader_heading_for is None else min(leader_heading_for, leader_speed)
+    closing = max(follower_speed - heading_for, 0.0)
+    following = (
+        r157_min_following_distance(follower_speed)
         + closing * START_REACTION_S
         + closing * closing / (2 * START_BRAKING_MPS2)
     )
+    stopping = 0.0
+    if heading_for < leader_speed:
+        stopping = follower_speed**2 / (2 * START_BRAKING_MPS2) - leader_speed**2 / (2 * LEADER_BRAKING_MPS2)
+    return START_CLEARANCE_M + max(following, stopping)
 
 
 def start_room(
-    follower_speed: float, leader_speed: float, follower_length: float, leader_length: float
+    follower_speed: float,
+    leader_speed: float,
+    follower_length: float,
+    leader_length: float,
+    leader_heading_for: float | None = None,
 ) -> float:
     """Least centre-to-centre distance [m] at spawn between a follower and its leader in one lane:
     both half-lengths [m] and `start_gap` at their speeds [m/s]."""
-    return (follower_length + leader_length) / 2 + start_gap(follower_speed, leader_speed)
+    return (follower_length + leader_length) / 2 + start_gap(follower_speed, leader_speed, leader_heading_for)

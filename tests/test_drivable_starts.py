@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from common.r157 import START_BRAKING_MPS2, r157_min_following_distance, start_gap, start_room
+from common.r157 import (
+    LEADER_BRAKING_MPS2,
+    START_BRAKING_MPS2,
+    r157_min_following_distance,
+    start_gap,
+    start_room,
+)
 from records import WorldState
 from stack.apps.cli import app
 from stack.settings.run import build_config
@@ -39,14 +45,18 @@ def too_close(world: WorldState) -> list[tuple[int, float, float]]:
 
 
 def test_start_gap_is_r157_distance_plus_room_to_match_a_slower_leader():
-    assert start_gap(25.0, 25.0) == pytest.approx(25.0 * 1.6)
-    assert start_gap(25.0, 30.0) == pytest.approx(25.0 * 1.6), "a faster leader needs no more"
-    assert start_gap(1.0, 1.0) == pytest.approx(5.0), "at crawl speed the jam clearance"
+    assert start_gap(25.0, 25.0) == pytest.approx(5.0 + 25.0 * 1.6)
+    assert start_gap(25.0, 30.0) == pytest.approx(5.0 + 25.0 * 1.6), "a faster leader needs no more"
+    assert start_gap(1.0, 1.0) == pytest.approx(5.0), "below 7.2 km/h the jam clearance alone"
     closing = 25.0 - 18.0
-    assert start_gap(25.0, 18.0) == pytest.approx(
-        40.0 + closing * 1.0 + closing**2 / (2 * START_BRAKING_MPS2)
+    following = 40.0 + closing * 1.0 + closing**2 / (2 * START_BRAKING_MPS2)
+    assert start_gap(25.0, 18.0) == pytest.approx(5.0 + following)
+    assert start_gap(25.0, 25.0, leader_heading_for=18.0) == pytest.approx(5.0 + following)
+    stopping = 30.0**2 / (2 * START_BRAKING_MPS2) - 30.0**2 / (2 * LEADER_BRAKING_MPS2)
+    assert start_gap(30.0, 30.0, leader_heading_for=29.0) == pytest.approx(5.0 + stopping), (
+        "a leader braking from its spawn on: room to stop behind it"
     )
-    assert start_room(25.0, 25.0, 5.0, 12.0) == pytest.approx(8.5 + 40.0)
+    assert start_room(25.0, 25.0, 5.0, 12.0) == pytest.approx(8.5 + 45.0)
 
 
 def assert_no_start_inside_r157_distance(scenario: str, seeds: int) -> None:
@@ -68,10 +78,11 @@ def test_no_vehicle_starts_inside_r157_distance_over_many_seeds(scenario):
     assert_no_start_inside_r157_distance(scenario, seeds=300)
 
 
-@pytest.mark.parametrize("scenario", ["highway-v0", "overtaking", "random"])
-def test_the_ego_starts_with_room_to_match_its_leader(scenario):
-    """Closing in on a slower leader (or one heading for a lower speed), the ego starts at least
-    `start_gap` behind it, so its first frames need no emergency braking."""
+@pytest.mark.parametrize("scenario", ["highway-v0", "overtaking", "random", "exit"])
+def test_the_ego_starts_with_room_to_match_its_leaders(scenario):
+    """Closing in on a slower leader (or one heading for a lower speed), in its lane or a lane next
+    to it (one it may change into at once), the ego starts at least `start_gap` behind it, so its
+    first frames need no emergency braking."""
     config = build_config({}, scenario=scenario)
     with HighwayAdapter(config.highway, "vector") as adapter:
         for seed in range(FIRST_SEED, FIRST_SEED + 20):
@@ -80,18 +91,19 @@ def test_the_ego_starts_with_room_to_match_its_leader(scenario):
             ego = env.vehicle
             lane = env.road.network.get_lane(ego.lane_index)
             s_ego = lane.local_coordinates(ego.position)[0]
-            ahead = [
-                (lane.local_coordinates(other.position)[0], other)
-                for other in env.road.vehicles
-                if other is not ego and other.lane_index == ego.lane_index
-            ]
-            ahead = [(s, other) for s, other in ahead if s > s_ego]
-            if not ahead:
-                continue
-            s_leader, leader = min(ahead, key=lambda pair: pair[0])
-            heading_for = min(leader.speed, getattr(leader, "target_speed", leader.speed))
-            needed = start_room(ego.speed, heading_for, ego.LENGTH, leader.LENGTH)
-            assert s_leader - s_ego >= needed - 1e-9, f"{scenario}, seed {seed}"
+            for side in (-1, 0, 1):
+                ahead = [
+                    (s, other)
+                    for other in env.road.vehicles
+                    for s, d in [lane.local_coordinates(other.position)]
+                    if other is not ego and s > s_ego and abs(d - side * lane.width) < lane.width / 2
+                ]
+                if not ahead:
+                    continue
+                s_leader, leader = min(ahead, key=lambda pair: pair[0])
+                heading_for = getattr(leader, "target_speed", leader.speed)
+                needed = start_room(ego.speed, leader.speed, ego.LENGTH, leader.LENGTH, heading_for)
+                assert s_leader - s_ego >= needed - 1e-9, f"{scenario}, seed {seed}, lane {side:+d}"
 
 
 @pytest.mark.parametrize("scenario", ["overtaking", "random"])

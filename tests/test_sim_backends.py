@@ -107,7 +107,8 @@ def test_backend_matches_stock(backend, seed, density, vehicles, frames):
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_the_short_runs_cover_crashes_and_traffic_lane_changes(backend):
-    states = assert_identical(HighwayConfig(vehicles_count=50), seed=1, frames=200, backend=backend)
+    """Seed 9: the ramming ego reaches a car within 200 frames of a drivable start."""
+    states = assert_identical(HighwayConfig(vehicles_count=50), seed=9, frames=200, backend=backend)
     assert states[-1][:, 6].sum() >= 2, "the ramming ego must crash into someone"
     assert traffic_lane_changes(states) > 0
 

@@ -125,9 +125,10 @@ def across_lane(lane: AbstractLane, positions: list[np.ndarray]) -> np.ndarray:
 def make_room(env: AbstractEnv, vehicle: Vehicle) -> None:
     """Move `vehicle`, just placed ahead of every other, forward along its lane until the vehicle
     behind it in that lane (the ego or traffic; on this lane's line, whichever road segment it
-    was placed on) starts at least `start_gap` behind it, bumper to bumper: UN R157's minimum
-    following distance at its speed and room to slow to `vehicle`'s. The one rule of every start
-    on the stack's roads, whichever backend steps them."""
+    was placed on), and the ego when it is behind in a lane next to it (a lane it may change
+    into), start at least `start_gap` behind it, bumper to bumper: UN R157's minimum following
+    distance at their speed and room to slow to `vehicle`'s. The one rule of every start on the
+    stack's roads, whichever backend steps them."""
     lane = env.road.network.get_lane(vehicle.lane_index)
     s_new = lane.local_coordinates(vehicle.position)[0]
     others = [other for other in env.road.vehicles if other is not vehicle]
@@ -135,17 +136,22 @@ def make_room(env: AbstractEnv, vehicle: Vehicle) -> None:
         return
     positions = [other.position for other in others]
     along = along_lane(lane, positions).tolist()
-    in_lane = (np.abs(across_lane(lane, positions)) < lane.width_at(s_new) / 2).tolist()
-    behind = [
-        (s, other) for s, inside, other in zip(along, in_lane, others, strict=True) if inside and s <= s_new
-    ]
-    if not behind:
-        return
-    s_follower, follower = max(behind, key=lambda pair: pair[0])
-    needed = start_room(follower.speed, heading_for(vehicle), follower.LENGTH, vehicle.LENGTH)
-    if s_new - s_follower < needed:
-        s_new = s_follower + needed
-        vehicle.position = lane.position(s_new, 0.0)
+    across = np.abs(across_lane(lane, positions)).tolist()
+    width = lane.width_at(s_new)
+    behind = [(s, d, other) for s, d, other in zip(along, across, others, strict=True) if s <= s_new]
+    in_lane = [(s, other) for s, d, other in behind if d < width / 2]
+    ego = env.vehicle
+    constraints = [max(in_lane, key=lambda pair: pair[0])] if in_lane else []
+    constraints += [(s, other) for s, d, other in behind if other is ego and width / 2 <= d < 1.5 * width]
+    least = max(
+        (
+            s + start_room(other.speed, vehicle.speed, other.LENGTH, vehicle.LENGTH, heading_for(vehicle))
+            for s, other in constraints
+        ),
+        default=s_new,
+    )
+    if s_new < least:
+        vehicle.position = lane.position(least, 0.0)
 
 
 @cache
