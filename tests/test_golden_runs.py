@@ -17,10 +17,19 @@ from stack.runs.episodes import run
 from stack.settings.run import build_config
 
 GOLDEN = Path(__file__).parent / "golden" / "runs.json"
+ROAD = {"vehicles_count": 30, "duration": 12}
+"""The cases' road: highway-v0's traffic, 30 vehicles, 12 s."""
+CHANGES_ROAD = {**ROAD, "duration": 20}
+"""The lane-change cases' road: from a drivable start the ego meets slower traffic after 12 s."""
 CASES = {
     "ddqn-pid": {"seed": 1, "planner": {"agent": "ddqn"}},
-    "mobil-mpc-changes": {"seed": 2, "planner": {"agent": "mobil"}, "controller": {"type": "mpc"}},
-    "rule-pid-changes": {"seed": 2, "planner": {"agent": "rule"}},
+    "mobil-mpc-changes": {
+        "seed": 2,
+        "planner": {"agent": "mobil"},
+        "controller": {"type": "mpc"},
+        "highway": CHANGES_ROAD,
+    },
+    "rule-pid-changes": {"seed": 2, "planner": {"agent": "rule"}, "highway": CHANGES_ROAD},
     "rule-pid-noisy": {
         "seed": 2,
         "planner": {"agent": "rule"},
@@ -46,7 +55,7 @@ TOLERANCE = {"rel": 1e-9, "abs": 1e-9}
 
 
 def outcome(case: str) -> dict:
-    data = {"episodes": 1, "highway": {"vehicles_count": 30, "duration": 12}, **CASES[case]}
+    data = {"episodes": 1, "highway": ROAD, **CASES[case]}
     results = run(build_config(data, case), progress=False)
     untimed = episode_result.outcome(results.summary)
     summary = {key: value for key, value in untimed.items() if key != "backend"}

@@ -14,7 +14,8 @@ from stack.settings.run import build_config
 from stack.sim.empty_road import EmptyRoad
 from stack.sim.highway import HighwayAdapter
 
-LANE_CHANGE = {"seed": 2, "highway": {"vehicles_count": 20, "duration": 8}, "perception": {"cells_ahead": 9}}
+LANE_CHANGE = {"seed": 2, "highway": {"vehicles_count": 20, "duration": 20}, "perception": {"cells_ahead": 9}}
+"""From its drivable start the ego meets slower traffic after ~14 s and changes lane to the left."""
 
 
 def run_one(data: dict):

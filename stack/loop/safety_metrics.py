@@ -45,6 +45,12 @@ from common.neighbours import (
     reaches_lane,
     vehicle_rows,
 )
+from common.r157 import (  # noqa: F401  (R157's distance, read here by the loop and the batch)
+    R157_MIN_SPEED_MPS,
+    R157_TIME_GAP,
+    r157_min_following_distance,
+    r157_min_following_distances,
+)
 from records import WorldState
 from records.batch import BatchColumns
 from stack.results.episode_result import TTC_CAP_S
@@ -55,25 +61,9 @@ STOPPED_SPEED_MPS = 0.5
 """Below this speed a vehicle counts as stopped [m/s]."""
 TTC_FLOOR_S = 1.5
 """Time to collision below which a tick counts towards the time below the TTC floor [s]."""
-R157_TIME_GAP = ((7.2, 1.0), (10.0, 1.1), (20.0, 1.2), (30.0, 1.3), (40.0, 1.4), (50.0, 1.5), (60.0, 1.6))
-"""UN R157 paragraph 5.2.3.3: (present speed [km/h], minimum time gap t_front [s])."""
-R157_MIN_SPEED_MPS = 7.2 / 3.6
-"""The table starts at 7.2 km/h [m/s]."""
-
-_R157_KMH, _R157_GAP = (np.array(column, dtype=float) for column in zip(*R157_TIME_GAP, strict=True))
 
 AT_FAULT_KINDS = ("front", "stopped vehicle", "lane change", "off road")
 NOT_AT_FAULT_KINDS = ("ego stopped", "rear", "side swipe")
-
-
-def r157_min_following_distance(speed: float) -> float:
-    """d_min = v * t_front(v) [m] at `speed` [m/s]; 0 below 7.2 km/h, where R157 sets none."""
-    return float(r157_min_following_distances(np.float64(speed)))
-
-
-def r157_min_following_distances(speed: np.ndarray | np.float64) -> np.ndarray:
-    """`r157_min_following_distance` of each of `speed` [m/s]."""
-    return np.where(speed < R157_MIN_SPEED_MPS, 0.0, speed * np.interp(speed * 3.6, _R157_KMH, _R157_GAP))
 
 
 def departed(world: WorldState) -> bool:

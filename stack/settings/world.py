@@ -7,10 +7,15 @@ from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
+from common.r157 import START_BRAKING_MPS2, start_room
 from records import BACKENDS, MAX_LANES, PLANTS, ROADS, Backend, PlantName, RoadName, one_of
 
 MAX_CLASS_BOUND = 60.0
 """Largest desired speed [m/s] and length [m] of a traffic vehicle class (the spawn speed's bound)."""
+EGO_SPAWN_SPEED_MPS = 25.0
+"""highway-env's ego speed at spawn [m/s] (without `traffic.spawn_speed_mps`)."""
+EGO_LENGTH_M = 5.0
+"""highway-env's ego length [m] (`Vehicle.LENGTH`)."""
 SHARE_TOLERANCE = 1e-6
 """How far the shares of the traffic classes may sum from 1."""
 
@@ -73,6 +78,22 @@ class TrafficConfig(BaseModel):
         description="every vehicle's speed at spawn [m/s] (None: its desired speed, the ego 25)",
     )
     incident: IncidentConfig | None = None
+
+    @model_validator(mode="after")
+    def _incident_leaves_a_drivable_start(self) -> TrafficConfig:
+        """A stopped car closer than the ego's start room (`common.r157.start_room`) would make
+        the ego brake hard at its first frame: refused, not driven."""
+        if self.incident is None:
+            return self
+        speed = self.spawn_speed_mps or EGO_SPAWN_SPEED_MPS
+        room = start_room(speed, 0.0, EGO_LENGTH_M, self.incident.length_m)
+        if self.incident.ahead_m < room:
+            raise ValueError(
+                f"incident.ahead_m: the ego spawns at {speed:g} m/s (traffic.spawn_speed_mps) and needs "
+                f"{room:.1f} m to the stopped car (R157's following distance and room to stop at "
+                f"{START_BRAKING_MPS2:g} m/s^2), got {self.incident.ahead_m:g}"
+            )
+        return self
 
     @field_validator("classes")
     @classmethod

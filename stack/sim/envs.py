@@ -13,6 +13,7 @@ HIGHWAY = "drivestack/Highway-v0"
 FAST_HIGHWAY = "drivestack/FastHighway-v0"
 VECTOR_HIGHWAY = "drivestack/VectorHighway-v0"
 FAST_HIGHWAY_FAST = "drivestack/FastHighwayFast-v0"
+EXIT = "drivestack/Exit-v0"
 FAST_EXIT = "drivestack/FastExit-v0"
 HIERARCHICAL_HIGHWAY = "drivestack/HierarchicalHighway-v0"
 DEEPCARS = "drivestack/DeepCars-v0"
@@ -27,6 +28,7 @@ def register_envs() -> None:
     gym.register(FAST_HIGHWAY, entry_point="stack.sim.fast_road:FastHighwayEnv")
     gym.register(VECTOR_HIGHWAY, entry_point="stack.sim.vector.road:VectorHighwayEnv")
     gym.register(FAST_HIGHWAY_FAST, entry_point="stack.sim.fast_road:FastHighwayEnvFast")
+    gym.register(EXIT, entry_point="stack.sim.traffic:ExitTraffic")
     gym.register(FAST_EXIT, entry_point="stack.sim.fast_road:FastExitEnv")
     gym.register(
         HIERARCHICAL_HIGHWAY,

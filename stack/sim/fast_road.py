@@ -21,14 +21,13 @@ from bisect import bisect_left
 from functools import cached_property
 
 import numpy as np
-from highway_env.envs.exit_env import ExitEnv
 from highway_env.envs.highway_env import HighwayEnvFast
 from highway_env.road.lane import AbstractLane, StraightLane
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.utils import wrap_to_pi
 from highway_env.vehicle.objects import Landmark, RoadObject
 
-from stack.sim.traffic import ScenarioTraffic
+from stack.sim.traffic import ExitTraffic, ScenarioTraffic
 
 BROAD_PHASE_MARGIN = 1e-6
 """Extra distance [m] the broad phase admits, so float rounding never drops a stock candidate."""
@@ -280,8 +279,9 @@ class FastHighwayEnvFast(HighwayEnvFast):
         FastRoad.adopt(self.road)
 
 
-class FastExitEnv(ExitEnv):
-    """exit-v0 on a `FastRoad`."""
+class FastExitEnv(ExitTraffic):
+    """exit-v0 (with the stack's drivable starts when asked, `stack.sim.traffic.ExitTraffic`) on a
+    `FastRoad`."""
 
     def _create_road(
         self, road_length: float = 1000, exit_position: float = 400, exit_length: float = 100

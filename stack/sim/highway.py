@@ -27,14 +27,14 @@ from highway_env.vehicle.kinematics import Vehicle
 
 from records import BACKENDS, Actuation, Backend, PlantName, RoadName, WorldState, unknown_name
 from stack.settings.world import HighwayConfig
-from stack.sim.envs import FAST_EXIT, FAST_HIGHWAY, HIGHWAY, VECTOR_HIGHWAY
+from stack.sim.envs import EXIT, FAST_EXIT, FAST_HIGHWAY, HIGHWAY, VECTOR_HIGHWAY
 from stack.sim.plant import stabilised
 from stack.sim.traffic import TRAFFIC_VEHICLE
 from stack.sim.vector.motion import Moved, columns
 
 ENV_IDS: dict[RoadName, dict[Backend, str]] = {
     "highway": {"vector": VECTOR_HIGHWAY, "fast": FAST_HIGHWAY, "stock": HIGHWAY},
-    "exit": {"vector": FAST_EXIT, "fast": FAST_EXIT, "stock": "exit-v0"},
+    "exit": {"vector": FAST_EXIT, "fast": FAST_EXIT, "stock": EXIT},
 }
 """Simulation backends: the gymnasium id each one runs (exit-v0's curved exit lane is outside what
 `VectorRoad` vectorises, so its `vector` is the fast road)."""

@@ -8,8 +8,10 @@ behaviours (IDM + MOBIL) and placement rule, and only (1) spawns `ego_position` 
 the ego, so that part is behind it, and (2) gives each vehicle a class drawn by share, with its
 desired (IDM target) speed and length drawn from the class's ranges, a lane from the class's lanes,
 MOBIL lane changes on or off and an IDM jam distance that grows with its length, and (3) keeps every
-start feasible: a vehicle placed too close ahead of the last one in its lane, for both lengths and a
-safe gap at the follower's speed (`make_room`), is moved forward. Every draw comes
+start drivable: a vehicle placed closer ahead of the last one in its lane (the ego or traffic) than
+both half-lengths, UN R157's minimum following distance at the follower's speed and room to slow to
+its own (`make_room`, `common.r157.start_gap`) is moved forward, so no episode opens with a brake.
+Every draw comes
 from the env's seeded generator, so the same seed gives the same traffic. Without `traffic` in the
 config, highway-env's own placement runs, with the same draws; its starts are made feasible too only
 where `feasible_spawns` asks (the stack's roads: `stack.sim.highway.env_config`), so the gym ids
@@ -24,14 +26,16 @@ from typing import Any
 
 import numpy as np
 from highway_env import utils
+from highway_env.envs.exit_env import ExitEnv
 from highway_env.envs.highway_env import HighwayEnv
-from highway_env.road.lane import AbstractLane, StraightLane
+from highway_env.road.lane import StraightLane
 from highway_env.road.road import Road
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
-EGO_SPAWN_SPEED = 25.0
-"""highway-env's ego speed at spawn [m/s]."""
+from common.r157 import start_room
+from stack.settings.world import EGO_LENGTH_M, EGO_SPAWN_SPEED_MPS
+from stack.sim.spawns import along_lane, make_room
 
 IDM_JAM_CLEARANCE = 5.0
 """highway-env's IDM jam distance is 5 m + the vehicle's length (centre to centre); scaled with each
@@ -86,60 +90,10 @@ class TrafficVehicle(IDMVehicle):
         return cls(road, lane.position(x0, 0), lane.heading_at(x0), speed)
 
 
-def along_lane(lane: AbstractLane, positions: list[np.ndarray]) -> np.ndarray:
-    """Each position's longitudinal coordinate [m] on `lane`, as `lane.local_coordinates` gives it
-    (the same bits): on a straight lane along a coordinate axis every product is by 0 or +-1, so
-    the sum over the whole array is exact; on any other lane, one call per position."""
-    direction = getattr(lane, "direction", None)
-    if type(lane) is StraightLane and direction is not None and set(np.abs(direction).tolist()) <= {0.0, 1.0}:
-        delta = np.asarray(positions, dtype=float).reshape(-1, 2) - lane.start
-        return delta[:, 0] * direction[0] + delta[:, 1] * direction[1]
-    return np.array([lane.local_coordinates(position)[0] for position in positions], dtype=float)
-
-
 TRAFFIC_VEHICLE = f"{TrafficVehicle.__module__}.{TrafficVehicle.__qualname__}"
 """The `other_vehicles_type` the stack's roads are filled with."""
 IDM_DRIVERS = (IDMVehicle, TrafficVehicle)
 """Vehicle classes driven by highway-env's IDM + MOBIL `act`, unchanged."""
-
-
-SPAWN_TIME_GAP_S = 0.5
-"""Bumper-to-bumper time gap [s] an IDM follower gets at spawn, beyond its jam clearance: highway-env's
-IDM brakes at up to 6 m/s^2 with no reaction time, so this is safe, not its 1.5 s equilibrium."""
-EGO_SPAWN_TIME_GAP_S = 1.0
-"""The ego's time gap at spawn [s]: UN R157's minimum at the lowest speeds, leaving the stack time
-for a decision before it has to brake."""
-SPAWN_BRAKING = 3.0
-"""Deceleration [m/s^2] that a faster follower is given room to slow to its new leader's speed at."""
-
-
-def make_room(env: HighwayEnv, vehicle: Vehicle) -> None:
-    """Move `vehicle`, just placed ahead of every other, forward along its lane until the vehicle
-    behind it in that lane has both half-lengths, the jam clearance, a time gap at its speed and
-    room to brake to `vehicle`'s speed between them."""
-    lane = env.road.network.get_lane(vehicle.lane_index)
-    s_new = lane.local_coordinates(vehicle.position)[0]
-    others = [
-        other
-        for other in env.road.vehicles
-        if other.lane_index == vehicle.lane_index and other is not vehicle
-    ]
-    along = along_lane(lane, [other.position for other in others]).tolist()
-    behind = [(s, other) for s, other in zip(along, others, strict=True) if s <= s_new]
-    if not behind:
-        return
-    s_follower, follower = max(behind, key=lambda pair: pair[0])
-    time_gap = EGO_SPAWN_TIME_GAP_S if follower is env.vehicle else SPAWN_TIME_GAP_S
-    closing = max(follower.speed - vehicle.speed, 0.0)
-    needed = (
-        (follower.LENGTH + vehicle.LENGTH) / 2
-        + IDM_JAM_CLEARANCE
-        + follower.speed * time_gap
-        + closing**2 / (2 * SPAWN_BRAKING)
-    )
-    if s_new - s_follower < needed:
-        s_new = s_follower + needed
-        vehicle.position = lane.position(s_new, 0.0)
 
 
 @cache
@@ -196,7 +150,7 @@ def _place_incident(env: HighwayEnv, incident: dict[str, Any]) -> None:
         if other is ego or other.lane_index != lane_index:
             return False
         ahead = s_stop - lane.local_coordinates(other.position)[0]
-        room = (other.LENGTH + stopped.LENGTH) / 2 + IDM_JAM_CLEARANCE + other.speed**2 / (2 * SPAWN_BRAKING)
+        room = start_room(other.speed, 0.0, other.LENGTH, stopped.LENGTH)
         return -(other.LENGTH + stopped.LENGTH) / 2 < ahead < room
 
     env.road.vehicles = [other for other in env.road.vehicles if not blocked(other)]
@@ -204,7 +158,8 @@ def _place_incident(env: HighwayEnv, incident: dict[str, Any]) -> None:
 
 
 INCIDENT_AHEAD_M = (150.0, 350.0)
-"""Where a random world's stopped car stands ahead of the ego at spawn [m]."""
+"""Where a random world's stopped car stands ahead of the ego at spawn [m], and at least the ego's
+start room (`common.r157.start_room`) at its spawn speed."""
 INCIDENT_LENGTH_M = 5.0
 """A random world's stopped car's length [m]."""
 SLOWEST_TRUCK_MPS = 2.0
@@ -246,9 +201,10 @@ def random_traffic(rng: np.random.Generator, ranges: dict[str, Any]) -> dict[str
         "spawn_speed_mps": sum(truck_speeds) / 2,
     }
     if rng.random() < ranges["incident_probability"]:
+        ego_room = start_room(traffic["spawn_speed_mps"], 0.0, EGO_LENGTH_M, INCIDENT_LENGTH_M)
         traffic["incident"] = {
             "lane": int(rng.integers(lanes)),
-            "ahead_m": float(rng.uniform(*INCIDENT_AHEAD_M)),
+            "ahead_m": max(float(rng.uniform(*INCIDENT_AHEAD_M)), ego_room),
             "length_m": INCIDENT_LENGTH_M,
         }
     return {
@@ -304,7 +260,7 @@ class ScenarioTraffic(HighwayEnv):
         other_type = vehicle_class(self.config["other_vehicles_type"])
         spawned = Vehicle.create_random(
             self.road,
-            speed=EGO_SPAWN_SPEED,
+            speed=EGO_SPAWN_SPEED_MPS,
             lane_id=self.config["initial_lane_id"],
             spacing=self.config["ego_spacing"],
         )
@@ -332,7 +288,7 @@ class ScenarioTraffic(HighwayEnv):
             _spawn_other(self, classes, odds, spawn_speed)
         spawned = Vehicle.create_random(
             self.road,
-            speed=spawn_speed or EGO_SPAWN_SPEED,
+            speed=spawn_speed or EGO_SPAWN_SPEED_MPS,
             lane_id=self.config["initial_lane_id"],
             spacing=self.config["ego_spacing"],
         )
@@ -344,3 +300,46 @@ class ScenarioTraffic(HighwayEnv):
             _spawn_other(self, classes, odds, spawn_speed)
         if traffic.get("incident"):
             _place_incident(self, traffic["incident"])
+
+
+class ExitTraffic(ExitEnv):
+    """exit-v0 with every start made drivable by `make_room` when `config["feasible_spawns"]` is
+    set (the stack's exit road); without it, exit-v0 vehicle for vehicle."""
+
+    @classmethod
+    def default_config(cls) -> dict:
+        return {**super().default_config(), "feasible_spawns": False}
+
+    def _create_vehicles(self) -> None:
+        """exit-v0's own spawn (the ego at 25 m/s in lane 0 behind the traffic, the same draws in
+        the same order), each traffic vehicle moved forward by `make_room` as it is placed."""
+        if not self.config["feasible_spawns"]:
+            super()._create_vehicles()
+            return
+        spawned = Vehicle.create_random(
+            self.road,
+            speed=EGO_SPAWN_SPEED_MPS,
+            lane_from="0",
+            lane_to="1",
+            lane_id=0,
+            spacing=self.config["ego_spacing"],
+        )
+        ego = self.action_type.vehicle_class(self.road, spawned.position, spawned.heading, spawned.speed)
+        self.controlled_vehicles = [ego]
+        self.road.vehicles.append(ego)
+        other_type = vehicle_class(self.config["other_vehicles_type"])
+        lanes = np.arange(self.config["lanes_count"])
+        for _ in range(self.config["vehicles_count"]):
+            lane_id = self.road.np_random.choice(lanes, size=1, p=lanes / lanes.sum()).astype(int)[0]
+            lane = self.road.network.get_lane(("0", "1", lane_id))
+            vehicle = other_type.create_random(
+                self.road,
+                lane_from="0",
+                lane_to="1",
+                lane_id=lane_id,
+                speed=lane.speed_limit,
+                spacing=1 / self.config["vehicles_density"],
+            ).plan_route_to("3")
+            vehicle.enable_lane_change = False
+            make_room(self, vehicle)
+            self.road.vehicles.append(vehicle)
