@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from perception.grid import GridConfig, OccupancyGridBuilder
 from records import Actuation, WorldState
-from stack.settings.run import HighwayConfig
+from stack.settings.run import build_config
 from stack.sim.highway import HighwayAdapter
 from tests.helpers import scene
 
@@ -19,9 +19,10 @@ GRID = GridConfig(cell_length=5.0, cells_ahead=9, cells_behind=4)
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
 def test_centre_mode_agrees_with_highway_env_occupancy_grid(seed):
     """highway-env marks the cell of each vehicle's centre (ego included); set up on our cells:
-    x from -(behind + 1/2) L in steps of L, y from the ego's lane edge in steps of a lane width."""
+    x from -(behind + 1/2) L in steps of L, y from the ego's lane edge in steps of a lane width. On
+    `jam`, whose ego starts inside the traffic, so the grid holds vehicles."""
     config = GRID.model_copy(update={"footprint": False})
-    with HighwayAdapter(HighwayConfig(vehicles_count=50, vehicles_density=2.0)) as adapter:
+    with HighwayAdapter(build_config({}, scenario="jam").highway) as adapter:
         world = adapter.reset(seed)
         for _ in range(30 * (seed + 1)):
             world = adapter.step(Actuation(0.0, 0.0))
