@@ -29,6 +29,7 @@ from stack.settings.checks import boolean_mismatch
 from stack.settings.history import with_former_values
 from stack.settings.train import Strict, TrainConfig
 from stack.settings.world import HighwayConfig, SimConfig
+from stack.sim.drivers import HIGHWAY_ENV
 
 
 class ConfigError(ValueError):
@@ -292,6 +293,11 @@ def build_config(
             data = scenarios.apply(scenario, data, keep_own=moved_to is None)
         except ValueError as error:
             raise ConfigError(f"{blamed}: scenario: {error}") from None
+    drivers = overrides.pop("traffic", None)
+    if drivers is not None:
+        data = with_drivers(data, drivers, labels.get("traffic", source))
+        blamed_for_drivers = labels.get("traffic", source)
+        labels = labels | {f"highway.{key}.drivers": blamed_for_drivers for key in DRIVER_SECTIONS}
     for dotted, value in overrides.items():
         if value is not None:
             key = dotted.replace("__", ".")
@@ -303,6 +309,27 @@ def build_config(
         return RunConfig.model_validate(data)
     except ValidationError as error:
         raise ConfigError(one_line(error, source, labels)) from None
+
+
+DRIVER_SECTIONS = ("traffic", "random_traffic")
+"""The `highway` sections that hold a driver population (`drivers`)."""
+
+
+def with_drivers(data: dict[str, Any], drivers: object, blamed: str) -> dict[str, Any]:
+    """`data` with the driver population `drivers` (`--traffic`) in its world's traffic section
+    (`highway.random_traffic` or `highway.traffic`, validated with it; a world without either,
+    highway-env's own vehicles, gets a `traffic` section of its drivers alone)."""
+    highway = data.get("highway")
+    for key in DRIVER_SECTIONS:
+        section = highway.get(key) if isinstance(highway, dict) else None
+        if isinstance(section, dict):
+            assert isinstance(highway, dict)
+            return {**data, "highway": {**highway, key: {**section, "drivers": drivers}}}
+    if drivers == HIGHWAY_ENV:
+        return data
+    if highway is not None and not isinstance(highway, dict):
+        raise ConfigError(f"{blamed}: expected a highway section to draw the drivers in")
+    return {**data, "highway": {**(highway or {}), "traffic": {"drivers": drivers}}}
 
 
 def read_mapping(path: Path | str) -> dict[str, Any]:

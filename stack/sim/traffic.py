@@ -30,6 +30,8 @@ from highway_env.road.road import Road
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
+from stack.sim.drivers import assign_drivers
+
 EGO_SPAWN_SPEED = 25.0
 """highway-env's ego speed at spawn [m/s]."""
 
@@ -259,6 +261,16 @@ def random_traffic(rng: np.random.Generator, ranges: dict[str, Any]) -> dict[str
     }
 
 
+def configured_drivers(config: dict[str, Any]) -> Any:
+    """The driver population (`stack.sim.drivers`) an env config asks for: `traffic.drivers`, or
+    `random_traffic.drivers` (a random world's `traffic` is drawn without it); None: highway-env's."""
+    for key in ("random_traffic", "traffic"):
+        section = config.get(key)
+        if isinstance(section, dict) and section.get("drivers") is not None:
+            return section["drivers"]
+    return None
+
+
 class ScenarioTraffic(HighwayEnv):
     """highway-v0 whose `_create_vehicles` reads `config["traffic"]` (see the module docstring), and
     whose `_reset` draws the road's traffic first when `config["random_traffic"]` is set. Without
@@ -273,6 +285,7 @@ class ScenarioTraffic(HighwayEnv):
         if ranges:
             self.config.update(random_traffic(self.np_random, ranges))
         super()._reset()
+        assign_drivers(self.road.vehicles, configured_drivers(self.config), self.np_random, IDM_DRIVERS)
 
     def _create_highway_env_vehicles(self) -> None:
         """highway-env's own `_create_vehicles` (the ego at 25 m/s behind all the traffic, the same
@@ -297,7 +310,7 @@ class ScenarioTraffic(HighwayEnv):
 
     def _create_vehicles(self) -> None:
         traffic = self.config.get("traffic")
-        if not traffic:
+        if not traffic or not traffic.get("classes"):
             self._create_highway_env_vehicles()
             return
         classes = list(traffic["classes"])
