@@ -14,8 +14,8 @@ from typer.testing import CliRunner
 
 from stack.apps.cli import app
 from stack.runs.batched_episodes import batch_refusal, run_batched
-from stack.runs.episodes import run_episode
-from stack.settings.run import ConfigError, build_config
+from stack.runs.episodes import run, run_episode
+from stack.settings.run import ConfigError, build_config, drivers_of, in_scenario
 from stack.sim.drivers import (
     DRIVER_PARAMETERS,
     POPULATION_RANGES,
@@ -36,7 +36,7 @@ def highway_in(scenario: str, drivers: object):
     return build_config({}, scenario=scenario, traffic=drivers).highway
 
 
-def drivers_of(scenario: str, drivers: object, seed: int) -> np.ndarray:
+def drawn_drivers(scenario: str, drivers: object, seed: int) -> np.ndarray:
     """Every IDM driver's target speed and drawn attributes after a reset with `seed`."""
     env = gym.make(VECTOR_HIGHWAY, config=env_config(highway_in(scenario, drivers)), disable_env_checker=True)
     env.reset(seed=seed)
@@ -50,7 +50,7 @@ def drivers_of(scenario: str, drivers: object, seed: int) -> np.ndarray:
 
 
 def test_highway_env_drivers_draw_nothing_and_keep_the_class_constants():
-    drivers = drivers_of("overtaking", "highway-env", seed=3)
+    drivers = drawn_drivers("overtaking", "highway-env", seed=3)
     constants = [IDMVehicle.TIME_WANTED, IDMVehicle.COMFORT_ACC_MAX, IDMVehicle.COMFORT_ACC_MIN]
     np.testing.assert_array_equal(drivers[:, 1:4], np.tile(constants, (len(drivers), 1)))
     assert draws_nothing(None) and draws_nothing("highway-env") and not draws_nothing("mixed")
@@ -58,7 +58,7 @@ def test_highway_env_drivers_draw_nothing_and_keep_the_class_constants():
 
 @pytest.mark.parametrize("population", ["calibrated", "aggressive", "cautious"])
 def test_each_driver_draws_its_parameters_within_the_populations_ranges(population):
-    drivers = drivers_of("overtaking", population, seed=4)
+    drivers = drawn_drivers("overtaking", population, seed=4)
     ranges = POPULATION_RANGES[population]
     for column, name in ((1, "time_gap_s"), (2, "max_acceleration"), (4, "politeness")):
         low, high = getattr(ranges, name)
@@ -77,9 +77,9 @@ def test_the_aggressive_drivers_are_the_issues():
 
 
 def test_the_same_seed_draws_the_same_drivers_and_another_seed_others():
-    one, again = drivers_of("dense", "mixed", seed=9), drivers_of("dense", "mixed", seed=9)
+    one, again = drawn_drivers("dense", "mixed", seed=9), drawn_drivers("dense", "mixed", seed=9)
     np.testing.assert_array_equal(one.view(np.uint64), again.view(np.uint64))
-    assert not np.array_equal(one, drivers_of("dense", "mixed", seed=10))
+    assert not np.array_equal(one, drawn_drivers("dense", "mixed", seed=10))
     mixed_time_gaps = set(one[:, 1].tolist())
     assert IDMVehicle.TIME_WANTED in mixed_time_gaps and len(mixed_time_gaps) > 2, "shares of several"
 
@@ -150,3 +150,28 @@ def test_traffic_option_errors_are_one_line(value, message):
     result = CliRunner().invoke(app, ["run", "--scenario", "jam", "--traffic", value, "--episodes", "1"])
     assert result.exit_code == 2
     assert message in result.output and "Traceback" not in result.output
+
+
+def test_a_world_moved_to_another_scenario_keeps_its_drivers():
+    """`benchmark` and a training mix move the config to each scenario: the drivers go along."""
+    config = build_config({}, traffic={"calibrated": 0.6, "cautious": 0.4})
+    for scenario in ("jam", "random", "dense"):
+        assert drivers_of(in_scenario(config, scenario).highway) == {"calibrated": 0.6, "cautious": 0.4}
+    assert drivers_of(in_scenario(build_config({}), "jam").highway) == "highway-env"
+
+
+@pytest.mark.parametrize("command", [["benchmark", "--quick"], ["train", "--steps", "10"], ["compare"]])
+def test_every_command_takes_the_traffic_option(command):
+    result = CliRunner().invoke(app, [*command, "--traffic", "wild"])
+    assert result.exit_code == 2
+    assert "--traffic: highway." in result.output
+    assert "drivers: unknown driver population 'wild'" in result.output
+
+
+def test_a_runs_summary_names_a_population_other_than_highway_envs():
+    config = build_config({}, "test", seed=990600, episodes=1, scenario="jam", traffic="cautious")
+    config = config.model_copy(update={"highway": config.highway.model_copy(update={"duration": 3})})
+    assert run(config, progress=False, snapshot=False).summary["drivers"] == "cautious"
+    plain = build_config({}, "test", seed=990600, episodes=1, scenario="jam")
+    plain = plain.model_copy(update={"highway": plain.highway.model_copy(update={"duration": 3})})
+    assert "drivers" not in run(plain, progress=False, snapshot=False).summary

@@ -333,6 +333,7 @@ def train(
     plant: str | None = typer.Option(None, help=PLANT_HELP),
     seed: int | None = typer.Option(None, help="Training seed."),
     scenario: str | None = typer.Option(None, help="Named world to train in (drivestack scenarios)."),
+    traffic: str | None = typer.Option(None, help=TRAFFIC_HELP),
     out: Path | None = typer.Option(None, help="Run folder (default: runs/train-<time>)."),
     resume: Path | None = typer.Option(
         None, help="Continue the run in this folder from its last checkpoint."
@@ -355,13 +356,15 @@ def train(
     if resume is not None:
         given = {"--agent": agent, "--config": config, "--envs": envs, "--worlds": worlds, "--seed": seed}
         given |= {"--plant": plant}
-        cfg = resumed_training(resume, sets, steps, given | {"--scenario": scenario, "--out": out}, adopt)
+        given |= {"--scenario": scenario, "--traffic": traffic, "--out": out}
+        cfg = resumed_training(resume, sets, steps, given, adopt)
         if cfg.train.members > 1:
             check_unfinished(resume, cfg)
     elif adopt:
         fail("--adopt: has no effect without --resume DIR (it takes over a folder made before owner records)")
     else:
-        options = {"scenario": scenario, "train__algorithm": agent, "train__envs": envs, "seed": seed}
+        options: dict[str, object] = {"scenario": scenario, "train__algorithm": agent, "seed": seed}
+        options |= {"train__envs": envs, "traffic": population_option(traffic)}
         options |= {"train__worlds": worlds} | ({"train__envs": 1} if worlds and envs is None else {})
         cfg = configured(config or TRAIN_CONFIG, sets, None, train__steps=steps, sim__plant=plant, **options)
     check_memory(cfg)

@@ -247,8 +247,21 @@ def scenario_road(name: str) -> HighwayConfig:
 
 
 def in_scenario(config: RunConfig, name: str) -> RunConfig:
-    """`config` moved to scenario `name` (its world replaced, everything else kept)."""
-    return RunConfig.model_validate(scenarios.apply(name, config.model_dump(mode="json")))
+    """`config` moved to scenario `name` (its world replaced, its traffic's drivers and everything
+    else kept)."""
+    data = scenarios.apply(name, config.model_dump(mode="json"))
+    drivers = drivers_of(config.highway)
+    if drivers != HIGHWAY_ENV:
+        data = with_drivers(data, drivers, "traffic")
+    return RunConfig.model_validate(data)
+
+
+def drivers_of(highway: HighwayConfig) -> str | dict[str, float]:
+    """The driver population of a world (`highway.random_traffic` or `highway.traffic`)."""
+    for section in (highway.random_traffic, highway.traffic):
+        if section is not None:
+            return section.drivers
+    return HIGHWAY_ENV
 
 
 def training_worlds(config: RunConfig) -> dict[str, RunConfig]:
