@@ -325,12 +325,12 @@ def test_a_frames_idm_is_highway_envs_bit_for_bit():
     rows = np.arange(-1, len(objects))
     ego, front = (grid.ravel() for grid in np.meshgrid(rows, rows, indexing="ij"))
     constants = np.array(DRIVER_CONSTANTS(judge)[1:], dtype=float)
-    laws = DriverLaws.of(*(np.full(len(ego), value) for value in constants))
+    laws = DriverLaws.of(*(np.array([value]) for value in constants))
     expected = [
         judge.acceleration(objects[e] if e >= 0 else None, objects[f] if f >= 0 else None)
         for e, f in zip(ego.tolist(), front.tolist(), strict=True)
     ]
-    got = frame.idm(ego, front, laws)
+    got = frame.idm(ego, front, laws, np.zeros(len(ego), dtype=int))
     np.testing.assert_array_equal(got.view(np.uint64), np.array(expected, dtype=float).view(np.uint64))
     env.close()
 

@@ -105,7 +105,7 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
     egos = np.concatenate([side_rear, side_rear, me, me, mover_rear, mover_rear, drivers])
     leaders = np.concatenate([side_front, me, side_front, mover_front, me, mover_front, own_front])
     evaluators = np.concatenate([me] * 6 + [drivers])
-    a = kinematics.idm(egos, leaders, laws.take(evaluators))
+    a = kinematics.idm(egos, leaders, laws, evaluators)
     blocks = 6 * len(me)
     side_accelerations, own_acceleration = a[:blocks].reshape(6, -1), a[blocks:]
     changer = drivers[pair_driver]
@@ -138,7 +138,7 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
     if len(changing):
         movers = drivers[changing]
         target_front, _ = lane_neighbours(movers, goal[changing], s, on, on_count)
-        on_target = kinematics.idm(movers, target_front, laws.take(movers))
+        on_target = kinematics.idm(movers, target_front, laws, movers)
         acceleration[changing] = np.where(
             on_target < acceleration[changing], on_target, acceleration[changing]
         )

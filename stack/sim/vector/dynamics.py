@@ -110,17 +110,18 @@ def mobil_accepts(
 @Kernel
 def mobil_verdicts(
     accelerations: np.ndarray,
+    decider: np.ndarray,
     politeness: np.ndarray,
     min_gain: np.ndarray,
     max_braking_imposed: np.ndarray,
 ) -> np.ndarray:  # pragma: no cover - compiled; covered through VectorRoad
     """`mobil_accepts` per candidate change: `accelerations` (6, candidates) in its order, the
-    deciding driver's MOBIL parameters per candidate."""
+    MOBIL parameters of each candidate's `decider` (its row in those arrays)."""
     accept = np.empty(accelerations.shape[1], dtype=np.bool_)
     for k in range(accelerations.shape[1]):
-        a = accelerations[:, k]
+        a, d = accelerations[:, k], decider[k]
         accept[k] = mobil_accepts(
-            a[0], a[1], a[2], a[3], a[4], a[5], politeness[k], min_gain[k], max_braking_imposed[k]
+            a[0], a[1], a[2], a[3], a[4], a[5], politeness[d], min_gain[d], max_braking_imposed[d]
         )
     return accept
 
@@ -130,20 +131,21 @@ def idm_gap_ratios(
     closing: np.ndarray,
     gap: np.ndarray,
     led_speed: np.ndarray,
-    distance_wanted: np.ndarray,
     valid: np.ndarray,
     led: np.ndarray,
+    evaluator: np.ndarray,
+    distance_wanted: np.ndarray,
     time_wanted: np.ndarray,
     braking_term: np.ndarray,
 ) -> np.ndarray:  # pragma: no cover - compiled; covered through TrafficFrame.idm
-    """Desired gap / gap of each led row of `idm_inputs`: `desired_gap` with the evaluating row's
-    jam distance `distance_wanted` d0 [m], time gap `time_wanted` [s] and `braking_term`
-    2 sqrt(a b) [m/s^2]."""
+    """Desired gap / gap of each led row of `idm_inputs`: `desired_gap` with the jam distance
+    `distance_wanted` d0 [m], time gap `time_wanted` [s] and `braking_term` 2 sqrt(a b) [m/s^2] of
+    each pair's `evaluator` (its row in those arrays)."""
     ratio = np.empty(gap.shape[0])
     j = 0
     for i in range(valid.shape[0]):
         if led[i]:
-            row = valid[i]
+            row = evaluator[valid[i]]
             desired = desired_gap(
                 distance_wanted[row], time_wanted[row], braking_term[row], led_speed[j], closing[j]
             )
@@ -159,14 +161,15 @@ def idm_accelerations(
     free_power: np.ndarray,
     led: np.ndarray,
     gap_power: np.ndarray,
+    evaluator: np.ndarray,
     a_max: np.ndarray,
 ) -> np.ndarray:  # pragma: no cover - compiled; covered through TrafficFrame.idm
     """IDM's a_max (1 - (v / v0)^delta) - a_max (s* / s)^2 per evaluating row from the powers numpy
-    computed, `a_max` [m/s^2] by the evaluating row, 0 for rows without a valid ego."""
+    computed, `a_max` [m/s^2] of each pair's `evaluator`, 0 for rows without a valid ego."""
     acceleration = np.zeros(rows)
     j = 0
     for i in range(valid.shape[0]):
-        a_row = a_max[valid[i]]
+        a_row = a_max[evaluator[valid[i]]]
         a = a_row * (1 - free_power[i])
         if led[i]:
             a = a - a_row * gap_power[j]

@@ -83,12 +83,12 @@ class TrafficFrame:
             me, lane_rows, self.s, self.order, self.sorted_s, self.next_on, self.last_before
         )
 
-    def idm(self, ego: np.ndarray, front: np.ndarray, laws: DriverLaws) -> np.ndarray:
+    def idm(self, ego: np.ndarray, front: np.ndarray, laws: DriverLaws, evaluator: np.ndarray) -> np.ndarray:
         """`IDMVehicle.acceleration(ego_vehicle=ego, front_vehicle=front)` [m/s^2] per row, for
-        evaluating IDM drivers of `laws` (one row per pair); rows -1 stand for no vehicle (0
-        without ego); the gap is measured along the ego's lane, as stock does."""
+        the evaluating IDM driver of each pair (its row of `laws` in `evaluator`); rows -1 stand
+        for no vehicle (0 without ego); the gap is measured along the ego's lane, as stock does."""
         rows = IdmRows(**{column.name: getattr(self, column.name) for column in fields(IdmRows)})
-        return rows.idm(ego, front, laws)
+        return rows.idm(ego, front, laws, evaluator)
 
 
 @dataclass(frozen=True, eq=False)
@@ -137,10 +137,6 @@ class DriverLaws:
             lane_change_delay,
         )
 
-    def take(self, rows: np.ndarray) -> DriverLaws:
-        """The laws of the drivers in `rows` (positions in these laws), in that order."""
-        return DriverLaws(*(getattr(self, column.name)[rows] for column in fields(DriverLaws)))
-
 
 @dataclass(frozen=True, eq=False)
 class IdmRows:
@@ -156,9 +152,9 @@ class IdmRows:
     velocity: np.ndarray
     direction: np.ndarray
 
-    def idm(self, ego: np.ndarray, front: np.ndarray, laws: DriverLaws) -> np.ndarray:
+    def idm(self, ego: np.ndarray, front: np.ndarray, laws: DriverLaws, evaluator: np.ndarray) -> np.ndarray:
         """`IDMVehicle.acceleration(ego_vehicle=ego, front_vehicle=front)` [m/s^2] per pair of rows
-        (-1: none), evaluated by the IDM driver of `laws`' row of the same position: compiled
+        (-1: none), evaluated by the IDM driver in row `evaluator` of `laws` per pair: compiled
         arithmetic around numpy's powers and dot products (highway-env's bits)."""
         valid, base, led, relative, heading, gap, led_speed = idm_inputs(
             ego,
@@ -171,9 +167,18 @@ class IdmRows:
             self.velocity,
             self.direction,
         )
-        free_power = np.power(base, laws.delta[valid])
+        free_power = np.power(base, laws.delta[evaluator[valid]])
         closing = np.vecdot(relative, heading)
         ratio = idm_gap_ratios(
-            closing, gap, led_speed, laws.distance_wanted, valid, led, laws.time_wanted, laws.braking_term
+            closing,
+            gap,
+            led_speed,
+            valid,
+            led,
+            evaluator,
+            laws.distance_wanted,
+            laws.time_wanted,
+            laws.braking_term,
         )
-        return idm_accelerations(len(ego), valid, free_power, led, np.power(ratio, 2), laws.a_max)
+        gap_power = np.power(ratio, 2)
+        return idm_accelerations(len(ego), valid, free_power, led, gap_power, evaluator, laws.a_max)

@@ -216,7 +216,7 @@ class VectorRoad(FastRoad):
             if abs(drivers[k].speed) >= 1
             for side in self.network.side_lanes(drivers[k].lane_index)
         ]
-        own = plan.me, plan.own_front, plan.laws
+        own = plan.me, plan.own_front, plan.laws, plan.everyone
         if pairs:
             index = np.array([k for k, _ in pairs], dtype=int)
             sides = np.array([frame.lanes.row[side] for _, side in pairs], dtype=int)
@@ -230,17 +230,18 @@ class VectorRoad(FastRoad):
         new_front, new_rear = frame.neighbours(me, sides)
         own_front, own_rear = plan.own_front[index], plan.own_rear[index]
         blocks = 6
-        evaluators = np.concatenate([index] * blocks + [np.arange(len(drivers))])
+        evaluators = np.concatenate([index] * blocks + [plan.everyone])
         egos = np.concatenate([new_rear, new_rear, me, me, own_rear, own_rear, plan.me])
         leaders = np.concatenate([new_front, me, new_front, own_front, me, own_front, plan.own_front])
-        a = frame.idm(egos, leaders, plan.laws.take(evaluators))
+        laws = plan.laws
+        a = frame.idm(egos, leaders, laws, evaluators)
         plan.own_acceleration = a[blocks * len(me) :]
-        deciding_laws = plan.laws.take(index)
         accept = mobil_verdicts(
             a[: blocks * len(me)].reshape(blocks, -1),
-            deciding_laws.politeness,
-            deciding_laws.min_gain,
-            deciding_laws.max_braking_imposed,
+            index,
+            laws.politeness,
+            laws.min_gain,
+            laws.max_braking_imposed,
         )
         for (k, side), yes in zip(pairs, accept.tolist(), strict=True):
             if yes:
@@ -262,7 +263,7 @@ class VectorRoad(FastRoad):
         if changing.any():
             movers = changing.nonzero()[0]
             target_front, _ = frame.neighbours(me[movers], target[movers])
-            on_target = frame.idm(me[movers], target_front, plan.laws.take(movers))
+            on_target = frame.idm(me[movers], target_front, plan.laws, movers)
             acceleration[movers] = np.where(on_target < acceleration[movers], on_target, acceleration[movers])
         acceleration = clip(acceleration, IDMVehicle.ACC_MAX)
         for v, steer, accel in zip(drivers, steering, acceleration, strict=True):
@@ -349,6 +350,7 @@ class Drivers:
         self.target = np.array([lane_row[v.target_lane_index] for v in drivers], dtype=int)
         self.length = constants[0]
         self.laws = DriverLaws.of(*constants[1:])
+        self.everyone = np.arange(len(drivers))
         self.timer_due = np.array([v.LANE_CHANGE_DELAY < v.timer for v in drivers], dtype=bool)
         self.enable_lane_change = np.array([v.enable_lane_change for v in drivers], dtype=bool)
         self.on_target = np.array([v.lane_index == v.target_lane_index for v in drivers], dtype=bool)
