@@ -15,14 +15,9 @@ from typer.testing import CliRunner
 from stack.apps.cli import app
 from stack.runs.batched_episodes import batch_refusal, run_batched
 from stack.runs.episodes import run, run_episode
+from stack.settings.drivers import DRIVER_PARAMETERS, POPULATION_RANGES, POPULATIONS, population_shares
 from stack.settings.run import ConfigError, build_config, drivers_of, in_scenario
-from stack.sim.drivers import (
-    DRIVER_PARAMETERS,
-    POPULATION_RANGES,
-    POPULATIONS,
-    draws_nothing,
-    population_shares,
-)
+from stack.sim.drivers import draws_nothing
 from stack.sim.envs import VECTOR_HIGHWAY
 from stack.sim.highway import env_config
 from tests.test_batched_episodes import assert_same_episodes
@@ -90,6 +85,10 @@ def test_the_vector_road_drives_the_drivers_as_stock_does_bit_for_bit(population
     arrays must give the very same trajectories (lane changes, crashes of the ramming ego)."""
     states = assert_identical(highway_in("overtaking", population), seed=21, frames=150, backend="vector")
     assert len(states) == 150
+
+
+def test_the_fast_road_drives_the_drivers_as_stock_does_bit_for_bit():
+    assert_identical(highway_in("dense", "mixed"), seed=22, frames=120, backend="fast")
 
 
 @pytest.mark.parametrize(("scenario", "population"), [("overtaking", "aggressive"), ("dense", "mixed")])

@@ -21,8 +21,8 @@ from stack.results.episode_result import EpisodeResult, summarize
 from stack.runs.batched_episodes import RAY_BATCH_WORLDS, batch_refusal, batches, run_batched
 from stack.runs.kept import kept_adapter, kept_agent
 from stack.runtime.executors import completed
+from stack.settings.drivers import HIGHWAY_ENV
 from stack.settings.run import RunConfig, drivers_of
-from stack.sim.drivers import HIGHWAY_ENV
 from stack.sim.highway import HighwayAdapter
 
 

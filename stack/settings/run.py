@@ -26,10 +26,10 @@ from records import AGENT_NAMES, SEED_LIMIT, GridConfig
 from stack.runtime.files import write_text
 from stack.settings import scenarios
 from stack.settings.checks import boolean_mismatch
+from stack.settings.drivers import HIGHWAY_ENV
 from stack.settings.history import with_former_values
 from stack.settings.train import Strict, TrainConfig
 from stack.settings.world import HighwayConfig, SimConfig
-from stack.sim.drivers import HIGHWAY_ENV
 
 
 class ConfigError(ValueError):

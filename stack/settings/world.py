@@ -8,7 +8,7 @@ from typing import Annotated
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
 from records import BACKENDS, MAX_LANES, PLANTS, ROADS, Backend, PlantName, RoadName, one_of
-from stack.sim.drivers import HIGHWAY_ENV, population_shares
+from stack.settings.drivers import HIGHWAY_ENV, population_shares
 
 MAX_CLASS_BOUND = 60.0
 """Largest desired speed [m/s] and length [m] of a traffic vehicle class (the spawn speed's bound)."""
@@ -17,7 +17,7 @@ SHARE_TOLERANCE = 1e-6
 
 
 DriverPopulation = str | dict[str, float]
-"""A driver population's name (`stack.sim.drivers.POPULATIONS`), or shares of several by name."""
+"""A driver population's name (`stack.settings.drivers.POPULATIONS`), or shares of several by name."""
 DRIVERS_HELP = (
     "the traffic's drivers: highway-env (its one IDM/MOBIL parameter set), calibrated, aggressive, "
     "cautious, mixed, or shares of several ({calibrated: 0.7, aggressive: 0.3})"
@@ -72,7 +72,7 @@ class IncidentConfig(BaseModel):
 
 class TrafficConfig(BaseModel):
     """Heterogeneous traffic (highway-env's IDM / MOBIL vehicles, drawn from the env's seeded
-    generator): its drivers (`stack.sim.drivers`; with no classes, highway-env's own vehicles get
+    generator): its drivers (`stack.settings.drivers`; with no classes, highway-env's own vehicles get
     them), the vehicle classes, where the ego is spawned, as the fraction of the traffic
     spawned behind it (0: behind everybody, highway-env's own placement), and one speed for every
     vehicle at spawn: highway-env spaces vehicles for equal speeds, so a fast car spawned at its
