@@ -322,7 +322,8 @@ def test_a_frames_idm_is_highway_envs_bit_for_bit():
     from highway_env.vehicle.behavior import IDMVehicle
 
     from stack.sim.fast_road import LaneProjections
-    from stack.sim.vector.frame import TrafficFrame
+    from stack.sim.vector.frame import DriverLaws, TrafficFrame
+    from stack.sim.vector.road import DRIVER_CONSTANTS
 
     env = vector_env_after("dense", seed=5, frames=40)
     road = env.unwrapped.road
@@ -331,12 +332,13 @@ def test_a_frames_idm_is_highway_envs_bit_for_bit():
     judge = next(v for v in objects if isinstance(v, IDMVehicle))
     rows = np.arange(-1, len(objects))
     ego, front = (grid.ravel() for grid in np.meshgrid(rows, rows, indexing="ij"))
-    delta, jam = np.full(len(ego), judge.DELTA), np.full(len(ego), judge.DISTANCE_WANTED)
+    constants = np.array(DRIVER_CONSTANTS(judge)[1:], dtype=float)
+    laws = DriverLaws.of(*(np.array([value]) for value in constants))
     expected = [
         judge.acceleration(objects[e] if e >= 0 else None, objects[f] if f >= 0 else None)
         for e, f in zip(ego.tolist(), front.tolist(), strict=True)
     ]
-    got = frame.idm(ego, front, delta, jam)
+    got = frame.idm(ego, front, laws, np.zeros(len(ego), dtype=int))
     np.testing.assert_array_equal(got.view(np.uint64), np.array(expected, dtype=float).view(np.uint64))
     env.close()
 

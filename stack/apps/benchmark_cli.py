@@ -13,9 +13,11 @@ from stack.apps.options import (
     PLANT_HELP,
     RAY_OPTION,
     SET_HELP,
+    TRAFFIC_HELP,
     fail,
     listed,
     per_agent,
+    population_option,
     ray_or_fail,
 )
 
@@ -41,6 +43,7 @@ def benchmark(
     ),
     sets: list[str] = typer.Option([], "--set", help=SET_HELP),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
+    traffic: str | None = typer.Option(None, help=TRAFFIC_HELP),
     jobs: int = JOBS_OPTION,
     ray: str | None = RAY_OPTION,
     out: Path | None = typer.Option(None, help="Results folder (default: runs/benchmark-<time>)."),
@@ -72,6 +75,7 @@ def benchmark(
         [(name, model_paths.get(name)) for name in names],
         labels={"planner.agent": "--agents"},
         model_option="--models",
+        traffic=population_option(traffic),
         sim__plant=plant,
         episodes=plan.episodes,
         seed=seed,

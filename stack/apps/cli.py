@@ -20,6 +20,7 @@ from stack.apps.options import (
     RAY_OPTION,
     RECORD_HELP,
     SET_HELP,
+    TRAFFIC_HELP,
     TRAIN_CONFIG,
     VARIANT_HELP,
     VERSION_OPTION,
@@ -29,6 +30,7 @@ from stack.apps.options import (
     guarded,
     listed,
     per_agent,
+    population_option,
     ray_or_fail,
     rerun_or_fail,
     until_interrupted,
@@ -77,6 +79,7 @@ def run(
     backend: str | None = typer.Option(None, help="Simulation backend: vector | fast | stock (sim.backend)."),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
+    traffic: str | None = typer.Option(None, help=TRAFFIC_HELP),
     jobs: int = JOBS_OPTION,
     ray: str | None = RAY_OPTION,
     progress: bool = typer.Option(True, help="Show a progress bar."),
@@ -93,6 +96,7 @@ def run(
         sets,
         pairs,
         scenario=scenario,
+        traffic=population_option(traffic),
         controller__type=controller,
         sim__backend=backend,
         sim__plant=plant,
@@ -163,6 +167,7 @@ def compare(
     episodes: int | None = typer.Option(None, help="Seeded episodes per agent."),
     seed: int | None = typer.Option(None, help="Seed of the first episode."),
     scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
+    traffic: str | None = typer.Option(None, help=TRAFFIC_HELP),
     baseline: str | None = typer.Option(None, help="Agent to report paired differences against."),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
     jobs: int = JOBS_OPTION,
@@ -193,6 +198,7 @@ def compare(
         labels={"planner.agent": "--agents"},
         model_option="--models",
         scenario=scenario,
+        traffic=population_option(traffic),
         sim__plant=plant,
         episodes=episodes,
         seed=seed,
@@ -327,6 +333,7 @@ def train(
     plant: str | None = typer.Option(None, help=PLANT_HELP),
     seed: int | None = typer.Option(None, help="Training seed."),
     scenario: str | None = typer.Option(None, help="Named world to train in (drivestack scenarios)."),
+    traffic: str | None = typer.Option(None, help=TRAFFIC_HELP),
     out: Path | None = typer.Option(None, help="Run folder (default: runs/train-<time>)."),
     resume: Path | None = typer.Option(
         None, help="Continue the run in this folder from its last checkpoint."
@@ -350,13 +357,15 @@ def train(
     if resume is not None:
         given = {"--agent": agent, "--config": config, "--envs": envs, "--worlds": worlds, "--seed": seed}
         given |= {"--plant": plant}
-        cfg = resumed_training(resume, sets, steps, given | {"--scenario": scenario, "--out": out}, adopt)
+        given |= {"--scenario": scenario, "--traffic": traffic, "--out": out}
+        cfg = resumed_training(resume, sets, steps, given, adopt)
         if cfg.train.members > 1:
             check_unfinished(resume, cfg)
     elif adopt:
         fail("--adopt: has no effect without --resume DIR (it takes over a folder made before owner records)")
     else:
-        options = {"scenario": scenario, "train__algorithm": agent, "train__envs": envs, "seed": seed}
+        options: dict[str, object] = {"scenario": scenario, "train__algorithm": agent, "seed": seed}
+        options |= {"train__envs": envs, "traffic": population_option(traffic)}
         options |= {"train__worlds": worlds} | ({"train__envs": 1} if worlds and envs is None else {})
         cfg = configured(config or TRAIN_CONFIG, sets, None, train__steps=steps, sim__plant=plant, **options)
     check_memory(cfg)

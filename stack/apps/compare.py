@@ -174,12 +174,22 @@ def write_comparison(rows: list[dict[str, Any]], out: Path) -> None:
         axes[-1].axhline(0.0, color="black", lw=0.8)
     first = rows[0]
     figure.suptitle(
-        f"{first['scenario'] or 'config'}: {first['episodes']} seeded episodes from seed {first['seed']}, "
+        f"{first['scenario'] or 'config'}{drivers_label(first)}: {first['episodes']} seeded episodes "
+        f"from seed {first['seed']}, "
         f"controller {short_labels([first['controller']])[0]} (bars: 95 % confidence intervals)"
     )
     figure.tight_layout()
     save_figure(figure, out / "comparison.png", dpi=100)
     plt.close(figure)
+
+
+def drivers_label(row: dict[str, Any]) -> str:
+    """ ", DRIVERS drivers" for a run whose traffic has a driver population other than highway-env's."""
+    drivers = row.get("drivers")
+    if drivers is None:
+        return ""
+    named = drivers if isinstance(drivers, str) else ", ".join(f"{k} {v:g}" for k, v in drivers.items())
+    return f", {named} drivers"
 
 
 def shown(rows: list[dict[str, Any]]) -> list[str]:

@@ -28,6 +28,10 @@ VARIANT_HELP = (
     "DeepCars rules: paper (the paper's text: 9-row line of sight, epsilon 0.2) | public (the "
     "authors' code: 4-row line of sight, epsilon 1.0 x0.995 per step, floor 0.01) | all (both)."
 )
+TRAFFIC_HELP = (
+    "The traffic's drivers (highway.traffic.drivers): highway-env | calibrated | aggressive | "
+    "cautious | mixed, or shares: calibrated=0.7,aggressive=0.3 (docs/traffic.md)."
+)
 SET_HELP = "KEY=VALUE: a dotted config key and a YAML value (repeatable); overrides the config file."
 RAY_HELP = (
     "Run the episodes as Ray tasks: on a local instance started for the run (bare --ray), on the "
@@ -111,7 +115,8 @@ def parsed_sets(sets: list[str]) -> dict[str, object]:
     """`--set` entries as config overrides (dotted keys as `a__b`); YAML values without anchors or
     aliases, so a short value cannot expand into a huge one. `null` (or `~`) sets the key to null
     (`NULL`: validation says where null is not allowed); an empty value is refused."""
-    from stack.settings.run import NULL, strict_yaml
+    from stack.runtime.yaml_text import strict_yaml
+    from stack.settings.run import NULL
 
     values: dict[str, object] = {}
     for entry in sets:
@@ -170,6 +175,21 @@ def listed(option: str, value: str) -> list[str]:
     if not all(names):
         fail(f"{option}: expected comma-separated names, none of them empty, got {value!r}")
     return names
+
+
+def population_option(value: str | None) -> str | dict[str, float] | None:
+    """`--traffic`'s value: a population's name, or NAME=SHARE,... as shares (checked by the
+    config's validation); a one-line error for a share that is not a number."""
+    if value is None or "=" not in value:
+        return value
+    shares: dict[str, float] = {}
+    for entry in listed("--traffic", value):
+        name, _, share = entry.partition("=")
+        try:
+            shares[name.strip()] = float(share)
+        except ValueError:
+            fail(f"--traffic: expected NAME=SHARE with a number for the share, got {entry!r}")
+    return shares
 
 
 def chosen(option: str, value: str, options: tuple[str, ...]) -> tuple[str, ...]:

@@ -21,7 +21,8 @@ from stack.results.episode_result import EpisodeResult, summarize
 from stack.runs.batched_episodes import RAY_BATCH_WORLDS, batch_refusal, batches, run_batched
 from stack.runs.kept import kept_adapter, kept_agent
 from stack.runtime.executors import completed
-from stack.settings.run import RunConfig
+from stack.settings.drivers import HIGHWAY_ENV
+from stack.settings.run import RunConfig, drivers_of
 from stack.sim.highway import HighwayAdapter
 
 
@@ -148,6 +149,7 @@ def run(
     summary = summarize(
         ordered,
         scenario=config.scenario,
+        **drivers_entry(config),
         agent=config.planner.agent,
         model=model_label(model_path(config.planner.agent, config.planner.model)),
         controller=config.controller.type,
@@ -159,6 +161,13 @@ def run(
         interrupted=interrupted,
     )
     return RunResults(summary=summary, episodes=ordered, frames=frames)
+
+
+def drivers_entry(config: RunConfig) -> dict[str, object]:
+    """The summary's `drivers` (the traffic's driver population, `stack.sim.drivers`), left out for
+    highway-env's own drivers (summaries of runs before populations stay as they were)."""
+    drivers = drivers_of(config.highway)
+    return {} if drivers == HIGHWAY_ENV else {"drivers": drivers}
 
 
 def stepping_reason(config: RunConfig, record: Path | None) -> str | None:

@@ -6,7 +6,6 @@ Every error is one line naming the file and the dotted key, e.g.
 
 from __future__ import annotations
 
-from collections.abc import Hashable
 from functools import cache
 from itertools import chain
 from pathlib import Path
@@ -25,8 +24,10 @@ from planner.networks import LANE_NETWORK, lane_problem
 from planner.safety import SafetyConfig
 from records import AGENT_NAMES, SEED_LIMIT, GridConfig
 from stack.runtime.files import write_text
+from stack.runtime.yaml_text import strict_yaml
 from stack.settings import scenarios
 from stack.settings.checks import boolean_mismatch
+from stack.settings.drivers import HIGHWAY_ENV
 from stack.settings.history import with_former_values
 from stack.settings.train import Strict, TrainConfig
 from stack.settings.world import HighwayConfig, SimConfig
@@ -177,51 +178,6 @@ MAX_QUOTE = 80
 """Longest quote of an offending value in an error message [characters]."""
 
 
-MAX_YAML_DEPTH = 64
-"""Deepest nesting of sections and lists a config or `--set` value may have."""
-
-
-class _NoAliasLoader(yaml.SafeLoader):
-    """PyYAML's safe loader without anchors and aliases, so a small file cannot expand into a huge
-    document (a "billion laughs"), without duplicate keys in a mapping (PyYAML keeps the last one
-    silently) and nested at most `MAX_YAML_DEPTH` deep (deeper ends in Python's recursion limit)."""
-
-    _depth = 0
-
-    def compose_node(self, parent: Any, index: Any) -> Any:
-        if self.check_event(yaml.AliasEvent) or getattr(self.peek_event(), "anchor", None):
-            event = self.peek_event()
-            raise yaml.composer.ComposerError(
-                None, None, "anchors and aliases (&, *) are not accepted", event.start_mark
-            )
-        if self._depth >= MAX_YAML_DEPTH:
-            raise yaml.composer.ComposerError(
-                None, None, f"nested more than {MAX_YAML_DEPTH} deep", self.peek_event().start_mark
-            )
-        self._depth += 1
-        try:
-            return super().compose_node(parent, index)
-        finally:
-            self._depth -= 1
-
-    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
-        seen = set()
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=True)
-            if isinstance(key, Hashable):
-                if key in seen:
-                    raise yaml.constructor.ConstructorError(
-                        None, None, f"key {str(key)[:MAX_QUOTE]!r} given twice", key_node.start_mark
-                    )
-                seen.add(key)
-        return super().construct_mapping(node, deep)
-
-
-def strict_yaml(text: str) -> Any:
-    """`text` as YAML by the rules of `_NoAliasLoader`; yaml.YAMLError otherwise."""
-    return yaml.load(text, Loader=_NoAliasLoader)
-
-
 def one_line(error: ValidationError, source: str, labels: dict[str, str]) -> str:
     first = error.errors()[0]
     key = ".".join(str(part) for part in first["loc"])
@@ -286,8 +242,21 @@ def scenario_road(name: str) -> HighwayConfig:
 
 
 def in_scenario(config: RunConfig, name: str) -> RunConfig:
-    """`config` moved to scenario `name` (its world replaced, everything else kept)."""
-    return RunConfig.model_validate(scenarios.apply(name, config.model_dump(mode="json")))
+    """`config` moved to scenario `name` (its world replaced, its traffic's drivers and everything
+    else kept)."""
+    data = scenarios.apply(name, config.model_dump(mode="json"))
+    drivers = drivers_of(config.highway)
+    if drivers != HIGHWAY_ENV:
+        data = with_drivers(data, drivers, "traffic")
+    return RunConfig.model_validate(data)
+
+
+def drivers_of(highway: HighwayConfig) -> str | dict[str, float]:
+    """The driver population of a world (`highway.random_traffic` or `highway.traffic`)."""
+    for section in (highway.random_traffic, highway.traffic):
+        if section is not None:
+            return section.drivers
+    return HIGHWAY_ENV
 
 
 def training_worlds(config: RunConfig) -> dict[str, RunConfig]:
@@ -332,6 +301,11 @@ def build_config(
             data = scenarios.apply(scenario, data, keep_own=moved_to is None)
         except ValueError as error:
             raise ConfigError(f"{blamed}: scenario: {error}") from None
+    drivers = overrides.pop("traffic", None)
+    if drivers is not None:
+        data = with_drivers(data, drivers, labels.get("traffic", source))
+        blamed_for_drivers = labels.get("traffic", source)
+        labels = labels | {f"highway.{key}.drivers": blamed_for_drivers for key in DRIVER_SECTIONS}
     for dotted, value in overrides.items():
         if value is not None:
             key = dotted.replace("__", ".")
@@ -343,6 +317,27 @@ def build_config(
         return RunConfig.model_validate(data)
     except ValidationError as error:
         raise ConfigError(one_line(error, source, labels)) from None
+
+
+DRIVER_SECTIONS = ("traffic", "random_traffic")
+"""The `highway` sections that hold a driver population (`drivers`)."""
+
+
+def with_drivers(data: dict[str, Any], drivers: object, blamed: str) -> dict[str, Any]:
+    """`data` with the driver population `drivers` (`--traffic`) in its world's traffic section
+    (`highway.random_traffic` or `highway.traffic`, validated with it; a world without either,
+    highway-env's own vehicles, gets a `traffic` section of its drivers alone)."""
+    highway = data.get("highway")
+    for key in DRIVER_SECTIONS:
+        section = highway.get(key) if isinstance(highway, dict) else None
+        if isinstance(section, dict):
+            assert isinstance(highway, dict)
+            return {**data, "highway": {**highway, key: {**section, "drivers": drivers}}}
+    if drivers == HIGHWAY_ENV:
+        return data
+    if highway is not None and not isinstance(highway, dict):
+        raise ConfigError(f"{blamed}: expected a highway section to draw the drivers in")
+    return {**data, "highway": {**(highway or {}), "traffic": {"drivers": drivers}}}
 
 
 def read_mapping(path: Path | str) -> dict[str, Any]:

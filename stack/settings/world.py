@@ -9,6 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validat
 
 from common.r157 import START_BRAKING_MPS2, start_room
 from records import BACKENDS, MAX_LANES, PLANTS, ROADS, Backend, PlantName, RoadName, one_of
+from stack.settings.drivers import HIGHWAY_ENV, population_shares
 
 MAX_CLASS_BOUND = 60.0
 """Largest desired speed [m/s] and length [m] of a traffic vehicle class (the spawn speed's bound)."""
@@ -18,6 +19,20 @@ EGO_LENGTH_M = 5.0
 """highway-env's ego length [m] (`Vehicle.LENGTH`)."""
 SHARE_TOLERANCE = 1e-6
 """How far the shares of the traffic classes may sum from 1."""
+
+
+DriverPopulation = str | dict[str, float]
+"""A driver population's name (`stack.settings.drivers.POPULATIONS`), or shares of several by name."""
+DRIVERS_HELP = (
+    "the traffic's drivers: highway-env (its one IDM/MOBIL parameter set), calibrated, aggressive, "
+    "cautious, mixed, or shares of several ({calibrated: 0.7, aggressive: 0.3})"
+)
+
+
+def known_population(drivers: DriverPopulation) -> DriverPopulation:
+    """`drivers` if it names populations whose shares sum to 1 (`population_shares`)."""
+    population_shares(drivers)
+    return drivers
 
 
 def _ordered_range(bounds: tuple[float, float]) -> tuple[float, float]:
@@ -62,14 +77,17 @@ class IncidentConfig(BaseModel):
 
 class TrafficConfig(BaseModel):
     """Heterogeneous traffic (highway-env's IDM / MOBIL vehicles, drawn from the env's seeded
-    generator): the vehicle classes, where the ego is spawned, as the fraction of the traffic
+    generator): its drivers (`stack.settings.drivers`; with no classes, highway-env's own vehicles get
+    them), the vehicle classes, where the ego is spawned, as the fraction of the traffic
     spawned behind it (0: behind everybody, highway-env's own placement), and one speed for every
     vehicle at spawn: highway-env spaces vehicles for equal speeds, so a fast car spawned at its
     desired speed just behind a slow truck can rear-end it before IDM has braked."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
-    classes: tuple[VehicleClass, ...] = Field(min_length=1)
+    classes: tuple[VehicleClass, ...] | None = Field(
+        None, min_length=1, description="the vehicle classes (None: highway-env's own vehicles)"
+    )
     ego_position: float = Field(0.0, ge=0, le=1, description="fraction of the traffic behind the ego")
     spawn_speed_mps: float | None = Field(
         None,
@@ -78,6 +96,21 @@ class TrafficConfig(BaseModel):
         description="every vehicle's speed at spawn [m/s] (None: its desired speed, the ego 25)",
     )
     incident: IncidentConfig | None = None
+    drivers: DriverPopulation = Field(HIGHWAY_ENV, description=DRIVERS_HELP)
+
+    @field_validator("drivers")
+    @classmethod
+    def _known_population(cls, drivers: DriverPopulation) -> DriverPopulation:
+        return known_population(drivers)
+
+    @model_validator(mode="after")
+    def _placement_needs_classes(self) -> TrafficConfig:
+        if self.classes is None and (self.ego_position or self.spawn_speed_mps or self.incident):
+            raise ValueError(
+                "classes: ego_position, spawn_speed_mps and incident place the classes' vehicles; "
+                "give classes, or only drivers for highway-env's own vehicles"
+            )
+        return self
 
     @model_validator(mode="after")
     def _incident_leaves_a_drivable_start(self) -> TrafficConfig:
@@ -97,7 +130,9 @@ class TrafficConfig(BaseModel):
 
     @field_validator("classes")
     @classmethod
-    def _shares_sum_to_one(cls, classes: tuple[VehicleClass, ...]) -> tuple[VehicleClass, ...]:
+    def _shares_sum_to_one(cls, classes: tuple[VehicleClass, ...] | None) -> tuple[VehicleClass, ...] | None:
+        if classes is None:
+            return classes
         total = sum(c.share for c in classes)
         if abs(total - 1.0) > SHARE_TOLERANCE:
             raise ValueError(f"the shares must sum to 1, got {total:g}")
@@ -162,6 +197,12 @@ class RandomTrafficConfig(BaseModel):
     false_positives: tuple[float, float] = Field(
         (0.0, 0.2), description="the sensor's phantom vehicles per observation"
     )
+    drivers: DriverPopulation = Field(HIGHWAY_ENV, description=DRIVERS_HELP)
+
+    @field_validator("drivers")
+    @classmethod
+    def _known_population(cls, drivers: DriverPopulation) -> DriverPopulation:
+        return known_population(drivers)
 
     @field_validator("lanes_count")
     @classmethod
@@ -231,7 +272,7 @@ class HighwayConfig(BaseModel):
                 f"traffic.incident.lane: must be a lane of the road (0..{self.lanes_count - 1}), "
                 f"got {incident.lane}"
             )
-        for vehicle_class in self.traffic.classes if self.traffic else ():
+        for vehicle_class in (self.traffic.classes or ()) if self.traffic else ():
             if any(not 0 <= lane < self.lanes_count for lane in vehicle_class.lanes or ()):
                 raise ValueError(
                     f"traffic.classes.lanes: class {vehicle_class.name!r} must spawn on lanes of the "

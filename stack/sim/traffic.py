@@ -35,6 +35,7 @@ from highway_env.vehicle.kinematics import Vehicle
 
 from common.r157 import start_room
 from stack.settings.world import EGO_LENGTH_M, EGO_SPAWN_SPEED_MPS
+from stack.sim.drivers import assign_drivers
 from stack.sim.spawns import along_lane, make_room
 
 IDM_JAM_CLEARANCE = 5.0
@@ -237,6 +238,16 @@ def lengthen_for_episode(road: Road, duration: float) -> None:
                 lane.length = needed
 
 
+def configured_drivers(config: dict[str, Any]) -> Any:
+    """The driver population (`stack.sim.drivers`) an env config asks for: `traffic.drivers`, or
+    `random_traffic.drivers` (a random world's `traffic` is drawn without it); None: highway-env's."""
+    for key in ("random_traffic", "traffic"):
+        section = config.get(key)
+        if isinstance(section, dict) and section.get("drivers") is not None:
+            return section["drivers"]
+    return None
+
+
 class ScenarioTraffic(HighwayEnv):
     """highway-v0 whose `_create_vehicles` reads `config["traffic"]` (see the module docstring), and
     whose `_reset` draws the road's traffic first when `config["random_traffic"]` is set. Without
@@ -252,6 +263,7 @@ class ScenarioTraffic(HighwayEnv):
             self.config.update(random_traffic(self.np_random, ranges))
         super()._reset()
         lengthen_for_episode(self.road, float(self.config["duration"]))
+        assign_drivers(self.road.vehicles, configured_drivers(self.config), self.np_random, IDM_DRIVERS)
 
     def _create_highway_env_vehicles(self) -> None:
         """highway-env's own `_create_vehicles` (the ego at 25 m/s behind all the traffic, the same
@@ -276,7 +288,7 @@ class ScenarioTraffic(HighwayEnv):
 
     def _create_vehicles(self) -> None:
         traffic = self.config.get("traffic")
-        if not traffic:
+        if not traffic or not traffic.get("classes"):
             self._create_highway_env_vehicles()
             return
         classes = list(traffic["classes"])

@@ -24,6 +24,20 @@ stack's `TrafficVehicle` (an IDM vehicle that stops at a standstill)."""
 KINDS: dict[type, int] = {Vehicle: PLAIN, IDMVehicle: IDM, TrafficVehicle: TRAFFIC}
 CLASSES = {kind: cls for cls, kind in KINDS.items()}
 
+DRIVER_LAWS: dict[str, str] = {
+    "delta": "DELTA",
+    "distance_wanted": "DISTANCE_WANTED",
+    "time_wanted": "TIME_WANTED",
+    "comfort_acc_max": "COMFORT_ACC_MAX",
+    "comfort_acc_min": "COMFORT_ACC_MIN",
+    "politeness": "POLITENESS",
+    "min_gain": "LANE_CHANGE_MIN_ACC_GAIN",
+    "max_braking_imposed": "LANE_CHANGE_MAX_BRAKING_IMPOSED",
+    "lane_change_delay": "LANE_CHANGE_DELAY",
+}
+"""The driver's columns (in `DriverLaws.of`'s order) and the `IDMVehicle` attribute each holds: the
+class's, or the driver's own (`stack.sim.drivers`)."""
+
 VEHICLE_COLUMNS: dict[str, tuple[type, float]] = {
     "x": (float, 0.0),
     "y": (float, 0.0),
@@ -35,6 +49,13 @@ VEHICLE_COLUMNS: dict[str, tuple[type, float]] = {
     "diagonal": (float, 1.0),
     "delta": (float, IDMVehicle.DELTA),
     "distance_wanted": (float, IDMVehicle.DISTANCE_WANTED),
+    "time_wanted": (float, IDMVehicle.TIME_WANTED),
+    "comfort_acc_max": (float, IDMVehicle.COMFORT_ACC_MAX),
+    "comfort_acc_min": (float, IDMVehicle.COMFORT_ACC_MIN),
+    "politeness": (float, IDMVehicle.POLITENESS),
+    "min_gain": (float, IDMVehicle.LANE_CHANGE_MIN_ACC_GAIN),
+    "max_braking_imposed": (float, IDMVehicle.LANE_CHANGE_MAX_BRAKING_IMPOSED),
+    "lane_change_delay": (float, IDMVehicle.LANE_CHANGE_DELAY),
     "max_speed": (float, Vehicle.MAX_SPEED),
     "min_speed": (float, Vehicle.MIN_SPEED),
     "timer": (float, 0.0),
@@ -51,7 +72,9 @@ VEHICLE_COLUMNS: dict[str, tuple[type, float]] = {
 }
 """Every vehicle's columns, (worlds, vehicles) each, with the value of an empty row: its centre (x,
 y) [m], heading [rad], speed and IDM target speed [m/s] (0 for a plain vehicle, as IDM reads it),
-length, width, diagonal [m], IDM exponent and jam distance [m], speed range [m/s], lane-change
+length, width, diagonal [m], the driver's IDM and MOBIL parameters (exponent, jam distance [m],
+time gap [s], a and -b [m/s^2], politeness, threshold and imposed braking [m/s^2], MOBIL's period
+[s]: `DRIVER_LAWS`, highway-env's for a plain vehicle), speed range [m/s], lane-change
 timer [s], the action it holds (steering [rad], acceleration [m/s^2], as `Vehicle.action`), the
 impact to apply at its next step [m], its lane and target lane (rows of its world's lanes; a plain
 vehicle's target is its lane), kind,
@@ -129,20 +152,20 @@ def _vehicle_row(vehicle: Vehicle, kind: int, lanes: LaneTable) -> dict[str, Any
     }
     if kind == PLAIN:
         default = VEHICLE_COLUMNS
-        row |= {
-            name: default[name][1] for name in ("delta", "distance_wanted", "timer", "enable_lane_change")
-        }
+        row |= {name: default[name][1] for name in (*DRIVER_LAWS, "timer", "enable_lane_change")}
         return row | {"target_lane": row["lane"]}
     assert isinstance(vehicle, IDMVehicle)
     if vehicle.route:
         raise UnsupportedRoad("batched traffic has no vehicles following routes")
-    return row | {
-        "delta": vehicle.DELTA,
-        "distance_wanted": vehicle.DISTANCE_WANTED,
-        "timer": vehicle.timer,
-        "target_lane": lanes.row[vehicle.target_lane_index],
-        "enable_lane_change": vehicle.enable_lane_change,
-    }
+    return (
+        row
+        | {name: getattr(vehicle, attribute) for name, attribute in DRIVER_LAWS.items()}
+        | {
+            "timer": vehicle.timer,
+            "target_lane": lanes.row[vehicle.target_lane_index],
+            "enable_lane_change": vehicle.enable_lane_change,
+        }
+    )
 
 
 class BatchArrays:
@@ -310,8 +333,9 @@ def road_of(
                 target_lane_index=lanes.indices[value["target_lane"]],
                 target_speed=value["target_speed"],
             )
-            vehicle.timer, vehicle.DELTA = value["timer"], value["delta"]
-            vehicle.DISTANCE_WANTED = value["distance_wanted"]
+            vehicle.timer = value["timer"]
+            for name, attribute in DRIVER_LAWS.items():
+                setattr(vehicle, attribute, value[name])
             vehicle.enable_lane_change = value["enable_lane_change"]
         vehicle.LENGTH, vehicle.WIDTH, vehicle.diagonal = value["length"], value["width"], value["diagonal"]
         vehicle.lane_index = lanes.indices[value["lane"]]

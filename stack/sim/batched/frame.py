@@ -11,7 +11,7 @@ from highway_env.road.lane import StraightLane
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.objects import RoadObject
 
-from stack.sim.batched.arrays import PLAIN, TRAFFIC, BatchArrays
+from stack.sim.batched.arrays import DRIVER_LAWS, PLAIN, TRAFFIC, BatchArrays
 from stack.sim.batched.kernels import (
     closest_lane_rows,
     collision_candidates,
@@ -22,7 +22,7 @@ from stack.sim.batched.kernels import (
 )
 from stack.sim.fast_road import BROAD_PHASE_MARGIN, NEIGHBOUR_MARGIN
 from stack.sim.vector.dynamics import bicycle_step, clipped_actions, steering_angles
-from stack.sim.vector.frame import BRAKING_TERM, IdmRows
+from stack.sim.vector.frame import DriverLaws, IdmRows
 from stack.sim.vector.kernels import SEPARATION_MARGIN
 from stack.sim.vector.lanes import clip
 
@@ -74,6 +74,7 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
         direction=direction_of,
     )
     lane, target, timer = flat["lane"], flat["target_lane"], flat["timer"]
+    laws = DriverLaws.of(*(flat[name] for name in DRIVER_LAWS))
     own_front, own_rear, side_driver, side_lane, side_front, side_rear, pair_driver, pair_other = (
         plan_decisions(
             drivers,
@@ -93,9 +94,9 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
             lanes["lane_length"],
             lanes["half_width"],
             lanes["forbidden"],
-            IDMVehicle.LANE_CHANGE_DELAY,
-            IDMVehicle.TIME_WANTED,
-            BRAKING_TERM,
+            laws.lane_change_delay,
+            laws.time_wanted,
+            laws.braking_term,
             StraightLane.VEHICLE_LENGTH,
         )
     )
@@ -104,7 +105,7 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
     egos = np.concatenate([side_rear, side_rear, me, me, mover_rear, mover_rear, drivers])
     leaders = np.concatenate([side_front, me, side_front, mover_front, me, mover_front, own_front])
     evaluators = np.concatenate([me] * 6 + [drivers])
-    a = kinematics.idm(egos, leaders, flat["delta"][evaluators], flat["distance_wanted"][evaluators])
+    a = kinematics.idm(egos, leaders, laws, evaluators)
     blocks = 6 * len(me)
     side_accelerations, own_acceleration = a[:blocks].reshape(6, -1), a[blocks:]
     changer = drivers[pair_driver]
@@ -124,12 +125,12 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
         pair_driver,
         pair_other,
         closing,
-        IDMVehicle.LANE_CHANGE_DELAY,
-        IDMVehicle.TIME_WANTED,
-        BRAKING_TERM,
-        IDMVehicle.POLITENESS,
-        IDMVehicle.LANE_CHANGE_MIN_ACC_GAIN,
-        IDMVehicle.LANE_CHANGE_MAX_BRAKING_IMPOSED,
+        laws.lane_change_delay,
+        laws.time_wanted,
+        laws.braking_term,
+        laws.politeness,
+        laws.min_gain,
+        laws.max_braking_imposed,
     )
     goal = target[drivers]
     changing = (lane[drivers] != goal).nonzero()[0]
@@ -137,9 +138,7 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
     if len(changing):
         movers = drivers[changing]
         target_front, _ = lane_neighbours(movers, goal[changing], s, on, on_count)
-        on_target = kinematics.idm(
-            movers, target_front, flat["delta"][movers], flat["distance_wanted"][movers]
-        )
+        on_target = kinematics.idm(movers, target_front, laws, movers)
         acceleration[changing] = np.where(
             on_target < acceleration[changing], on_target, acceleration[changing]
         )

@@ -12,6 +12,7 @@ import numpy as np
 from numba import njit
 
 from common.compiled import Kernel
+from stack.sim.vector.dynamics import desired_gap, mobil_accepts
 from stack.sim.vector.kernels import (
     closest_lanes,
     could_touch,
@@ -121,9 +122,9 @@ def plan_decisions(
     lane_length: np.ndarray,
     half_width: np.ndarray,
     forbidden: np.ndarray,
-    lane_change_delay: float,
-    time_wanted: float,
-    braking_term: float,
+    lane_change_delay: np.ndarray,
+    time_wanted: np.ndarray,
+    braking_term: np.ndarray,
     vehicle_length: float,
 ) -> tuple[
     np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray
@@ -132,7 +133,7 @@ def plan_decisions(
     state at the frame's start (flat arrays, (W, V) for s, (W, L, V) for r):
 
     - each driver's own-lane (front, rear);
-    - the MOBIL candidates of the drivers due to decide (lane-change timer past
+    - the MOBIL candidates of the drivers due to decide (lane-change timer past their
       `lane_change_delay` [s], on their target lane, lane changes on, |speed| >= 1 m/s): one per
       reachable side lane, in `side_lanes`' order: the driver's position k in `drivers`, the side
       lane's row, its (front, rear) there;
@@ -172,10 +173,8 @@ def plan_decisions(
                 if v == i or not controlled[other] or lane[other] == goal:
                     continue
                 d = s_w[v] - s_me
-                largest = (
-                    distance_wanted[g]
-                    + reach * time_wanted
-                    + reach * (reach + abs(speed[other])) / braking_term
+                largest = desired_gap(
+                    distance_wanted[g], time_wanted[g], braking_term[g], reach, reach + abs(speed[other])
                 )
                 if 0 < d and d < largest * (1 + 1e-9) + 1e-9:
                     if pairs == pair_capacity:
@@ -185,7 +184,7 @@ def plan_decisions(
                     pair_driver[pairs], pair_other[pairs] = k, other
                     pairs += 1
             continue
-        if not lane_change_delay < timer[g] or abs(speed[g]) < 1:
+        if not lane_change_delay[g] < timer[g] or abs(speed[g]) < 1:
             continue
         for side in (own - 1, own + 1):
             if side < 0 or side >= lane_count[w] or forbidden[w, side]:
@@ -226,12 +225,12 @@ def decide(
     pair_driver: np.ndarray,
     pair_other: np.ndarray,
     pair_closing: np.ndarray,
-    lane_change_delay: float,
-    time_wanted: float,
-    braking_term: float,
-    politeness: float,
-    min_gain: float,
-    max_braking_imposed: float,
+    lane_change_delay: np.ndarray,
+    time_wanted: np.ndarray,
+    braking_term: np.ndarray,
+    politeness: np.ndarray,
+    min_gain: np.ndarray,
+    max_braking_imposed: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
     """`IDMVehicle.change_lane_policy` of every driver in road order, on `plan_decisions`'
     candidates: sets `target` (lane rows) and `timer` [s] in place. A driver changing lane aborts
@@ -255,10 +254,8 @@ def decide(
                 other = pair_other[pair]
                 if target[other] == goal:
                     d = s[other] - s[g]
-                    desired = (
-                        distance_wanted[g]
-                        + speed[g] * time_wanted
-                        + speed[g] * pair_closing[pair] / braking_term
+                    desired = desired_gap(
+                        distance_wanted[g], time_wanted[g], braking_term[g], speed[g], pair_closing[pair]
                     )
                     if 0 < d and d < desired:
                         target[g] = lane[g]
@@ -267,24 +264,15 @@ def decide(
             while pair < pair_driver.shape[0] and pair_driver[pair] == k:
                 pair += 1
             continue
-        if not lane_change_delay < timer[g]:
+        if not lane_change_delay[g] < timer[g]:
             continue
         timer[g] = 0.0
         while side < sides and side_driver[side] == k:
-            new_rear_a = side_accelerations[0, side]
-            new_rear_pred_a = side_accelerations[1, side]
-            self_pred_a = side_accelerations[2, side]
-            self_a = side_accelerations[3, side]
-            own_rear_a = side_accelerations[4, side]
-            own_rear_pred_a = side_accelerations[5, side]
-            if not new_rear_pred_a < -max_braking_imposed:
-                gain = (
-                    self_pred_a
-                    - self_a
-                    + politeness * (new_rear_pred_a - new_rear_a + own_rear_pred_a - own_rear_a)
-                )
-                if not gain < min_gain:
-                    target[g] = side_lane[side]
+            a = side_accelerations[:, side]
+            if mobil_accepts(
+                a[0], a[1], a[2], a[3], a[4], a[5], politeness[g], min_gain[g], max_braking_imposed[g]
+            ):
+                target[g] = side_lane[side]
             side += 1
 
 

@@ -74,26 +74,81 @@ def idm_inputs(
     return valid, base, led, relative, heading, gap, led_speed
 
 
+@njit(cache=True, nogil=True, inline="always")
+def desired_gap(
+    distance_wanted: float, time_wanted: float, braking_term: float, speed: float, closing: float
+) -> float:  # pragma: no cover - compiled
+    """IDM's desired gap s* = d0 + v T + v dv / (2 sqrt(a b)) [m] as highway-env's `desired_gap`
+    computes it (its operation order): jam distance `distance_wanted` d0 [m], time gap
+    `time_wanted` T [s], `braking_term` 2 sqrt(a b) [m/s^2], `speed` v and `closing` speed dv [m/s]."""
+    return distance_wanted + speed * time_wanted + speed * closing / braking_term
+
+
+@njit(cache=True, nogil=True, inline="always")
+def mobil_accepts(
+    new_rear_a: float,
+    new_rear_pred_a: float,
+    self_pred_a: float,
+    self_a: float,
+    own_rear_a: float,
+    own_rear_pred_a: float,
+    politeness: float,
+    min_gain: float,
+    max_braking_imposed: float,
+) -> bool:  # pragma: no cover - compiled
+    """`IDMVehicle.mobil` for a driver without a route: the change is safe (the new follower brakes
+    no harder than `max_braking_imposed` [m/s^2]) and worth it (the driver's gain plus `politeness`
+    times its followers' is at least `min_gain` [m/s^2]), from the six IDM accelerations [m/s^2]
+    (new rear behind new front, and behind the driver; the driver behind the new front, and behind
+    its own; its own rear behind it, and behind its own front), in highway-env's operation order."""
+    if new_rear_pred_a < -max_braking_imposed:
+        return False
+    gain = self_pred_a - self_a + politeness * (new_rear_pred_a - new_rear_a + own_rear_pred_a - own_rear_a)
+    return not gain < min_gain
+
+
+@Kernel
+def mobil_verdicts(
+    accelerations: np.ndarray,
+    decider: np.ndarray,
+    politeness: np.ndarray,
+    min_gain: np.ndarray,
+    max_braking_imposed: np.ndarray,
+) -> np.ndarray:  # pragma: no cover - compiled; covered through VectorRoad
+    """`mobil_accepts` per candidate change: `accelerations` (6, candidates) in its order, the
+    MOBIL parameters of each candidate's `decider` (its row in those arrays)."""
+    accept = np.empty(accelerations.shape[1], dtype=np.bool_)
+    for k in range(accelerations.shape[1]):
+        a, d = accelerations[:, k], decider[k]
+        accept[k] = mobil_accepts(
+            a[0], a[1], a[2], a[3], a[4], a[5], politeness[d], min_gain[d], max_braking_imposed[d]
+        )
+    return accept
+
+
 @Kernel
 def idm_gap_ratios(
     closing: np.ndarray,
     gap: np.ndarray,
     led_speed: np.ndarray,
-    distance_wanted: np.ndarray,
     valid: np.ndarray,
     led: np.ndarray,
-    time_wanted: float,
-    braking_term: float,
+    evaluator: np.ndarray,
+    distance_wanted: np.ndarray,
+    time_wanted: np.ndarray,
+    braking_term: np.ndarray,
 ) -> np.ndarray:  # pragma: no cover - compiled; covered through TrafficFrame.idm
-    """Desired gap / gap of each led row of `idm_inputs`: the desired gap d0 + v T + v dv /
-    `braking_term` (2 sqrt(a b)), in highway-env's operation order, `distance_wanted` d0 [m] by
-    the evaluating row."""
+    """Desired gap / gap of each led row of `idm_inputs`: `desired_gap` with the jam distance
+    `distance_wanted` d0 [m], time gap `time_wanted` [s] and `braking_term` 2 sqrt(a b) [m/s^2] of
+    each pair's `evaluator` (its row in those arrays)."""
     ratio = np.empty(gap.shape[0])
     j = 0
     for i in range(valid.shape[0]):
         if led[i]:
-            v = led_speed[j]
-            desired = distance_wanted[valid[i]] + v * time_wanted + v * closing[j] / braking_term
+            row = evaluator[valid[i]]
+            desired = desired_gap(
+                distance_wanted[row], time_wanted[row], braking_term[row], led_speed[j], closing[j]
+            )
             ratio[j] = desired / _not_zero(gap[j])
             j += 1
     return ratio
@@ -101,16 +156,23 @@ def idm_gap_ratios(
 
 @Kernel
 def idm_accelerations(
-    rows: int, valid: np.ndarray, free_power: np.ndarray, led: np.ndarray, gap_power: np.ndarray, a_max: float
+    rows: int,
+    valid: np.ndarray,
+    free_power: np.ndarray,
+    led: np.ndarray,
+    gap_power: np.ndarray,
+    evaluator: np.ndarray,
+    a_max: np.ndarray,
 ) -> np.ndarray:  # pragma: no cover - compiled; covered through TrafficFrame.idm
     """IDM's a_max (1 - (v / v0)^delta) - a_max (s* / s)^2 per evaluating row from the powers numpy
-    computed, 0 for rows without a valid ego."""
+    computed, `a_max` [m/s^2] of each pair's `evaluator`, 0 for rows without a valid ego."""
     acceleration = np.zeros(rows)
     j = 0
     for i in range(valid.shape[0]):
-        a = a_max * (1 - free_power[i])
+        a_row = a_max[evaluator[valid[i]]]
+        a = a_row * (1 - free_power[i])
         if led[i]:
-            a = a - a_max * gap_power[j]
+            a = a - a_row * gap_power[j]
             j += 1
         acceleration[valid[i]] = a
     return acceleration

@@ -7,7 +7,6 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 from highway_env.road.lane import StraightLane
-from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import RoadObject
 
@@ -84,15 +83,59 @@ class TrafficFrame:
             me, lane_rows, self.s, self.order, self.sorted_s, self.next_on, self.last_before
         )
 
-    def idm(
-        self, ego: np.ndarray, front: np.ndarray, delta: np.ndarray, distance_wanted: np.ndarray
-    ) -> np.ndarray:
-        """`IDMVehicle.acceleration(ego_vehicle=ego, front_vehicle=front)` [m/s^2] per row, for an
-        evaluating IDM vehicle of exponent `delta` and jam distance `distance_wanted` [m]; rows -1
-        stand for no vehicle (0 without ego); the gap is measured along the ego's lane, as stock
-        does."""
+    def idm(self, ego: np.ndarray, front: np.ndarray, laws: DriverLaws, evaluator: np.ndarray) -> np.ndarray:
+        """`IDMVehicle.acceleration(ego_vehicle=ego, front_vehicle=front)` [m/s^2] per row, for
+        the evaluating IDM driver of each pair (its row of `laws` in `evaluator`); rows -1 stand
+        for no vehicle (0 without ego); the gap is measured along the ego's lane, as stock does."""
         rows = IdmRows(**{column.name: getattr(self, column.name) for column in fields(IdmRows)})
-        return rows.idm(ego, front, delta, distance_wanted)
+        return rows.idm(ego, front, laws, evaluator)
+
+
+@dataclass(frozen=True, eq=False)
+class DriverLaws:
+    """IDM and MOBIL parameters of a set of drivers, one row each, under the names highway-env's
+    `IDMVehicle` gives them (a driver of a population other than highway-env's has its own,
+    `stack.sim.drivers`): IDM's exponent `delta`, jam distance `distance_wanted` (centre to centre)
+    [m], time gap `time_wanted` [s], maximum acceleration `a_max` [m/s^2] and `braking_term`
+    2 sqrt(a b) [m/s^2]; MOBIL's `politeness`, incentive threshold `min_gain` [m/s^2], the most
+    braking it imposes `max_braking_imposed` [m/s^2] and its period `lane_change_delay` [s]."""
+
+    delta: np.ndarray
+    distance_wanted: np.ndarray
+    time_wanted: np.ndarray
+    a_max: np.ndarray
+    braking_term: np.ndarray
+    politeness: np.ndarray
+    min_gain: np.ndarray
+    max_braking_imposed: np.ndarray
+    lane_change_delay: np.ndarray
+
+    @staticmethod
+    def of(
+        delta: np.ndarray,
+        distance_wanted: np.ndarray,
+        time_wanted: np.ndarray,
+        comfort_acc_max: np.ndarray,
+        comfort_acc_min: np.ndarray,
+        politeness: np.ndarray,
+        min_gain: np.ndarray,
+        max_braking_imposed: np.ndarray,
+        lane_change_delay: np.ndarray,
+    ) -> DriverLaws:
+        """The laws of drivers with `IDMVehicle`'s COMFORT_ACC_MAX and COMFORT_ACC_MIN (a and -b
+        [m/s^2]): the braking term as highway-env computes it, 2 sqrt(-a b_min)."""
+        braking_term = 2 * np.sqrt(-comfort_acc_max * comfort_acc_min)
+        return DriverLaws(
+            delta,
+            distance_wanted,
+            time_wanted,
+            comfort_acc_max,
+            braking_term,
+            politeness,
+            min_gain,
+            max_braking_imposed,
+            lane_change_delay,
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,13 +152,10 @@ class IdmRows:
     velocity: np.ndarray
     direction: np.ndarray
 
-    def idm(
-        self, ego: np.ndarray, front: np.ndarray, delta: np.ndarray, distance_wanted: np.ndarray
-    ) -> np.ndarray:
+    def idm(self, ego: np.ndarray, front: np.ndarray, laws: DriverLaws, evaluator: np.ndarray) -> np.ndarray:
         """`IDMVehicle.acceleration(ego_vehicle=ego, front_vehicle=front)` [m/s^2] per pair of rows
-        (-1: none), evaluated by an IDM vehicle of exponent `delta` and jam distance
-        `distance_wanted` [m] per pair: compiled arithmetic around numpy's powers and dot products
-        (highway-env's bits)."""
+        (-1: none), evaluated by the IDM driver in row `evaluator` of `laws` per pair: compiled
+        arithmetic around numpy's powers and dot products (highway-env's bits)."""
         valid, base, led, relative, heading, gap, led_speed = idm_inputs(
             ego,
             front,
@@ -127,14 +167,18 @@ class IdmRows:
             self.velocity,
             self.direction,
         )
-        free_power = np.power(base, delta[valid])
+        free_power = np.power(base, laws.delta[evaluator[valid]])
         closing = np.vecdot(relative, heading)
-        time_wanted, a_max = IDMVehicle.TIME_WANTED, IDMVehicle.COMFORT_ACC_MAX
         ratio = idm_gap_ratios(
-            closing, gap, led_speed, distance_wanted, valid, led, time_wanted, BRAKING_TERM
+            closing,
+            gap,
+            led_speed,
+            valid,
+            led,
+            evaluator,
+            laws.distance_wanted,
+            laws.time_wanted,
+            laws.braking_term,
         )
-        return idm_accelerations(len(ego), valid, free_power, led, np.power(ratio, 2), a_max)
-
-
-BRAKING_TERM = 2 * np.sqrt(-IDMVehicle.COMFORT_ACC_MAX * IDMVehicle.COMFORT_ACC_MIN)
-"""2 sqrt(a b) [m/s^2] of IDM's desired gap, as highway-env computes it."""
+        gap_power = np.power(ratio, 2)
+        return idm_accelerations(len(ego), valid, free_power, led, gap_power, evaluator, laws.a_max)

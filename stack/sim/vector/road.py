@@ -40,8 +40,8 @@ from highway_env.vehicle.objects import RoadObject
 
 from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections
 from stack.sim.traffic import IDM_DRIVERS, ScenarioTraffic
-from stack.sim.vector.dynamics import steering_angles
-from stack.sim.vector.frame import TrafficFrame
+from stack.sim.vector.dynamics import mobil_verdicts, steering_angles
+from stack.sim.vector.frame import DriverLaws, TrafficFrame
 from stack.sim.vector.lanes import LaneTable, clip
 from stack.sim.vector.motion import (
     MOVER_CONSTANTS,
@@ -216,7 +216,7 @@ class VectorRoad(FastRoad):
             if abs(drivers[k].speed) >= 1
             for side in self.network.side_lanes(drivers[k].lane_index)
         ]
-        own = plan.me, plan.own_front, plan.delta, plan.jam
+        own = plan.me, plan.own_front, plan.laws, plan.everyone
         if pairs:
             index = np.array([k for k, _ in pairs], dtype=int)
             sides = np.array([frame.lanes.row[side] for _, side in pairs], dtype=int)
@@ -230,22 +230,19 @@ class VectorRoad(FastRoad):
         new_front, new_rear = frame.neighbours(me, sides)
         own_front, own_rear = plan.own_front[index], plan.own_rear[index]
         blocks = 6
-        delta = np.concatenate([plan.delta[index]] * blocks + [plan.delta])
-        jam = np.concatenate([plan.jam[index]] * blocks + [plan.jam])
+        evaluators = np.concatenate([index] * blocks + [plan.everyone])
         egos = np.concatenate([new_rear, new_rear, me, me, own_rear, own_rear, plan.me])
         leaders = np.concatenate([new_front, me, new_front, own_front, me, own_front, plan.own_front])
-        a = frame.idm(egos, leaders, delta, jam)
+        laws = plan.laws
+        a = frame.idm(egos, leaders, laws, evaluators)
         plan.own_acceleration = a[blocks * len(me) :]
-        new_rear_a, new_rear_pred_a, self_pred_a, self_a, own_rear_a, own_rear_pred_a = a[
-            : blocks * len(me)
-        ].reshape(blocks, -1)
-        gain = (
-            self_pred_a
-            - self_a
-            + IDMVehicle.POLITENESS * (new_rear_pred_a - new_rear_a + own_rear_pred_a - own_rear_a)
+        accept = mobil_verdicts(
+            a[: blocks * len(me)].reshape(blocks, -1),
+            index,
+            laws.politeness,
+            laws.min_gain,
+            laws.max_braking_imposed,
         )
-        unsafe = new_rear_pred_a < -IDMVehicle.LANE_CHANGE_MAX_BRAKING_IMPOSED
-        accept = ~unsafe & ~(gain < IDMVehicle.LANE_CHANGE_MIN_ACC_GAIN)
         for (k, side), yes in zip(pairs, accept.tolist(), strict=True):
             if yes:
                 decisions[k] = side
@@ -266,7 +263,7 @@ class VectorRoad(FastRoad):
         if changing.any():
             movers = changing.nonzero()[0]
             target_front, _ = frame.neighbours(me[movers], target[movers])
-            on_target = frame.idm(me[movers], target_front, plan.delta[movers], plan.jam[movers])
+            on_target = frame.idm(me[movers], target_front, plan.laws, movers)
             acceleration[movers] = np.where(on_target < acceleration[movers], on_target, acceleration[movers])
         acceleration = clip(acceleration, IDMVehicle.ACC_MAX)
         for v, steer, accel in zip(drivers, steering, acceleration, strict=True):
@@ -317,8 +314,20 @@ class VectorRoad(FastRoad):
         return close_pairs(Footprints.of(self.vehicles), dt)
 
 
-DRIVER_CONSTANTS = attrgetter("LENGTH", "DELTA", "DISTANCE_WANTED")
-"""A driver's LENGTH [m], IDM exponent DELTA and jam distance DISTANCE_WANTED [m]."""
+DRIVER_CONSTANTS = attrgetter(
+    "LENGTH",
+    "DELTA",
+    "DISTANCE_WANTED",
+    "TIME_WANTED",
+    "COMFORT_ACC_MAX",
+    "COMFORT_ACC_MIN",
+    "POLITENESS",
+    "LANE_CHANGE_MIN_ACC_GAIN",
+    "LANE_CHANGE_MAX_BRAKING_IMPOSED",
+    "LANE_CHANGE_DELAY",
+)
+"""A driver's LENGTH [m] and its IDM and MOBIL parameters (`DriverLaws.of`'s arguments), under
+highway-env's names: its class's, or its own when its population drew them (`stack.sim.drivers`)."""
 
 
 class Drivers:
@@ -339,7 +348,9 @@ class Drivers:
         else:
             self.me = np.array([projections.row[id(v)] for v in drivers], dtype=int)
         self.target = np.array([lane_row[v.target_lane_index] for v in drivers], dtype=int)
-        self.length, self.delta, self.jam = constants
+        self.length = constants[0]
+        self.laws = DriverLaws.of(*constants[1:])
+        self.everyone = np.arange(len(drivers))
         self.timer_due = np.array([v.LANE_CHANGE_DELAY < v.timer for v in drivers], dtype=bool)
         self.enable_lane_change = np.array([v.enable_lane_change for v in drivers], dtype=bool)
         self.on_target = np.array([v.lane_index == v.target_lane_index for v in drivers], dtype=bool)

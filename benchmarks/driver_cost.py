@@ -1,0 +1,76 @@
+"""What a driver population costs per frame against highway-env's own drivers, in one sitting: the
+`vector` backend driving one world alone (frames per CPU-second, `HighwayAdapter.step`, snapshot
+included) and a batch of worlds (`TrafficBatch.step`, world-frames per CPU-second), on the same
+worlds (seeds 0, 1, ...) with the same braking ego as `batched_traffic.py`.
+
+    .venv/bin/python benchmarks/driver_cost.py [--scenario highway-v0] [--runs 3] [--frames 150]
+
+The populations alternate run by run, after one warm-up run each; the figures are medians. A
+population changes the traffic too (aggressive drivers change lane more often), so its cost is
+its per-driver parameters and the traffic it makes together.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import platform
+import statistics
+
+from batched_traffic import batch_rate, vector_rate
+
+from stack.settings import drivers
+from stack.settings.run import build_config
+
+SAME_AS_HIGHWAY_ENV = "highway-env-drawn"
+"""A population that draws highway-env's own values (jam clearance 5 m beyond the length, no speed
+factor): the same traffic, bit for bit, with every parameter read per driver: the cost of the
+per-driver parameters alone."""
+drivers.POPULATION_RANGES[SAME_AS_HIGHWAY_ENV] = drivers.DriverRanges(
+    desired_speed_factor=(1.0, 1.0),
+    time_gap_s=(1.5, 1.5),
+    max_acceleration=(3.0, 3.0),
+    comfortable_deceleration=(5.0, 5.0),
+    jam_clearance_m=(5.0, 5.0),
+    politeness=(0.0, 0.0),
+    threshold=(0.2, 0.2),
+    safe_braking=(2.0, 2.0),
+    decision_period_s=(1.0, 1.0),
+)
+drivers.POPULATIONS = (*drivers.POPULATIONS, SAME_AS_HIGHWAY_ENV)
+POPULATIONS = ("highway-env", SAME_AS_HIGHWAY_ENV, "calibrated", "aggressive", "cautious", "mixed")
+BATCH_WORLDS = 64
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--scenario", default="highway-v0")
+    parser.add_argument("--runs", type=int, default=3)
+    parser.add_argument("--frames", type=int, default=150)
+    args = parser.parse_args()
+    highways = {name: build_config({}, scenario=args.scenario, traffic=name).highway for name in POPULATIONS}
+    for highway in highways.values():
+        vector_rate(highway, 0, 10), batch_rate(highway, 4, 10)
+    alone: dict[str, list[float]] = {name: [] for name in POPULATIONS}
+    batched: dict[str, list[float]] = {name: [] for name in POPULATIONS}
+    for _ in range(args.runs):
+        for name, highway in highways.items():
+            alone[name].append(statistics.mean(vector_rate(highway, w, args.frames) for w in range(3)))
+            batched[name].append(batch_rate(highway, BATCH_WORLDS, args.frames))
+    machine = platform.processor() or platform.machine()
+    print(f"{datetime.date.today()} {machine}, {args.scenario}, {args.runs} runs")
+    batch = f"batch of {BATCH_WORLDS} world-frames/CPU-s"
+    print(f"| drivers | per world frames/CPU-s | vs highway-env | {batch} | vs highway-env |")
+    print("|---|---|---|---|---|")
+    base_alone, base_batched = (
+        statistics.median(alone["highway-env"]),
+        statistics.median(batched["highway-env"]),
+    )
+    for name in POPULATIONS:
+        a, b = statistics.median(alone[name]), statistics.median(batched[name])
+        alone_cost, batched_cost = base_alone / a - 1, base_batched / b - 1
+        print(f"| {name} | {a:.0f} | {alone_cost:+.1%} cost | {b:.0f} | {batched_cost:+.1%} cost |")
+
+
+if __name__ == "__main__":
+    main()
