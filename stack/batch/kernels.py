@@ -177,6 +177,7 @@ def control(
     speeds = np.empty(most_lanes * vehicles)
     rows = np.empty(most_lanes * vehicles, dtype=np.int64)
     lanes = np.empty(most_lanes, dtype=np.int64)
+    heading_to_lane = np.empty(vehicles)
     reach = (lane_width + extent) / 2
     for w in range(live.shape[0]):
         if not live[w]:
@@ -206,8 +207,10 @@ def control(
                 lanes[used] = other
                 used += 1
         d_ref, d_dot_ref, d_ddot_ref = _sample(w, coef, profile, clock, t)
+        for row in range(n):
+            heading_to_lane[row] = heading[w, row] - lane_heading[w]
         found = leaders_in_rows(
-            lanes[:used], n, s[w], d[w], speed[w], heading[w] - lane_heading[w], length[w], width[w],
+            lanes[:used], n, s[w], d[w], speed[w], heading_to_lane, length[w], width[w],
             extent[w], offsets[w], lane_width, gaps, speeds, rows,
         )  # fmt: skip
         for k in range(found):
