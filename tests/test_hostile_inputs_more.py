@@ -186,6 +186,25 @@ def test_resume_after_the_plug_in_file_was_edited_is_refused_naming_it(tmp_path)
     one_line_refusal([*arguments, "--resume"], f"{agent} was edited since the run")
 
 
+def test_resume_after_a_module_plug_in_was_edited_is_refused_naming_its_file(tmp_path, monkeypatch):
+    package = tmp_path / "site"
+    package.mkdir()
+    agent = package / "edited_agent.py"
+    agent.write_text(PLUGIN_AGENT.read_text())
+    monkeypatch.syspath_prepend(str(package))
+    out = tmp_path / "run"
+    arguments = ["run", "-c", str(tiny_config_file(tmp_path)), "--agent", "edited_agent:LeftWhenBlocked"]
+    arguments += ["--episodes", "2", "--out", str(out), "--no-progress"]
+    result = CliRunner().invoke(app, arguments)
+    assert result.exit_code == 0, result.output
+    assert f"{agent} sha256" in (out / "config.yaml").read_text()
+    first = json.dumps(csv_rows(out / "episodes.csv")[0] | csv_rows(out / "timings.csv")[0])
+    journal = out / f"{file_safe('edited_agent:LeftWhenBlocked')}.{JOURNAL}"
+    agent.write_text(agent.read_text() + "\n# edited\n")
+    journal.write_text(first + "\n")
+    one_line_refusal([*arguments, "--resume"], f"{agent} was edited since the run")
+
+
 @pytest.mark.parametrize(
     ("metadata", "expected"),
     [

@@ -5,11 +5,12 @@ import: a refused `--resume` costs no simulator import."""
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import math
 import sys
 from pathlib import Path
 
-from common.plugins import FILE_SPEC, file_safe
+from common.plugins import FILE_SPEC, MODULE_SPEC, file_safe
 from records import child_seed
 from stack.results.episode_result import EpisodeResult
 from stack.runtime.files import JOURNAL, EpisodeJournal, write_text
@@ -38,13 +39,16 @@ def resolved_config(configs: list[RunConfig], exclude: dict | None = None) -> st
 
 def code_digests(configs: list[RunConfig]) -> dict[str, str]:
     """The SHA-256 of each file besides the config that decides the episodes of `configs`: the
-    agents' and controllers' plug-in files (`file.py:Class`) and the model files given, by path.
-    A file that cannot be read is left out (the run's own checks name it)."""
+    agents' and controllers' plug-in files (`file.py:Class`, and the module file of a
+    `module:Class`) and the model files given, by path. A file that cannot be read or found is
+    left out (the run's own checks name it)."""
     paths: list[str] = []
     for config in configs:
         for spec in (config.planner.agent, config.controller.type):
             if match := FILE_SPEC.fullmatch(spec):
                 paths.append(match["file"])
+            elif (match := MODULE_SPEC.fullmatch(spec)) and (origin := module_file(match["module"])):
+                paths.append(origin)
         if config.planner.model is not None:
             paths.append(str(config.planner.model))
     digests = {}
@@ -55,6 +59,15 @@ def code_digests(configs: list[RunConfig]) -> dict[str, str]:
         except OSError:
             continue
     return digests
+
+
+def module_file(module: str) -> str | None:
+    """The source file a plug-in's `module` is loaded from, or None (not found, or not a file)."""
+    try:
+        found = importlib.util.find_spec(module)
+    except (ImportError, ValueError):
+        return None
+    return found.origin if found is not None and found.has_location and found.origin else None
 
 
 def edited_code(configs: list[RunConfig], out: Path) -> str | None:
