@@ -91,8 +91,8 @@ def edited_code(configs: list[RunConfig], out: Path) -> str | None:
     now = code_digests(configs)
     if edited := [path for path, digest in recorded.items() if path in now and now[path] != digest]:
         return (
-            f"--resume: {edited[0]} was edited since the run in {out} started (its episodes would mix "
-            "two versions); restore it, or run again without --resume"
+            f"--resume: {edited[0]} was edited since the run started (its episodes would mix two "
+            "versions); restore it, or run again without --resume"
         )
     return None
 
