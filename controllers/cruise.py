@@ -50,12 +50,18 @@ class AdaptiveCruise:
         ki_speed: float = 0.05,
         max_acceleration: float = 2.0,
     ) -> None:
-        self.time_gap = time_gap
-        self.standstill_gap = standstill_gap
         self.law = GapKeeping(time_gap, standstill_gap)
-        self.comfort_deceleration = comfort_deceleration
-        self.max_acceleration = max_acceleration
         self.speed_pid = PID(kp=kp_speed, ki=ki_speed, limits=(-comfort_deceleration, max_acceleration))
+
+    @property
+    def comfort_deceleration(self) -> float:
+        """The most the cruise brakes [m/s^2] (its speed PI's lower limit, negated)."""
+        return -self.speed_pid.low
+
+    @property
+    def max_acceleration(self) -> float:
+        """The most the cruise accelerates [m/s^2] (its speed PI's upper limit)."""
+        return self.speed_pid.high
 
     def reset(self) -> None:
         self.speed_pid.reset()
@@ -65,4 +71,4 @@ class AdaptiveCruise:
         command = self.speed_pid.update(set_speed - speed, dt)
         for leader in leaders:
             command = min(command, gap_acceleration(self.law, speed, leader.gap, leader.speed))
-        return clip(command, -self.comfort_deceleration, self.max_acceleration)
+        return clip(command, self.speed_pid.low, self.speed_pid.high)

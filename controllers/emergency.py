@@ -77,9 +77,6 @@ class EmergencyBraking:
     BRAKING_SEEN_MPS2 = BRAKING_SEEN_MPS2
 
     def __init__(self, max_deceleration: float, comfort_deceleration: float, trigger_ttc_s: float) -> None:
-        self.max_deceleration = max_deceleration
-        self.comfort_deceleration = comfort_deceleration
-        self.trigger_ttc_s = trigger_ttc_s
         self.limits = BrakingLimits(max_deceleration, comfort_deceleration, trigger_ttc_s)
         self.reset()
 

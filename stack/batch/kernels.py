@@ -14,14 +14,11 @@ activations]) and the road departure flag."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
-from common import neighbours
 from common.compiled import Kernel, clip
-from common.neighbours import VehicleRows
+from common.neighbours import VehicleRows, footprint_across, reaches_lane
 from controllers.cruise import gap_acceleration
 from controllers.emergency import BrakingLimits, braked_acceleration, leader_braking, needs_full_braking
 from controllers.lateral import LateralMemory, lateral_steering
@@ -201,7 +198,7 @@ def control(
         )
         clock[w, 0], clock[w, 1], clock[w, 2] = warp
         lanes[0], used = target[w], 1
-        low, high = ego_extent(w, d, length, width, heading, lane_heading)
+        low, high = footprint_across(d[w, 0], length[w, 0], width[w, 0], heading[w, 0] - lane_heading[w])
         for other in range(lanes_count[w]):
             if other != target[w] and reaches_lane(low, high, offsets[w, other], lane_width):
                 lanes[used] = other
@@ -310,26 +307,6 @@ def emergency_acceleration(
     return braked_acceleration(limits, flags[0] != 0, acceleration, speed, dt)
 
 
-@njit(cache=True, nogil=True)
-def ego_extent(
-    w: int,
-    d: np.ndarray,
-    length: np.ndarray,
-    width: np.ndarray,
-    heading: np.ndarray,
-    lane_heading: np.ndarray,
-) -> tuple[float, float]:  # pragma: no cover - compiled
-    """(lowest, highest) lateral coordinate [m] of world `w`'s ego footprint corners
-    (`common.neighbours.footprint_lateral_extent`: its rectangle turned by its heading to the lane)."""
-    relative = heading[w, 0] - lane_heading[w]
-    half = (length[w, 0] * abs(math.sin(relative)) + width[w, 0] * abs(math.cos(relative))) / 2
-    return d[w, 0] - half, d[w, 0] + half
-
-
-reaches_lane = njit(cache=True, nogil=True, inline="always")(neighbours.reaches_lane)
-"""`common.neighbours.reaches_lane` compiled: the one footprint-reaches-lane test of both paths."""
-
-
 @Kernel
 def settle(
     stepped: np.ndarray,
@@ -350,7 +327,7 @@ def settle(
     for w in range(stepped.shape[0]):
         if not stepped[w]:
             continue
-        low, high = ego_extent(w, d, length, width, heading, lane_heading)
+        low, high = footprint_across(d[w, 0], length[w, 0], width[w, 0], heading[w, 0] - lane_heading[w])
         if departs(low, high, offsets[w], lanes_count[w], lane_width):
             departed[w] = True
         if lane[w] != target[w]:
