@@ -10,7 +10,15 @@ motion carries it there within abort_lookahead (a car cutting in from the far la
 it arrives, while the ego can still turn back). No change starts while a vehicle in the lane beyond
 the target is within far_lane_gap of the ego, bumper to bumper: alongside, it may take the same
 gap at the same moment, and a change under way cannot get out of its way (at 4 m/s an abort needs
-seconds to turn back).
+seconds to turn back); nor, with `far_lane_leader`, while the nearest vehicle ahead in that lane
+fails the gap rule for a car ahead: it may move into the target lane just in front of the ego.
+
+No change starts either that would force the follower in the target lane to brake harder than
+`follower_braking_mps2` (UN R157's lane-change criterion: 3 m/s^2, starting
+`follower_reaction_s` = 0.4 s after the change starts) to stay `min_gap` behind the ego, while the
+ego itself brakes as its leaders ask (the harder of what the nearest vehicles ahead in its lane and
+in the target lane need to be met without contact). A change begun while braking for a stopped
+car otherwise slows to a crawl between two lanes, in front of a follower that arrives at speed.
 
 The rule is written once, as plain functions of one world's `VehicleRows` (`unsafe_vehicles`,
 `lane_is_safe`, `change_is_safe`) that numba compiles: `SafetyLayer` calls them compiled on its
@@ -37,6 +45,14 @@ MAX_GAP_M = 200.0
 """Largest gap the safety layer may ask for [m]: beyond any sensor's reach on a highway."""
 MAX_TIME_S = 60.0
 """Largest time gap or time to collision it may ask for [s]."""
+MAX_BRAKING_MPS2 = 15.0
+"""Largest braking it may grant a follower [m/s^2]: beyond any tyre's grip."""
+FORECAST_STEP_S = 0.1
+"""Time step of the follower's forecast [s]."""
+FORECAST_HORIZON_S = 30.0
+"""How far the follower's forecast runs at most [s]: past any car's stop from highway speeds."""
+STOP_MARGIN_M = 1.0
+"""The gap the ego's braking forecast keeps to the leader it meets [m] (`EmergencyBraking`'s)."""
 
 
 class SafetyConfig(BaseModel):
@@ -61,11 +77,25 @@ class SafetyConfig(BaseModel):
         description="no change starts while a vehicle in the lane beyond the target is this close, "
         "bumper to bumper [m] (none: no such check)",
     )
+    far_lane_leader: bool = Field(
+        True, description="the nearest vehicle ahead in the lane beyond the target must pass the gap rule too"
+    )
+    follower_braking_mps2: float | None = Field(
+        3.0,
+        gt=0,
+        le=MAX_BRAKING_MPS2,
+        description="hardest braking a change may force on the follower in the target lane [m/s^2] "
+        "(none: no such check)",
+    )
+    follower_reaction_s: float = Field(
+        0.4, ge=0, le=MAX_TIME_S, description="the follower's reaction before it brakes [s]"
+    )
 
 
 class SafetySettings(NamedTuple):
     """`SafetyConfig`'s numbers as compiled code takes them: gaps [m], TTCs and time gaps [s];
-    `checks_far_lane` false when `far_lane_gap_m` is none (then 0)."""
+    `checks_far_lane` false when `far_lane_gap_m` is none (then 0), `checks_follower` false when
+    `follower_braking_mps2` is none (then 0)."""
 
     enabled: bool
     min_gap_m: float
@@ -76,6 +106,10 @@ class SafetySettings(NamedTuple):
     abort_ttc_s: float
     checks_far_lane: bool
     far_lane_gap_m: float
+    far_lane_leader: bool
+    checks_follower: bool
+    follower_braking_mps2: float
+    follower_reaction_s: float
 
 
 def safety_settings(config: SafetyConfig) -> SafetySettings:
@@ -91,6 +125,10 @@ def safety_settings(config: SafetyConfig) -> SafetySettings:
         abort_ttc_s=config.abort_ttc_s,
         checks_far_lane=far is not None,
         far_lane_gap_m=0.0 if far is None else far,
+        far_lane_leader=config.far_lane_leader,
+        checks_follower=config.follower_braking_mps2 is not None,
+        follower_braking_mps2=config.follower_braking_mps2 or 0.0,
+        follower_reaction_s=config.follower_reaction_s,
     )
 
 
@@ -147,32 +185,101 @@ def lane_is_safe(
 
 
 @register_jitable
+def ego_braking(rows: VehicleRows, centres: tuple[float, float]) -> tuple[float, float]:
+    """(deceleration [m/s^2], the speed it brakes to [m/s]) the ego needs to meet, `STOP_MARGIN_M`
+    behind, the harder to meet of the nearest vehicles ahead in the lanes centred at `centres` [m]
+    at constant speed (0 and its own speed when none closes in)."""
+    s, speed, length = rows.s, rows.speed, rows.length
+    deceleration, floor = 0.0, speed[0]
+    for centre in centres:
+        ahead = nearest_in_lane(rows, centre)[0]
+        if ahead < 0 or speed[ahead] >= speed[0]:
+            continue
+        room = max(s[ahead] - s[0] - (length[ahead] + length[0]) / 2 - STOP_MARGIN_M, 0.1)
+        needed = (speed[0] - speed[ahead]) ** 2 / (2 * room)
+        if needed > deceleration:
+            deceleration, floor = needed, speed[ahead]
+    return deceleration, floor
+
+
+@register_jitable
+def follower_keeps_clear(
+    gap: float,
+    follower_speed: float,
+    ego_speed: float,
+    ego_deceleration: float,
+    ego_floor: float,
+    braking: float,
+    reaction: float,
+    keep: float,
+) -> bool:
+    """Whether a follower `gap` [m] behind the ego (bumper to bumper) at `follower_speed` [m/s]
+    stays at least `keep` [m] behind it, holding its speed for `reaction` [s] and then braking at
+    most `braking` [m/s^2] (no slower than it needs to follow the ego), while the ego brakes at
+    `ego_deceleration` [m/s^2] from `ego_speed` down to `ego_floor` [m/s]. Forecast in steps of
+    `FORECAST_STEP_S` until the follower is no faster than the ego and the ego no longer brakes."""
+    dt = FORECAST_STEP_S
+    for step in range(int(FORECAST_HORIZON_S / dt)):
+        t = (step + 1) * dt
+        ego_before, follower_before = ego_speed, follower_speed
+        ego_speed = max(ego_floor, ego_speed - ego_deceleration * dt)
+        if t > reaction:
+            follower_speed = max(follower_speed - braking * dt, min(follower_speed, ego_speed))
+        gap += (ego_before + ego_speed - follower_before - follower_speed) * dt / 2
+        if gap < keep:
+            return False
+        if t > reaction and follower_speed <= ego_speed and ego_speed <= ego_floor:
+            return True
+    return True
+
+
+@register_jitable
+def follower_is_spared(
+    rows: VehicleRows, offsets: np.ndarray, lane: int, goal: int, safety: SafetySettings
+) -> bool:
+    """The follower in lane `goal` needs no harder braking than `follower_braking_mps2` to stay
+    `min_gap_m` behind the ego changing into it from `lane`, while the ego brakes as its leaders in
+    both lanes ask (`ego_braking`, `follower_keeps_clear`)."""
+    behind = nearest_in_lane(rows, offsets[goal])[1]
+    if behind < 0:
+        return True
+    gap = abs(rows.s[behind] - rows.s[0]) - (rows.length[behind] + rows.length[0]) / 2
+    deceleration, floor = ego_braking(rows, (offsets[lane], offsets[goal]))
+    return follower_keeps_clear(
+        gap, rows.speed[behind], rows.speed[0], deceleration, floor,
+        safety.follower_braking_mps2, safety.follower_reaction_s, safety.min_gap_m,
+    )  # fmt: skip
+
+
+@register_jitable
 def change_is_safe(
     rows: VehicleRows, offsets: np.ndarray, lanes_count: int, lane: int, goal: int, safety: SafetySettings
 ) -> bool:
     """`SafetyLayer.permits` of one world's change from `lane` to `goal` (lanes centred at
-    `offsets` [m]), on its `rows` where they are now: on the road, the strict gap rule in `goal`
-    and, in the lane beyond it, no vehicle nearer than the far-lane gap bumper to bumper."""
+    `offsets` [m]), on its `rows` where they are now: on the road, the strict gap rule in `goal`,
+    its follower spared hard braking (`follower_is_spared`) and, in the lane beyond it, no vehicle
+    nearer than the far-lane gap bumper to bumper nor, with `far_lane_leader`, a vehicle ahead that
+    fails the strict rule for a car ahead."""
     if not 0 <= goal < lanes_count:
         return False
-    if not lane_is_safe(
-        rows,
-        offsets[goal],
-        safety.min_gap_m,
-        safety.min_ttc_s,
-        safety.front_time_gap_s,
-        safety.rear_time_gap_s,
-    ):
+    strict = (safety.min_gap_m, safety.min_ttc_s, safety.front_time_gap_s, safety.rear_time_gap_s)
+    if not lane_is_safe(rows, offsets[goal], *strict):
+        return False
+    if safety.checks_follower and not follower_is_spared(rows, offsets, lane, goal, safety):
         return False
     beyond = 2 * goal - lane
     if not safety.checks_far_lane or not 0 <= beyond < lanes_count:
         return True
+    if safety.far_lane_leader and unsafe_vehicles(rows, offsets[beyond], *strict)[0] >= 0:
+        return False
     return lane_is_safe(rows, offsets[beyond], safety.far_lane_gap_m, 0.0, 0.0, 0.0)
 
 
 change_is_safe_compiled = Kernel(change_is_safe)
 """`change_is_safe` compiled, for Python callers: the per-world layer and the lookahead."""
 _unsafe_vehicles = Kernel(unsafe_vehicles)
+_follower_is_spared = Kernel(follower_is_spared)
+_nearest_in_lane = Kernel(nearest_in_lane)
 
 
 @dataclass(frozen=True)
@@ -220,27 +327,25 @@ class SafetyLayer:
             return command
         self.masked += 1
         target = lane + command.lane_shift
-        config = self.config
-        if 0 <= target < world.lanes_count:
-            self.reacted_to = self._unsafe(
-                world,
-                target,
-                config.min_gap_m,
-                config.min_ttc_s,
-                config.front_time_gap_s,
-                config.rear_time_gap_s,
-            ) + self._alongside_beyond(world, target + command.lane_shift)
-        else:
-            self.reacted_to = ()
+        self.reacted_to = self._blockers(world, lane, target) if 0 <= target < world.lanes_count else ()
         return Command.STAY
 
-    def _alongside_beyond(self, world: WorldState, far_lane: int) -> tuple[int, ...]:
-        """The vehicles (ids) of `far_lane`, the lane beyond a change's target, closer to the ego
-        than `far_lane_gap_m` (none without the check or the lane)."""
-        gap = self.config.far_lane_gap_m
-        if gap is None or not 0 <= far_lane < world.lanes_count:
-            return ()
-        return self._unsafe(world, far_lane, gap, 0.0, 0.0, 0.0)
+    def _blockers(self, world: WorldState, lane: int, target: int) -> tuple[int, ...]:
+        """The vehicles (ids) that stop a change from `lane` into `target` (`change_is_safe`):
+        those that make `target` unsafe, its follower when not spared hard braking, and in the lane
+        beyond, the leader failing the strict rule and those alongside."""
+        config, settings = self.config, self.settings
+        rows, offsets = vehicle_rows(world), world.lane_offsets
+        strict = (config.min_gap_m, config.min_ttc_s, config.front_time_gap_s, config.rear_time_gap_s)
+        found = list(_unsafe_vehicles(rows, float(offsets[target]), *strict))
+        if settings.checks_follower and not _follower_is_spared(rows, offsets, lane, target, settings):
+            found.append(_nearest_in_lane(rows, float(offsets[target]))[1])
+        beyond = 2 * target - lane
+        if config.far_lane_gap_m is not None and 0 <= beyond < world.lanes_count:
+            if config.far_lane_leader:
+                found.append(_unsafe_vehicles(rows, float(offsets[beyond]), *strict)[0])
+            found.extend(_unsafe_vehicles(rows, float(offsets[beyond]), config.far_lane_gap_m, 0.0, 0.0, 0.0))
+        return tuple(dict.fromkeys(int(world.ids[row]) for row in found if row >= 0))
 
     def should_abort(self, world: WorldState, target: int) -> bool:
         """True when the gap in `target` has closed below the abort margins, counting the vehicles

@@ -1,12 +1,19 @@
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from common.neighbours import lateral_extent, neighbours
 from controllers.maneuver import Maneuver
-from planner.safety import SafetyConfig, SafetyLayer
-from records import Command
+from planner.safety import SafetyConfig, SafetyLayer, follower_keeps_clear
+from records import Command, WorldState
 from tests.helpers import cutting_in, scene
+
+
+def with_speeds(world: WorldState, *speeds: float) -> WorldState:
+    """`world` with its vehicles' speeds [m/s], row by row, heading along the road."""
+    speed = np.array(speeds, dtype=float)
+    return replace(world, speed=speed, velocity=np.stack([speed, np.zeros_like(speed)], axis=1))
 
 
 def layer(**overrides) -> SafetyLayer:
@@ -36,11 +43,44 @@ def test_no_change_starts_while_a_car_is_alongside_in_the_lane_beyond_the_target
     assert safety.filter(Command.LEFT, beside, lane=2) is Command.STAY and safety.reacted_to == (1,)
     assert safety.filter(Command.RIGHT, beside, lane=2) is Command.RIGHT, "no lane beyond lane 3"
     assert layer(far_lane_gap_m=None).filter(Command.LEFT, beside, lane=2) is Command.LEFT
-    # 10 m centre to centre, 5 m bumper to bumper: past the 2 m the default asks
-    assert layer().filter(Command.LEFT, scene(4, (0.0, 2), [(10.0, 0.0)], 4.0, 5.0), lane=2) is Command.LEFT
+    # 10 m centre to centre, 5 m bumper to bumper: past the 2 m the default asks alongside (but
+    # short of the 6 m a car ahead must leave, which the far lane's leader check asks)
+    ahead = scene(4, (0.0, 2), [(10.0, 0.0)], 4.0, 5.0)
+    assert layer(far_lane_leader=False).filter(Command.LEFT, ahead, lane=2) is Command.LEFT
     assert layer(far_lane_gap_m=6.0).filter(Command.LEFT, scene(4, (0.0, 2), [(10.0, 0.0)], 4.0, 5.0), 2) is (
         Command.STAY
     )
+
+
+def test_no_change_starts_while_the_leader_of_the_lane_beyond_may_take_the_same_gap():
+    """Seed 980153 of `lanes-5` (the lookahead): a change from lane 4 to 3 started 18 m behind a
+    slower car in lane 2, which moved into lane 3 too; the ego braked at emergency strength."""
+    world = with_speeds(scene(5, (0.0, 4), [(18.2, 8.0)]), 25.1, 22.0)
+    safety = layer()
+    assert safety.filter(Command.LEFT, world, lane=4) is Command.STAY and safety.reacted_to == (1,)
+    assert layer(far_lane_leader=False).filter(Command.LEFT, world, lane=4) is Command.LEFT
+    far_ahead = with_speeds(scene(5, (0.0, 4), [(60.0, 8.0)]), 25.1, 22.0)
+    assert safety.filter(Command.LEFT, far_ahead, lane=4) is Command.LEFT
+
+
+def test_no_change_that_forces_the_follower_to_brake_hard_while_the_ego_brakes_for_its_leader():
+    """Seed 996541 of `incident` (MOBIL, aggressive drivers): braking for the stopped car ahead at
+    13.8 m/s, the ego changed left in front of a car coming at 21.5 m/s, slowed to a crawl between the
+    lanes and was hit. The follower, braking at 3 m/s^2 after 0.4 s, would not have stayed clear."""
+    world = with_speeds(scene(2, (0.0, 1), [(47.4, 4.0), (-46.1, 0.0)]), 13.8, 0.0, 21.5)
+    safety = layer()
+    assert safety.filter(Command.LEFT, world, lane=1) is Command.STAY and safety.reacted_to == (2,)
+    assert layer(follower_braking_mps2=None).filter(Command.LEFT, world, lane=1) is Command.LEFT
+    no_stopped_car = with_speeds(scene(2, (0.0, 1), [(-46.1, 0.0)]), 13.8, 21.5)
+    assert safety.filter(Command.LEFT, no_stopped_car, lane=1) is Command.LEFT
+
+
+def test_the_follower_forecast_meets_the_stopping_distance():
+    """A stopped ego and a follower at 20 m/s that reacts after 0.4 s and brakes at 3 m/s^2: it
+    covers 8 + 400 / 6 = 74.7 m, so with 6 m to keep it needs 80.7 m."""
+    kept = [follower_keeps_clear(gap, 20.0, 0.0, 0.0, 0.0, 3.0, 0.4, 6.0) for gap in (80.0, 82.0)]
+    assert kept == [False, True]
+    assert follower_keeps_clear(1.0, 20.0, 25.0, 0.0, 25.0, 3.0, 0.4, 0.5), "a slower follower"
 
 
 def test_time_gap_and_ttc_to_the_vehicles_ahead_and_behind():

@@ -169,7 +169,7 @@ def test_a_folder_written_before_overlap_existed_keeps_its_fingerprint():
     """A run folder records its config's fingerprint; one written before `train.overlap` existed
     has none of it, and still resumes: the key is left out while it holds that run's value."""
     config = build_config(WORLDS)
-    former = _fingerprint_without(config, "train.overlap", "train.members", "planner.change_margin")
+    former = _fingerprint_without(config, *FORMER)
     assert training_owner(config).config == former
     overlapped = build_config({**WORLDS, "train": {**WORLDS["train"], "overlap": True}})
     assert training_owner(overlapped).config != training_owner(config).config
@@ -225,7 +225,23 @@ def test_a_resolved_config_written_before_the_far_lane_check_reproduces_its_run(
     assert training_owner(build_config(WORLDS)).config != training_owner(read).config
 
 
-FORMER = ("train.overlap", "train.members", "planner.change_margin")
+def test_a_resolved_config_written_before_the_follower_check_reproduces_its_run():
+    """A folder's config.yaml written before `planner.safety.far_lane_leader` and the follower's
+    braking check existed reads both as off (how its run changed lanes) and keeps its fingerprint."""
+    off = {"far_lane_leader": False, "follower_braking_mps2": None}
+    then = build_config({**WORLDS, "planner": {"safety": off}})
+    written = then.model_dump(mode="json")
+    for key in (*off, "follower_reaction_s"):
+        written["planner"]["safety"].pop(key)
+    read = build_config(written)
+    assert read == then and read.planner.safety.follower_braking_mps2 is None
+    dotted = [f"planner.safety.{key}" for key in off]
+    assert training_owner(read).config == _fingerprint_without(then, *FORMER, *dotted)
+    assert build_config(WORLDS).planner.safety.follower_braking_mps2 == 3.0
+    assert training_owner(build_config(WORLDS)).config != training_owner(read).config
+
+
+FORMER = ("train.overlap", "train.members", "planner.change_margin", "planner.safety.follower_reaction_s")
 """The keys added later that `WORLDS` holds at their former values."""
 
 

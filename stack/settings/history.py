@@ -13,7 +13,13 @@ HOW_NOT_WHAT = {"sim": {"batched"}}
 fingerprint that lets `--resume` go on with a folder (`stack.apps.resume`, `training_owner`)."""
 ADDED_LATER: dict[str, dict[str, Any]] = {
     "train": {"overlap": False, "members": 1},
-    "planner.safety": {"abort_lookahead_s": 0.0, "far_lane_gap_m": None},
+    "planner.safety": {
+        "abort_lookahead_s": 0.0,
+        "far_lane_gap_m": None,
+        "far_lane_leader": False,
+        "follower_braking_mps2": None,
+        "follower_reaction_s": 0.4,
+    },
     "planner": {"change_margin": 0.0},
 }
 """Config keys (by dotted section) added after folders were written, with the value the runs of
