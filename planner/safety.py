@@ -23,7 +23,7 @@ car otherwise slows to a crawl between two lanes, in front of a follower that ar
 The rule is written once, as plain functions of one world's `VehicleRows` (`unsafe_vehicles`,
 `lane_is_safe`, `change_is_safe`) that numba compiles: `SafetyLayer` calls them compiled on its
 snapshot, the lookahead on the scene it reads, and `permitted_batch` and the batch's kernels
-(`stack.batch.kernels`) loop over worlds around them.
+(`stack.batch.loop_kernels`) loop over worlds around them.
 """
 
 from __future__ import annotations

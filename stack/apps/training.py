@@ -39,7 +39,7 @@ def check_batched(config: RunConfig) -> None:
     if config.train.worlds is None:
         return
     from perception.grid import BATCHED_FEATURES
-    from stack.batch.closed_loop import refusal
+    from stack.batch.closed_loop_batch import refusal
     from stack.settings.run import training_worlds
 
     reason: str | None

@@ -26,7 +26,7 @@ from stack.settings.run import RunConfig
 from stack.training.batch_env import ReplayableWorlds, TrainingWorlds
 from stack.training.decision_batch import batch_config
 from stack.training.decision_env import EpisodeRecord
-from stack.training.vector_env import WorldsVecEnv
+from stack.training.gym_vector_env import WorldsVecEnv
 
 
 def shard_worker(remote: Connection, learner_end: Connection, config: RunConfig, worlds: int) -> None:
