@@ -3,6 +3,10 @@ write the model their shard processes write (`--envs 2`), bit for bit; a dead ac
 in one line (exit 1) naming the shard, its last checkpoint kept, and `--resume` finishes the model
 of the run never cut; bad input is one line (exit 2) before any work."""
 
+import os
+import signal
+import time
+
 import pytest
 from typer.testing import CliRunner
 
@@ -13,7 +17,9 @@ from stack.settings.run import build_config
 from stack.training.batch_env import batched_worlds
 from stack.training.checkpoint import DqnCounters, read_checkpoint
 from stack.training.trainer import Trainer
+from tests.test_train_signals import started_training, stopped_with_its_checkpoint
 from tests.test_train_worlds import WORLDS
+from tests.test_world_shards import group_alive
 
 ray = pytest.importorskip("ray")
 
@@ -68,6 +74,7 @@ def assert_ended(actors: list) -> None:
             ray.get(actor.host.remote(), timeout=30)
 
 
+@pytest.mark.slow
 def test_a_dead_actor_is_one_line_with_the_checkpoint_kept_and_resume_finishes_the_model(
     tmp_path, local_ray, on_processes, capsys, monkeypatch
 ):
@@ -103,6 +110,22 @@ def test_a_dead_actor_is_one_line_with_the_checkpoint_kept_and_resume_finishes_t
     for name in ("final.npz", "checkpoint.npz"):
         assert_same_arrays(out, on_processes, name)
     assert_ended(actors)
+
+
+@pytest.mark.slow
+def test_ctrl_c_checkpoints_with_the_actors_episodes_and_ends_them(tmp_path):
+    """Ctrl-C to the command's process group on a local Ray instance: the learner writes its
+    checkpoint (which asks the actors for their worlds' episodes under way), exits 130 without a
+    traceback, and leaves no process of its group behind."""
+    data = {**SHARDED, "train": {**SHARDED["train"], "steps": 50_000}}
+    process, out = started_training(tmp_path, data, 180.0, ("--ray",), start_new_session=True)
+    os.killpg(process.pid, signal.SIGINT)
+    checkpoint = stopped_with_its_checkpoint(process, out)
+    assert len(checkpoint["counters"]["episodes"]) == 4
+    deadline = time.monotonic() + 30
+    while group_alive(process.pid):
+        assert time.monotonic() < deadline, "a process outlived the run"
+        time.sleep(0.1)
 
 
 def invoke(*arguments: str):
