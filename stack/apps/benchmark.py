@@ -12,7 +12,9 @@ from pathlib import Path
 
 from stack.apps.benchmark_report import (
     LANE_CHANGE_BUDGET,
+    MIN_HEADROOM,
     WEIGHTS,
+    Allowances,
     csv_rows,
     leaderboard,
     markdown,
@@ -22,6 +24,7 @@ from stack.apps.compare import compare, comparison, write_comparison
 from stack.apps.resume import journal_of, journaled, resolved_config, started
 from stack.loop.safety_metrics import TTC_FLOOR_S
 from stack.results.episode_result import EpisodeResult
+from stack.runs.world_allowance import WorldAllowance, world_allowance
 from stack.runtime.files import write_csv, write_json, write_text
 from stack.runtime.interrupts import deferred
 from stack.settings import scenarios
@@ -86,6 +89,12 @@ def finished_before(configs: list[RunConfig], folder: Path) -> dict[str, list[Ep
     }
 
 
+def allowances_of(config: RunConfig, runs: dict[str, list[EpisodeResult]]) -> dict[int, WorldAllowance]:
+    """What each seed the agents ran in `config`'s world allows (one reset of the world a seed)."""
+    seeds = sorted({episode.seed for episodes in runs.values() for episode in episodes})
+    return {seed: world_allowance(config, seed) for seed in seeds}
+
+
 def run_benchmark(
     configs: list[RunConfig],
     plan: BenchmarkPlan,
@@ -100,6 +109,7 @@ def run_benchmark(
     journals kept for --resume)."""
     write_text(out / "config.yaml", resolved_config(configs))
     results: dict[str, dict[str, list[EpisodeResult]]] = {}
+    allowances: Allowances = {}
     journals = []
     interrupted = False
     for scenario in plan.scenarios:
@@ -115,6 +125,7 @@ def run_benchmark(
             interrupted = True
             break
         results[scenario] = {run.summary["agent"]: run.episodes for run in runs}
+        allowances[scenario] = allowances_of(scenario_configs[0], results[scenario])
         with deferred(interrupt_after=False):
             write_comparison(comparison(runs), folder)
         if len(runs) < len(configs) or runs[-1].summary["interrupted"]:
@@ -122,22 +133,23 @@ def run_benchmark(
             break
     if not results:
         raise KeyboardInterrupt
-    reference = configs[0].controller.set_speed_mps
-    rows = leaderboard(results, reference)
+    set_speed = configs[0].controller.set_speed_mps
+    rows = leaderboard(results, allowances, set_speed)
     with deferred(interrupt_after=False):
         write_json(
             out / "summary.json",
             {
                 "plan": asdict(plan),
                 "interrupted": interrupted,
-                "reference_speed_mps": reference,
+                "set_speed_mps": set_speed,
+                "min_headroom_mps": MIN_HEADROOM,
                 "weights": WEIGHTS,
                 "ttc_floor_s": TTC_FLOOR_S,
                 "lane_change_budget_per_min": LANE_CHANGE_BUDGET,
                 "leaderboard": rows,
             },
         )
-        write_csv(out / "benchmark.csv", csv_rows(results, reference))
+        write_csv(out / "benchmark.csv", csv_rows(results, allowances, set_speed))
         done_count = sum(len(episodes) for runs in results.values() for episodes in runs.values())
         title = (
             f"drivestack benchmark: {len(results)} scenarios, {done_count} episodes from seed {plan.seed}"
