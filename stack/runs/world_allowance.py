@@ -86,3 +86,8 @@ def world_allowance(config: RunConfig, seed: int) -> WorldAllowance:
     limits = np.array([getattr(lane, "speed_limit", None) or np.inf for lane in world.lanes])
     speeds = lane_speeds(world, desired, limits, config.highway.duration, Cruise.of(config))
     return WorldAllowance(float(speeds.max()), float(speeds[world.ego_lane]))
+
+
+def world_allowances(config: RunConfig, seeds: list[int]) -> list[WorldAllowance]:
+    """`world_allowance` of each of `seeds` (one work item of a process pool or a Ray task)."""
+    return [world_allowance(config, seed) for seed in seeds]
