@@ -21,6 +21,9 @@ runs on it, as it does on the pool it starts itself.
 from __future__ import annotations
 
 import argparse
+import csv
+import json
+import math
 import os
 import platform
 import tempfile
@@ -34,7 +37,9 @@ import stack.apps.benchmark as benchmark
 import stack.apps.compare as compare_module
 from stack.apps.benchmark import FULL_EPISODES, FULL_RANDOM_EPISODES, RANDOM, BenchmarkPlan, run_benchmark
 from stack.apps.benchmark_cli import BENCHMARK_AGENTS
+from stack.apps.benchmark_report import combined
 from stack.apps.options import per_agent
+from stack.runs.statistics import Interval, mean_interval
 from stack.runs.world_allowance import world_allowance
 from stack.runtime import executors
 from stack.runtime.files import EpisodeJournal
@@ -114,7 +119,11 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1_007_000)
     parser.add_argument("--duration", type=float, default=None, help="episode length [s] (smoke tests)")
     parser.add_argument("--out", type=Path, default=None, help="keep the benchmark's folder here")
+    parser.add_argument("--scores-of", type=Path, default=None, help="only print a finished folder's scores")
     args = parser.parse_args()
+    if args.scores_of is not None:
+        print(separation(args.scores_of), end="")
+        return
     agents = args.agents.split(",")
     instrument()
     plan = BenchmarkPlan.chosen(False, args.episodes, args.seed, args.duration)
@@ -130,7 +139,62 @@ def main() -> None:
         start_up = time.perf_counter() - start
         run_benchmark(configs, plan, out, jobs=args.jobs, progress=False)
         total = time.perf_counter() - start
+        scores = separation(out)
     report(agents, plan, args, total, start_up, allowance_s(configs[0], plan))
+    print("\n" + scores, end="")
+
+
+def separation(folder: Path) -> str:
+    """The score and the set-speed score of each agent of the benchmark in `folder`, best first,
+    and the paired difference of each agent to the next (per scenario, on the same seeds, combined
+    over the scenarios as the overall score is): how far apart each score puts them."""
+    rows = list(csv.DictReader((folder / "benchmark.csv").open()))
+    order = [row["agent"] for row in json.loads((folder / "summary.json").read_text())["leaderboard"]]
+    scenarios = list(dict.fromkeys(row["scenario"] for row in rows))
+    found = {(r["agent"], r["scenario"], r["seed"]): r for r in rows}
+    lines = ["| agent | score | set-speed score | progress |", "|---|---|---|---|"]
+    for agent in order:
+        cells = [
+            combined(
+                [
+                    mean_interval(
+                        [float(r[name]) for r in rows if r["agent"] == agent and r["scenario"] == s]
+                    )
+                    for s in scenarios
+                ]
+            )
+            for name in ("score", "set_speed_score", "progress")
+        ]
+        lines.append(f"| {agent} | " + " | ".join(_cell(c) for c in cells) + " |")
+    lines += [
+        "",
+        "| pair (paired by seed) | score difference | set-speed score difference | apart (new / old) |",
+        "|---|---|---|---|",
+    ]
+    for better, worse in zip(order, order[1:], strict=False):
+        cells, apart = [], []
+        for name in ("score", "set_speed_score"):
+            per = [
+                mean_interval(
+                    [
+                        float(found[better, s, seed][name]) - float(found[worse, s, seed][name])
+                        for (a, sc, seed) in found
+                        if a == better and sc == s and (worse, s, seed) in found
+                    ]
+                )
+                for s in scenarios
+            ]
+            cells.append(_cell(combined(per, floor=-math.inf), signed=True))
+            apart.append(sum(part.low > 0 or part.high < 0 for part in per))
+        lines.append(
+            f"| {better} - {worse} | {cells[0]} | {cells[1]} | {apart[0]} / {apart[1]} of {len(scenarios)} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def _cell(interval: Interval, signed: bool = False) -> str:
+    form = "+.3f" if signed else ".3f"
+    return f"{interval.value:{form}} [{interval.low:{form}}, {interval.high:{form}}]"
 
 
 def allowance_s(config: Any, plan: BenchmarkPlan, seeds: int = 20) -> float:

@@ -120,13 +120,13 @@ def scored(
     return found
 
 
-def combined(parts: list[Interval]) -> Interval:
+def combined(parts: list[Interval], floor: float = 0.0) -> Interval:
     """The mean of the scenarios' values, its half-width the quadrature sum of theirs over their
-    count (independent scenarios)."""
+    count (independent scenarios), cut at `floor` (a score cannot be negative; a difference can)."""
     value = float(np.mean([part.value for part in parts]))
     high = math.sqrt(sum((part.high - part.value) ** 2 for part in parts)) / len(parts)
     low = math.sqrt(sum((part.value - part.low) ** 2 for part in parts)) / len(parts)
-    return Interval(value, max(0.0, value - low), value + high)
+    return Interval(value, max(floor, value - low), value + high)
 
 
 def leaderboard(
