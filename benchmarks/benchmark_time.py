@@ -105,7 +105,7 @@ def instrument() -> None:
 
 def warm_worker(_: int) -> int:
     """What a pool worker imports before its first episode."""
-    import stack.runs.batched_episodes  # noqa: F401
+    import stack.runs.batch_episodes  # noqa: F401
     import stack.runs.episodes  # noqa: F401
 
     return os.getpid()

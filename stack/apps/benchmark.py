@@ -25,7 +25,7 @@ from stack.apps.compare import compare, comparison, write_comparison
 from stack.apps.resume import journal_of, journaled, resolved_config, started
 from stack.loop.safety_metrics import TTC_FLOOR_S
 from stack.results.episode_result import EpisodeResult
-from stack.runs.batched_episodes import batches
+from stack.runs.batch_episodes import batches
 from stack.runs.world_allowance import WorldAllowance, world_allowances
 from stack.runtime.executors import completed, shared_workers
 from stack.runtime.files import write_csv, write_json, write_text
