@@ -14,13 +14,14 @@ from pathlib import Path
 from typing import Any
 
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.vec_env import SubprocVecEnv, VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env import SubprocVecEnv, VecEnv, VecEnvWrapper, VecMonitor
 
 from planner.model_file import CHECKPOINT
 from stack.runtime.interrupts import handled_by, note_stop
 from stack.settings.run import RunConfig
+from stack.training.batch_env import TrainingWorlds
 from stack.training.decision_env import HierarchicalHighwayEnv
-from stack.training.world_shards import ShardDied, ShardedWorlds, batched_training_env
+from stack.training.world_shards import ShardDied, ShardedWorlds, WorldShards
 
 
 class StopTraining(Exception):
@@ -116,3 +117,20 @@ def close_env(env: Monitor | VecEnv, a_worker_died: bool = False) -> None:
 def innermost(env: object) -> object:
     """The vec env under `env`'s vec-env wrappers (SB3's `VecMonitor` of batched worlds), or `env`."""
     return env.unwrapped if isinstance(env, VecEnvWrapper) else env
+
+
+def batched_training_env(config: RunConfig, ray: str | None = None) -> VecMonitor:
+    """`train.worlds` worlds of `config`, each episode of a `train.scenarios` mix drawing its
+    member as the per-world env does: in this process, as `train.envs` shards in worker
+    processes, or with `ray` (an address: `local`, `auto`, HOST:PORT) as `train.envs` shards in
+    Ray actors (SB3's `VecMonitor` keeps the episode returns for the logs); ValueError (one line)
+    for a config the batch does not run."""
+    train = config.train
+    assert train.worlds is not None, "a batched training env has its worlds"
+    if ray is not None:
+        from stack.training.ray_shards import RayWorldShards  # Ray is imported only by runs that use it
+
+        return VecMonitor(RayWorldShards(config, train.worlds, train.envs, ray))
+    if train.envs == 1:
+        return VecMonitor(TrainingWorlds(config, train.worlds))
+    return VecMonitor(WorldShards(config, train.worlds, train.envs))

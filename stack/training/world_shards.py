@@ -19,7 +19,6 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from stable_baselines3.common.vec_env import VecMonitor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
 from records import N_ACTIONS
@@ -208,20 +207,3 @@ def shard_context(start_method: str | None = None) -> BaseContext:
     if method == "forkserver":
         context.set_forkserver_preload(["__main__", __name__])
     return context
-
-
-def batched_training_env(config: RunConfig, ray: str | None = None) -> VecMonitor:
-    """`train.worlds` worlds of `config`, each episode of a `train.scenarios` mix drawing its
-    member as the per-world env does: in this process, as `train.envs` shards in worker
-    processes, or with `ray` (an address: `local`, `auto`, HOST:PORT) as `train.envs` shards in
-    Ray actors (SB3's `VecMonitor` keeps the episode returns for the logs); ValueError (one line)
-    for a config the batch does not run."""
-    train = config.train
-    assert train.worlds is not None, "a batched training env has its worlds"
-    if ray is not None:
-        from stack.training.ray_shards import RayWorldShards
-
-        return VecMonitor(RayWorldShards(config, train.worlds, train.envs, ray))
-    if train.envs == 1:
-        return VecMonitor(TrainingWorlds(config, train.worlds))
-    return VecMonitor(WorldShards(config, train.worlds, train.envs))
