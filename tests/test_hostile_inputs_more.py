@@ -394,17 +394,17 @@ def test_a_checkpoint_declaring_more_than_the_run_can_hold_is_refused_before_inf
     tracemalloc.stop()
 
 
-def oversized_buffer_checkpoint(observation_size: int, rows: int, fields: tuple[str, ...]) -> bytes:
-    """A checkpoint whose replay-buffer `fields` each declare `rows` rows of zeros (float32, one env)
-    in a `.npy` header that tells the truth: `rows` x `observation_size` x 4 bytes each when
-    inflated, about a thousandth of it packed."""
+def oversized_buffer_checkpoint(shape: tuple[int, ...], fields: tuple[str, ...]) -> bytes:
+    """A checkpoint whose replay-buffer `fields` each hold zeros (float32) of `shape` (rows, envs,
+    observation), as their `.npy` headers truthfully declare: 4 bytes a value inflated, about a
+    thousandth of it packed."""
     import io
     import zipfile
 
     from tests.test_model_files import metadata_bytes, npy
 
     counters = {"format": "drivestack-model/1", "kind": "checkpoint", "counters": {"num_timesteps": 5}}
-    zeros = npy(np.zeros((rows, 1, observation_size), dtype=np.float32))
+    zeros = npy(np.zeros(shape, dtype=np.float32))
     packed = io.BytesIO()
     with zipfile.ZipFile(packed, "w", zipfile.ZIP_DEFLATED) as archive:
         archive.writestr("metadata.npy", metadata_bytes(counters))
@@ -428,7 +428,7 @@ def test_a_checkpoint_whose_headers_do_not_fit_the_run_is_refused_from_them(tmp_
     owned_training_folder(folder, config)
     size = (transition_bytes(build_config(config)) - 20) // 8
     rows = 200 * 2**20 // (4 * size)
-    crafted = oversized_buffer_checkpoint(size, rows, ("observations",))
+    crafted = oversized_buffer_checkpoint((rows, 1, size), ("observations",))
     assert rows * size * 4 < checkpoint_bytes(build_config(config)) and len(crafted) < 2**20
     (folder / "checkpoint.npz").write_bytes(crafted)
     arguments = ["train", "--resume", str(folder), "--no-progress"]
@@ -440,7 +440,7 @@ def test_a_checkpoint_whose_headers_do_not_fit_the_run_is_refused_from_them(tmp_
     )
     assert tracemalloc.get_traced_memory()[1] < 100 * 2**20
     tracemalloc.stop()
-    (folder / "checkpoint.npz").write_bytes(oversized_buffer_checkpoint(size, 10, ("secrets",)))
+    (folder / "checkpoint.npz").write_bytes(oversized_buffer_checkpoint((10, 1, size), ("secrets",)))
     one_line_refusal(arguments, "'buffer/secrets' is not part of this run's checkpoint")
 
 
