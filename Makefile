@@ -53,6 +53,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/decision_ceiling.py
 	$(BIN)/python benchmarks/ray_scaling.py
 	$(BIN)/python benchmarks/compare_rate.py
+	$(BIN)/python benchmarks/benchmark_time.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -1,4 +1,4 @@
-"""Batched decisions (`stack.training.vector_env.DecisionVecEnv` over `DecisionBatch`): decisions of
+"""Batched decisions (`stack.training.gym_vector_env.DecisionVecEnv` over `DecisionBatch`): decisions of
 the decision MDP per CPU-second, N worlds stepped together against one world of the per-world env
 (`HierarchicalHighwayEnv` on the `vector` backend), measured in one sitting.
 
@@ -28,7 +28,7 @@ import numpy as np
 
 from stack.settings.run import RunConfig, build_config
 from stack.training.decision_env import HierarchicalHighwayEnv
-from stack.training.vector_env import DecisionVecEnv
+from stack.training.gym_vector_env import DecisionVecEnv
 
 SIZES = (1, 16, 64, 256)
 

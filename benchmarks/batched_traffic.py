@@ -1,4 +1,4 @@
-"""Batched traffic (`stack.sim.batched`): world-frames per CPU-second of N worlds stepped together,
+"""Batched traffic (`stack.sim.batch`): world-frames per CPU-second of N worlds stepped together,
 against the `vector` backend driving one world alone and stock highway-env, measured in one sitting;
 and the memory of a batch of 256 worlds.
 
@@ -32,7 +32,7 @@ import numpy as np
 
 from records import Actuation
 from stack.settings.run import HighwayConfig, build_config
-from stack.sim.batched.traffic import TrafficBatch
+from stack.sim.batch.traffic import TrafficBatch
 from stack.sim.envs import HIGHWAY
 from stack.sim.highway import HighwayAdapter, env_config, to_env_action
 

@@ -347,7 +347,7 @@ API_PROGRAM = """
 import sys, time, tracemalloc
 import gymnasium as gym
 import stack
-from stack.training.vector_env import DecisionVecEnv
+from stack.training.gym_vector_env import DecisionVecEnv
 def vector(worlds):
     made = gym.make_vec("drivestack/HierarchicalHighway-v0", num_envs=worlds,
         vectorization_mode="vector_entry_point", config={"highway": {"duration": 2, "vehicles_count": 5}})

@@ -126,7 +126,7 @@ def occupied_lanes(world: WorldState, extent: tuple[float, float] | None = None)
 @register_jitable
 def reaches_lane(low: float, high: float, centre: float, lane_width: float) -> bool:
     """Whether a footprint spanning [`low`, `high`] across the road [m] reaches into the lane
-    centred at `centre` (the batch compiles this same function: `stack.batch.kernels`)."""
+    centred at `centre` (the batch compiles this same function: `stack.batch.loop_kernels`)."""
     return low < centre + lane_width / 2 and high > centre - lane_width / 2
 
 

@@ -5,7 +5,7 @@ on the QP.
 The cost is a sum of squares of terms linear in the decision vector, so its Hessian is constant;
 Gauss-Newton leaves out the constraints' curvature, so the QP's Hessian is computed once at build
 time. Per tick: one call of an expanded SX function (cost gradient, constraint Jacobian and the
-QP's bounds at the guess; compiled to C when the machine can, `controllers.compiled`) and one
+QP's bounds at the guess; compiled to C when the machine can, `controllers.casadi_codegen`) and one
 `qrqp` solve. A guess that is already optimal (zero cost gradient, feasible: lane keeping exactly
 at the steady state) is kept without a QP, as sqpmethod's convergence test before its first
 iteration does: qrqp can cycle between equivalent active sets on that degenerate QP. The step
@@ -20,7 +20,7 @@ from typing import Any
 
 import casadi as ca
 
-from controllers.compiled import compiled
+from controllers.casadi_codegen import compiled
 
 QP_OPTIONS = {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False}
 QP_TOLERANCE = 1e-8

@@ -23,7 +23,7 @@ car otherwise slows to a crawl between two lanes, in front of a follower that ar
 The rule is written once, as plain functions of one world's `VehicleRows` (`unsafe_vehicles`,
 `lane_is_safe`, `change_is_safe`) that numba compiles: `SafetyLayer` calls them compiled on its
 snapshot, the lookahead on the scene it reads, and `permitted_batch` and the batch's kernels
-(`stack.batch.kernels`) loop over worlds around them.
+(`stack.batch.loop_kernels`) loop over worlds around them.
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from common.compiled import Kernel
 from common.neighbours import VehicleRows, lateral_drift, lateral_extents, nearest_in_lane, vehicle_rows
+from planner.follower_forecast import ego_braking, follower_keeps_clear
 from records import N_ACTIONS, Command, WorldState
 from records.batch import BatchColumns, WorldBatch
 
@@ -47,12 +48,6 @@ MAX_TIME_S = 60.0
 """Largest time gap or time to collision it may ask for [s]."""
 MAX_BRAKING_MPS2 = 15.0
 """Largest braking it may grant a follower [m/s^2]: beyond any tyre's grip."""
-FORECAST_STEP_S = 0.1
-"""Time step of the follower's forecast [s]."""
-FORECAST_HORIZON_S = 30.0
-"""How far the follower's forecast runs at most [s]: past any car's stop from highway speeds."""
-STOP_MARGIN_M = 1.0
-"""The gap the ego's braking forecast keeps to the leader it meets [m] (`EmergencyBraking`'s)."""
 
 
 class SafetyConfig(BaseModel):
@@ -182,55 +177,6 @@ def lane_is_safe(
     """No vehicle makes the lane centred at `centre` unsafe (`unsafe_vehicles`)."""
     ahead, behind = unsafe_vehicles(rows, centre, min_gap, min_ttc, front_time_gap, rear_time_gap)
     return ahead < 0 and behind < 0
-
-
-@register_jitable
-def ego_braking(rows: VehicleRows, centres: tuple[float, float]) -> tuple[float, float]:
-    """(deceleration [m/s^2], the speed it brakes to [m/s]) the ego needs to meet, `STOP_MARGIN_M`
-    behind, the harder to meet of the nearest vehicles ahead in the lanes centred at `centres` [m]
-    at constant speed (0 and its own speed when none closes in)."""
-    s, speed, length = rows.s, rows.speed, rows.length
-    deceleration, floor = 0.0, speed[0]
-    for centre in centres:
-        ahead = nearest_in_lane(rows, centre)[0]
-        if ahead < 0 or speed[ahead] >= speed[0]:
-            continue
-        room = max(s[ahead] - s[0] - (length[ahead] + length[0]) / 2 - STOP_MARGIN_M, 0.1)
-        needed = (speed[0] - speed[ahead]) ** 2 / (2 * room)
-        if needed > deceleration:
-            deceleration, floor = needed, speed[ahead]
-    return deceleration, floor
-
-
-@register_jitable
-def follower_keeps_clear(
-    gap: float,
-    follower_speed: float,
-    ego_speed: float,
-    ego_deceleration: float,
-    ego_floor: float,
-    braking: float,
-    reaction: float,
-    keep: float,
-) -> bool:
-    """Whether a follower `gap` [m] behind the ego (bumper to bumper) at `follower_speed` [m/s]
-    stays at least `keep` [m] behind it, holding its speed for `reaction` [s] and then braking at
-    most `braking` [m/s^2] (no slower than it needs to follow the ego), while the ego brakes at
-    `ego_deceleration` [m/s^2] from `ego_speed` down to `ego_floor` [m/s]. Forecast in steps of
-    `FORECAST_STEP_S` until the follower is no faster than the ego and the ego no longer brakes."""
-    dt = FORECAST_STEP_S
-    for step in range(int(FORECAST_HORIZON_S / dt)):
-        t = (step + 1) * dt
-        ego_before, follower_before = ego_speed, follower_speed
-        ego_speed = max(ego_floor, ego_speed - ego_deceleration * dt)
-        if t > reaction:
-            follower_speed = max(follower_speed - braking * dt, min(follower_speed, ego_speed))
-        gap += (ego_before + ego_speed - follower_before - follower_speed) * dt / 2
-        if gap < keep:
-            return False
-        if t > reaction and follower_speed <= ego_speed and ego_speed <= ego_floor:
-            return True
-    return True
 
 
 @register_jitable

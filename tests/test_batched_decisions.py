@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from records.batch import WorldBatch
-from stack.batch.closed_loop import ClosedLoopBatch
+from stack.batch.closed_loop_batch import ClosedLoopBatch
 from stack.settings.run import build_config
 from stack.training.decision_batch import DecisionBatch
 from stack.training.decision_env import HierarchicalHighwayEnv

@@ -1,4 +1,4 @@
-"""`drivestack run` and `compare` on batched worlds (`stack.runs.batched_episodes`): each episode's
+"""`drivestack run` and `compare` on batched worlds (`stack.runs.batch_episodes`): each episode's
 result, every outcome field and the per-tick trace, is the one the per-world loop reports (passed
 cars, comfort, TTC, R157, standstill, collision class, counts), for the agents that decide on the
 grid (learned, MOBIL, rule, keep-lane, random), through sensors, on roads of several lane counts;
@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 
 from stack.results.episode_result import EpisodeResult
-from stack.runs.batched_episodes import BATCH_WORLDS, batch_refusal, batches, run_batched
+from stack.runs.batch_episodes import BATCH_WORLDS, batch_refusal, batches, run_batched
 from stack.runs.episodes import run, run_episode
 from stack.settings.run import build_config
 from stack.settings.scenarios import names as scenario_names

@@ -13,7 +13,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 import stack  # noqa: F401 - registers the envs
 from stack.settings.run import build_config, training_worlds
 from stack.training.decision_env import HierarchicalHighwayEnv
-from stack.training.vector_env import DecisionVecEnv, HierarchicalHighwayVectorEnv
+from stack.training.gym_vector_env import DecisionVecEnv, HierarchicalHighwayVectorEnv
 
 SHORT = {"highway": {"duration": 6}}
 """Episodes of 6 s: several end, and are reset, within a few decisions."""

@@ -45,6 +45,10 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
     assert "| 64 batched worlds |" in rates and "| 64 batched worlds in 2 processes | 0.0625 |" in rates
     assert "| batch 4 |" in run("batched_decisions.py", "--runs", "1", "--duration", "2", "--sizes", "1,4")
     assert "of them between floors of stack: 0\n" in run("config_path.py")
+    timed = run(
+        "benchmark_time.py", *("--agents", "keep-lane", "--episodes", "1", "--duration", "2", "--jobs", "1")
+    )
+    assert "| keep-lane |" in timed and "extrapolated" in timed
     training = yaml.safe_load((ROOT / "configs" / "train" / "ddqn-stage1.yaml").read_text())
     training |= {"scenario": None, "highway": {"vehicles_count": 10, "duration": 3}}
     training["train"] |= {"envs": 1, "learning_starts": 10, "scenarios": {}, "checkpoint_every": 20}

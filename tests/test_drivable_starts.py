@@ -21,7 +21,7 @@ from stack.settings.run import build_config
 from stack.settings.scenarios import names
 from stack.settings.world import EGO_LENGTH_M
 from stack.sim import envs
-from stack.sim.batched.traffic import TrafficBatch
+from stack.sim.batch.traffic import TrafficBatch
 from stack.sim.highway import HighwayAdapter
 from stack.sim.traffic import INCIDENT_LENGTH_M, random_traffic
 

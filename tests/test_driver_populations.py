@@ -13,7 +13,7 @@ from highway_env.vehicle.behavior import IDMVehicle
 from typer.testing import CliRunner
 
 from stack.apps.cli import app
-from stack.runs.batched_episodes import batch_refusal, run_batched
+from stack.runs.batch_episodes import batch_refusal, run_batched
 from stack.runs.episodes import run, run_episode
 from stack.settings.drivers import DRIVER_PARAMETERS, POPULATION_RANGES, POPULATIONS, population_shares
 from stack.settings.run import ConfigError, build_config, drivers_of, in_scenario

@@ -47,7 +47,7 @@ def test_batched_worlds_drive_the_same_long_road():
     from highway_env.vehicle.kinematics import Vehicle
 
     from stack.settings.world import HighwayConfig
-    from stack.sim.batched.traffic import TrafficBatch
+    from stack.sim.batch.traffic import TrafficBatch
 
     batch = TrafficBatch(HighwayConfig(duration=3600, vehicles_count=10), worlds=2)
     batch.reset([1, 2])
@@ -124,7 +124,7 @@ def vector_env():
     import gymnasium as gym
 
     import stack  # noqa: F401  (registers the envs)
-    from stack.training.vector_env import DecisionVecEnv
+    from stack.training.gym_vector_env import DecisionVecEnv
 
     gymnasium_env = gym.make_vec(
         "drivestack/HierarchicalHighway-v0",
@@ -144,7 +144,7 @@ def vector_env():
 def test_the_vector_envs_refuse_a_world_count_before_allocating(num_envs):
     import gymnasium as gym
 
-    from stack.training.vector_env import DecisionVecEnv
+    from stack.training.gym_vector_env import DecisionVecEnv
 
     with pytest.raises(ValueError, match="num_envs: expected a whole number of worlds from 1 to 1024"):
         DecisionVecEnv(TINY_WORLD, num_envs)

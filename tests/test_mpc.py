@@ -11,7 +11,7 @@ from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.dynamics import BicycleVehicle
 from typer.testing import CliRunner
 
-from controllers.compiled import compiled, compiler
+from controllers.casadi_codegen import compiled, compiler
 from controllers.config import MPCSettings, PIDGains
 from controllers.cruise import AdaptiveCruise
 from controllers.mpc import MPCTracker
@@ -119,7 +119,7 @@ def test_the_compiled_linearisation_equals_the_interpreted_one_bit_for_bit(monke
     fast = compiled(function)
     assert fast.is_a("External") == (compiler() is not None)
     with monkeypatch.context() as no_compiler:
-        no_compiler.setattr("controllers.compiled.shutil.which", lambda name: None)
+        no_compiler.setattr("controllers.casadi_codegen.shutil.which", lambda name: None)
         assert compiled(function) is function
     monkeypatch.setenv("DRIVESTACK_COMPILE", "0")
     assert compiled(function) is function

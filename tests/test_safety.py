@@ -5,7 +5,8 @@ import numpy as np
 
 from common.neighbours import lateral_extent, neighbours
 from controllers.maneuver import Maneuver
-from planner.safety import SafetyConfig, SafetyLayer, follower_keeps_clear
+from planner.follower_forecast import follower_keeps_clear
+from planner.safety import SafetyConfig, SafetyLayer
 from records import Command, WorldState
 from tests.helpers import cutting_in, scene
 

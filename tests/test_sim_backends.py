@@ -322,8 +322,8 @@ def test_a_frames_idm_is_highway_envs_bit_for_bit():
     from highway_env.vehicle.behavior import IDMVehicle
 
     from stack.sim.fast_road import LaneProjections
-    from stack.sim.vector.frame import DriverLaws, TrafficFrame
     from stack.sim.vector.road import DRIVER_CONSTANTS
+    from stack.sim.vector.road_frame import DriverLaws, TrafficFrame
 
     env = vector_env_after("dense", seed=5, frames=40)
     road = env.unwrapped.road

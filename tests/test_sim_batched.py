@@ -14,10 +14,10 @@ from records import Actuation
 from records.batch import WorldBatch
 from stack.settings.run import build_config
 from stack.settings.world import HighwayConfig
-from stack.sim.batched.arrays import BatchArrays, UnsupportedRoad, read_world
-from stack.sim.batched.frame import lane_frame
-from stack.sim.batched.kernels import lane_neighbours
-from stack.sim.batched.traffic import TrafficBatch
+from stack.sim.batch.arrays import BatchArrays, UnsupportedRoad, read_world
+from stack.sim.batch.traffic import TrafficBatch
+from stack.sim.batch.traffic_frame import lane_frame
+from stack.sim.batch.traffic_kernels import lane_neighbours
 from stack.sim.envs import HIGHWAY
 from stack.sim.highway import HighwayAdapter, env_config
 

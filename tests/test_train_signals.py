@@ -27,15 +27,17 @@ from tests.test_train import TINY
 
 
 def started_training(
-    tmp_path: Path, data: dict, deadline_s: float = 60.0, **popen: Any
+    tmp_path: Path, data: dict, deadline_s: float = 60.0, options: tuple[str, ...] = (), **popen: Any
 ) -> tuple[subprocess.Popen, Path]:
-    """`drivestack train` of config `data` in a subprocess (`popen`: more of Popen's options), once
-    it has written its first checkpoint: the process and its folder."""
+    """`drivestack train` of config `data` (with more command-line `options`) in a subprocess
+    (`popen`: more of Popen's options), once it has written its first checkpoint: the process and
+    its folder."""
     config = tmp_path / "long.yaml"
     config.write_text(yaml.safe_dump(data))
     out = tmp_path / "t"
+    command = [sys.executable, "-m", "stack", "train", "-c", str(config), "--out", str(out), "--no-progress"]
     process = subprocess.Popen(
-        [sys.executable, "-m", "stack", "train", "-c", str(config), "--out", str(out), "--no-progress"],
+        [*command, *options],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         **popen,

@@ -8,11 +8,14 @@ its finished episodes, and only the rest run."""
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from functools import partial
 from pathlib import Path
 
 from stack.apps.benchmark_report import (
     LANE_CHANGE_BUDGET,
+    MIN_HEADROOM,
     WEIGHTS,
+    Allowances,
     csv_rows,
     leaderboard,
     markdown,
@@ -22,6 +25,9 @@ from stack.apps.compare import compare, comparison, write_comparison
 from stack.apps.resume import journal_of, journaled, resolved_config, started
 from stack.loop.safety_metrics import TTC_FLOOR_S
 from stack.results.episode_result import EpisodeResult
+from stack.runs.batch_episodes import batches
+from stack.runs.world_allowance import WorldAllowance, world_allowances
+from stack.runtime.executors import completed, shared_workers
 from stack.runtime.files import write_csv, write_json, write_text
 from stack.runtime.interrupts import deferred
 from stack.settings import scenarios
@@ -36,6 +42,8 @@ FULL_RANDOM_EPISODES = 300
 QUICK_EPISODES = 4
 """Episodes per scenario with --quick (5 agents on 10 scenarios in under 3 minutes on 2 cores)."""
 RANDOM = "random"
+ALLOWANCE_BATCH_SEEDS = 100
+"""Seeds a work item resets for their worlds' allowances (about 1 s of work)."""
 
 
 @dataclass(frozen=True)
@@ -86,6 +94,21 @@ def finished_before(configs: list[RunConfig], folder: Path) -> dict[str, list[Ep
     }
 
 
+def allowances_of(
+    config: RunConfig, runs: dict[str, list[EpisodeResult]], jobs: int = 1, ray: str | None = None
+) -> dict[int, WorldAllowance]:
+    """What each seed the agents ran in `config`'s world allows (one reset of the world a seed),
+    over the benchmark's processes or Ray tasks (here with `jobs` 1: a stopped benchmark's)."""
+    seeds = sorted({episode.seed for episodes in runs.values() for episode in episodes})
+    if jobs <= 1 and ray is None:
+        return dict(zip(seeds, world_allowances(config, seeds), strict=True))
+    parts = batches(seeds, jobs if ray is None else 1, ALLOWANCE_BATCH_SEEDS)
+    found: dict[int, WorldAllowance] = {}
+    for index, allowances in completed(partial(world_allowances, config), parts, jobs, ray):
+        found.update(zip(parts[index], allowances, strict=True))
+    return found
+
+
 def run_benchmark(
     configs: list[RunConfig],
     plan: BenchmarkPlan,
@@ -100,44 +123,51 @@ def run_benchmark(
     journals kept for --resume)."""
     write_text(out / "config.yaml", resolved_config(configs))
     results: dict[str, dict[str, list[EpisodeResult]]] = {}
+    allowances: Allowances = {}
     journals = []
     interrupted = False
-    for scenario in plan.scenarios:
-        scenario_configs = plan.configs(configs, scenario)
-        folder = out / scenario
-        folder.mkdir(exist_ok=True)
-        done = finished_before(scenario_configs, folder) if resuming else None
-        kept = started(scenario_configs, folder, done)
-        journals += kept
-        try:
-            runs = compare(scenario_configs, kept, jobs=jobs, progress=progress, ray=ray, done=done)
-        except KeyboardInterrupt:
-            interrupted = True
-            break
-        results[scenario] = {run.summary["agent"]: run.episodes for run in runs}
-        with deferred(interrupt_after=False):
-            write_comparison(comparison(runs), folder)
-        if len(runs) < len(configs) or runs[-1].summary["interrupted"]:
-            interrupted = True
-            break
+    with shared_workers():
+        for scenario in plan.scenarios:
+            scenario_configs = plan.configs(configs, scenario)
+            folder = out / scenario
+            folder.mkdir(exist_ok=True)
+            done = finished_before(scenario_configs, folder) if resuming else None
+            kept = started(scenario_configs, folder, done)
+            journals += kept
+            try:
+                runs = compare(scenario_configs, kept, jobs=jobs, progress=progress, ray=ray, done=done)
+            except KeyboardInterrupt:
+                interrupted = True
+                break
+            results[scenario] = {run.summary["agent"]: run.episodes for run in runs}
+            stopped = len(runs) < len(configs) or bool(runs[-1].summary["interrupted"])
+            with deferred(interrupt_after=False):
+                allowances[scenario] = allowances_of(
+                    scenario_configs[0], results[scenario], *((1, None) if stopped else (jobs, ray))
+                )
+                write_comparison(comparison(runs), folder)
+            if stopped:
+                interrupted = True
+                break
     if not results:
         raise KeyboardInterrupt
-    reference = configs[0].controller.set_speed_mps
-    rows = leaderboard(results, reference)
+    set_speed = configs[0].controller.set_speed_mps
+    rows = leaderboard(results, allowances, set_speed)
     with deferred(interrupt_after=False):
         write_json(
             out / "summary.json",
             {
                 "plan": asdict(plan),
                 "interrupted": interrupted,
-                "reference_speed_mps": reference,
+                "set_speed_mps": set_speed,
+                "min_headroom_mps": MIN_HEADROOM,
                 "weights": WEIGHTS,
                 "ttc_floor_s": TTC_FLOOR_S,
                 "lane_change_budget_per_min": LANE_CHANGE_BUDGET,
                 "leaderboard": rows,
             },
         )
-        write_csv(out / "benchmark.csv", csv_rows(results, reference))
+        write_csv(out / "benchmark.csv", csv_rows(results, allowances, set_speed))
         done_count = sum(len(episodes) for runs in results.values() for episodes in runs.values())
         title = (
             f"drivestack benchmark: {len(results)} scenarios, {done_count} episodes from seed {plan.seed}"
@@ -147,6 +177,6 @@ def run_benchmark(
         for journal in journals if not interrupted else []:
             journal.discard()
     print(markdown(rows), end="")
-    stopped = " (interrupted: the same command with --resume finishes it)"
-    print(f"results: {out}" + (stopped if interrupted else ""))
+    resumable = " (interrupted: the same command with --resume finishes it)"
+    print(f"results: {out}" + (resumable if interrupted else ""))
     return interrupted

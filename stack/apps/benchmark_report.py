@@ -3,9 +3,15 @@ summary.json, benchmark.csv and leaderboard.png.
 
 An episode scores gate x the weighted mean of four sub-scores in [0, 1]:
 - **gate** (multiplicative): 0 for an episode with an at-fault collision or a road departure, else 1;
-- **progress** (weight 5): mean speed / the cruise's set speed (30 m/s by default: the fastest a free
-  road lets the stack drive), capped at 1. Computable without the oracle; on a road where nobody can
-  reach the set speed (a jam) every agent scores low, and only the comparison between agents counts;
+- **progress** (weight 5): how much of what its world allows the episode took
+  (`stack.runs.world_allowance`: the mean speeds an ego could hold in the fastest lane, `allowed`,
+  and in its own, `own_lane`, from the seed's world at the start). Where another lane allows at
+  least `MIN_HEADROOM` more than the ego's own, progress is the share of that headroom gained,
+  (mean speed - own_lane) / (allowed - own_lane), clipped to [0, 1]: keeping the lane scores about 0
+  there and taking the fastest lane 1. Where no lane allows more, it is mean speed / allowed, capped
+  at 1. Against the set speed alone (30 m/s) every safe agent landed within 0.035 of the others,
+  since most of its speed is what any agent gets for free; the old score is kept as
+  `set_speed_score` (the same score on a world allowing the set speed in every lane);
 - **TTC** (weight 5): the share of the episode's time with no vehicle ahead in an occupied lane
   closer than `stack.loop.safety_metrics.TTC_FLOOR_S` (1.5 s) in time to collision;
 - **comfort** (weight 2): the share of three bounds kept over the episode: peak lateral acceleration
@@ -29,6 +35,7 @@ import numpy as np
 from common.plugins import short_labels
 from stack.results.episode_result import EpisodeResult
 from stack.runs.statistics import Interval, mean_interval, rate_interval
+from stack.runs.world_allowance import WorldAllowance
 
 WEIGHTS = {"progress": 5.0, "ttc": 5.0, "comfort": 2.0, "economy": 1.0}
 """The sub-scores' weights (nuPlan's: progress 5, TTC 5, comfort 2; economy added here)."""
@@ -38,7 +45,11 @@ MAX_LATERAL_JERK = 2.5
 """Comfort bound on the peak lateral jerk [m/s^3]."""
 LANE_CHANGE_BUDGET = 6.0
 """Lane changes a minute that cost no economy [1/min]."""
+MIN_HEADROOM = 1.0
+"""The least gain over the ego's own lane [m/s] that makes lane choice count in the progress."""
 SUBSCORES = tuple(WEIGHTS)
+Allowances = dict[str, dict[int, WorldAllowance]]
+"""What each episode's world allows, by scenario and seed."""
 
 
 @dataclass(frozen=True)
@@ -57,8 +68,26 @@ class EpisodeScore:
         return self.gate * weighted / sum(WEIGHTS.values())
 
 
-def episode_score(episode: EpisodeResult, reference_speed: float) -> EpisodeScore:
-    """`episode` scored against `reference_speed` [m/s] (the cruise's set speed)."""
+def progress(mean_speed: float, allowance: WorldAllowance) -> float:
+    """The progress sub-score of an episode of `mean_speed` [m/s] in a world allowing `allowance`:
+    the share of the headroom over the own lane gained, or, with less than `MIN_HEADROOM`, of the
+    allowed speed reached."""
+    if mean_speed >= allowance.allowed:
+        return 1.0
+    headroom = allowance.allowed - allowance.own_lane
+    if headroom < MIN_HEADROOM:
+        return max(mean_speed, 0.0) / allowance.allowed
+    return min(1.0, max(0.0, (mean_speed - allowance.own_lane) / headroom))
+
+
+def set_speed_allowance(set_speed: float) -> WorldAllowance:
+    """A world allowing `set_speed` [m/s] in every lane: progress is then mean speed / set speed,
+    the score before worlds were measured (`set_speed_score`)."""
+    return WorldAllowance(set_speed, set_speed)
+
+
+def episode_score(episode: EpisodeResult, allowance: WorldAllowance) -> EpisodeScore:
+    """`episode` scored in a world allowing `allowance`."""
     duration = max(episode.duration_s, 1e-6)
     comfort = (
         (episode.peak_lat_accel <= MAX_LATERAL_ACCELERATION)
@@ -68,48 +97,53 @@ def episode_score(episode: EpisodeResult, reference_speed: float) -> EpisodeScor
     per_minute = episode.lane_changes * 60.0 / duration
     return EpisodeScore(
         gate=0.0 if episode.at_fault_collision or episode.road_departure else 1.0,
-        progress=min(1.0, max(episode.mean_speed, 0.0) / reference_speed),
+        progress=progress(episode.mean_speed, allowance),
         ttc=min(1.0, max(0.0, 1.0 - episode.time_below_ttc_floor_s / duration)),
         comfort=comfort,
         economy=1.0 if per_minute <= LANE_CHANGE_BUDGET else LANE_CHANGE_BUDGET / per_minute,
     )
 
 
-def scored(episodes: list[EpisodeResult], reference_speed: float) -> dict[str, Interval]:
-    """One agent's episodes in one scenario: `score`, each sub-score and the `failure` rate (the
-    share of gated episodes), each with its 95 % interval."""
-    scores = [episode_score(episode, reference_speed) for episode in episodes]
+def scored(
+    episodes: list[EpisodeResult], allowances: dict[int, WorldAllowance], set_speed: float
+) -> dict[str, Interval]:
+    """One agent's episodes in one scenario (`allowances` by seed): `score`, each sub-score, the
+    `failure` rate (the share of gated episodes) and the `set_speed_score`, each with its 95 %
+    interval."""
+    scores = [episode_score(episode, allowances[episode.seed]) for episode in episodes]
     found = {"score": mean_interval([s.score for s in scores], floor=0.0)}
     for name in SUBSCORES:
         found[name] = mean_interval([getattr(s, name) for s in scores], floor=0.0)
     found["failure"] = rate_interval(sum(s.gate == 0.0 for s in scores), len(scores))
+    flat = set_speed_allowance(set_speed)
+    found["set_speed_score"] = mean_interval([episode_score(e, flat).score for e in episodes], floor=0.0)
     return found
 
 
-def combined(parts: list[Interval]) -> Interval:
+def combined(parts: list[Interval], floor: float = 0.0) -> Interval:
     """The mean of the scenarios' values, its half-width the quadrature sum of theirs over their
-    count (independent scenarios)."""
+    count (independent scenarios), cut at `floor` (a score cannot be negative; a difference can)."""
     value = float(np.mean([part.value for part in parts]))
     high = math.sqrt(sum((part.high - part.value) ** 2 for part in parts)) / len(parts)
     low = math.sqrt(sum((part.value - part.low) ** 2 for part in parts)) / len(parts)
-    return Interval(value, max(0.0, value - low), value + high)
+    return Interval(value, max(floor, value - low), value + high)
 
 
 def leaderboard(
-    results: dict[str, dict[str, list[EpisodeResult]]], reference_speed: float
+    results: dict[str, dict[str, list[EpisodeResult]]], allowances: Allowances, set_speed: float
 ) -> list[dict[str, Any]]:
     """Per agent, best first: `overall` {metric: [value, low, high]} over the scenarios it finished
     and `scenarios` {scenario: {metric: [value, low, high]}}; `results` is {scenario: {agent:
-    episodes}}."""
+    episodes}}, `set_speed` [m/s] the cruise's (for `set_speed_score`)."""
     agents = list(dict.fromkeys(agent for runs in results.values() for agent in runs))
     rows = []
     for agent in agents:
         per = {
-            scenario: scored(runs[agent], reference_speed)
+            scenario: scored(runs[agent], allowances[scenario], set_speed)
             for scenario, runs in results.items()
             if runs.get(agent)
         }
-        metrics = ("score", *SUBSCORES, "failure")
+        metrics = ("score", *SUBSCORES, "failure", "set_speed_score")
         overall = {metric: combined([found[metric] for found in per.values()]) for metric in metrics}
         rows.append(
             {
@@ -126,17 +160,23 @@ def leaderboard(
 
 
 def csv_rows(
-    results: dict[str, dict[str, list[EpisodeResult]]], reference_speed: float
+    results: dict[str, dict[str, list[EpisodeResult]]], allowances: Allowances, set_speed: float
 ) -> list[dict[str, Any]]:
-    """benchmark.csv: one row per scenario, agent and episode: its score, sub-scores and results."""
+    """benchmark.csv: one row per scenario, agent and episode: its score, sub-scores, what its world
+    allows [m/s], the set-speed score and its results."""
     rows = []
+    flat = set_speed_allowance(set_speed)
     for scenario, runs in results.items():
         for agent, episodes in runs.items():
             for episode in episodes:
-                score = episode_score(episode, reference_speed)
+                allowance = allowances[scenario][episode.seed]
+                score = episode_score(episode, allowance)
                 parts = {name: getattr(score, name) for name in ("gate", *SUBSCORES)}
+                world = {"allowed_speed": allowance.allowed, "own_lane_speed": allowance.own_lane}
+                old = {"set_speed_score": episode_score(episode, flat).score}
                 rows.append(
-                    {"scenario": scenario, "agent": agent, "score": score.score, **parts, **episode.row()}
+                    {"scenario": scenario, "agent": agent, "score": score.score, **parts, **world, **old}
+                    | episode.row()
                 )
     return rows
 

@@ -22,6 +22,7 @@ from stack.apps.options import (
     SET_HELP,
     TRAFFIC_HELP,
     TRAIN_CONFIG,
+    TRAIN_RAY_HELP,
     VARIANT_HELP,
     VERSION_OPTION,
     chosen,
@@ -340,6 +341,7 @@ def train(
         None, help="Continue the run in this folder from its last checkpoint."
     ),
     adopt: bool = typer.Option(False, "--adopt", help=ADOPT_HELP),
+    ray: str | None = typer.Option(None, "--ray", metavar="[ADDRESS]", help=TRAIN_RAY_HELP),
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Train a decision agent inside the closed loop, keeping the best model by real-time validation
@@ -350,6 +352,7 @@ def train(
         check_envs,
         check_init_model,
         check_memory,
+        check_ray_shards,
         resumed_training,
         train_or_fail,
         training_owner,
@@ -370,8 +373,10 @@ def train(
         options |= {"train__worlds": worlds} | ({"train__envs": 1} if worlds and envs is None else {})
         cfg = configured(config or TRAIN_CONFIG, sets, None, train__steps=steps, sim__plant=plant, **options)
     check_memory(cfg)
-    check_envs(cfg)
+    if ray in (None, "local"):
+        check_envs(cfg)
     check_batched(cfg)
+    check_ray_shards(cfg, ray)
     if not cfg.train.scenarios:
         try:
             cfg.check_one_encoding({cfg.scenario or "highway": cfg.highway}, "perception.lanes")
@@ -380,5 +385,5 @@ def train(
     check_init_model(cfg)
     owner, resuming = training_owner(cfg), resume is not None
     folder = claimed(resume or out, f"train-{cfg.train.algorithm}", owner, resuming, restart=False)
-    if (train_members if cfg.train.members > 1 else train_or_fail)(cfg, folder, progress):
+    if (train_members if cfg.train.members > 1 else train_or_fail)(cfg, folder, progress, ray):
         sys.exit(130)

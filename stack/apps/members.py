@@ -39,7 +39,7 @@ def check_unfinished(folder: Path, config: RunConfig) -> None:
         )
 
 
-def train_members(config: RunConfig, folder: Path, progress: bool) -> bool:
+def train_members(config: RunConfig, folder: Path, progress: bool, ray: str | None = None) -> bool:
     """Train (or resume) each member in `folder/seed-S`, a finished one kept as it is, then write
     the ensemble of their best.npz and of their final.npz as `folder`'s and its summary.json. True
     when a signal stopped a member (its checkpoint written: `--resume folder` goes on)."""
@@ -60,7 +60,7 @@ def train_members(config: RunConfig, folder: Path, progress: bool) -> bool:
         except FolderRefused as error:
             fail(str(error))
         with lock:
-            if train_or_fail(member, run, progress):
+            if train_or_fail(member, run, progress, ray):
                 print(f"the ensemble goes on with `drivestack train --resume {folder}`", file=sys.stderr)
                 return True
     write_ensemble(folder, list(members))

@@ -37,6 +37,11 @@ RAY_HELP = (
     "Run the episodes as Ray tasks: on a local instance started for the run (bare --ray), on the "
     "cluster `ray start` made (auto) or at HOST:PORT; needs pip install 'drivestack\\[ray]'."
 )
+TRAIN_RAY_HELP = (
+    "Step the batched worlds' shards (train.envs of train.worlds / envs worlds) as Ray actors, the "
+    "learner here: on a local instance (bare --ray), the cluster `ray start` made (auto) or at "
+    "HOST:PORT; the same model as --envs (docs/ray.md); needs pip install 'drivestack\\[ray]'."
+)
 JOBS_OPTION = typer.Option(
     1, min=1, help="Parallel processes for the episodes (at most one per CPU; checked against memory)."
 )

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from planner.model_file import CHECKPOINT as CHECKPOINT_FILE
-from stack.apps.options import AGAIN, cannot_write, configured, fail
+from stack.apps.options import AGAIN, cannot_write, configured, fail, ray_or_fail
 from stack.runtime.machine import available_memory_bytes
 from stack.runtime.owner import MARKER, Owner, fingerprint, owner_of
 
@@ -39,7 +39,7 @@ def check_batched(config: RunConfig) -> None:
     if config.train.worlds is None:
         return
     from perception.grid import BATCHED_FEATURES
-    from stack.batch.closed_loop import refusal
+    from stack.batch.closed_loop_batch import refusal
     from stack.settings.run import training_worlds
 
     reason: str | None
@@ -92,6 +92,27 @@ def check_envs(config: RunConfig) -> None:
         )
 
 
+def check_ray_shards(config: RunConfig, address: str | None) -> None:
+    """With `--ray`, refuse in one line, before the run folder exists: per-world envs (only batched
+    worlds are sharded over actors), no Ray or no cluster at `address`, and a cluster with fewer
+    CPUs than the shards take (one each: the actors would wait for them forever)."""
+    if address is None:
+        return
+    if config.train.worlds is None:
+        fail("--ray: steps the shards of batched worlds as Ray actors; give --worlds N (train.worlds) too")
+    ray_or_fail(address)
+    if address == "local":
+        return
+    import ray
+
+    envs, cpus = config.train.envs, ray.cluster_resources().get("CPU", 0)
+    if envs > cpus:
+        fail(
+            f"--ray {address}: {envs} world shards (train.envs) take one CPU each, but the cluster has "
+            f"{cpus:g}; use --envs {int(cpus)} or fewer, or add nodes"
+        )
+
+
 def check_init_model(config: RunConfig) -> None:
     """Refuse, before the run folder exists and before torch is imported, a `train.init_model`
     that does not fit the run, or a learned expert's model that does not fit the roads it teaches on."""
@@ -105,35 +126,41 @@ def check_init_model(config: RunConfig) -> None:
         fail(str(error))
 
 
-def train_or_fail(config: RunConfig, folder: Path, progress: bool) -> bool:
-    """`drivestack train` in `folder`; a checkpoint that cannot be resumed is a one-line error.
-    True when interrupted (resumable)."""
+def train_or_fail(config: RunConfig, folder: Path, progress: bool, ray: str | None = None) -> bool:
+    """`drivestack train` in `folder` (with `ray`, an address, the world shards as Ray actors
+    there); a checkpoint that cannot be resumed is a one-line error. True when interrupted
+    (resumable)."""
     from planner.model_file import CHECKPOINT, ModelFileError, load_checkpoint
     from stack.training.checks import checkpoint_bytes
 
     try:
         if (checkpoint := folder / CHECKPOINT).is_file():
             load_checkpoint(checkpoint, arrays=False, max_bytes=checkpoint_bytes(config))
-        return train_and_report(config, folder, progress)
+        return train_and_report(config, folder, progress, ray)
     except ModelFileError as error:
         fail(str(error))
 
 
-def train_and_report(config: RunConfig, folder: Path, progress: bool) -> bool:
+def train_and_report(config: RunConfig, folder: Path, progress: bool, ray: str | None = None) -> bool:
     """Train (or resume) in `folder` and print the outcome; True when a signal stopped it (its
     checkpoint written: resumable). A signal while the env processes start stops before training;
-    signals after training only wait for the files. A dead env process ends it in one line."""
+    signals after training only wait for the files. A dead env process or Ray actor (as it starts
+    or later) ends it in one line, exit code 1."""
     from stack.runtime.files import write_failure
     from stack.runtime.interrupts import deferred, received
-    from stack.training.envs import EnvWorkerDied
+    from stack.training.envs import EnvWorkerDied, worker_death
     from stack.training.trainer import Trainer
+    from stack.training.world_shards import ShardDied
 
     try:
         with deferred():
-            trainer = Trainer(config, folder, progress=progress)
+            trainer = Trainer(config, folder, progress=progress, ray=ray)
     except KeyboardInterrupt:
         print("interrupted before training started; nothing trained", file=sys.stderr)
         return True
+    except ShardDied as error:
+        print(f"error: {worker_death(None, folder, error)}", file=sys.stderr)
+        sys.exit(1)
     with deferred(interrupt_after=False):
         try:
             summary = trainer.run()

@@ -1,5 +1,5 @@
 """The ego's state and settings in a batch of closed loops, as named records the compiled steps
-(`stack.batch.kernels`) take: one row a world of what `Maneuver` and the controllers hold."""
+(`stack.batch.loop_kernels`) take: one row a world of what `Maneuver` and the controllers hold."""
 
 from __future__ import annotations
 

@@ -18,7 +18,7 @@ from stack.agents.oracle import Oracle
 from stack.loop.closed_loop import ClosedLoop
 from stack.loop.recording import episode_recording
 from stack.results.episode_result import EpisodeResult, summarize
-from stack.runs.batched_episodes import RAY_BATCH_WORLDS, batch_refusal, batches, run_batched
+from stack.runs.batch_episodes import RAY_BATCH_WORLDS, batch_refusal, batches, run_batched
 from stack.runs.kept import kept_adapter, kept_agent
 from stack.runtime.executors import completed
 from stack.settings.drivers import HIGHWAY_ENV
@@ -97,7 +97,7 @@ def run(
 ) -> RunResults:
     """Run `config.episodes` seeded episodes over `jobs` processes, or as Ray tasks with `ray` (an
     address, see `stack.runtime.executors`), as batches of worlds where the config allows
-    (`stack.runs.batched_episodes`); results are ordered by episode, identical for any `jobs`, `ray`
+    (`stack.runs.batch_episodes`); results are ordered by episode, identical for any `jobs`, `ray`
     or batching. Here a batch hands on each episode as it ends; over processes or Ray a batch comes
     whole, and a stop loses the batches under way. With `video`, episode 0 (unless done) runs here
     and keeps its frames; with `snapshot` (the default), it runs alone and keeps its road's

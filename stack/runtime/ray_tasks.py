@@ -200,8 +200,13 @@ def worker_call(task: Callable[[Item], Result], item: Item, path: Sequence[str])
     this worker's `sys.path` the entries of the driver's `path` it lacks (`import_path`). Ray gives
     its workers the driver's working directory and, on this machine, its environment (PYTHONPATH),
     but not folders a program added to sys.path; the entries a worker has keep their precedence."""
-    sys.path.extend([entry for entry in dict.fromkeys(path) if entry not in sys.path])
+    extend_path(path)
     return task(item)
+
+
+def extend_path(path: Sequence[str]) -> None:
+    """Append to this worker's `sys.path` the entries of the driver's `path` it lacks, in order."""
+    sys.path.extend([entry for entry in dict.fromkeys(path) if entry not in sys.path])
 
 
 def import_path() -> list[str]:

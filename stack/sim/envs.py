@@ -33,7 +33,7 @@ def register_envs() -> None:
     gym.register(
         HIERARCHICAL_HIGHWAY,
         entry_point="stack.training.decision_env:HierarchicalHighwayEnv",
-        vector_entry_point="stack.training.vector_env:HierarchicalHighwayVectorEnv",
+        vector_entry_point="stack.training.gym_vector_env:HierarchicalHighwayVectorEnv",
     )
     gym.register(DEEPCARS, entry_point="stack.deepcars.world:DeepCarsEnv")
 

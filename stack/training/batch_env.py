@@ -15,7 +15,7 @@ from records import Command
 from stack.settings.run import RunConfig
 from stack.training.decision_batch import DecisionBatch
 from stack.training.decision_env import EpisodeRecord
-from stack.training.vector_env import DecisionVecEnv, SeededWorlds
+from stack.training.gym_vector_env import DecisionVecEnv, SeededWorlds
 
 
 class RecordedWorlds(SeededWorlds):

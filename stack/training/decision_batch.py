@@ -13,7 +13,7 @@ from gymnasium import spaces
 
 from perception.grid import OccupancyGridBuilder, observe_batch
 from records import N_ACTIONS, Command
-from stack.batch.closed_loop import ClosedLoopBatch, refusal
+from stack.batch.closed_loop_batch import ClosedLoopBatch, refusal
 from stack.settings.run import RunConfig, build_config, grid_config, training_worlds
 from stack.settings.train import MAX_WORLDS
 from stack.training.decision_env import drawn_episode, mix_shares, with_permitted
@@ -81,7 +81,7 @@ def _shown(values: np.ndarray) -> str:
 def batch_config(config: RunConfig | dict | None) -> RunConfig:
     """`config` validated as the decision MDP's, or ValueError (one line) for what a batch does not
     run: an encoding other than `observation`, or one of another size on some road an episode
-    may draw (see also `stack.batch.closed_loop.refusal`)."""
+    may draw (see also `stack.batch.closed_loop_batch.refusal`)."""
     if not isinstance(config, RunConfig):
         config = build_config(config or {}, "HierarchicalHighway-v0 config")
     if config.train.encoding != "observation":

@@ -20,7 +20,7 @@ from planner.model_file import CHECKPOINT
 from stack.runtime.interrupts import handled_by, note_stop
 from stack.settings.run import RunConfig
 from stack.training.decision_env import HierarchicalHighwayEnv
-from stack.training.world_shards import WorldShards, batched_training_env
+from stack.training.world_shards import ShardDied, ShardedWorlds, batched_training_env
 
 
 class StopTraining(Exception):
@@ -53,12 +53,12 @@ def monitored_env(config: RunConfig) -> Monitor:
     return Monitor(HierarchicalHighwayEnv(config))
 
 
-def training_env(config: RunConfig) -> Monitor | VecEnv:
+def training_env(config: RunConfig, ray: str | None = None) -> Monitor | VecEnv:
     """What a DDQN / DQN run steps: `train.worlds` batched worlds (in this process, or as
-    `train.envs` shards in worker processes), else one monitored env here or `train.envs` of them
-    in worker processes."""
+    `train.envs` shards in worker processes, or in Ray actors at the address `ray`), else one
+    monitored env here or `train.envs` of them in worker processes."""
     if config.train.worlds is not None:
-        return batched_training_env(config)
+        return batched_training_env(config, ray)
     if config.train.envs == 1:
         return monitored_env(config)
     return SubprocVecEnv([partial(worker_env, config)] * config.train.envs)
@@ -76,35 +76,40 @@ class EnvWorkerDied(RuntimeError):
 
 
 def worker_death(env: object, out: Path, error: BaseException) -> str:
-    """One line: that an env worker of `env` died, how, and what the run in `out` keeps."""
-    codes = [p.exitcode for p in getattr(innermost(env), "processes", []) if p.exitcode not in (None, 0)]
-    how = f" (exit code {codes[0]})" if codes else f" ({type(error).__name__})"
+    """One line: that an env worker of `env` died (a shard that names itself: `ShardDied`), how,
+    and what the run in `out` keeps."""
     kept = (
         f"its last checkpoint ({out / CHECKPOINT}) is kept: --resume {out} continues from it"
         if (out / CHECKPOINT).is_file()
         else "no checkpoint was written yet: start the run again"
     )
+    if isinstance(error, ShardDied):
+        return f"{error}; {kept}"
+    codes = [p.exitcode for p in getattr(innermost(env), "processes", []) if p.exitcode not in (None, 0)]
+    how = f" (exit code {codes[0]})" if codes else f" ({type(error).__name__})"
     return f"a training environment process died{how}; {kept}"
 
 
 def close_env(env: Monitor | VecEnv, a_worker_died: bool = False) -> None:
-    """Close `env` and its worker processes. After `a_worker_died` the workers are ended without
-    SB3's goodbye exchange: a reply of a live worker may already have been read while `waiting`
-    is still set, and `close()` would wait for it forever."""
+    """Close `env` and its worker processes. After `a_worker_died` (or a close that finds one dead)
+    the workers are ended without SB3's goodbye exchange: a reply of a live worker may already have
+    been read while `waiting` is still set, and `close()` would wait for it forever."""
     inner = innermost(env)
-    processes = getattr(inner, "processes", [])
     if not a_worker_died:
         try:
             env.close()
             return
         except (EOFError, OSError):
             pass
-    for process in processes:
+    if isinstance(inner, ShardedWorlds):
+        inner.abandon()
+        return
+    for process in getattr(inner, "processes", []):
         process.kill()
         process.join(timeout=10)
     for remote in getattr(inner, "remotes", []):
         remote.close()
-    if isinstance(inner, SubprocVecEnv | WorldShards):
+    if isinstance(inner, SubprocVecEnv):
         inner.closed = True
 
 

@@ -73,12 +73,14 @@ class Trainer:
         out: Path,
         progress: bool = True,
         on_validation: Callable[[Validation], None] | None = None,
+        ray: str | None = None,
     ) -> None:
-        """`on_validation` hears every validation (a sweep reports them to Ray Tune)."""
+        """`on_validation` hears every validation (a sweep reports them to Ray Tune); with `ray`
+        (an address: `local`, `auto`, HOST:PORT) the batched worlds' shards are Ray actors there."""
         self.config, self.out, self.progress = config, Path(out), progress
         self.on_validation = on_validation
         self.start = initial_model(config)
-        self.env: Monitor | VecEnv = training_env(config)
+        self.env: Monitor | VecEnv = training_env(config, ray)
         self.validation_env = HierarchicalHighwayEnv(config)
         self.history: list[Validation] = []
         self.best: dict[str, tuple[float, float] | None] | None = None
@@ -86,9 +88,9 @@ class Trainer:
         self.elapsed_before = 0.0
 
     @classmethod
-    def resume(cls, out: Path, steps: int | None, progress: bool = True) -> Trainer:
+    def resume(cls, out: Path, steps: int | None, progress: bool = True, ray: str | None = None) -> Trainer:
         config = load_config(Path(out) / "config.yaml", train__steps=steps)
-        return cls(config, out, progress)
+        return cls(config, out, progress, ray=ray)
 
     def metadata(self, steps: int) -> ModelMetadata:
         return model_metadata(self.config, self.validation_env, steps)

@@ -12,7 +12,7 @@ from highway_env.vehicle.behavior import IDMVehicle
 from numba import njit
 
 from common.compiled import Kernel
-from stack.sim.vector.kernels import maximum, minimum, wrap_to_pi
+from stack.sim.vector.geometry_kernels import maximum, minimum, wrap_to_pi
 from stack.sim.vector.lanes import clip
 
 NOT_ZERO = 1e-2

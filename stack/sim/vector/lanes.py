@@ -10,7 +10,7 @@ from highway_env.road.lane import StraightLane
 from highway_env.road.road import RoadNetwork
 
 from stack.sim.fast_road import LaneIndex
-from stack.sim.vector.kernels import closest_lanes
+from stack.sim.vector.geometry_kernels import closest_lanes
 
 
 def clip(x: np.ndarray, bound: float) -> np.ndarray:

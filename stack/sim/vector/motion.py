@@ -15,7 +15,7 @@ from highway_env.vehicle.kinematics import Vehicle
 from stack.sim.fast_road import BROAD_PHASE_MARGIN
 from stack.sim.traffic import TrafficVehicle
 from stack.sim.vector.dynamics import bicycle_step, clipped_actions
-from stack.sim.vector.kernels import SEPARATION_MARGIN, close_pair_rows
+from stack.sim.vector.geometry_kernels import SEPARATION_MARGIN, close_pair_rows
 from stack.sim.vector.lanes import LaneTable
 
 _KINEMATIC: dict[type, bool] = {}

@@ -16,7 +16,7 @@ the continuous parts as array operations over the vehicles, in the stock operati
 - step: clipping, the kinematic bicycle, impacts and the closest lane of every vehicle at once, then
   stock's collision test on the pairs that could touch (`motion.close_pairs`).
 
-The arithmetic runs as numba kernels (`stack.sim.vector.kernels` for the geometry,
+The arithmetic runs as numba kernels (`stack.sim.vector.geometry_kernels` for the geometry,
 `stack.sim.vector.dynamics` for the vehicles) between numpy's transcendental calls and dot products,
 which stay in numpy (highway-env's bits).
 
@@ -41,7 +41,6 @@ from highway_env.vehicle.objects import RoadObject
 from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections
 from stack.sim.traffic import IDM_DRIVERS, ScenarioTraffic
 from stack.sim.vector.dynamics import mobil_verdicts, steering_angles
-from stack.sim.vector.frame import DriverLaws, TrafficFrame
 from stack.sim.vector.lanes import LaneTable, clip
 from stack.sim.vector.motion import (
     MOVER_CONSTANTS,
@@ -54,6 +53,7 @@ from stack.sim.vector.motion import (
     same_objects,
     steps_like_vehicle,
 )
+from stack.sim.vector.road_frame import DriverLaws, TrafficFrame
 
 
 def _plain_velocity(cls: type) -> bool:

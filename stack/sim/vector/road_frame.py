@@ -12,7 +12,7 @@ from highway_env.vehicle.objects import RoadObject
 
 from stack.sim.fast_road import NEIGHBOUR_MARGIN, LaneProjections, is_kind
 from stack.sim.vector.dynamics import idm_accelerations, idm_gap_ratios, idm_inputs
-from stack.sim.vector.kernels import lane_order, neighbour_rows
+from stack.sim.vector.geometry_kernels import lane_order, neighbour_rows
 from stack.sim.vector.lanes import LaneTable
 from stack.sim.vector.motion import Moved, columns
 

@@ -18,7 +18,7 @@ import numpy as np
 from perception.grid import BATCHED_FEATURES, observe_batch
 from planner.agents import Agent, decide, sees_permitted
 from records import Command, GridConfig, child_seed
-from stack.batch.closed_loop import ClosedLoopBatch, refusal
+from stack.batch.closed_loop_batch import ClosedLoopBatch, refusal
 from stack.loop.closed_loop import grid_config
 from stack.results.episode_result import EpisodeResult
 from stack.runs.kept import kept_agent
@@ -37,7 +37,7 @@ PLANNING_AGENTS = ("oracle", "lookahead")
 def batch_refusal(config: RunConfig) -> str | None:
     """Why `config`'s episodes run one world at a time (one line), or None when they run as a
     batch: `sim.batched` on, the `vector` backend, the PID tracker on the kinematic plant
-    (`stack.batch.closed_loop.refusal`), and an agent that decides on the run's grid in the
+    (`stack.batch.closed_loop_batch.refusal`), and an agent that decides on the run's grid in the
     `observation` or `paper` encoding of features the batch computes, in one size on every road
     the episodes draw."""
     if not config.sim.batched:

@@ -4,7 +4,7 @@ bit for bit, through its sensor model when it has one (`perception.sensor.Sensor
 
 The traffic is a `TrafficBatch`; the ego's side of every tick (reference, leaders, PID, cruise,
 emergency braking, the safety layer's abort, road departure) is three compiled calls over all the
-worlds (`stack.batch.kernels`); between them numpy computes what it computes for one
+worlds (`stack.batch.loop_kernels`); between them numpy computes what it computes for one
 world (the snapshot's lane frame, each footprint's sine and cosine) over the whole batch. No
 Python runs per world per tick: only a world's reset (highway-env spawns its road) is per world."""
 
@@ -26,7 +26,7 @@ from perception.sensor import SensorBatch, SensorModel
 from planner.safety import permitted_batch, safety_settings
 from records import WorldState
 from records.batch import WorldBatch
-from stack.batch.kernels import (
+from stack.batch.loop_kernels import (
     ControllerArrays,
     EgoLaws,
     ManeuverArrays,
@@ -41,7 +41,7 @@ from stack.loop.safety_metrics import classify_collision
 from stack.results.episode_fields import record_fields
 from stack.results.episode_result import EpisodeResult
 from stack.settings.run import RunConfig, training_worlds
-from stack.sim.batched.traffic import TrafficBatch
+from stack.sim.batch.traffic import TrafficBatch
 from stack.sim.highway import snapshot
 
 
@@ -141,7 +141,7 @@ class ClosedLoopBatch:
 
     def _memory(self, vehicles: int, phantoms: int = 0) -> None:
         """Emergency braking's per-vehicle memory (`seen`, `seen_speed`, `seen_slowing`: what it
-        kept of each vehicle, `stack.batch.kernels.emergency_acceleration`), grown to room
+        kept of each vehicle, `stack.batch.loop_kernels.emergency_acceleration`), grown to room
         for `vehicles` a world (a column per snapshot row), then `phantoms` (a column per false
         positive's id)."""
         more = vehicles - self.vehicle_room

@@ -4,7 +4,7 @@ Each world is highway-v0 with the stack's traffic (`stack.sim.traffic`) and an e
 actuation, the same world the `vector` backend drives alone through `HighwayAdapter`, bit for bit:
 at reset highway-env spawns the world's road with the world's own generator (a seed, or the stream
 the world's last reset left, as one env's `reset()` continues it), the arrays read it once, and from
-then on a frame of every world is a fixed sequence of compiled kernels (`stack.sim.batched.kernels`,
+then on a frame of every world is a fixed sequence of compiled kernels (`stack.sim.batch.traffic_kernels`,
 the vector backend's `dynamics` and `frame.IdmRows`) and numpy's transcendental calls and dot products
 over all the worlds' vehicles at once, in highway-env's operation order:
 
@@ -22,7 +22,7 @@ The four facts this identity rests on are the vector backend's (`stack.sim.vecto
 whose episode ended (the ego crashed, or the duration is reached) are reset at their next `step`,
 which returns their first frame instead of stepping them (gymnasium's next-step autoreset); the
 other worlds step on, untouched. `road(world)` builds highway-env's objects on request; the arrays
-(`TrafficBatch.arrays`, `stack.sim.batched.arrays`) are the state of record."""
+(`TrafficBatch.arrays`, `stack.sim.batch.arrays`) are the state of record."""
 
 from __future__ import annotations
 
@@ -37,8 +37,8 @@ from highway_env.road.road import RoadNetwork
 from highway_env.vehicle.kinematics import Vehicle
 
 from stack.settings.world import HighwayConfig
-from stack.sim.batched.arrays import BatchArrays, read_world, road_of
-from stack.sim.batched.frame import act, move
+from stack.sim.batch.arrays import BatchArrays, read_world, road_of
+from stack.sim.batch.traffic_frame import act, move
 from stack.sim.fast_road import FastRoadNetwork
 from stack.sim.highway import MAX_ACCELERATION, MAX_STEERING, env_config
 from stack.sim.traffic import ScenarioTraffic

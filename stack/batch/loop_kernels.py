@@ -1,4 +1,4 @@
-"""The compiled steps of a batch of closed loops (`stack.batch.closed_loop`), one call each over
+"""The compiled steps of a batch of closed loops (`stack.batch.closed_loop_batch`), one call each over
 every world: `decide` (a decision point: the safety layer's filter, the maneuver's lane change),
 `control` (one tick's reference, leaders, PID, cruise and emergency braking: the actuation) and
 `settle` (after the plant's frame: road departure, the maneuver's end). Each follows

@@ -1,6 +1,6 @@
 """One frame of a batch of traffic worlds over its arrays (`BatchArrays`): `act` (highway-env's
 `Road.act()`: the IDM drivers' decisions, steering and acceleration), `move` (`Road.step(dt)`: the
-vehicles' steps, then `collide`). Compiled kernels (`stack.sim.batched.kernels`, the vector backend's
+vehicles' steps, then `collide`). Compiled kernels (`stack.sim.batch.traffic_kernels`, the vector backend's
 `dynamics`) around numpy's transcendental calls and dot products, in highway-env's operation order;
 only the worlds with vehicles in `active` (a count per world, 0 for a world left as it is) move."""
 
@@ -11,8 +11,8 @@ from highway_env.road.lane import StraightLane
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.objects import RoadObject
 
-from stack.sim.batched.arrays import DRIVER_LAWS, PLAIN, TRAFFIC, BatchArrays
-from stack.sim.batched.kernels import (
+from stack.sim.batch.arrays import DRIVER_LAWS, PLAIN, TRAFFIC, BatchArrays
+from stack.sim.batch.traffic_kernels import (
     closest_lane_rows,
     collision_candidates,
     decide,
@@ -22,9 +22,9 @@ from stack.sim.batched.kernels import (
 )
 from stack.sim.fast_road import BROAD_PHASE_MARGIN, NEIGHBOUR_MARGIN
 from stack.sim.vector.dynamics import bicycle_step, clipped_actions, steering_angles
-from stack.sim.vector.frame import DriverLaws, IdmRows
-from stack.sim.vector.kernels import SEPARATION_MARGIN
+from stack.sim.vector.geometry_kernels import SEPARATION_MARGIN
 from stack.sim.vector.lanes import clip
+from stack.sim.vector.road_frame import DriverLaws, IdmRows
 
 
 def lane_frame(

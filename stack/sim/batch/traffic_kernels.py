@@ -4,7 +4,7 @@ order, the closest lane and the collision candidates. Vehicle `i` of world `w` i
 of the flattened arrays (V vehicles a world; a world's vehicles fill its first rows, in road
 order). Sums, products, comparisons and the float modulo only, in highway-env's operation order
 (numpy's bits, numba contracts no multiply-add); numpy's transcendental calls and dot products run
-between the kernels (`stack.sim.batched.traffic`)."""
+between the kernels (`stack.sim.batch.traffic`)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from numba import njit
 
 from common.compiled import Kernel
 from stack.sim.vector.dynamics import desired_gap, mobil_accepts
-from stack.sim.vector.kernels import (
+from stack.sim.vector.geometry_kernels import (
     closest_lanes,
     could_touch,
     counted_on_lane,
@@ -290,7 +290,7 @@ def closest_lane_rows(
     lane_heading: np.ndarray,
 ) -> np.ndarray:  # pragma: no cover - compiled
     """Each world's vehicles' closest lane rows (W, V) by highway-env's `distance_with_heading`
-    (`stack.sim.vector.kernels.closest_lanes`), -1 in the empty rows."""
+    (`stack.sim.vector.geometry_kernels.closest_lanes`), -1 in the empty rows."""
     rows = np.full(x.shape, -1, dtype=np.int64)
     for w in range(x.shape[0]):
         n, used = count[w], lane_count[w]
@@ -323,7 +323,7 @@ def collision_candidates(
     separation_margin: float,
 ) -> np.ndarray:  # pragma: no cover - compiled
     """The (world, i, j) triples, i < j, by world then i then j, of the vehicle pairs that
-    `stack.sim.vector.kernels.could_touch` keeps (a superset of the pairs highway-env's collision
+    `stack.sim.vector.geometry_kernels.could_touch` keeps (a superset of the pairs highway-env's collision
     test finds touching or about to over `dt` [s]), from a sweep along each world's lane
     `direction` (an axis): no pair further apart along it than the largest reach is tested."""
     found = np.empty((16, 3), dtype=np.int64)
