@@ -5,9 +5,12 @@ member.
 Metadata says what the arrays mean: `kind` (`mlp` or `qtable`), the algorithm, the observation
 size and encoding, the grid the observation came from, the network sizes. Reading is bounded before
 anything is inflated or allocated: the zip directory must list only `.npy` members, stored or
-deflated, unencrypted, whose declared sizes fit `max_bytes`; each member's `.npy` header must
-declare a numeric dtype and a shape whose bytes fit its member; metadata must be a JSON object of at
-most `MAX_METADATA_BYTES`. Anything else is refused with one line naming the file.
+deflated, unencrypted, whose declared sizes fit `max_bytes`; each member's `.npy` header (only
+its first bytes inflated) must declare a numeric dtype and a shape whose bytes fit its member, and
+the metadata's at most `MAX_METADATA_BYTES`; a reader that knows what the file must hold (a
+training run its checkpoint) checks every header against that (`ExpectedArray`, `header_check`)
+before any array is read. Metadata must be a JSON object. Anything else is refused with one line
+naming the file.
 """
 
 from __future__ import annotations
@@ -15,6 +18,8 @@ from __future__ import annotations
 import json
 import zipfile
 import zlib
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
@@ -33,8 +38,56 @@ MAX_MESSAGE = 200
 """Longest quote of a file's content in an error message [characters]."""
 
 
+METADATA = "metadata.npy"
+
+HeaderCheck = Callable[[str, tuple[int, ...], np.dtype], str | None]
+"""(array name, shape, dtype) as a member's `.npy` header declares them -> why the array cannot be
+one of the file's (a phrase, e.g. "is not part of this run's checkpoint"), or None."""
+
+
 class ModelFileError(ValueError):
     """A model file that cannot be loaded; the message is one line naming the file."""
+
+
+@dataclass(frozen=True)
+class ExpectedArray:
+    """What one array of a file must be: its `dtype` (None: any number) and `shape`, whose first
+    dimension may be anything up to `shape[0]` when `at_most_rows` (a replay buffer's filled rows)."""
+
+    shape: tuple[int, ...]
+    dtype: np.dtype | None = None
+    at_most_rows: bool = False
+
+    def admits(self, shape: tuple[int, ...], dtype: np.dtype) -> bool:
+        if self.dtype is not None and dtype != self.dtype:
+            return False
+        if self.at_most_rows:
+            return (
+                len(shape) == len(self.shape) >= 1
+                and shape[0] <= self.shape[0]
+                and shape[1:] == self.shape[1:]
+            )
+        return shape == self.shape
+
+    def __str__(self) -> str:
+        shape = (f"<={self.shape[0]}", *self.shape[1:]) if self.at_most_rows else self.shape
+        return f"({', '.join(map(str, shape))}{',' if len(shape) == 1 else ''}) {self.dtype or 'numbers'}"
+
+
+def header_check(layout: dict[str, tuple[ExpectedArray, ...]]) -> HeaderCheck:
+    """The `HeaderCheck` of a file holding the arrays `layout` names, each one of its options; a
+    name ending in `/*` stands for any last part (`optimizer/0/*`)."""
+
+    def check(name: str, shape: tuple[int, ...], dtype: np.dtype) -> str | None:
+        options = layout.get(name) or layout.get(name.rpartition("/")[0] + "/*")
+        if options is None:
+            return "is not part of this run's checkpoint"
+        if any(option.admits(shape, dtype) for option in options):
+            return None
+        declared = ExpectedArray(shape, dtype)
+        return f"declares {declared}; this run's holds {' or '.join(map(str, options))}"
+
+    return check
 
 
 def save_model(path: Path | str, arrays: dict[str, np.ndarray], metadata: dict) -> Path:
@@ -58,20 +111,24 @@ def save_model(path: Path | str, arrays: dict[str, np.ndarray], metadata: dict) 
 
 
 def load_model(
-    path: Path | str, max_bytes: int = MODEL_BYTES, arrays: bool = True
+    path: Path | str, max_bytes: int = MODEL_BYTES, arrays: bool = True, expected: HeaderCheck | None = None
 ) -> tuple[dict[str, np.ndarray], dict]:
     """(arrays, metadata) of a model file of at most `max_bytes` inflated; never unpickles. With
-    `arrays=False` only the metadata is read (the whole directory is checked all the same)."""
+    `arrays=False` only the metadata is read (the whole directory is checked all the same). With
+    `expected`, every array's header is checked by it before any array is read."""
     path = Path(path)
     if not path.is_file():
         raise ModelFileError(f"{path}: no such model file")
     try:
         with zipfile.ZipFile(path) as archive:
             members = _checked_members(path, archive, max_bytes)
+            checked = [name for name in members if arrays or expected is not None or name == METADATA]
+            for name in checked:
+                _check_header(path, archive, members[name], expected)
             data = {
-                name.removesuffix(".npy"): _read_array(path, archive, info)
-                for name, info in members.items()
-                if arrays or name == "metadata.npy"
+                name.removesuffix(".npy"): _read_array(archive, members[name])
+                for name in checked
+                if arrays or name == METADATA
             }
     except ModelFileError:
         raise
@@ -95,12 +152,15 @@ def load_model(
 
 
 def load_checkpoint(
-    path: Path | str, arrays: bool = True, max_bytes: int = CHECKPOINT_BYTES
+    path: Path | str,
+    arrays: bool = True,
+    max_bytes: int = CHECKPOINT_BYTES,
+    expected: HeaderCheck | None = None,
 ) -> tuple[dict[str, np.ndarray], dict]:
     """A training checkpoint (`load_model` of at most `max_bytes`, the run's own bound, at most
-    CHECKPOINT_BYTES), refused in one line unless it is one; `arrays=False` reads its metadata
-    only."""
-    found, metadata = load_model(path, min(max_bytes, CHECKPOINT_BYTES), arrays)
+    CHECKPOINT_BYTES, each array as `expected`: what the run's own model holds), refused in one
+    line unless it is one; `arrays=False` reads its metadata only."""
+    found, metadata = load_model(path, min(max_bytes, CHECKPOINT_BYTES), arrays, expected)
     if metadata.get("kind") != "checkpoint" or not isinstance(metadata.get("counters"), dict):
         raise ModelFileError(f"{path}: not a training checkpoint")
     return found, metadata
@@ -111,7 +171,7 @@ def _checked_members(path: Path, archive: zipfile.ZipFile, max_bytes: int) -> di
     members = {info.filename: info for info in archive.infolist()}
     total = 0
     for name, info in members.items():
-        if not name.endswith(".npy") or not (name == "metadata.npy" or name.startswith("array/")):
+        if not name.endswith(".npy") or not (name == METADATA or name.startswith("array/")):
             raise ModelFileError(
                 f"{path}: unexpected member {name[:MAX_MESSAGE]!r}; expected metadata and arrays"
             )
@@ -125,15 +185,30 @@ def _checked_members(path: Path, archive: zipfile.ZipFile, max_bytes: int) -> di
     return members
 
 
-def _read_array(path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> np.ndarray:
-    """One member: its `.npy` header checked (numeric dtype, a shape that fits the member) before
-    the array is allocated and read."""
+def _check_header(
+    path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo, expected: HeaderCheck | None
+) -> None:
+    """One member's `.npy` header (only its first bytes inflated), before any array is allocated:
+    a numeric dtype, a shape that fits the member (the metadata's: `MAX_METADATA_BYTES`) and, for
+    an array, what `expected` says the file holds."""
     with archive.open(info) as stream:
         shape, dtype = _header(stream)
     if dtype.hasobject or dtype.kind not in "fiub":
         raise ModelFileError(f"{path}: {info.filename!r} holds {dtype} values; only numbers are allowed")
-    if float(np.prod(shape, dtype=np.float64)) * dtype.itemsize > info.file_size:
+    declared = float(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+    if declared > info.file_size:
         raise ModelFileError(f"{path}: {info.filename!r} declares {shape} values, more than it holds")
+    if info.filename == METADATA:
+        if declared > MAX_METADATA_BYTES:
+            raise ModelFileError(f"{path}: metadata of {declared:.0f} bytes; at most {MAX_METADATA_BYTES}")
+    elif expected is not None:
+        name = info.filename.removeprefix("array/").removesuffix(".npy")
+        if (why := expected(name, shape, dtype)) is not None:
+            raise ModelFileError(f"{path}: {name[:MAX_MESSAGE]!r} {why}")
+
+
+def _read_array(archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> np.ndarray:
+    """One member whose header `_check_header` checked."""
     with archive.open(info) as stream:
         return np.lib.format.read_array(stream, allow_pickle=False)
 
@@ -147,8 +222,7 @@ def _header(stream: IO[bytes]) -> tuple[tuple[int, ...], np.dtype]:
 
 
 def _metadata(path: Path, raw: np.ndarray) -> dict:
-    if raw.nbytes > MAX_METADATA_BYTES:
-        raise ModelFileError(f"{path}: metadata of {raw.nbytes} bytes; at most {MAX_METADATA_BYTES}")
+    """The metadata member (its size checked with its header) as a JSON object."""
     try:
         metadata = json.loads(raw.tobytes().decode())
     except (ValueError, RecursionError):  # not UTF-8, not JSON, an integer over Python's digit limit

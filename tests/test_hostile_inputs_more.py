@@ -205,6 +205,28 @@ def test_resume_after_a_module_plug_in_was_edited_is_refused_naming_its_file(tmp
     one_line_refusal([*arguments, "--resume"], f"{agent} was edited since the run")
 
 
+def test_track_again_after_the_controller_plug_in_was_edited_says_which(tmp_path):
+    """`track` keeps no maneuver of an earlier run (it has no --resume: the same command in its own
+    folder measures every maneuver again); its config.yaml records each controller plug-in's digest,
+    and a restart after one was edited says which file, as `run --resume` does (`edited_file`)."""
+    from tests.test_plugins import PLUGIN_CONTROLLER
+
+    controller = tmp_path / "controller.py"
+    controller.write_text(PLUGIN_CONTROLLER.read_text())
+    arguments = ["track", "--controller", f"pid,{controller}:HeadingPD", "--plant", "kinematic"]
+    arguments += ["--speeds", "20", "--out", str(out := tmp_path / "track"), "--no-progress"]
+    first = CliRunner().invoke(app, arguments)
+    assert first.exit_code == 0 and "warning" not in first.output, first.output
+    assert f"{controller} sha256" in (out / "config.yaml").read_text()
+    controller.write_text(controller.read_text() + "\n# edited\n")
+    again = CliRunner().invoke(app, arguments)
+    assert again.exit_code == 0, again.output
+    warning = f"warning: {controller} was edited since the maneuvers in this folder were measured"
+    assert again.output.count(warning) == 1, again.output
+    records = json.loads((out / "tracking.json").read_text())
+    assert {r["controller"] for r in records} == {"pid", "controller.py:HeadingPD"}
+
+
 @pytest.mark.parametrize(
     ("metadata", "expected"),
     [
@@ -370,6 +392,83 @@ def test_a_checkpoint_declaring_more_than_the_run_can_hold_is_refused_before_inf
     one_line_refusal(["train", "--resume", str(folder), "--no-progress"], "MB when unpacked; at most")
     assert tracemalloc.get_traced_memory()[1] < 100 * 2**20
     tracemalloc.stop()
+
+
+def oversized_buffer_checkpoint(shape: tuple[int, ...], fields: tuple[str, ...]) -> bytes:
+    """A checkpoint whose replay-buffer `fields` each hold zeros (float32) of `shape` (rows, envs,
+    observation), as their `.npy` headers truthfully declare: 4 bytes a value inflated, about a
+    thousandth of it packed."""
+    import io
+    import zipfile
+
+    from tests.test_model_files import metadata_bytes, npy
+
+    counters = {"format": "drivestack-model/1", "kind": "checkpoint", "counters": {"num_timesteps": 5}}
+    zeros = npy(np.zeros(shape, dtype=np.float32))
+    packed = io.BytesIO()
+    with zipfile.ZipFile(packed, "w", zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr("metadata.npy", metadata_bytes(counters))
+        for field in fields:
+            archive.writestr(f"array/buffer/{field}.npy", zeros)
+    return packed.getvalue()
+
+
+def test_a_checkpoint_whose_headers_do_not_fit_the_run_is_refused_from_them(tmp_path):
+    """Within the run's own size bound (257 MB for 1,000 transitions), a buffer of 200 MB
+    inflated was read whole before the restore refused it; its header already says it holds more
+    rows than the run's buffer, and an array the run's checkpoint never holds is refused too."""
+    import tracemalloc
+
+    from stack.settings.run import build_config
+    from stack.training.checks import checkpoint_bytes, transition_bytes
+    from tests.test_hostile_inputs import owned_training_folder
+
+    folder = tmp_path / "run"
+    config = {"train": {"steps": 10, "buffer_size": 1000}, "highway": {"duration": 2}}
+    owned_training_folder(folder, config)
+    size = (transition_bytes(build_config(config)) - 20) // 8
+    rows = 200 * 2**20 // (4 * size)
+    crafted = oversized_buffer_checkpoint((rows, 1, size), ("observations",))
+    assert rows * size * 4 < checkpoint_bytes(build_config(config)) and len(crafted) < 2**20
+    (folder / "checkpoint.npz").write_bytes(crafted)
+    arguments = ["train", "--resume", str(folder), "--no-progress"]
+    tracemalloc.start()
+    one_line_refusal(
+        arguments,
+        f"'buffer/observations' declares ({rows}, 1, {size}) float32; "
+        f"this run's holds (<=1000, 1, {size}) float32",
+    )
+    assert tracemalloc.get_traced_memory()[1] < 100 * 2**20
+    tracemalloc.stop()
+    (folder / "checkpoint.npz").write_bytes(oversized_buffer_checkpoint((10, 1, size), ("secrets",)))
+    one_line_refusal(arguments, "'buffer/secrets' is not part of this run's checkpoint")
+
+
+def test_expected_arrays_admit_what_a_run_writes_and_nothing_else():
+    from planner.model_file import ExpectedArray, header_check
+
+    float32 = np.dtype(np.float32)
+    check = header_check(
+        {
+            "q/0.weight": (ExpectedArray((4, 3), float32),),
+            "optimizer/0/*": (ExpectedArray((4, 3), float32), ExpectedArray(())),
+            "buffer/rewards": (ExpectedArray((100, 1), float32, at_most_rows=True),),
+        }
+    )
+    for name, shape in (("q/0.weight", (4, 3)), ("optimizer/0/exp_avg", (4, 3)), ("optimizer/0/step", ())):
+        assert check(name, shape, float32) is None
+    assert (
+        check("buffer/rewards", (0, 1), float32) is None
+        and check("buffer/rewards", (100, 1), float32) is None
+    )
+    assert check("q/0.weight", (4, 3), np.dtype(np.float64)) == (
+        "declares (4, 3) float64; this run's holds (4, 3) float32"
+    )
+    assert check("buffer/rewards", (101, 1), float32) == (
+        "declares (101, 1) float32; this run's holds (<=100, 1) float32"
+    )
+    assert check("buffer/rewards", (10, 2), float32) is not None
+    assert check("optimizer/1/exp_avg", (4, 3), float32) == "is not part of this run's checkpoint"
 
 
 @pytest.mark.parametrize("kind", ["fifo", "zero device", "not rrd", "many"])

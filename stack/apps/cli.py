@@ -137,7 +137,7 @@ def track(
     """Single lane changes on empty straight and curved roads: tracking metrics and plots."""
     rerun_or_fail("--record", record)
     from records import PLANTS
-    from stack.apps.track import controller_names, parse_speeds, track_and_report
+    from stack.apps.track import controller_names, parse_speeds, track_and_report, warn_of_edited_plug_ins
 
     try:
         names = controller_names(",".join(listed("--controller", controller)))
@@ -151,6 +151,7 @@ def track(
     cfg = configured(config, sets, controller__lane_change_duration_s=duration)
     ray_or_fail(ray)
     folder = claimed_for("track", out, f"{names}{plants}{speed_list}", cfg)
+    warn_of_edited_plug_ins(names, cfg, folder)
     until_interrupted(
         lambda: track_and_report(names, speed_list, cfg, folder, progress, cast(Any, plants), ray, record),
         lambda: f"the table above holds every maneuver measured; {AGAIN}",

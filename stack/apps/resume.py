@@ -33,8 +33,13 @@ def resolved_config(configs: list[RunConfig], exclude: dict | None = None) -> st
     agents = ", ".join(
         c.planner.agent + (f" ({c.planner.model})" if c.planner.model else "") for c in configs
     )
-    files = "".join(f"\n{CODE_FILE}{path} sha256 {digest}" for path, digest in code_digests(configs).items())
-    return config_text(configs[0], f"the resolved config; agents: {agents}{files}", exclude)
+    return config_text(configs[0], f"the resolved config; agents: {agents}{code_files(configs)}", exclude)
+
+
+def code_files(configs: list[RunConfig]) -> str:
+    """The lines of a config.yaml header (each after a newline) naming every file `code_digests`
+    finds for `configs`, with its digest: what `edited_file` compares against."""
+    return "".join(f"\n{CODE_FILE}{path} sha256 {digest}" for path, digest in code_digests(configs).items())
 
 
 def code_digests(configs: list[RunConfig]) -> dict[str, str]:
@@ -74,6 +79,17 @@ def edited_code(configs: list[RunConfig], out: Path) -> str | None:
     """Why `--resume` into `out` must not go on (one line) when a plug-in or model file that its
     config.yaml records was edited since the run started (its episodes would mix two versions of
     the code), or None."""
+    if (edited := edited_file(configs, out)) is not None:
+        return (
+            f"--resume: {edited} was edited since the run started (its episodes would mix two "
+            "versions); restore it, or run again without --resume"
+        )
+    return None
+
+
+def edited_file(configs: list[RunConfig], out: Path) -> str | None:
+    """The first plug-in or model file of `configs` that `out`/config.yaml records (`code_files`)
+    and whose content has changed since, or None (none changed, or no such config.yaml)."""
     stored = out / "config.yaml"
     try:
         if not stored.is_file() or stored.stat().st_size > MAX_CONFIG_BYTES:
@@ -89,12 +105,7 @@ def edited_code(configs: list[RunConfig], out: Path) -> str | None:
         if line.startswith(f"# {CODE_FILE}") and path:
             recorded[path] = digest
     now = code_digests(configs)
-    if edited := [path for path, digest in recorded.items() if path in now and now[path] != digest]:
-        return (
-            f"--resume: {edited[0]} was edited since the run started (its episodes would mix two "
-            "versions); restore it, or run again without --resume"
-        )
-    return None
+    return next((path for path, digest in recorded.items() if path in now and now[path] != digest), None)
 
 
 def run_owner(configs: list[RunConfig], command: str) -> Owner:

@@ -29,6 +29,7 @@ from common.plugins import CONTROLLER_GROUP, entry_points, label
 from controllers.config import ControllerConfig
 from controllers.tracker import make_controller
 from records import CONTROLLER_NAMES, PLANTS, Command, PlantName
+from stack.apps.resume import code_files, edited_file, warn
 from stack.apps.track_record import TrackedLaneChange
 from stack.apps.track_report import plot_maneuvers, print_tracking, speed_label
 from stack.apps.view import view_command_line
@@ -80,6 +81,24 @@ def controller_names(value: str) -> list[str]:
                 make_controller(config, 1 / 15)
             names.append(config.type)
     return list(dict.fromkeys(names))
+
+
+def controller_configs(controllers: list[str], config: RunConfig) -> list[RunConfig]:
+    """`config` with each of `controllers` (but highway-env's `builtin`): the configs whose plug-in
+    files `stack.apps.resume.code_digests` finds."""
+    return [
+        config.model_copy(update={"controller": config.controller.model_copy(update={"type": name})})
+        for name in controllers
+        if name != "builtin"
+    ]
+
+
+def warn_of_edited_plug_ins(controllers: list[str], config: RunConfig, out: Path) -> None:
+    """One warning line naming a controller plug-in's file that was edited since the maneuvers in
+    `out` (a `track` of the same arguments) were measured: none of them is kept, every maneuver
+    is measured again with the edited file."""
+    if (edited := edited_file(controller_configs(controllers, config), out)) is not None:
+        warn(f"{edited} was edited since the maneuvers in this folder were measured; all are measured again")
 
 
 def run_maneuver(
@@ -199,7 +218,10 @@ def track_and_report(
     print_tracking(maneuvers)
     with deferred(interrupt_after=False):
         write_tracking(maneuvers, out, ROADS, plants, speeds)
-        write_config(config, out / "config.yaml", "the resolved config of this run (its controller section)")
+        comment = "the resolved config of this run (its controller section)"
+        write_config(
+            config, out / "config.yaml", comment + code_files(controller_configs(controllers, config))
+        )
     interrupted = len(maneuvers) < total
     stopped = f" (interrupted: the {len(maneuvers)} of {total} maneuvers finished)"
     Console().print(f"results: {out}" + (stopped if interrupted else ""))

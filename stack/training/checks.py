@@ -56,6 +56,18 @@ def demonstrations_bytes(config: RunConfig) -> int:
     return 2 * demonstrations.episodes * decisions * transition_bytes(config)
 
 
+def demonstration_rows(config: RunConfig) -> int:
+    """Most transitions `train.demonstrations` can record: every episode as long as the longest
+    world it is drawn from, one decision a control tick at most (0 without demonstrations)."""
+    from stack.settings.run import demonstration_worlds, training_worlds
+
+    if (demonstrations := config.train.demonstrations) is None:
+        return 0
+    worlds = training_worlds(demonstration_worlds(config)).values()
+    ticks = max(math.ceil(world.highway.duration * world.control_rate_hz) for world in worlds)
+    return demonstrations.episodes * ticks
+
+
 def memory_refusal(config: RunConfig, available: int | None) -> str | None:
     """One line naming the key whose memory does not fit in `available` bytes (None: unknown),
     or None when the run fits (a tabular run keeps no buffer)."""

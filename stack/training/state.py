@@ -5,6 +5,8 @@ episode under way (replayed on resume: the simulator is deterministic)."""
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 import torch as th
 from stable_baselines3 import DQN
@@ -13,6 +15,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecEnv
 
 from planner.ddqn import Demonstrations, DoubleDQN
+from planner.model_file import ExpectedArray
 from planner.tabular import QLearning
 from records import N_ACTIONS
 from stack.training.batch_env import batched_worlds
@@ -20,6 +23,11 @@ from stack.training.checkpoint import DqnCounters, TabularCounters, generator_st
 from stack.training.decision_env import EpisodeRecord
 
 BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
+NUMPY_KEYS = ExpectedArray((624,), np.dtype(np.uint32))
+"""numpy's global generator (MT19937) key, as `np.random.get_state` gives it."""
+
+Layout = dict[str, tuple[ExpectedArray, ...]]
+"""Array name -> what it may be (`planner.model_file.header_check`)."""
 
 
 def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], DqnCounters]:
@@ -60,6 +68,36 @@ def dqn_state(model: DQN) -> tuple[dict[str, np.ndarray], DqnCounters]:
         pending_gradient_steps=pending or None,
     )
     return arrays, counters
+
+
+def dqn_layout(model: DQN, demonstration_rows: int) -> Layout:
+    """What a checkpoint of `model` (`dqn_state`) may hold, from the freshly built model, so a
+    file that does not fit it is refused from its headers before anything large is read: both
+    Q-networks exactly; the optimizer's state of parameter i shaped as it (Adam's moments) or a
+    scalar (its step); at most the replay buffer's rows of each field; at most
+    `demonstration_rows` demonstrations (a DoubleDQN's only); numpy's generator key."""
+    layout: Layout = {}
+    for prefix, network in (("q/", model.policy.q_net), ("target/", model.policy.q_net_target)):
+        for name, value in network.state_dict().items():
+            layout[prefix + name] = (ExpectedArray(tuple(value.shape), value.cpu().numpy().dtype),)
+    parameters = [p for group in model.policy.optimizer.param_groups for p in group["params"]]
+    for index, parameter in enumerate(parameters):
+        like = ExpectedArray(tuple(parameter.shape), parameter.detach().cpu().numpy().dtype)
+        layout[f"optimizer/{index}/*"] = (like, ExpectedArray(()))
+    buffer = model.replay_buffer
+    assert buffer is not None, "SB3 builds the replay buffer with the model"
+    for name in BUFFER_FIELDS:
+        field = getattr(buffer, name)
+        layout[f"buffer/{name}"] = (ExpectedArray(field.shape, field.dtype, at_most_rows=True),)
+    if isinstance(model, DoubleDQN) and demonstration_rows > 0:
+        size = int(np.prod(model.observation_space.shape))  # type: ignore[arg-type]
+        for demonstration in fields(Demonstrations):
+            name = demonstration.name
+            shape = (demonstration_rows, size) if "observations" in name else (demonstration_rows,)
+            dtype = np.dtype(np.int64 if name == "actions" else np.float32)
+            layout[f"demonstrations/{name}"] = (ExpectedArray(shape, dtype, at_most_rows=True),)
+    layout["random/numpy_keys"] = (NUMPY_KEYS,)
+    return layout
 
 
 def restore_dqn_state(model: DQN, arrays: dict[str, np.ndarray], counters: DqnCounters) -> BaseCallback:
@@ -148,6 +186,11 @@ def tabular_state(model: QLearning, env: Monitor) -> tuple[dict[str, np.ndarray]
         num_timesteps=model.steps, tabular_random=dict(model.rng.bit_generator.state), episodes=(episode,)
     )
     return {"q_table": model.table}, counters
+
+
+def tabular_layout(model: QLearning) -> Layout:
+    """What a checkpoint of `model` (`tabular_state`) holds: its table, exactly."""
+    return {"q_table": (ExpectedArray(model.table.shape, model.table.dtype),)}
 
 
 def restore_tabular_state(

@@ -23,7 +23,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from tqdm import tqdm
 
 from planner.learned import export_q_network, save_q_table
-from planner.model_file import CHECKPOINT, ModelFileError, load_checkpoint, save_model
+from planner.model_file import CHECKPOINT, ModelFileError, header_check, load_checkpoint, save_model
 from planner.model_metadata import ModelMetadata
 from planner.scores import Validation
 from planner.tabular import QLearning
@@ -31,7 +31,7 @@ from planner.validation import RealTimeValidation
 from records import child_seed
 from stack.settings.run import RunConfig, grid_config, load_config, write_config
 from stack.training.checkpoint import Checkpoint, DqnCounters, TabularCounters, read_checkpoint
-from stack.training.checks import checkpoint_bytes
+from stack.training.checks import checkpoint_bytes, demonstration_rows
 from stack.training.decision_env import HierarchicalHighwayEnv
 from stack.training.demonstrations import demonstrations_used, start_from_demonstrations
 from stack.training.envs import (
@@ -44,7 +44,15 @@ from stack.training.envs import (
 )
 from stack.training.model import Checkpoints, build_dqn, initial_model, model_metadata, warm_start
 from stack.training.report import write_training_summary
-from stack.training.state import dqn_state, restore_dqn_state, restore_tabular_state, tabular_state
+from stack.training.state import (
+    Layout,
+    dqn_layout,
+    dqn_state,
+    restore_dqn_state,
+    restore_tabular_state,
+    tabular_layout,
+    tabular_state,
+)
 from stack.training.summary import TrainSummary
 
 BEST = "best.npz"
@@ -154,7 +162,7 @@ class Trainer:
         resumed = (self.out / CHECKPOINT).is_file()
         callbacks: list[BaseCallback] = []
         if resumed:
-            arrays, metadata = self._checkpoint()
+            arrays, metadata = self._checkpoint(dqn_layout(self.model, demonstration_rows(self.config)))
             try:
                 checkpoint = read_checkpoint(metadata, DqnCounters)
                 callbacks.append(restore_dqn_state(self.model, arrays, checkpoint.counters))
@@ -206,7 +214,7 @@ class Trainer:
         assert isinstance(self.env, Monitor), "tabular training steps one env"
         observation = None
         if (self.out / CHECKPOINT).is_file():
-            arrays, metadata = self._checkpoint()
+            arrays, metadata = self._checkpoint(tabular_layout(self.model))
             try:
                 tabular = read_checkpoint(metadata, TabularCounters)
                 observation = restore_tabular_state(self.model, self.env, arrays, tabular.counters)
@@ -231,10 +239,12 @@ class Trainer:
         return self._save_checkpoint()
 
     # --- shared -------------------------------------------------------------------------------
-    def _checkpoint(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    def _checkpoint(self, layout: Layout) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """The run's checkpoint file (arrays, metadata), refused in one line (ModelFileError)
-        unless it is one."""
-        return load_checkpoint(self.out / CHECKPOINT, max_bytes=checkpoint_bytes(self.config))
+        unless it is one: every array as `layout` (what this run's model holds) says, checked from
+        the `.npy` headers before any array is read."""
+        path, bound = self.out / CHECKPOINT, checkpoint_bytes(self.config)
+        return load_checkpoint(path, max_bytes=bound, expected=header_check(layout))
 
     def _restore_common(self, checkpoint: Checkpoint[DqnCounters] | Checkpoint[TabularCounters]) -> None:
         self.history, self.best = RealTimeValidation.restore(checkpoint.validation)
