@@ -36,6 +36,7 @@ from stack.batch.kernels import (
     settle,
 )
 from stack.loop.closed_loop import episode_sensor
+from stack.loop.emergency_causes import CAUSES, NEVER, BrakingsByCause, emergency_cause, observe_batch
 from stack.loop.metrics import EpisodeMetricsBatch
 from stack.loop.safety_metrics import classify_collision
 from stack.results.episode_fields import record_fields
@@ -126,7 +127,7 @@ class ClosedLoopBatch:
         )
         self.counts = np.zeros((worlds, 3), dtype=np.int64)
         self.lateral, self.speed_pi = np.zeros((worlds, 4)), np.zeros((worlds, 3))
-        self.flags = np.zeros((worlds, 2), dtype=np.int64)
+        self.flags = np.zeros((worlds, 3), dtype=np.int64)
         self.seen = np.zeros((worlds, 0), dtype=np.int64)
         self.seen_speed, self.seen_slowing = np.zeros((worlds, 0)), np.zeros((worlds, 0))
         self.departed = np.zeros(worlds, dtype=bool)
@@ -138,6 +139,7 @@ class ClosedLoopBatch:
         self.slots = np.zeros((worlds, 0), dtype=np.int64)
         self.vehicle_room = 0
         self.metrics = EpisodeMetricsBatch(worlds, self.dt) if metrics else None
+        self.causes = CausesBatch(worlds)
 
     def _memory(self, vehicles: int, phantoms: int = 0) -> None:
         """Emergency braking's per-vehicle memory (`seen`, `seen_speed`, `seen_slowing`: what it
@@ -233,6 +235,7 @@ class ClosedLoopBatch:
             self.lateral[world] = self.speed_pi[world] = 0.0
             self.seen[world], self.seen_speed[world], self.seen_slowing[world] = 0, 0.0, 0.0
             self.departed[world] = self.crashed[world] = self.truncated[world] = False
+        self.causes.reset(reset, self.batch, self.traffic.time, self.dt)
         if self.metrics is not None:
             self.metrics.reset(worlds, self.batch, self.traffic.time)
 
@@ -299,6 +302,7 @@ class ClosedLoopBatch:
         controller = ControllerArrays(
             self.lateral, self.speed_pi, self.seen, self.seen_speed, self.seen_slowing, self.flags
         )
+        activations = self.flags[:, 1].copy()
         started = time.perf_counter()
         control(
             live, traffic.time, perceived.columns(), perceived.heading, perceived.lane_heading,
@@ -307,8 +311,10 @@ class ClosedLoopBatch:
             self.safety, self.settings, self.laws, self.dt, actuation,
         )  # fmt: skip
         control_s = time.perf_counter() - started
+        self.causes.attribute(live, self.changing, traffic.time, self.flags, activations, self.vehicle_room)
         ended = traffic.step(actuation[:, 0], actuation[:, 1], live)
         batch = self.batch = traffic.arrays.world_batch()
+        self.causes.observe(live, batch, traffic.time, self.dt)
         self._sense(live)
         changing = self.changing
         settle(
@@ -340,6 +346,7 @@ class ClosedLoopBatch:
             masked_commands=int(counts[1]),
             aborted_changes=int(counts[2]),
             emergency_brakings=int(self.flags[world, 1]),
+            **record_fields(BrakingsByCause.of(self.causes.counts[world])),
             solve_ms_p50=p50_ms,
             solve_ms_p95=p95_ms,
             **record_fields(self.metrics.driven(world)),
@@ -351,6 +358,71 @@ class ClosedLoopBatch:
         _, ego = self.traffic.road(world)
         lanes = int(self.traffic.arrays.lane_count[world])
         return snapshot(ego.road, ego, float(self.traffic.time[world]), lanes)
+
+
+class CausesBatch:
+    """`stack.loop.emergency_causes.CauseTracker` of each world of a batch, one row a world and a
+    column a truth row (a vehicle): `seen`, `speed_before` [m/s], `drifted_at`, `braked_at` [s];
+    the last time the ego changed lane [s] and the counts per cause (W, causes)."""
+
+    def __init__(self, worlds: int) -> None:
+        self.seen = np.zeros((worlds, 0), dtype=np.int64)
+        self.speed_before = np.zeros((worlds, 0))
+        self.drifted_at = np.full((worlds, 0), NEVER)
+        self.braked_at = np.full((worlds, 0), NEVER)
+        self.ego_changed_at = np.full(worlds, NEVER)
+        self.counts = np.zeros((worlds, len(CAUSES)), dtype=np.int64)
+
+    def _room(self, vehicles: int) -> None:
+        more = vehicles - self.seen.shape[1]
+        if more > 0:
+            self.seen = np.pad(self.seen, ((0, 0), (0, more)))
+            self.speed_before = np.pad(self.speed_before, ((0, 0), (0, more)))
+            self.drifted_at = np.pad(self.drifted_at, ((0, 0), (0, more)), constant_values=NEVER)
+            self.braked_at = np.pad(self.braked_at, ((0, 0), (0, more)), constant_values=NEVER)
+
+    def reset(self, worlds: np.ndarray, batch: WorldBatch, time: np.ndarray, dt: float) -> None:
+        """The worlds flagged in `worlds` begin an episode at the truth `batch`."""
+        self._room(batch.s.shape[1])
+        self.seen[worlds] = 0
+        self.drifted_at[worlds] = self.braked_at[worlds] = NEVER
+        self.ego_changed_at[worlds] = NEVER
+        self.counts[worlds] = 0
+        self.observe(worlds, batch, time, dt)
+
+    def observe(self, stepped: np.ndarray, batch: WorldBatch, time: np.ndarray, dt: float) -> None:
+        """The truth `batch` after a frame of the worlds flagged `stepped`."""
+        self._room(batch.s.shape[1])
+        observe_batch(
+            stepped, time, batch.columns(), dt, self.seen, self.speed_before, self.drifted_at, self.braked_at
+        )
+
+    def attribute(
+        self,
+        live: np.ndarray,
+        changing: np.ndarray,
+        time: np.ndarray,
+        flags: np.ndarray,
+        activations: np.ndarray,
+        vehicle_room: int,
+    ) -> None:
+        """A control tick of the worlds flagged `live` at `time` [s], their ego `changing` lane, with
+        emergency braking's `flags` ([active, activations, slot]) after it and its `activations`
+        before it: count each new activation by its cause (a slot from `vehicle_room` on is a
+        phantom's)."""
+        self.ego_changed_at = np.where(live & changing, time, self.ego_changed_at)
+        for world in np.flatnonzero(live & (flags[:, 1] > activations)).tolist():
+            slot = int(flags[world, 2])
+            phantom = slot >= vehicle_room
+            row = 0 if phantom else slot
+            cause = emergency_cause(
+                phantom,
+                float(time[world]),
+                float(self.drifted_at[world, row]),
+                float(self.braked_at[world, row]),
+                float(self.ego_changed_at[world]),
+            )
+            self.counts[world, cause] += 1
 
 
 def _mean_speeds(speeds: np.ndarray, ran: np.ndarray, batch: WorldBatch) -> np.ndarray:

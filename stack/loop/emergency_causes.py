@@ -1,0 +1,185 @@
+"""Why the ego braked at emergency strength: each activation of `controllers.emergency` is
+attributed to one cause, from the simulator's truth about the vehicle it braked for and the ego's
+own maneuver over the last `RECENT_S` seconds, checked in this order:
+
+- `phantom`: the vehicle braked for does not exist in the truth (a false positive of the sensor);
+- `cut_in`: it left the wandering zone of its lane (R157's 0.375 m: a lane change of its own
+  under way, in or out) within `RECENT_S`;
+- `leader_braking`: it slowed harder than `HARD_BRAKING_MPS2` on some tick within `RECENT_S`;
+- `own_lane_change`: the ego's lane change was under way within `RECENT_S` (aborted ones too);
+- `closing_in`: none of those (the ego drove up to a slower vehicle).
+
+The per-tick law is written once (`vehicle_events`, `emergency_cause`): `CauseTracker` calls it on
+one world keyed by vehicle id, `observe_batch` and `ClosedLoopBatch` on the rows of a batch."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numba.extending import register_jitable
+
+from common.compiled import Kernel
+from records import WorldState
+from records.batch import BatchColumns
+from stack.assessment.reference_driver import WANDERING_M
+
+CAUSES = ("cut_in", "leader_braking", "own_lane_change", "closing_in", "phantom")
+"""The causes, in the order of the counts (`EpisodeResult.emergency_brakings_<cause>`)."""
+CUT_IN, LEADER_BRAKING, OWN_LANE_CHANGE, CLOSING_IN, PHANTOM = range(len(CAUSES))
+RECENT_S = 2.0
+"""How far back a vehicle's lane change or hard braking, or the ego's lane change, causes an
+activation [s]."""
+HARD_BRAKING_MPS2 = 3.0
+"""A vehicle slowing harder than this on a tick brakes hard [m/s^2]."""
+NEVER = -math.inf
+"""The time of an event that has not happened [s]."""
+CLOCK_TOLERANCE_S = 1e-6
+"""Slack on `RECENT_S` so that an event exactly `RECENT_S` back counts on every clock's rounding [s]."""
+
+
+@dataclass(frozen=True)
+class BrakingsByCause:
+    """An episode's emergency brakings per cause: its fields are `EpisodeResult`'s of the same names."""
+
+    emergency_brakings_cut_in: int
+    emergency_brakings_leader_braking: int
+    emergency_brakings_own_lane_change: int
+    emergency_brakings_closing_in: int
+    emergency_brakings_phantom: int
+
+    @classmethod
+    def of(cls, counts: Sequence[int]) -> BrakingsByCause:
+        """From the counts in the order of `CAUSES`."""
+        return cls(*(int(count) for count in counts))
+
+
+def cause_label(cause: int) -> str:
+    """`CAUSES[cause]` as a report writes it ("cut-in", "leader braking", ...)."""
+    return CAUSES[cause].replace("_", " ").replace("cut in", "cut-in")
+
+
+@register_jitable
+def vehicle_events(
+    drift: float, slowing: float, time: float, drifted_at: float, braked_at: float
+) -> tuple[float, float]:
+    """One tick of one vehicle seen at `time` [s], `drift` [m] from its lane's centre and slowing
+    at `slowing` [m/s^2]: the last time it was outside the wandering zone and the last time it
+    braked hard [s], from those before (`drifted_at`, `braked_at`)."""
+    if drift > WANDERING_M:
+        drifted_at = time
+    if slowing > HARD_BRAKING_MPS2:
+        braked_at = time
+    return drifted_at, braked_at
+
+
+@register_jitable
+def emergency_cause(
+    phantom: bool, time: float, drifted_at: float, braked_at: float, ego_changed_at: float
+) -> int:
+    """The cause (an index of `CAUSES`) of an activation at `time` [s] for a vehicle that is a
+    `phantom`, or was last outside its wandering zone at `drifted_at` and last braked hard at
+    `braked_at`, the ego's lane change last under way at `ego_changed_at` [s]."""
+    recent = RECENT_S + CLOCK_TOLERANCE_S
+    if phantom:
+        return PHANTOM
+    if time - drifted_at <= recent:
+        return CUT_IN
+    if time - braked_at <= recent:
+        return LEADER_BRAKING
+    if time - ego_changed_at <= recent:
+        return OWN_LANE_CHANGE
+    return CLOSING_IN
+
+
+class CauseTracker:
+    """One world's memory for `emergency_cause`: per vehicle id its last speed [m/s] and the last
+    times it drifted and braked hard [s]; the last time the ego changed lane; the counts per
+    cause. `observe` every frame of the truth (the first included), `ego` and `attribute` on a
+    control tick."""
+
+    def __init__(self, dt: float) -> None:
+        self.dt = dt
+        self.speed: dict[int, float] = {}
+        self.drifted_at: dict[int, float] = {}
+        self.braked_at: dict[int, float] = {}
+        self.ego_changed_at = NEVER
+        self.counts = [0] * len(CAUSES)
+        self.last: int | None = None
+        """The cause of the latest activation (None before the first)."""
+
+    def observe(self, world: WorldState) -> None:
+        """The truth `world` after a frame (or at the start)."""
+        speeds = {}
+        for row in range(1, world.count):
+            vehicle, speed = int(world.ids[row]), float(world.speed[row])
+            before = self.speed.get(vehicle)
+            slowing = 0.0 if before is None else (before - speed) / self.dt
+            drift = abs(float(world.d[row] - world.lane_offsets[int(world.lane[row])]))
+            self.drifted_at[vehicle], self.braked_at[vehicle] = vehicle_events(
+                drift,
+                slowing,
+                world.time,
+                self.drifted_at.get(vehicle, NEVER),
+                self.braked_at.get(vehicle, NEVER),
+            )
+            speeds[vehicle] = speed
+        self.speed = speeds
+
+    def ego(self, time: float, changing_lane: bool) -> None:
+        """The ego's maneuver on the control tick at `time` [s]: a lane change runs or not."""
+        if changing_lane:
+            self.ego_changed_at = time
+
+    def attribute(self, world: WorldState, vehicle: int | None) -> int:
+        """Count an activation on the control tick at the truth `world` for `vehicle` (an id of what
+        the sensor reported): its cause."""
+        phantom = vehicle is None or vehicle not in set(world.ids.tolist())
+        key = -1 if vehicle is None else vehicle
+        cause = emergency_cause(
+            phantom,
+            world.time,
+            self.drifted_at.get(key, NEVER),
+            self.braked_at.get(key, NEVER),
+            self.ego_changed_at,
+        )
+        self.counts[cause] += 1
+        self.last = cause
+        return cause
+
+
+@Kernel
+def observe_batch(
+    stepped: np.ndarray,
+    time: np.ndarray,
+    columns: BatchColumns,
+    dt: float,
+    seen: np.ndarray,
+    speed_before: np.ndarray,
+    drifted_at: np.ndarray,
+    braked_at: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """`CauseTracker.observe` in each `stepped` world of a batch, per row (a vehicle): `seen` 1 where
+    its speed before is in `speed_before` [m/s], `drifted_at` and `braked_at` [s] (W, rows)."""
+    count, d, speed, lane, offsets = (
+        columns.vehicles,
+        columns.d,
+        columns.speed,
+        columns.lane,
+        columns.lane_offsets,
+    )
+    for w in range(stepped.shape[0]):
+        if not stepped[w]:
+            continue
+        for row in range(1, count[w]):
+            slowing = (speed_before[w, row] - speed[w, row]) / dt if seen[w, row] else 0.0
+            drift = abs(d[w, row] - offsets[w, lane[w, row]])
+            drifted_at[w, row], braked_at[w, row] = vehicle_events(
+                drift, slowing, time[w], drifted_at[w, row], braked_at[w, row]
+            )
+            speed_before[w, row] = speed[w, row]
+            seen[w, row] = 1
+        for row in range(count[w], seen.shape[1]):
+            seen[w, row] = 0

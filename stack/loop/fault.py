@@ -1,0 +1,145 @@
+"""Who is at fault in a collision, as UN R157 decides preventability: a collision is the ego's fault
+unless a careful and competent driver in its place could not have avoided it either.
+
+- The ego's own lane change (the geometric `lane change` contact, or the ego's lane differing
+  anywhere in the last `REPLAY_S` seconds) and leaving the road stay at fault: no replay excuses
+  a maneuver the ego chose.
+- Any other contact (front, stopped vehicle, rear, side swipe, ego stopped) is replayed: R157's
+  reference driver (`stack.assessment.reference_driver.CarefulDriver`: risk perception 0.4 s,
+  reaction 0.75 s, a 0.6 s ramp to the plant's 5 m/s^2, keeping R157's minimum following
+  distance) takes the ego's place `REPLAY_S` seconds before the contact, in the lane the ego
+  collided in, at the ego's position and speed then, against the other vehicles' recorded
+  trajectories. If it touches nobody up to the contact's time, the collision was preventable: at
+  fault. The other vehicles replay what they did; they do not react to the reference driver, so
+  after a frontal contact only vehicles ahead of it count (a recorded follower that followed the
+  ego elsewhere is no evidence), after being hit from behind or side on every vehicle counts.
+
+The reason says why: the situation (the collided vehicle's cut-in or hard braking within
+`stack.loop.emergency_causes.RECENT_S`, by the emergency-braking attribution law, else closing
+in; or the contact's kind: rear, side swipe, ego stopped, stopped vehicle) and whether it was
+preventable ("cut-in not preventable", "leader braking preventable"); "own lane change" and
+"off road" for the maneuvers that stay at fault."""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from records import WorldState
+from stack.assessment.reference_driver import CarefulDriver
+from stack.loop.emergency_causes import NEVER, cause_label, emergency_cause, vehicle_events
+
+REPLAY_S = 5.0
+"""How long before the contact the reference driver takes the ego's place [s]."""
+FROM_BEHIND_KINDS = ("rear", "side swipe", "ego stopped")
+"""Contact kinds where the other vehicle came into the ego: the replay counts every vehicle."""
+
+
+@dataclass(frozen=True)
+class Fault:
+    """The verdict on a collision: whether the ego is at fault, and why (module docstring)."""
+
+    at_fault: bool
+    reason: str
+
+
+class WorldHistory:
+    """The truth of the last `REPLAY_S` seconds (plus the frame now), one snapshot a tick: bounded
+    memory. Snapshots are records, never changed: a copy of the history (a fork of the loop)
+    shares them."""
+
+    def __init__(self, dt: float) -> None:
+        self.dt = dt
+        self.worlds: deque[WorldState] = deque(maxlen=round(REPLAY_S / dt) + 1)
+
+    def add(self, world: WorldState) -> None:
+        self.worlds.append(world)
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> WorldHistory:
+        copied = WorldHistory(self.dt)
+        copied.worlds = deque(self.worlds, maxlen=self.worlds.maxlen)
+        memo[id(self)] = copied
+        return copied
+
+
+def judge(kind: str, other: int | None, history: Sequence[WorldState], dt: float) -> Fault:
+    """The fault of the collision of geometric `kind` (`stack.loop.safety_metrics`) with the vehicle
+    of id `other` (None: unknown), at the last of `history` (the truth, one snapshot a tick of `dt`
+    [s], oldest first)."""
+    if kind == "off road":
+        return Fault(True, "off road")
+    crash = history[-1]
+    if kind == "lane change" or any(world.ego_lane != crash.ego_lane for world in history):
+        return Fault(True, "own lane change")
+    from_behind = kind in FROM_BEHIND_KINDS
+    situation = kind if from_behind or kind == "stopped vehicle" else _situation(other, history, dt)
+    avoided = careful_driver_avoids(history, dt, from_behind)
+    return Fault(avoided, f"{situation} {'preventable' if avoided else 'not preventable'}")
+
+
+def _situation(other: int | None, history: Sequence[WorldState], dt: float) -> str:
+    """What the vehicle of id `other` did before the contact, as emergency braking's cause law
+    reads it: cut-in, leader braking or closing in."""
+    drifted_at = braked_at = NEVER
+    speed_before: float | None = None
+    for world in history:
+        rows = np.flatnonzero(world.ids == other)
+        if not rows.size:
+            continue
+        row = int(rows[0])
+        speed = float(world.speed[row])
+        slowing = 0.0 if speed_before is None else (speed_before - speed) / dt
+        drift = abs(float(world.d[row] - world.lane_offsets[int(world.lane[row])]))
+        drifted_at, braked_at = vehicle_events(drift, slowing, world.time, drifted_at, braked_at)
+        speed_before = speed
+    return cause_label(emergency_cause(False, history[-1].time, drifted_at, braked_at, NEVER))
+
+
+def careful_driver_avoids(history: Sequence[WorldState], dt: float, from_behind: bool) -> bool:
+    """Whether R157's reference driver, in the ego's place from the first of `history` (its position
+    and speed then, the centre of the lane the ego is in at the last), touches no vehicle of the
+    recorded frames (only those ahead of it unless the contact came `from_behind`)."""
+    driver = CarefulDriver(keeps_distance=True)
+    start, crash = history[0], history[-1]
+    lane = crash.ego_lane
+    s, speed = float(start.s[0]), float(start.speed[0])
+    d = float(crash.lane_offsets[lane])
+    for world in history:
+        placed = _with_ego(world, s, d, speed, lane)
+        if _touches(placed, from_behind):
+            return False
+        acceleration = driver.step(placed, dt).acceleration
+        s += speed * dt
+        speed = max(speed + acceleration * dt, 0.0)
+    return True
+
+
+def _with_ego(world: WorldState, s: float, d: float, speed: float, lane: int) -> WorldState:
+    """`world` with the ego at `s`, `d` [m], `speed` [m/s] in lane `lane`, heading along it."""
+
+    def first(values: np.ndarray, value: float) -> np.ndarray:
+        changed = values.copy()
+        changed[0] = value
+        return changed
+
+    return replace(
+        world,
+        s=first(world.s, s),
+        d=first(world.d, d),
+        speed=first(world.speed, speed),
+        lane=first(world.lane, lane),
+    )
+
+
+def _touches(world: WorldState, from_behind: bool) -> bool:
+    """The ego's footprint overlaps another's in the lane frame (lengths and widths, headings
+    ignored); only vehicles whose centre is ahead of the ego's count unless `from_behind`."""
+    others = np.arange(1, world.count)
+    along = np.abs(world.s[others] - world.s[0]) < (world.length[others] + world.length[0]) / 2
+    across = np.abs(world.d[others] - world.d[0]) < (world.width[others] + world.width[0]) / 2
+    counted = np.ones(others.size, dtype=bool) if from_behind else world.s[others] > world.s[0]
+    return bool(np.any(along & across & counted))
