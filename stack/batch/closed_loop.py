@@ -36,7 +36,14 @@ from stack.batch.kernels import (
     settle,
 )
 from stack.loop.closed_loop import episode_sensor
-from stack.loop.emergency_causes import CAUSES, NEVER, BrakingsByCause, emergency_cause, observe_batch
+from stack.loop.emergency_causes import (
+    CAUSES,
+    NEVER,
+    RECENT_S,
+    BrakingsByCause,
+    emergency_cause,
+    observe_batch,
+)
 from stack.loop.metrics import EpisodeMetricsBatch
 from stack.loop.safety_metrics import classify_collision
 from stack.results.episode_fields import record_fields
@@ -421,6 +428,7 @@ class CausesBatch:
                 float(self.drifted_at[world, row]),
                 float(self.braked_at[world, row]),
                 float(self.ego_changed_at[world]),
+                RECENT_S,
             )
             self.counts[world, cause] += 1
 

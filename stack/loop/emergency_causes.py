@@ -5,7 +5,8 @@ own maneuver over the last `RECENT_S` seconds, checked in this order:
 - `phantom`: the vehicle braked for does not exist in the truth (a false positive of the sensor);
 - `cut_in`: it left the wandering zone of its lane (R157's 0.375 m: a lane change of its own
   under way, in or out) within `RECENT_S`;
-- `leader_braking`: it slowed harder than `HARD_BRAKING_MPS2` on some tick within `RECENT_S`;
+- `leader_braking`: it slowed at about 3 m/s^2 or harder (`HARD_BRAKING_MPS2`) on some tick
+  within `RECENT_S`;
 - `own_lane_change`: the ego's lane change was under way within `RECENT_S` (aborted ones too);
 - `closing_in`: none of those (the ego drove up to a slower vehicle).
 
@@ -32,12 +33,13 @@ CUT_IN, LEADER_BRAKING, OWN_LANE_CHANGE, CLOSING_IN, PHANTOM = range(len(CAUSES)
 RECENT_S = 2.0
 """How far back a vehicle's lane change or hard braking, or the ego's lane change, causes an
 activation [s]."""
-HARD_BRAKING_MPS2 = 3.0
-"""A vehicle slowing harder than this on a tick brakes hard [m/s^2]."""
+HARD_BRAKING_MPS2 = 2.9
+"""A vehicle slowing harder than this on a tick brakes hard [m/s^2]: 3 m/s^2 or more, with slack
+for a tick's rounding."""
 NEVER = -math.inf
 """The time of an event that has not happened [s]."""
 CLOCK_TOLERANCE_S = 1e-6
-"""Slack on `RECENT_S` so that an event exactly `RECENT_S` back counts on every clock's rounding [s]."""
+"""Slack on the window (`RECENT_S`) so that an event exactly `RECENT_S` back counts on every clock's rounding [s]."""
 
 
 @dataclass(frozen=True)
@@ -77,12 +79,13 @@ def vehicle_events(
 
 @register_jitable
 def emergency_cause(
-    phantom: bool, time: float, drifted_at: float, braked_at: float, ego_changed_at: float
+    phantom: bool, time: float, drifted_at: float, braked_at: float, ego_changed_at: float, recent_s: float
 ) -> int:
     """The cause (an index of `CAUSES`) of an activation at `time` [s] for a vehicle that is a
     `phantom`, or was last outside its wandering zone at `drifted_at` and last braked hard at
-    `braked_at`, the ego's lane change last under way at `ego_changed_at` [s]."""
-    recent = RECENT_S + CLOCK_TOLERANCE_S
+    `braked_at`, the ego's lane change last under way at `ego_changed_at` [s], each counting
+    within `recent_s` [s] (`RECENT_S` for emergency braking)."""
+    recent = recent_s + CLOCK_TOLERANCE_S
     if phantom:
         return PHANTOM
     if time - drifted_at <= recent:
@@ -144,6 +147,7 @@ class CauseTracker:
             self.drifted_at.get(key, NEVER),
             self.braked_at.get(key, NEVER),
             self.ego_changed_at,
+            RECENT_S,
         )
         self.counts[cause] += 1
         self.last = cause

@@ -9,14 +9,15 @@ unless a careful and competent driver in its place could not have avoided it eit
   reaction 0.75 s, a 0.6 s ramp to the plant's 5 m/s^2, keeping R157's minimum following
   distance) takes the ego's place `REPLAY_S` seconds before the contact, in the lane the ego
   collided in, at the ego's position and speed then, against the other vehicles' recorded
-  trajectories. If it touches nobody up to the contact's time, the collision was preventable: at
-  fault. The other vehicles replay what they did; they do not react to the reference driver, so
+  trajectories, and beyond the contact's time (until it stands, at most `BEYOND_S`) against
+  them extrapolated (each holding its last acceleration; one moving sideways goes on to the
+  next lane's centre). If it touches nobody, the collision was preventable: at fault. The other vehicles replay what they did; they do not react to the reference driver, so
   after a frontal contact only vehicles ahead of it count (a recorded follower that followed the
   ego elsewhere is no evidence), after being hit from behind or side on every vehicle counts.
 
-The reason says why: the situation (the collided vehicle's cut-in or hard braking within
-`stack.loop.emergency_causes.RECENT_S`, by the emergency-braking attribution law, else closing
-in; or the contact's kind: rear, side swipe, ego stopped, stopped vehicle) and whether it was
+The reason says why: the situation (the collided vehicle's cut-in or hard braking within the
+replayed seconds, by emergency braking's attribution law, `stack.loop.emergency_causes`, else
+closing in; or the contact's kind: rear, side swipe, ego stopped, stopped vehicle) and whether it was
 preventable ("cut-in not preventable", "leader braking preventable"); "own lane change" and
 "off road" for the maneuvers that stay at fault."""
 
@@ -35,6 +36,9 @@ from stack.loop.emergency_causes import NEVER, cause_label, emergency_cause, veh
 
 REPLAY_S = 5.0
 """How long before the contact the reference driver takes the ego's place [s]."""
+BEYOND_S = 8.0
+"""How long after the contact's time the replay goes on, the others extrapolated, until the
+reference driver stands [s]: a contact only just avoided at that time may still come."""
 FROM_BEHIND_KINDS = ("rear", "side swipe", "ego stopped")
 """Contact kinds where the other vehicle came into the ego: the replay counts every vehicle."""
 
@@ -96,19 +100,23 @@ def _situation(other: int | None, history: Sequence[WorldState], dt: float) -> s
         drift = abs(float(world.d[row] - world.lane_offsets[int(world.lane[row])]))
         drifted_at, braked_at = vehicle_events(drift, slowing, world.time, drifted_at, braked_at)
         speed_before = speed
-    return cause_label(emergency_cause(False, history[-1].time, drifted_at, braked_at, NEVER))
+    return cause_label(emergency_cause(False, history[-1].time, drifted_at, braked_at, NEVER, REPLAY_S))
 
 
 def careful_driver_avoids(history: Sequence[WorldState], dt: float, from_behind: bool) -> bool:
     """Whether R157's reference driver, in the ego's place from the first of `history` (its position
     and speed then, the centre of the lane the ego is in at the last), touches no vehicle of the
-    recorded frames (only those ahead of it unless the contact came `from_behind`)."""
+    recorded frames and of their extrapolation (`extrapolated`) until it stands (only vehicles
+    ahead of it count unless the contact came `from_behind`)."""
     driver = CarefulDriver(keeps_distance=True)
     start, crash = history[0], history[-1]
     lane = crash.ego_lane
     s, speed = float(start.s[0]), float(start.speed[0])
     d = float(crash.lane_offsets[lane])
-    for world in history:
+    beyond = extrapolated(history, dt, BEYOND_S)
+    for world in [*history, *beyond]:
+        if world.time > crash.time and speed <= 0.0:
+            break
         placed = _with_ego(world, s, d, speed, lane)
         if _touches(placed, from_behind):
             return False
@@ -116,6 +124,41 @@ def careful_driver_avoids(history: Sequence[WorldState], dt: float, from_behind:
         s += speed * dt
         speed = max(speed + acceleration * dt, 0.0)
     return True
+
+
+def extrapolated(history: Sequence[WorldState], dt: float, seconds: float) -> list[WorldState]:
+    """Frames every `dt` [s] for `seconds` after the last of `history`: each vehicle holds the
+    acceleration of its last tick (speed at least 0), and one that moved sideways on its last tick
+    goes on at that lateral speed to the centre of the next lane in that direction."""
+    last = history[-1]
+    before = history[-2] if len(history) > 1 else last
+    rows = {int(vehicle): row for row, vehicle in enumerate(before.ids.tolist())}
+    previous = [rows.get(int(vehicle)) for vehicle in last.ids.tolist()]
+    s, d, speed = last.s.astype(float), last.d.astype(float), last.speed.astype(float)
+    acceleration = np.array(
+        [0.0 if r is None else (speed[k] - before.speed[r]) / dt for k, r in enumerate(previous)]
+    )
+    lateral = np.array([0.0 if r is None else (d[k] - before.d[r]) / dt for k, r in enumerate(previous)])
+    offsets = np.sort(last.lane_offsets)
+    goal = np.array([_next_centre(offsets, float(d[k]), float(lateral[k])) for k in range(last.count)])
+    frames = []
+    for tick in range(1, round(seconds / dt) + 1):
+        s = s + speed * dt
+        step = lateral * dt
+        d = np.where(np.abs(goal - d) <= np.abs(step), goal, d + step)
+        speed = np.maximum(speed + acceleration * dt, 0.0)
+        lanes = np.abs(d[:, None] - last.lane_offsets[None, :]).argmin(axis=1)
+        frames.append(replace(last, time=last.time + tick * dt, s=s, d=d, speed=speed, lane=lanes))
+    return frames
+
+
+def _next_centre(offsets: np.ndarray, d: float, lateral: float) -> float:
+    """The first lane centre (of the sorted `offsets` [m]) at or beyond `d` in the direction of
+    `lateral` [m/s]; `d` itself when it does not move sideways."""
+    if abs(lateral) < 1e-6:
+        return d
+    ahead = offsets[offsets >= d - 1e-9] if lateral > 0 else offsets[offsets <= d + 1e-9][::-1]
+    return float(ahead[0]) if ahead.size else d
 
 
 def _with_ego(world: WorldState, s: float, d: float, speed: float, lane: int) -> WorldState:
