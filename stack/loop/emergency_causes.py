@@ -39,7 +39,8 @@ for a tick's rounding."""
 NEVER = -math.inf
 """The time of an event that has not happened [s]."""
 CLOCK_TOLERANCE_S = 1e-6
-"""Slack on the window (`RECENT_S`) so that an event exactly `RECENT_S` back counts on every clock's rounding [s]."""
+"""Slack on the window (`RECENT_S`): an event exactly that far back counts on every clock's
+rounding [s]."""
 
 
 @dataclass(frozen=True)

@@ -11,13 +11,14 @@ unless a careful and competent driver in its place could not have avoided it eit
   collided in, at the ego's position and speed then, against the other vehicles' recorded
   trajectories, and beyond the contact's time (until it stands, at most `BEYOND_S`) against
   them extrapolated (each holding its last acceleration; one moving sideways goes on to the
-  next lane's centre). If it touches nobody, the collision was preventable: at fault. The other vehicles replay what they did; they do not react to the reference driver, so
-  after a frontal contact only vehicles ahead of it count (a recorded follower that followed the
-  ego elsewhere is no evidence), after being hit from behind or side on every vehicle counts.
+  next lane's centre). If it touches nobody, the collision was preventable: at fault. The other
+  vehicles replay what they did; they do not react to the reference driver, so after a frontal
+  contact only vehicles ahead of it count (a recorded follower that followed the ego elsewhere is
+  no evidence), after being hit from behind or side on every vehicle counts.
 
 The reason says why: the situation (the collided vehicle's cut-in or hard braking within the
-replayed seconds, by emergency braking's attribution law, `stack.loop.emergency_causes`, else
-closing in; or the contact's kind: rear, side swipe, ego stopped, stopped vehicle) and whether it was
+replayed seconds, by emergency braking's attribution law, `stack.loop.emergency_causes`; else the
+contact's kind, rear, side swipe, ego stopped or stopped vehicle; else closing in) and whether it was
 preventable ("cut-in not preventable", "leader braking preventable"); "own lane change" and
 "off road" for the maneuvers that stay at fault."""
 
@@ -80,7 +81,9 @@ def judge(kind: str, other: int | None, history: Sequence[WorldState], dt: float
     if kind == "lane change" or any(world.ego_lane != crash.ego_lane for world in history):
         return Fault(True, "own lane change")
     from_behind = kind in FROM_BEHIND_KINDS
-    situation = kind if from_behind or kind == "stopped vehicle" else _situation(other, history, dt)
+    situation = _situation(other, history, dt)
+    if situation == "closing in" and kind != "front":
+        situation = kind
     avoided = careful_driver_avoids(history, dt, from_behind)
     return Fault(avoided, f"{situation} {'preventable' if avoided else 'not preventable'}")
 
