@@ -10,7 +10,10 @@ import math
 import pytest
 
 from records import Actuation
+from stack.assessment.safety_assessment import plant_for, point_config
+from stack.loop.closed_loop import ClosedLoop
 from stack.loop.emergency_causes import (
+    CAUSES,
     CLOSING_IN,
     CUT_IN,
     LEADER_BRAKING,
@@ -20,7 +23,10 @@ from stack.loop.emergency_causes import (
     emergency_cause,
 )
 from stack.loop.safety_metrics import SafetyMeasures, SafetyMonitor
-from stack.sim.safety_scenarios import EGO_LANE, LENGTH, lane_centre
+from stack.runs.episodes import run_agent_episode
+from stack.runs.kept import build_agent
+from stack.settings.run import build_config
+from stack.sim.safety_scenarios import EGO_LANE, LENGTH, lane_centre, parse_point
 from stack.sim.scripted_road import EGO_START_S, Actor, ScriptedRoad
 
 SPEED = 25.0
@@ -122,3 +128,20 @@ def test_an_emergency_braking_s_cause_is_the_first_that_holds(
     change, else closing in."""
     assert emergency_cause(phantom, 10.0, drifted_at, braked_at, ego_changed_at, 2.0) == cause
     assert math.isinf(NEVER)
+
+
+@pytest.mark.parametrize(
+    ("kind", "point", "cause"),
+    [
+        ("lead-braking", "speed=25,time_gap=1.0,deceleration=6", "leader_braking"),
+        ("cut-in", "speed=25,gap=4,relative_speed=3,lateral_speed=1.5", "cut_in"),
+    ],
+)
+def test_the_stack_s_emergency_braking_is_counted_by_its_cause(kind: str, point: str, cause: str) -> None:
+    """The full stack on a safety-assessment point: each activation counted once, by its cause."""
+    config = point_config(build_config({}, "test", planner__agent="keep-lane"), parse_point(kind, point))
+    agent = build_agent(config, config.seed)
+    loop = ClosedLoop(config, plant_for(config, parse_point(kind, point)), grid=agent.grid_config)
+    result = run_agent_episode(loop, agent, 0, config.seed)
+    by_cause = {name: getattr(result, f"emergency_brakings_{name}") for name in CAUSES}
+    assert result.emergency_brakings >= 1 and by_cause[cause] == result.emergency_brakings, by_cause

@@ -98,39 +98,75 @@ def emergency_cause(
     return CLOSING_IN
 
 
+@register_jitable
+def observe_rows(
+    time: float,
+    count: int,
+    d: np.ndarray,
+    speed: np.ndarray,
+    lane: np.ndarray,
+    offsets: np.ndarray,
+    columns: np.ndarray,
+    dt: float,
+    seen: np.ndarray,
+    speed_before: np.ndarray,
+    drifted_at: np.ndarray,
+    braked_at: np.ndarray,
+) -> None:
+    """`vehicle_events` of the vehicles in rows 1 to `count` - 1 of one world's truth at `time` [s]
+    (lateral offset `d` [m], `speed` [m/s], `lane` of lanes centred at `offsets` [m]), row r's memory
+    in column `columns[r]`: `seen` 1 where the vehicle was in the last frame, its speed then in
+    `speed_before` [m/s], `drifted_at` and `braked_at` [s]."""
+    for row in range(1, count):
+        column = columns[row]
+        slowing = (speed_before[column] - speed[row]) / dt if seen[column] else 0.0
+        drift = abs(d[row] - offsets[lane[row]])
+        drifted_at[column], braked_at[column] = vehicle_events(
+            drift, slowing, time, drifted_at[column], braked_at[column]
+        )
+        speed_before[column] = speed[row]
+    seen[:] = 0
+    for row in range(1, count):
+        seen[columns[row]] = 1
+
+
+_observe_rows = Kernel(observe_rows)
+
+
 class CauseTracker:
-    """One world's memory for `emergency_cause`: per vehicle id its last speed [m/s] and the last
-    times it drifted and braked hard [s]; the last time the ego changed lane; the counts per
-    cause. `observe` every frame of the truth (the first included), `ego` and `attribute` on a
-    control tick."""
+    """One world's memory for `emergency_cause`, a column per vehicle id (`observe_rows`); the last
+    time the ego changed lane; the counts per cause. `observe` every frame of the truth (the first
+    included), `ego` and `attribute` on a control tick."""
 
     def __init__(self, dt: float) -> None:
         self.dt = dt
-        self.speed: dict[int, float] = {}
-        self.drifted_at: dict[int, float] = {}
-        self.braked_at: dict[int, float] = {}
+        self.columns: dict[int, int] = {}
+        self.seen = np.zeros(0, dtype=np.int64)
+        self.speed_before = np.zeros(0)
+        self.drifted_at = np.zeros(0)
+        self.braked_at = np.zeros(0)
         self.ego_changed_at = NEVER
         self.counts = [0] * len(CAUSES)
         self.last: int | None = None
         """The cause of the latest activation (None before the first)."""
 
+    def _column(self, vehicle: int) -> int:
+        column = self.columns.setdefault(vehicle, len(self.columns))
+        if column >= self.seen.size:
+            more = max(self.seen.size, 16)
+            self.seen = np.pad(self.seen, (0, more))
+            self.speed_before = np.pad(self.speed_before, (0, more))
+            self.drifted_at = np.pad(self.drifted_at, (0, more), constant_values=NEVER)
+            self.braked_at = np.pad(self.braked_at, (0, more), constant_values=NEVER)
+        return column
+
     def observe(self, world: WorldState) -> None:
         """The truth `world` after a frame (or at the start)."""
-        speeds = {}
-        for row in range(1, world.count):
-            vehicle, speed = int(world.ids[row]), float(world.speed[row])
-            before = self.speed.get(vehicle)
-            slowing = 0.0 if before is None else (before - speed) / self.dt
-            drift = abs(float(world.d[row] - world.lane_offsets[int(world.lane[row])]))
-            self.drifted_at[vehicle], self.braked_at[vehicle] = vehicle_events(
-                drift,
-                slowing,
-                world.time,
-                self.drifted_at.get(vehicle, NEVER),
-                self.braked_at.get(vehicle, NEVER),
-            )
-            speeds[vehicle] = speed
-        self.speed = speeds
+        columns = np.array([self._column(vehicle) for vehicle in world.ids.tolist()], dtype=np.int64)
+        _observe_rows(
+            world.time, world.count, world.d, world.speed, world.lane, world.lane_offsets, columns,
+            self.dt, self.seen, self.speed_before, self.drifted_at, self.braked_at,
+        )  # fmt: skip
 
     def ego(self, time: float, changing_lane: bool) -> None:
         """The ego's maneuver on the control tick at `time` [s]: a lane change runs or not."""
@@ -141,12 +177,12 @@ class CauseTracker:
         """Count an activation on the control tick at the truth `world` for `vehicle` (an id of what
         the sensor reported): its cause."""
         phantom = vehicle is None or vehicle not in set(world.ids.tolist())
-        key = -1 if vehicle is None else vehicle
+        column = self.columns.get(-1 if vehicle is None else vehicle)
         cause = emergency_cause(
             phantom,
             world.time,
-            self.drifted_at.get(key, NEVER),
-            self.braked_at.get(key, NEVER),
+            NEVER if column is None else float(self.drifted_at[column]),
+            NEVER if column is None else float(self.braked_at[column]),
             self.ego_changed_at,
             RECENT_S,
         )
@@ -166,25 +202,12 @@ def observe_batch(
     drifted_at: np.ndarray,
     braked_at: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
-    """`CauseTracker.observe` in each `stepped` world of a batch, per row (a vehicle): `seen` 1 where
-    its speed before is in `speed_before` [m/s], `drifted_at` and `braked_at` [s] (W, rows)."""
-    count, d, speed, lane, offsets = (
-        columns.vehicles,
-        columns.d,
-        columns.speed,
-        columns.lane,
-        columns.lane_offsets,
-    )
+    """`observe_rows` in each `stepped` world of a batch, a memory column per row (a vehicle):
+    `seen`, `speed_before` [m/s], `drifted_at` and `braked_at` [s] (W, rows)."""
+    rows = np.arange(seen.shape[1])
     for w in range(stepped.shape[0]):
-        if not stepped[w]:
-            continue
-        for row in range(1, count[w]):
-            slowing = (speed_before[w, row] - speed[w, row]) / dt if seen[w, row] else 0.0
-            drift = abs(d[w, row] - offsets[w, lane[w, row]])
-            drifted_at[w, row], braked_at[w, row] = vehicle_events(
-                drift, slowing, time[w], drifted_at[w, row], braked_at[w, row]
-            )
-            speed_before[w, row] = speed[w, row]
-            seen[w, row] = 1
-        for row in range(count[w], seen.shape[1]):
-            seen[w, row] = 0
+        if stepped[w]:
+            observe_rows(
+                time[w], columns.vehicles[w], columns.d[w], columns.speed[w], columns.lane[w],
+                columns.lane_offsets[w], rows, dt, seen[w], speed_before[w], drifted_at[w], braked_at[w],
+            )  # fmt: skip
