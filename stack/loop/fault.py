@@ -16,10 +16,10 @@ unless a careful and competent driver in its place could not have avoided it eit
   contact only vehicles ahead of it count (a recorded follower that followed the ego elsewhere is
   no evidence), after being hit from behind or side on every vehicle counts.
 
-The reason says why: the situation (the collided vehicle's cut-in or hard braking within the
-replayed seconds, by emergency braking's attribution law, `stack.loop.emergency_causes`; else the
-contact's kind, rear, side swipe, ego stopped or stopped vehicle; else closing in) and whether it was
-preventable ("cut-in not preventable", "leader braking preventable"); "own lane change" and
+The reason says why: the situation (the collided vehicle's cut-in within the replayed seconds, by
+emergency braking's attribution law, `stack.loop.emergency_causes`; for a vehicle ahead, its hard
+braking; else the contact's kind, rear, side swipe, ego stopped or stopped vehicle, or closing in)
+and whether it was preventable ("cut-in not preventable", "leader braking preventable"); "own lane change" and
 "off road" for the maneuvers that stay at fault."""
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ def judge(kind: str, other: int | None, history: Sequence[WorldState], dt: float
         return Fault(True, "own lane change")
     from_behind = kind in FROM_BEHIND_KINDS
     situation = _situation(other, history, dt)
-    if situation == "closing in" and kind != "front":
+    if (from_behind and situation != "cut-in") or (kind == "stopped vehicle" and situation == "closing in"):
         situation = kind
     avoided = careful_driver_avoids(history, dt, from_behind)
     return Fault(avoided, f"{situation} {'preventable' if avoided else 'not preventable'}")
