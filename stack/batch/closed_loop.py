@@ -146,7 +146,8 @@ class ClosedLoopBatch:
         self.slots = np.zeros((worlds, 0), dtype=np.int64)
         self.vehicle_room = 0
         self.metrics = EpisodeMetricsBatch(worlds, self.dt) if metrics else None
-        self.causes = CausesBatch(worlds)
+        self.causes = CausesBatch(worlds) if metrics else None
+        """Emergency braking's causes, counted with the metrics (training needs none)."""
 
     def _memory(self, vehicles: int, phantoms: int = 0) -> None:
         """Emergency braking's per-vehicle memory (`seen`, `seen_speed`, `seen_slowing`: what it
@@ -242,7 +243,8 @@ class ClosedLoopBatch:
             self.lateral[world] = self.speed_pi[world] = 0.0
             self.seen[world], self.seen_speed[world], self.seen_slowing[world] = 0, 0.0, 0.0
             self.departed[world] = self.crashed[world] = self.truncated[world] = False
-        self.causes.reset(reset, self.batch, self.traffic.time, self.dt)
+        if self.causes is not None:
+            self.causes.reset(reset, self.batch, self.traffic.time, self.dt)
         if self.metrics is not None:
             self.metrics.reset(worlds, self.batch, self.traffic.time)
 
@@ -318,10 +320,14 @@ class ClosedLoopBatch:
             self.safety, self.settings, self.laws, self.dt, actuation,
         )  # fmt: skip
         control_s = time.perf_counter() - started
-        self.causes.attribute(live, self.changing, traffic.time, self.flags, activations, self.vehicle_room)
+        if self.causes is not None:
+            self.causes.attribute(
+                live, self.changing, traffic.time, self.flags, activations, self.vehicle_room
+            )
         ended = traffic.step(actuation[:, 0], actuation[:, 1], live)
         batch = self.batch = traffic.arrays.world_batch()
-        self.causes.observe(live, batch, traffic.time, self.dt)
+        if self.causes is not None:
+            self.causes.observe(live, batch, traffic.time, self.dt)
         self._sense(live)
         changing = self.changing
         settle(
@@ -341,7 +347,7 @@ class ClosedLoopBatch:
         """World `world`'s episode as `ClosedLoop.result` reports it (kept with `metrics`), run as
         episode `episode` with traffic seed `seed`; no grid snapshot; the controller's time per tick
         is the world's share of the batch's control step (reference, PID, cruise and braking)."""
-        if self.metrics is None:
+        if self.metrics is None or self.causes is None:
             raise ValueError("a batch measures its episodes when made with metrics=True")
         counts, departed = self.counts[world], bool(self.departed[world])
         p50_ms, p95_ms = self.metrics.control_ms(world)
