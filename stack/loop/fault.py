@@ -9,7 +9,7 @@ unless a careful and competent driver in its place could not have avoided it eit
   reaction 0.75 s, a 0.6 s ramp to the plant's 5 m/s^2, keeping R157's minimum following
   distance) takes the ego's place `REPLAY_S` seconds before the contact, in the lane the ego
   collided in, at the ego's position and speed then, against the other vehicles' recorded
-  trajectories, and beyond the contact's time (until it stands, at most `BEYOND_S`) against
+  trajectories, and for `BEYOND_S` past the contact's time against
   them extrapolated (each holding its last acceleration; one moving sideways goes on to the
   next lane's centre). If it touches nobody, the collision was preventable: at fault. The other
   vehicles replay what they did; they do not react to the reference driver, so after a frontal
@@ -38,8 +38,9 @@ from stack.loop.emergency_causes import NEVER, cause_label, emergency_cause, veh
 REPLAY_S = 5.0
 """How long before the contact the reference driver takes the ego's place [s]."""
 BEYOND_S = 8.0
-"""How long after the contact's time the replay goes on, the others extrapolated, until the
-reference driver stands [s]: a contact only just avoided at that time may still come."""
+"""How long after the contact's time the replay goes on, the others extrapolated [s]: a contact
+only just avoided at that time may still come (a follower still closing in on a reference driver
+that stands)."""
 FROM_BEHIND_KINDS = ("rear", "side swipe", "ego stopped")
 """Contact kinds where the other vehicle came into the ego: the replay counts every vehicle."""
 
@@ -109,8 +110,8 @@ def _situation(other: int | None, history: Sequence[WorldState], dt: float) -> s
 def careful_driver_avoids(history: Sequence[WorldState], dt: float, from_behind: bool) -> bool:
     """Whether R157's reference driver, in the ego's place from the first of `history` (its position
     and speed then, the centre of the lane the ego is in at the last), touches no vehicle of the
-    recorded frames and of their extrapolation (`extrapolated`) until it stands (only vehicles
-    ahead of it count unless the contact came `from_behind`)."""
+    recorded frames and of their extrapolation (`extrapolated`, `BEYOND_S`; only vehicles ahead of
+    it count unless the contact came `from_behind`)."""
     driver = CarefulDriver(keeps_distance=True)
     start, crash = history[0], history[-1]
     lane = crash.ego_lane
@@ -118,8 +119,6 @@ def careful_driver_avoids(history: Sequence[WorldState], dt: float, from_behind:
     d = float(crash.lane_offsets[lane])
     beyond = extrapolated(history, dt, BEYOND_S)
     for world in [*history, *beyond]:
-        if world.time > crash.time and speed <= 0.0:
-            break
         placed = _with_ego(world, s, d, speed, lane)
         if _touches(placed, from_behind):
             return False
