@@ -23,7 +23,7 @@ from stack.loop.emergency_causes import (
     emergency_cause,
 )
 from stack.loop.safety_metrics import SafetyMeasures, SafetyMonitor
-from stack.runs.episodes import run_agent_episode
+from stack.runs.alone import run_agent_episode
 from stack.runs.kept import build_agent
 from stack.settings.run import build_config
 from stack.sim.safety_scenarios import EGO_LANE, LENGTH, lane_centre, parse_point

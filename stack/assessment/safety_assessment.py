@@ -24,7 +24,7 @@ from stack.assessment.reference_driver import CarefulDriver
 from stack.loop.closed_loop import ClosedLoop
 from stack.loop.recording import episode_recording
 from stack.loop.safety_metrics import SafetyMonitor
-from stack.runs.episodes import run_agent_episode
+from stack.runs.alone import run_agent_episode
 from stack.runs.kept import build_agent
 from stack.settings.run import RunConfig
 from stack.sim.safety_scenarios import Point, build

@@ -22,6 +22,7 @@ from records import Command, GridConfig, child_seed
 from stack.batch.closed_loop import ClosedLoopBatch, refusal
 from stack.loop.closed_loop import grid_config
 from stack.results.episode_result import EpisodeResult
+from stack.runs.alone import run_episode
 from stack.runs.kept import kept_agent
 from stack.runtime.interrupts import raise_if_stopped
 from stack.settings.run import RunConfig
@@ -125,8 +126,6 @@ def _judged(config: RunConfig, result: EpisodeResult) -> EpisodeResult:
     world, for a rare event), so the episode is run again alone, which reproduces it exactly."""
     if not result.crashed:
         return result
-    from stack.runs.episodes import run_episode  # it runs batches too: imported where it is used
-
     alone = run_episode(config, result.episode)
     return replace(result, at_fault_collision=alone.at_fault_collision, fault_reason=alone.fault_reason)
 
