@@ -5,7 +5,7 @@ unless a careful and competent driver in its place could not have avoided it eit
   anywhere in the last `REPLAY_S` seconds) and leaving the road stay at fault: no replay excuses
   a maneuver the ego chose.
 - Any other contact (front, stopped vehicle, rear, side swipe, ego stopped) is replayed: R157's
-  reference driver (`stack.assessment.reference_driver.CarefulDriver`: risk perception 0.4 s,
+  reference driver (`stack.loop.reference_driver.CarefulDriver`: risk perception 0.4 s,
   reaction 0.75 s, a 0.6 s ramp to the plant's 5 m/s^2, keeping R157's minimum following
   distance) takes the ego's place `REPLAY_S` seconds before the contact, in the lane the ego
   collided in, at the ego's position and speed then, against the other vehicles' recorded
@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 
 from records import WorldState
-from stack.assessment.reference_driver import CarefulDriver
 from stack.loop.emergency_causes import NEVER, cause_label, emergency_cause, vehicle_events
+from stack.loop.reference_driver import CarefulDriver
 
 REPLAY_S = 5.0
 """How long before the contact the reference driver takes the ego's place [s]."""
