@@ -1,5 +1,5 @@
-"""Collision fault as UN R157 decides preventability (`stack.loop.fault`) and emergency braking's
-cause (`stack.loop.emergency_causes`), on constructed scenes of the scripted road: an inattentive
+"""Collision fault as UN R157 decides preventability (`stack.fault.preventability`) and emergency braking's
+cause (`stack.fault.emergency_causes`), on constructed scenes of the scripted road: an inattentive
 ego (constant speed, or steering into the next lane) meets scripted vehicles, and R157's reference
 driver, replayed in its place over the last seconds, decides whether the contact was avoidable."""
 
@@ -11,8 +11,7 @@ import pytest
 
 from records import Actuation
 from stack.assessment.safety_assessment import plant_for, point_config
-from stack.loop.closed_loop import ClosedLoop
-from stack.loop.emergency_causes import (
+from stack.fault.emergency_causes import (
     CAUSES,
     CLOSING_IN,
     CUT_IN,
@@ -22,6 +21,7 @@ from stack.loop.emergency_causes import (
     PHANTOM,
     emergency_cause,
 )
+from stack.loop.closed_loop import ClosedLoop
 from stack.loop.safety_metrics import SafetyMeasures, SafetyMonitor
 from stack.runs.alone import run_agent_episode
 from stack.runs.kept import build_agent

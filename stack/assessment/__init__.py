@@ -1,3 +1,3 @@
 """The safety assessment after UN R157: the full stack and R157's careful and competent driver
-(`stack.loop.reference_driver`, which the fault judge replays too) on the same scripted scenario,
+(`stack.fault.reference_driver`, which the fault judge replays too) on the same scripted scenario,
 point by point (`safety_assessment`)."""

@@ -35,8 +35,7 @@ from stack.batch.kernels import (
     decide,
     settle,
 )
-from stack.loop.closed_loop import episode_sensor
-from stack.loop.emergency_causes import (
+from stack.fault.emergency_causes import (
     CAUSES,
     NEVER,
     RECENT_S,
@@ -44,6 +43,7 @@ from stack.loop.emergency_causes import (
     emergency_cause,
     observe_batch,
 )
+from stack.loop.closed_loop import episode_sensor
 from stack.loop.metrics import EpisodeMetricsBatch
 from stack.loop.safety_metrics import classify_collision
 from stack.results.episode_fields import record_fields
@@ -374,7 +374,7 @@ class ClosedLoopBatch:
 
 
 class CausesBatch:
-    """`stack.loop.emergency_causes.CauseTracker` of each world of a batch, one row a world and a
+    """`stack.fault.emergency_causes.CauseTracker` of each world of a batch, one row a world and a
     column a truth row (a vehicle): `seen`, `speed_before` [m/s], `drifted_at`, `braked_at` [s];
     the last time the ego changed lane [s] and the counts per cause (W, causes)."""
 

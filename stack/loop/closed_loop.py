@@ -29,7 +29,7 @@ from perception.grid import OccupancyGrid, OccupancyGridBuilder
 from perception.sensor import SensorConfig, SensorModel
 from planner.safety import SafetyLayer
 from records import Actuation, Command, Encoding, GridConfig, WorldState
-from stack.loop.emergency_causes import BrakingsByCause, CauseTracker, cause_label
+from stack.fault.emergency_causes import BrakingsByCause, CauseTracker, cause_label
 from stack.loop.loop_records import Acted, LoopStatus, SolveStatistics, Tick
 from stack.loop.metrics import EpisodeRecorder, Traces
 from stack.loop.safety_metrics import SafetyMonitor

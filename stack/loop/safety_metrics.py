@@ -11,7 +11,7 @@
   the road (`off road`). Not at fault: the ego stands (`ego stopped`), is hit from behind while
   keeping one lane (`rear`), or is touched side on while keeping one lane (`side swipe`: the other
   moved into it). That is the contact's geometry; who is at fault is decided as R157 decides
-  preventability (`stack.loop.fault`): the ego's own lane change and leaving the road stay at
+  preventability (`stack.fault.preventability`): the ego's own lane change and leaving the road stay at
   fault, any other contact is at fault when R157's careful and competent driver, replayed in the
   ego's place over the last seconds, avoids it (`fault_reason` says why).
 - **minimum time to collision** [s]: gap / closing speed to the nearest vehicle ahead in each lane
@@ -56,7 +56,7 @@ from common.r157 import (  # noqa: F401  (R157's distance, read here by the loop
 )
 from records import WorldState
 from records.batch import BatchColumns
-from stack.loop.fault import Fault, WorldHistory, judge
+from stack.fault.preventability import Fault, WorldHistory, judge
 from stack.results.episode_result import TTC_CAP_S
 
 DEPARTURE_TOLERANCE_M = 0.3

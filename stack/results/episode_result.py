@@ -53,7 +53,7 @@ def _accuracy(values: list[int], episodes: Sequence[EpisodeResult]) -> float | N
 
 def _by_cause(cause: str, label: str) -> dict:
     """The declaration of the count of emergency brakings attributed to `cause`
-    (`stack.loop.emergency_causes`), shown as `label`."""
+    (`stack.fault.emergency_causes`), shown as `label`."""
     key = f"emergency_brakings_{cause}"
     return declared(
         "count",
@@ -229,7 +229,7 @@ class EpisodeResult:
     )
     fault_reason: str = field(default="", metadata=declared("", "collisions"))
     """Why the collision is or is not the ego's fault, as R157 decides preventability
-    (`stack.loop.fault`): "cut-in not preventable", "leader braking preventable", "own lane
+    (`stack.fault.preventability`): "cut-in not preventable", "leader braking preventable", "own lane
     change", ...; empty without a collision."""
     min_ttc_s: float = field(
         default=TTC_CAP_S,

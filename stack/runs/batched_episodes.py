@@ -122,7 +122,7 @@ def run_batched(
 def _judged(config: RunConfig, result: EpisodeResult) -> EpisodeResult:
     """`result` with its collision's fault judged as the per-world loop judges it: that loop
     replays R157's reference driver over the last seconds of the truth it keeps
-    (`stack.loop.fault`); the batch keeps no such history (memory and a per-tick cost for every
+    (`stack.fault.preventability`); the batch keeps no such history (memory and a per-tick cost for every
     world, for a rare event), so the episode is run again alone, which reproduces it exactly."""
     if not result.crashed:
         return result

@@ -25,7 +25,7 @@ from numba.extending import register_jitable
 from common.compiled import Kernel
 from records import WorldState
 from records.batch import BatchColumns
-from stack.loop.reference_driver import WANDERING_M
+from stack.fault.reference_driver import WANDERING_M
 
 CAUSES = ("cut_in", "leader_braking", "own_lane_change", "closing_in", "phantom")
 """The causes, in the order of the counts (`EpisodeResult.emergency_brakings_<cause>`)."""

@@ -5,7 +5,7 @@ unless a careful and competent driver in its place could not have avoided it eit
   anywhere in the last `REPLAY_S` seconds) and leaving the road stay at fault: no replay excuses
   a maneuver the ego chose.
 - Any other contact (front, stopped vehicle, rear, side swipe, ego stopped) is replayed: R157's
-  reference driver (`stack.loop.reference_driver.CarefulDriver`: risk perception 0.4 s,
+  reference driver (`stack.fault.reference_driver.CarefulDriver`: risk perception 0.4 s,
   reaction 0.75 s, a 0.6 s ramp to the plant's 5 m/s^2, keeping R157's minimum following
   distance) takes the ego's place `REPLAY_S` seconds before the contact, in the lane the ego
   collided in, at the ego's position and speed then, against the other vehicles' recorded
@@ -17,7 +17,7 @@ unless a careful and competent driver in its place could not have avoided it eit
   no evidence), after being hit from behind or side on every vehicle counts.
 
 The reason says why: the situation (the collided vehicle's cut-in within the replayed seconds, by
-emergency braking's attribution law, `stack.loop.emergency_causes`; for a vehicle ahead, its hard
+emergency braking's attribution law, `stack.fault.emergency_causes`; for a vehicle ahead, its hard
 braking; else the contact's kind, rear, side swipe, ego stopped or stopped vehicle, or closing in)
 and whether it was preventable ("cut-in not preventable", "leader braking preventable"); "own lane change" and
 "off road" for the maneuvers that stay at fault."""
@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 
 from records import WorldState
-from stack.loop.emergency_causes import NEVER, cause_label, emergency_cause, vehicle_events
-from stack.loop.reference_driver import CarefulDriver
+from stack.fault.emergency_causes import NEVER, cause_label, emergency_cause, vehicle_events
+from stack.fault.reference_driver import CarefulDriver
 
 REPLAY_S = 5.0
 """How long before the contact the reference driver takes the ego's place [s]."""

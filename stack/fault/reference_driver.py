@@ -11,7 +11,7 @@ in the ego's or a neighbouring lane leaves the wandering zone of its lane (its c
 lane brakes harder than `BRAKE_LIGHT_MPS2`. The driver keeps its lane and speed until it
 reacts, then brakes while it closes in on any vehicle ahead reaching into its lane.
 
-A driver that `keeps_distance` (the replay that decides a collision's fault, `stack.loop.fault`)
+A driver that `keeps_distance` (the replay that decides a collision's fault, `stack.fault.preventability`)
 also perceives a risk when it closes in on the leader of its lane within R157's minimum following
 distance (`common.r157`): a careful driver does not drive up to a slower vehicle unawares.
 """
