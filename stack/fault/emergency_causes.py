@@ -10,8 +10,9 @@ own maneuver over the last `RECENT_S` seconds, checked in this order:
 - `own_lane_change`: the ego's lane change was under way within `RECENT_S` (aborted ones too);
 - `closing_in`: none of those (the ego drove up to a slower vehicle).
 
-The per-tick law is written once (`vehicle_events`, `emergency_cause`): `CauseTracker` calls it on
-one world keyed by vehicle id, `observe_batch` and `ClosedLoopBatch` on the rows of a batch."""
+The per-tick law is written once (`vehicle_events`, `observe_rows`, `emergency_cause`):
+`CauseTracker` calls it on one world, a memory column per vehicle id, `CausesBatch` (for
+`stack.batch.closed_loop.ClosedLoopBatch`) on the rows of a batch."""
 
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ from numba.extending import register_jitable
 
 from common.compiled import Kernel
 from records import WorldState
-from records.batch import BatchColumns
+from records.batch import BatchColumns, WorldBatch
 from stack.fault.reference_driver import WANDERING_M
 
 CAUSES = ("cut_in", "leader_braking", "own_lane_change", "closing_in", "phantom")
@@ -211,3 +212,69 @@ def observe_batch(
                 time[w], columns.vehicles[w], columns.d[w], columns.speed[w], columns.lane[w],
                 columns.lane_offsets[w], rows, dt, seen[w], speed_before[w], drifted_at[w], braked_at[w],
             )  # fmt: skip
+
+
+class CausesBatch:
+    """`stack.fault.emergency_causes.CauseTracker` of each world of a batch, one row a world and a
+    column a truth row (a vehicle): `seen`, `speed_before` [m/s], `drifted_at`, `braked_at` [s];
+    the last time the ego changed lane [s] and the counts per cause (W, causes)."""
+
+    def __init__(self, worlds: int) -> None:
+        self.seen = np.zeros((worlds, 0), dtype=np.int64)
+        self.speed_before = np.zeros((worlds, 0))
+        self.drifted_at = np.full((worlds, 0), NEVER)
+        self.braked_at = np.full((worlds, 0), NEVER)
+        self.ego_changed_at = np.full(worlds, NEVER)
+        self.counts = np.zeros((worlds, len(CAUSES)), dtype=np.int64)
+
+    def _room(self, vehicles: int) -> None:
+        more = vehicles - self.seen.shape[1]
+        if more > 0:
+            self.seen = np.pad(self.seen, ((0, 0), (0, more)))
+            self.speed_before = np.pad(self.speed_before, ((0, 0), (0, more)))
+            self.drifted_at = np.pad(self.drifted_at, ((0, 0), (0, more)), constant_values=NEVER)
+            self.braked_at = np.pad(self.braked_at, ((0, 0), (0, more)), constant_values=NEVER)
+
+    def reset(self, worlds: np.ndarray, batch: WorldBatch, time: np.ndarray, dt: float) -> None:
+        """The worlds flagged in `worlds` begin an episode at the truth `batch`."""
+        self._room(batch.s.shape[1])
+        self.seen[worlds] = 0
+        self.drifted_at[worlds] = self.braked_at[worlds] = NEVER
+        self.ego_changed_at[worlds] = NEVER
+        self.counts[worlds] = 0
+        self.observe(worlds, batch, time, dt)
+
+    def observe(self, stepped: np.ndarray, batch: WorldBatch, time: np.ndarray, dt: float) -> None:
+        """The truth `batch` after a frame of the worlds flagged `stepped`."""
+        self._room(batch.s.shape[1])
+        observe_batch(
+            stepped, time, batch.columns(), dt, self.seen, self.speed_before, self.drifted_at, self.braked_at
+        )
+
+    def attribute(
+        self,
+        live: np.ndarray,
+        changing: np.ndarray,
+        time: np.ndarray,
+        flags: np.ndarray,
+        activations: np.ndarray,
+        vehicle_room: int,
+    ) -> None:
+        """A control tick of the worlds flagged `live` at `time` [s], their ego `changing` lane, with
+        emergency braking's `flags` ([active, activations, slot]) after it and its `activations`
+        before it: count each new activation by its cause (a slot from `vehicle_room` on is a
+        phantom's)."""
+        self.ego_changed_at = np.where(live & changing, time, self.ego_changed_at)
+        for world in np.flatnonzero(live & (flags[:, 1] > activations)).tolist():
+            slot = int(flags[world, 2])
+            phantom = slot >= vehicle_room
+            row = 0 if phantom else slot
+            cause = emergency_cause(
+                phantom,
+                float(time[world]),
+                float(self.drifted_at[world, row]),
+                float(self.braked_at[world, row]),
+                float(self.ego_changed_at[world]),
+                RECENT_S,
+            )
+            self.counts[world, cause] += 1
