@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from records import WorldState
-from stack.fault.emergency_causes import NEVER, cause_label, emergency_cause, vehicle_events
+from stack.fault.emergency_causes import CLOSING_IN, NEVER, CauseTracker, cause_label, emergency_cause
 from stack.fault.reference_driver import CarefulDriver
 
 REPLAY_S = 5.0
@@ -91,19 +91,14 @@ def judge(kind: str, other: int | None, history: Sequence[WorldState], dt: float
 
 def _situation(other: int | None, history: Sequence[WorldState], dt: float) -> str:
     """What the vehicle of id `other` did before the contact, as emergency braking's cause law
-    reads it: cut-in, leader braking or closing in."""
-    drifted_at = braked_at = NEVER
-    speed_before: float | None = None
+    reads it over `history` (`CauseTracker`): cut-in, leader braking or closing in."""
+    tracker = CauseTracker(dt)
     for world in history:
-        rows = np.flatnonzero(world.ids == other)
-        if not rows.size:
-            continue
-        row = int(rows[0])
-        speed = float(world.speed[row])
-        slowing = 0.0 if speed_before is None else (speed_before - speed) / dt
-        drift = abs(float(world.d[row] - world.lane_offsets[int(world.lane[row])]))
-        drifted_at, braked_at = vehicle_events(drift, slowing, world.time, drifted_at, braked_at)
-        speed_before = speed
+        tracker.observe(world)
+    column = tracker.columns.get(-1 if other is None else other)
+    if column is None:
+        return cause_label(CLOSING_IN)
+    drifted_at, braked_at = float(tracker.drifted_at[column]), float(tracker.braked_at[column])
     return cause_label(emergency_cause(False, history[-1].time, drifted_at, braked_at, NEVER, REPLAY_S))
 
 
