@@ -25,6 +25,7 @@ STACK_FLOORS = (
     "sim",
     "rrd",
     "results",
+    "fault",
     "loop",
     "batch",
     "agents",
@@ -200,7 +201,18 @@ def test_stack_imports_point_downwards(floor):
         assert not upward, f"{path.relative_to(ROOT)} imports {sorted(upward)}"
 
 
-ONE_ROLE_FOLDERS = ("runtime", "settings", "rrd", "results", "loop", "batch", "agents", "runs", "assessment")
+ONE_ROLE_FOLDERS = (
+    "runtime",
+    "settings",
+    "rrd",
+    "results",
+    "fault",
+    "loop",
+    "batch",
+    "agents",
+    "runs",
+    "assessment",
+)
 """The folders the run core was cut into (once `stack/core`, 4.1k lines); `apps` (a module per
 command), `sim` (three backends) and `training` are held by `MAX_LINES` per module instead."""
 

@@ -20,6 +20,10 @@ def assert_same_episodes(batched: list[EpisodeResult], alone: list[EpisodeResult
     for mine, theirs in zip(batched, alone, strict=True):
         assert mine.outcome_row() == theirs.outcome_row(), mine.episode
         assert mine.trace == theirs.trace, mine.episode
+        by_cause = [
+            value for name, value in mine.outcome_row().items() if name.startswith("emergency_brakings_")
+        ]
+        assert len(by_cause) == 5 and sum(by_cause) == mine.emergency_brakings, mine.episode
 
 
 def both_ways(episodes: int, **overrides: object) -> tuple[list[EpisodeResult], list[EpisodeResult]]:

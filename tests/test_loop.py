@@ -9,7 +9,8 @@ from records import Command
 from stack.loop.closed_loop import ClosedLoop, grid_config
 from stack.loop.loop_records import LoopStatus, SolveStatistics
 from stack.results.episode_result import outcome
-from stack.runs.episodes import run, run_agent_episode
+from stack.runs.alone import run_agent_episode
+from stack.runs.episodes import run
 from stack.settings.run import build_config
 from stack.sim.empty_road import EmptyRoad
 from stack.sim.highway import HighwayAdapter

@@ -11,8 +11,8 @@ from controllers.emergency import EmergencyBraking
 from controllers.leaders import leaders
 from records import Actuation, Neighbour
 from stack.apps.cli import app
-from stack.assessment.reference_driver import CarefulDriver, stopping_distance
 from stack.assessment.safety_assessment import assess, drive_reference
+from stack.fault.reference_driver import CarefulDriver, stopping_distance
 from stack.settings.run import build_config
 from stack.sim import safety_scenarios
 from stack.sim.safety_scenarios import LENGTH, Point, build, grid, parse_point

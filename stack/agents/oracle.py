@@ -15,7 +15,7 @@ is in BENCHMARKS.md).
 It is an agent, one of `drivestack agents`, but it lives here, beside the closed loop, rather than
 in `planner/` with the others: it plans on the loop itself (`ClosedLoop.fork`, `permits`,
 `changing_lane`), and the layers never import `stack`. The loop knows it only as an agent with a
-`plan(loop)` (`stack.runs.episodes.agent_step`).
+`plan(loop)` (`stack.runs.alone.agent_step`).
 """
 
 from __future__ import annotations

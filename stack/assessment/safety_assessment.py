@@ -1,5 +1,5 @@
 """One point of the safety assessment: the full stack and the reference driver (R157's careful and
-competent driver, `stack.assessment.reference_driver`) each drive the same scenario on the same plant.
+competent driver, `stack.fault.reference_driver`) each drive the same scenario on the same plant.
 
 Outcome of a point (the stack's collision vs the reference's):
 - `avoided by both`;
@@ -20,11 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from records import PlantName
-from stack.assessment.reference_driver import CarefulDriver
+from stack.fault.reference_driver import CarefulDriver
 from stack.loop.closed_loop import ClosedLoop
 from stack.loop.recording import episode_recording
 from stack.loop.safety_metrics import SafetyMonitor
-from stack.runs.episodes import run_agent_episode
+from stack.runs.alone import run_agent_episode
 from stack.runs.kept import build_agent
 from stack.settings.run import RunConfig
 from stack.sim.safety_scenarios import Point, build

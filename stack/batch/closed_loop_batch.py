@@ -35,6 +35,7 @@ from stack.batch.loop_kernels import (
     decide,
     settle,
 )
+from stack.fault.emergency_causes import BrakingsByCause, CausesBatch
 from stack.loop.closed_loop import episode_sensor
 from stack.loop.metrics import EpisodeMetricsBatch
 from stack.loop.safety_metrics import classify_collision
@@ -126,7 +127,7 @@ class ClosedLoopBatch:
         )
         self.counts = np.zeros((worlds, 3), dtype=np.int64)
         self.lateral, self.speed_pi = np.zeros((worlds, 4)), np.zeros((worlds, 3))
-        self.flags = np.zeros((worlds, 2), dtype=np.int64)
+        self.flags = np.zeros((worlds, 3), dtype=np.int64)
         self.seen = np.zeros((worlds, 0), dtype=np.int64)
         self.seen_speed, self.seen_slowing = np.zeros((worlds, 0)), np.zeros((worlds, 0))
         self.departed = np.zeros(worlds, dtype=bool)
@@ -138,6 +139,8 @@ class ClosedLoopBatch:
         self.slots = np.zeros((worlds, 0), dtype=np.int64)
         self.vehicle_room = 0
         self.metrics = EpisodeMetricsBatch(worlds, self.dt) if metrics else None
+        self.causes = CausesBatch(worlds) if metrics else None
+        """Emergency braking's causes, counted with the metrics (training needs none)."""
 
     def _memory(self, vehicles: int, phantoms: int = 0) -> None:
         """Emergency braking's per-vehicle memory (`seen`, `seen_speed`, `seen_slowing`: what it
@@ -233,6 +236,8 @@ class ClosedLoopBatch:
             self.lateral[world] = self.speed_pi[world] = 0.0
             self.seen[world], self.seen_speed[world], self.seen_slowing[world] = 0, 0.0, 0.0
             self.departed[world] = self.crashed[world] = self.truncated[world] = False
+        if self.causes is not None:
+            self.causes.reset(reset, self.batch, self.traffic.time, self.dt)
         if self.metrics is not None:
             self.metrics.reset(worlds, self.batch, self.traffic.time)
 
@@ -299,6 +304,7 @@ class ClosedLoopBatch:
         controller = ControllerArrays(
             self.lateral, self.speed_pi, self.seen, self.seen_speed, self.seen_slowing, self.flags
         )
+        activations = self.flags[:, 1].copy()
         started = time.perf_counter()
         control(
             live, traffic.time, perceived.columns(), perceived.heading, perceived.lane_heading,
@@ -307,8 +313,14 @@ class ClosedLoopBatch:
             self.safety, self.settings, self.laws, self.dt, actuation,
         )  # fmt: skip
         control_s = time.perf_counter() - started
+        if self.causes is not None:
+            self.causes.attribute(
+                live, self.changing, traffic.time, self.flags, activations, self.vehicle_room
+            )
         ended = traffic.step(actuation[:, 0], actuation[:, 1], live)
         batch = self.batch = traffic.arrays.world_batch()
+        if self.causes is not None:
+            self.causes.observe(live, batch, traffic.time, self.dt)
         self._sense(live)
         changing = self.changing
         settle(
@@ -328,7 +340,7 @@ class ClosedLoopBatch:
         """World `world`'s episode as `ClosedLoop.result` reports it (kept with `metrics`), run as
         episode `episode` with traffic seed `seed`; no grid snapshot; the controller's time per tick
         is the world's share of the batch's control step (reference, PID, cruise and braking)."""
-        if self.metrics is None:
+        if self.metrics is None or self.causes is None:
             raise ValueError("a batch measures its episodes when made with metrics=True")
         counts, departed = self.counts[world], bool(self.departed[world])
         p50_ms, p95_ms = self.metrics.control_ms(world)
@@ -340,6 +352,7 @@ class ClosedLoopBatch:
             masked_commands=int(counts[1]),
             aborted_changes=int(counts[2]),
             emergency_brakings=int(self.flags[world, 1]),
+            **record_fields(BrakingsByCause.of(self.causes.counts[world])),
             solve_ms_p50=p50_ms,
             solve_ms_p95=p95_ms,
             **record_fields(self.metrics.driven(world)),

@@ -42,7 +42,8 @@ class ManeuverArrays(NamedTuple):
 class ControllerArrays(NamedTuple):
     """Each world's controller state (one row a world): the lateral PID [integral, output, has
     output, last steering], the speed PI [integral, output, has output], emergency braking's
-    per-vehicle memory (`seen`, `seen_speed`, `seen_slowing`) and its [active, activations]."""
+    per-vehicle memory (`seen`, `seen_speed`, `seen_slowing`) and its [active, activations, the memory
+    slot of the vehicle the latest activation braked for]."""
 
     lateral: np.ndarray
     speed_pi: np.ndarray

@@ -10,7 +10,7 @@ The state a kernel reads and writes is a tuple of arrays, one row per world (`Eg
 peak lateral speed], clock [anchor, profile anchor, rate], counts [lane changes, masked,
 aborted]), controller (lateral PID [integral, output, has output, last steering], speed PI
 [integral, output, has output], emergency braking's per-vehicle memory and [active,
-activations]) and the road departure flag."""
+activations, slot braked for]) and the road departure flag."""
 
 from __future__ import annotations
 
@@ -275,7 +275,8 @@ def emergency_acceleration(
 ) -> float:  # pragma: no cover - compiled
     """`EmergencyBraking.apply` on one world's row: its memory per vehicle slot (`seen` 1 where it
     was a leader last tick, its speed then in `seen_speed`; 2 where it was one the tick before too,
-    its slowing then in `seen_slowing` [m/s^2]) and `flags` = [active, activations]."""
+    its slowing then in `seen_slowing` [m/s^2]) and `flags` = [active, activations, the slot of the
+    vehicle the latest activation braked for]."""
     braking = np.zeros(leaders)
     rates = np.zeros(leaders)
     rated = np.zeros(leaders, dtype=np.bool_)
@@ -303,6 +304,7 @@ def emergency_acceleration(
             if needs_full_braking(limits, speed, gaps[k], speeds[k], braking[k]):
                 flags[0] = 1
                 flags[1] += 1
+                flags[2] = rows[k]
                 break
     return braked_acceleration(limits, flags[0] != 0, acceleration, speed, dt)
 

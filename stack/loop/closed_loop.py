@@ -29,6 +29,7 @@ from perception.grid import OccupancyGrid, OccupancyGridBuilder
 from perception.sensor import SensorConfig, SensorModel
 from planner.safety import SafetyLayer
 from records import Actuation, Command, Encoding, GridConfig, WorldState
+from stack.fault.emergency_causes import BrakingsByCause, CauseTracker, cause_label
 from stack.loop.loop_records import Acted, LoopStatus, SolveStatistics, Tick
 from stack.loop.metrics import EpisodeRecorder, Traces
 from stack.loop.safety_metrics import SafetyMonitor
@@ -135,6 +136,9 @@ class ClosedLoop:
             control.emergency_decel_mps2, control.comfort_decel_mps2, control.emergency_ttc_s
         )
         self.monitor = SafetyMonitor(self.plant.dt)
+        self.monitor.start(self.world)
+        self.causes = CauseTracker(self.plant.dt)
+        self.causes.observe(self.world)
         self.recorder: EpisodeRecorder | None = EpisodeRecorder(self.world)
         self.video: Video | None = None
         if self.frames is not None:
@@ -226,7 +230,12 @@ class ClosedLoop:
         times = self.controller.solve_times
         solve = times[-1] if len(times) > self.solves_recorded else None
         self.solves_recorded = len(times)
-        emergency = (self.emergency.cause, self.emergency.activations)
+        last = self.causes.last
+        emergency = (
+            self.emergency.cause,
+            self.emergency.activations,
+            cause_label(last) if last is not None else "",
+        )
         recording.tick(tick, self.safety.aborted, self.safety.reacted_to, emergency, self.monitor, solve)
 
     def tick(self) -> Tick:
@@ -236,8 +245,16 @@ class ClosedLoop:
         reference = self.maneuver.reference(self.perceived)
         state = self.world.ego_state()
         actuation = self.controller.step(state, reference)
+        activations = self.emergency.activations
         actuation = self.emergency.apply(actuation, state.speed, reference.leaders, self.plant.dt)
+        counted = self.recorder is not None
+        if counted:
+            self.causes.ego(self.world.time, self.maneuver.changing_lane)
+        if counted and self.emergency.activations > activations:
+            self.causes.attribute(self.world, self.emergency.cause)
         self.world = self.plant.step(actuation)
+        if counted:
+            self.causes.observe(self.world)
         self.perceived = self._observe()
         maneuver = self.maneuver
         return Tick(reference, actuation, self.world, maneuver.lane, maneuver.target)
@@ -337,6 +354,7 @@ class ClosedLoop:
             aborted_changes=safety.aborted,
             mpc_fallbacks=solves.fallbacks,
             emergency_brakings=self.emergency.activations,
+            **record_fields(BrakingsByCause.of(self.causes.counts)),
             solve_ms_p50=solves.p50_ms,
             solve_ms_p95=solves.p95_ms,
             snapshot=self.snapshot,

@@ -352,10 +352,12 @@ class EpisodeMetricsBatch:
 
     def measured(self, world: int, departed: bool) -> SafetyMeasures:
         """`SafetyMonitor.measured` of world `world`'s episode so far, which `departed` the road or
-        not (`ClosedLoopBatch.departed`)."""
+        not (`ClosedLoopBatch.departed`), its collision's fault by the contact's geometry alone
+        (the batch keeps no history to replay: `stack.runs.batch_episodes` judges it)."""
         return SafetyMeasures.of(
             departed,
             self.collision[world],
+            None,
             float(self.min_ttc_s[world]),
             float(self.time_below_min_distance_s[world]),
             float(self.time_below_ttc_floor_s[world]),

@@ -106,12 +106,13 @@ class EpisodeRecording:
         tick: Tick,
         aborted: int,
         reacted_to: tuple[int, ...],
-        emergency: tuple[int | None, int],
+        emergency: tuple[int | None, int, str],
         monitor: SafetyMonitor,
         solve_s: float | None,
     ) -> None:
         """One control tick: the `tick` record, the safety layer's abort count and the vehicles it
-        last reacted to, emergency braking's (cause, activations), the safety monitor, and the
+        last reacted to, emergency braking's (vehicle braked for, activations, the latest activation's
+        cause), the safety monitor, and the
         controller's time for this tick [s] (None when it measured none)."""
         world, reference, actuation = tick.world, tick.reference, tick.actuation
         time = world.time
@@ -120,10 +121,10 @@ class EpisodeRecording:
             self.last_aborted = aborted
             self.safety_reacted = reacted_to
             self._event(time, "lane change aborted: its gap closed", "WARN")
-        cause, activations = emergency
+        cause, activations, why = emergency
         if activations > self.last_activations:
             self.last_activations = activations
-            self._event(time, f"emergency braking for vehicle {cause}", "ERROR")
+            self._event(time, f"emergency braking for vehicle {cause} ({why})", "ERROR")
         phase = (
             f"change lane {tick.lane} -> {tick.target}" if tick.changing_lane else f"keep lane {tick.lane}"
         )

@@ -10,7 +10,10 @@
   while its footprint spans two lanes or it is changing lane (`lane change`), or collides while off
   the road (`off road`). Not at fault: the ego stands (`ego stopped`), is hit from behind while
   keeping one lane (`rear`), or is touched side on while keeping one lane (`side swipe`: the other
-  moved into it).
+  moved into it). That is the contact's geometry; who is at fault is decided as R157 decides
+  preventability (`stack.fault.preventability`): the ego's own lane change and leaving the road stay at
+  fault, any other contact is at fault when R157's careful and competent driver, replayed in the
+  ego's place over the last seconds, avoids it (`fault_reason` says why).
 - **minimum time to collision** [s]: gap / closing speed to the nearest vehicle ahead in each lane
   the ego's footprint occupies, over the episode (`TTC_CAP_S` when nothing ever closed in); a
   vehicle alongside (its centre ahead, its rear beside the ego: gap <= 0) is not ahead of the ego's
@@ -53,6 +56,7 @@ from common.r157 import (  # noqa: F401  (R157's distance, read here by the loop
 )
 from records import WorldState
 from records.batch import BatchColumns
+from stack.fault.preventability import Fault, WorldHistory, judge
 from stack.results.episode_result import TTC_CAP_S
 
 DEPARTURE_TOLERANCE_M = 0.3
@@ -92,9 +96,11 @@ def departs(low: float, high: float, offsets: np.ndarray, lanes_count: int, lane
 
 @dataclass(frozen=True)
 class Collision:
-    """What the ego hit and who is at fault (see the module docstring for `kind`)."""
+    """What the ego hit (see the module docstring for `kind`) and the id of the vehicle it touched
+    (None: none is flagged); `at_fault` is the contact geometry's verdict alone."""
 
     kind: str
+    other: int | None = None
 
     @property
     def at_fault(self) -> bool:
@@ -107,10 +113,11 @@ def classify_collision(world: WorldState, changing_lane: bool) -> Collision:
     if departed(world):
         return Collision("off road")
     other = _collided_with(world)
-    if world.speed[0] < STOPPED_SPEED_MPS:
-        return Collision("ego stopped")
     if other is None:
-        return Collision("front")
+        return Collision("ego stopped" if world.speed[0] < STOPPED_SPEED_MPS else "front")
+    vehicle = int(world.ids[other])
+    if world.speed[0] < STOPPED_SPEED_MPS:
+        return Collision("ego stopped", vehicle)
     heading = float(world.heading[0])
     delta = world.position[other] - world.position[0]
     along = float(delta[0] * math.cos(heading) + delta[1] * math.sin(heading))
@@ -118,9 +125,11 @@ def classify_collision(world: WorldState, changing_lane: bool) -> Collision:
     in_two_lanes = len(occupied_lanes(world)) > 1
     if abs(along) - world.length[0] / 2 >= abs(across) - world.width[0] / 2:
         if along > 0:
-            return Collision("stopped vehicle" if world.speed[other] < STOPPED_SPEED_MPS else "front")
-        return Collision("lane change" if changing_lane or in_two_lanes else "rear")
-    return Collision("lane change" if changing_lane or in_two_lanes else "side swipe")
+            return Collision(
+                "stopped vehicle" if world.speed[other] < STOPPED_SPEED_MPS else "front", vehicle
+            )
+        return Collision("lane change" if changing_lane or in_two_lanes else "rear", vehicle)
+    return Collision("lane change" if changing_lane or in_two_lanes else "side swipe", vehicle)
 
 
 def _collided_with(world: WorldState) -> int | None:
@@ -140,6 +149,7 @@ class SafetyMeasures:
     road_departure: bool
     at_fault_collision: bool
     collision_kind: str
+    fault_reason: str
     min_ttc_s: float
     time_below_min_distance_s: float
     time_below_ttc_floor_s: float
@@ -149,15 +159,20 @@ class SafetyMeasures:
         cls,
         road_departure: bool,
         collision: Collision | None,
+        fault: Fault | None,
         min_ttc_s: float,
         time_below_min_distance_s: float,
         time_below_ttc_floor_s: float,
     ) -> SafetyMeasures:
-        """The measures of an episode that ended in `collision` (none: it did not collide)."""
+        """The measures of an episode that ended in `collision` (none: it did not collide), judged
+        `fault` (none: by its geometry alone, the reason left empty)."""
+        if fault is None and collision is not None:
+            fault = Fault(collision.at_fault, "")
         return cls(
             road_departure=road_departure,
-            at_fault_collision=collision is not None and collision.at_fault,
+            at_fault_collision=fault is not None and fault.at_fault,
             collision_kind=collision.kind if collision is not None else "",
+            fault_reason=fault.reason if fault is not None else "",
             min_ttc_s=min_ttc_s,
             time_below_min_distance_s=time_below_min_distance_s,
             time_below_ttc_floor_s=time_below_ttc_floor_s,
@@ -165,10 +180,13 @@ class SafetyMeasures:
 
 
 class SafetyMonitor:
-    """Per-episode safety record, fed the true world after every control tick."""
+    """Per-episode safety record, fed the true world after every control tick (and, for the
+    replay that judges a collision's fault, at the start: `start`)."""
 
     def __init__(self, dt: float) -> None:
         self.dt = dt
+        self.history = WorldHistory(dt)
+        self.fault: Fault | None = None
         self.min_ttc_s = TTC_CAP_S
         self.time_below_min_distance_s = 0.0
         self.time_below_ttc_floor_s = 0.0
@@ -179,9 +197,15 @@ class SafetyMonitor:
         """Only whether the ego left the road in `world` (what ends an episode early)."""
         self.road_departure = self.road_departure or departed(world)
 
+    def start(self, world: WorldState) -> None:
+        """The episode's first frame."""
+        self.history.add(world)
+
     def record(self, world: WorldState, changing_lane: bool) -> None:
+        self.history.add(world)
         if world.crashed[0] and self.collision is None:
             self.collision = classify_collision(world, changing_lane)
+            self.fault = judge(self.collision.kind, self.collision.other, self.history.worlds, self.dt)
         extent = footprint_lateral_extent(world)
         self.road_departure = self.road_departure or _departed(world, extent)
         ttc, ego_lane_gap = _leaders_ahead(
@@ -202,6 +226,7 @@ class SafetyMonitor:
         return SafetyMeasures.of(
             self.road_departure,
             self.collision,
+            self.fault,
             self.min_ttc_s,
             self.time_below_min_distance_s,
             self.time_below_ttc_floor_s,

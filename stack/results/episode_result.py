@@ -51,6 +51,20 @@ def _accuracy(values: list[int], episodes: Sequence[EpisodeResult]) -> float | N
     return 100.0 * passed / (passed + collisions) if passed + collisions else None
 
 
+def _by_cause(cause: str, label: str) -> dict:
+    """The declaration of the count of emergency brakings attributed to `cause`
+    (`stack.fault.emergency_causes`), shown as `label`."""
+    key = f"emergency_brakings_{cause}"
+    return declared(
+        "count",
+        "safety",
+        summary=(Summarized(key, mean),),
+        rows=(SummaryRow(f"  of which {label} / episode", f"{{{key}:.2f}}"),),
+        interval=CompareInterval(key, "mean"),
+        columns=(Column("safety", f"AEB {label} / ep", interval_cell(key)),),
+    )
+
+
 @dataclass(frozen=True)
 class EpisodeResult:
     """One closed-loop episode; `trace` holds per-tick time [s], speed [m/s] and lateral offset [m].
@@ -204,11 +218,19 @@ class EpisodeResult:
                 Column(
                     "episodes",
                     "fault",
-                    lambda row: row["collision_kind"] + (" (at fault)" if row["at_fault_collision"] else ""),
+                    lambda row: (
+                        row["collision_kind"]
+                        + (f" ({row['fault_reason']})" if row["fault_reason"] else "")
+                        + (" (at fault)" if row["at_fault_collision"] else "")
+                    ),
                 ),
             ),
         ),
     )
+    fault_reason: str = field(default="", metadata=declared("", "collisions"))
+    """Why the collision is or is not the ego's fault, as R157 decides preventability
+    (`stack.fault.preventability`): "cut-in not preventable", "leader braking preventable", "own lane
+    change", ...; empty without a collision."""
     min_ttc_s: float = field(
         default=TTC_CAP_S,
         metadata=declared(
@@ -249,6 +271,16 @@ class EpisodeResult:
             ),
         ),
     )
+    emergency_brakings_cut_in: int = field(default=0, metadata=_by_cause("cut_in", "cut-in"))
+    emergency_brakings_leader_braking: int = field(
+        default=0, metadata=_by_cause("leader_braking", "leader braking")
+    )
+    emergency_brakings_own_lane_change: int = field(
+        default=0,
+        metadata=_by_cause("own_lane_change", "own lane change"),
+    )
+    emergency_brakings_closing_in: int = field(default=0, metadata=_by_cause("closing_in", "closing in"))
+    emergency_brakings_phantom: int = field(default=0, metadata=_by_cause("phantom", "phantom"))
     longest_standstill_s: float = field(
         default=0.0,
         metadata=declared(

@@ -12,6 +12,7 @@ at a time (`batch_refusal` says why)."""
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -21,6 +22,7 @@ from records import Command, GridConfig, child_seed
 from stack.batch.closed_loop_batch import ClosedLoopBatch, refusal
 from stack.loop.closed_loop import grid_config
 from stack.results.episode_result import EpisodeResult
+from stack.runs.alone import run_episode
 from stack.runs.kept import kept_agent
 from stack.runtime.interrupts import raise_if_stopped
 from stack.settings.run import RunConfig
@@ -108,13 +110,24 @@ def run_batched(
             completed = loop.tick(live)
             since[live] += 1
             for world in np.flatnonzero(live & loop.done).tolist():
-                results[world] = loop.result(world, episodes[world], seeds[world])
+                results[world] = _judged(config, loop.result(world, episodes[world], seeds[world]))
                 if on_finished is not None:
                     on_finished(results[world])
             deciding = ~loop.done & (completed | (~loop.changing & (since >= config.decision_ticks)))
     finally:
         loop.close()
     return [results[world] for world in range(worlds)]
+
+
+def _judged(config: RunConfig, result: EpisodeResult) -> EpisodeResult:
+    """`result` with its collision's fault judged as the per-world loop judges it: that loop
+    replays R157's reference driver over the last seconds of the truth it keeps
+    (`stack.fault.preventability`); the batch keeps no such history (memory and a per-tick cost for every
+    world, for a rare event), so the episode is run again alone, which reproduces it exactly."""
+    if not result.crashed:
+        return result
+    alone = run_episode(config, result.episode)
+    return replace(result, at_fault_collision=alone.at_fault_collision, fault_reason=alone.fault_reason)
 
 
 def batches(episodes: Sequence[int], jobs: int, most: int = BATCH_WORLDS) -> list[list[int]]:

@@ -11,43 +11,13 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from planner.agents import Agent, Scored, decide, sees_permitted
 from planner.factory import model_label, model_path
-from records import child_seed
-from stack.agents.oracle import Oracle
-from stack.loop.closed_loop import ClosedLoop
-from stack.loop.recording import episode_recording
 from stack.results.episode_result import EpisodeResult, summarize
+from stack.runs.alone import run_episode
 from stack.runs.batch_episodes import RAY_BATCH_WORLDS, batch_refusal, batches, run_batched
-from stack.runs.kept import kept_adapter, kept_agent
 from stack.runtime.executors import completed
 from stack.settings.drivers import HIGHWAY_ENV
 from stack.settings.run import RunConfig, drivers_of
-from stack.sim.highway import HighwayAdapter
-
-
-def agent_step(loop: ClosedLoop, agent: Agent) -> int:
-    """Perceive, let `agent` decide on its own encoding, act until the next decision; ticks run.
-    A recorded loop also gets the agent's scores of the decision, when it has them (`Scored`)."""
-    grid = loop.perceive()
-    observation = None
-    if isinstance(agent, Oracle):
-        command = agent.plan(loop)
-    else:
-        observation = loop.observation(grid, agent.encoding, sees_permitted(agent))
-        command = decide(agent, observation)
-    if loop.recording is not None and isinstance(agent, Scored):
-        seen = observation if observation is not None else np.empty(0)
-        loop.recording.scores(agent.scores(seen), agent.score_name)
-    return loop.act(command).ticks
-
-
-def run_agent_episode(loop: ClosedLoop, agent: Agent, episode: int, seed: int) -> EpisodeResult:
-    """Drive one episode: perceive, decide, act, until the episode ends."""
-    loop.reset(seed)
-    while not loop.done:
-        agent_step(loop, agent)
-    return loop.result(episode)
 
 
 @dataclass
@@ -55,33 +25,6 @@ class RunResults:
     summary: dict
     episodes: list[EpisodeResult]
     frames: list[np.ndarray]
-
-
-def run_episode(
-    config: RunConfig, episode: int, frames: list[np.ndarray] | None = None, record: Path | None = None
-) -> EpisodeResult:
-    """Episode `episode` of `config` (seed = config.seed + episode); `frames`, when given, collects
-    the rendered frames; with `record` (a folder), the episode is recorded there as
-    `episode-NNNN.rrd` (`stack.loop.recording`; written by whichever process runs it). Its result
-    does not depend on which process runs it, what ran before or whether it is recorded: the env a
-    process keeps for a config is reset with the episode's seed (highway-env then rebuilds the road
-    and reseeds every draw), and the learned agents it keeps are greedy, stateless policies over a
-    model file that has not changed since it was checked."""
-    seed = child_seed(config.seed, episode)
-    agent = kept_agent(config, seed)
-    recording = episode_recording(config, record, f"episode-{episode:04d}", seed)
-    if frames is not None:
-        with HighwayAdapter(
-            config.highway, config.sim.backend, render=True, plant=config.sim.plant
-        ) as adapter:
-            loop = ClosedLoop(config, adapter, frames, grid=agent.grid_config, recording=recording)
-            result = run_agent_episode(loop, agent, episode, seed)
-    else:
-        loop = ClosedLoop(config, kept_adapter(config), grid=agent.grid_config, recording=recording)
-        result = run_agent_episode(loop, agent, episode, seed)
-    if recording is not None:
-        recording.close()
-    return result
 
 
 def run(

@@ -10,6 +10,10 @@ in the ego's or a neighbouring lane leaves the wandering zone of its lane (its c
 0.375 m from its lane's centre: a cut-in or a cut-out starts) or the vehicle ahead in the ego's
 lane brakes harder than `BRAKE_LIGHT_MPS2`. The driver keeps its lane and speed until it
 reacts, then brakes while it closes in on any vehicle ahead reaching into its lane.
+
+A driver that `keeps_distance` (the replay that decides a collision's fault, `stack.fault.preventability`)
+also perceives a risk when it closes in on the leader of its lane within R157's minimum following
+distance (`common.r157`): a careful driver does not drive up to a slower vehicle unawares.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import math
 
 import numpy as np
 
+from common.r157 import r157_min_following_distance
 from records import Actuation, WorldState
 
 RISK_PERCEPTION_S = 0.4
@@ -36,10 +41,14 @@ PLANT_MAX_DECELERATION = 5.0
 
 class CarefulDriver:
     """R157's careful and competent driver as a longitudinal controller (steering 0: the straight
-    road's lane is kept without it). `step(world, dt)` is one control tick of `dt` [s]."""
+    road's lane is kept without it). `step(world, dt)` is one control tick of `dt` [s]; with
+    `keeps_distance`, closing in within R157's minimum following distance is a risk too."""
 
-    def __init__(self, max_deceleration: float = PLANT_MAX_DECELERATION) -> None:
+    def __init__(
+        self, max_deceleration: float = PLANT_MAX_DECELERATION, keeps_distance: bool = False
+    ) -> None:
         self.max_deceleration = max_deceleration
+        self.keeps_distance = keeps_distance
         self.reset()
 
     def reset(self) -> None:
@@ -76,7 +85,8 @@ class CarefulDriver:
         return [float(v) for v in world.speed[1:][ahead]]
 
     def _risk(self, world: WorldState, dt: float) -> bool:
-        """A vehicle ahead left its wandering zone, or the ego lane's leader brakes."""
+        """A vehicle ahead left its wandering zone, or the ego lane's leader brakes (or, keeping
+        distance, is closed in on within R157's minimum following distance)."""
         ego_lane = world.ego_lane
         for row in range(1, world.count):
             if world.s[row] <= world.s[0] or abs(int(world.lane[row]) - ego_lane) > 1:
@@ -85,9 +95,17 @@ class CarefulDriver:
             if drift > WANDERING_M:
                 return True
         leader = self._leader_row(world)
+        if leader is not None and self.keeps_distance and self._too_close(world, leader):
+            return True
         if leader is not None and (before := self.speeds.get(int(world.ids[leader]))) is not None:
             return (before - float(world.speed[leader])) / dt > BRAKE_LIGHT_MPS2
         return False
+
+    def _too_close(self, world: WorldState, leader: int) -> bool:
+        """Closing in on `leader` (a row) within R157's minimum following distance."""
+        speed = float(world.speed[0])
+        gap = float(world.s[leader] - world.s[0]) - float(world.length[leader] + world.length[0]) / 2
+        return speed > float(world.speed[leader]) and gap < r157_min_following_distance(speed)
 
     def _leader_row(self, world: WorldState) -> int | None:
         """Row of the closest vehicle ahead in the ego's lane."""

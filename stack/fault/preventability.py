@@ -1,0 +1,185 @@
+"""Who is at fault in a collision, as UN R157 decides preventability: a collision is the ego's fault
+unless a careful and competent driver in its place could not have avoided it either.
+
+- The ego's own lane change (the geometric `lane change` contact, or the ego's lane differing
+  anywhere in the last `REPLAY_S` seconds) and leaving the road stay at fault: no replay excuses
+  a maneuver the ego chose.
+- Any other contact (front, stopped vehicle, rear, side swipe, ego stopped) is replayed: R157's
+  reference driver (`stack.fault.reference_driver.CarefulDriver`: risk perception 0.4 s,
+  reaction 0.75 s, a 0.6 s ramp to the plant's 5 m/s^2, keeping R157's minimum following
+  distance) takes the ego's place `REPLAY_S` seconds before the contact, in the lane the ego
+  collided in, at the ego's position and speed then, against the other vehicles' recorded
+  trajectories, and for `BEYOND_S` past the contact's time against
+  them extrapolated (each holding its last acceleration; one moving sideways goes on to the
+  next lane's centre). If it touches nobody, the collision was preventable: at fault. The other
+  vehicles replay what they did; they do not react to the reference driver, so after a frontal
+  contact only vehicles ahead of it count (a recorded follower that followed the ego elsewhere is
+  no evidence), after being hit from behind or side on every vehicle counts.
+
+The reason says why: the situation (the collided vehicle's cut-in within the replayed seconds, by
+emergency braking's attribution law, `stack.fault.emergency_causes`; for a vehicle ahead, its hard
+braking; else the contact's kind, rear, side swipe, ego stopped or stopped vehicle, or closing in)
+and whether it was preventable ("cut-in not preventable", "leader braking preventable"); "own lane change" and
+"off road" for the maneuvers that stay at fault."""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from records import WorldState
+from stack.fault.emergency_causes import CLOSING_IN, NEVER, CauseTracker, cause_label, emergency_cause
+from stack.fault.reference_driver import CarefulDriver
+
+REPLAY_S = 5.0
+"""How long before the contact the reference driver takes the ego's place [s]."""
+BEYOND_S = 8.0
+"""How long after the contact's time the replay goes on, the others extrapolated [s]: a contact
+only just avoided at that time may still come (a follower still closing in on a reference driver
+that stands)."""
+FROM_BEHIND_KINDS = ("rear", "side swipe", "ego stopped")
+"""Contact kinds where the other vehicle came into the ego: the replay counts every vehicle."""
+
+
+@dataclass(frozen=True)
+class Fault:
+    """The verdict on a collision: whether the ego is at fault, and why (module docstring)."""
+
+    at_fault: bool
+    reason: str
+
+
+class WorldHistory:
+    """The truth of the last `REPLAY_S` seconds (plus the frame now), one snapshot a tick: bounded
+    memory. Snapshots are records, never changed: a copy of the history (a fork of the loop)
+    shares them."""
+
+    def __init__(self, dt: float) -> None:
+        self.dt = dt
+        self.worlds: deque[WorldState] = deque(maxlen=round(REPLAY_S / dt) + 1)
+
+    def add(self, world: WorldState) -> None:
+        self.worlds.append(world)
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> WorldHistory:
+        copied = WorldHistory(self.dt)
+        copied.worlds = deque(self.worlds, maxlen=self.worlds.maxlen)
+        memo[id(self)] = copied
+        return copied
+
+
+def judge(kind: str, other: int | None, history: Sequence[WorldState], dt: float) -> Fault:
+    """The fault of the collision of geometric `kind` (`stack.loop.safety_metrics`) with the vehicle
+    of id `other` (None: unknown), at the last of `history` (the truth, one snapshot a tick of `dt`
+    [s], oldest first)."""
+    if kind == "off road":
+        return Fault(True, "off road")
+    crash = history[-1]
+    if kind == "lane change" or any(world.ego_lane != crash.ego_lane for world in history):
+        return Fault(True, "own lane change")
+    from_behind = kind in FROM_BEHIND_KINDS
+    situation = _situation(other, history, dt)
+    if (from_behind and situation != "cut-in") or (kind == "stopped vehicle" and situation == "closing in"):
+        situation = kind
+    avoided = careful_driver_avoids(history, dt, from_behind)
+    return Fault(avoided, f"{situation} {'preventable' if avoided else 'not preventable'}")
+
+
+def _situation(other: int | None, history: Sequence[WorldState], dt: float) -> str:
+    """What the vehicle of id `other` did before the contact, as emergency braking's cause law
+    reads it over `history` (`CauseTracker`): cut-in, leader braking or closing in."""
+    tracker = CauseTracker(dt)
+    for world in history:
+        tracker.observe(world)
+    column = tracker.columns.get(-1 if other is None else other)
+    if column is None:
+        return cause_label(CLOSING_IN)
+    drifted_at, braked_at = float(tracker.drifted_at[column]), float(tracker.braked_at[column])
+    return cause_label(emergency_cause(False, history[-1].time, drifted_at, braked_at, NEVER, REPLAY_S))
+
+
+def careful_driver_avoids(history: Sequence[WorldState], dt: float, from_behind: bool) -> bool:
+    """Whether R157's reference driver, in the ego's place from the first of `history` (its position
+    and speed then, the centre of the lane the ego is in at the last), touches no vehicle of the
+    recorded frames and of their extrapolation (`extrapolated`, `BEYOND_S`; only vehicles ahead of
+    it count unless the contact came `from_behind`)."""
+    driver = CarefulDriver(keeps_distance=True)
+    start, crash = history[0], history[-1]
+    lane = crash.ego_lane
+    s, speed = float(start.s[0]), float(start.speed[0])
+    d = float(crash.lane_offsets[lane])
+    beyond = extrapolated(history, dt, BEYOND_S)
+    for world in [*history, *beyond]:
+        placed = _with_ego(world, s, d, speed, lane)
+        if _touches(placed, from_behind):
+            return False
+        acceleration = driver.step(placed, dt).acceleration
+        s += speed * dt
+        speed = max(speed + acceleration * dt, 0.0)
+    return True
+
+
+def extrapolated(history: Sequence[WorldState], dt: float, seconds: float) -> list[WorldState]:
+    """Frames every `dt` [s] for `seconds` after the last of `history`: each vehicle holds the
+    acceleration of its last tick (speed at least 0), and one that moved sideways on its last tick
+    goes on at that lateral speed to the centre of the next lane in that direction."""
+    last = history[-1]
+    before = history[-2] if len(history) > 1 else last
+    rows = {int(vehicle): row for row, vehicle in enumerate(before.ids.tolist())}
+    previous = [rows.get(int(vehicle)) for vehicle in last.ids.tolist()]
+    s, d, speed = last.s.astype(float), last.d.astype(float), last.speed.astype(float)
+    acceleration = np.array(
+        [0.0 if r is None else (speed[k] - before.speed[r]) / dt for k, r in enumerate(previous)]
+    )
+    lateral = np.array([0.0 if r is None else (d[k] - before.d[r]) / dt for k, r in enumerate(previous)])
+    offsets = np.sort(last.lane_offsets)
+    goal = np.array([_next_centre(offsets, float(d[k]), float(lateral[k])) for k in range(last.count)])
+    frames = []
+    for tick in range(1, round(seconds / dt) + 1):
+        s = s + speed * dt
+        step = lateral * dt
+        d = np.where(np.abs(goal - d) <= np.abs(step), goal, d + step)
+        speed = np.maximum(speed + acceleration * dt, 0.0)
+        lanes = np.abs(d[:, None] - last.lane_offsets[None, :]).argmin(axis=1)
+        frames.append(replace(last, time=last.time + tick * dt, s=s, d=d, speed=speed, lane=lanes))
+    return frames
+
+
+def _next_centre(offsets: np.ndarray, d: float, lateral: float) -> float:
+    """The first lane centre (of the sorted `offsets` [m]) at or beyond `d` in the direction of
+    `lateral` [m/s]; `d` itself when it does not move sideways."""
+    if abs(lateral) < 1e-6:
+        return d
+    ahead = offsets[offsets >= d - 1e-9] if lateral > 0 else offsets[offsets <= d + 1e-9][::-1]
+    return float(ahead[0]) if ahead.size else d
+
+
+def _with_ego(world: WorldState, s: float, d: float, speed: float, lane: int) -> WorldState:
+    """`world` with the ego at `s`, `d` [m], `speed` [m/s] in lane `lane`, heading along it."""
+
+    def first(values: np.ndarray, value: float) -> np.ndarray:
+        changed = values.copy()
+        changed[0] = value
+        return changed
+
+    return replace(
+        world,
+        s=first(world.s, s),
+        d=first(world.d, d),
+        speed=first(world.speed, speed),
+        lane=first(world.lane, lane),
+    )
+
+
+def _touches(world: WorldState, from_behind: bool) -> bool:
+    """The ego's footprint overlaps another's in the lane frame (lengths and widths, headings
+    ignored); only vehicles whose centre is ahead of the ego's count unless `from_behind`."""
+    others = np.arange(1, world.count)
+    along = np.abs(world.s[others] - world.s[0]) < (world.length[others] + world.length[0]) / 2
+    across = np.abs(world.d[others] - world.d[0]) < (world.width[others] + world.width[0]) / 2
+    counted = np.ones(others.size, dtype=bool) if from_behind else world.s[others] > world.s[0]
+    return bool(np.any(along & across & counted))

@@ -1,0 +1,147 @@
+"""Collision fault as UN R157 decides preventability (`stack.fault.preventability`) and emergency braking's
+cause (`stack.fault.emergency_causes`), on constructed scenes of the scripted road: an inattentive
+ego (constant speed, or steering into the next lane) meets scripted vehicles, and R157's reference
+driver, replayed in its place over the last seconds, decides whether the contact was avoidable."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from records import Actuation
+from stack.assessment.safety_assessment import plant_for, point_config
+from stack.fault.emergency_causes import (
+    CAUSES,
+    CLOSING_IN,
+    CUT_IN,
+    LEADER_BRAKING,
+    NEVER,
+    OWN_LANE_CHANGE,
+    PHANTOM,
+    emergency_cause,
+)
+from stack.loop.closed_loop import ClosedLoop
+from stack.loop.safety_metrics import SafetyMeasures, SafetyMonitor
+from stack.runs.alone import run_agent_episode
+from stack.runs.kept import build_agent
+from stack.settings.run import build_config
+from stack.sim.safety_scenarios import EGO_LANE, LENGTH, lane_centre, parse_point
+from stack.sim.scripted_road import EGO_START_S, Actor, ScriptedRoad
+
+SPEED = 25.0
+"""The ego's and the actors' speed at the start [m/s]."""
+DT = 1 / 15
+
+
+class Timed:
+    """At `move_at` [s] actor 0 heads for `to_lane` at `lateral_speed` [m/s]; at `brake_at` [s] it
+    brakes at `braking` [m/s^2] (None: never)."""
+
+    def __init__(
+        self,
+        move_at: float | None = None,
+        to_lane: int = EGO_LANE,
+        lateral_speed: float = 1.5,
+        brake_at: float | None = None,
+        braking: float = 0.0,
+    ) -> None:
+        self.move_at, self.to_lane, self.lateral_speed = move_at, to_lane, lateral_speed
+        self.brake_at, self.braking = brake_at, braking
+
+    def update(self, time: float, ego_s: float, actors: list[Actor]) -> None:
+        actor = actors[0]
+        if self.move_at is not None and time >= self.move_at - 1e-9 and actor.target_d is None:
+            actor.target_d, actor.lateral_speed = lane_centre(self.to_lane), self.lateral_speed
+        if self.brake_at is not None and time >= self.brake_at - 1e-9:
+            actor.braking = self.braking
+
+    def settled(self, actors: list[Actor]) -> bool:
+        return False
+
+
+def drive(actors: list[Actor], script: Timed, steering: float = 0.0, seconds: float = 15.0) -> SafetyMeasures:
+    """The inattentive ego (no throttle, no brake, `steering` [rad]) on the scripted road until it
+    collides: what the safety monitor measured, judging the contact."""
+    road = ScriptedRoad(3, EGO_LANE, SPEED, actors, script, "kinematic", DT, seconds)
+    monitor = SafetyMonitor(DT)
+    monitor.start(road.reset())
+    while not road.done:
+        monitor.record(road.step(Actuation(acceleration=0.0, steering=steering)), steering != 0.0)
+    assert road.crashed
+    return monitor.measured()
+
+
+def ahead(gap: float, lane: int = EGO_LANE, speed: float = SPEED) -> Actor:
+    """An actor whose rear is `gap` [m] ahead of the ego's front, in `lane`."""
+    return Actor(EGO_START_S + LENGTH + gap, lane_centre(lane), speed)
+
+
+def test_a_car_cutting_in_5_m_ahead_and_braking_is_not_the_ego_s_fault() -> None:
+    measured = drive([ahead(5.0, EGO_LANE + 1)], Timed(move_at=0.5, brake_at=1.5, braking=5.0))
+    assert measured.collision_kind == "front"
+    assert not measured.at_fault_collision
+    assert measured.fault_reason == "cut-in not preventable"
+
+
+def test_the_ego_changing_lane_into_a_car_is_at_fault() -> None:
+    beside = Actor(EGO_START_S, lane_centre(EGO_LANE + 1), SPEED)
+    measured = drive([beside], Timed(), steering=0.03)
+    assert measured.collision_kind == "lane change"
+    assert measured.at_fault_collision and measured.fault_reason == "own lane change"
+
+
+def test_running_into_a_car_braking_at_3_mps2_from_a_safe_gap_is_at_fault() -> None:
+    safe_gap = 1.6 * SPEED
+    measured = drive([ahead(safe_gap)], Timed(brake_at=1.0, braking=3.0))
+    assert measured.collision_kind == "front"
+    assert measured.at_fault_collision
+    assert measured.fault_reason == "leader braking preventable"
+
+
+def test_driving_up_to_a_slower_car_is_at_fault() -> None:
+    measured = drive([ahead(60.0, speed=15.0)], Timed())
+    assert measured.at_fault_collision and measured.fault_reason == "closing in preventable"
+
+
+def test_a_leader_braking_hard_within_the_reaction_time_is_not_preventable() -> None:
+    measured = drive([ahead(8.0)], Timed(brake_at=1.0, braking=6.0))
+    assert not measured.at_fault_collision
+    assert measured.fault_reason == "leader braking not preventable"
+
+
+@pytest.mark.parametrize(
+    ("phantom", "drifted_at", "braked_at", "ego_changed_at", "cause"),
+    [
+        (True, 9.0, 9.0, 9.0, PHANTOM),
+        (False, 9.0, 9.5, 9.5, CUT_IN),
+        (False, 7.0, 9.5, 9.5, LEADER_BRAKING),
+        (False, NEVER, 7.9, 8.0, OWN_LANE_CHANGE),
+        (False, 7.9, 7.9, 7.9, CLOSING_IN),
+        (False, NEVER, NEVER, NEVER, CLOSING_IN),
+    ],
+)
+def test_an_emergency_braking_s_cause_is_the_first_that_holds(
+    phantom: bool, drifted_at: float, braked_at: float, ego_changed_at: float, cause: int
+) -> None:
+    """At 10 s, events within the last 2 s count: phantom, then cut-in, leader braking, own lane
+    change, else closing in."""
+    assert emergency_cause(phantom, 10.0, drifted_at, braked_at, ego_changed_at, 2.0) == cause
+    assert math.isinf(NEVER)
+
+
+@pytest.mark.parametrize(
+    ("kind", "point", "cause"),
+    [
+        ("lead-braking", "speed=25,time_gap=1.0,deceleration=6", "leader_braking"),
+        ("cut-in", "speed=25,gap=4,relative_speed=3,lateral_speed=1.5", "cut_in"),
+    ],
+)
+def test_the_stack_s_emergency_braking_is_counted_by_its_cause(kind: str, point: str, cause: str) -> None:
+    """The full stack on a safety-assessment point: each activation counted once, by its cause."""
+    config = point_config(build_config({}, "test", planner__agent="keep-lane"), parse_point(kind, point))
+    agent = build_agent(config, config.seed)
+    loop = ClosedLoop(config, plant_for(config, parse_point(kind, point)), grid=agent.grid_config)
+    result = run_agent_episode(loop, agent, 0, config.seed)
+    by_cause = {name: getattr(result, f"emergency_brakings_{name}") for name in CAUSES}
+    assert result.emergency_brakings >= 1 and by_cause[cause] == result.emergency_brakings, by_cause
