@@ -73,6 +73,17 @@ class PlannerConfig(Strict):
         description="[Q-value] the learned agents' hysteresis: ddqn and dqn change lane only when the "
         "change's Q-value beats STAY's by at least this much",
     )
+    fallback: Literal["lookahead", "mobil", "none"] = Field(
+        "lookahead",
+        description="who decides where an ensemble's members disagree on its command by more than "
+        "uncertainty_threshold (planner.uncertainty); none: the ensemble decides all the same",
+    )
+    uncertainty_threshold: float | None = Field(
+        None,
+        ge=0,
+        description="[Q-value] the members' standard deviation above which the fallback decides; "
+        "null: the one calibrated into the model file (drivestack gate-calibrate), else no gate",
+    )
 
     @field_validator("model")
     @classmethod
