@@ -5,10 +5,12 @@ the lookahead, and the outcomes with and without the gate, on the same seeds.
     PYTHONPATH=. .venv/bin/python benchmarks/uncertainty_gate.py --model runs/ddqn-gated.npz \\
         [--episodes 30] [--seed 1005000] [--horizon 3] [--probes racers,stopped-60m,...]
 
-A decision's outcome is bad when, within `--horizon` seconds of it, the ego's time to collision
-with a leader drops below 1.5 s (`TTC_FLOOR_S`), emergency braking fires, or it collides: what the
-safety monitor measures on every tick (the oracle's verdict would cost a search a decision). The
-AUROC is that of the no-gate arm (the ensemble decides everything), for the members' standard
+Two bad outcomes are measured. Unsafe: within `--horizon` seconds of the decision, the ego's time
+to collision with a leader drops below 1.5 s (`TTC_FLOOR_S`), emergency braking fires, or it
+collides (what the safety monitor measures on every tick). Not the planner's: the lookahead, on the
+same sensor reading, would take another command (a proxy for the oracle's verdict, which costs a
+search a decision; the lookahead is within about 0.5 m/s of the ddqn on every named scenario).
+The AUROCs are the no-gate arm's (the ensemble decides everything), for the members' standard
 deviation of Q(chosen) (what the gate reads) and for Hoel et al.'s coefficient of variation. Both
 arms run one world at a time (`ClosedLoop`), episode k of a probe with seed `--seed` + k.
 """
@@ -24,6 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import rankdata
 
+from planner.agents import decide
 from planner.factory import make_agent
 from planner.learned import LearnedAgent, load_agent
 from stack.apps.gate import LoggedGate
@@ -67,13 +70,15 @@ PROBES: dict[str, tuple[str, dict[str, object]]] = {
 
 @dataclass
 class Arm:
-    """One arm's decisions (disagreement, variation, handed over, bad within the horizon) and
+    """One arm's decisions (disagreement, variation, handed over, unsafe within the horizon, not
+    the lookahead's command) and
     episodes (mean speed, crashed, at fault, emergency brakings, time below the TTC floor)."""
 
     spread: list[float]
     variation: list[float]
     handed: list[bool]
     bad: list[bool]
+    other: list[bool]
     episodes: list[dict[str, float]]
 
 
@@ -89,15 +94,17 @@ def run_arm(
     fallback = make_agent(
         "lookahead", config.highway.lanes_count, grid_config(config), lookahead=lookahead_setup(config)
     )
-    arm = Arm([], [], [], [], [])
+    arm = Arm([], [], [], [], [], [])
     for episode in range(episodes):
         gate = LoggedGate(learned, fallback, threshold, "lookahead")
         loop = ClosedLoop(config, kept_adapter(config), grid=learned.grid_config)
         loop.reset(seed + episode)
-        starts, marks = [], []
+        starts, marks, lookahead_says = [], [], []
         while not loop.done:
             starts.append((loop.world.time, _badness(loop)))
             agent_step(loop, gate)
+            view = loop.perceive_as(fallback.grid_config).encode(fallback.encoding)
+            lookahead_says.append(int(decide(fallback, view)))
             marks.append((loop.world.time, _badness(loop)))
         for start, before in starts:
             after = next((bad for end, bad in marks if end >= start + horizon), marks[-1][1])
@@ -105,6 +112,7 @@ def run_arm(
         arm.spread += gate.disagreements
         arm.variation += gate.variations
         arm.handed += gate.handed
+        arm.other += [ours != theirs for ours, theirs in zip(gate.actions, lookahead_says, strict=True)]
         result = loop.result(episode)
         arm.episodes.append(
             {
@@ -158,8 +166,8 @@ def main() -> None:
         raise SystemExit(f"{args.model}: no uncertainty_threshold; run drivestack gate-calibrate first")
     print(f"threshold {threshold:.4f} ({learned.metadata.uncertainty_calibration})")
     print(
-        "probe | decisions | bad % | AUROC std | AUROC CV | handed over % | speed no gate / gate | "
-        "crashes | AEB / ep | below TTC 1.5 s / ep"
+        "probe | decisions | unsafe % | AUROC std / CV | not the lookahead's % | AUROC std / CV | "
+        "handed over % | speed no gate / gate | crashes | AEB / ep | below TTC 1.5 s / ep"
     )
     rows = {}
     for name in args.probes.split(","):
@@ -173,6 +181,9 @@ def main() -> None:
             "bad_share": float(np.mean(plain.bad)),
             "auroc_std": auroc(plain.spread, plain.bad),
             "auroc_cv": auroc(plain.variation, plain.bad),
+            "other_share": float(np.mean(plain.other)),
+            "auroc_other_std": auroc(plain.spread, plain.other),
+            "auroc_other_cv": auroc(plain.variation, plain.other),
             "handed_share": float(np.mean(gated.handed)),
             "would_hand_share": float(np.mean(np.array(plain.spread) > threshold)),
             **{f"{key}_no_gate": mean_of(plain, key) for key in plain.episodes[0]},
@@ -183,8 +194,9 @@ def main() -> None:
         rows[name] = row
         shown = lambda value: "n/a" if value is None else f"{value:.2f}"  # noqa: E731
         print(
-            f"{name} | {row['decisions']} | {100 * row['bad_share']:.1f} | {shown(row['auroc_std'])} | "
-            f"{shown(row['auroc_cv'])} | {100 * row['handed_share']:.1f} | "
+            f"{name} | {row['decisions']} | {100 * row['bad_share']:.1f} | {shown(row['auroc_std'])} / "
+            f"{shown(row['auroc_cv'])} | {100 * row['other_share']:.1f} | {shown(row['auroc_other_std'])} / "
+            f"{shown(row['auroc_other_cv'])} | {100 * row['handed_share']:.1f} | "
             f"{row['mean_speed_no_gate']:.2f} / {row['mean_speed_gate']:.2f} | "
             f"{row['crashed_no_gate'] * args.episodes:.0f} / {row['crashed_gate'] * args.episodes:.0f} | "
             f"{row['emergency_brakings_no_gate']:.2f} / {row['emergency_brakings_gate']:.2f} | "

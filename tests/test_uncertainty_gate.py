@@ -21,6 +21,7 @@ from planner.model_metadata import ModelMetadata
 from planner.uncertainty import GatedAgent, coefficient_of_variation, disagreement, handed_over
 from records import Command, GridConfig
 from stack.apps.cli import app
+from stack.apps.gate import calibrate, write_threshold
 from stack.loop.recording import EpisodeRecording
 from stack.runs.episodes import run
 from stack.runs.kept import build_agent
@@ -171,3 +172,24 @@ def test_a_bad_threshold_or_fallback_is_refused_in_one_line(tmp_path):
             app, ["run", "--agent", "ddqn", "--set", f"{key}={value}", "--out", str(tmp_path / "x")]
         )
         assert result.exit_code == 2 and key in result.output and "Traceback" not in result.output
+
+
+def test_calibration_puts_the_threshold_at_the_percentile_of_in_distribution_disagreement(tmp_path):
+    found = calibrate(short(), SHIPPED_MODELS["ddqn"], episodes=2, seed=1005982, percentile=90.0)
+    (spreads,) = found.disagreements.values()
+    assert len(spreads) >= 4 and found.threshold == pytest.approx(np.percentile(spreads, 90.0))
+    assert found.shares()["overtaking"] <= 0.2
+    written = write_threshold(SHIPPED_MODELS["ddqn"], tmp_path / "gated.npz", found)
+    agent = load_agent(written)
+    assert agent.metadata.uncertainty_threshold == pytest.approx(found.threshold, abs=1e-6)
+    assert "90th percentile" in str(agent.metadata.uncertainty_calibration)
+    assert "seeds 1005982-1005983" in str(agent.metadata.uncertainty_calibration)
+    gated = build_agent(short(**{"planner.model": written}), 0)
+    assert isinstance(gated, GatedAgent) and gated.threshold == agent.metadata.uncertainty_threshold
+
+
+def test_calibrating_a_single_network_is_refused_in_one_line(tmp_path):
+    result = CliRunner().invoke(
+        app, ["gate-calibrate", "--model", str(SHIPPED_MODELS["dqn"]), "--out", str(tmp_path / "x.npz")]
+    )
+    assert result.exit_code == 2 and "needs an ensemble" in result.output and "Traceback" not in result.output

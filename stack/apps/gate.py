@@ -29,8 +29,8 @@ DEFAULT_PERCENTILE = 98.5
 
 
 class LoggedGate(GatedAgent):
-    """A gate that keeps every decision's disagreement, coefficient of variation and whether it
-    handed over (by default it never does: an infinite threshold)."""
+    """A gate that keeps every decision's disagreement, coefficient of variation, the ensemble's
+    command and whether it handed over (by default it never does: an infinite threshold)."""
 
     def __init__(
         self, learned: LearnedAgent, fallback: Agent, threshold: float = float("inf"), name: str = "none"
@@ -39,9 +39,11 @@ class LoggedGate(GatedAgent):
         self.disagreements: list[float] = []
         self.variations: list[float] = []
         self.handed: list[bool] = []
+        self.actions: list[int] = []
 
     def gate(self, observation: np.ndarray) -> Gated:
         gated = super().gate(observation)
+        self.actions.extend(gated.actions.tolist())
         self.disagreements.extend(gated.disagreement.tolist())
         self.variations.extend(gated.variation.tolist())
         self.handed.extend(gated.handed.tolist())
