@@ -3,7 +3,10 @@ the ensemble's disagreement predicts a bad outcome (AUROC), the share of decisio
 the lookahead, and the outcomes with and without the gate, on the same seeds.
 
     PYTHONPATH=. .venv/bin/python benchmarks/uncertainty_gate.py --model runs/ddqn-gated.npz \\
-        [--episodes 30] [--seed 1005000] [--horizon 3] [--probes racers,stopped-60m,...]
+        [--episodes 30] [--seed 1005000] [--horizon 3] [--probes "7 lanes,mixed drivers"]
+
+(`--model`: a file `drivestack gate-calibrate` wrote.) With `--in-distribution N`, instead, the
+share the gate hands over on N episodes of each world of the training mix from `--seed`.
 
 Two bad outcomes are measured. Unsafe: within `--horizon` seconds of the decision, the ego's time
 to collision with a leader drops below 1.5 s (`TTC_FLOOR_S`), emergency braking fires, or it
@@ -29,11 +32,12 @@ from scipy.stats import rankdata
 from planner.agents import decide
 from planner.factory import make_agent
 from planner.learned import LearnedAgent, load_agent
-from stack.apps.gate import LoggedGate
+from stack.apps.gate import LoggedGate, calibrate, calibration_table
+from stack.apps.options import TRAIN_CONFIG
 from stack.loop.closed_loop import ClosedLoop
 from stack.runs.episodes import agent_step
 from stack.runs.kept import kept_adapter, lookahead_setup
-from stack.settings.run import RunConfig, build_config, grid_config
+from stack.settings.run import RunConfig, build_config, grid_config, load_config
 
 RACERS = {
     "ego_position": 0.5,
@@ -158,6 +162,13 @@ def main() -> None:
     )
     parser.add_argument("--probes", default=",".join(PROBES))
     parser.add_argument("--out", type=Path, default=Path("runs/uncertainty_gate.json"))
+    parser.add_argument(
+        "--in-distribution",
+        type=int,
+        default=0,
+        metavar="EPISODES",
+        help="instead: the share handed over on EPISODES episodes of each training world from --seed",
+    )
     args = parser.parse_args()
     learned = load_agent(args.model, expected_algorithms=("ddqn",))
     assert isinstance(learned, LearnedAgent)
@@ -165,6 +176,13 @@ def main() -> None:
     if threshold is None:
         raise SystemExit(f"{args.model}: no uncertainty_threshold; run drivestack gate-calibrate first")
     print(f"threshold {threshold:.4f} ({learned.metadata.uncertainty_calibration})")
+    if args.in_distribution:
+        found = calibrate(load_config(TRAIN_CONFIG), args.model, args.in_distribution, args.seed, 98.5)
+        found.threshold = threshold
+        everything = np.concatenate([np.array(values) for values in found.disagreements.values()])
+        print(calibration_table(found))
+        print(f"handed over: {np.mean(everything > threshold):.1%} of {everything.size} decisions")
+        return
     print(
         "probe | decisions | unsafe % | AUROC std / CV | not the lookahead's % | AUROC std / CV | "
         "handed over % | speed no gate / gate | crashes | AEB / ep | below TTC 1.5 s / ep"
