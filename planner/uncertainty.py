@@ -40,14 +40,12 @@ def handed_over(spread: np.ndarray, threshold: float) -> np.ndarray:
 
 
 class GatedAgent(Policy):
-    """An ensemble `learned` agent whose decisions above `threshold` disagreement go to `fallback`
-    (None: it decides all the same, and only the count says it would have handed over). It shows
-    the loop what `learned` must be shown; the loop asks `gate` and, for a handed-over decision,
+    """An ensemble `learned` agent whose decisions above `threshold` disagreement [Q-value] go to
+    `fallback` (named `fallback_name`; `planner.fallback: none` builds no gate). It shows the loop
+    what `learned` must be shown; the loop asks `gate` and, for a handed-over decision,
     the fallback on the fallback's own view (`predict` alone is the ensemble's greedy choice)."""
 
-    def __init__(
-        self, learned: LearnedAgent, fallback: Agent | None, threshold: float, fallback_name: str
-    ) -> None:
+    def __init__(self, learned: LearnedAgent, fallback: Agent, threshold: float, fallback_name: str) -> None:
         self.learned = learned
         self.fallback = fallback
         self.threshold = threshold
