@@ -28,7 +28,7 @@ import numpy as np
 
 from planner.factory import make_agent
 from stack.loop.closed_loop import ClosedLoop, grid_config
-from stack.runs.episodes import run_agent_episode
+from stack.runs.alone import run_agent_episode
 from stack.settings.run import load_config
 from stack.sim.highway import HighwayAdapter, env_config
 

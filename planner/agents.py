@@ -8,6 +8,7 @@ those two attributes to build what the agent sees, so it never knows which agent
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -46,6 +47,29 @@ class Scored(Protocol):
     score_name: str
 
     def scores(self, observation: np.ndarray) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class Gated:
+    """One gated decision per row: the ensemble's commands, their disagreement and coefficient of
+    variation, and which rows go to the fallback."""
+
+    actions: np.ndarray
+    disagreement: np.ndarray
+    variation: np.ndarray
+    handed: np.ndarray
+
+
+@runtime_checkable
+class Gate(Protocol):
+    """An agent that hands a decision to its `fallback` where `gate` says so
+    (`planner.uncertainty.GatedAgent`): the loop then shows the fallback its own view."""
+
+    fallback: Agent
+    fallback_name: str
+    threshold: float
+
+    def gate(self, observation: np.ndarray) -> Gated: ...
 
 
 def sees_permitted(agent: object) -> bool:

@@ -42,7 +42,11 @@ class MeanQNetwork(nn.Module):
         self.members = nn.ModuleList(members)
 
     def forward(self, observations: th.Tensor) -> th.Tensor:
-        return th.stack([member(observations) for member in self.members]).mean(dim=0)
+        return self.member_values(observations).mean(dim=0)
+
+    def member_values(self, observations: th.Tensor) -> th.Tensor:
+        """(members, batch, actions): each member's Q-values."""
+        return th.stack([member(observations) for member in self.members])
 
 
 class LearnedAgent(Policy):
@@ -69,9 +73,21 @@ class LearnedAgent(Policy):
         """The last observation decided on and its `rated` values (`scores` reads them)."""
 
     def q_values(self, observation: np.ndarray) -> np.ndarray:
-        batch = np.asarray(observation, dtype=np.float32).reshape(-1, self.observation_size)
         with th.no_grad():
-            return self.network(th.as_tensor(batch)).numpy()
+            return self.network(self._batch(observation)).numpy()
+
+    def member_q_values(self, observation: np.ndarray) -> np.ndarray:
+        """(members, batch, actions): each member's Q-values (one member: the network's)."""
+        with th.no_grad():
+            return self._member_values(self._batch(observation)).numpy()
+
+    def _batch(self, observation: np.ndarray) -> th.Tensor:
+        return th.as_tensor(np.asarray(observation, dtype=np.float32).reshape(-1, self.observation_size))
+
+    def _member_values(self, batch: th.Tensor) -> th.Tensor:
+        if isinstance(self.network, MeanQNetwork):
+            return self.network.member_values(batch)
+        return self.network(batch)[None]
 
     score_name = "Q-value (with the MOBIL prior's bonus)"
 
@@ -83,6 +99,10 @@ class LearnedAgent(Policy):
 
     def rated(self, observation: np.ndarray) -> np.ndarray:
         """(batch, actions): the Q-values with the MOBIL prior's bonus, checked for size."""
+        self._check_size(observation)
+        return self._with_prior(observation, self.q_values(observation))
+
+    def _check_size(self, observation: np.ndarray) -> None:
         size = np.asarray(observation).size
         if size % self.observation_size:
             raise ValueError(
@@ -90,13 +110,26 @@ class LearnedAgent(Policy):
                 f"({self.encoding} encoding of grid {self.grid_config.model_dump(mode='json')}), "
                 f"got {size}"
             )
-        q_values = self.q_values(observation)
+
+    def _with_prior(self, observation: np.ndarray, q_values: np.ndarray) -> np.ndarray:
         if self.prior is not None:
             q_values += self.prior.bonuses(np.asarray(observation).reshape(len(q_values), -1))
         return q_values
 
     def choose(self, observation: np.ndarray) -> Action:
-        q_values = self.rated(observation)
+        return self._greedy(observation, self.rated(observation))
+
+    def choose_with_members(self, observation: np.ndarray) -> tuple[Action, np.ndarray]:
+        """`choose(observation)` and the members' Q-values (members, batch, actions) it came from,
+        from one pass of the members (their mean taken as the ensemble's network takes it)."""
+        self._check_size(observation)
+        with th.no_grad():
+            members = self._member_values(self._batch(observation))
+            q_values = members.mean(dim=0).numpy()
+        return self._greedy(observation, self._with_prior(observation, q_values)), members.numpy()
+
+    def _greedy(self, observation: np.ndarray, q_values: np.ndarray) -> Action:
+        """The greedy command of each row of rated `q_values`, among the permitted ones."""
         self.last_rated = (observation, q_values)
         if self.sees_permitted:
             permitted = np.asarray(observation).reshape(len(q_values), -1)[:, -N_ACTIONS:] >= 0.5

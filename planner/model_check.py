@@ -97,6 +97,9 @@ def _check_metadata(path: Path | str, metadata: dict) -> None:
         problem = f"members: expected an integer in 1..{most}"
     if problem is None:
         problem = _description_problem(metadata)
+    threshold = metadata.get("uncertainty_threshold")
+    if problem is None and threshold is not None and not _non_negative(threshold):
+        problem = "uncertainty_threshold: expected a number >= 0"
     if problem:
         raise ModelFileError(f"{path}: model metadata {problem}")
 
@@ -123,6 +126,13 @@ def _description_problem(metadata: dict) -> str | None:
     ):
         return f"member_seeds: expected one seed (an integer, 0..{SEED_LIMIT - 1}) per member ({members})"
     return None
+
+
+def _non_negative(value: object) -> bool:
+    """Whether `value` is a finite number >= 0 (not a bool)."""
+    if not isinstance(value, int | float) or isinstance(value, bool):
+        return False
+    return math.isfinite(value) and value >= 0
 
 
 def _prior_problem(bonus: object, grid: GridConfig, encoding: Encoding) -> str | None:

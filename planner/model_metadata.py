@@ -25,8 +25,11 @@ class ModelMetadata:
     written) and its `action_mask` (its observations end with the safety layer's permitted
     commands, and it decides among them; False: not written) and its `members` (an ensemble of
     that many Q-networks of these sizes deciding on their mean, `planner.learned.MeanQNetwork`;
-    1: not written) are needed to use it (`planner.model_check` checks them); the rest describes
-    where it came from and is None (`member_seeds`: empty) in a file that does not say."""
+    1: not written) are needed to use it (`planner.model_check` checks them), and an ensemble's
+    `uncertainty_threshold` (the members' disagreement above which a fallback decides,
+    `planner.uncertainty`; with how it was calibrated, `uncertainty_calibration`: None when never
+    calibrated) to gate it; the rest describes where it came from and is None (`member_seeds`:
+    empty) in a file that does not say."""
 
     kind: ModelKind
     algorithm: str | None = None
@@ -44,6 +47,8 @@ class ModelMetadata:
     action_mask: bool = False
     members: int = 1
     member_seeds: tuple[int, ...] = ()
+    uncertainty_threshold: float | None = None
+    uncertainty_calibration: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The metadata member's keys in the order drivestack has always written them; a field
@@ -65,6 +70,8 @@ class ModelMetadata:
             "action_mask": self.action_mask or None,
             "members": self.members if self.members > 1 else None,
             "member_seeds": list(self.member_seeds) or None,
+            "uncertainty_threshold": self.uncertainty_threshold,
+            "uncertainty_calibration": self.uncertainty_calibration,
         }
         return {key: value for key, value in data.items() if value is not None}
 
@@ -90,6 +97,8 @@ class ModelMetadata:
             action_mask=data.get("action_mask", False) is True,
             members=_typed(data, "members", int) or 1,
             member_seeds=_member_seeds(data),
+            uncertainty_threshold=_number(data.get("uncertainty_threshold")),
+            uncertainty_calibration=_typed(data, "uncertainty_calibration", str),
         )
 
 
@@ -99,6 +108,11 @@ def _member_seeds(data: dict[str, Any]) -> tuple[int, ...]:
     if isinstance(seeds, list) and _all_int(seeds) and len(seeds) == data.get("members"):
         return tuple(seeds)
     return ()
+
+
+def _number(value: object) -> float | None:
+    """`value` as a float when it is a number (not a bool), else None."""
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
 
 
 def _typed(data: dict[str, Any], key: str, kind: type) -> Any:

@@ -11,7 +11,7 @@ import typer
 
 from common.plugins import SPEC_FORMS
 from stack.apps.benchmark_cli import benchmark
-from stack.apps.commands import agents, controllers, ensemble, export, sweep, view
+from stack.apps.commands import agents, controllers, ensemble, export, gate_calibrate, sweep, view
 from stack.apps.folders import claimed, claimed_for, episodes_kept, resumed
 from stack.apps.options import (
     AGAIN,
@@ -291,6 +291,7 @@ reproduce_app = typer.Typer(no_args_is_help=True, help="Reproduce the paper's ex
 app.add_typer(reproduce_app, name="reproduce")
 app.command()(export)
 app.command()(ensemble)
+app.command("gate-calibrate")(gate_calibrate)
 app.command()(agents)
 app.command()(controllers)
 app.command()(sweep)

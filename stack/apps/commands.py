@@ -10,7 +10,7 @@ import typer
 from rich.console import Console
 
 from common.plugins import AGENT_GROUP, SPEC_FORMS
-from stack.apps.options import AGAIN, fail, ray_or_fail, until_interrupted
+from stack.apps.options import AGAIN, TRAIN_CONFIG, fail, ray_or_fail, until_interrupted
 
 SWEEP_RAY_HELP = (
     "Where the trials run: a local Ray instance (default), auto (the cluster `ray start` made) or HOST:PORT."
@@ -192,3 +192,52 @@ def view(
     code = view(recordings, web)
     if code:
         raise typer.Exit(code=code)
+
+
+def gate_calibrate(
+    out: Path = typer.Option(
+        ..., "--out", help="The model file to write, the threshold in its metadata (.npz)."
+    ),
+    model: Path | None = typer.Option(
+        None, "--model", help="An ensemble model file (default: the shipped ddqn)."
+    ),
+    config: Path = typer.Option(
+        TRAIN_CONFIG,
+        "--config",
+        "-c",
+        help="The training config whose world mix (train.scenarios) is in distribution.",
+    ),
+    episodes: int = typer.Option(10, "--episodes", min=1, max=10_000, help="Episodes per world of the mix."),
+    seed: int = typer.Option(1005500, "--seed", min=0, help="Seed of each world's first episode."),
+    percentile: float = typer.Option(
+        98.5,
+        "--percentile",
+        min=50.0,
+        max=99.99,
+        help="The threshold's percentile of in-distribution disagreement.",
+    ),
+) -> None:
+    """Calibrate the uncertainty gate: the percentile of an ensemble's disagreement (its members'
+    std of Q(chosen)) over the worlds it trained on, written into a copy of its model file as
+    `uncertainty_threshold` (planner.uncertainty_threshold: null reads it)."""
+    from planner.factory import SHIPPED_MODELS
+    from stack.apps.folders import check_destination
+    from stack.apps.gate import calibrate, calibration_table, write_threshold
+    from stack.settings.run import ConfigError, load_config
+
+    source = model or SHIPPED_MODELS["ddqn"]
+    try:
+        check_destination(out, "--out", "")
+        found = calibrate(load_config(config), source, episodes, seed, percentile)
+        written = write_threshold(source, out, found)
+    except (ValueError, ConfigError) as error:
+        fail(str(error))
+    except OSError as error:
+        fail(f"--out: cannot write {out} ({error.strerror})")
+    console = Console()
+    console.print(calibration_table(found), highlight=False, soft_wrap=True)
+    console.print(
+        f"wrote {written}: uncertainty_threshold {found.threshold:.4f} ({found.description()})",
+        highlight=False,
+        soft_wrap=True,
+    )

@@ -109,6 +109,8 @@ class ClosedLoop:
         self.recording = recording
         self.given_controller = controller
         self.builder = OccupancyGridBuilder(grid or grid_config(config))
+        self.other_views: dict[str, OccupancyGridBuilder] = {}
+        """The builders of `perceive_as`, by grid."""
 
     def reset(self, seed: int) -> WorldState:
         config = self.config
@@ -151,7 +153,9 @@ class ClosedLoop:
             self.video = Video(self.frames, self.plant, title, VIDEO_FRAME_TICKS)
         self.command: Command = Command.STAY
         self.applied: Command | None = Command.STAY
+        self.fallback_decisions = 0
         self.grid: OccupancyGrid | None = None
+        self.gridded: WorldState = self.perceived
         self.snapshot: tuple[WorldState, OccupancyGrid] | None = None
         if self.recording is not None:
             self.recording.start(self.world, self.plant.dt, self.maneuver.lane)
@@ -177,12 +181,29 @@ class ClosedLoop:
     def perceive(self) -> OccupancyGrid:
         """The grid the planner decides on now (through the sensor model)."""
         if self.config.perception.control_on_ground_truth:
-            self.grid = self.builder.build(self.sensor.observe(self.world))
+            self.gridded = self.sensor.observe(self.world)
         else:
-            self.grid = self.builder.build(self.perceived)
+            self.gridded = self.perceived
+        self.grid = self.builder.build(self.gridded)
         if self.snapshot is None or self.snapshot[0].time < SNAPSHOT_TIME_S:
             self.snapshot = (self.world, self.grid)
         return self.grid
+
+    def perceive_as(self, grid: GridConfig | None) -> OccupancyGrid:
+        """The world `perceive` last gridded, on `grid` (None: the run's): what another agent
+        deciding now (a fallback) sees of the same sensor reading."""
+        config = grid or grid_config(self.config)
+        key = config.model_dump_json()
+        if key not in self.other_views:
+            self.other_views[key] = OccupancyGridBuilder(config)
+        return self.other_views[key].build(self.gridded)
+
+    def hand_over(self, spread: float, threshold: float, fallback: str, command: Command) -> None:
+        """The decision about to be acted on went to `fallback`, which chose `command`: the
+        ensemble's members disagreed by `spread` above `threshold` [Q-value]."""
+        self.fallback_decisions += 1
+        if self.recording is not None:
+            self.recording.handed_over(self.world.time, spread, threshold, fallback, command)
 
     def act(self, command: Command, ticks: int | None = None) -> Acted:
         """Apply `command` through the safety layer, unless a lane change is still running (then
@@ -355,6 +376,7 @@ class ClosedLoop:
             mpc_fallbacks=solves.fallbacks,
             emergency_brakings=self.emergency.activations,
             **record_fields(BrakingsByCause.of(self.causes.counts)),
+            fallback_decisions=self.fallback_decisions,
             solve_ms_p50=solves.p50_ms,
             solve_ms_p95=solves.p95_ms,
             snapshot=self.snapshot,

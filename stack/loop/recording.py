@@ -101,6 +101,18 @@ class EpisodeRecording:
             self._event(world.time, f"masked {command.name}: the gap in the target lane is unsafe", "WARN")
         self.draw_path = True
 
+    def handed_over(
+        self, time: float, spread: float, threshold: float, fallback: str, command: Command
+    ) -> None:
+        """The decision at `time` [s] went to the `fallback` agent, which chose `command`: the
+        ensemble's members disagreed by `spread` [Q-value], above the gate's `threshold`."""
+        self._event(
+            time,
+            f"uncertain: the members disagree by {spread:.2f} > {threshold:.2f}; "
+            f"{fallback} decides {command.name}",
+            "WARN",
+        )
+
     def tick(
         self,
         tick: Tick,

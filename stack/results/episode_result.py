@@ -167,6 +167,20 @@ class EpisodeResult:
             columns=(Column("agents", "aborted / ep", interval_cell("aborted_changes")),),
         ),
     )
+    fallback_decisions: int = field(
+        default=0,
+        metadata=declared(
+            "count",
+            "decisions",
+            summary=(Summarized("fallback_decisions", mean),),
+            rows=(SummaryRow("fallback decisions / episode", "{fallback_decisions:.2f}"),),
+            interval=CompareInterval("fallback_decisions", "mean"),
+            columns=(
+                Column("episodes", "fallback", episode_cell("{fallback_decisions}")),
+                Column("agents", "fallback / ep", interval_cell("fallback_decisions")),
+            ),
+        ),
+    )
     mpc_fallbacks: int = field(
         default=0,
         metadata=declared(

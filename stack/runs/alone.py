@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from planner.agents import Agent, Scored, decide, sees_permitted
-from records import child_seed
+from planner.agents import Agent, Gate, Scored, decide, sees_permitted
+from records import Command, child_seed
 from stack.agents.oracle import Oracle
 from stack.loop.closed_loop import ClosedLoop
 from stack.loop.recording import episode_recording
@@ -28,11 +28,30 @@ def agent_step(loop: ClosedLoop, agent: Agent) -> int:
         command = agent.plan(loop)
     else:
         observation = loop.observation(grid, agent.encoding, sees_permitted(agent))
-        command = decide(agent, observation)
+        command = (
+            gated_decision(loop, agent, observation)
+            if isinstance(agent, Gate)
+            else decide(agent, observation)
+        )
     if loop.recording is not None and isinstance(agent, Scored):
         seen = observation if observation is not None else np.empty(0)
         loop.recording.scores(agent.scores(seen), agent.score_name)
     return loop.act(command).ticks
+
+
+def gated_decision(loop: ClosedLoop, agent: Gate, observation: np.ndarray) -> Command:
+    """The gated ensemble's command on `observation`, or, where its members disagree above the
+    threshold, its fallback's on the fallback's own view of the same reading (counted by the loop)."""
+    gated = agent.gate(observation)
+    if not gated.handed[0]:
+        return Command(int(gated.actions[0]))
+    fallback = agent.fallback
+    seen = loop.observation(
+        loop.perceive_as(fallback.grid_config), fallback.encoding, sees_permitted(fallback)
+    )
+    command = decide(fallback, seen)
+    loop.hand_over(float(gated.disagreement[0]), agent.threshold, agent.fallback_name, command)
+    return command
 
 
 def run_agent_episode(loop: ClosedLoop, agent: Agent, episode: int, seed: int) -> EpisodeResult:

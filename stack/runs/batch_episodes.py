@@ -17,7 +17,7 @@ from dataclasses import replace
 import numpy as np
 
 from perception.grid import BATCHED_FEATURES, observe_batch
-from planner.agents import Agent, decide, sees_permitted
+from planner.agents import Agent, Gate, decide, sees_permitted
 from records import Command, GridConfig, child_seed
 from stack.batch.closed_loop_batch import ClosedLoopBatch, refusal
 from stack.loop.closed_loop import grid_config
@@ -95,22 +95,39 @@ def run_batched(
         deciding = np.ones(worlds, dtype=bool)
         since = np.zeros(worlds, dtype=np.int64)
         commands = np.full(worlds, Command.STAY.value, dtype=np.int64)
+        fallback_decisions = np.zeros(worlds, dtype=np.int64)
         while len(results) < worlds:
             raise_if_stopped()
             if deciding.any():
                 assert loop.perceived is not None
-                seen = observe_batch(grid, loop.perceived)
-                if with_permitted:
-                    seen = np.concatenate([seen, loop.permitted()], axis=1)
+                seen = _seen(loop, grid, with_permitted)
+                handed = []
                 for world in np.flatnonzero(deciding).tolist():
-                    commands[world] = decide(agents[world], seen[world]).value
+                    agent = agents[world]
+                    if isinstance(agent, Gate):
+                        gated = agent.gate(seen[world])
+                        commands[world] = int(gated.actions[0])
+                        if gated.handed[0]:
+                            handed.append(world)
+                    else:
+                        commands[world] = decide(agent, seen[world]).value
+                if handed:
+                    gate = agents[handed[0]]
+                    assert isinstance(gate, Gate)
+                    fallback = gate.fallback
+                    fallback_seen = _seen(loop, _grid(config, fallback), sees_permitted(fallback))
+                    for world in handed:
+                        commands[world] = decide(fallback, fallback_seen[world]).value
+                    fallback_decisions[handed] += 1
                 loop.command(commands, deciding)
                 since[deciding] = 0
             live = ~loop.done
             completed = loop.tick(live)
             since[live] += 1
             for world in np.flatnonzero(live & loop.done).tolist():
-                results[world] = _judged(config, loop.result(world, episodes[world], seeds[world]))
+                result = loop.result(world, episodes[world], seeds[world])
+                fallbacks = int(fallback_decisions[world])
+                results[world] = _judged(config, replace(result, fallback_decisions=fallbacks))
                 if on_finished is not None:
                     on_finished(results[world])
             deciding = ~loop.done & (completed | (~loop.changing & (since >= config.decision_ticks)))
@@ -128,6 +145,14 @@ def _judged(config: RunConfig, result: EpisodeResult) -> EpisodeResult:
         return result
     alone = run_episode(config, result.episode)
     return replace(result, at_fault_collision=alone.at_fault_collision, fault_reason=alone.fault_reason)
+
+
+def _seen(loop: ClosedLoopBatch, grid: GridConfig, with_permitted: bool) -> np.ndarray:
+    """(worlds, values): every world's observation on `grid`, followed by its permitted commands
+    for an agent trained with an action mask (`with_permitted`)."""
+    assert loop.perceived is not None
+    seen = observe_batch(grid, loop.perceived)
+    return np.concatenate([seen, loop.permitted()], axis=1) if with_permitted else seen
 
 
 def batches(episodes: Sequence[int], jobs: int, most: int = BATCH_WORLDS) -> list[list[int]]:

@@ -37,7 +37,29 @@ def build_agent(config: RunConfig, seed: int) -> Agent:
     if expected is not None:
         counts = config.highway.lane_counts
         check_road_fit(path or "", grid, agent.encoding, expected, counts, permitted=sees_permitted(agent))
-    return agent
+    return with_gate(agent, config, seed)
+
+
+def with_gate(agent: Agent, config: RunConfig, seed: int) -> Agent:
+    """`agent` behind the uncertainty gate (`planner.uncertainty.GatedAgent`) when it is an
+    ensemble, `planner.fallback` names an agent and a threshold is known (`planner.
+    uncertainty_threshold`, else the one calibrated into its model file); else `agent` itself."""
+    from planner.learned import LearnedAgent
+
+    planner = config.planner
+    if not isinstance(agent, LearnedAgent) or agent.metadata.members < 2 or planner.fallback == "none":
+        return agent
+    threshold = planner.uncertainty_threshold
+    if threshold is None:
+        threshold = agent.metadata.uncertainty_threshold
+    if threshold is None:
+        return agent
+    from planner.uncertainty import GatedAgent
+
+    setup = lookahead_setup(config) if planner.fallback == "lookahead" else None
+    lanes = config.highway.lanes_count
+    fallback = make_agent(planner.fallback, lanes, grid_config(config), seed, lookahead=setup)
+    return GatedAgent(agent, fallback, threshold, planner.fallback)
 
 
 def lookahead_setup(config: RunConfig) -> LookaheadSetup:

@@ -73,6 +73,14 @@ class PlannerConfig(Strict):
         description="[Q-value] the learned agents' hysteresis: ddqn and dqn change lane only when the "
         "change's Q-value beats STAY's by at least this much",
     )
+    fallback: Literal["lookahead", "mobil", "none"] = Field(
+        "lookahead", description="who decides where an ensemble's members disagree on its command by "
+        "more than uncertainty_threshold (planner.uncertainty); none: no gate",
+    )  # fmt: skip
+    uncertainty_threshold: float | None = Field(
+        None, ge=0, description="[Q-value] the members' std above which the fallback decides; null: the "
+        "one calibrated into the model file (drivestack gate-calibrate), else no gate",
+    )  # fmt: skip
 
     @field_validator("model")
     @classmethod
