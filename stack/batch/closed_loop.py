@@ -307,6 +307,7 @@ class ClosedLoopBatch:
             self.safety, self.settings, self.laws, self.dt, actuation,
         )  # fmt: skip
         control_s = time.perf_counter() - started
+        traffic.arrays.intent[:] = np.where(self.changing, self.target, -1)
         ended = traffic.step(actuation[:, 0], actuation[:, 1], live)
         batch = self.batch = traffic.arrays.world_batch()
         self._sense(live)

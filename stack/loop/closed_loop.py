@@ -85,6 +85,8 @@ class Plant(Protocol):
 
     def render_scale(self) -> tuple[float, float]: ...
 
+    def show_intent(self, lane: int) -> None: ...
+
 
 class ClosedLoop:
     """Plant, perception, safety layer, maneuver, controller and metrics of one episode."""
@@ -237,9 +239,10 @@ class ClosedLoop:
         state = self.world.ego_state()
         actuation = self.controller.step(state, reference)
         actuation = self.emergency.apply(actuation, state.speed, reference.leaders, self.plant.dt)
+        maneuver = self.maneuver
+        self.plant.show_intent(maneuver.target if maneuver.changing_lane else -1)
         self.world = self.plant.step(actuation)
         self.perceived = self._observe()
-        maneuver = self.maneuver
         return Tick(reference, actuation, self.world, maneuver.lane, maneuver.target)
 
     @property
