@@ -253,10 +253,10 @@ def scenario_road(name: str) -> HighwayConfig:
 
 def in_scenario(config: RunConfig, name: str) -> RunConfig:
     """`config` moved to scenario `name` (its world replaced, its traffic's drivers and everything
-    else kept)."""
+    else kept; the exit road spawns its own traffic, with highway-env's drivers)."""
     data = scenarios.apply(name, config.model_dump(mode="json"))
     drivers = drivers_of(config.highway)
-    if drivers != HIGHWAY_ENV:
+    if drivers != HIGHWAY_ENV and data["highway"].get("road") != "exit":
         data = with_drivers(data, drivers, "traffic")
     return RunConfig.model_validate(data)
 
