@@ -86,15 +86,12 @@ def test_a_delayed_driver_acts_on_the_gap_it_saw():
     seen = SeenPast(1, 2)
     for frame in range(20):
         seen.push(np.zeros(1, dtype=int), np.array([[0.0, 50.0 - frame]]), np.array([[20.0, 20.0]]))
-    laws = (4.0, 3.0, 10.0, 1.5, 2 * np.sqrt(15.0))
-    now, then = (
-        seen_acceleration(20.0, 30.0, np.nan, laws[0], laws[1], laws[2], laws[3], laws[4], gap, 0.0)
-        for gap in (31.0, 41.0)
-    )
+    free, laws = 0.5, (3.0, 10.0, 1.5, 2 * np.sqrt(15.0))
+    now, then = (seen_acceleration(free, 20.0, *laws, gap, 0.0) for gap in (31.0, 41.0))
     acceleration = np.zeros(1)
     delayed_accelerations(
         acceleration, np.zeros(1, dtype=np.int64), np.array([0]), np.array([1]), np.array([10]),
-        seen.s, seen.speed, seen.pushed, np.array([20.0]), np.array([30.0]), np.array([np.nan]),
+        seen.s, seen.speed, seen.pushed, np.array([free]), np.array([20.0]),
         *(np.array([value]) for value in laws),
     )  # fmt: skip
     assert acceleration[0] == then and then > now

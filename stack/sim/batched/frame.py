@@ -184,13 +184,19 @@ def _delayed(
     (`delayed_accelerations` over the worlds' `seen` past), as the vector road computes it."""
     seen, width = arrays.seen, arrays.vehicles
     assert seen is not None
+    delay = flat["delay_frames"][drivers]
+    delayed = np.flatnonzero((delay > 0) & (own_front >= 0))
+    if len(delayed) == 0:
+        return
+    rows, fronts = drivers[delayed], own_front[delayed]
+    seen_acceleration = acceleration[delayed]
+    free = kinematics.idm(rows, np.full(len(rows), -1), laws, rows)
     delayed_accelerations(
-        acceleration, drivers // width, drivers % width, np.where(own_front >= 0, own_front % width, -1),
-        flat["delay_frames"][drivers], seen.s, seen.speed, seen.pushed, kinematics.speed[drivers],
-        kinematics.target_speed[drivers], kinematics.speed_limit[drivers], laws.delta[drivers],
-        laws.a_max[drivers], laws.distance_wanted[drivers], laws.time_wanted[drivers],
-        laws.braking_term[drivers],
+        seen_acceleration, rows // width, rows % width, fronts % width, delay[delayed], seen.s, seen.speed,
+        seen.pushed, free, kinematics.speed[rows], laws.a_max[rows], laws.distance_wanted[rows],
+        laws.time_wanted[rows], laws.braking_term[rows],
     )  # fmt: skip
+    acceleration[delayed] = seen_acceleration
 
 
 def _yield_and_brake(

@@ -16,7 +16,6 @@ from numba import njit
 from common.compiled import Kernel
 from stack.sim.drivers import SEEN_FRAMES, habits_of
 from stack.sim.vector.dynamics import desired_gap
-from stack.sim.vector.kernels import maximum, minimum
 
 _UNIT = 1.0 / 9007199254740992.0
 """2^-53: a 53-bit integer to a float in [0, 1)."""
@@ -48,10 +47,8 @@ def sudden_braking(
 
 @njit(cache=True, nogil=True, inline="always")
 def seen_acceleration(
+    free: float,
     speed: float,
-    target_speed: float,
-    speed_limit: float,
-    delta: float,
     a_max: float,
     distance_wanted: float,
     time_wanted: float,
@@ -59,15 +56,12 @@ def seen_acceleration(
     gap: float,
     closing: float,
 ) -> float:  # pragma: no cover - compiled
-    """IDM's acceleration [m/s^2] of a driver at `speed` [m/s] (desired: `target_speed` clipped to
-    [0, `speed_limit`], NaN: none) from the `gap` [m] and `closing` speed [m/s] it saw: a_max (1 -
-    (v / v0)^delta - (s*(v, dv) / s)^2), with `desired_gap` and highway-env's 0.01 floors."""
-    desired = target_speed if speed_limit != speed_limit else minimum(maximum(target_speed, 0.0), speed_limit)
-    desired = desired if abs(desired) > 1e-2 else (1e-2 if desired >= 0 else -1e-2)
-    free = a_max * (1 - (maximum(speed, 0.0) / abs(desired)) ** delta)
+    """IDM's acceleration [m/s^2] of a driver at `speed` [m/s] from the `gap` [m] and `closing`
+    speed [m/s] it saw: its free-road acceleration `free` (IDM without a leader, a_max (1 - (v /
+    v0)^delta)) - a_max (s*(v, dv) / s)^2, with `desired_gap` and highway-env's 0.01 floor."""
     gap = gap if abs(gap) > 1e-2 else (1e-2 if gap >= 0 else -1e-2)
     ratio = desired_gap(distance_wanted, time_wanted, braking_term, speed, closing) / gap
-    return free - a_max * ratio**2
+    return free - a_max * ratio * ratio
 
 
 @Kernel
@@ -80,10 +74,8 @@ def delayed_accelerations(
     seen_s: np.ndarray,
     seen_speed: np.ndarray,
     pushed: np.ndarray,
+    free: np.ndarray,
     speed: np.ndarray,
-    target_speed: np.ndarray,
-    speed_limit: np.ndarray,
-    delta: np.ndarray,
     a_max: np.ndarray,
     distance_wanted: np.ndarray,
     time_wanted: np.ndarray,
@@ -93,7 +85,8 @@ def delayed_accelerations(
     (frames) and a `leader` (its row in its `world`, -1: none; `me` its own) by `seen_acceleration`
     on the gap and closing speed of `delay` frames ago (the oldest kept, early on): from `seen_s`
     and `seen_speed` (worlds, `SEEN_FRAMES`, rows), a ring of which `pushed` (per world) frames were
-    written. The other parameters are per driver, now (speed, desired and limit [m/s], IDM's)."""
+    written. The other parameters are per driver, now: its free-road acceleration [m/s^2] (IDM
+    behind no leader), speed [m/s], IDM's a_max [m/s^2], d0 [m], T [s], 2 sqrt(a b) [m/s^2]."""
     for k in range(acceleration.shape[0]):
         if delay[k] <= 0 or leader[k] < 0:
             continue
@@ -103,10 +96,8 @@ def delayed_accelerations(
         gap = seen_s[w, then, leader[k]] - seen_s[w, then, me[k]]
         closing = seen_speed[w, then, me[k]] - seen_speed[w, then, leader[k]]
         acceleration[k] = seen_acceleration(
+            free[k],
             speed[k],
-            target_speed[k],
-            speed_limit[k],
-            delta[k],
             a_max[k],
             distance_wanted[k],
             time_wanted[k],

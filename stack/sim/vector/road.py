@@ -322,10 +322,11 @@ class VectorRoad(FastRoad):
         (`delayed_accelerations` over this road's `seen` past)."""
         frame, me, laws, seen = plan.frame, plan.me, plan.laws, self.seen
         assert plan.habits is not None and seen is not None
+        free = frame.idm(me, np.full(len(me), -1), laws, plan.everyone)
         delayed_accelerations(
             acceleration, np.zeros(len(me), dtype=np.int64), me, plan.own_front, plan.habits.delay_frames,
-            seen.s, seen.speed, seen.pushed, frame.speed[me], frame.target_speed[me], frame.speed_limit[me],
-            laws.delta, laws.a_max, laws.distance_wanted, laws.time_wanted, laws.braking_term,
+            seen.s, seen.speed, seen.pushed, free, frame.speed[me], laws.a_max, laws.distance_wanted,
+            laws.time_wanted, laws.braking_term,
         )  # fmt: skip
 
     @staticmethod
