@@ -210,22 +210,38 @@ def _yield_and_brake(
     """The yielding drivers behind their ego's lane change (`yielders`, `yielding`) and the sudden
     brakings (`sudden_accelerations`), in place, as the vector road computes them."""
     world = drivers // arrays.vehicles
+    yields = flat["yields_to_ego"][drivers]
+    if yields.any():
+        _yield(arrays, flat, kinematics, laws, drivers, world, yields, acceleration)
+    chance = flat["sudden_braking_chance"][drivers]
+    if (chance > 0).any():
+        sudden_accelerations(
+            acceleration, arrays.acts[world] - 1, flat["habit_key"][drivers], chance,
+            flat["sudden_braking_frames"][drivers], flat["sudden_braking_mps2"][drivers],
+        )  # fmt: skip
+
+
+def _yield(
+    arrays: BatchArrays,
+    flat: dict[str, np.ndarray],
+    kinematics: IdmRows,
+    laws: DriverLaws,
+    drivers: np.ndarray,
+    world: np.ndarray,
+    yields: np.ndarray,
+    acceleration: np.ndarray,
+) -> None:
+    """The yielding drivers behind their ego's lane change, in place (`yielders`, `yielding`)."""
     egos = (np.arange(arrays.worlds) * arrays.vehicles + arrays.ego)[world]
     yield_now = yielders(
-        flat["yields_to_ego"][drivers], flat["lane"][drivers], arrays.intent[world],
-        kinematics.s[drivers], kinematics.s[egos],
-    ).nonzero()[0]  # fmt: skip
+        yields, flat["lane"][drivers], arrays.intent[world], kinematics.s[drivers], kinematics.s[egos]
+    ).nonzero()[0]
     if len(yield_now):
         yielders_rows = drivers[yield_now]
         behind_ego = kinematics.idm(yielders_rows, egos[yield_now], laws, yielders_rows)
         acceleration[yield_now] = yielding(
             acceleration[yield_now], behind_ego, flat["comfort_acc_min"][yielders_rows]
         )
-    sudden_accelerations(
-        acceleration, arrays.acts[world] - 1, flat["habit_key"][drivers],
-        flat["sudden_braking_chance"][drivers], flat["sudden_braking_frames"][drivers],
-        flat["sudden_braking_mps2"][drivers],
-    )  # fmt: skip
 
 
 def move(arrays: BatchArrays, active: np.ndarray, dt: float) -> None:

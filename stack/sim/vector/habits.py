@@ -8,6 +8,7 @@ without habits calls none of them, so highway-env's drivers keep stock's bits.""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -174,20 +175,30 @@ class HabitColumns:
             np.array([h.yields_to_ego for h in habits], dtype=bool),
         )
 
-    @property
+    @cached_property
     def delayed(self) -> bool:
         """Whether a driver acts on a delayed view (a road must keep its vehicles' past)."""
         return bool((self.delay_frames > 0).any())
 
-    @property
+    @cached_property
+    def brakes_suddenly(self) -> bool:
+        """Whether a driver brakes without cause."""
+        return bool((self.sudden_braking_chance > 0).any())
+
+    @cached_property
+    def blind(self) -> bool:
+        """Whether a driver is blind to the ego."""
+        return bool(self.blind_to_ego.any())
+
+    @cached_property
+    def yields(self) -> bool:
+        """Whether a driver yields to the ego."""
+        return bool(self.yields_to_ego.any())
+
+    @cached_property
     def any(self) -> bool:
         """Whether a driver has a habit at all."""
-        return bool(
-            self.delayed
-            or (self.sudden_braking_chance > 0).any()
-            or self.blind_to_ego.any()
-            or self.yields_to_ego.any()
-        )
+        return self.delayed or self.brakes_suddenly or self.blind or self.yields
 
 
 class SeenPast:
@@ -213,6 +224,13 @@ class SeenPast:
 
     def push(self, worlds: np.ndarray, s: np.ndarray, speed: np.ndarray) -> None:
         """Write this frame's `s` and `speed` (len(worlds), rows) of `worlds` into their rings."""
+        if len(worlds) == 1:
+            world = int(worlds[0])
+            slot_of = int(self.pushed[world]) % SEEN_FRAMES
+            self.s[world, slot_of, : s.shape[1]] = s[0]
+            self.speed[world, slot_of, : speed.shape[1]] = speed[0]
+            self.pushed[world] += 1
+            return
         slot = self.pushed[worlds] % SEEN_FRAMES
         self.s[worlds, slot, : s.shape[1]] = s
         self.speed[worlds, slot, : speed.shape[1]] = speed

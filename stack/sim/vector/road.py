@@ -182,13 +182,20 @@ class VectorRoad(FastRoad):
             return
         frame = plan.frame
         plan.habits, plan.frame_index = habits, self.acts - 1
-        plan.ego_row = frame.row(self.ego) if self.ego in self.vehicles else -1
-        plan.intent = self.ego_intent_lane
+        if (habits.blind or habits.yields) and self.ego is not None:
+            plan.ego_row = self._ego_row(frame)
+            plan.intent = self.ego_intent_lane
         if habits.delayed:
             rows = len(frame.s)
             if self.seen is None or self.seen.s.shape[2] != rows:
                 self.seen = SeenPast(1, rows)
             self.seen.push(np.zeros(1, dtype=int), frame.s[None, :], frame.speed[None, :])
+
+    def _ego_row(self, frame: TrafficFrame) -> int:
+        """The ego's row in `frame`, -1 when it is not on the road."""
+        if frame.projections.vehicles_first:
+            return next((place for place, v in enumerate(self.vehicles) if v is self.ego), -1)
+        return frame.row(self.ego) if any(v is self.ego for v in self.vehicles) else -1
 
     def _drivers_and_others(self) -> tuple[list[IDMVehicle], list[int], list[int]]:
         """The IDM drivers that act this frame (not crashed: stock's act returns at once for those),
@@ -270,7 +277,7 @@ class VectorRoad(FastRoad):
             plan.own_acceleration = frame.idm(*own)
             return decisions
         new_front, new_rear = frame.neighbours(me, sides)
-        if plan.habits is not None:
+        if plan.habits is not None and plan.habits.blind:
             new_rear = unseen_ego(new_rear, plan.habits.blind_to_ego[index], plan.ego_row)
         own_front, own_rear = plan.own_front[index], plan.own_rear[index]
         blocks = 6
@@ -335,7 +342,7 @@ class VectorRoad(FastRoad):
         brakings (`sudden_accelerations`), in place."""
         habits, frame, me = plan.habits, plan.frame, plan.me
         assert habits is not None
-        if plan.ego_row >= 0 and plan.intent >= 0 and habits.yields_to_ego.any():
+        if plan.ego_row >= 0 and plan.intent >= 0 and habits.yields:
             yield_now = yielders(
                 habits.yields_to_ego,
                 frame.lane[me],
@@ -349,10 +356,11 @@ class VectorRoad(FastRoad):
                 acceleration[yield_now] = yielding(
                     acceleration[yield_now], behind_ego, plan.comfort_acc_min[yield_now]
                 )
-        sudden_accelerations(
-            acceleration, np.full(len(me), plan.frame_index), habits.key, habits.sudden_braking_chance,
-            habits.sudden_braking_frames, habits.sudden_braking_mps2,
-        )  # fmt: skip
+        if habits.brakes_suddenly:
+            sudden_accelerations(
+                acceleration, np.full(len(me), plan.frame_index), habits.key, habits.sudden_braking_chance,
+                habits.sudden_braking_frames, habits.sudden_braking_mps2,
+            )  # fmt: skip
 
     def step(self, dt: float) -> None:
         """Stock `Road.step`: every vehicle moved over `dt` [s] (the kinematic ones at once, from what
