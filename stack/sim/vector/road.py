@@ -301,7 +301,7 @@ class VectorRoad(FastRoad):
 
     def _drive(self, plan: Drivers) -> tuple[np.ndarray, np.ndarray]:
         """`IDMVehicle.act`'s steering [rad] and IDM acceleration [m/s^2] of every driver, after its
-        decisions (and its habits: `_with_habits`): set as their actions, and returned."""
+        decisions and habits (`_delayed`, `_yield_and_brake`): set as their actions, and returned."""
         frame, drivers, me = plan.frame, plan.drivers, plan.me
         lanes = frame.lanes
         heading, speed, target = frame.heading[me], frame.speed[me], plan.target
