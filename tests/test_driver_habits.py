@@ -21,6 +21,7 @@ from stack.settings.run import ConfigError, build_config
 from stack.sim.drivers import SEEN_FRAMES, habits_of
 from stack.sim.envs import VECTOR_HIGHWAY
 from stack.sim.highway import env_config
+from stack.sim.vector import road
 from stack.sim.vector.habits import (
     SeenPast,
     delayed_accelerations,
@@ -126,9 +127,17 @@ def test_each_batched_world_is_the_vector_world_with_habits(population):
     assert_worlds_identical(highway_in("dense", population), [1002040, 1002041], frames=150)
 
 
-def test_a_batched_run_is_the_per_world_run_with_yielding_and_blind_drivers():
+def test_a_batched_run_is_the_per_world_run_with_yielding_and_blind_drivers(monkeypatch):
     """MOBIL's ego changes lane in front of cautious (yielding) and blind drivers: the batched
-    run shows the traffic the ego's intent lane as the per-world loop does."""
+    run shows the traffic the ego's intent lane as the per-world loop does, and drivers ease off."""
+    eased: list[int] = []
+
+    def counted(acceleration, behind_ego, comfort_acc_min):
+        out = yielding(acceleration, behind_ego, comfort_acc_min)
+        eased.append(int((out < acceleration).sum()))
+        return out
+
+    monkeypatch.setattr(road, "yielding", counted)
     config = build_config(
         {},
         "test",
@@ -142,6 +151,7 @@ def test_a_batched_run_is_the_per_world_run_with_yielding_and_blind_drivers():
     batched = run_batched(config, [0, 1, 2])
     assert_same_episodes(batched, [run_episode(config, e) for e in range(3)])
     assert any(e.lane_changes for e in batched)
+    assert sum(eased) > 0, "a yielding driver eased off behind the ego's lane change"
 
 
 def test_the_stock_and_fast_backends_refuse_drivers_with_habits_in_one_line():
