@@ -49,10 +49,12 @@ BRAKING = -2.0
 """The egos' acceleration [m/s^2]."""
 
 
-def batch_rate(highway: HighwayConfig, worlds: int, frames: int) -> float:
-    """World-frames per CPU-second of a batch of `worlds` (resets at the start not counted)."""
+def batch_rate(highway: HighwayConfig, worlds: int, frames: int, intent: int = -1) -> float:
+    """World-frames per CPU-second of a batch of `worlds` (resets at the start not counted), each
+    ego showing the traffic the lane `intent` (-1: none) as the one it changes into."""
     batch = TrafficBatch(highway, worlds)
     batch.reset(list(range(worlds)))
+    batch.arrays.intent[:] = intent
     steering = np.array([[actuation(frame, k)[1] for k in range(worlds)] for frame in range(frames)])
     acceleration = np.full(worlds, BRAKING)
     start = time.process_time()
@@ -65,10 +67,12 @@ def batch_rate(highway: HighwayConfig, worlds: int, frames: int) -> float:
     return worlds * frames / elapsed
 
 
-def vector_rate(highway: HighwayConfig, world: int, frames: int) -> float:
-    """Frames per CPU-second of the vector backend driving world `world` alone."""
+def vector_rate(highway: HighwayConfig, world: int, frames: int, intent: int = -1) -> float:
+    """Frames per CPU-second of the vector backend driving world `world` alone, its ego showing the
+    lane `intent` (-1: none) as the one it changes into."""
     adapter = HighwayAdapter(highway, backend="vector")
     adapter.reset(world)
+    adapter.show_intent(intent)
     actuations = [Actuation(*actuation(frame, world)) for frame in range(frames)]
     start = time.process_time()
     for frame in range(frames):

@@ -1,9 +1,12 @@
 """What a driver population costs per frame against highway-env's own drivers, in one sitting: the
 `vector` backend driving one world alone (frames per CPU-second, `HighwayAdapter.step`, snapshot
 included) and a batch of worlds (`TrafficBatch.step`, world-frames per CPU-second), on the same
-worlds (seeds 0, 1, ...) with the same braking ego as `batched_traffic.py`.
+worlds (seeds 0, 1, ...) with the same braking ego as `batched_traffic.py`, which shows the traffic
+lane `--intent` (default 1) as the lane it changes into the whole time: the yielding drivers'
+worst case (every cautious driver behind the ego in that lane evaluates IDM behind it each frame).
 
     .venv/bin/python benchmarks/driver_cost.py [--scenario highway-v0] [--runs 3] [--frames 150]
+        [--intent 1] [--populations highway-env,calibrated,...]
 
 The populations alternate run by run, after one warm-up run each; the figures are medians. A
 population changes the traffic too (aggressive drivers change lane more often), so its cost is
@@ -38,7 +41,16 @@ drivers.POPULATION_RANGES[SAME_AS_HIGHWAY_ENV] = drivers.DriverRanges(
     decision_period_s=(1.0, 1.0),
 )
 drivers.POPULATIONS = (*drivers.POPULATIONS, SAME_AS_HIGHWAY_ENV)
-POPULATIONS = ("highway-env", SAME_AS_HIGHWAY_ENV, "calibrated", "aggressive", "cautious", "mixed")
+POPULATIONS = (
+    "highway-env",
+    SAME_AS_HIGHWAY_ENV,
+    "calibrated",
+    "aggressive",
+    "cautious",
+    "distracted",
+    "blind",
+    "mixed",
+)
 BATCH_WORLDS = 64
 
 
@@ -47,18 +59,26 @@ def main() -> None:
     parser.add_argument("--scenario", default="highway-v0")
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--frames", type=int, default=150)
+    parser.add_argument("--intent", type=int, default=1, help="the lane the ego shows it changes into")
+    parser.add_argument("--populations", default=",".join(POPULATIONS), help="comma-separated")
     args = parser.parse_args()
-    highways = {name: build_config({}, scenario=args.scenario, traffic=name).highway for name in POPULATIONS}
+    populations = args.populations.split(",")
+    if populations[0] != "highway-env":
+        populations.insert(0, "highway-env")
+    highways = {name: build_config({}, scenario=args.scenario, traffic=name).highway for name in populations}
+    intent = args.intent
     for highway in highways.values():
-        vector_rate(highway, 0, 10), batch_rate(highway, 4, 10)
-    alone: dict[str, list[float]] = {name: [] for name in POPULATIONS}
-    batched: dict[str, list[float]] = {name: [] for name in POPULATIONS}
+        vector_rate(highway, 0, 10, intent), batch_rate(highway, 4, 10, intent)
+    alone: dict[str, list[float]] = {name: [] for name in populations}
+    batched: dict[str, list[float]] = {name: [] for name in populations}
     for _ in range(args.runs):
         for name, highway in highways.items():
-            alone[name].append(statistics.mean(vector_rate(highway, w, args.frames) for w in range(3)))
-            batched[name].append(batch_rate(highway, BATCH_WORLDS, args.frames))
+            alone[name].append(
+                statistics.mean(vector_rate(highway, w, args.frames, intent) for w in range(3))
+            )
+            batched[name].append(batch_rate(highway, BATCH_WORLDS, args.frames, intent))
     machine = platform.processor() or platform.machine()
-    print(f"{datetime.date.today()} {machine}, {args.scenario}, {args.runs} runs")
+    print(f"{datetime.date.today()} {machine}, {args.scenario}, {args.runs} runs, intent lane {intent}")
     batch = f"batch of {BATCH_WORLDS} world-frames/CPU-s"
     print(f"| drivers | per world frames/CPU-s | vs highway-env | {batch} | vs highway-env |")
     print("|---|---|---|---|---|")
@@ -66,7 +86,7 @@ def main() -> None:
         statistics.median(alone["highway-env"]),
         statistics.median(batched["highway-env"]),
     )
-    for name in POPULATIONS:
+    for name in populations:
         a, b = statistics.median(alone[name]), statistics.median(batched[name])
         alone_cost, batched_cost = base_alone / a - 1, base_batched / b - 1
         print(f"| {name} | {a:.0f} | {alone_cost:+.1%} cost | {b:.0f} | {batched_cost:+.1%} cost |")

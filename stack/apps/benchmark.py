@@ -3,13 +3,16 @@ agent (`stack.apps.benchmark_report`). Each scenario runs as a `compare` of the 
 machinery: processes or Ray, one journal per agent, per-scenario comparison.json and figure) in
 its own subfolder; the benchmark folder holds the resolved config, summary.json, benchmark.csv and
 leaderboard.png. `--resume` finishes an interrupted benchmark: each scenario's journals give back
-its finished episodes, and only the rest run."""
+its finished episodes, and only the rest run. With several driver populations (`--traffic A,B`,
+a traffic axis) each population's benchmark runs in its own subfolder, and the benchmark folder's
+summary.json and printed table hold each agent's score per population (`run_traffic_axis`)."""
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 from functools import partial
 from pathlib import Path
+from typing import Any
 
 from stack.apps.benchmark_report import (
     LANE_CHANGE_BUDGET,
@@ -21,7 +24,7 @@ from stack.apps.benchmark_report import (
     markdown,
     plot_leaderboard,
 )
-from stack.apps.compare import compare, comparison, write_comparison
+from stack.apps.compare import compare, comparison, population_line, write_comparison
 from stack.apps.resume import journal_of, journaled, resolved_config, started
 from stack.loop.safety_metrics import TTC_FLOOR_S
 from stack.results.episode_result import EpisodeResult
@@ -31,7 +34,7 @@ from stack.runtime.executors import completed, shared_workers
 from stack.runtime.files import write_csv, write_json, write_text
 from stack.runtime.interrupts import deferred
 from stack.settings import scenarios
-from stack.settings.run import RunConfig, in_scenario
+from stack.settings.run import RunConfig, drivers_of, in_scenario
 
 REPORT_SEED = 970_000
 """The first seed of the benchmark's episodes (report seeds: never trained, selected or tuned on)."""
@@ -117,10 +120,10 @@ def run_benchmark(
     progress: bool = True,
     ray: str | None = None,
     resuming: bool = False,
-) -> bool:
+) -> tuple[bool, list[dict[str, Any]]]:
     """Run `plan` for the agents of `configs` (one per agent) into `out`, write the report, print
-    the leaderboard; True when Ctrl-C cut it short (the scenarios run so far are reported, the
-    journals kept for --resume)."""
+    the leaderboard; whether Ctrl-C cut it short (the scenarios run so far are reported, the
+    journals kept for --resume), and the leaderboard's rows."""
     write_text(out / "config.yaml", resolved_config(configs))
     results: dict[str, dict[str, list[EpisodeResult]]] = {}
     allowances: Allowances = {}
@@ -153,11 +156,13 @@ def run_benchmark(
         raise KeyboardInterrupt
     set_speed = configs[0].controller.set_speed_mps
     rows = leaderboard(results, allowances, set_speed)
+    drivers = drivers_of(configs[0].highway)
     with deferred(interrupt_after=False):
         write_json(
             out / "summary.json",
             {
                 "plan": asdict(plan),
+                "drivers": drivers,
                 "interrupted": interrupted,
                 "set_speed_mps": set_speed,
                 "min_headroom_mps": MIN_HEADROOM,
@@ -176,7 +181,93 @@ def run_benchmark(
         plot_leaderboard(rows, title, out / "leaderboard.png")
         for journal in journals if not interrupted else []:
             journal.discard()
-    print(markdown(rows), end="")
+    print(population_line({"drivers": drivers}) + markdown(rows), end="")
     resumable = " (interrupted: the same command with --resume finishes it)"
     print(f"results: {out}" + (resumable if interrupted else ""))
+    return interrupted, rows
+
+
+def run_traffic_axis(
+    populations: dict[str, list[RunConfig]],
+    plan: BenchmarkPlan,
+    out: Path,
+    jobs: int = 1,
+    progress: bool = True,
+    ray: str | None = None,
+    resuming: bool = False,
+) -> bool:
+    """The benchmark under each driver population (`populations`: the agents' configs by
+    population name), each in out/POPULATION; then out/summary.json and the printed table of each
+    agent's overall score per population (`traffic_table`). True when Ctrl-C cut it short (the
+    populations finished so far are reported)."""
+    boards: dict[str, list[dict[str, Any]]] = {}
+    interrupted = False
+    for name, configs in populations.items():
+        folder = out / name
+        folder.mkdir(exist_ok=True)
+        try:
+            interrupted, boards[name] = run_benchmark(configs, plan, folder, jobs, progress, ray, resuming)
+        except KeyboardInterrupt:
+            interrupted = True
+        if interrupted:
+            break
+    if not boards:
+        raise KeyboardInterrupt
+    table = traffic_table(boards)
+    with deferred(interrupt_after=False):
+        write_json(
+            out / "summary.json",
+            {
+                "plan": asdict(plan),
+                "interrupted": interrupted,
+                "populations": list(boards),
+                "scores": {
+                    next(iter(by.values()))["agent"]: {
+                        name: row["overall"]["score"] for name, row in by.items()
+                    }
+                    for by in table
+                },
+                "leaderboards": boards,
+            },
+        )
+    print(traffic_markdown(table, list(boards)), end="")
+    print(f"results: {out}" + (" (interrupted)" if interrupted else ""))
     return interrupted
+
+
+def traffic_table(boards: dict[str, list[dict[str, Any]]]) -> list[dict[str, dict[str, Any]]]:
+    """Per agent (in the first population's rank order), its leaderboard row in each population."""
+    first = next(iter(boards.values()))
+    return [
+        {name: row for name, rows in boards.items() for row in rows if row["agent"] == leader["agent"]}
+        for leader in first
+    ]
+
+
+def traffic_markdown(table: list[dict[str, dict[str, Any]]], populations: list[str]) -> str:
+    """The agents x populations table: each agent's overall score [95 % interval] and its rank under
+    each population."""
+    header = "| agent | " + " | ".join(populations) + " |"
+    lines = [header, "|" + "---|" * (len(populations) + 1)]
+    ranks = {
+        name: {row["agent"]: rank for rank, row in enumerate(sorted(
+            (by[name] for by in table if name in by), key=lambda row: -row["overall"]["score"][0]), 1)}
+        for name in populations
+    }  # fmt: skip
+    for by in table:
+        agent = next(iter(by.values()))["agent"]
+        cells = [
+            f"{_score_cell(by[name]['overall']['score'])} (#{ranks[name][agent]})" if name in by else "-"
+            for name in populations
+        ]
+        lines.append(f"| {agent} | " + " | ".join(cells) + " |")
+    return (
+        "agents x traffic drivers: overall benchmark score [95 % interval] (rank)\n\n"
+        + "\n".join(lines)
+        + "\n"
+    )
+
+
+def _score_cell(interval: list[float]) -> str:
+    value, low, high = interval
+    return f"{value:.3f} [{low:.3f}, {high:.3f}]"

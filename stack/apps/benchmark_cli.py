@@ -17,7 +17,7 @@ from stack.apps.options import (
     fail,
     listed,
     per_agent,
-    population_option,
+    populations_option,
     ray_or_fail,
 )
 
@@ -43,7 +43,9 @@ def benchmark(
     ),
     sets: list[str] = typer.Option([], "--set", help=SET_HELP),
     plant: str | None = typer.Option(None, help=PLANT_HELP),
-    traffic: str | None = typer.Option(None, help=TRAFFIC_HELP),
+    traffic: str | None = typer.Option(
+        None, help=TRAFFIC_HELP + " Several names (A,B,...): a traffic axis, the benchmark under each."
+    ),
     jobs: int = JOBS_OPTION,
     ray: str | None = RAY_OPTION,
     out: Path | None = typer.Option(None, help="Results folder (default: runs/benchmark-<time>)."),
@@ -69,27 +71,37 @@ def benchmark(
     from stack.apps.benchmark import BenchmarkPlan
 
     plan = BenchmarkPlan.chosen(quick, episodes, seed, duration)
-    configs = per_agent(
-        config,
-        sets,
-        [(name, model_paths.get(name)) for name in names],
-        labels={"planner.agent": "--agents"},
-        model_option="--models",
-        traffic=population_option(traffic),
-        sim__plant=plant,
-        episodes=plan.episodes,
-        seed=seed,
-    )
+    populations = {
+        str(population): per_agent(
+            config,
+            sets,
+            [(name, model_paths.get(name)) for name in names],
+            labels={"planner.agent": "--agents", "traffic": "--traffic"},
+            model_option="--models",
+            traffic=population,
+            sim__plant=plant,
+            episodes=plan.episodes,
+            seed=seed,
+        )
+        for population in populations_option(traffic)
+    }
+    configs = [config for configs in populations.values() for config in configs]
     from stack.apps.plugin_checks import plugins_or_fail
     from stack.apps.preflight import checked_run
 
     plugins_or_fail(configs, ["--agents"] * len(configs))
     ray_or_fail(ray)
     folder = checked_run(configs, out, "benchmark", resume, jobs)
-    from stack.apps.benchmark import run_benchmark
+    from stack.apps.benchmark import run_benchmark, run_traffic_axis
     from stack.apps.options import until_interrupted
 
+    if len(populations) > 1:
+        until_interrupted(
+            lambda: run_traffic_axis(populations, plan, folder, jobs, progress, ray, resume),
+            lambda: f"the episodes finished are kept in {folder}'s population folders; --resume finishes it",
+        )
+        return
     until_interrupted(
-        lambda: run_benchmark(configs, plan, folder, jobs, progress, ray, resume),
+        lambda: run_benchmark(configs, plan, folder, jobs, progress, ray, resume)[0],
         lambda: f"the episodes finished are kept in {folder}'s scenario folders; --resume finishes it",
     )

@@ -24,6 +24,7 @@ from stack.runs.statistics import Interval, mean_interval, paired_difference, ra
 from stack.runtime.executors import shared_workers
 from stack.runtime.files import EpisodeJournal, save_figure, write_csv, write_json
 from stack.runtime.interrupts import deferred
+from stack.settings.drivers import HIGHWAY_ENV
 from stack.settings.run import RunConfig
 
 PANELS = (
@@ -228,7 +229,8 @@ def _bars(axis: Axes, names: list[str], intervals: list[list[float]], label: str
 
 
 def markdown(rows: list[dict[str, Any]]) -> str:
-    """The table: every metric as value [95 % interval]; paired differences with a baseline."""
+    """The table, below the line naming the traffic's drivers (`population_line`): every metric as
+    value [95 % interval]; paired differences with a baseline."""
     shown_columns = columns(EpisodeResult, "agents")
     header = "| agent | episodes | " + " | ".join(column.header for column in shown_columns) + " |"
     baseline = shown_baseline(rows) if rows[0].get("baseline") else None
@@ -242,7 +244,15 @@ def markdown(rows: list[dict[str, Any]]) -> str:
             line += f" {interval_text(difference['mean_speed'], sign='+')} |"
             line += f" {interval_text(difference['collision_rate'], 100, 1, '+')} |"
         lines.append(line)
-    return "\n".join(lines) + "\n\n" + safety_markdown(rows)
+    return population_line(rows[0]) + "\n".join(lines) + "\n\n" + safety_markdown(rows)
+
+
+def population_line(row: dict[str, Any]) -> str:
+    """ "traffic drivers: POPULATION" and a blank line, for a run's summary row (`drivers`, absent
+    for highway-env's own)."""
+    drivers = row.get("drivers", HIGHWAY_ENV)
+    named = drivers if isinstance(drivers, str) else ", ".join(f"{k} {v:g}" for k, v in drivers.items())
+    return f"traffic drivers: {named}\n\n"
 
 
 def safety_markdown(rows: list[dict[str, Any]]) -> str:

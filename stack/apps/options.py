@@ -30,7 +30,8 @@ VARIANT_HELP = (
 )
 TRAFFIC_HELP = (
     "The traffic's drivers (highway.traffic.drivers): highway-env | calibrated | aggressive | "
-    "cautious | mixed, or shares: calibrated=0.7,aggressive=0.3 (docs/traffic.md)."
+    "cautious | distracted | blind | mixed | random, or shares: calibrated=0.7,aggressive=0.3 "
+    "(docs/traffic.md)."
 )
 SET_HELP = "KEY=VALUE: a dotted config key and a YAML value (repeatable); overrides the config file."
 RAY_HELP = (
@@ -195,6 +196,17 @@ def population_option(value: str | None) -> str | dict[str, float] | None:
         except ValueError:
             fail(f"--traffic: expected NAME=SHARE with a number for the share, got {entry!r}")
     return shares
+
+
+def populations_option(value: str | None) -> list[str | dict[str, float] | None]:
+    """`benchmark --traffic`'s value: several population names (A,B,...: a traffic axis), each
+    once, or one population as `population_option` reads it."""
+    if value is None or "=" in value or "," not in value:
+        return [population_option(value)]
+    names = listed("--traffic", value)
+    if len(set(names)) < len(names):
+        fail(f"--traffic: expected each population once, got {value!r}")
+    return list(names)
 
 
 def chosen(option: str, value: str, options: tuple[str, ...]) -> tuple[str, ...]:

@@ -317,6 +317,7 @@ class ClosedLoopBatch:
             self.causes.attribute(
                 live, self.changing, traffic.time, self.flags, activations, self.vehicle_room
             )
+        traffic.arrays.intent[:] = np.where(self.changing, self.target, -1)
         ended = traffic.step(actuation[:, 0], actuation[:, 1], live)
         batch = self.batch = traffic.arrays.world_batch()
         if self.causes is not None:

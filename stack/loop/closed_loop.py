@@ -86,6 +86,8 @@ class Plant(Protocol):
 
     def render_scale(self) -> tuple[float, float]: ...
 
+    def show_intent(self, lane: int) -> None: ...
+
 
 class ClosedLoop:
     """Plant, perception, safety layer, maneuver, controller and metrics of one episode."""
@@ -273,11 +275,12 @@ class ClosedLoop:
             self.causes.ego(self.world.time, self.maneuver.changing_lane)
         if counted and self.emergency.activations > activations:
             self.causes.attribute(self.world, self.emergency.cause)
+        maneuver = self.maneuver
+        self.plant.show_intent(maneuver.target if maneuver.changing_lane else -1)
         self.world = self.plant.step(actuation)
         if counted:
             self.causes.observe(self.world)
         self.perceived = self._observe()
-        maneuver = self.maneuver
         return Tick(reference, actuation, self.world, maneuver.lane, maneuver.target)
 
     @property

@@ -1,12 +1,15 @@
 """Driver populations as data: the ranges each population draws its drivers' IDM and MOBIL
-parameters from, the shares of `mixed`, and the check of a population spec (a name, or shares of
-names); drawing and setting them is `stack.sim.drivers`. docs/traffic.md names the sources."""
+parameters (and the distracted drivers' delay and sudden brakings) from, the habits of its drivers
+(blind to the ego, yielding to it), the shares of `mixed`, and the check of a population spec (a
+name, `random`, or shares of names); drawing and setting them is `stack.sim.drivers`.
+docs/traffic.md names the sources and the rates."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -34,22 +37,82 @@ class DriverRanges:
     threshold: tuple[float, float]
     safe_braking: tuple[float, float]
     decision_period_s: tuple[float, float]
+    perception_delay_s: tuple[float, float] | None = None
+    sudden_braking_per_minute: tuple[float, float] | None = None
+    sudden_braking_mps2: tuple[float, float] | None = None
+    sudden_braking_s: tuple[float, float] | None = None
+    blind_to_ego: bool = False
+    yields_to_ego: bool = False
+    """A distracted driver's habits, drawn after the parameters above when given:
+    perception_delay_s, how old [s] the view of its leader is that its IDM acts on;
+    sudden_braking_per_minute, the Poisson rate [1/min] of its brakings without cause, each
+    sudden_braking_mps2 [m/s^2] strong (drawn once per driver) for sudden_braking_s [s]. The
+    habits no driver draws: blind_to_ego, MOBIL's safety criterion does not see the ego as the new
+    follower (it cuts in on it; IDM still follows it in its lane); yields_to_ego, a driver in the
+    lane the ego is changing into, behind the ego, eases off to make room for it."""
 
 
-DRIVER_PARAMETERS = tuple(field.name for field in fields(DriverRanges))
-"""The drawn parameters, in the order they are drawn."""
+DRIVER_PARAMETERS = tuple(field.name for field in fields(DriverRanges))[:9]
+"""The parameters every drawn population draws, in the order they are drawn."""
+HABIT_PARAMETERS = (
+    "perception_delay_s",
+    "sudden_braking_per_minute",
+    "sudden_braking_mps2",
+    "sudden_braking_s",
+)
+"""The parameters a population with habits draws after `DRIVER_PARAMETERS`, in that order."""
+
+
+def _ranges(data: dict[str, Any]) -> DriverRanges:
+    """A population's `DriverRanges` from its YAML mapping (flags as they are, ranges as floats)."""
+    values: dict[str, Any] = {
+        key: value if isinstance(value, bool) else (float(value[0]), float(value[1]))
+        for key, value in data.items()
+    }
+    return DriverRanges(**values)
+
 
 POPULATION_RANGES: dict[str, DriverRanges] = {
-    name: DriverRanges(**{key: (float(low), float(high)) for key, (low, high) in ranges.items()})
+    name: _ranges(ranges)
     for name, ranges in yaml.safe_load((Path(__file__).parent / "drivers.yaml").read_text()).items()
 }
 """Each drawn population's ranges (module docstring; docs/traffic.md)."""
 
-MIXED_SHARES: dict[str, float] = {HIGHWAY_ENV: 0.25, "calibrated": 0.35, "aggressive": 0.2, "cautious": 0.2}
+MIXED_SHARES: dict[str, float] = {
+    HIGHWAY_ENV: 0.2,
+    "calibrated": 0.25,
+    "aggressive": 0.15,
+    "cautious": 0.15,
+    "distracted": 0.15,
+    "blind": 0.1,
+}
 """`mixed`: the share of each population among the drivers."""
 
-POPULATIONS = (HIGHWAY_ENV, *POPULATION_RANGES, "mixed")
+RANDOM = "random"
+"""The population that draws one of `RANDOM_CHOICES` per episode (evenly) from the env's generator."""
+
+POPULATIONS = (HIGHWAY_ENV, *POPULATION_RANGES, "mixed", RANDOM)
 """Every population by name."""
+
+RANDOM_CHOICES = tuple(name for name in POPULATIONS if name != RANDOM)
+"""What `random` draws from."""
+
+STOCK_POPULATIONS = (HIGHWAY_ENV, "calibrated", "aggressive")
+"""The populations stock highway-env's per-vehicle Python drives (the `stock` and `fast` backends):
+parameters only, no habits."""
+
+
+def check_population(drivers: str | Mapping[str, float]) -> None:
+    """ValueError naming what is wrong unless `drivers` is a population, `random`, or shares."""
+    if drivers != RANDOM:
+        population_shares(drivers)
+
+
+def stock_drives(drivers: str | Mapping[str, float] | None) -> bool:
+    """Whether stock highway-env's Python drives `drivers` as the `vector` road does (no habits)."""
+    if drivers is None:
+        return True
+    return drivers != RANDOM and set(population_shares(drivers)) <= set(STOCK_POPULATIONS)
 
 
 def population_shares(drivers: str | Mapping[str, float]) -> dict[str, float]:
@@ -58,6 +121,8 @@ def population_shares(drivers: str | Mapping[str, float]) -> dict[str, float]:
     if isinstance(drivers, str):
         if drivers not in POPULATIONS:
             raise ValueError(f"unknown driver population {drivers!r}; available: {', '.join(POPULATIONS)}")
+        if drivers == RANDOM:
+            raise ValueError("random draws one population per episode: it is not a share of one")
         return dict(MIXED_SHARES) if drivers == "mixed" else {drivers: 1.0}
     shares: dict[str, float] = {}
     for name, share in drivers.items():

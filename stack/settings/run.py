@@ -27,7 +27,7 @@ from stack.runtime.files import write_text
 from stack.runtime.yaml_text import strict_yaml
 from stack.settings import scenarios
 from stack.settings.checks import boolean_mismatch
-from stack.settings.drivers import HIGHWAY_ENV
+from stack.settings.drivers import HIGHWAY_ENV, STOCK_POPULATIONS, stock_drives
 from stack.settings.history import with_former_values
 from stack.settings.train import Strict, TrainConfig
 from stack.settings.world import HighwayConfig, SimConfig
@@ -114,6 +114,16 @@ class RunConfig(Strict):
             raise ValueError(
                 f"decision_period_s: must be at least one control tick "
                 f"({1.0 / self.control_rate_hz:.4f} s), got {self.decision_period_s}"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _backend_drives_the_drivers(self) -> RunConfig:
+        drivers = drivers_of(self.highway)
+        if self.sim.backend != "vector" and not stock_drives(drivers):
+            raise ValueError(
+                f"sim.backend: the {self.sim.backend} backend drives {', '.join(STOCK_POPULATIONS)} drivers "
+                f"only (no habits), not {drivers!r}: use the vector backend"
             )
         return self
 
@@ -251,10 +261,10 @@ def scenario_road(name: str) -> HighwayConfig:
 
 def in_scenario(config: RunConfig, name: str) -> RunConfig:
     """`config` moved to scenario `name` (its world replaced, its traffic's drivers and everything
-    else kept)."""
+    else kept; the exit road spawns its own traffic, with highway-env's drivers)."""
     data = scenarios.apply(name, config.model_dump(mode="json"))
     drivers = drivers_of(config.highway)
-    if drivers != HIGHWAY_ENV:
+    if drivers != HIGHWAY_ENV and data["highway"].get("road") != "exit":
         data = with_drivers(data, drivers, "traffic")
     return RunConfig.model_validate(data)
 

@@ -9,7 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validat
 
 from common.r157 import START_BRAKING_MPS2, start_room
 from records import BACKENDS, MAX_LANES, PLANTS, ROADS, Backend, PlantName, RoadName, one_of
-from stack.settings.drivers import HIGHWAY_ENV, population_shares
+from stack.settings.drivers import HIGHWAY_ENV, check_population
 
 MAX_CLASS_BOUND = 60.0
 """Largest desired speed [m/s] and length [m] of a traffic vehicle class (the spawn speed's bound)."""
@@ -25,13 +25,15 @@ DriverPopulation = str | dict[str, float]
 """A driver population's name (`stack.settings.drivers.POPULATIONS`), or shares of several by name."""
 DRIVERS_HELP = (
     "the traffic's drivers: highway-env (its one IDM/MOBIL parameter set), calibrated, aggressive, "
-    "cautious, mixed, or shares of several ({calibrated: 0.7, aggressive: 0.3})"
+    "cautious, distracted, blind, mixed, random (one per episode), or shares of several "
+    "({calibrated: 0.7, aggressive: 0.3})"
 )
 
 
 def known_population(drivers: DriverPopulation) -> DriverPopulation:
-    """`drivers` if it names populations whose shares sum to 1 (`population_shares`)."""
-    population_shares(drivers)
+    """`drivers` if it names a population, `random`, or populations whose shares sum to 1
+    (`check_population`)."""
+    check_population(drivers)
     return drivers
 
 

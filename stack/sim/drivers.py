@@ -11,7 +11,10 @@ spawn, the generator's stream and every trajectory stay highway-v0's.
 `calibrated` is built around the highway parameter set of Treiber and Kesting's calibrations of IDM
 and MOBIL (docs/traffic.md names the sources and the mapping); `aggressive`, `cautious` and the
 shares of `mixed` are this project's. Every range is drawn uniformly, one driver after another in
-road order, parameters in `DRIVER_PARAMETERS` order."""
+road order, parameters in `DRIVER_PARAMETERS` order, then a distracted driver's `HABIT_PARAMETERS`
+and the key of its sudden brakings. A driver's habits (`DriverHabits`: its perception delay, its
+sudden brakings, blind to the ego, yielding to it) are set as its `habits`; stock highway-env
+knows none of them (`stack.settings.drivers.STOCK_POPULATIONS`)."""
 
 from __future__ import annotations
 
@@ -23,16 +26,53 @@ import numpy as np
 
 from stack.settings.drivers import (
     DRIVER_PARAMETERS,
+    HABIT_PARAMETERS,
     HIGHWAY_ENV,
     POPULATION_RANGES,
+    RANDOM,
+    RANDOM_CHOICES,
     DriverRanges,
     population_shares,
 )
 
+SEEN_FRAMES = 32
+"""Frames of every vehicle's past (s and speed) a road keeps for its distracted drivers: the
+longest perception delay is one frame fewer (1.5 s needs 23 at 15 Hz)."""
+KEY_LIMIT = 2**62
+"""Sudden-braking keys are drawn in [0, KEY_LIMIT)."""
+
+
+@dataclass(frozen=True)
+class DriverHabits:
+    """What a driver does beyond IDM and MOBIL, per frame of the road: `delay_frames`, how many
+    frames old the view of its leader is that IDM reads (gap and closing speed); its sudden
+    brakings without cause, an onset each frame with `sudden_braking_chance` (a Poisson rate),
+    `sudden_braking_mps2` [m/s^2] for `sudden_braking_frames` frames, decided by a counter-based
+    hash of its `key` (drawn at spawn) and the frame (`stack.sim.vector.habits`); `blind_to_ego`,
+    MOBIL does not see the ego as its new follower; `yields_to_ego`, it eases off for the ego's
+    lane change into its lane."""
+
+    delay_frames: int = 0
+    sudden_braking_chance: float = 0.0
+    sudden_braking_frames: int = 0
+    sudden_braking_mps2: float = 0.0
+    key: int = 0
+    blind_to_ego: bool = False
+    yields_to_ego: bool = False
+
+
+NO_HABITS = DriverHabits()
+"""highway-env's drivers: IDM and MOBIL only."""
+
+
+def habits_of(vehicle: Any) -> DriverHabits:
+    """A driver's habits (`NO_HABITS` unless its population gave it some)."""
+    return getattr(vehicle, "habits", NO_HABITS)
+
 
 def draws_nothing(drivers: str | Mapping[str, float] | None) -> bool:
     """Whether `drivers` leaves every driver highway-env's (nothing drawn)."""
-    return drivers is None or population_shares(drivers) == {HIGHWAY_ENV: 1.0}
+    return drivers is None or (drivers != RANDOM and population_shares(drivers) == {HIGHWAY_ENV: 1.0})
 
 
 def bounds(ranges: DriverRanges) -> tuple[np.ndarray, np.ndarray]:
@@ -47,22 +87,55 @@ class DrawnDriver:
 
     population: str
     values: dict[str, float]
+    key: int = 0
 
 
 def draw_driver(rng: np.random.Generator, names: list[str], odds: np.ndarray) -> DrawnDriver:
     """One driver: its population drawn by `odds` among `names` (no draw for a single one), then,
-    unless it is `highway-env`'s, its parameters (one uniform draw per parameter, in order)."""
+    unless it is `highway-env`'s, its parameters (one uniform draw per parameter, in order), then
+    its habits' parameters and its key (a population with habits to draw)."""
     population = names[int(rng.choice(len(names), p=odds))] if len(names) > 1 else names[0]
     if population == HIGHWAY_ENV:
         return DrawnDriver(population, {})
-    low, high = bounds(POPULATION_RANGES[population])
-    values = rng.uniform(low, high)
-    return DrawnDriver(population, dict(zip(DRIVER_PARAMETERS, values.tolist(), strict=True)))
+    ranges = POPULATION_RANGES[population]
+    low, high = bounds(ranges)
+    values = dict(zip(DRIVER_PARAMETERS, rng.uniform(low, high).tolist(), strict=True))
+    if ranges.perception_delay_s is None:
+        return DrawnDriver(population, values)
+    habit_ranges = [getattr(ranges, name) for name in HABIT_PARAMETERS]
+    habits = rng.uniform([low for low, _ in habit_ranges], [high for _, high in habit_ranges])
+    values |= dict(zip(HABIT_PARAMETERS, habits.tolist(), strict=True))
+    return DrawnDriver(population, values, int(rng.integers(0, KEY_LIMIT)))
 
 
-def apply_driver(vehicle: Any, driver: DrawnDriver) -> None:
+def habits(driver: DrawnDriver, frequency: float) -> DriverHabits:
+    """`driver`'s habits on a road of `frequency` frames a second [Hz]; ValueError for a delay
+    longer than the road keeps (`SEEN_FRAMES`)."""
+    ranges = POPULATION_RANGES[driver.population]
+    value = driver.values
+    if "perception_delay_s" not in value:
+        return DriverHabits(blind_to_ego=ranges.blind_to_ego, yields_to_ego=ranges.yields_to_ego)
+    delay_frames = round(value["perception_delay_s"] * frequency)
+    if delay_frames >= SEEN_FRAMES:
+        raise ValueError(
+            f"a perception delay of {value['perception_delay_s']:g} s is {delay_frames} frames at "
+            f"{frequency:g} Hz; at most {SEEN_FRAMES - 1}"
+        )
+    return DriverHabits(
+        delay_frames=delay_frames,
+        sudden_braking_chance=float(-np.expm1(-value["sudden_braking_per_minute"] / 60 / frequency)),
+        sudden_braking_frames=max(1, round(value["sudden_braking_s"] * frequency)),
+        sudden_braking_mps2=value["sudden_braking_mps2"],
+        key=driver.key,
+        blind_to_ego=ranges.blind_to_ego,
+        yields_to_ego=ranges.yields_to_ego,
+    )
+
+
+def apply_driver(vehicle: Any, driver: DrawnDriver, frequency: float) -> None:
     """Set `driver`'s parameters on an IDM `vehicle` under the names highway-env's `IDMVehicle`
-    reads (its desired speed scaled, its jam distance centre to centre)."""
+    reads (its desired speed scaled, its jam distance centre to centre), and its habits on a road
+    of `frequency` frames a second [Hz] as its `habits` (none: nothing set)."""
     if not driver.values:
         return
     value = driver.values
@@ -75,6 +148,9 @@ def apply_driver(vehicle: Any, driver: DrawnDriver) -> None:
     vehicle.LANE_CHANGE_MIN_ACC_GAIN = value["threshold"]
     vehicle.LANE_CHANGE_MAX_BRAKING_IMPOSED = value["safe_braking"]
     vehicle.LANE_CHANGE_DELAY = value["decision_period_s"]
+    drawn_habits = habits(driver, frequency)
+    if drawn_habits != NO_HABITS:
+        vehicle.habits = drawn_habits
 
 
 def assign_drivers(
@@ -82,11 +158,16 @@ def assign_drivers(
     drivers: str | Mapping[str, float] | None,
     rng: np.random.Generator,
     kinds: tuple[type, ...],
-) -> None:
+    frequency: float,
+) -> str:
     """Draw a driver (`draw_driver`) for every vehicle of `kinds` (IDM drivers) in `vehicles`, in
-    road order, from `rng`, and set it (`apply_driver`); nothing at all for `highway-env`'s."""
+    road order, from `rng`, and set it (`apply_driver`, on a road of `frequency` frames a second
+    [Hz]); nothing at all for `highway-env`'s. `random` first draws one of `RANDOM_CHOICES`
+    (evenly). The population driven (its name, or the shares' spec)."""
+    if drivers == RANDOM:
+        drivers = RANDOM_CHOICES[int(rng.integers(len(RANDOM_CHOICES)))]
     if draws_nothing(drivers):
-        return
+        return HIGHWAY_ENV
     assert drivers is not None
     shares = population_shares(drivers)
     names = list(shares)
@@ -94,4 +175,5 @@ def assign_drivers(
     odds = odds / odds.sum()
     for vehicle in vehicles:
         if type(vehicle) in kinds:
-            apply_driver(vehicle, draw_driver(rng, names, odds))
+            apply_driver(vehicle, draw_driver(rng, names, odds), frequency)
+    return drivers if isinstance(drivers, str) else ",".join(f"{k}={v:g}" for k, v in drivers.items())

@@ -129,6 +129,9 @@ class EmptyRoad:
     def render_scale(self) -> tuple[float, float]:
         raise NotImplementedError("the empty road is not rendered")
 
+    def show_intent(self, lane: int) -> None:
+        """The empty road has no traffic to read the ego's intent."""
+
 
 class BuiltinDriver:
     """highway-env's own lane change as a controller: `ControlledVehicle`'s steering and speed

@@ -122,6 +122,11 @@ class HighwayAdapter:
         take_moved = getattr(env.road, "take_moved", None)
         return self.snapshot(take_moved() if take_moved is not None else None)
 
+    def show_intent(self, lane: int) -> None:
+        """Show the traffic the lane the ego is changing into (-1: none) for the frames that follow:
+        a yielding driver in it eases off (`stack.sim.vector.habits`); other roads ignore it."""
+        self.road_env.road.ego_intent_lane = lane
+
     @property
     def done(self) -> bool:
         return self.terminated or self.truncated

@@ -184,3 +184,6 @@ class ScriptedRoad:
         from stack.sim.scripted_view import RoadView
 
         return RoadView.scale()
+
+    def show_intent(self, lane: int) -> None:
+        """Scripted traffic does not read the ego's intent."""

@@ -263,7 +263,14 @@ class ScenarioTraffic(HighwayEnv):
             self.config.update(random_traffic(self.np_random, ranges))
         super()._reset()
         lengthen_for_episode(self.road, float(self.config["duration"]))
-        assign_drivers(self.road.vehicles, configured_drivers(self.config), self.np_random, IDM_DRIVERS)
+        self.drivers_drawn = assign_drivers(
+            self.road.vehicles,
+            configured_drivers(self.config),
+            self.np_random,
+            IDM_DRIVERS,
+            float(self.config["simulation_frequency"]),
+        )
+        self.road.ego = self.vehicle
 
     def _create_highway_env_vehicles(self) -> None:
         """highway-env's own `_create_vehicles` (the ego at 25 m/s behind all the traffic, the same

@@ -15,7 +15,9 @@ from highway_env.vehicle.kinematics import Vehicle
 
 from common.compiled import Kernel
 from records.batch import WorldBatch
+from stack.sim.drivers import NO_HABITS, DriverHabits, habits_of
 from stack.sim.traffic import TrafficVehicle
+from stack.sim.vector.habits import SeenPast
 from stack.sim.vector.lanes import LaneTable
 
 PLAIN, IDM, TRAFFIC = 0, 1, 2
@@ -37,6 +39,17 @@ DRIVER_LAWS: dict[str, str] = {
 }
 """The driver's columns (in `DriverLaws.of`'s order) and the `IDMVehicle` attribute each holds: the
 class's, or the driver's own (`stack.sim.drivers`)."""
+
+HABITS: dict[str, str] = {
+    "delay_frames": "delay_frames",
+    "sudden_braking_chance": "sudden_braking_chance",
+    "sudden_braking_frames": "sudden_braking_frames",
+    "sudden_braking_mps2": "sudden_braking_mps2",
+    "habit_key": "key",
+    "blind_to_ego": "blind_to_ego",
+    "yields_to_ego": "yields_to_ego",
+}
+"""The driver's habit columns and the `DriverHabits` field each holds."""
 
 VEHICLE_COLUMNS: dict[str, tuple[type, float]] = {
     "x": (float, 0.0),
@@ -69,6 +82,13 @@ VEHICLE_COLUMNS: dict[str, tuple[type, float]] = {
     "crashed": (bool, False),
     "impacted": (bool, False),
     "enable_lane_change": (bool, False),
+    "delay_frames": (int, 0),
+    "sudden_braking_chance": (float, 0.0),
+    "sudden_braking_frames": (int, 0),
+    "sudden_braking_mps2": (float, 0.0),
+    "habit_key": (int, 0),
+    "blind_to_ego": (bool, False),
+    "yields_to_ego": (bool, False),
 }
 """Every vehicle's columns, (worlds, vehicles) each, with the value of an empty row: its centre (x,
 y) [m], heading [rad], speed and IDM target speed [m/s] (0 for a plain vehicle, as IDM reads it),
@@ -78,7 +98,8 @@ time gap [s], a and -b [m/s^2], politeness, threshold and imposed braking [m/s^2
 timer [s], the action it holds (steering [rad], acceleration [m/s^2], as `Vehicle.action`), the
 impact to apply at its next step [m], its lane and target lane (rows of its world's lanes; a plain
 vehicle's target is its lane), kind,
-crash flag, whether an impact is pending, and whether MOBIL lane changes are on."""
+crash flag, whether an impact is pending, whether MOBIL lane changes are on, and the driver's
+habits (`HABITS`: `stack.sim.drivers.DriverHabits`, none for a plain vehicle)."""
 
 LANE_COLUMNS: dict[str, tuple[type, float]] = {
     "lane_length": (float, 0.0),
@@ -152,7 +173,7 @@ def _vehicle_row(vehicle: Vehicle, kind: int, lanes: LaneTable) -> dict[str, Any
     }
     if kind == PLAIN:
         default = VEHICLE_COLUMNS
-        row |= {name: default[name][1] for name in (*DRIVER_LAWS, "timer", "enable_lane_change")}
+        row |= {name: default[name][1] for name in (*DRIVER_LAWS, *HABITS, "timer", "enable_lane_change")}
         return row | {"target_lane": row["lane"]}
     assert isinstance(vehicle, IDMVehicle)
     if vehicle.route:
@@ -160,6 +181,7 @@ def _vehicle_row(vehicle: Vehicle, kind: int, lanes: LaneTable) -> dict[str, Any
     return (
         row
         | {name: getattr(vehicle, attribute) for name, attribute in DRIVER_LAWS.items()}
+        | {name: getattr(habits_of(vehicle), field) for name, field in HABITS.items()}
         | {
             "timer": vehicle.timer,
             "target_lane": lanes.row[vehicle.target_lane_index],
@@ -184,6 +206,14 @@ class BatchArrays:
         """Vehicles in each world (its first rows)."""
         self.ego = np.zeros(worlds, dtype=np.int64)
         """The ego's row in each world."""
+        self.acts = np.zeros(worlds, dtype=np.int64)
+        """Frames each world acted since its reset: the clock of the sudden brakings."""
+        self.intent = np.full(worlds, -1, dtype=np.int64)
+        """The lane (row) each world's ego shows it is changing into, -1 for none."""
+        self.habits = False
+        """Whether a world ever loaded holds a driver with habits (`stack.sim.drivers.DriverHabits`)."""
+        self.seen: SeenPast | None = None
+        """Every row's past s and speed, kept once a loaded world holds a driver with a delay."""
 
     def __getattr__(self, name: str) -> np.ndarray:
         """A vehicle column (worlds, vehicles) or lane column (worlds, lanes) by name."""
@@ -243,6 +273,12 @@ class BatchArrays:
         self.lane_columns["direction"][world] = table.direction
         self.lane_columns["lane_count"][world] = lanes
         self.count[world], self.ego[world] = n, spawned.ego
+        self.acts[world], self.intent[world] = 0, -1
+        columns = spawned.columns
+        self.habits |= any(columns[name].any() for name in HABITS)
+        if self.seen is not None or columns["delay_frames"].any():
+            self.seen = SeenPast.grown(self.seen, self.worlds, self.vehicles)
+            self.seen.pushed[world] = 0
 
     def lane_args(self) -> tuple[np.ndarray, ...]:
         """Lane count, start, direction and lateral of every world's lanes."""
@@ -336,6 +372,9 @@ def road_of(
             vehicle.timer = value["timer"]
             for name, attribute in DRIVER_LAWS.items():
                 setattr(vehicle, attribute, value[name])
+            habits = DriverHabits(**{field: value[name] for name, field in HABITS.items()})
+            if habits != NO_HABITS:
+                vehicle.habits = habits
             vehicle.enable_lane_change = value["enable_lane_change"]
         vehicle.LENGTH, vehicle.WIDTH, vehicle.diagonal = value["length"], value["width"], value["diagonal"]
         vehicle.lane_index = lanes.indices[value["lane"]]

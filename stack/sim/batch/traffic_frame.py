@@ -23,6 +23,13 @@ from stack.sim.batch.traffic_kernels import (
 from stack.sim.fast_road import BROAD_PHASE_MARGIN, NEIGHBOUR_MARGIN
 from stack.sim.vector.dynamics import bicycle_step, clipped_actions, steering_angles
 from stack.sim.vector.geometry_kernels import SEPARATION_MARGIN
+from stack.sim.vector.habits import (
+    delayed_accelerations,
+    sudden_accelerations,
+    unseen_ego,
+    yielders,
+    yielding,
+)
 from stack.sim.vector.lanes import clip
 from stack.sim.vector.road_frame import DriverLaws, IdmRows
 
@@ -54,12 +61,16 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
     flat = {name: column.reshape(-1) for name, column in arrays.columns.items()}
     lanes = arrays.lane_columns
     lane_count = lanes["lane_count"]
+    arrays.acts[active > 0] += 1
     s, r, on, on_count = lane_frame(arrays, active)
     in_world = np.arange(arrays.vehicles)[None, :] < active[:, None]
     kind, crashed = flat["kind"], flat["crashed"]
     drivers = np.flatnonzero(in_world.reshape(-1) & (kind != PLAIN) & ~crashed)
     if len(drivers) == 0:
         return
+    if arrays.seen is not None:
+        acting = np.flatnonzero(active > 0)
+        arrays.seen.push(acting, s[acting], arrays.speed[acting])
     world_of = np.repeat(np.arange(arrays.worlds), arrays.vehicles)
     heading, speed = flat["heading"], flat["speed"]
     direction_of = np.empty((len(heading), 2))
@@ -101,6 +112,9 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
         )
     )
     me = drivers[side_driver]
+    if arrays.habits:
+        egos_of = np.arange(arrays.worlds) * arrays.vehicles + arrays.ego
+        side_rear = unseen_ego(side_rear, flat["blind_to_ego"][me], egos_of[me // arrays.vehicles])
     mover_rear, mover_front = own_rear[side_driver], own_front[side_driver]
     egos = np.concatenate([side_rear, side_rear, me, me, mover_rear, mover_rear, drivers])
     leaders = np.concatenate([side_front, me, side_front, mover_front, me, mover_front, own_front])
@@ -135,6 +149,8 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
     goal = target[drivers]
     changing = (lane[drivers] != goal).nonzero()[0]
     acceleration = own_acceleration
+    if arrays.seen is not None:
+        _delayed(arrays, flat, kinematics, laws, drivers, own_front, acceleration)
     if len(changing):
         movers = drivers[changing]
         target_front, _ = lane_neighbours(movers, goal[changing], s, on, on_count)
@@ -142,6 +158,8 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
         acceleration[changing] = np.where(
             on_target < acceleration[changing], on_target, acceleration[changing]
         )
+    if arrays.habits:
+        _yield_and_brake(arrays, flat, kinematics, laws, drivers, acceleration)
     world, row = drivers // arrays.vehicles, drivers % arrays.vehicles
     flat["steering"][drivers] = steering_angles(
         r[world, goal, row],
@@ -151,6 +169,79 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
         speed[drivers],
     )
     flat["acceleration"][drivers] = clip(acceleration, IDMVehicle.ACC_MAX)
+
+
+def _delayed(
+    arrays: BatchArrays,
+    flat: dict[str, np.ndarray],
+    kinematics: IdmRows,
+    laws: DriverLaws,
+    drivers: np.ndarray,
+    own_front: np.ndarray,
+    acceleration: np.ndarray,
+) -> None:
+    """The own-lane IDM of the drivers that act on a delayed view, in place
+    (`delayed_accelerations` over the worlds' `seen` past), as the vector road computes it."""
+    seen, width = arrays.seen, arrays.vehicles
+    assert seen is not None
+    delay = flat["delay_frames"][drivers]
+    delayed = np.flatnonzero((delay > 0) & (own_front >= 0))
+    if len(delayed) == 0:
+        return
+    rows, fronts = drivers[delayed], own_front[delayed]
+    seen_acceleration = acceleration[delayed]
+    free = kinematics.idm(rows, np.full(len(rows), -1), laws, rows)
+    delayed_accelerations(
+        seen_acceleration, rows // width, rows % width, fronts % width, delay[delayed], seen.s, seen.speed,
+        seen.pushed, free, kinematics.speed[rows], laws.a_max[rows], laws.distance_wanted[rows],
+        laws.time_wanted[rows], laws.braking_term[rows],
+    )  # fmt: skip
+    acceleration[delayed] = seen_acceleration
+
+
+def _yield_and_brake(
+    arrays: BatchArrays,
+    flat: dict[str, np.ndarray],
+    kinematics: IdmRows,
+    laws: DriverLaws,
+    drivers: np.ndarray,
+    acceleration: np.ndarray,
+) -> None:
+    """The yielding drivers behind their ego's lane change (`yielders`, `yielding`) and the sudden
+    brakings (`sudden_accelerations`), in place, as the vector road computes them."""
+    world = drivers // arrays.vehicles
+    yields = flat["yields_to_ego"][drivers]
+    if yields.any():
+        _yield(arrays, flat, kinematics, laws, drivers, world, yields, acceleration)
+    chance = flat["sudden_braking_chance"][drivers]
+    if (chance > 0).any():
+        sudden_accelerations(
+            acceleration, arrays.acts[world] - 1, flat["habit_key"][drivers], chance,
+            flat["sudden_braking_frames"][drivers], flat["sudden_braking_mps2"][drivers],
+        )  # fmt: skip
+
+
+def _yield(
+    arrays: BatchArrays,
+    flat: dict[str, np.ndarray],
+    kinematics: IdmRows,
+    laws: DriverLaws,
+    drivers: np.ndarray,
+    world: np.ndarray,
+    yields: np.ndarray,
+    acceleration: np.ndarray,
+) -> None:
+    """The yielding drivers behind their ego's lane change, in place (`yielders`, `yielding`)."""
+    egos = (np.arange(arrays.worlds) * arrays.vehicles + arrays.ego)[world]
+    yield_now = yielders(
+        yields, flat["lane"][drivers], arrays.intent[world], kinematics.s[drivers], kinematics.s[egos]
+    ).nonzero()[0]
+    if len(yield_now):
+        yielders_rows = drivers[yield_now]
+        behind_ego = kinematics.idm(yielders_rows, egos[yield_now], laws, yielders_rows)
+        acceleration[yield_now] = yielding(
+            acceleration[yield_now], behind_ego, flat["comfort_acc_min"][yielders_rows]
+        )
 
 
 def move(arrays: BatchArrays, active: np.ndarray, dt: float) -> None:

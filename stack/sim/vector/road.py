@@ -41,6 +41,15 @@ from highway_env.vehicle.objects import RoadObject
 from stack.sim.fast_road import FastRoad, LaneIndex, LaneProjections
 from stack.sim.traffic import IDM_DRIVERS, ScenarioTraffic
 from stack.sim.vector.dynamics import mobil_verdicts, steering_angles
+from stack.sim.vector.habits import (
+    HabitColumns,
+    SeenPast,
+    delayed_accelerations,
+    sudden_accelerations,
+    unseen_ego,
+    yielders,
+    yielding,
+)
 from stack.sim.vector.lanes import LaneTable, clip
 from stack.sim.vector.motion import (
     MOVER_CONSTANTS,
@@ -87,6 +96,17 @@ class VectorRoad(FastRoad):
     order, drive (`KeptColumns.of` reads them afresh otherwise)."""
     moved: Moved | None = None
     """Where the last step left every vehicle, for the adapter's snapshot (`take_moved`)."""
+    ego: Vehicle | None = None
+    """The ego (set by the env at reset): what a blind driver does not see and a yielding one yields to."""
+    ego_intent_lane: int = -1
+    """The lane (row of the road's lanes) the ego shows it is changing into, -1 for none
+    (`HighwayAdapter.show_intent`): what a yielding driver reads."""
+    acts: int = 0
+    """Frames acted since the road was made (at reset): the clock of the sudden brakings."""
+    seen: SeenPast | None = None
+    """Every row's past s and speed, kept while a driver acts on a delayed view."""
+    habit_columns: tuple[list[IDMVehicle], HabitColumns] | None = None
+    """The drivers' habits, kept while the same drivers, in the same order, act."""
 
     def _lane_table(self) -> LaneTable | None:
         """The network's `LaneTable`, or None when this frame runs as `FastRoad` (a lane the table
@@ -105,6 +125,7 @@ class VectorRoad(FastRoad):
         is valid), then `_act_in` it; the lane projections it indexes serve the per-vehicle calls
         (`neighbour_vehicles`) of this act only."""
         self.acted_for_step = None
+        self.acts += 1
         lanes = self._lane_table()
         if lanes is None:
             super().act()
@@ -134,6 +155,7 @@ class VectorRoad(FastRoad):
             return
         self.driver_constants = KeptColumns.of(drivers, DRIVER_CONSTANTS, self.driver_constants)
         plan = Drivers(drivers, places, frame, self.driver_constants.rows)
+        self._read_habits(plan)
         self._decide(plan, places, others)
         steering, acceleration = self._drive(plan)
         if frame.projections.vehicles_first:
@@ -147,6 +169,33 @@ class VectorRoad(FastRoad):
                 steering,
                 acceleration,
             )
+
+    def _read_habits(self, plan: Drivers) -> None:
+        """The drivers' habits (`plan.habits`, None if no driver has one), the ego's row and
+        lane intent, the frame's clock, and this frame's s and speed of every row kept for the
+        drivers that act on a delayed view."""
+        kept = self.habit_columns
+        if kept is None or not same_objects(kept[0], plan.drivers):
+            kept = self.habit_columns = (list(plan.drivers), HabitColumns.of(plan.drivers))
+        habits = kept[1]
+        if not habits.any:
+            return
+        frame = plan.frame
+        plan.habits, plan.frame_index = habits, self.acts - 1
+        if (habits.blind or habits.yields) and self.ego is not None:
+            plan.ego_row = self._ego_row(frame)
+            plan.intent = self.ego_intent_lane
+        if habits.delayed:
+            rows = len(frame.s)
+            if self.seen is None or self.seen.s.shape[2] != rows:
+                self.seen = SeenPast(1, rows)
+            self.seen.push(np.zeros(1, dtype=int), frame.s[None, :], frame.speed[None, :])
+
+    def _ego_row(self, frame: TrafficFrame) -> int:
+        """The ego's row in `frame`, -1 when it is not on the road."""
+        if frame.projections.vehicles_first:
+            return next((place for place, v in enumerate(self.vehicles) if v is self.ego), -1)
+        return frame.row(self.ego) if any(v is self.ego for v in self.vehicles) else -1
 
     def _drivers_and_others(self) -> tuple[list[IDMVehicle], list[int], list[int]]:
         """The IDM drivers that act this frame (not crashed: stock's act returns at once for those),
@@ -228,6 +277,8 @@ class VectorRoad(FastRoad):
             plan.own_acceleration = frame.idm(*own)
             return decisions
         new_front, new_rear = frame.neighbours(me, sides)
+        if plan.habits is not None and plan.habits.blind:
+            new_rear = unseen_ego(new_rear, plan.habits.blind_to_ego[index], plan.ego_row)
         own_front, own_rear = plan.own_front[index], plan.own_rear[index]
         blocks = 6
         evaluators = np.concatenate([index] * blocks + [plan.everyone])
@@ -248,10 +299,9 @@ class VectorRoad(FastRoad):
                 decisions[k] = side
         return decisions
 
-    @staticmethod
-    def _drive(plan: Drivers) -> tuple[np.ndarray, np.ndarray]:
+    def _drive(self, plan: Drivers) -> tuple[np.ndarray, np.ndarray]:
         """`IDMVehicle.act`'s steering [rad] and IDM acceleration [m/s^2] of every driver, after its
-        decisions: set as their actions, and returned."""
+        decisions and habits (`_delayed`, `_yield_and_brake`): set as their actions, and returned."""
         frame, drivers, me = plan.frame, plan.drivers, plan.me
         lanes = frame.lanes
         heading, speed, target = frame.heading[me], frame.speed[me], plan.target
@@ -260,15 +310,57 @@ class VectorRoad(FastRoad):
         steering = steering_angles(frame.r[target, me], lanes.heading[target], heading, plan.length, speed)
 
         acceleration = plan.own_acceleration
+        if plan.habits is not None and plan.habits.delayed:
+            self._delayed(plan, acceleration)
         if changing.any():
             movers = changing.nonzero()[0]
             target_front, _ = frame.neighbours(me[movers], target[movers])
             on_target = frame.idm(me[movers], target_front, plan.laws, movers)
             acceleration[movers] = np.where(on_target < acceleration[movers], on_target, acceleration[movers])
+        if plan.habits is not None:
+            self._yield_and_brake(plan, acceleration)
         acceleration = clip(acceleration, IDMVehicle.ACC_MAX)
         for v, steer, accel in zip(drivers, steering, acceleration, strict=True):
             v.action = {"steering": steer, "acceleration": accel}
         return steering, acceleration
+
+    def _delayed(self, plan: Drivers, acceleration: np.ndarray) -> None:
+        """The own-lane IDM of the drivers that act on a delayed view, in place
+        (`delayed_accelerations` over this road's `seen` past)."""
+        frame, me, laws, seen = plan.frame, plan.me, plan.laws, self.seen
+        assert plan.habits is not None and seen is not None
+        free = frame.idm(me, np.full(len(me), -1), laws, plan.everyone)
+        delayed_accelerations(
+            acceleration, np.zeros(len(me), dtype=np.int64), me, plan.own_front, plan.habits.delay_frames,
+            seen.s, seen.speed, seen.pushed, free, frame.speed[me], laws.a_max, laws.distance_wanted,
+            laws.time_wanted, laws.braking_term,
+        )  # fmt: skip
+
+    @staticmethod
+    def _yield_and_brake(plan: Drivers, acceleration: np.ndarray) -> None:
+        """The yielding drivers behind the ego's lane change (`yielders`, `yielding`) and the sudden
+        brakings (`sudden_accelerations`), in place."""
+        habits, frame, me = plan.habits, plan.frame, plan.me
+        assert habits is not None
+        if plan.ego_row >= 0 and plan.intent >= 0 and habits.yields:
+            yield_now = yielders(
+                habits.yields_to_ego,
+                frame.lane[me],
+                plan.intent,
+                frame.s[me],
+                frame.s[plan.ego_row],
+            ).nonzero()[0]
+            if len(yield_now):
+                ego = np.full(len(yield_now), plan.ego_row)
+                behind_ego = frame.idm(me[yield_now], ego, plan.laws, yield_now)
+                acceleration[yield_now] = yielding(
+                    acceleration[yield_now], behind_ego, plan.comfort_acc_min[yield_now]
+                )
+        if habits.brakes_suddenly:
+            sudden_accelerations(
+                acceleration, np.full(len(me), plan.frame_index), habits.key, habits.sudden_braking_chance,
+                habits.sudden_braking_frames, habits.sudden_braking_mps2,
+            )  # fmt: skip
 
     def step(self, dt: float) -> None:
         """Stock `Road.step`: every vehicle moved over `dt` [s] (the kinematic ones at once, from what
@@ -336,6 +428,11 @@ class Drivers:
 
     own_acceleration: np.ndarray
     """IDM acceleration [m/s^2] behind the own lane's leader, per driver (set by `_mobil`)."""
+    habits: HabitColumns | None = None
+    """The drivers' habits, None when none has one (`VectorRoad._read_habits` sets the rest)."""
+    frame_index: int = 0
+    ego_row: int = -1
+    intent: int = -1
 
     def __init__(
         self, drivers: list[IDMVehicle], places: list[int], frame: TrafficFrame, constants: np.ndarray
@@ -350,6 +447,7 @@ class Drivers:
         self.target = np.array([lane_row[v.target_lane_index] for v in drivers], dtype=int)
         self.length = constants[0]
         self.laws = DriverLaws.of(*constants[1:])
+        self.comfort_acc_min = constants[5]
         self.everyone = np.arange(len(drivers))
         self.timer_due = np.array([v.LANE_CHANGE_DELAY < v.timer for v in drivers], dtype=bool)
         self.enable_lane_change = np.array([v.enable_lane_change for v in drivers], dtype=bool)
