@@ -22,8 +22,8 @@ import statistics
 
 from batched_traffic import batch_rate, vector_rate
 
-from stack.settings import drivers
 from stack.settings.run import build_config
+from stack.worlds import drivers
 
 SAME_AS_HIGHWAY_ENV = "highway-env-drawn"
 """A population that draws highway-env's own values (jam clearance 5 m beyond the length, no speed

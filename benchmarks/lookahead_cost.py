@@ -20,9 +20,9 @@ import numpy as np
 from planner.agents import decide
 from stack.loop.closed_loop import ClosedLoop
 from stack.runs.kept import build_agent
-from stack.settings import scenarios
 from stack.settings.run import build_config
 from stack.sim.highway import HighwayAdapter
+from stack.worlds import scenarios
 
 
 def decision_times(scenario: str, episodes: int, duration: float) -> tuple[list[float], list[float]]:

@@ -21,6 +21,7 @@ MAX_FOLDER_LINES = 1_500
 """A folder of `stack` past this many lines holds more than one role (the loop, the largest, is ~1,200)."""
 STACK_FLOORS = (
     "runtime",
+    "worlds",
     "settings",
     "sim",
     "rrd",
@@ -203,6 +204,7 @@ def test_stack_imports_point_downwards(floor):
 
 ONE_ROLE_FOLDERS = (
     "runtime",
+    "worlds",
     "settings",
     "rrd",
     "results",

@@ -12,7 +12,7 @@ from stack.results.episode_result import EpisodeResult
 from stack.runs.batch_episodes import BATCH_WORLDS, batch_refusal, batches, run_batched
 from stack.runs.episodes import run, run_episode
 from stack.settings.run import build_config
-from stack.settings.scenarios import names as scenario_names
+from stack.worlds.scenarios import names as scenario_names
 
 
 def assert_same_episodes(batched: list[EpisodeResult], alone: list[EpisodeResult]) -> None:

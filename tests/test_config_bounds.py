@@ -10,7 +10,8 @@ from pydantic import BaseModel
 from controllers.config import ControllerConfig
 from planner.safety import SafetyConfig
 from stack.runs.episodes import run
-from stack.settings.run import OracleConfig, PerceptionConfig, build_config
+from stack.settings.layers import OracleConfig, PerceptionConfig
+from stack.settings.run import build_config
 from tests.test_hostile_limits import numeric_fields
 
 SECTIONS: dict[str, type[BaseModel]] = {

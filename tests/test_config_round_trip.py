@@ -12,8 +12,8 @@ from typer.testing import CliRunner
 
 from stack.apps.cli import app
 from stack.apps.options import RUN_CONFIG, TRAIN_CONFIG
-from stack.settings import scenarios
 from stack.settings.run import ConfigError, build_config, config_text, load_config
+from stack.worlds import scenarios
 
 WORLD_SETS = {
     "highway.duration": st.integers(2, 60),

@@ -18,12 +18,12 @@ from common.r157 import (
 from records import WorldState
 from stack.apps.cli import app
 from stack.settings.run import build_config
-from stack.settings.scenarios import names
 from stack.settings.world import EGO_LENGTH_M
 from stack.sim import envs
 from stack.sim.batch.traffic import TrafficBatch
 from stack.sim.highway import HighwayAdapter
 from stack.sim.traffic import INCIDENT_LENGTH_M, random_traffic
+from stack.worlds.scenarios import names
 
 FIRST_SEED = 990_000
 """Seeds of these tests; the reports' seeds (880000 on, 980000 on) are never tested on."""

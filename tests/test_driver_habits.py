@@ -16,12 +16,11 @@ from typer.testing import CliRunner
 from stack.apps.cli import app
 from stack.runs.batch_episodes import batch_refusal, run_batched
 from stack.runs.episodes import run_episode
-from stack.settings.drivers import MIXED_SHARES, POPULATION_RANGES, RANDOM_CHOICES, stock_drives
 from stack.settings.run import ConfigError, build_config
 from stack.sim.drivers import SEEN_FRAMES, habits_of
 from stack.sim.envs import VECTOR_HIGHWAY
 from stack.sim.highway import env_config
-from stack.sim.vector import road
+from stack.sim.vector import idm_drivers
 from stack.sim.vector.habits import (
     SeenPast,
     delayed_accelerations,
@@ -31,6 +30,7 @@ from stack.sim.vector.habits import (
     yielders,
     yielding,
 )
+from stack.worlds.drivers import MIXED_SHARES, POPULATION_RANGES, RANDOM_CHOICES, stock_drives
 from tests.test_batched_episodes import assert_same_episodes
 from tests.test_sim_batched import assert_worlds_identical
 
@@ -137,7 +137,7 @@ def test_a_batched_run_is_the_per_world_run_with_yielding_and_blind_drivers(monk
         eased.append(int((out < acceleration).sum()))
         return out
 
-    monkeypatch.setattr(road, "yielding", counted)
+    monkeypatch.setattr(idm_drivers, "yielding", counted)
     config = build_config(
         {},
         "test",

@@ -15,11 +15,11 @@ from typer.testing import CliRunner
 from stack.apps.cli import app
 from stack.runs.batch_episodes import batch_refusal, run_batched
 from stack.runs.episodes import run, run_episode
-from stack.settings.drivers import DRIVER_PARAMETERS, POPULATION_RANGES, POPULATIONS, population_shares
 from stack.settings.run import ConfigError, build_config, drivers_of, in_scenario
 from stack.sim.drivers import draws_nothing
 from stack.sim.envs import VECTOR_HIGHWAY
 from stack.sim.highway import env_config
+from stack.worlds.drivers import DRIVER_PARAMETERS, POPULATION_RANGES, POPULATIONS, population_shares
 from tests.test_batched_episodes import assert_same_episodes
 from tests.test_sim_backends import assert_identical
 from tests.test_sim_batched import assert_worlds_identical

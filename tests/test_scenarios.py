@@ -8,9 +8,9 @@ from records import Actuation
 from stack.apps.cli import app
 from stack.results.episode_result import outcome
 from stack.runs.episodes import run
-from stack.settings import scenarios
 from stack.settings.run import ConfigError, build_config
 from stack.sim.highway import HighwayAdapter
+from stack.worlds import scenarios
 
 REQUIRED = {"highway-v0", "dense", "lanes-3", "lanes-5", "overtaking", "noisy"}
 

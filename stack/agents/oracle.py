@@ -29,7 +29,7 @@ from planner.agents import Action, Agent, Policy, decide, sees_permitted
 from planner.factory import make_agent
 from records import Command, Encoding, GridConfig
 from stack.loop.closed_loop import ClosedLoop
-from stack.settings.run import OracleConfig
+from stack.settings.layers import OracleConfig
 
 COMMANDS = (Command.STAY, Command.LEFT, Command.RIGHT)
 

@@ -33,8 +33,8 @@ from stack.runs.world_allowance import WorldAllowance, world_allowances
 from stack.runtime.executors import completed, shared_workers
 from stack.runtime.files import write_csv, write_json, write_text
 from stack.runtime.interrupts import deferred
-from stack.settings import scenarios
 from stack.settings.run import RunConfig, drivers_of, in_scenario
+from stack.worlds import scenarios
 
 REPORT_SEED = 970_000
 """The first seed of the benchmark's episodes (report seeds: never trained, selected or tuned on)."""

@@ -281,7 +281,7 @@ def safety(
 @app.command()
 def scenarios() -> None:
     """The named worlds `--scenario` takes, one line each."""
-    from stack.settings import scenarios as named
+    from stack.worlds import scenarios as named
 
     for name in named.names():
         typer.echo(f"{name:12} {named.description(name)}")

@@ -24,8 +24,8 @@ from stack.runs.statistics import Interval, mean_interval, paired_difference, ra
 from stack.runtime.executors import shared_workers
 from stack.runtime.files import EpisodeJournal, save_figure, write_csv, write_json
 from stack.runtime.interrupts import deferred
-from stack.settings.drivers import HIGHWAY_ENV
 from stack.settings.run import RunConfig
+from stack.worlds.drivers import HIGHWAY_ENV
 
 PANELS = (
     ("collision_rate", "collision rate [%]", 100.0),

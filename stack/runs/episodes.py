@@ -16,8 +16,8 @@ from stack.results.episode_result import EpisodeResult, summarize
 from stack.runs.alone import run_episode
 from stack.runs.batch_episodes import RAY_BATCH_WORLDS, batch_refusal, batches, run_batched
 from stack.runtime.executors import completed
-from stack.settings.drivers import HIGHWAY_ENV
 from stack.settings.run import RunConfig, drivers_of
+from stack.worlds.drivers import HIGHWAY_ENV
 
 
 @dataclass

@@ -9,89 +9,33 @@ from __future__ import annotations
 from functools import cache
 from itertools import chain
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any
 
 import yaml
-from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic import Field, ValidationError, model_validator
 
-from common.plugins import AGENT_GROUP, plugin_name
 from controllers.config import ControllerConfig
 from perception.grid import OccupancyGridBuilder
-from perception.sensor import SensorConfig
-from planner.lookahead_config import LookaheadConfig
 from planner.mobil import prior_problem
 from planner.networks import LANE_NETWORK, lane_problem
-from planner.safety import SafetyConfig
-from records import AGENT_NAMES, SEED_LIMIT, GridConfig
+from records import SEED_LIMIT, GridConfig
 from stack.runtime.files import write_text
 from stack.runtime.yaml_text import strict_yaml
-from stack.settings import scenarios
 from stack.settings.checks import boolean_mismatch
-from stack.settings.drivers import HIGHWAY_ENV, STOCK_POPULATIONS, stock_drives
 from stack.settings.history import with_former_values
+from stack.settings.layers import PerceptionConfig, PlannerConfig
 from stack.settings.train import Strict, TrainConfig
 from stack.settings.world import HighwayConfig, SimConfig
+from stack.worlds import scenarios
+from stack.worlds.drivers import HIGHWAY_ENV, STOCK_POPULATIONS, stock_drives
 
 
 class ConfigError(ValueError):
     """A configuration that cannot run; the message is one line for the user."""
 
 
-class PerceptionConfig(GridConfig):
-    """The occupancy grid (perception.grid.GridConfig's keys), the sensor model, and who sees it:
-    by default the agent, the safety layer and the adaptive cruise all act on the perceived world;
-    `control_on_ground_truth` lets safety and cruise read the simulator's truth (an ablation)."""
-
-    sensor: SensorConfig = SensorConfig()
-    control_on_ground_truth: bool = False
-
-
-class OracleConfig(Strict):
-    """The tree's depth (decisions), the look-ahead horizon [s], the lane-change margin [m] and the
-    agent that drives after the tree's last decision (`ddqn`: the shipped Double DQN, so the
-    search improves on the best agent there is)."""
-
-    depth: int = Field(2, ge=1, le=3)
-    horizon_s: float = Field(30.0, gt=0, le=60)
-    margin_m: float = Field(0.0, ge=0, le=100, description="lane-change margin [m]")
-    base: Literal["keep-lane", "mobil", "rule", "ddqn"] = "ddqn"
-
-
-class PlannerConfig(Strict):
-    """`agent`: a built-in name, a name an installed package registers (entry points
-    `drivestack.agents`) or a plug-in class `module.path:Class` / `file.py:Class` (docs/plugins.md)."""
-
-    agent: Annotated[str, plugin_name("agent", AGENT_NAMES, AGENT_GROUP)] = "rule"
-    model: Path | None = None
-    safety: SafetyConfig = SafetyConfig()
-    oracle: OracleConfig = OracleConfig()
-    lookahead: LookaheadConfig = LookaheadConfig()
-    change_margin: float = Field(
-        0.0,
-        ge=0,
-        le=10,
-        description="[Q-value] the learned agents' hysteresis: ddqn and dqn change lane only when the "
-        "change's Q-value beats STAY's by at least this much",
-    )
-    fallback: Literal["lookahead", "mobil", "none"] = Field(
-        "lookahead", description="who decides where an ensemble's members disagree on its command by "
-        "more than uncertainty_threshold (planner.uncertainty); none: no gate",
-    )  # fmt: skip
-    uncertainty_threshold: float | None = Field(
-        None, ge=0, description="[Q-value] the members' std above which the fallback decides; null: the "
-        "one calibrated into the model file (drivestack gate-calibrate), else no gate",
-    )  # fmt: skip
-
-    @field_validator("model")
-    @classmethod
-    def _absolute_model(cls, model: Path | None) -> Path | None:
-        """The file as an absolute path (as plug-in files are): a run's config.yaml names the same
-        file from any directory."""
-        return None if model is None else model.expanduser().resolve()
-
-
 class RunConfig(Strict):
-    scenario: str | None = Field(None, description="the named world applied (stack.settings.scenarios)")
+    scenario: str | None = Field(None, description="the named world applied (stack.worlds.scenarios)")
     seed: int = Field(0, ge=0, le=SEED_LIMIT - 1_000_000, description="seed of the first episode")
     episodes: int = Field(5, ge=1, le=1_000_000)
     highway: HighwayConfig = HighwayConfig()
@@ -302,7 +246,7 @@ def build_config(
     """Validate `data` in its scenario with dotted-key `overrides` applied (None values are
     ignored, `NULL` sets null): `scenario` in `overrides` moves `data` to that world, a
     `scenario` of `data`'s own keeps the world keys `data` sets over it
-    (`stack.settings.scenarios.apply`). An error
+    (`stack.worlds.scenarios.apply`). An error
     in a key that `labels` names (dotted key -> e.g. the CLI option that set it) blames that label
     instead of `source`."""
     labels = labels or {}

@@ -11,7 +11,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validat
 from planner.mobil import MAX_PRIOR
 from planner.networks import MAX_MEMBERS, NET_ARCHS
 from records import ENCODINGS, LEARNED_AGENTS, SEED_LIMIT, Encoding, LearnedAgentName, one_of, unknown_name
-from stack.settings import scenarios
+from stack.worlds import scenarios
 
 LEARNED_EXPERTS = ("ddqn", "dqn")
 """The learned agents that can teach (`train.demonstrations.expert_model` names their file)."""

@@ -9,7 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validat
 
 from common.r157 import START_BRAKING_MPS2, start_room
 from records import BACKENDS, MAX_LANES, PLANTS, ROADS, Backend, PlantName, RoadName, one_of
-from stack.settings.drivers import HIGHWAY_ENV, check_population
+from stack.worlds.drivers import HIGHWAY_ENV, check_population
 
 MAX_CLASS_BOUND = 60.0
 """Largest desired speed [m/s] and length [m] of a traffic vehicle class (the spawn speed's bound)."""
@@ -22,7 +22,7 @@ SHARE_TOLERANCE = 1e-6
 
 
 DriverPopulation = str | dict[str, float]
-"""A driver population's name (`stack.settings.drivers.POPULATIONS`), or shares of several by name."""
+"""A driver population's name (`stack.worlds.drivers.POPULATIONS`), or shares of several by name."""
 DRIVERS_HELP = (
     "the traffic's drivers: highway-env (its one IDM/MOBIL parameter set), calibrated, aggressive, "
     "cautious, distracted, blind, mixed, random (one per episode), or shares of several "
@@ -79,7 +79,7 @@ class IncidentConfig(BaseModel):
 
 class TrafficConfig(BaseModel):
     """Heterogeneous traffic (highway-env's IDM / MOBIL vehicles, drawn from the env's seeded
-    generator): its drivers (`stack.settings.drivers`; with no classes, highway-env's own vehicles get
+    generator): its drivers (`stack.worlds.drivers`; with no classes, highway-env's own vehicles get
     them), the vehicle classes, where the ego is spawned, as the fraction of the traffic
     spawned behind it (0: behind everybody, highway-env's own placement), and one speed for every
     vehicle at spawn: highway-env spaces vehicles for equal speeds, so a fast car spawned at its

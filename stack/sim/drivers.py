@@ -14,7 +14,7 @@ shares of `mixed` are this project's. Every range is drawn uniformly, one driver
 road order, parameters in `DRIVER_PARAMETERS` order, then a distracted driver's `HABIT_PARAMETERS`
 and the key of its sudden brakings. A driver's habits (`DriverHabits`: its perception delay, its
 sudden brakings, blind to the ego, yielding to it) are set as its `habits`; stock highway-env
-knows none of them (`stack.settings.drivers.STOCK_POPULATIONS`)."""
+knows none of them (`stack.worlds.drivers.STOCK_POPULATIONS`)."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from stack.settings.drivers import (
+from stack.worlds.drivers import (
     DRIVER_PARAMETERS,
     HABIT_PARAMETERS,
     HIGHWAY_ENV,

@@ -33,7 +33,6 @@ from __future__ import annotations
 from operator import attrgetter, itemgetter
 
 import numpy as np
-from highway_env.road.lane import StraightLane
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import RoadObject
@@ -44,12 +43,9 @@ from stack.sim.vector.dynamics import mobil_verdicts, steering_angles
 from stack.sim.vector.habits import (
     HabitColumns,
     SeenPast,
-    delayed_accelerations,
-    sudden_accelerations,
     unseen_ego,
-    yielders,
-    yielding,
 )
+from stack.sim.vector.idm_drivers import Drivers, delayed, yield_and_brake
 from stack.sim.vector.lanes import LaneTable, clip
 from stack.sim.vector.motion import (
     MOVER_CONSTANTS,
@@ -62,7 +58,7 @@ from stack.sim.vector.motion import (
     same_objects,
     steps_like_vehicle,
 )
-from stack.sim.vector.road_frame import DriverLaws, TrafficFrame
+from stack.sim.vector.road_frame import TrafficFrame
 
 
 def _plain_velocity(cls: type) -> bool:
@@ -301,7 +297,7 @@ class VectorRoad(FastRoad):
 
     def _drive(self, plan: Drivers) -> tuple[np.ndarray, np.ndarray]:
         """`IDMVehicle.act`'s steering [rad] and IDM acceleration [m/s^2] of every driver, after its
-        decisions and habits (`_delayed`, `_yield_and_brake`): set as their actions, and returned."""
+        decisions and habits (`delayed`, `yield_and_brake`): set as their actions, and returned."""
         frame, drivers, me = plan.frame, plan.drivers, plan.me
         lanes = frame.lanes
         heading, speed, target = frame.heading[me], frame.speed[me], plan.target
@@ -311,56 +307,19 @@ class VectorRoad(FastRoad):
 
         acceleration = plan.own_acceleration
         if plan.habits is not None and plan.habits.delayed:
-            self._delayed(plan, acceleration)
+            assert self.seen is not None
+            delayed(plan, self.seen, acceleration)
         if changing.any():
             movers = changing.nonzero()[0]
             target_front, _ = frame.neighbours(me[movers], target[movers])
             on_target = frame.idm(me[movers], target_front, plan.laws, movers)
             acceleration[movers] = np.where(on_target < acceleration[movers], on_target, acceleration[movers])
         if plan.habits is not None:
-            self._yield_and_brake(plan, acceleration)
+            yield_and_brake(plan, acceleration)
         acceleration = clip(acceleration, IDMVehicle.ACC_MAX)
         for v, steer, accel in zip(drivers, steering, acceleration, strict=True):
             v.action = {"steering": steer, "acceleration": accel}
         return steering, acceleration
-
-    def _delayed(self, plan: Drivers, acceleration: np.ndarray) -> None:
-        """The own-lane IDM of the drivers that act on a delayed view, in place
-        (`delayed_accelerations` over this road's `seen` past)."""
-        frame, me, laws, seen = plan.frame, plan.me, plan.laws, self.seen
-        assert plan.habits is not None and seen is not None
-        free = frame.idm(me, np.full(len(me), -1), laws, plan.everyone)
-        delayed_accelerations(
-            acceleration, np.zeros(len(me), dtype=np.int64), me, plan.own_front, plan.habits.delay_frames,
-            seen.s, seen.speed, seen.pushed, free, frame.speed[me], laws.a_max, laws.distance_wanted,
-            laws.time_wanted, laws.braking_term,
-        )  # fmt: skip
-
-    @staticmethod
-    def _yield_and_brake(plan: Drivers, acceleration: np.ndarray) -> None:
-        """The yielding drivers behind the ego's lane change (`yielders`, `yielding`) and the sudden
-        brakings (`sudden_accelerations`), in place."""
-        habits, frame, me = plan.habits, plan.frame, plan.me
-        assert habits is not None
-        if plan.ego_row >= 0 and plan.intent >= 0 and habits.yields:
-            yield_now = yielders(
-                habits.yields_to_ego,
-                frame.lane[me],
-                plan.intent,
-                frame.s[me],
-                frame.s[plan.ego_row],
-            ).nonzero()[0]
-            if len(yield_now):
-                ego = np.full(len(yield_now), plan.ego_row)
-                behind_ego = frame.idm(me[yield_now], ego, plan.laws, yield_now)
-                acceleration[yield_now] = yielding(
-                    acceleration[yield_now], behind_ego, plan.comfort_acc_min[yield_now]
-                )
-        if habits.brakes_suddenly:
-            sudden_accelerations(
-                acceleration, np.full(len(me), plan.frame_index), habits.key, habits.sudden_braking_chance,
-                habits.sudden_braking_frames, habits.sudden_braking_mps2,
-            )  # fmt: skip
 
     def step(self, dt: float) -> None:
         """Stock `Road.step`: every vehicle moved over `dt` [s] (the kinematic ones at once, from what
@@ -420,53 +379,6 @@ DRIVER_CONSTANTS = attrgetter(
 )
 """A driver's LENGTH [m] and its IDM and MOBIL parameters (`DriverLaws.of`'s arguments), under
 highway-env's names: its class's, or its own when its population drew them (`stack.sim.drivers`)."""
-
-
-class Drivers:
-    """The IDM drivers of a frame: their rows, constants, lane-change state, and their own lane's
-    front and rear."""
-
-    own_acceleration: np.ndarray
-    """IDM acceleration [m/s^2] behind the own lane's leader, per driver (set by `_mobil`)."""
-    habits: HabitColumns | None = None
-    """The drivers' habits, None when none has one (`VectorRoad._read_habits` sets the rest)."""
-    frame_index: int = 0
-    ego_row: int = -1
-    intent: int = -1
-
-    def __init__(
-        self, drivers: list[IDMVehicle], places: list[int], frame: TrafficFrame, constants: np.ndarray
-    ) -> None:
-        """`places`: the drivers' places in the road's vehicles; `constants`: their `DRIVER_CONSTANTS`."""
-        self.drivers, self.frame = drivers, frame
-        projections, lane_row = frame.projections, frame.lanes.row
-        if projections.vehicles_first:
-            self.me = np.array(places, dtype=int)
-        else:
-            self.me = np.array([projections.row[id(v)] for v in drivers], dtype=int)
-        self.target = np.array([lane_row[v.target_lane_index] for v in drivers], dtype=int)
-        self.length = constants[0]
-        self.laws = DriverLaws.of(*constants[1:])
-        self.comfort_acc_min = constants[5]
-        self.everyone = np.arange(len(drivers))
-        self.timer_due = np.array([v.LANE_CHANGE_DELAY < v.timer for v in drivers], dtype=bool)
-        self.enable_lane_change = np.array([v.enable_lane_change for v in drivers], dtype=bool)
-        self.on_target = np.array([v.lane_index == v.target_lane_index for v in drivers], dtype=bool)
-        self.routed = np.array([bool(v.route) for v in drivers], dtype=bool)
-        """Per driver: its lane-change timer is past `LANE_CHANGE_DELAY`; it may change lane; it is in
-        its target lane; it follows a route."""
-        self.own_front, self.own_rear = frame.neighbours(self.me, frame.lane[self.me])
-
-    def retarget(self, drivers: list[int]) -> None:
-        """Re-read the target lanes of `drivers` (positions in `self.drivers`) after their decisions."""
-        lane_row = self.frame.lanes.row
-        for k in drivers:
-            self.target[k] = lane_row[self.drivers[k].target_lane_index]
-
-    def at_lane_end(self) -> np.ndarray:
-        """Per driver, whether `follow_road` moves it on to the next lane."""
-        frame = self.frame
-        return frame.s[self.me] > frame.lanes.length[self.target] - StraightLane.VEHICLE_LENGTH / 2
 
 
 class VectorHighwayEnv(ScenarioTraffic):
