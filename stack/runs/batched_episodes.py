@@ -5,7 +5,9 @@ per-world loop reports, outcome for outcome (`tests/test_batched_episodes.py`).
 The worlds tick together; at a world's decision point (one decision period on, or the end of its
 lane change, as `ClosedLoop.act` decides) its agent decides on the batched encoding of what its
 sensor reports (`perception.grid.observe_batch`) and the command goes through the batched safety layer.
-Agents that plan on copies of the loop (the oracle, the lookahead planner), the tabular encoding,
+An agent that decides for many worlds at once (`planner.agents.BatchPolicy`: the lookahead) decides
+for every world at a decision point in one call. The agent that plans on copies of the loop (the
+oracle), the tabular encoding,
 the grid's `traffic` feature, other controllers and plants, recordings and videos run one world
 at a time (`batch_refusal` says why)."""
 
@@ -16,7 +18,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from perception.grid import BATCHED_FEATURES, observe_batch
-from planner.agents import Agent, decide, sees_permitted
+from planner.agents import Agent, BatchPolicy, decide, sees_permitted
 from records import Command, GridConfig, child_seed
 from stack.batch.closed_loop import ClosedLoopBatch, refusal
 from stack.loop.closed_loop import grid_config
@@ -30,7 +32,7 @@ BATCH_WORLDS = 64
 RAY_BATCH_WORLDS = 8
 """The most episodes one Ray task runs at once: a cluster gets many tasks, each still a batch (the
 traffic alone: 16 worlds step 13x faster than one, BENCHMARKS.md)."""
-PLANNING_AGENTS = ("oracle", "lookahead")
+PLANNING_AGENTS = ("oracle",)
 """Agents that plan on copies of the loop: they run one world at a time."""
 
 
@@ -100,8 +102,7 @@ def run_batched(
                 seen = observe_batch(grid, loop.perceived)
                 if with_permitted:
                     seen = np.concatenate([seen, loop.permitted()], axis=1)
-                for world in np.flatnonzero(deciding).tolist():
-                    commands[world] = decide(agents[world], seen[world]).value
+                decide_worlds(agents, seen, deciding, commands)
                 loop.command(commands, deciding)
                 since[deciding] = 0
             live = ~loop.done
@@ -115,6 +116,20 @@ def run_batched(
     finally:
         loop.close()
     return [results[world] for world in range(worlds)]
+
+
+def decide_worlds(
+    agents: Sequence[Agent], seen: np.ndarray, deciding: np.ndarray, commands: np.ndarray
+) -> None:
+    """Each world flagged `deciding` decides on its row of `seen`: its command (a `Command` value)
+    written to `commands`; one call for them all when the agents decide as a batch
+    (`BatchPolicy`)."""
+    worlds = np.flatnonzero(deciding)
+    if isinstance(agents[0], BatchPolicy):
+        commands[worlds] = agents[0].choose_batch(seen[worlds])
+        return
+    for world in worlds.tolist():
+        commands[world] = decide(agents[world], seen[world]).value
 
 
 def batches(episodes: Sequence[int], jobs: int, most: int = BATCH_WORLDS) -> list[list[int]]:
