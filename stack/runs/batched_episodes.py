@@ -56,7 +56,7 @@ def batch_refusal(config: RunConfig) -> str | None:
     agent = kept_agent(config, config.seed)
     if agent.encoding not in ("observation", "paper"):
         return f"batched worlds encode the grid as observation or paper, not {agent.encoding!r}"
-    grid = _grid(config, agent)
+    grid = decision_grid(config, agent)
     if unbatched := [name for name in grid.features if name not in BATCHED_FEATURES]:
         return f"batched worlds do not compute the grid feature {unbatched[0]!r}"
     if len(config.highway.lane_counts) > 1 and (grid.lanes != "ego" or grid.lane_code != "sides"):
@@ -69,7 +69,7 @@ def _alone(config: RunConfig) -> RunConfig:
     return config.model_copy(update={"train": config.train.model_copy(update={"scenarios": {}})})
 
 
-def _grid(config: RunConfig, agent: Agent) -> GridConfig:
+def decision_grid(config: RunConfig, agent: Agent) -> GridConfig:
     """The grid `agent` decides on, as the batch encodes it: the paper state is the observation
     encoding of the grid without its features (presence, then the lane part)."""
     grid = agent.grid_config or grid_config(config)
@@ -91,7 +91,7 @@ def run_batched(
     try:
         loop.reset(seeds)
         agents = [kept_agent(config, seed) for seed in seeds]
-        grid, with_permitted = _grid(config, agents[0]), sees_permitted(agents[0])
+        grid, with_permitted = decision_grid(config, agents[0]), sees_permitted(agents[0])
         deciding = np.ones(worlds, dtype=bool)
         since = np.zeros(worlds, dtype=np.int64)
         commands = np.full(worlds, Command.STAY.value, dtype=np.int64)
