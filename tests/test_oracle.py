@@ -80,8 +80,8 @@ def test_a_command_the_safety_layer_masks_is_refused_before_any_copy(monkeypatch
 
 
 def test_a_search_that_goes_on_from_the_last_one_rates_every_command_as_a_fresh_search(monkeypatch):
-    """The leaves the last search kept, played on, and one future for the three commands given while
-    a lane change runs: every decision's values are those of a search that keeps nothing."""
+    """The leaves the last search kept, played on for the time the root moved on: every decision's
+    values are those of a search that keeps nothing."""
     config = build_config(
         {**SHORT, "highway": {"duration": 14}, "planner": {"agent": "oracle", "oracle": {"horizon_s": 6}}},
         scenario="overtaking",

@@ -10,12 +10,11 @@ more than staying. With the shipped Double DQN as `base` (the default) the rollo
 agent there is and the tree adds what changing its next decisions gains with the future known: a
 reference ceiling for any agent on the same seeds, controllers and safety layer, though not an
 exhaustive optimum. It is slow: up to 3^depth look-ahead rollouts per decision (the cost per episode
-is in BENCHMARKS.md), fewer for two reasons that leave every value as it was. While a lane change
-runs the loop ignores commands, so the subtrees of the three commands are one future: it is played
-once. And a search's leaves are kept: when the loop then stands where the search's chosen command
-led (the same world, bit for bit: the simulator is deterministic), the new search's leaf whose
-commands are the kept one's after the first (its base agent's first command included) is that same
-future, played on only for the time the root moved on.
+is in BENCHMARKS.md), fewer where a search goes on from the last one: its leaves are kept, and when
+the loop then stands where one of its root commands led (the same world, bit for bit: the simulator
+is deterministic), a leaf of the new search whose commands are a kept leaf's after the first (its
+base agent's first command included) is that same future, played on only for the time the root
+moved on. Every value, so every decision, is the one a search from scratch makes.
 
 It is an agent, one of `drivestack agents`, but it lives here, beside the closed loop, rather than
 in `planner/` with the others: it plans on the loop itself (`ClosedLoop.fork`, `permits`,
@@ -38,10 +37,8 @@ from stack.loop.closed_loop import ClosedLoop
 from stack.settings.run import OracleConfig
 
 COMMANDS = (Command.STAY, Command.LEFT, Command.RIGHT)
-IGNORED = None
-"""A command given while a lane change runs, in a path: the loop ignores it, whichever it is."""
-Path = tuple[Command | None, ...]
-"""Commands from a search's root (`IGNORED` where the loop ignored one)."""
+Path = tuple[Command, ...]
+"""Commands given from a search's root."""
 
 
 @dataclass
@@ -50,7 +47,7 @@ class Leaf:
     every command that led there from the root: the tree's, then the base agent's."""
 
     loop: ClosedLoop
-    commands: list[Command | None]
+    commands: list[Command]
 
 
 class Oracle(Policy):
@@ -66,7 +63,7 @@ class Oracle(Policy):
         self.view = OccupancyGridBuilder(base.grid_config) if base.grid_config is not None else None
         self.values = np.full(len(COMMANDS), np.nan)
         self._leaves: list[Leaf] = []
-        self._reached: dict[Command | None, WorldState] = {}
+        self._reached: dict[Command, tuple[WorldState, bool]] = {}
         self._kept: dict[Path, Leaf] = {}
 
     @classmethod
@@ -101,11 +98,12 @@ class Oracle(Policy):
 
     def _continued(self, loop: ClosedLoop) -> dict[Path, Leaf]:
         """The last search's leaves that go on from `loop`, by their tree's commands from it: those
-        under the root command whose copy reached the world `loop` stands in now, bit for bit."""
+        under the root command whose copy reached the world `loop` stands in now, bit for bit, with a
+        lane change running there as here or in neither."""
         depth = self.config.depth
         kept: dict[Path, Leaf] = {}
-        for command, reached in self._reached.items():
-            if not _same_world(loop.world, reached):
+        for command, (reached, changing) in self._reached.items():
+            if changing != loop.changing_lane or not _same_world(loop.world, reached):
                 continue
             for leaf in self._leaves:
                 if leaf.commands[0] == command and len(leaf.commands) > depth:
@@ -124,23 +122,20 @@ class Oracle(Policy):
         """Best distance [m] from `start_s` after `command` and `depth - 1` more decisions; a
         command the safety layer would mask is worth nothing, decided before anything is copied.
         `path`: the commands from the root before `command`."""
-        ignored = loop.changing_lane
-        if not ignored and not loop.permits(command):
+        if not loop.changing_lane and not loop.permits(command):
             return -math.inf
-        path = (*path, IGNORED if ignored else command)
+        path = (*path, command)
         kept = self._kept.pop(path, None) if depth == 1 else None
         if kept is not None:
             return self._leaf_value(Leaf(kept.loop, kept.commands[1:]), start_s, start_time)
         future = loop.fork(self.view)
         future.act(command)
         if len(path) == 1:
-            self._reached[path[0]] = future.world
+            self._reached[path[0]] = (future.world, future.changing_lane)
         if future.crashed:
             return -math.inf
         if depth > 1 and not future.done:
             future.perceive()
-            if future.changing_lane:
-                return self._value(future, COMMANDS[0], depth - 1, start_s, start_time, path)
             return max(
                 self._value(future, next_command, depth - 1, start_s, start_time, path)
                 for next_command in COMMANDS
@@ -156,7 +151,7 @@ class Oracle(Policy):
             grid = future.perceive()
             seen = future.observation(grid, self.base.encoding, sees_permitted(self.base))
             command = decide(self.base, seen)
-            leaf.commands.append(IGNORED if future.changing_lane else command)
+            leaf.commands.append(command)
             future.act(command)
         return -math.inf if future.crashed else float(future.world.s[0]) - start_s
 
