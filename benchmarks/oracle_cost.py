@@ -7,8 +7,8 @@ sitting, with a check that both drive the same episode.
 CPU seconds (process time) of whole 40-s episodes of `--agent oracle`, the backends alternating
 seed by seed, after a 2-s episode in the same process (imports and compiled kernels loaded); the
 episode summaries must be identical, since both backends are bit-identical to stock. With one
-backend (`--backends vector`), its cost per episode alone, and each episode's summary printed (to
-compare two trees: run this file with each tree on the `PYTHONPATH`).
+backend (`--backends vector`), its cost per episode alone, and a digest of each episode's record
+(to compare two trees: run this file with each tree on the `PYTHONPATH`).
 With `--profile`, the first seed's episode on `vector` alone, after a 2-s episode in the same process
 (imports and compiled kernels loaded), its CPU time split between the search's parts.
 """
@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import collections
 import dataclasses
+import hashlib
 import json
 import platform
 import time
@@ -94,7 +95,8 @@ def main() -> None:
             cost[backend] += time.process_time() - start
             print(f"seed {seed} {backend}: {time.process_time() - start:.1f} s CPU", flush=True)
         if len(cost) == 1:
-            print(f"seed {seed} episode: {next(iter(results.values()))}")
+            digest = hashlib.sha256(next(iter(results.values())).encode()).hexdigest()[:16]
+            print(f"seed {seed} episode digest: {digest}")
             continue
         assert results["fast"] == results["vector"], f"seed {seed}: the backends drove different episodes"
     if len(cost) == 1:
