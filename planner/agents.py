@@ -72,6 +72,16 @@ class Gate(Protocol):
     def gate(self, observation: np.ndarray) -> Gated: ...
 
 
+@runtime_checkable
+class BatchPolicy(Protocol):
+    """An agent that decides for many worlds in one call: `choose_batch(observations)` gives, per
+    row of `observations` (worlds, size), the `Command` value `predict` gives on that row alone.
+    Its decisions depend on the observation only (not on the seed it was built with), so one of
+    them decides for every world of a batch."""
+
+    def choose_batch(self, observations: np.ndarray) -> np.ndarray: ...
+
+
 def sees_permitted(agent: object) -> bool:
     """Whether the loop shows `agent` the safety layer's permitted commands after its encoding
     (`N_ACTIONS` values, 1 permitted, 0 refused, in `Command` order): an agent trained with an

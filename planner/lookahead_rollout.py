@@ -1,14 +1,18 @@
-"""The lookahead's forecast: every candidate command rolled out at once, in one compiled loop over
-(commands x steps x vehicles).
+"""The lookahead's forecast: every candidate command rolled out at once, in one loop over
+(commands x steps x vehicles), a plain function that numba compiles into the lookahead's decision
+(`planner.lookahead`, one world or a batch of them).
 
 The ego follows a reduced model of the stack's own maneuver and longitudinal control: the quintic
 lane change (minimum-jerk, `duration` s, tracked exactly: no controller lag), the adaptive cruise's
 law (speed P term towards the set speed, capped by the constant-time-gap law for the leader of the
-own lane and, during a change, of the target lane; the PI's integral and the plant's lag left out)
-and emergency braking (full braking when comfort braking cannot stop in the gap, or the TTC is below
-its trigger). The others drive IDM along the lane they are seen in, with their desired speed set to
-the speed they are seen at (so a free vehicle keeps its velocity, one behind a slower vehicle or the
-ego brakes): nothing but perceived state.
+own lane and, during a change, of the target lane: `controllers.cruise.gap_acceleration`; the PI's
+integral and the plant's lag left out) and emergency braking (full braking when comfort braking
+cannot stop in the gap, or the TTC is below its trigger: `controllers.emergency.needs_full_braking`
+for a leader not seen braking). The others drive IDM along the lane they are seen in, with their
+desired speed set to the speed they are seen at (so a free vehicle keeps its velocity, one behind a
+slower vehicle or the ego brakes): nothing but perceived state. Their IDM is the original one
+(`IDM_*` below: desired gap d0 + max(0, v T + v dv / 2 sqrt(a b)), the desired speed at least
+1 m/s), not the traffic's highway-env form (`stack.sim.vector.dynamics.desired_gap`, no clamp).
 
 Lanes are relative to the ego's: -1 left, 0 own, +1 right. Positions are the centres along the road
 relative to the ego's centre at the decision [m]; speeds in m/s, accelerations in m/s^2.
@@ -16,13 +20,15 @@ relative to the ego's centre at the decision [m]; speeds in m/s, accelerations i
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
+from numba.extending import register_jitable
 
-from common.compiled import Kernel
+from common.compiled import clip
+from controllers.cruise import GapKeeping, gap_acceleration
+from controllers.emergency import BrakingLimits, needs_full_braking
 
-EGO = ("set_speed", "time_gap", "standstill_gap", "comfort_decel", "max_accel", "kp_speed",
-       "emergency_decel", "emergency_ttc", "length", "width", "lane_width")  # fmt: skip
-"""The ego's parameters, in the order `rollout` reads them."""
 OUTCOME = ("at_fault", "min_ttc", "progress", "emergency", "end_speed", "option_speed")
 """What `rollout` returns per command, in its columns' order."""
 
@@ -36,19 +42,29 @@ IDM_TIME_GAP = 1.5
 """Their IDM time gap [s]."""
 IDM_LIMIT = 6.0
 """Largest acceleration or deceleration an IDM vehicle applies [m/s^2] (highway-env's ACC_MAX)."""
-GAP_GAIN = 0.25
-"""The adaptive cruise's gap-error gain [1/s^2] (`controllers.cruise.AdaptiveCruise.KP_GAP`)."""
-CLOSING_GAIN = 0.8
-"""Its relative-speed gain [1/s] (`AdaptiveCruise.KP_CLOSING`)."""
-STOP_MARGIN = 1.0
-"""Gap emergency braking keeps when stopping [m] (`EmergencyBraking.STOP_MARGIN_M`)."""
 OPTION_RANGE = 60.0
 """How far ahead of the ego's end position the lane beyond a change's target is read [m]."""
 NO_TTC = 1e3
 """The TTC reported when nothing closes in [s]."""
 
 
-@Kernel
+class EgoModel(NamedTuple):
+    """The ego as the rollout drives it: the adaptive cruise's gap law, emergency braking's limits
+    (full braking, the comfort deceleration the cruise brakes at most, the trigger TTC), the set
+    speed [m/s], the speed gain [1/s], the largest acceleration [m/s^2], its length and width and
+    the lane width [m]."""
+
+    gap: GapKeeping
+    braking: BrakingLimits
+    set_speed: float
+    kp_speed: float
+    max_accel: float
+    length: float
+    width: float
+    lane_width: float
+
+
+@register_jitable
 def rollout(
     shifts: np.ndarray,
     durations: np.ndarray,
@@ -57,7 +73,7 @@ def rollout(
     centre: np.ndarray,
     length: np.ndarray,
     velocity: np.ndarray,
-    ego: np.ndarray,
+    ego: EgoModel,
     steps: int,
     dt: float,
     left: int,
@@ -73,8 +89,9 @@ def rollout(
     seen). An at-fault collision: the ego reaches a vehicle ahead in a lane it occupies, or any
     vehicle in the lane it moves into; being hit from behind in its own lane is not its fault and
     is not counted."""
-    set_speed, time_gap, standstill, comfort, max_accel, kp = ego[0], ego[1], ego[2], ego[3], ego[4], ego[5]
-    emergency_decel, emergency_ttc, ego_length, ego_width, width = ego[6], ego[7], ego[8], ego[9], ego[10]
+    set_speed, kp, max_accel = ego.set_speed, ego.kp_speed, ego.max_accel
+    comfort = ego.braking.comfort_deceleration
+    ego_length, ego_width, width = ego.length, ego.width, ego.lane_width
     count = lane.shape[0]
     outcome = np.zeros((shifts.shape[0], 6))
     s = np.empty(count)
@@ -108,17 +125,12 @@ def rollout(
                             nearest, gap = i, here
                 if nearest < 0:
                     continue
-                closing = ego_v - v[nearest]
-                desired = standstill + time_gap * ego_v
-                command = min(command, GAP_GAIN * (gap - desired) - CLOSING_GAIN * closing)
-                room = max(gap - STOP_MARGIN, 0.01)
-                if closing > 0 and (
-                    closing * closing / (2 * room) > comfort or gap / closing < emergency_ttc
-                ):
+                command = min(command, gap_acceleration(ego.gap, ego_v, gap, v[nearest]))
+                if needs_full_braking(ego.braking, ego_v, gap, v[nearest], 0.0):
                     braking = True
-            command = min(max(command, -comfort), max_accel)
+            command = clip(command, -comfort, max_accel)
             if braking:
-                command = -emergency_decel
+                command = -ego.braking.max_deceleration
                 emergency = 1.0
             for i in range(count):
                 leader_gap, leader_v = 1e9, v[i]

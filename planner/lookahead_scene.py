@@ -4,15 +4,20 @@ relative speeds), read back into the vehicles around the ego.
 A vehicle marks every cell its footprint overlaps, so a run of occupied cells with one relative
 speed is one vehicle (two touching vehicles at one speed read as one long one). Each is placed at
 the run's outer cell edges: up to one cell longer than it is, so every gap read is at most the
-true gap (never optimistic by more than rounding).
+true gap (never optimistic by more than rounding). The reading is one plain function
+(`read_vehicles`) that numba compiles for one observation (`read_scene`) and into the lookahead's
+decision over a batch of them (`planner.lookahead`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
+from numba.extending import register_jitable
 
+from common.compiled import Kernel
 from records import MAX_SPEED, SIDE_LANES_SEEN, GridConfig
 
 CELL_M = 2.0
@@ -63,46 +68,95 @@ class Scene:
     velocity: np.ndarray
 
 
+class SceneLayout(NamedTuple):
+    """A lookahead grid's shape as the compiled reader takes it: cells a lane, the ego's column,
+    the cell length [m] and the relative speed that gives grid feature 1 [m/s]."""
+
+    cells: int
+    ego_column: int
+    cell_length: float
+    speed_scale: float
+
+
+def scene_layout(grid: GridConfig) -> SceneLayout:
+    """The `SceneLayout` of `grid` (a `lookahead_grid`)."""
+    return SceneLayout(grid.cells, grid.ego_column, grid.cell_length, grid.speed_scale)
+
+
+def observation_size(grid: GridConfig) -> int:
+    """Values in one observation of `grid` (a `lookahead_grid`): presence and relative speed of
+    2 REACH + 1 lanes of cells, the ego's speed, the lanes on each side."""
+    return 2 * (2 * REACH + 1) * grid.cells + 3
+
+
+def checked_size(grid: GridConfig, size: int) -> None:
+    """ValueError (one line) unless an observation of `size` values is one of `grid`."""
+    if size != observation_size(grid):
+        raise ValueError(
+            f"lookahead agent expected 2 x {2 * REACH + 1} x {grid.cells} grid values, the ego speed and "
+            f"2 side-lane values; got {size} values"
+        )
+
+
 def read_scene(grid: GridConfig, observation: np.ndarray) -> Scene:
     """The `Scene` in an observation of `grid` (a `lookahead_grid`); ValueError on another size."""
     observation = np.asarray(observation, dtype=np.float64).reshape(-1)
-    cells, rows = grid.cells, 2 * REACH + 1
-    size = rows * cells
-    if observation.size != 2 * size + 3:
-        raise ValueError(
-            f"lookahead agent expected 2 x {rows} x {cells} grid values, the ego speed and 2 side-lane "
-            f"values; got {observation.size} values"
-        )
-    presence = observation[:size].reshape(rows, cells) > 0
-    relative = observation[size : 2 * size].reshape(rows, cells) * grid.speed_scale
-    speed = float(observation[2 * size]) * MAX_SPEED
-    left, right = (round(float(value) * SIDE_LANES_SEEN) for value in observation[2 * size + 1 :])
-    lanes, centres, lengths, speeds = [], [], [], []
-    for shift in range(-min(left, REACH), min(right, REACH) + 1):
-        row = shift + REACH
-        first, last = _runs(presence[row], relative[row])
-        rear = (first - grid.ego_column - 0.5) * grid.cell_length
-        front = (last - grid.ego_column + 0.5) * grid.cell_length
-        lanes.append(np.full(first.size, shift, dtype=np.int64))
-        centres.append((rear + front) / 2)
-        lengths.append(front - rear)
-        speeds.append(np.maximum(speed + relative[row, first], 0.0))
-    return Scene(
-        speed,
-        left,
-        right,
-        np.concatenate(lanes),
-        np.concatenate(centres),
-        np.concatenate(lengths),
-        np.concatenate(speeds),
+    checked_size(grid, observation.size)
+    room = (2 * REACH + 1) * grid.cells
+    lane, centre = np.empty(room, dtype=np.int64), np.empty(room)
+    length, velocity = np.empty(room), np.empty(room)
+    count, speed, left, right = _read_one(scene_layout(grid), observation, lane, centre, length, velocity)
+    return Scene(speed, left, right, lane[:count], centre[:count], length[:count], velocity[:count])
+
+
+@register_jitable
+def read_vehicles(
+    layout: SceneLayout,
+    observation: np.ndarray,
+    lane: np.ndarray,
+    centre: np.ndarray,
+    length: np.ndarray,
+    velocity: np.ndarray,
+) -> tuple[int, float, int, int]:
+    """(vehicles, ego speed [m/s], lanes on the left, lanes on the right) of one observation of a
+    lookahead grid (float64 values): each vehicle's lane relative to the ego's, centre and length
+    [m] and speed [m/s] written to the first rows of `lane`, `centre`, `length`, `velocity` (room
+    for one a cell), lane by lane from the leftmost seen, rear to front."""
+    cells, ego_column, cell_length, speed_scale = (
+        layout.cells,
+        layout.ego_column,
+        layout.cell_length,
+        layout.speed_scale,
     )
+    size = (2 * REACH + 1) * cells
+    speed = observation[2 * size] * MAX_SPEED
+    left = round(observation[2 * size + 1] * SIDE_LANES_SEEN)
+    right = round(observation[2 * size + 2] * SIDE_LANES_SEEN)
+    count = 0
+    for shift in range(-min(left, REACH), min(right, REACH) + 1):
+        row = (shift + REACH) * cells
+        for first in range(cells):
+            value = observation[size + row + first] * speed_scale
+            if not observation[row + first] > 0:
+                continue
+            if first > 0 and observation[row + first - 1] > 0:
+                if observation[size + row + first - 1] * speed_scale == value:
+                    continue
+            last = first
+            while (
+                last + 1 < cells
+                and observation[row + last + 1] > 0
+                and observation[size + row + last + 1] * speed_scale == value
+            ):
+                last += 1
+            rear = (first - ego_column - 0.5) * cell_length
+            front = (last - ego_column + 0.5) * cell_length
+            lane[count] = shift
+            centre[count] = (rear + front) / 2
+            length[count] = front - rear
+            velocity[count] = max(speed + value, 0.0)
+            count += 1
+    return count, speed, left, right
 
 
-def _runs(occupied: np.ndarray, value: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(first, last) columns of each run of occupied cells that share one `value`."""
-    inside = np.concatenate([[False], occupied, [False]])
-    level = np.concatenate([[np.nan], value, [np.nan]])
-    changed = (level[1:] != level[:-1]) | (inside[1:] != inside[:-1])
-    starts = np.flatnonzero(changed[:-1] & inside[1:-1])
-    ends = np.flatnonzero(changed[1:] & inside[1:-1])
-    return starts, ends
+_read_one = Kernel(read_vehicles)

@@ -1,8 +1,8 @@
 """`drivestack run` and `compare` on batched worlds (`stack.runs.batch_episodes`): each episode's
 result, every outcome field and the per-tick trace, is the one the per-world loop reports (passed
 cars, comfort, TTC, R157, standstill, collision class, counts), for the agents that decide on the
-grid (learned, MOBIL, rule, keep-lane, random), through sensors, on roads of several lane counts;
-the configs a batch does not run are refused in one line and run one world at a time."""
+grid (learned, MOBIL, rule, keep-lane, random, the lookahead), through sensors, on roads of several
+lane counts; the configs a batch does not run are refused in one line and run one world at a time."""
 
 from __future__ import annotations
 
@@ -35,7 +35,14 @@ def both_ways(episodes: int, **overrides: object) -> tuple[list[EpisodeResult], 
 
 @pytest.mark.parametrize(
     ("scenario", "agent"),
-    [("overtaking", "ddqn"), ("noisy", "mobil"), ("random", "ddqn"), ("incident", "rule")],
+    [
+        ("overtaking", "ddqn"),
+        ("noisy", "mobil"),
+        ("random", "ddqn"),
+        ("incident", "rule"),
+        ("overtaking", "lookahead"),
+        ("random", "lookahead"),
+    ],
 )
 def test_each_episode_of_a_batch_is_the_episode_run_alone(scenario: str, agent: str) -> None:
     batched, alone = both_ways(3, scenario=scenario, planner__agent=agent)
@@ -82,7 +89,6 @@ def test_a_run_stepped_one_world_at_a_time_says_why_in_its_summary() -> None:
 @pytest.mark.parametrize(
     ("overrides", "reason"),
     [
-        ({"planner__agent": "lookahead"}, "plans on copies"),
         ({"planner__agent": "oracle"}, "plans on copies"),
         ({"planner__agent": "tabular"}, "not 'tabular'"),
         ({"controller__type": "mpc"}, "PID tracker"),

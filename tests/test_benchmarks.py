@@ -38,6 +38,9 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
     assert "ms per frame" in run("loop_rate.py", "--cpu", "--episodes", "1", "--duration", "1")
     assert "| road act" in run("loop_profile.py", "--episodes", "1", "--duration", "1").replace("&nbsp;", "")
     assert "cheaper" in run("oracle_cost.py", "--seeds", "0", "--duration", "2")
+    assert "s CPU per oracle episode" in run(
+        "oracle_cost.py", "--seeds", "0", "--duration", "2", "--backends", "vector"
+    )
     assert "p95" in run("lookahead_cost.py", "--episodes", "1", "--duration", "2", "--scenarios", "jam")
     assert "| control ticks" in run("oracle_cost.py", "--profile", "--seeds", "0", "--duration", "2")
     assert "| all |" in run("record_cost.py", "--seeds", "0", "--duration", "2", "--repeats", "1")

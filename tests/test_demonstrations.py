@@ -19,6 +19,8 @@ from stack.runtime.executors import completed
 from stack.settings.run import build_config, grid_config
 from stack.training.decision_env import HierarchicalHighwayEnv
 from stack.training.demonstrations import (
+    batch_experts,
+    batched_expert_episodes,
     collect_demonstrations,
     demonstration_worlds,
     expert_episode,
@@ -109,6 +111,43 @@ def test_demonstrations_do_not_depend_on_the_number_of_processes():
     two = collect_demonstrations(build_config({**data, "train": {**data["train"], "envs": 2}}), False)
     for name, values in one.arrays().items():
         np.testing.assert_array_equal(two.arrays()[name], values, err_msg=name)
+
+
+@pytest.mark.parametrize(
+    ("demonstrations", "masked"),
+    [
+        ({"expert": "lookahead"}, False),
+        (
+            {
+                "expert": "lookahead",
+                "experts": {"jam": "mobil"},
+                "scenarios": {"jam": 1.0, "overtaking": 1.0},
+            },
+            True,
+        ),
+    ],
+)
+def test_demonstrations_on_batched_worlds_are_the_episodes_recorded_one_world_at_a_time(
+    demonstrations, masked
+):
+    data = {**TINY, "highway": {**TINY["highway"], "duration": 8}}
+    data["train"] = {**TINY["train"], "action_mask": masked, "demonstrations": demonstrations}
+    config = build_config(data)
+    world, settings = demonstration_worlds(config), config.train.demonstrations
+    seeds = [200_020, 200_021, 200_022, 200_023]
+    batched = batched_expert_episodes(world, settings, seeds)
+    assert batched is not None
+    for seed, episode in zip(seeds, batched, strict=True):
+        alone = expert_episode(world, settings, seed)
+        for name, values in alone.arrays().items():
+            np.testing.assert_array_equal(episode.arrays()[name], values, err_msg=f"{seed} {name}")
+    assert any(len(set(episode.actions.tolist())) > 1 for episode in batched), "some lane change taught"
+
+
+def test_an_oracle_expert_records_one_world_at_a_time():
+    data = {**TINY, "train": {**TINY["train"], "demonstrations": {"expert": "oracle"}}}
+    config = build_config(data)
+    assert batch_experts(demonstration_worlds(config), config.train.demonstrations) is None
 
 
 def test_a_run_with_demonstrations_validates_its_pretrained_model_first(tmp_path):

@@ -77,3 +77,36 @@ def test_a_command_the_safety_layer_masks_is_refused_before_any_copy(monkeypatch
         assert oracle._value(loop, Command.RIGHT, 2, 0.0, 0.0) == -np.inf and not copies
         monkeypatch.setattr(type(loop.safety), "permits", lambda self, command, *_: command is Command.STAY)
         assert oracle.plan(loop) is Command.STAY and not copies
+
+
+def test_a_search_that_goes_on_from_the_last_one_rates_every_command_as_a_fresh_search(monkeypatch):
+    """The leaves the last search kept, played on for the time the root moved on: every decision's
+    values are those of a search that keeps nothing."""
+    config = build_config(
+        {**SHORT, "highway": {"duration": 14}, "planner": {"agent": "oracle", "oracle": {"horizon_s": 6}}},
+        scenario="overtaking",
+    )
+    keeping, fresh = build_agent(config, 0), build_agent(config, 0)
+    assert isinstance(keeping, Oracle) and isinstance(fresh, Oracle)
+    continued: list[int] = []
+    leaf_value = Oracle._leaf_value
+
+    def counted(self, leaf, *args):
+        if self is keeping and len(leaf.commands) > self.config.depth:
+            continued.append(len(leaf.commands))
+        return leaf_value(self, leaf, *args)
+
+    monkeypatch.setattr(Oracle, "_leaf_value", counted)
+    searched = 0
+    with HighwayAdapter(config.highway, config.sim.backend) as adapter:
+        loop = ClosedLoop(config, adapter, grid=keeping.grid_config)
+        loop.reset(3)
+        while not loop.done:
+            loop.perceive()
+            fresh._reached = {}
+            command = keeping.plan(loop)
+            assert fresh.plan(loop) is command
+            assert np.array_equal(keeping.values, fresh.values, equal_nan=True), loop.world.time
+            searched += not np.isnan(keeping.values).all()
+            loop.act(command)
+    assert searched >= 3 and continued, "some searches went on from the last one's leaves"

@@ -5,7 +5,9 @@ per-world loop reports, outcome for outcome (`tests/test_batched_episodes.py`).
 The worlds tick together; at a world's decision point (one decision period on, or the end of its
 lane change, as `ClosedLoop.act` decides) its agent decides on the batched encoding of what its
 sensor reports (`perception.grid.observe_batch`) and the command goes through the batched safety layer.
-Agents that plan on copies of the loop (the oracle, the lookahead planner), the tabular encoding,
+An agent that decides for many worlds at once (`planner.agents.BatchPolicy`: the lookahead) decides
+for every world at a decision point in one call. The agent that plans on copies of the loop (the
+oracle), the tabular encoding,
 the grid's `traffic` feature, other controllers and plants, recordings and videos run one world
 at a time (`batch_refusal` says why)."""
 
@@ -17,7 +19,7 @@ from dataclasses import replace
 import numpy as np
 
 from perception.grid import BATCHED_FEATURES, observe_batch
-from planner.agents import Agent, Gate, decide, sees_permitted
+from planner.agents import Agent, BatchPolicy, Gate, decide, sees_permitted
 from records import Command, GridConfig, child_seed
 from stack.batch.closed_loop_batch import ClosedLoopBatch, refusal
 from stack.loop.closed_loop import grid_config
@@ -32,7 +34,7 @@ BATCH_WORLDS = 64
 RAY_BATCH_WORLDS = 8
 """The most episodes one Ray task runs at once: a cluster gets many tasks, each still a batch (the
 traffic alone: 16 worlds step 13x faster than one, BENCHMARKS.md)."""
-PLANNING_AGENTS = ("oracle", "lookahead")
+PLANNING_AGENTS = ("oracle",)
 """Agents that plan on copies of the loop: they run one world at a time."""
 
 
@@ -56,7 +58,7 @@ def batch_refusal(config: RunConfig) -> str | None:
     agent = kept_agent(config, config.seed)
     if agent.encoding not in ("observation", "paper"):
         return f"batched worlds encode the grid as observation or paper, not {agent.encoding!r}"
-    grid = _grid(config, agent)
+    grid = decision_grid(config, agent)
     if unbatched := [name for name in grid.features if name not in BATCHED_FEATURES]:
         return f"batched worlds do not compute the grid feature {unbatched[0]!r}"
     if len(config.highway.lane_counts) > 1 and (grid.lanes != "ego" or grid.lane_code != "sides"):
@@ -69,7 +71,7 @@ def _alone(config: RunConfig) -> RunConfig:
     return config.model_copy(update={"train": config.train.model_copy(update={"scenarios": {}})})
 
 
-def _grid(config: RunConfig, agent: Agent) -> GridConfig:
+def decision_grid(config: RunConfig, agent: Agent) -> GridConfig:
     """The grid `agent` decides on, as the batch encodes it: the paper state is the observation
     encoding of the grid without its features (presence, then the lane part)."""
     grid = agent.grid_config or grid_config(config)
@@ -91,7 +93,7 @@ def run_batched(
     try:
         loop.reset(seeds)
         agents = [kept_agent(config, seed) for seed in seeds]
-        grid, with_permitted = _grid(config, agents[0]), sees_permitted(agents[0])
+        grid, with_permitted = decision_grid(config, agents[0]), sees_permitted(agents[0])
         deciding = np.ones(worlds, dtype=bool)
         since = np.zeros(worlds, dtype=np.int64)
         commands = np.full(worlds, Command.STAY.value, dtype=np.int64)
@@ -101,23 +103,15 @@ def run_batched(
             if deciding.any():
                 assert loop.perceived is not None
                 seen = _seen(loop, grid, with_permitted)
-                handed = []
-                for world in np.flatnonzero(deciding).tolist():
-                    agent = agents[world]
-                    if isinstance(agent, Gate):
-                        gated = agent.gate(seen[world])
-                        commands[world] = int(gated.actions[0])
-                        if gated.handed[0]:
-                            handed.append(world)
-                    else:
-                        commands[world] = decide(agent, seen[world]).value
+                handed = decide_worlds(agents, seen, deciding, commands)
                 if handed:
                     gate = agents[handed[0]]
                     assert isinstance(gate, Gate)
                     fallback = gate.fallback
-                    fallback_seen = _seen(loop, _grid(config, fallback), sees_permitted(fallback))
-                    for world in handed:
-                        commands[world] = decide(fallback, fallback_seen[world]).value
+                    fallback_seen = _seen(loop, decision_grid(config, fallback), sees_permitted(fallback))
+                    to_fallback = np.zeros_like(deciding)
+                    to_fallback[handed] = True
+                    decide_worlds([fallback] * worlds, fallback_seen, to_fallback, commands)
                     fallback_decisions[handed] += 1
                 loop.command(commands, deciding)
                 since[deciding] = 0
@@ -153,6 +147,29 @@ def _seen(loop: ClosedLoopBatch, grid: GridConfig, with_permitted: bool) -> np.n
     assert loop.perceived is not None
     seen = observe_batch(grid, loop.perceived)
     return np.concatenate([seen, loop.permitted()], axis=1) if with_permitted else seen
+
+
+def decide_worlds(
+    agents: Sequence[Agent], seen: np.ndarray, deciding: np.ndarray, commands: np.ndarray
+) -> list[int]:
+    """Each world flagged `deciding` decides on its row of `seen`: its command (a `Command` value)
+    written to `commands`; one call for them all when the agents decide as a batch
+    (`BatchPolicy`). Returns the worlds whose gate (`Gate`) hands the decision to its fallback."""
+    worlds = np.flatnonzero(deciding)
+    if isinstance(agents[0], BatchPolicy):
+        commands[worlds] = agents[0].choose_batch(seen[worlds])
+        return []
+    handed = []
+    for world in worlds.tolist():
+        agent = agents[world]
+        if isinstance(agent, Gate):
+            gated = agent.gate(seen[world])
+            commands[world] = int(gated.actions[0])
+            if gated.handed[0]:
+                handed.append(world)
+        else:
+            commands[world] = decide(agent, seen[world]).value
+    return handed
 
 
 def batches(episodes: Sequence[int], jobs: int, most: int = BATCH_WORLDS) -> list[list[int]]:
