@@ -2,34 +2,9 @@
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
-from numba.extending import register_jitable
-
+from common.longitudinal import KP_CLOSING, KP_GAP, GapKeeping, gap_acceleration
 from controllers.pid import PID
 from records import Neighbour, clip
-
-KP_GAP = 0.25
-"""Gap-error gain [1/s^2]."""
-KP_CLOSING = 0.8
-"""Relative-speed gain [1/s]."""
-
-
-class GapKeeping(NamedTuple):
-    """The cruise's time-gap law: keep `standstill_gap` [m] + `time_gap` [s] x speed to a leader."""
-
-    time_gap: float
-    standstill_gap: float
-
-
-@register_jitable
-def gap_acceleration(law: GapKeeping, speed: float, gap: float, leader_speed: float) -> float:
-    """The acceleration [m/s^2] that keeps the time gap to one leader `gap` [m] ahead at
-    `leader_speed` [m/s] from the ego's `speed` [m/s]: KP_GAP on the gap error, KP_CLOSING on the
-    closing speed."""
-    desired_gap = law.standstill_gap + law.time_gap * speed
-    closing = speed - leader_speed
-    return KP_GAP * (gap - desired_gap) - KP_CLOSING * closing
 
 
 class AdaptiveCruise:

@@ -4,25 +4,10 @@ the car at standstill instead of reversing it."""
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 from numba.extending import register_jitable
 
+from common.longitudinal import BRAKING_SEEN_MPS2, STOP_MARGIN_M, BrakingLimits, needs_full_braking
 from records import Actuation, Neighbour
-
-STOP_MARGIN_M = 1.0
-"""Gap kept when stopping behind a leader [m]."""
-BRAKING_SEEN_MPS2 = 0.5
-"""A leader slowing faster than this is braking: the ego must stop behind where it stops [m/s^2]."""
-
-
-class BrakingLimits(NamedTuple):
-    """Emergency braking's settings: full braking [m/s^2], the comfort deceleration it steps in
-    beyond [m/s^2], and the time to collision that triggers it [s]."""
-
-    max_deceleration: float
-    comfort_deceleration: float
-    trigger_ttc_s: float
 
 
 @register_jitable
@@ -34,25 +19,6 @@ def leader_braking(
     `previous_slowing` (0 when it was not seen slowing: a one-tick dip is not braking)."""
     slowing = (previous_speed - speed) / dt
     return slowing, min(slowing, previous_slowing)
-
-
-@register_jitable
-def needs_full_braking(
-    limits: BrakingLimits, speed: float, gap: float, leader_speed: float, braking: float
-) -> bool:
-    """Whether the ego at `speed` [m/s] needs more than comfort braking for a leader `gap` [m] ahead
-    at `leader_speed` [m/s], braking at `braking` [m/s^2] (`EmergencyBraking.needed`)."""
-    closing = speed - leader_speed
-    if closing <= 0:
-        return False
-    room = max(gap - STOP_MARGIN_M, 0.01)
-    stopping = braking > BRAKING_SEEN_MPS2
-    stops_in = leader_speed * leader_speed / (2 * braking) if stopping else 0.0
-    return (
-        closing * closing / (2 * room) > limits.comfort_deceleration
-        or gap / closing < limits.trigger_ttc_s
-        or (stopping and speed * speed / (2 * (room + stops_in)) > limits.comfort_deceleration)
-    )
 
 
 @register_jitable

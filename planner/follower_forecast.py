@@ -8,14 +8,13 @@ from __future__ import annotations
 
 from numba.extending import register_jitable
 
+from common.longitudinal import STOP_MARGIN_M
 from common.neighbours import VehicleRows, nearest_in_lane
 
 FORECAST_STEP_S = 0.1
 """Time step of the follower's forecast [s]."""
 FORECAST_HORIZON_S = 30.0
 """How far the follower's forecast runs at most [s]: past any car's stop from highway speeds."""
-STOP_MARGIN_M = 1.0
-"""The gap the ego's braking forecast keeps to the leader it meets [m] (`EmergencyBraking`'s)."""
 
 
 @register_jitable

@@ -27,9 +27,8 @@ import numpy as np
 from numba.extending import register_jitable
 
 from common.compiled import Kernel
+from common.longitudinal import BrakingLimits, GapKeeping
 from common.neighbours import VehicleRows
-from controllers.cruise import GapKeeping
-from controllers.emergency import BrakingLimits
 from planner.agents import Action, Policy
 from planner.lookahead_config import LookaheadConfig
 from planner.lookahead_rollout import EgoModel, rollout

@@ -5,9 +5,9 @@
 The ego follows a reduced model of the stack's own maneuver and longitudinal control: the quintic
 lane change (minimum-jerk, `duration` s, tracked exactly: no controller lag), the adaptive cruise's
 law (speed P term towards the set speed, capped by the constant-time-gap law for the leader of the
-own lane and, during a change, of the target lane: `controllers.cruise.gap_acceleration`; the PI's
+own lane and, during a change, of the target lane: `common.longitudinal.gap_acceleration`; the PI's
 integral and the plant's lag left out) and emergency braking (full braking when comfort braking
-cannot stop in the gap, or the TTC is below its trigger: `controllers.emergency.needs_full_braking`
+cannot stop in the gap, or the TTC is below its trigger: `common.longitudinal.needs_full_braking`
 for a leader not seen braking). The others drive IDM along the lane they are seen in, with their
 desired speed set to the speed they are seen at (so a free vehicle keeps its velocity, one behind a
 slower vehicle or the ego brakes): nothing but perceived state. Their IDM is the original one
@@ -26,8 +26,7 @@ import numpy as np
 from numba.extending import register_jitable
 
 from common.compiled import clip
-from controllers.cruise import GapKeeping, gap_acceleration
-from controllers.emergency import BrakingLimits, needs_full_braking
+from common.longitudinal import BrakingLimits, GapKeeping, gap_acceleration, needs_full_braking
 
 OUTCOME = ("at_fault", "min_ttc", "progress", "emergency", "end_speed", "option_speed")
 """What `rollout` returns per command, in its columns' order."""

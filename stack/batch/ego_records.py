@@ -7,8 +7,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from controllers.cruise import GapKeeping
-from controllers.emergency import BrakingLimits
+from common.longitudinal import BrakingLimits, GapKeeping
 from controllers.lateral import LateralGains
 from controllers.pid import PIDTerms
 

@@ -18,9 +18,9 @@ import numpy as np
 from numba import njit
 
 from common.compiled import Kernel, clip
+from common.longitudinal import BrakingLimits, gap_acceleration, needs_full_braking
 from common.neighbours import VehicleRows, footprint_across, reaches_lane
-from controllers.cruise import gap_acceleration
-from controllers.emergency import BrakingLimits, braked_acceleration, leader_braking, needs_full_braking
+from controllers.emergency import braked_acceleration, leader_braking
 from controllers.lateral import LateralMemory, lateral_steering
 from controllers.leaders import leaders_in_rows
 from controllers.maneuver import lane_change_target, left_origin
