@@ -27,6 +27,7 @@ from controllers.protocol import Controller
 from controllers.tracker import make_controller
 from perception.grid import OccupancyGrid, OccupancyGridBuilder
 from perception.sensor import SensorConfig, SensorModel
+from perception.tracking import Tracker
 from planner.safety import SafetyLayer
 from records import Actuation, Command, Encoding, GridConfig, WorldState
 from stack.loop.loop_records import Acted, LoopStatus, SolveStatistics, Tick
@@ -113,8 +114,16 @@ class ClosedLoop:
         config = self.config
         self.seed = seed
         self.world = self.plant.reset(seed)
-        self.sensor = SensorModel(episode_sensor(config, seed), seed)
-        self.perceived = self._observe()
+        sensor = episode_sensor(config, seed)
+        self.sensor = SensorModel(sensor, seed)
+        self.detected = self.perceived = self._observe()
+        self.tracker: Tracker | None = None
+        if config.perception.tracker.tracks(sensor) and not config.perception.control_on_ground_truth:
+            self.tracker = Tracker(config.perception.tracker, sensor)
+            warm_up = [self.perceived] + [
+                self._observe() for _ in range(config.perception.tracker.confirm_frames - 1)
+            ]
+            self.perceived = self.tracker.warm_up(warm_up)
         self.safety = SafetyLayer(config.planner.safety)
         self.controller = self.given_controller or make_controller(
             config.controller, self.plant.dt, config.sim.plant
@@ -238,7 +247,9 @@ class ClosedLoop:
         actuation = self.controller.step(state, reference)
         actuation = self.emergency.apply(actuation, state.speed, reference.leaders, self.plant.dt)
         self.world = self.plant.step(actuation)
-        self.perceived = self._observe()
+        self.detected = self.perceived = self._observe()
+        if self.tracker is not None:
+            self.perceived = self.tracker.update(self.detected, self.plant.dt)
         maneuver = self.maneuver
         return Tick(reference, actuation, self.world, maneuver.lane, maneuver.target)
 
@@ -292,7 +303,7 @@ class ClosedLoop:
             id(self.recording): None,
         }
         snapshot = self.snapshot[0] if self.snapshot is not None else None
-        for world in (self.world, self.perceived, snapshot):
+        for world in (self.world, self.detected, self.perceived, snapshot):
             if world is not None:
                 memo[id(world)] = world
         return copy.deepcopy(self, memo)

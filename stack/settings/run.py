@@ -18,6 +18,7 @@ from common.plugins import AGENT_GROUP, plugin_name
 from controllers.config import ControllerConfig
 from perception.grid import OccupancyGridBuilder
 from perception.sensor import SensorConfig
+from perception.tracking import TrackerConfig
 from planner.lookahead_config import LookaheadConfig
 from planner.mobil import prior_problem
 from planner.networks import LANE_NETWORK, lane_problem
@@ -37,12 +38,17 @@ class ConfigError(ValueError):
     """A configuration that cannot run; the message is one line for the user."""
 
 
+NOT_GRID = {"sensor", "tracker", "control_on_ground_truth"}
+"""The `perception` keys that are not the grid's."""
+
+
 class PerceptionConfig(GridConfig):
     """The occupancy grid (perception.grid.GridConfig's keys), the sensor model, and who sees it:
     by default the agent, the safety layer and the adaptive cruise all act on the perceived world;
     `control_on_ground_truth` lets safety and cruise read the simulator's truth (an ablation)."""
 
     sensor: SensorConfig = SensorConfig()
+    tracker: TrackerConfig = TrackerConfig()
     control_on_ground_truth: bool = False
 
 
@@ -141,9 +147,7 @@ class RunConfig(Strict):
         lanes = {(name, count) for name, road in roads.items() for count in road.lane_counts}
         if len(lanes) < 2:
             return
-        grid = OccupancyGridBuilder(
-            GridConfig(**self.perception.model_dump(exclude={"sensor", "control_on_ground_truth"}))
-        )
+        grid = OccupancyGridBuilder(GridConfig(**self.perception.model_dump(exclude=NOT_GRID)))
         sizes = {(name, count): grid.space(self.train.encoding, count).shape for name, count in lanes}
         if len(set(sizes.values())) > 1:
             raise ValueError(
@@ -389,4 +393,4 @@ def _beside(section: dict[str, Any], key: str, config_file: Path) -> None:
 
 def grid_config(config: RunConfig) -> GridConfig:
     """The perception grid `config` asks for (its `perception` section without the sensor)."""
-    return GridConfig(**config.perception.model_dump(exclude={"sensor", "control_on_ground_truth"}))
+    return GridConfig(**config.perception.model_dump(exclude=NOT_GRID))
