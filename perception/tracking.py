@@ -20,7 +20,7 @@ import dataclasses
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from perception.sensor import SensorConfig
 from perception.tracking_law import (
@@ -64,6 +64,12 @@ class TrackerConfig(BaseModel):
     max_tracks: int = Field(
         128, ge=1, le=4096, description="tracks a world (more detections are not tracked)"
     )
+
+    @field_validator("mode", mode="before")
+    @classmethod
+    def _yaml_switch(cls, mode: object) -> object:
+        """YAML reads a bare `on` / `off` as true / false."""
+        return {True: "on", False: "off"}.get(mode, mode) if isinstance(mode, bool) else mode
 
     @model_validator(mode="after")
     def _hits_fit_the_window(self) -> TrackerConfig:

@@ -39,6 +39,7 @@ from stack.settings.run import RunConfig, grid_config
 
 if TYPE_CHECKING:
     from stack.loop.recording import EpisodeRecording
+    from stack.loop.tracking_quality import TrackingQuality
     from stack.loop.video import Video
 
 SNAPSHOT_TIME_S = 10.0
@@ -109,6 +110,8 @@ class ClosedLoop:
         self.recording = recording
         self.given_controller = controller
         self.builder = OccupancyGridBuilder(grid or grid_config(config))
+        self.quality: TrackingQuality | None = None
+        """When set, scores every tick's perceived world against the truth (`drivestack tracking`)."""
 
     def reset(self, seed: int) -> WorldState:
         config = self.config
@@ -237,6 +240,8 @@ class ClosedLoop:
         self.solves_recorded = len(times)
         emergency = (self.emergency.cause, self.emergency.activations)
         recording.tick(tick, self.safety.aborted, self.safety.reacted_to, emergency, self.monitor, solve)
+        if self.sensor.config.enabled and not self.config.perception.control_on_ground_truth:
+            recording.sensed(self.detected, self.perceived if self.tracker is not None else None)
 
     def tick(self) -> Tick:
         """One control tick: reference, actuation (emergency braking last), one plant step and what
@@ -250,6 +255,8 @@ class ClosedLoop:
         self.detected = self.perceived = self._observe()
         if self.tracker is not None:
             self.perceived = self.tracker.update(self.detected, self.plant.dt)
+        if self.quality is not None:
+            self.quality.record(self.world, self.perceived)
         maneuver = self.maneuver
         return Tick(reference, actuation, self.world, maneuver.lane, maneuver.target)
 
@@ -301,6 +308,7 @@ class ClosedLoop:
             id(self.video): None,
             id(self.recorder): None,
             id(self.recording): None,
+            id(self.quality): None,
         }
         snapshot = self.snapshot[0] if self.snapshot is not None else None
         for world in (self.world, self.detected, self.perceived, snapshot):
