@@ -44,8 +44,9 @@ def measure(config: RunConfig) -> dict[str, float]:
     return measures
 
 
-def report(configs: dict[str, RunConfig], folder: Path) -> None:
-    """Measure each agent's config, print one row each and write `tracking.json` into `folder`."""
+def report(configs: dict[str, RunConfig], folder: Path) -> bool:
+    """Measure each agent's config, print one row each and write `tracking.json` into `folder`;
+    False (`until_interrupted`: nothing cut short)."""
     rows = {agent: measure(config) for agent, config in configs.items()}
     header = ["agent", *(label for _, label, _ in COLUMNS)]
     typer.echo(" | ".join(header))
@@ -55,3 +56,4 @@ def report(configs: dict[str, RunConfig], folder: Path) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "tracking.json").write_text(json.dumps(rows, indent=2) + "\n")
     typer.echo(f"wrote {folder / 'tracking.json'}")
+    return False

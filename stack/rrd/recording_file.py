@@ -268,12 +268,14 @@ def _sensed(rr: Any, recording: Any, buffers: Buffers) -> None:
     if not buffers.sensed:
         return
     when = [rr.TimeColumn("sim_time", duration=[time for time, _, _ in buffers.sensed])]
-    for column, name in ((1, "detections"), (2, "tracks")):
-        points = [entry[column] for entry in buffers.sensed]
+    for name, points in (
+        ("detections", [detected for _, detected, _ in buffers.sensed]),
+        ("tracks", [tracked for _, _, tracked in buffers.sensed]),
+    ):
         path = f"scene/world/{name}"
         recording.log(path, rr.Points2D.from_fields(colors=COLOURS[name], radii=WIDTHS[name]), static=True)
         positions = np.concatenate(points).astype(np.float32) if points else np.zeros((0, 2), np.float32)
-        counts = np.array([len(p) for p in points], dtype=int)
+        counts = np.array([len(p) for p in points], dtype=np.int64)
         recording.send_columns(path, when, rr.Points2D.columns(positions=positions).partition(counts))
 
 
