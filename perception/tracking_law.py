@@ -199,13 +199,15 @@ def track_frame(
     the detections' positions `position_variance` [m^2] noisy."""
     slots = len(tracks.status)
     r, rv = position_variance, law.speed_variance
+    live = 0
     for t in range(slots):
         if tracks.status[t] != FREE:
             predict(tracks.state[t], tracks.covariance[t], law, dt)
+            live += 1
     detections = max(found.rows - 1, 0)
-    pair_track = np.empty(slots * detections, dtype=np.int64)
-    pair_found = np.empty(slots * detections, dtype=np.int64)
-    pair_cost = np.empty(slots * detections)
+    pair_track = np.empty(live * detections, dtype=np.int64)
+    pair_found = np.empty(live * detections, dtype=np.int64)
+    pair_cost = np.empty(live * detections)
     pairs = 0
     for t in range(slots):
         if tracks.status[t] == FREE:
