@@ -5,8 +5,9 @@ At a decision point: `grid = loop.perceive()`, the agent decides, `loop.act(comm
 ticks up to the next decision point. Each tick reads like do-mpc's loop: the maneuver gives the
 reference, the controller the actuation, the plant the next world; it returns a frozen `Tick`,
 which the metrics recorder, the safety monitor and the video consume outside the tick. Its face:
-`reset`, `perceive`, `act`, `tick`, the `world` (truth) and `perceived` (what the sensor reports)
-snapshots, `done` / `crashed`, `status()`, `traces()`, `solve_statistics()` and `result()`;
+`reset`, `perceive`, `act`, `tick`, the `world` (truth), `detected` (what the sensor reports) and
+`perceived` (what the layers act on: the tracker's confirmed tracks, `perception.tracking`, or the
+detections themselves with the tracker off) snapshots, `done` / `crashed`, `status()`, `traces()`, `solve_statistics()` and `result()`;
 `observation(grid, encoding, with_permitted)`, what an agent decides on (with `permitted()`, the
 commands `act` would carry out, for an agent trained with an action mask); for planners that look
 ahead, `permits`, `changing_lane` and `fork` (a copy to play the future on); for a scripted
