@@ -7,7 +7,8 @@ reference, the controller the actuation, the plant the next world; it returns a 
 which the metrics recorder, the safety monitor and the video consume outside the tick. Its face:
 `reset`, `perceive`, `act`, `tick`, the `world` (truth), `detected` (what the sensor reports) and
 `perceived` (what the layers act on: the tracker's confirmed tracks, `perception.tracking`, or the
-detections themselves with the tracker off) snapshots, `done` / `crashed`, `status()`, `traces()`, `solve_statistics()` and `result()`;
+detections themselves with the tracker off) snapshots, `done` / `crashed`, `status()`, `traces()`,
+`solve_statistics()` and `result()`;
 `observation(grid, encoding, with_permitted)`, what an agent decides on (with `permitted()`, the
 commands `act` would carry out, for an agent trained with an action mask); for planners that look
 ahead, `permits`, `changing_lane` and `fork` (a copy to play the future on); for a scripted
