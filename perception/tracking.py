@@ -50,17 +50,21 @@ class TrackerConfig(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     mode: Literal["auto", "on", "off"] = "auto"
-    confirm_hits: int = Field(3, ge=1, le=62, description="detections in the last confirm_frames to confirm")
-    confirm_frames: int = Field(4, ge=1, le=62, description="frames of the confirmation window")
+    confirm_hits: int = Field(4, ge=1, le=62, description="detections in the last confirm_frames to confirm")
+    confirm_frames: int = Field(5, ge=1, le=62, description="frames of the confirmation window")
     coast_frames: int = Field(5, ge=1, le=1000, description="missed frames running that delete a track")
-    gate: float = Field(16.0, gt=0, le=1000, description="squared Mahalanobis gate (3 degrees of freedom)")
+    gate: float = Field(
+        13.3, gt=0, le=1000, description="squared Mahalanobis gate (4 degrees of freedom: 99 %)"
+    )
     longitudinal_acceleration_mps2: float = Field(
         3.0, gt=0, le=100, description="white-noise acceleration along the lane [m/s^2]"
     )
     lateral_acceleration_mps2: float = Field(
         1.0, gt=0, le=100, description="white-noise acceleration across the lane [m/s^2]"
     )
-    speed_noise_mps: float = Field(0.5, gt=0, le=100, description="std of a detection's reported speed [m/s]")
+    speed_noise_mps: float = Field(
+        0.5, gt=0, le=100, description="std of a detection's reported velocity, each direction [m/s]"
+    )
     max_tracks: int = Field(
         128, ge=1, le=4096, description="tracks a world (more detections are not tracked)"
     )
@@ -116,10 +120,14 @@ def empty_tracks(slots: int, worlds: tuple[int, ...] = ()) -> Tracks:
     )
 
 
-def along_lane(speed: np.ndarray, heading: np.ndarray, lane_heading: np.ndarray | float) -> np.ndarray:
-    """Detections' reported `speed` [m/s] along the lane heading at the ego `lane_heading` [rad]
-    (numpy's cosine: one element's bits on any array)."""
-    return np.asarray(speed * np.cos(heading - lane_heading))
+def lane_velocity(
+    speed: np.ndarray, heading: np.ndarray, lane_heading: np.ndarray | float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Detections' reported velocity along and across the lane heading at the ego `lane_heading`
+    [rad], from their `speed` [m/s] and `heading` [rad] (numpy's cosine and sine: one element's
+    bits on any array)."""
+    relative = heading - lane_heading
+    return np.asarray(speed * np.cos(relative)), np.asarray(speed * np.sin(relative))
 
 
 def _floats(values: np.ndarray) -> np.ndarray:
@@ -147,12 +155,13 @@ class Tracker:
     def update(self, detected: WorldState, dt: float) -> WorldState:
         """The world of the confirmed tracks after the frame `detected`, `dt` [s] after the last."""
         lane_heading = detected.lanes[0].heading_at(float(detected.s[0]))
-        speed = along_lane(detected.speed, detected.heading, lane_heading)
+        along, across = lane_velocity(detected.speed, detected.heading, lane_heading)
         found = Measured(
             detected.count,
             _floats(detected.s),
             _floats(detected.d),
-            _floats(speed),
+            _floats(along),
+            _floats(across),
             _floats(detected.length),
             _floats(detected.width),
         )
@@ -223,8 +232,8 @@ class TrackerBatch:
         """Every world as its tracker reports it after the frame `sensed`, `dt` [s] after the last,
         tracking the detections of the tracked worlds flagged in `worlds`."""
         flagged = np.asarray(worlds, dtype=bool) & self.tracked
-        speed = along_lane(sensed.speed, sensed.heading, sensed.lane_heading[:, None])
-        found = MeasuredWorlds(sensed.count, sensed.s, sensed.d, speed, sensed.length, sensed.width)
+        along, across = lane_velocity(sensed.speed, sensed.heading, sensed.lane_heading[:, None])
+        found = MeasuredWorlds(sensed.count, sensed.s, sensed.d, along, across, sensed.length, sensed.width)
         track_worlds(
             self.law, self.tracks, found, self.position_variance, dt, flagged, sensed.lane_offsets,
             sensed.lanes_count, self.slots, self.lanes, self.counts,

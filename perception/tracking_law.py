@@ -3,11 +3,12 @@ fixed-size arrays (at most `TRACKS` tracks a world), a plain function numba comp
 `perception.tracking.Tracker` calls it compiled on its world; `track_worlds` loops over the worlds
 of a batch around the same function (`perception.tracking.TrackerBatch`).
 
-Each track is two constant-velocity Kalman filters in the reference lane's frame: longitudinal
-(s [m], ds/dt [m/s]) measured by a detection's s and its reported speed along the lane (a radar's
-range rate), and lateral (d [m], dd/dt [m/s]) measured by d alone. A frame: every live track is
-predicted `dt` ahead; each (track, detection) pair whose Mahalanobis distance (3 degrees of
-freedom) is within the gate is a candidate; candidates are assigned greedily, nearest first
+Each track is two constant-velocity Kalman filters in the reference lane's frame, along the lane
+(s [m], ds/dt [m/s]) and across it (d [m], dd/dt [m/s]), each measured by a detection's position
+and its reported velocity in that direction (a radar's range rate, a camera's heading), the
+velocity's noise `speed_variance`. A frame: every live track is predicted `dt` ahead; each
+(track, detection) pair whose Mahalanobis distance (4 degrees of freedom) is within the gate is a
+candidate; candidates are assigned greedily, nearest first
 (`assign_greedy`); assigned tracks are updated, the others coast; a track is confirmed once
 `confirm_hits` of its last `confirm_frames` frames had a detection, a tentative one is dropped
 once it can no longer reach that, a confirmed one after `coast_frames` frames running without
@@ -29,16 +30,14 @@ STATE_SIZE = 4
 """A track's state: s [m], ds/dt [m/s], d [m], dd/dt [m/s]."""
 COVARIANCE_SIZE = 6
 """A track's covariance, two symmetric 2 x 2 blocks: [P_ss, P_sv, P_vv, P_dd, P_dw, P_ww]."""
-INITIAL_LATERAL_SPEED_STD_MPS = 1.0
-"""How unsure a new track is of its lateral speed [m/s] (no detection measures it)."""
 
 
 class TrackerLaw(NamedTuple):
     """The tracker's settings as `track_frame` reads them: confirmation `confirm_hits` of the last
     `confirm_frames` frames (at most 62), deletion after `coast_frames` missed frames running,
-    the gate (squared Mahalanobis distance, 3 degrees of freedom), the white-noise accelerations
-    [m/s^2] of the longitudinal and lateral filters, and the variance of a reported speed
-    [m^2/s^2]."""
+    the gate (squared Mahalanobis distance, 4 degrees of freedom), the white-noise accelerations
+    [m/s^2] of the longitudinal and lateral filters, and the variance of a reported velocity
+    component [m^2/s^2]."""
 
     confirm_hits: int
     confirm_frames: int
@@ -74,18 +73,21 @@ class MeasuredWorlds(NamedTuple):
     s: np.ndarray
     d: np.ndarray
     speed: np.ndarray
+    lateral_speed: np.ndarray
     length: np.ndarray
     width: np.ndarray
 
 
 class Measured(NamedTuple):
     """One frame's detections, rows 1 to `rows` - 1 (row 0 is the ego, never tracked): `s`, `d`
-    [m] in the reference lane's frame, `speed` along the lane [m/s], `length`, `width` [m]."""
+    [m] in the reference lane's frame, `speed` along the lane and `lateral_speed` across it [m/s],
+    `length`, `width` [m]."""
 
     rows: int
     s: np.ndarray
     d: np.ndarray
     speed: np.ndarray
+    lateral_speed: np.ndarray
     length: np.ndarray
     width: np.ndarray
 
@@ -112,44 +114,52 @@ def _predict_block(covariance: np.ndarray, at: int, acceleration: float, dt: flo
 
 
 @register_jitable
-def distance(
-    state: np.ndarray, covariance: np.ndarray, s: float, speed: float, d: float, r: float, rv: float
+def block_distance(
+    state: np.ndarray, covariance: np.ndarray, at: int, position: float, velocity: float, r: float, rv: float
 ) -> float:
-    """Squared Mahalanobis distance of a detection at `s`, `d` [m] reporting `speed` [m/s] from a
-    track, with position variance `r` [m^2] and speed variance `rv` [m^2/s^2]."""
-    a, b, c = covariance[0] + r, covariance[1], covariance[2] + rv
-    ys, yv = s - state[0], speed - state[1]
-    longitudinal = (c * ys * ys - 2 * b * ys * yv + a * yv * yv) / (a * c - b * b)
-    yd = d - state[2]
-    return longitudinal + yd * yd / (covariance[3] + r)
+    """Squared Mahalanobis distance in one direction (the state's and covariance's block from
+    `at`) of a measured `position` [m] and `velocity` [m/s], variances `r` [m^2] and `rv` [m^2/s^2]."""
+    a, b, c = covariance[at] + r, covariance[at + 1], covariance[at + 2] + rv
+    yx, yv = position - state[at // 3 * 2], velocity - state[at // 3 * 2 + 1]
+    return (c * yx * yx - 2 * b * yx * yv + a * yv * yv) / (a * c - b * b)
 
 
 @register_jitable
-def update(
-    state: np.ndarray, covariance: np.ndarray, s: float, speed: float, d: float, r: float, rv: float
+def block_update(
+    state: np.ndarray, covariance: np.ndarray, at: int, position: float, velocity: float, r: float, rv: float
 ) -> None:
-    """One track's Kalman update by a detection at `s`, `d` [m] reporting `speed` [m/s]."""
-    pxx, pxv, pvv = covariance[0], covariance[1], covariance[2]
+    """One direction's Kalman update (the covariance block from `at`) by a measured `position` [m]
+    and `velocity` [m/s]."""
+    x = at // 3 * 2
+    pxx, pxv, pvv = covariance[at], covariance[at + 1], covariance[at + 2]
     a, b, c = pxx + r, pxv, pvv + rv
     det = a * c - b * b
     ia, ib, ic = c / det, -b / det, a / det
     k00, k01 = pxx * ia + pxv * ib, pxx * ib + pxv * ic
     k10, k11 = pxv * ia + pvv * ib, pxv * ib + pvv * ic
-    ys, yv = s - state[0], speed - state[1]
-    state[0] += k00 * ys + k01 * yv
-    state[1] += k10 * ys + k11 * yv
-    covariance[0] = (1 - k00) * pxx - k01 * pxv
-    covariance[1] = (1 - k00) * pxv - k01 * pvv
-    covariance[2] = -k10 * pxv + (1 - k11) * pvv
-    pdd, pdw, pww = covariance[3], covariance[4], covariance[5]
-    innovation = pdd + r
-    gd, gw = pdd / innovation, pdw / innovation
-    yd = d - state[2]
-    state[2] += gd * yd
-    state[3] += gw * yd
-    covariance[3] = (1 - gd) * pdd
-    covariance[4] = (1 - gd) * pdw
-    covariance[5] = pww - gw * pdw
+    yx, yv = position - state[x], velocity - state[x + 1]
+    state[x] += k00 * yx + k01 * yv
+    state[x + 1] += k10 * yx + k11 * yv
+    covariance[at] = (1 - k00) * pxx - k01 * pxv
+    covariance[at + 1] = (1 - k00) * pxv - k01 * pvv
+    covariance[at + 2] = -k10 * pxv + (1 - k11) * pvv
+
+
+@register_jitable
+def distance(
+    state: np.ndarray, covariance: np.ndarray, found: Measured, j: int, r: float, rv: float
+) -> float:
+    """Squared Mahalanobis distance of detection `j` of `found` from a track, its positions' variance
+    `r` [m^2], its velocities' `rv` [m^2/s^2]."""
+    along = block_distance(state, covariance, 0, found.s[j], found.speed[j], r, rv)
+    return along + block_distance(state, covariance, 3, found.d[j], found.lateral_speed[j], r, rv)
+
+
+@register_jitable
+def update(state: np.ndarray, covariance: np.ndarray, found: Measured, j: int, r: float, rv: float) -> None:
+    """One track's Kalman update by detection `j` of `found`."""
+    block_update(state, covariance, 0, found.s[j], found.speed[j], r, rv)
+    block_update(state, covariance, 3, found.d[j], found.lateral_speed[j], r, rv)
 
 
 @register_jitable
@@ -219,7 +229,7 @@ def track_frame(
             ds, dd = found.s[j + 1] - state[0], found.d[j + 1] - state[2]
             if ds * ds > reach_s or dd * dd > reach_d:
                 continue
-            cost = distance(state, covariance, found.s[j + 1], found.speed[j + 1], found.d[j + 1], r, rv)
+            cost = distance(state, covariance, found, j + 1, r, rv)
             if cost <= law.gate:
                 pair_track[pairs], pair_found[pairs], pair_cost[pairs] = t, j, cost
                 pairs += 1
@@ -229,15 +239,7 @@ def track_frame(
         t = assigned[j]
         if t >= 0:
             hit[t] = True
-            update(
-                tracks.state[t],
-                tracks.covariance[t],
-                found.s[j + 1],
-                found.speed[j + 1],
-                found.d[j + 1],
-                r,
-                rv,
-            )
+            update(tracks.state[t], tracks.covariance[t], found, j + 1, r, rv)
             tracks.size[t, 0], tracks.size[t, 1] = found.length[j + 1], found.width[j + 1]
     window = (1 << law.confirm_frames) - 1
     for t in range(slots):
@@ -263,11 +265,10 @@ def track_frame(
         if slot == slots:
             break
         tracks.state[slot, 0], tracks.state[slot, 1] = found.s[j + 1], found.speed[j + 1]
-        tracks.state[slot, 2], tracks.state[slot, 3] = found.d[j + 1], 0.0
+        tracks.state[slot, 2], tracks.state[slot, 3] = found.d[j + 1], found.lateral_speed[j + 1]
         covariance = tracks.covariance[slot]
         covariance[0], covariance[1], covariance[2] = r, 0.0, rv
-        covariance[3], covariance[4] = r, 0.0
-        covariance[5] = INITIAL_LATERAL_SPEED_STD_MPS * INITIAL_LATERAL_SPEED_STD_MPS
+        covariance[3], covariance[4], covariance[5] = r, 0.0, rv
         tracks.hits[slot], tracks.age[slot], tracks.misses[slot] = 1, 1, 0
         tracks.status[slot] = CONFIRMED if law.confirm_hits <= 1 else TENTATIVE
         tracks.ident[slot] = tracks.next_ident[0]
@@ -348,7 +349,13 @@ def track_worlds(
             tracks.next_ident[w],
         )
         measured = Measured(
-            found.rows[w], found.s[w], found.d[w], found.speed[w], found.length[w], found.width[w]
+            found.rows[w],
+            found.s[w],
+            found.d[w],
+            found.speed[w],
+            found.lateral_speed[w],
+            found.length[w],
+            found.width[w],
         )
         _track_frame(law, one, measured, position_variance[w], dt)
         counts_out[w] = _confirmed_tracks(one, lane_offsets[w], lanes_count[w], slots_out[w], lane_out[w])
