@@ -7,7 +7,8 @@ Each track is two constant-velocity Kalman filters in the reference lane's frame
 (s [m], ds/dt [m/s]) and across it (d [m], dd/dt [m/s]), each measured by a detection's position
 and its reported velocity in that direction (a radar's range rate, a camera's heading), the
 velocity's noise `speed_variance`. A frame: every live track is predicted `dt` ahead; each
-(track, detection) pair whose Mahalanobis distance (4 degrees of freedom) is within the gate is a
+(track, detection) pair (the detections sorted along the road, so each track checks only those
+within its gate's reach) whose Mahalanobis distance (4 degrees of freedom) is within the gate is a
 candidate; candidates are assigned greedily, nearest first
 (`assign_greedy`); assigned tracks are updated, the others coast; a track is confirmed once
 `confirm_hits` of its last `confirm_frames` frames had a detection, a tentative one is dropped
@@ -26,6 +27,8 @@ from common.compiled import Kernel
 
 FREE, TENTATIVE, CONFIRMED = 0, 1, 2
 """A track slot's status."""
+GATE_WINDOW_MARGIN_M = 1e-6
+"""How far past a track's gate along the road detections are still checked [m] (rounding)."""
 STATE_SIZE = 4
 """A track's state: s [m], ds/dt [m/s], d [m], dd/dt [m/s]."""
 COVARIANCE_SIZE = 6
@@ -219,13 +222,20 @@ def track_frame(
     pair_found = np.empty(live * detections, dtype=np.int64)
     pair_cost = np.empty(live * detections)
     pairs = 0
+    along = found.s[1 : detections + 1]
+    order = np.argsort(along, kind="mergesort")
+    ordered = along[order]
     for t in range(slots):
         if tracks.status[t] == FREE:
             continue
         state, covariance = tracks.state[t], tracks.covariance[t]
         reach_s = law.gate * (covariance[0] + r)
         reach_d = law.gate * (covariance[3] + r)
-        for j in range(detections):
+        half = np.sqrt(reach_s) + GATE_WINDOW_MARGIN_M
+        first = np.searchsorted(ordered, state[0] - half, side="left")
+        last = np.searchsorted(ordered, state[0] + half, side="right")
+        for k in range(first, last):
+            j = order[k]
             ds, dd = found.s[j + 1] - state[0], found.d[j + 1] - state[2]
             if ds * ds > reach_s or dd * dd > reach_d:
                 continue
