@@ -242,12 +242,13 @@ class TrackerBatch:
 
     def _report(self, sensed: WorldBatch) -> TrackedBatch:
         """The tracked worlds' rows (ego, then confirmed tracks), the others' detections."""
-        slots_most = self.config.max_tracks
+        slots_most = int(self.counts.max(initial=0))
         rows = max(sensed.s.shape[1], 1 + slots_most)
         tracked = self.tracked[:, None]
         column = np.arange(slots_most)[None, :]
         live = column < self.counts[:, None]
-        slot = np.where(live, self.slots, 0)
+        slots, lanes = self.slots[:, :slots_most], self.lanes[:, :slots_most]
+        slot = np.where(live, slots, 0)
         state = np.take_along_axis(self.tracks.state, slot[:, :, None], axis=1)
         s, vs, d, vd = (np.where(live, state[:, :, k], 0.0) for k in range(STATE_SIZE))
         size = np.take_along_axis(self.tracks.size, slot[:, :, None], axis=1)
@@ -271,8 +272,8 @@ class TrackerBatch:
             heading=merged("heading", np.where(live, heading, 0.0)),
             length=merged("length", length),
             width=merged("width", width),
-            lane=merged("lane", np.where(live, self.lanes, 0)),
+            lane=merged("lane", np.where(live, lanes, 0)),
         )
         slot_rows = np.full((sensed.worlds, rows), -1, dtype=np.int64)
-        slot_rows[:, 1 : 1 + slots_most] = np.where(tracked & live, self.slots, -1)
+        slot_rows[:, 1 : 1 + slots_most] = np.where(tracked & live, slots, -1)
         return TrackedBatch(batch, slot_rows)
