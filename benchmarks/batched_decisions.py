@@ -3,7 +3,7 @@ the decision MDP per CPU-second, N worlds stepped together against one world of 
 (`HierarchicalHighwayEnv` on the `vector` backend), measured in one sitting.
 
     .venv/bin/python benchmarks/batched_decisions.py [--scenario highway-v0] [--runs 3] [--episodes 1]
-        [--duration S] [--sizes 1,16,64,256] [--sides]
+        [--duration S] [--sizes 1,16,64,256] [--sides] [--tracker auto|on|off]
 
 `--sides`: the grid of one size on every road (`lanes: ego`, `lane_code: sides`), which `random`
 (2-6 lanes an episode) needs.
@@ -74,16 +74,21 @@ def main() -> None:
     parser.add_argument("--duration", type=float, help="episode duration [s] (default: the scenario's)")
     parser.add_argument("--sizes", default=",".join(map(str, SIZES)), help="batch sizes, comma-separated")
     parser.add_argument("--sides", action="store_true", help="perception lanes: ego, lane_code: sides")
+    parser.add_argument("--tracker", default="auto", help="perception.tracker.mode: auto | on | off")
     args = parser.parse_args()
     data: dict = {"highway": {"duration": args.duration}} if args.duration else {}
+    data["perception"] = {"tracker": {"mode": args.tracker}}
     if args.sides:
-        data["perception"] = {"lanes": "ego", "lane_code": "sides"}
+        data["perception"] |= {"lanes": "ego", "lane_code": "sides"}
     config = build_config(data, scenario=args.scenario)
     sizes = [int(size) for size in args.sizes.split(",")]
     steps = args.episodes * decisions_per_episode(config)
     print(f"{platform.processor() or platform.machine()}, Python {platform.python_version()}, ", end="")
     now = datetime.datetime.now(datetime.UTC)
-    print(f"{now:%Y-%m-%d %H:%M} UTC, scenario {args.scenario}, {steps} decisions a world")
+    print(
+        f"{now:%Y-%m-%d %H:%M} UTC, scenario {args.scenario}, tracker {args.tracker}, "
+        f"{steps} decisions a world"
+    )
     alone_rate(config, 0, 3), batch_rate(config, 2, 0, 3)  # compiled, loaded
     rates: dict[str, list[float]] = {"alone": [], **{f"batch {n}": [] for n in sizes}}
     for run in range(args.runs):

@@ -3,6 +3,7 @@ and the CPU cost of whole seeded episodes per backend.
 
     .venv/bin/python benchmarks/loop_rate.py [--episodes 3] [--config configs/highway.yaml]
     .venv/bin/python benchmarks/loop_rate.py --cpu [--episodes 3] [--scenario highway-v0] [--agent mobil]
+        [--tracker auto|on|off]
 
 With `--cpu`: the CPU time (process time) of `run_episode` on the same seeded `--duration`-s
 episodes of `--agent` with `--backend stock` and the default `vector`, the backends alternating
@@ -60,7 +61,7 @@ def loop_rate(run_config, seeds: range) -> float:
     return statistics.median(rates)
 
 
-def episode_cpu(scenario: str, agent: str, episodes: int, duration: float) -> None:
+def episode_cpu(scenario: str, agent: str, episodes: int, duration: float, tracker: str = "auto") -> None:
     """CPU ms per frame of the same seeded episodes on the stock and the vector backend."""
     from stack.results.episode_result import TIMING_FIELDS
     from stack.runs.episodes import run_episode
@@ -68,7 +69,12 @@ def episode_cpu(scenario: str, agent: str, episodes: int, duration: float) -> No
 
     configs = {
         backend: build_config(
-            {"planner": {"agent": agent}, "sim": {"backend": backend}, "seed": 0},
+            {
+                "planner": {"agent": agent},
+                "sim": {"backend": backend},
+                "seed": 0,
+                "perception": {"tracker": {"mode": tracker}},
+            },
             scenario=scenario,
             highway__duration=duration,
         )
@@ -88,7 +94,7 @@ def episode_cpu(scenario: str, agent: str, episodes: int, duration: float) -> No
         assert rows["stock"] == rows["vector"], f"episode {episode}: the backends drove different episodes"
         frames += result.steps
     print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}")
-    print(f"{episodes} x {duration:g}-s {agent} episodes on {scenario}, {frames} frames")
+    print(f"{episodes} x {duration:g}-s {agent} episodes on {scenario} (tracker {tracker}), {frames} frames")
     print("| backend | CPU s | ms per frame | ratio |\n|---|---|---|---|")
     for backend in cpu:
         ratio = cpu["stock"] / cpu[backend]
@@ -103,9 +109,12 @@ def main() -> None:
     parser.add_argument("--scenario", default="highway-v0")
     parser.add_argument("--agent", default="mobil")
     parser.add_argument("--duration", type=float, default=15.0, help="episode length [s] with --cpu")
+    parser.add_argument(
+        "--tracker", default="auto", help="with --cpu: perception.tracker.mode (auto | on | off)"
+    )
     args = parser.parse_args()
     if args.cpu:
-        episode_cpu(args.scenario, args.agent, args.episodes, args.duration)
+        episode_cpu(args.scenario, args.agent, args.episodes, args.duration, args.tracker)
         return
     config = load_config(args.config)
     seeds = range(args.episodes)

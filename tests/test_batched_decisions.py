@@ -183,10 +183,13 @@ POOR_SENSOR = {
 """A sensor that misses, drifts and imagines often: phantoms ahead brake the ego, gaps flicker."""
 
 
-def test_a_poor_sensor_seen_through_matches():
-    data = {"scenario": "dense", "perception": {"sensor": POOR_SENSOR}, "train": {"action_mask": True}}
+@pytest.mark.parametrize("tracker", ["off", "auto"])
+def test_a_poor_sensor_seen_through_matches(tracker):
+    """Raw detections (`off`: phantoms brake the ego) and the tracker's confirmed tracks alike."""
+    perception = {"sensor": POOR_SENSOR, "tracker": {"mode": tracker}}
+    data = {"scenario": "dense", "perception": perception, "train": {"action_mask": True}}
     seen = drive_both(data, 3, 10, weaving)
-    assert seen["masked"] > 0 and seen["emergencies"] > 0
+    assert seen["masked"] > 0 and (seen["emergencies"] > 0 or tracker != "off")
 
 
 @pytest.mark.slow

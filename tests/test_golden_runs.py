@@ -33,7 +33,10 @@ CASES = {
     "rule-pid-noisy": {
         "seed": 2,
         "planner": {"agent": "rule"},
-        "perception": {"sensor": {"position_noise_m": 1.0, "false_positives": 1.0}},
+        "perception": {
+            "sensor": {"position_noise_m": 1.0, "false_positives": 1.0},
+            "tracker": {"mode": "off"},
+        },
     },
     "rule-pid-noisy-control-on-ground-truth": {
         "seed": 2,
@@ -47,7 +50,8 @@ CASES = {
 """The summary's `backend` is left out: every backend gives stock's trajectories, so the results
 were written on `fast` and hold on `vector`. `rule-pid-noisy-control-on-ground-truth` keeps the
 result of the noisy case from before safety and cruise acted on the perceived world (the agent
-alone saw the noise then)."""
+alone saw the noise then); `rule-pid-noisy` keeps its result from before the tracker (it acts on
+each frame's raw detections: `perception.tracker.mode: off`)."""
 
 
 TOLERANCE = {"rel": 1e-9, "abs": 1e-9}

@@ -81,7 +81,10 @@ def test_noisy_sensor_runs_are_seeded_and_change_what_the_planner_sees(tiny_conf
     noisy = build_config(
         {
             **tiny_config.model_dump(),
-            "perception": {"sensor": {"position_noise_m": 1.0, "false_positives": 2.0}},
+            "perception": {
+                "sensor": {"position_noise_m": 1.0, "false_positives": 2.0},
+                "tracker": {"mode": "off"},
+            },
         }
     )
     first, second = run(noisy, progress=False), run(noisy, progress=False)
@@ -91,7 +94,8 @@ def test_noisy_sensor_runs_are_seeded_and_change_what_the_planner_sees(tiny_conf
 
 
 def test_safety_and_cruise_act_on_the_perceived_world(tiny_config):
-    sensed = {**tiny_config.model_dump(), "perception": {"sensor": {"false_positives": 4.0}}}
+    raw = {"sensor": {"false_positives": 4.0}, "tracker": {"mode": "off"}}
+    sensed = {**tiny_config.model_dump(), "perception": raw}
     perceived = build_config(sensed)
     truth = build_config(sensed, perception__control_on_ground_truth=True)
     with HighwayAdapter(perceived.highway, perceived.sim.backend) as adapter:

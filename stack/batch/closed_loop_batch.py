@@ -23,6 +23,7 @@ from controllers.lateral import LateralPID
 from controllers.reference import lane_keeping
 from controllers.tracker import PIDTracker, make_controller
 from perception.sensor import SensorBatch, SensorModel
+from perception.tracking import TrackerBatch
 from planner.safety import permitted_batch, safety_settings
 from records import WorldState
 from records.batch import WorldBatch
@@ -35,7 +36,7 @@ from stack.batch.loop_kernels import (
     decide,
     settle,
 )
-from stack.fault.emergency_causes import BrakingsByCause, CausesBatch
+from stack.fault.emergency_causes import BrakingsByCause, CausesBatch, true_row
 from stack.loop.closed_loop import episode_sensor
 from stack.loop.metrics import EpisodeMetricsBatch
 from stack.loop.safety_metrics import classify_collision
@@ -136,6 +137,11 @@ class ClosedLoopBatch:
         self.batch: WorldBatch | None = None
         self.perceived: WorldBatch | None = None
         self.sensor = SensorBatch(worlds) if any(map(_sensed, self.members)) else None
+        tracking = config.perception.tracker
+        self.tracker = None
+        if self.sensor is not None and tracking.mode != "off":
+            self.tracker = TrackerBatch(tracking, worlds)
+        self.detected: WorldBatch | None = None
         self.slots = np.zeros((worlds, 0), dtype=np.int64)
         self.vehicle_room = 0
         self.metrics = EpisodeMetricsBatch(worlds, self.dt) if metrics else None
@@ -160,9 +166,11 @@ class ClosedLoopBatch:
             self.seen_speed = np.pad(self.seen_speed, ((0, 0), (0, more)))
             self.seen_slowing = np.pad(self.seen_slowing, ((0, 0), (0, more)))
 
-    def _sense(self, worlds: np.ndarray) -> None:
+    def _sense(self, worlds: np.ndarray, warm_up: bool = False) -> None:
         """`perceived` and the memory `slots` of its rows after a frame: the worlds flagged observed
-        anew through their sensors (the truth itself without a sensor model)."""
+        anew through their sensors (the truth itself without a sensor model), tracked in the worlds
+        that track (`perception.tracking.TrackerBatch`; memory column 1 + the track's slot), with no
+        time passed since the last frame when `warm_up` (the tracker's start, as `Tracker.warm_up`)."""
         batch = self.batch
         assert batch is not None
         if self.sensor is None:
@@ -171,9 +179,40 @@ class ClosedLoopBatch:
                 self.slots = np.tile(np.arange(batch.s.shape[1]), (self.worlds, 1))
             return
         sensed = self.sensor.sense(batch, worlds)
-        self._memory(self.traffic.arrays.vehicles, int(sensed.phantom.max(initial=-1)) + 1)
-        self.perceived = sensed.batch
-        self.slots = np.where(sensed.phantom >= 0, self.vehicle_room + sensed.phantom, sensed.source)
+        phantoms = int(sensed.phantom.max(initial=-1)) + 1
+        if self.tracker is None:
+            self._memory(self.traffic.arrays.vehicles, phantoms)
+            self.perceived = self.detected = sensed.batch
+            self.slots = np.where(sensed.phantom >= 0, self.vehicle_room + sensed.phantom, sensed.source)
+            return
+        self._memory(self.traffic.arrays.vehicles, max(phantoms, 1 + self.tracker.config.max_tracks))
+        self.detected = sensed.batch
+        tracked = self.tracker.update(sensed.batch, worlds, 0.0 if warm_up else self.dt)
+        self.perceived = tracked.batch
+        rows = tracked.slot.shape[1]
+        detected_slots = np.zeros((self.worlds, rows), dtype=np.int64)
+        source = np.where(sensed.phantom >= 0, self.vehicle_room + sensed.phantom, sensed.source)
+        detected_slots[:, : source.shape[1]] = source
+        self.slots = np.where(self.tracker.tracked[:, None], 1 + np.maximum(tracked.slot, -1), detected_slots)
+
+    def _tracked_rows(self, braking: np.ndarray) -> np.ndarray:
+        """Per world, the slot emergency braking braked for, or, in a tracked world flagged `braking`
+        (a new emergency braking), the true row under the track it brakes for
+        (`stack.fault.emergency_causes.true_row`), -1 for none."""
+        assert self.tracker is not None
+        rows = self.flags[:, 2].copy()
+        perceived, truth = self.perceived, self.batch
+        assert perceived is not None and truth is not None
+        for world in np.flatnonzero(braking & self.tracker.tracked).tolist():
+            found = np.flatnonzero(self.slots[world, 1:] == self.flags[world, 2])
+            rows[world] = -1
+            if len(found):
+                row, count = 1 + int(found[0]), int(truth.count[world])
+                rows[world] = true_row(
+                    float(perceived.s[world, row]), float(perceived.d[world, row]),
+                    truth.s[world, :count], truth.d[world, :count],
+                )  # fmt: skip
+        return rows
 
     @property
     def done(self) -> np.ndarray:
@@ -217,11 +256,17 @@ class ClosedLoopBatch:
             if self.sensor is not None:
                 sensor = episode_sensor(self.members[member], int(seed))
                 self.sensor.reset_world(world, SensorModel(sensor, int(seed)))
+                if self.tracker is not None:
+                    self.tracker.reset_world(world, sensor)
         self._memory(self.traffic.arrays.vehicles)
         self.batch = self.traffic.arrays.world_batch()
         reset = np.zeros(self.worlds, dtype=bool)
         reset[list(worlds)] = True
-        self._sense(reset)
+        self._sense(reset, warm_up=True)
+        if self.tracker is not None:
+            warming = reset & self.tracker.tracked
+            for _ in range(self.config.perception.tracker.confirm_frames - 1):
+                self._sense(warming, warm_up=True)
         arrays = self.traffic.arrays
         for world in worlds:
             lane = int(arrays.lane[world, arrays.ego[world]])
@@ -315,8 +360,9 @@ class ClosedLoopBatch:
         control_s = time.perf_counter() - started
         if self.causes is not None:
             self.causes.attribute(
-                live, self.changing, traffic.time, self.flags, activations, self.vehicle_room
-            )
+                live, self.changing, traffic.time, self.flags, activations, self.vehicle_room,
+                None if self.tracker is None else self._tracked_rows(live & (self.flags[:, 1] > activations)),
+            )  # fmt: skip
         traffic.arrays.intent[:] = np.where(self.changing, self.target, -1)
         ended = traffic.step(actuation[:, 0], actuation[:, 1], live)
         batch = self.batch = traffic.arrays.world_batch()

@@ -28,6 +28,24 @@ from records import WorldState
 from records.batch import BatchColumns, WorldBatch
 from stack.fault.reference_driver import WANDERING_M
 
+TRACK_MATCH_ALONG_M = 3.0
+"""A tracked vehicle is a real one when a true vehicle's centre is this close along the road [m]
+(`drivestack tracking`'s gate)."""
+TRACK_MATCH_ACROSS_M = 1.5
+"""... and this close across it [m]."""
+
+
+def true_row(s: float, d: float, truth_s: np.ndarray, truth_d: np.ndarray) -> int:
+    """The row (from 1: row 0 is the ego) of the true vehicle whose centre is nearest a tracked
+    vehicle's at (`s`, `d`) [m] within `TRACK_MATCH_ALONG_M` x `TRACK_MATCH_ACROSS_M`, or -1: a track
+    braked for is a phantom only when no true vehicle lies under it (its id is the tracker's own)."""
+    along, across = np.abs(truth_s[1:] - s), np.abs(truth_d[1:] - d)
+    near = (along < TRACK_MATCH_ALONG_M) & (across < TRACK_MATCH_ACROSS_M)
+    if not near.any():
+        return -1
+    return 1 + int(np.argmin(np.where(near, along, np.inf)))
+
+
 CAUSES = ("cut_in", "leader_braking", "own_lane_change", "closing_in", "phantom")
 """The causes, in the order of the counts (`EpisodeResult.emergency_brakings_<cause>`)."""
 CUT_IN, LEADER_BRAKING, OWN_LANE_CHANGE, CLOSING_IN, PHANTOM = range(len(CAUSES))
@@ -174,10 +192,16 @@ class CauseTracker:
         if changing_lane:
             self.ego_changed_at = time
 
-    def attribute(self, world: WorldState, vehicle: int | None) -> int:
+    def attribute(self, world: WorldState, vehicle: int | None, perceived: WorldState | None = None) -> int:
         """Count an activation on the control tick at the truth `world` for `vehicle` (an id of what
-        the sensor reported): its cause."""
-        phantom = vehicle is None or vehicle not in set(world.ids.tolist())
+        the sensor reported, or of a track in `perceived`, matched to the truth by `true_row`): its
+        cause."""
+        ids = world.ids.tolist()
+        if vehicle is not None and vehicle not in ids and perceived is not None and vehicle in perceived.ids:
+            row = perceived.ids.tolist().index(vehicle)
+            match = true_row(float(perceived.s[row]), float(perceived.d[row]), world.s, world.d)
+            vehicle = ids[match] if match > 0 else None
+        phantom = vehicle is None or vehicle not in ids
         column = self.columns.get(-1 if vehicle is None else vehicle)
         cause = emergency_cause(
             phantom,
@@ -259,15 +283,17 @@ class CausesBatch:
         flags: np.ndarray,
         activations: np.ndarray,
         vehicle_room: int,
+        tracked_rows: np.ndarray | None = None,
     ) -> None:
         """A control tick of the worlds flagged `live` at `time` [s], their ego `changing` lane, with
         emergency braking's `flags` ([active, activations, slot]) after it and its `activations`
         before it: count each new activation by its cause (a slot from `vehicle_room` on is a
-        phantom's)."""
+        phantom's; `tracked_rows`, when the worlds are tracked: per world, the true row of the track
+        braked for, -1 for none)."""
         self.ego_changed_at = np.where(live & changing, time, self.ego_changed_at)
         for world in np.flatnonzero(live & (flags[:, 1] > activations)).tolist():
-            slot = int(flags[world, 2])
-            phantom = slot >= vehicle_room
+            slot = int(flags[world, 2]) if tracked_rows is None else int(tracked_rows[world])
+            phantom = slot >= vehicle_room or slot < 0
             row = 0 if phantom else slot
             cause = emergency_cause(
                 phantom,

@@ -5,8 +5,10 @@ At a decision point: `grid = loop.perceive()`, the agent decides, `loop.act(comm
 ticks up to the next decision point. Each tick reads like do-mpc's loop: the maneuver gives the
 reference, the controller the actuation, the plant the next world; it returns a frozen `Tick`,
 which the metrics recorder, the safety monitor and the video consume outside the tick. Its face:
-`reset`, `perceive`, `act`, `tick`, the `world` (truth) and `perceived` (what the sensor reports)
-snapshots, `done` / `crashed`, `status()`, `traces()`, `solve_statistics()` and `result()`;
+`reset`, `perceive`, `act`, `tick`, the `world` (truth), `detected` (what the sensor reports) and
+`perceived` (what the layers act on: the tracker's confirmed tracks, `perception.tracking`, or the
+detections themselves with the tracker off) snapshots, `done` / `crashed`, `status()`, `traces()`,
+`solve_statistics()` and `result()`;
 `observation(grid, encoding, with_permitted)`, what an agent decides on (with `permitted()`, the
 commands `act` would carry out, for an agent trained with an action mask); for planners that look
 ahead, `permits`, `changing_lane` and `fork` (a copy to play the future on); for a scripted
@@ -27,6 +29,7 @@ from controllers.protocol import Controller
 from controllers.tracker import make_controller
 from perception.grid import OccupancyGrid, OccupancyGridBuilder
 from perception.sensor import SensorConfig, SensorModel
+from perception.tracking import Tracker
 from planner.safety import SafetyLayer
 from records import Actuation, Command, Encoding, GridConfig, WorldState
 from stack.fault.emergency_causes import BrakingsByCause, CauseTracker, cause_label
@@ -39,6 +42,7 @@ from stack.settings.run import RunConfig, grid_config
 
 if TYPE_CHECKING:
     from stack.loop.recording import EpisodeRecording
+    from stack.loop.tracking_quality import TrackingQuality
     from stack.loop.video import Video
 
 SNAPSHOT_TIME_S = 10.0
@@ -113,13 +117,23 @@ class ClosedLoop:
         self.builder = OccupancyGridBuilder(grid or grid_config(config))
         self.other_views: dict[str, OccupancyGridBuilder] = {}
         """The builders of `perceive_as`, by grid."""
+        self.quality: TrackingQuality | None = None
+        """When set, scores every tick's perceived world against the truth (`drivestack tracking`)."""
 
     def reset(self, seed: int) -> WorldState:
         config = self.config
         self.seed = seed
         self.world = self.plant.reset(seed)
-        self.sensor = SensorModel(episode_sensor(config, seed), seed)
-        self.perceived = self._observe()
+        sensor = episode_sensor(config, seed)
+        self.sensor = SensorModel(sensor, seed)
+        self.detected = self.perceived = self._observe()
+        self.tracker: Tracker | None = None
+        if config.perception.tracker.tracks(sensor) and not config.perception.control_on_ground_truth:
+            self.tracker = Tracker(config.perception.tracker, sensor)
+            warm_up = [self.perceived] + [
+                self._observe() for _ in range(config.perception.tracker.confirm_frames - 1)
+            ]
+            self.perceived = self.tracker.warm_up(warm_up)
         self.safety = SafetyLayer(config.planner.safety)
         self.controller = self.given_controller or make_controller(
             config.controller, self.plant.dt, config.sim.plant
@@ -260,6 +274,8 @@ class ClosedLoop:
             cause_label(last) if last is not None else "",
         )
         recording.tick(tick, self.safety.aborted, self.safety.reacted_to, emergency, self.monitor, solve)
+        if self.sensor.config.enabled and not self.config.perception.control_on_ground_truth:
+            recording.sensed(self.detected, self.perceived if self.tracker is not None else None)
 
     def tick(self) -> Tick:
         """One control tick: reference, actuation (emergency braking last), one plant step and what
@@ -274,13 +290,17 @@ class ClosedLoop:
         if counted:
             self.causes.ego(self.world.time, self.maneuver.changing_lane)
         if counted and self.emergency.activations > activations:
-            self.causes.attribute(self.world, self.emergency.cause)
+            self.causes.attribute(self.world, self.emergency.cause, self.perceived)
         maneuver = self.maneuver
         self.plant.show_intent(maneuver.target if maneuver.changing_lane else -1)
         self.world = self.plant.step(actuation)
         if counted:
             self.causes.observe(self.world)
-        self.perceived = self._observe()
+        self.detected = self.perceived = self._observe()
+        if self.tracker is not None:
+            self.perceived = self.tracker.update(self.detected, self.plant.dt)
+        if self.quality is not None:
+            self.quality.record(self.world, self.perceived)
         return Tick(reference, actuation, self.world, maneuver.lane, maneuver.target)
 
     @property
@@ -331,9 +351,10 @@ class ClosedLoop:
             id(self.video): None,
             id(self.recorder): None,
             id(self.recording): None,
+            id(self.quality): None,
         }
         snapshot = self.snapshot[0] if self.snapshot is not None else None
-        for world in (self.world, self.perceived, snapshot):
+        for world in (self.world, self.detected, self.perceived, snapshot):
             if world is not None:
                 memo[id(world)] = world
         return copy.deepcopy(self, memo)

@@ -162,6 +162,13 @@ class EpisodeRecording:
         add("maneuver/target_lane", tick.target)
         self._safety(time, world, monitor)
 
+    def sensed(self, detected: WorldState, tracked: WorldState | None) -> None:
+        """What the sensor detected this tick and, with the tracker on, its confirmed tracks."""
+        lane = detected.lanes[0]
+        tracks = np.zeros((0, 2)) if tracked is None else lane_points(lane, tracked.s[1:], tracked.d[1:])
+        points = lane_points(lane, detected.s[1:], detected.d[1:])
+        self.buffers.sensed.append((detected.time, points, tracks))
+
     def _world(self, world: WorldState, leaders: tuple[int, ...], reacted: tuple[int, ...] = ()) -> None:
         """A snapshot to draw at `close` (its vehicles' arrays, `Frame`), with the ids of the ego's
         leaders and of the vehicles the safety layer or emergency braking reacted to."""

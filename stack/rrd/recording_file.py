@@ -34,13 +34,15 @@ COLOURS = {
     "edges": (60, 60, 60),
     "reference": (20, 190, 90),
     "grid": (230, 40, 200),
+    "detections": (250, 200, 0),
+    "tracks": (0, 200, 220),
 }
 """RGB per vehicle role and road element."""
 ROLES = ("ego", "leader", "reacted", "traffic")
 """Vehicle roles, each its own entity: the ego, the leaders its cruise keeps a gap to, the vehicles
 the safety layer or emergency braking reacted to, everyone else (the first role that fits)."""
 WIDTHS = {"ego": -1.5, "leader": -1.5, "reacted": -1.5, "traffic": -1.0, "lines": -0.75, "edges": -1.5}
-WIDTHS |= {"reference": -1.25, "grid": -1.0}
+WIDTHS |= {"reference": -1.25, "grid": -1.0, "detections": -2.0, "tracks": -3.5}
 """Line radius per role and road element in the viewer's UI points (rerun reads a negative radius
 so): lines stay visible however far the view is zoomed out."""
 SCORE_COLOURS = {Command.LEFT: (40, 120, 240), Command.STAY: (90, 90, 90), Command.RIGHT: (240, 120, 40)}
@@ -121,6 +123,9 @@ class Buffers:
     phases: list[tuple[float, str]] = field(default_factory=list)
     paths: list[tuple[float, np.ndarray]] = field(default_factory=list)
     decisions: list[Decision] = field(default_factory=list)
+    sensed: list[tuple[float, np.ndarray, np.ndarray]] = field(default_factory=list)
+    """Per tick seen through a sensor: its time [s], the detections' and the confirmed tracks'
+    centres (points, 2) [m] (no tracks when the tracker is off)."""
 
     def add(self, name: str, value: float) -> None:
         self.series.setdefault(name, []).append(value)
@@ -153,6 +158,7 @@ def write_recording(path: Path, title: str, buffers: Buffers) -> None:
         recording.log("description", rr.TextDocument(title), static=True)
         _road(rr, recording, first, buffers.frames)
         _ticks(rr, recording, first, buffers)
+        _sensed(rr, recording, buffers)
         _decisions(rr, recording, buffers)
         _events(rr, recording, buffers)
         recording.flush()
@@ -255,6 +261,22 @@ def _ticks(rr: Any, recording: Any, first: WorldState, buffers: Buffers) -> None
         when = [rr.TimeColumn("sim_time", duration=[time for time, _ in buffers.paths])]
         strips = rr.LineStrips2D.columns(strips=_strips(rr, paths)).partition(np.ones(len(paths), dtype=int))
         recording.send_columns("scene/world/reference", when, strips)
+
+
+def _sensed(rr: Any, recording: Any, buffers: Buffers) -> None:
+    """Per tick seen through a sensor: the detections and the confirmed tracks, as points."""
+    if not buffers.sensed:
+        return
+    when = [rr.TimeColumn("sim_time", duration=[time for time, _, _ in buffers.sensed])]
+    for name, points in (
+        ("detections", [detected for _, detected, _ in buffers.sensed]),
+        ("tracks", [tracked for _, _, tracked in buffers.sensed]),
+    ):
+        path = f"scene/world/{name}"
+        recording.log(path, rr.Points2D.from_fields(colors=COLOURS[name], radii=WIDTHS[name]), static=True)
+        positions = np.concatenate(points).astype(np.float32) if points else np.zeros((0, 2), np.float32)
+        counts = np.array([len(p) for p in points], dtype=np.int64)
+        recording.send_columns(path, when, rr.Points2D.columns(positions=positions).partition(counts))
 
 
 def _roles(

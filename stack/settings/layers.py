@@ -11,10 +11,14 @@ from pydantic import Field, field_validator
 
 from common.plugins import AGENT_GROUP, plugin_name
 from perception.sensor import SensorConfig
+from perception.tracking import TrackerConfig
 from planner.lookahead_config import LookaheadConfig
 from planner.safety import SafetyConfig
 from records import AGENT_NAMES, GridConfig
 from stack.settings.train import Strict
+
+NOT_GRID = {"sensor", "tracker", "control_on_ground_truth"}
+"""The `perception` keys that are not the grid's."""
 
 
 class PerceptionConfig(GridConfig):
@@ -23,6 +27,7 @@ class PerceptionConfig(GridConfig):
     `control_on_ground_truth` lets safety and cruise read the simulator's truth (an ablation)."""
 
     sensor: SensorConfig = SensorConfig()
+    tracker: TrackerConfig = TrackerConfig()
     control_on_ground_truth: bool = False
 
 

@@ -23,7 +23,7 @@ from stack.runtime.files import write_text
 from stack.runtime.yaml_text import strict_yaml
 from stack.settings.checks import boolean_mismatch
 from stack.settings.history import with_former_values
-from stack.settings.layers import PerceptionConfig, PlannerConfig
+from stack.settings.layers import NOT_GRID, PerceptionConfig, PlannerConfig
 from stack.settings.train import Strict, TrainConfig
 from stack.settings.world import HighwayConfig, SimConfig
 from stack.worlds import scenarios
@@ -103,9 +103,7 @@ class RunConfig(Strict):
         lanes = {(name, count) for name, road in roads.items() for count in road.lane_counts}
         if len(lanes) < 2:
             return
-        grid = OccupancyGridBuilder(
-            GridConfig(**self.perception.model_dump(exclude={"sensor", "control_on_ground_truth"}))
-        )
+        grid = OccupancyGridBuilder(GridConfig(**self.perception.model_dump(exclude=NOT_GRID)))
         sizes = {(name, count): grid.space(self.train.encoding, count).shape for name, count in lanes}
         if len(set(sizes.values())) > 1:
             raise ValueError(
@@ -351,4 +349,4 @@ def _beside(section: dict[str, Any], key: str, config_file: Path) -> None:
 
 def grid_config(config: RunConfig) -> GridConfig:
     """The perception grid `config` asks for (its `perception` section without the sensor)."""
-    return GridConfig(**config.perception.model_dump(exclude={"sensor", "control_on_ground_truth"}))
+    return GridConfig(**config.perception.model_dump(exclude=NOT_GRID))

@@ -1,0 +1,279 @@
+"""Perception that tracks: a sensor's detections become tracks before the grid, the safety layer or
+emergency braking see them. `Tracker.update(detected, dt)` turns one frame's detections
+(`perception.sensor`) into the world of the confirmed tracks: row 0 the ego as detected, then each
+confirmed track in slot order at its filtered s and d, its speed and heading from its filtered
+velocity (so relative speeds and times to collision come from the filter), its size from its last
+detection, its id `TRACK_ID_BASE` + a counter. One frame's phantom is never confirmed; a missed
+detection coasts the track (`perception.tracking_law`, the per-frame law).
+
+One law, two paths: `Tracker` calls `track_world` compiled on its world; `TrackerBatch` calls
+`track_worlds` on the worlds of a batch, then makes every world's tracked rows in numpy over the
+batch, to the bits `Tracker.update` reports.
+
+Before the first frame the sensor has run for `confirm_frames` observations of the first world
+(`warm_up`; the world frozen, dt = 0), so an episode starts with its vehicles tracked rather
+than with an empty road."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from perception.sensor import SensorConfig
+from perception.tracking_law import (
+    COVARIANCE_SIZE,
+    STATE_SIZE,
+    Measured,
+    MeasuredWorlds,
+    TrackerLaw,
+    Tracks,
+    track_world,
+    track_worlds,
+)
+from records import WorldState
+from records.batch import WorldBatch
+
+TRACK_ID_BASE = 2_000_000
+"""Ids of tracks start here, so they never collide with real vehicles' or phantoms' ids."""
+MIN_POSITION_NOISE_M = 0.1
+"""The position noise the filter assumes of a sensor that reports none [m]."""
+
+
+class TrackerConfig(BaseModel):
+    """`perception.tracker`: whether the perceived world is tracked (`mode`: `auto` tracks whenever
+    the episode's sensor is imperfect, `on` always, `off` never: every layer then acts on each
+    frame's raw detections), and the tracker's settings."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    mode: Literal["auto", "on", "off"] = "auto"
+    confirm_hits: int = Field(4, ge=1, le=62, description="detections in the last confirm_frames to confirm")
+    confirm_frames: int = Field(5, ge=1, le=62, description="frames of the confirmation window")
+    coast_frames: int = Field(5, ge=1, le=1000, description="missed frames running that delete a track")
+    gate: float = Field(
+        13.3, gt=0, le=1000, description="squared Mahalanobis gate (4 degrees of freedom: 99 %)"
+    )
+    longitudinal_acceleration_mps2: float = Field(
+        3.0, gt=0, le=100, description="white-noise acceleration along the lane [m/s^2]"
+    )
+    lateral_acceleration_mps2: float = Field(
+        1.0, gt=0, le=100, description="white-noise acceleration across the lane [m/s^2]"
+    )
+    speed_noise_mps: float = Field(
+        0.5, gt=0, le=100, description="std of a detection's reported velocity, each direction [m/s]"
+    )
+    max_tracks: int = Field(
+        128, ge=1, le=4096, description="tracks a world (more detections are not tracked)"
+    )
+
+    @field_validator("mode", mode="before")
+    @classmethod
+    def _yaml_switch(cls, mode: object) -> object:
+        """YAML reads a bare `on` / `off` as true / false."""
+        return {True: "on", False: "off"}.get(mode, mode) if isinstance(mode, bool) else mode
+
+    @model_validator(mode="after")
+    def _hits_fit_the_window(self) -> TrackerConfig:
+        if self.confirm_hits > self.confirm_frames:
+            raise ValueError(
+                f"confirm_hits ({self.confirm_hits}) must be at most confirm_frames ({self.confirm_frames})"
+            )
+        return self
+
+    @property
+    def law(self) -> TrackerLaw:
+        return TrackerLaw(
+            self.confirm_hits,
+            self.confirm_frames,
+            self.coast_frames,
+            float(self.gate),
+            float(self.longitudinal_acceleration_mps2),
+            float(self.lateral_acceleration_mps2),
+            float(self.speed_noise_mps) ** 2,
+        )
+
+    def tracks(self, sensor: SensorConfig) -> bool:
+        """Whether an episode seen through `sensor` is tracked."""
+        return self.mode == "on" or (self.mode == "auto" and sensor.enabled)
+
+
+def position_variance(sensor: SensorConfig) -> float:
+    """The variance the filter assumes of a detection's s and d through `sensor` [m^2]."""
+    return max(sensor.position_noise_m, MIN_POSITION_NOISE_M) ** 2
+
+
+def empty_tracks(slots: int, worlds: tuple[int, ...] = ()) -> Tracks:
+    """`slots` free track slots (a world's, or with `worlds` (W,) each world's)."""
+    return Tracks(
+        np.zeros((*worlds, slots, STATE_SIZE)),
+        np.zeros((*worlds, slots, COVARIANCE_SIZE)),
+        np.zeros((*worlds, slots), dtype=np.int64),
+        np.zeros((*worlds, slots), dtype=np.int64),
+        np.zeros((*worlds, slots), dtype=np.int64),
+        np.zeros((*worlds, slots), dtype=np.int64),
+        np.zeros((*worlds, slots), dtype=np.int64),
+        np.zeros((*worlds, slots, 2)),
+        np.full((*worlds, 1), TRACK_ID_BASE, dtype=np.int64),
+    )
+
+
+def lane_velocity(
+    speed: np.ndarray, heading: np.ndarray, lane_heading: np.ndarray | float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Detections' reported velocity along and across the lane heading at the ego `lane_heading`
+    [rad], from their `speed` [m/s] and `heading` [rad] (numpy's cosine and sine: one element's
+    bits on any array)."""
+    relative = heading - lane_heading
+    return np.asarray(speed * np.cos(relative)), np.asarray(speed * np.sin(relative))
+
+
+def _floats(values: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(values, dtype=np.float64)
+
+
+class Tracker:
+    """One world's tracker: `warm_up(observe)` at an episode's start, then `update(detected, dt)`
+    every frame."""
+
+    def __init__(self, config: TrackerConfig, sensor: SensorConfig) -> None:
+        self.config, self.law = config, config.law
+        self.position_variance = position_variance(sensor)
+        self.tracks = empty_tracks(config.max_tracks)
+        self.slots = np.zeros(config.max_tracks, dtype=np.int64)
+        self.lanes = np.zeros(config.max_tracks, dtype=np.int64)
+
+    def warm_up(self, detections: list[WorldState]) -> WorldState:
+        """The tracked world after `detections`, the sensor's observations of the frozen first world."""
+        tracked = detections[0]
+        for detected in detections:
+            tracked = self.update(detected, 0.0)
+        return tracked
+
+    def update(self, detected: WorldState, dt: float) -> WorldState:
+        """The world of the confirmed tracks after the frame `detected`, `dt` [s] after the last."""
+        lane_heading = detected.lanes[0].heading_at(float(detected.s[0]))
+        along, across = lane_velocity(detected.speed, detected.heading, lane_heading)
+        found = Measured(
+            detected.count,
+            _floats(detected.s),
+            _floats(detected.d),
+            _floats(along),
+            _floats(across),
+            _floats(detected.length),
+            _floats(detected.width),
+        )
+        offsets = _floats(detected.lane_offsets)
+        count = track_world(
+            self.law, self.tracks, found, self.position_variance, dt, offsets, detected.lanes_count,
+            self.slots, self.lanes,
+        )  # fmt: skip
+        rows = self.slots[:count]
+        state = self.tracks.state[rows]
+        s, vs, d, vd = state[:, 0], state[:, 1], state[:, 2], state[:, 3]
+        length, width = self.tracks.size[rows, 0], self.tracks.size[rows, 1]
+
+        def with_ego(name: str, tracked: np.ndarray) -> np.ndarray:
+            return np.concatenate([getattr(detected, name)[:1], tracked])
+
+        return dataclasses.replace(
+            detected,
+            ids=with_ego("ids", self.tracks.ident[rows]),
+            position=np.concatenate([detected.position[:1], np.stack([s, d], axis=1)]),
+            heading=with_ego("heading", lane_heading + np.arctan2(vd, vs)),
+            speed=with_ego("speed", np.hypot(vs, vd)),
+            velocity=np.concatenate([detected.velocity[:1], np.stack([vs, vd], axis=1)]),
+            lane=with_ego("lane", self.lanes[:count].copy()),
+            length=with_ego("length", length),
+            width=with_ego("width", width),
+            s=with_ego("s", s),
+            d=with_ego("d", d),
+            crashed=with_ego("crashed", np.zeros(count, dtype=bool)),
+        )
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class TrackedBatch:
+    """What the tracker reports of every world (`batch`, row 0 the ego) and each row's track slot
+    (`slot` (worlds, rows), -1 on the ego's row and on the rows of untracked worlds)."""
+
+    batch: WorldBatch
+    slot: np.ndarray
+
+
+class TrackerBatch:
+    """`worlds` trackers of one config: `reset_world(world, sensor)` at each episode (untracked when
+    `config.tracks(sensor)` is false: the world's detections pass through), `update(sensed,
+    worlds, dt)` after each frame (the worlds flagged track their new detections; the others
+    keep their tracks)."""
+
+    def __init__(self, config: TrackerConfig, worlds: int) -> None:
+        self.config, self.law = config, config.law
+        slots = config.max_tracks
+        self.tracks = empty_tracks(slots, (worlds,))
+        self.tracked = np.zeros(worlds, dtype=bool)
+        self.position_variance = np.ones(worlds)
+        self.slots = np.zeros((worlds, slots), dtype=np.int64)
+        self.lanes = np.zeros((worlds, slots), dtype=np.int64)
+        self.counts = np.zeros(worlds, dtype=np.int64)
+
+    def reset_world(self, world: int, sensor: SensorConfig) -> None:
+        """World `world`'s episode seen through `sensor`: its tracks cleared."""
+        self.tracked[world] = self.config.tracks(sensor)
+        self.position_variance[world] = position_variance(sensor)
+        for array in self.tracks:
+            array[world] = 0
+        self.tracks.next_ident[world] = TRACK_ID_BASE
+        self.counts[world] = 0
+
+    def update(self, sensed: WorldBatch, worlds: np.ndarray, dt: float) -> TrackedBatch:
+        """Every world as its tracker reports it after the frame `sensed`, `dt` [s] after the last,
+        tracking the detections of the tracked worlds flagged in `worlds`."""
+        flagged = np.asarray(worlds, dtype=bool) & self.tracked
+        along, across = lane_velocity(sensed.speed, sensed.heading, sensed.lane_heading[:, None])
+        found = MeasuredWorlds(sensed.count, sensed.s, sensed.d, along, across, sensed.length, sensed.width)
+        track_worlds(
+            self.law, self.tracks, found, self.position_variance, dt, flagged, sensed.lane_offsets,
+            sensed.lanes_count, self.slots, self.lanes, self.counts,
+        )  # fmt: skip
+        return self._report(sensed)
+
+    def _report(self, sensed: WorldBatch) -> TrackedBatch:
+        """The tracked worlds' rows (ego, then confirmed tracks), the others' detections."""
+        slots_most = int(self.counts.max(initial=0))
+        rows = max(sensed.s.shape[1], 1 + slots_most)
+        tracked = self.tracked[:, None]
+        column = np.arange(slots_most)[None, :]
+        live = column < self.counts[:, None]
+        slots, lanes = self.slots[:, :slots_most], self.lanes[:, :slots_most]
+        slot = np.where(live, slots, 0)
+        state = np.take_along_axis(self.tracks.state, slot[:, :, None], axis=1)
+        s, vs, d, vd = (np.where(live, state[:, :, k], 0.0) for k in range(STATE_SIZE))
+        size = np.take_along_axis(self.tracks.size, slot[:, :, None], axis=1)
+        length, width = np.where(live, size[:, :, 0], 0.0), np.where(live, size[:, :, 1], 0.0)
+
+        def merged(name: str, tracked_rows: np.ndarray) -> np.ndarray:
+            detected = getattr(sensed, name)
+            out = np.zeros((sensed.worlds, rows), dtype=detected.dtype)
+            out[:, : detected.shape[1]] = detected
+            with_ego = np.concatenate([detected[:, :1], tracked_rows.astype(detected.dtype)], axis=1)
+            out[:, : 1 + slots_most] = np.where(tracked, with_ego, out[:, : 1 + slots_most])
+            return out
+
+        heading = sensed.lane_heading[:, None] + np.arctan2(vd, vs)
+        batch = dataclasses.replace(
+            sensed,
+            count=np.where(self.tracked, 1 + self.counts, sensed.count),
+            s=merged("s", s),
+            d=merged("d", d),
+            speed=merged("speed", np.where(live, np.hypot(vs, vd), 0.0)),
+            heading=merged("heading", np.where(live, heading, 0.0)),
+            length=merged("length", length),
+            width=merged("width", width),
+            lane=merged("lane", np.where(live, lanes, 0)),
+        )
+        slot_rows = np.full((sensed.worlds, rows), -1, dtype=np.int64)
+        slot_rows[:, 1 : 1 + slots_most] = np.where(tracked & live, slots, -1)
+        return TrackedBatch(batch, slot_rows)

@@ -1,0 +1,156 @@
+"""The tracker (`perception.tracking`): the filter's physics on one track (a constant-velocity target
+converges, a missed detection coasts, a track dies after its coast), phantoms never confirmed, the
+greedy assignment against scipy's, and whole episodes: deterministic per seed, each batched world
+the world run alone, the tracker off or a perfect sensor as before."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import linear_sum_assignment
+
+from perception.sensor import SensorConfig
+from perception.tracking import TRACK_ID_BASE, TrackerConfig, empty_tracks
+from perception.tracking_law import CONFIRMED, FREE, TENTATIVE, Measured, assign_greedy, track_world
+from stack.runs.batch_episodes import batch_refusal, run_batched
+from stack.runs.episodes import run_episode
+from stack.settings.run import build_config
+
+DT = 1 / 15
+CONFIG = TrackerConfig()
+LANES = np.array([0.0, 4.0, 8.0])
+
+
+class OneWorld:
+    """The law on one world's tracks, fed detections (s, d, speed) a frame."""
+
+    def __init__(self, config: TrackerConfig = CONFIG, noise_m: float = 1.0) -> None:
+        self.law, self.variance = config.law, noise_m**2
+        self.tracks = empty_tracks(config.max_tracks)
+        self.slots = np.zeros(config.max_tracks, dtype=np.int64)
+        self.lanes = np.zeros(config.max_tracks, dtype=np.int64)
+
+    def frame(self, detections: list[tuple[float, ...]], dt: float = DT) -> int:
+        """One frame of detections (s, d, speed along the lane[, across it])."""
+        rows = [(0.0, 0.0, 0.0, 0.0), *((*row, 0.0)[:4] for row in detections)]
+        s, d, speed, across = (np.array(column, dtype=float) for column in zip(*rows, strict=True))
+        sizes = np.full(len(rows), 5.0), np.full(len(rows), 2.0)
+        found = Measured(len(rows), s, d, speed, across, *sizes)
+        return int(
+            track_world(self.law, self.tracks, found, self.variance, dt, LANES, 3, self.slots, self.lanes)
+        )
+
+    def status(self, slot: int = 0) -> int:
+        return int(self.tracks.status[slot])
+
+
+def test_a_constant_velocity_target_converges_to_its_position_and_speed() -> None:
+    """1 m position noise, 0.5 m/s velocity noise: over the last 2 s of 4 the filter's errors are
+    well below the noise (RMSE)."""
+    rng = np.random.default_rng(1003001)
+    world, errors = OneWorld(), []
+    for k in range(60):
+        t = k * DT
+        s, d = 30.0 + 25.0 * t, 4.0 + 0.5 * t
+        noisy = (s + rng.normal(0, 1.0), d + rng.normal(0, 1.0))
+        world.frame([(*noisy, 25.0 + rng.normal(0, 0.5), 0.5 + rng.normal(0, 0.5))])
+        if k >= 30:
+            errors.append(world.tracks.state[0] - (s, 25.0, d, 0.5))
+    rmse = np.sqrt(np.mean(np.square(errors), axis=0))
+    assert world.status() == CONFIRMED and world.tracks.ident[0] == TRACK_ID_BASE
+    assert rmse[0] < 0.6 and rmse[2] < 0.6, "positions"
+    assert rmse[1] < 0.3 and rmse[3] < 0.3, "velocities"
+
+
+def test_a_track_is_confirmed_after_m_of_n_frames_and_a_missed_detection_coasts() -> None:
+    world, hits = OneWorld(noise_m=0.1), CONFIG.confirm_hits
+    seen = [world.frame([(20.0 + 10 * k * DT, 0.0, 10.0)]) for k in range(hits - 1)]
+    assert seen == [0] * (hits - 1) and world.status() == TENTATIVE
+    assert world.frame([(20.0 + 10 * (hits - 1) * DT, 0.0, 10.0)]) == 1
+    before = world.tracks.state[0, 0]
+    assert world.frame([]) == 1 and world.frame([]) == 1, "missed detections coast"
+    assert world.tracks.state[0, 0] == pytest.approx(before + 2 * 10.0 * DT)
+    assert world.frame([(20.0 + 10 * (hits + 2) * DT, 0.0, 10.0)]) == 1 and world.tracks.misses[0] == 0
+
+
+def test_a_confirmed_track_is_deleted_after_its_coast() -> None:
+    world = OneWorld(noise_m=0.1)
+    for k in range(CONFIG.confirm_hits):
+        world.frame([(20.0 + 10 * k * DT, 0.0, 10.0)])
+    for _ in range(CONFIG.coast_frames - 1):
+        world.frame([])
+    assert world.status() == CONFIRMED
+    world.frame([])
+    assert world.status() == FREE
+
+
+def test_one_frame_s_phantom_is_never_confirmed() -> None:
+    world = OneWorld()
+    world.frame([(15.0, 4.0, 0.0)])
+    assert world.status() == TENTATIVE
+    for _ in range(5):
+        assert world.frame([]) == 0
+    assert world.status() == FREE
+
+
+def test_phantoms_at_the_sensor_s_rate_are_not_confirmed() -> None:
+    """0.5 phantoms an observation, anywhere within 60 m on three lanes, over 100 s: no confirmed
+    track (a phantom falls in another's gate too rarely for 4 frames of 5)."""
+    rng = np.random.default_rng(1003002)
+    world, confirmed = OneWorld(), 0
+    for _ in range(1500):
+        count = rng.poisson(0.5)
+        s, d = rng.uniform(-60, 60, count), LANES[rng.integers(0, 3, count)]
+        confirmed += world.frame([(float(at), float(across), 0.0) for at, across in zip(s, d, strict=True)])
+    assert confirmed == 0
+
+
+@pytest.mark.parametrize("seed", range(1003010, 1003030))
+def test_greedy_assignment_is_scipy_s_on_scenes_of_separated_vehicles(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    vehicles = 25
+    truth = np.stack(
+        [
+            np.sort(rng.choice(np.arange(-100, 100, 8.0), vehicles, replace=False)),
+            rng.integers(0, 3, vehicles) * 4.0,
+        ],
+        axis=1,
+    )
+    detected = truth + rng.normal(0, 1.0, truth.shape)
+    cost = ((truth[:, None, :] - detected[None, :, :]) ** 2).sum(axis=2)
+    gated = np.argwhere(cost <= CONFIG.gate)
+    greedy = assign_greedy(
+        gated[:, 0], gated[:, 1], cost[gated[:, 0], gated[:, 1]], len(gated), vehicles, vehicles
+    )
+    rows, columns = linear_sum_assignment(np.where(cost <= CONFIG.gate, cost, 1e9))
+    optimal = np.full(vehicles, -1)
+    kept = cost[rows, columns] <= CONFIG.gate
+    optimal[columns[kept]] = rows[kept]
+    np.testing.assert_array_equal(greedy, optimal)
+
+
+def test_the_tracker_follows_the_sensor_unless_told() -> None:
+    perfect, noisy = SensorConfig(), SensorConfig(position_noise_m=0.5)
+    assert not CONFIG.tracks(perfect) and CONFIG.tracks(noisy)
+    assert not TrackerConfig(mode="off").tracks(noisy) and TrackerConfig(mode="on").tracks(perfect)
+    with pytest.raises(ValueError, match="confirm_hits"):
+        TrackerConfig(confirm_hits=5, confirm_frames=4)
+
+
+def test_a_tracked_episode_is_deterministic_and_each_batched_world_is_the_world_run_alone() -> None:
+    config = build_config(
+        {},
+        "test",
+        seed=1003100,
+        episodes=2,
+        scenario="poor-sensor",
+        planner__agent="mobil",
+        highway__duration=12,
+    )
+    assert batch_refusal(config) is None
+    batched = run_batched(config, [0, 1])
+    alone = [run_episode(config, e) for e in range(2)]
+    again = [run_episode(config, e) for e in range(2)]
+    for mine, theirs, repeated in zip(batched, alone, again, strict=True):
+        assert mine.outcome_row() == theirs.outcome_row() == repeated.outcome_row()
+        assert mine.trace == theirs.trace == repeated.trace
