@@ -145,3 +145,15 @@ def test_the_stack_s_emergency_braking_is_counted_by_its_cause(kind: str, point:
     result = run_agent_episode(loop, agent, 0, config.seed)
     by_cause = {name: getattr(result, f"emergency_brakings_{name}") for name in CAUSES}
     assert result.emergency_brakings >= 1 and by_cause[cause] == result.emergency_brakings, by_cause
+
+
+def test_a_braking_for_a_track_is_the_true_vehicle_s_under_it_and_a_phantom_s_only_when_none_is():
+    """Tracks carry the tracker's own ids: the cause is read from the true vehicle nearest the track,
+    within 3 m along and 1.5 m across the road."""
+    from stack.fault.emergency_causes import true_row
+
+    truth_s, truth_d = np.array([0.0, 30.0, 60.0]), np.array([4.0, 4.0, 8.0])
+    assert true_row(31.2, 4.5, truth_s, truth_d) == 1
+    assert true_row(59.0, 7.0, truth_s, truth_d) == 2
+    assert true_row(45.0, 4.0, truth_s, truth_d) == -1
+    assert true_row(0.5, 4.0, truth_s, truth_d) == -1, "the ego is never the vehicle braked for"
