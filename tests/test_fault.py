@@ -150,6 +150,8 @@ def test_the_stack_s_emergency_braking_is_counted_by_its_cause(kind: str, point:
 def test_a_braking_for_a_track_is_the_true_vehicle_s_under_it_and_a_phantom_s_only_when_none_is():
     """Tracks carry the tracker's own ids: the cause is read from the true vehicle nearest the track,
     within 3 m along and 1.5 m across the road."""
+    import numpy as np
+
     from stack.fault.emergency_causes import true_row
 
     truth_s, truth_d = np.array([0.0, 30.0, 60.0]), np.array([4.0, 4.0, 8.0])
