@@ -129,6 +129,7 @@ def test_run_s_table_of_episodes_is_made_from_the_declarations():
         "passed",
         "mean speed [m/s]",
         "lane changes",
+        "fallback",
         "peak |a_y| [m/s²]",
         "peak jerk [m/s³]",
     ]
@@ -143,6 +144,7 @@ def test_run_s_table_of_episodes_is_made_from_the_declarations():
         "4",
         "21.46",
         "2",
+        "0",
         "1.23",
         "2.35",
     ]

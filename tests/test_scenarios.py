@@ -237,7 +237,7 @@ def test_random_traffic_draws_a_seeded_world_per_episode_from_its_ranges():
 
 
 def test_a_random_world_is_seen_through_a_sensor_drawn_from_its_seed():
-    from stack.loop.closed_loop import episode_sensor
+    from stack.settings.run import episode_sensor
 
     config = build_config({"scenario": "random", "perception": {"sensor": {"range_m": 150.0}}})
     ranges = config.highway.random_traffic

@@ -115,6 +115,8 @@ def test_every_step_spans_one_decision_period_and_a_lane_change_ignores_new_acti
             **TINY,
             "highway": {"vehicles_count": 1, "duration": 10},
             "train": {**TINY["train"], "reward": {"lane_change": 0.25}},
+            # the one other car starts 16 m ahead in the lane beyond: not what this test is about
+            "planner": {"safety": {"far_lane_leader": False}},
         },
     )
     env.reset(seed=0)
@@ -321,7 +323,7 @@ def test_a_stopped_and_resumed_run_ends_as_an_uninterrupted_one(
 
     def step_then_signal(self, action):
         calls["n"] += 1
-        if calls["n"] == (3 if envs > 1 else 27 if demonstrations is None else 47):
+        if calls["n"] == (3 if envs > 1 else 27 if demonstrations is None else 14):
             trainer._request_stop(15, None)
             trainer._request_stop(15, None)  # a second signal waits too
         return real_step(self, action)

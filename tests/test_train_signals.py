@@ -114,13 +114,14 @@ def test_a_stop_while_learning_from_demonstrations_ends_there_and_a_resume_start
     config = build_config({**TINY, "train": {**TINY["train"], "demonstrations": demonstrations}})
     trainer = Trainer(config, tmp_path / "t", progress=False)
     if phase == "recording":
-        real_episode = demonstrations_module.expert_episode
+        for recorder in ("expert_episode", "batched_expert_episodes"):  # one world, or a batch
+            real = getattr(demonstrations_module, recorder)
 
-        def episode_then_signal(*args):
-            trainer._request_stop(15, None)
-            return real_episode(*args)
+            def recorded_then_signal(*args, real=real):
+                trainer._request_stop(15, None)
+                return real(*args)
 
-        monkeypatch.setattr(demonstrations_module, "expert_episode", episode_then_signal)
+            monkeypatch.setattr(demonstrations_module, recorder, recorded_then_signal)
     else:
         real_pretrain = DoubleDQN.pretrain
 

@@ -11,7 +11,7 @@ import typer
 
 from common.plugins import SPEC_FORMS
 from stack.apps.benchmark_cli import benchmark
-from stack.apps.commands import agents, controllers, ensemble, export, gate_calibrate, sweep, view
+from stack.apps.commands import agents, controllers, ensemble, export, gate_calibrate, sweep, tracking, view
 from stack.apps.folders import claimed, claimed_for, episodes_kept, resumed
 from stack.apps.options import (
     AGAIN,
@@ -279,32 +279,6 @@ def safety(
 
 
 @app.command()
-def tracking(
-    agents: str = typer.Option("ddqn,mobil", help=f"Comma-separated names or {PLUGIN_HELP}"),
-    config: Path | None = typer.Option(
-        None, "--config", "-c", help="YAML run config (default: configs/highway.yaml)."
-    ),
-    sets: list[str] = typer.Option([], "--set", help=SET_HELP),
-    episodes: int | None = typer.Option(None, help="Seeded episodes per agent."),
-    seed: int | None = typer.Option(None, help="Seed of the first episode."),
-    scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
-    out: Path | None = typer.Option(None, help="Results folder (default: runs/tracking-<time>)."),
-) -> None:
-    """Tracking quality against the simulator's truth (precision, recall, RMSE, OSPA, phantom
-    tracks), one world at a time (docs/perception.md)."""
-    names = listed("--agents", agents)
-    configs = per_agent(
-        config, sets, [(name, None) for name in names], labels={"planner.agent": "--agents"},
-        scenario=scenario, episodes=episodes, seed=seed,
-    )  # fmt: skip
-    plugins_or_fail(configs, ["--agents"] * len(configs))
-    folder = claimed_for("tracking", out, agents, configs[0])
-    from stack.apps.tracking import report
-
-    until_interrupted(lambda: report(dict(zip(names, configs, strict=True)), folder))
-
-
-@app.command()
 def scenarios() -> None:
     """The named worlds `--scenario` takes, one line each."""
     from stack.worlds import scenarios as named
@@ -318,6 +292,7 @@ app.add_typer(reproduce_app, name="reproduce")
 app.command()(export)
 app.command()(ensemble)
 app.command("gate-calibrate")(gate_calibrate)
+app.command()(tracking)
 app.command()(agents)
 app.command()(controllers)
 app.command()(sweep)

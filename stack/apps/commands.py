@@ -10,7 +10,18 @@ import typer
 from rich.console import Console
 
 from common.plugins import AGENT_GROUP, SPEC_FORMS
-from stack.apps.options import AGAIN, TRAIN_CONFIG, fail, ray_or_fail, until_interrupted
+from stack.apps.folders import claimed_for
+from stack.apps.options import (
+    AGAIN,
+    SET_HELP,
+    TRAIN_CONFIG,
+    fail,
+    listed,
+    per_agent,
+    ray_or_fail,
+    until_interrupted,
+)
+from stack.apps.plugin_checks import plugins_or_fail
 
 SWEEP_RAY_HELP = (
     "Where the trials run: a local Ray instance (default), auto (the cluster `ray start` made) or HOST:PORT."
@@ -241,3 +252,30 @@ def gate_calibrate(
         highlight=False,
         soft_wrap=True,
     )
+
+
+def tracking(
+    agents: str = typer.Option(
+        "ddqn,mobil", help=f"Comma-separated names or a plug-in class: {SPEC_FORMS} (docs/plugins.md)."
+    ),
+    config: Path | None = typer.Option(
+        None, "--config", "-c", help="YAML run config (default: configs/highway.yaml)."
+    ),
+    sets: list[str] = typer.Option([], "--set", help=SET_HELP),
+    episodes: int | None = typer.Option(None, help="Seeded episodes per agent."),
+    seed: int | None = typer.Option(None, help="Seed of the first episode."),
+    scenario: str | None = typer.Option(None, help="Named world (drivestack scenarios)."),
+    out: Path | None = typer.Option(None, help="Results folder (default: runs/tracking-<time>)."),
+) -> None:
+    """Tracking quality against the simulator's truth (precision, recall, RMSE, OSPA, phantom
+    tracks), one world at a time (docs/perception.md)."""
+    names = listed("--agents", agents)
+    configs = per_agent(
+        config, sets, [(name, None) for name in names], labels={"planner.agent": "--agents"},
+        scenario=scenario, episodes=episodes, seed=seed,
+    )  # fmt: skip
+    plugins_or_fail(configs, ["--agents"] * len(configs))
+    folder = claimed_for("tracking", out, agents, configs[0])
+    from stack.apps.tracking import report
+
+    until_interrupted(lambda: report(dict(zip(names, configs, strict=True)), folder))

@@ -1,5 +1,5 @@
 """`drivestack tracking`: how well the world the layers act on follows the simulator's truth, per
-agent, over seeded episodes run one world at a time (`stack.loop.tracking_quality`); a table on
+agent, over seeded episodes run one world at a time (`stack.results.tracking_quality`); a table on
 the terminal and `tracking.json` in the results folder."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import typer
 
 from records import child_seed
 from stack.loop.closed_loop import ClosedLoop
-from stack.loop.tracking_quality import TrackingQuality, combined
+from stack.results.tracking_quality import TrackingQuality, combined
 from stack.runs.alone import run_agent_episode
 from stack.runs.kept import kept_adapter, kept_agent
 from stack.settings.run import RunConfig

@@ -13,7 +13,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -27,6 +26,7 @@ from perception.tracking import TrackerBatch
 from planner.safety import permitted_batch, safety_settings
 from records import WorldState
 from records.batch import WorldBatch
+from stack.batch.ego_records import ActedBatch
 from stack.batch.loop_kernels import (
     ControllerArrays,
     EgoLaws,
@@ -36,13 +36,12 @@ from stack.batch.loop_kernels import (
     decide,
     settle,
 )
-from stack.fault.emergency_causes import BrakingsByCause, CausesBatch, true_row
-from stack.loop.closed_loop import episode_sensor
+from stack.fault.emergency_causes import BrakingsByCause, CausesBatch, tracked_true_rows
 from stack.loop.metrics import EpisodeMetricsBatch
 from stack.loop.safety_metrics import classify_collision
 from stack.results.episode_fields import record_fields
 from stack.results.episode_result import EpisodeResult
-from stack.settings.run import RunConfig, training_worlds
+from stack.settings.run import RunConfig, episode_sensor, training_worlds
 from stack.sim.batch.traffic import TrafficBatch
 from stack.sim.highway import snapshot
 
@@ -65,19 +64,6 @@ def refusal(config: RunConfig) -> str | None:
 def _sensed(config: RunConfig) -> bool:
     """Whether some episode of `config` may be seen through a sensor model (`episode_sensor`)."""
     return config.perception.sensor.enabled or config.highway.random_traffic is not None
-
-
-@dataclass(frozen=True, eq=False)
-class ActedBatch:
-    """Per world, one decision's outcome: control ticks run, whether the command was considered
-    (no lane change ran), masked by the safety layer, refused by the maneuver, and the ego's mean
-    speed over the ticks [m/s] (its speed when none ran)."""
-
-    ticks: np.ndarray
-    considered: np.ndarray
-    masked: np.ndarray
-    refused: np.ndarray
-    mean_speed: np.ndarray
 
 
 class ClosedLoopBatch:
@@ -194,25 +180,6 @@ class ClosedLoopBatch:
         source = np.where(sensed.phantom >= 0, self.vehicle_room + sensed.phantom, sensed.source)
         detected_slots[:, : source.shape[1]] = source
         self.slots = np.where(self.tracker.tracked[:, None], 1 + np.maximum(tracked.slot, -1), detected_slots)
-
-    def _tracked_rows(self, braking: np.ndarray) -> np.ndarray:
-        """Per world, the slot emergency braking braked for, or, in a tracked world flagged `braking`
-        (a new emergency braking), the true row under the track it brakes for
-        (`stack.fault.emergency_causes.true_row`), -1 for none."""
-        assert self.tracker is not None
-        rows = self.flags[:, 2].copy()
-        perceived, truth = self.perceived, self.batch
-        assert perceived is not None and truth is not None
-        for world in np.flatnonzero(braking & self.tracker.tracked).tolist():
-            found = np.flatnonzero(self.slots[world, 1:] == self.flags[world, 2])
-            rows[world] = -1
-            if len(found):
-                row, count = 1 + int(found[0]), int(truth.count[world])
-                rows[world] = true_row(
-                    float(perceived.s[world, row]), float(perceived.d[world, row]),
-                    truth.s[world, :count], truth.d[world, :count],
-                )  # fmt: skip
-        return rows
 
     @property
     def done(self) -> np.ndarray:
@@ -343,8 +310,8 @@ class ClosedLoopBatch:
         after it): reference, actuation, the plant's frame, the sensor, the road departure and the
         maneuver's update, and the episode metrics when kept (`metrics`). Per world: a lane change
         completed on this tick (`Maneuver.update`)."""
-        perceived, traffic = self.perceived, self.traffic
-        assert perceived is not None
+        perceived, traffic, truth = self.perceived, self.traffic, self.batch
+        assert perceived is not None and truth is not None
         actuation = np.zeros((self.worlds, 2))
         controller = ControllerArrays(
             self.lateral, self.speed_pi, self.seen, self.seen_speed, self.seen_slowing, self.flags
@@ -361,7 +328,10 @@ class ClosedLoopBatch:
         if self.causes is not None:
             self.causes.attribute(
                 live, self.changing, traffic.time, self.flags, activations, self.vehicle_room,
-                None if self.tracker is None else self._tracked_rows(live & (self.flags[:, 1] > activations)),
+                None if self.tracker is None else tracked_true_rows(
+                    live & (self.flags[:, 1] > activations) & self.tracker.tracked, self.flags[:, 2],
+                    self.slots, perceived, truth,
+                ),
             )  # fmt: skip
         traffic.arrays.intent[:] = np.where(self.changing, self.target, -1)
         ended = traffic.step(actuation[:, 0], actuation[:, 1], live)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -60,3 +61,16 @@ class EgoLaws(NamedTuple):
     speed: PIDTerms
     gap: GapKeeping
     braking: BrakingLimits
+
+
+@dataclass(frozen=True, eq=False)
+class ActedBatch:
+    """Per world, one decision's outcome: control ticks run, whether the command was considered
+    (no lane change ran), masked by the safety layer, refused by the maneuver, and the ego's mean
+    speed over the ticks [m/s] (its speed when none ran)."""
+
+    ticks: np.ndarray
+    considered: np.ndarray
+    masked: np.ndarray
+    refused: np.ndarray
+    mean_speed: np.ndarray

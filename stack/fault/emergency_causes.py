@@ -46,6 +46,25 @@ def true_row(s: float, d: float, truth_s: np.ndarray, truth_d: np.ndarray) -> in
     return 1 + int(np.argmin(np.where(near, along, np.inf)))
 
 
+def tracked_true_rows(
+    braking: np.ndarray, slot: np.ndarray, slots: np.ndarray, perceived: WorldBatch, truth: WorldBatch
+) -> np.ndarray:
+    """Per world, the `slot` emergency braking braked for, or, in the worlds flagged `braking` (a
+    new emergency braking in a tracked world: `slots` map each perceived row to its slot), the true
+    row under the track braked for (`true_row`), -1 for none."""
+    rows = slot.copy()
+    for world in np.flatnonzero(braking).tolist():
+        found = np.flatnonzero(slots[world, 1:] == slot[world])
+        rows[world] = -1
+        if len(found):
+            row, count = 1 + int(found[0]), int(truth.count[world])
+            rows[world] = true_row(
+                float(perceived.s[world, row]), float(perceived.d[world, row]),
+                truth.s[world, :count], truth.d[world, :count],
+            )  # fmt: skip
+    return rows
+
+
 CAUSES = ("cut_in", "leader_braking", "own_lane_change", "closing_in", "phantom")
 """The causes, in the order of the counts (`EpisodeResult.emergency_brakings_<cause>`)."""
 CUT_IN, LEADER_BRAKING, OWN_LANE_CHANGE, CLOSING_IN, PHANTOM = range(len(CAUSES))

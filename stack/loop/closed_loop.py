@@ -28,7 +28,7 @@ from controllers.maneuver import Maneuver
 from controllers.protocol import Controller
 from controllers.tracker import make_controller
 from perception.grid import OccupancyGrid, OccupancyGridBuilder
-from perception.sensor import SensorConfig, SensorModel
+from perception.sensor import SensorModel
 from perception.tracking import Tracker
 from planner.safety import SafetyLayer
 from records import Actuation, Command, Encoding, GridConfig, WorldState
@@ -38,33 +38,17 @@ from stack.loop.metrics import EpisodeRecorder, Traces
 from stack.loop.safety_metrics import SafetyMonitor
 from stack.results.episode_fields import record_fields
 from stack.results.episode_result import EpisodeResult
-from stack.settings.run import RunConfig, grid_config
+from stack.settings.run import RunConfig, episode_sensor, grid_config
 
 if TYPE_CHECKING:
     from stack.loop.recording import EpisodeRecording
-    from stack.loop.tracking_quality import TrackingQuality
     from stack.loop.video import Video
+    from stack.results.tracking_quality import TrackingQuality
 
 SNAPSHOT_TIME_S = 10.0
 """Each episode keeps the (world, grid) of its first decision at or after this time [s]."""
 VIDEO_FRAME_TICKS = 2
 """Control ticks per video frame: the 1st, 3rd, 5th ... tick is drawn (7.5 frames/s at 15 Hz)."""
-
-
-SENSOR_DRAW_STREAM = 7
-"""The generator stream `episode_sensor` draws a random world's sensor from (beside the seed)."""
-
-
-def episode_sensor(config: RunConfig, seed: int) -> SensorConfig:
-    """The sensor episode `seed` is seen through: `perception.sensor`, or, on a road of random
-    traffic, that sensor with its noise, missed detections and phantoms drawn from the ranges of
-    `highway.random_traffic` (from the seed alone, so every backend and process draws the same)."""
-    ranges, sensor = config.highway.random_traffic, config.perception.sensor
-    if ranges is None:
-        return sensor
-    rng = np.random.default_rng((seed, SENSOR_DRAW_STREAM))
-    drawn = ("position_noise_m", "miss_probability", "false_positives")
-    return sensor.model_copy(update={name: float(rng.uniform(*getattr(ranges, name))) for name in drawn})
 
 
 class Plant(Protocol):

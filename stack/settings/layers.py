@@ -63,9 +63,12 @@ class PlannerConfig(Strict):
         "more than uncertainty_threshold (planner.uncertainty); none: no gate",
     )  # fmt: skip
     uncertainty_threshold: float | None = Field(
-        None, ge=0, description="[Q-value] the members' std above which the fallback decides; null: the "
-        "one calibrated into the model file (drivestack gate-calibrate), else no gate",
-    )  # fmt: skip
+        None,
+        ge=0,
+        le=1e6,
+        description="[Q-value] the members' std above which the fallback decides; null: the one "
+        "calibrated into the model file (drivestack gate-calibrate), else no gate",
+    )
 
     @field_validator("model")
     @classmethod

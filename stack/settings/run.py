@@ -11,11 +11,13 @@ from itertools import chain
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 from pydantic import Field, ValidationError, model_validator
 
 from controllers.config import ControllerConfig
 from perception.grid import OccupancyGridBuilder
+from perception.sensor import SensorConfig
 from planner.mobil import prior_problem
 from planner.networks import LANE_NETWORK, lane_problem
 from records import SEED_LIMIT, GridConfig
@@ -350,3 +352,19 @@ def _beside(section: dict[str, Any], key: str, config_file: Path) -> None:
 def grid_config(config: RunConfig) -> GridConfig:
     """The perception grid `config` asks for (its `perception` section without the sensor)."""
     return GridConfig(**config.perception.model_dump(exclude=NOT_GRID))
+
+
+SENSOR_DRAW_STREAM = 7
+"""The generator stream `episode_sensor` draws a random world's sensor from (beside the seed)."""
+
+
+def episode_sensor(config: RunConfig, seed: int) -> SensorConfig:
+    """The sensor episode `seed` is seen through: `perception.sensor`, or, on a road of random
+    traffic, that sensor with its noise, missed detections and phantoms drawn from the ranges of
+    `highway.random_traffic` (from the seed alone, so every backend and process draws the same)."""
+    ranges, sensor = config.highway.random_traffic, config.perception.sensor
+    if ranges is None:
+        return sensor
+    rng = np.random.default_rng((seed, SENSOR_DRAW_STREAM))
+    drawn = ("position_noise_m", "miss_probability", "false_positives")
+    return sensor.model_copy(update={name: float(rng.uniform(*getattr(ranges, name))) for name in drawn})
