@@ -123,7 +123,7 @@ def test_each_episode_counts_its_handed_over_decisions_per_world_and_batched_ali
         assert all(row["fallback_decisions"] >= 1 for row in found[batched])
         assert results.summary["fallback_decisions"] >= 1
     assert found[True] == found[False]
-    never = run(short(**{"planner.uncertainty_threshold": 1e9}), progress=False, snapshot=False)
+    never = run(short(**{"planner.uncertainty_threshold": 1e6}), progress=False, snapshot=False)
     plain = run(short(**{"planner.fallback": "none"}), progress=False, snapshot=False)
     assert [e.outcome_row() for e in never.episodes] == [e.outcome_row() for e in plain.episodes]
     assert never.summary["fallback_decisions"] == 0
