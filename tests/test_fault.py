@@ -159,3 +159,15 @@ def test_a_braking_for_a_track_is_the_true_vehicle_s_under_it_and_a_phantom_s_on
     assert true_row(59.0, 7.0, truth_s, truth_d) == 2
     assert true_row(45.0, 4.0, truth_s, truth_d) == -1
     assert true_row(0.5, 4.0, truth_s, truth_d) == -1, "the ego is never the vehicle braked for"
+
+
+def test_being_hit_from_behind_or_standing_while_keeping_the_lane_is_the_other_s():
+    """The follower's recorded path answered the ego's own braking: no replay can judge it."""
+    from stack.fault.preventability import judge
+    from tests.helpers import scene
+
+    world = scene(3, (0.0, 1), [(-6.0, 4.0)], speed=10.0, other_speed=20.0)
+    for kind in ("rear", "ego stopped"):
+        fault = judge(kind, 1, [world, world], 1 / 15)
+        assert not fault.at_fault and fault.reason == f"{kind} not preventable"
+    assert judge("lane change", 1, [world], 1 / 15).at_fault

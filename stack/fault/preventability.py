@@ -4,7 +4,9 @@ unless a careful and competent driver in its place could not have avoided it eit
 - The ego's own lane change (the geometric `lane change` contact, or the ego's lane differing
   anywhere in the last `REPLAY_S` seconds) and leaving the road stay at fault: no replay excuses
   a maneuver the ego chose.
-- Any other contact (front, stopped vehicle, rear, side swipe, ego stopped) is replayed: R157's
+- Being hit from behind or standing (`rear`, `ego stopped`) while keeping its lane is the other's:
+  the follower's recorded path answered the ego's own braking, so no replay can judge it.
+- Any other contact (front, stopped vehicle, side swipe) is replayed: R157's
   reference driver (`stack.fault.reference_driver.CarefulDriver`: risk perception 0.4 s,
   reaction 0.75 s, a 0.6 s ramp to the plant's 5 m/s^2, keeping R157's minimum following
   distance) takes the ego's place `REPLAY_S` seconds before the contact, in the lane the ego
@@ -43,6 +45,11 @@ only just avoided at that time may still come (a follower still closing in on a 
 that stands)."""
 FROM_BEHIND_KINDS = ("rear", "side swipe", "ego stopped")
 """Contact kinds where the other vehicle came into the ego: the replay counts every vehicle."""
+HIT_FROM_BEHIND_KINDS = ("rear", "ego stopped")
+"""Contact kinds the replay cannot judge: the vehicle that hit the ego from behind (or hit it
+standing) drove its recorded path in answer to the ego's own braking, so a reference driver that
+brakes otherwise meets a follower that would have driven otherwise. Without a lane change of the
+ego's in the replayed seconds, such a contact is the other's (as R157 and nuPlan take it)."""
 
 
 @dataclass(frozen=True)
@@ -81,6 +88,8 @@ def judge(kind: str, other: int | None, history: Sequence[WorldState], dt: float
     crash = history[-1]
     if kind == "lane change" or any(world.ego_lane != crash.ego_lane for world in history):
         return Fault(True, "own lane change")
+    if kind in HIT_FROM_BEHIND_KINDS:
+        return Fault(False, f"{kind} not preventable")
     from_behind = kind in FROM_BEHIND_KINDS
     situation = _situation(other, history, dt)
     if (from_behind and situation != "cut-in") or (kind == "stopped vehicle" and situation == "closing in"):
