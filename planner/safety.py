@@ -21,8 +21,9 @@ in the target lane need to be met without contact). A change begun while braking
 car otherwise slows to a crawl between two lanes, in front of a follower that arrives at speed.
 
 The rule is written once, as plain functions of one world's `VehicleRows` (`unsafe_vehicles`,
-`lane_is_safe`, `change_is_safe`) that numba compiles: `SafetyLayer` calls them compiled on its
-snapshot, the lookahead on the scene it reads, and `permitted_batch` and the batch's kernels
+`lane_is_safe`, `change_blockers` and `change_is_safe` derived from it) that numba compiles:
+`SafetyLayer` calls them compiled on its snapshot (its record of what blocked a change
+included), the lookahead on the scene it reads, and `permitted_batch` and the batch's kernels
 (`stack.batch.loop_kernels`) loop over worlds around them.
 """
 
@@ -180,52 +181,60 @@ def lane_is_safe(
 
 
 @register_jitable
-def follower_is_spared(
+def unspared_follower(
     rows: VehicleRows, offsets: np.ndarray, lane: int, goal: int, safety: SafetySettings
-) -> bool:
-    """The follower in lane `goal` needs no harder braking than `follower_braking_mps2` to stay
-    `min_gap_m` behind the ego changing into it from `lane`, while the ego brakes as its leaders in
-    both lanes ask (`ego_braking`, `follower_keeps_clear`)."""
+) -> int:
+    """The row of the follower in lane `goal` (-1: none) when it would need harder braking than
+    `follower_braking_mps2` to stay `min_gap_m` behind the ego changing into it from `lane`, while
+    the ego brakes as its leaders in both lanes ask (`ego_braking`, `follower_keeps_clear`)."""
     behind = nearest_in_lane(rows, offsets[goal])[1]
     if behind < 0:
-        return True
+        return -1
     gap = abs(rows.s[behind] - rows.s[0]) - (rows.length[behind] + rows.length[0]) / 2
     deceleration, floor = ego_braking(rows, (offsets[lane], offsets[goal]))
-    return follower_keeps_clear(
+    spared = follower_keeps_clear(
         gap, rows.speed[behind], rows.speed[0], deceleration, floor,
         safety.follower_braking_mps2, safety.follower_reaction_s, safety.min_gap_m,
     )  # fmt: skip
+    return -1 if spared else behind
+
+
+@register_jitable
+def change_blockers(
+    rows: VehicleRows, offsets: np.ndarray, lanes_count: int, lane: int, goal: int, safety: SafetySettings
+) -> tuple[int, int, int, int, int, int]:
+    """The rows (-1: none) that stop one world's change from `lane` to `goal`, a lane on the road
+    (lanes centred at `offsets` [m]), on its `rows` where they are now: the vehicles ahead and behind
+    that fail the strict gap rule in `goal`; its follower, when not spared hard braking
+    (`unspared_follower`); and in the lane beyond, the vehicle ahead that fails the strict rule for a
+    car ahead (with `far_lane_leader`) and those nearer than the far-lane gap bumper to bumper."""
+    strict = (safety.min_gap_m, safety.min_ttc_s, safety.front_time_gap_s, safety.rear_time_gap_s)
+    ahead, behind = unsafe_vehicles(rows, offsets[goal], *strict)
+    follower = unspared_follower(rows, offsets, lane, goal, safety) if safety.checks_follower else -1
+    far_leader, far_ahead, far_behind = -1, -1, -1
+    beyond = 2 * goal - lane
+    if safety.checks_far_lane and 0 <= beyond < lanes_count:
+        if safety.far_lane_leader:
+            far_leader = unsafe_vehicles(rows, offsets[beyond], *strict)[0]
+        far_ahead, far_behind = unsafe_vehicles(rows, offsets[beyond], safety.far_lane_gap_m, 0.0, 0.0, 0.0)
+    return ahead, behind, follower, far_leader, far_ahead, far_behind
 
 
 @register_jitable
 def change_is_safe(
     rows: VehicleRows, offsets: np.ndarray, lanes_count: int, lane: int, goal: int, safety: SafetySettings
 ) -> bool:
-    """`SafetyLayer.permits` of one world's change from `lane` to `goal` (lanes centred at
-    `offsets` [m]), on its `rows` where they are now: on the road, the strict gap rule in `goal`,
-    its follower spared hard braking (`follower_is_spared`) and, in the lane beyond it, no vehicle
-    nearer than the far-lane gap bumper to bumper nor, with `far_lane_leader`, a vehicle ahead that
-    fails the strict rule for a car ahead."""
+    """`SafetyLayer.permits` of one world's change from `lane` to `goal`: on the road, and nothing
+    blocks it (`change_blockers`)."""
     if not 0 <= goal < lanes_count:
         return False
-    strict = (safety.min_gap_m, safety.min_ttc_s, safety.front_time_gap_s, safety.rear_time_gap_s)
-    if not lane_is_safe(rows, offsets[goal], *strict):
-        return False
-    if safety.checks_follower and not follower_is_spared(rows, offsets, lane, goal, safety):
-        return False
-    beyond = 2 * goal - lane
-    if not safety.checks_far_lane or not 0 <= beyond < lanes_count:
-        return True
-    if safety.far_lane_leader and unsafe_vehicles(rows, offsets[beyond], *strict)[0] >= 0:
-        return False
-    return lane_is_safe(rows, offsets[beyond], safety.far_lane_gap_m, 0.0, 0.0, 0.0)
+    return max(change_blockers(rows, offsets, lanes_count, lane, goal, safety)) < 0
 
 
 change_is_safe_compiled = Kernel(change_is_safe)
 """`change_is_safe` compiled, for Python callers: the per-world layer and the lookahead."""
 _unsafe_vehicles = Kernel(unsafe_vehicles)
-_follower_is_spared = Kernel(follower_is_spared)
-_nearest_in_lane = Kernel(nearest_in_lane)
+_change_blockers = Kernel(change_blockers)
 
 
 @dataclass(frozen=True)
@@ -277,20 +286,10 @@ class SafetyLayer:
         return Command.STAY
 
     def _blockers(self, world: WorldState, lane: int, target: int) -> tuple[int, ...]:
-        """The vehicles (ids) that stop a change from `lane` into `target` (`change_is_safe`):
-        those that make `target` unsafe, its follower when not spared hard braking, and in the lane
-        beyond, the leader failing the strict rule and those alongside."""
-        config, settings = self.config, self.settings
-        rows, offsets = vehicle_rows(world), world.lane_offsets
-        strict = (config.min_gap_m, config.min_ttc_s, config.front_time_gap_s, config.rear_time_gap_s)
-        found = list(_unsafe_vehicles(rows, float(offsets[target]), *strict))
-        if settings.checks_follower and not _follower_is_spared(rows, offsets, lane, target, settings):
-            found.append(_nearest_in_lane(rows, float(offsets[target]))[1])
-        beyond = 2 * target - lane
-        if config.far_lane_gap_m is not None and 0 <= beyond < world.lanes_count:
-            if config.far_lane_leader:
-                found.append(_unsafe_vehicles(rows, float(offsets[beyond]), *strict)[0])
-            found.extend(_unsafe_vehicles(rows, float(offsets[beyond]), config.far_lane_gap_m, 0.0, 0.0, 0.0))
+        """The vehicles (ids) that stop a change from `lane` into `target` (`change_blockers`)."""
+        found = _change_blockers(
+            vehicle_rows(world), world.lane_offsets, world.lanes_count, lane, target, self.settings
+        )
         return tuple(dict.fromkeys(int(world.ids[row]) for row in found if row >= 0))
 
     def should_abort(self, world: WorldState, target: int) -> bool:

@@ -30,7 +30,7 @@ from stack.fault.reference_driver import WANDERING_M
 
 TRACK_MATCH_ALONG_M = 3.0
 """A tracked vehicle is a real one when a true vehicle's centre is this close along the road [m]
-(`drivestack tracking`'s gate)."""
+(the length of `drivestack tracking`'s 3 m gate; across the road the match keeps to the lane)."""
 TRACK_MATCH_ACROSS_M = 1.5
 """... and this close across it [m]."""
 
