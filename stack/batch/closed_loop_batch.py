@@ -40,6 +40,7 @@ from stack.fault.emergency_causes import BrakingsByCause, CausesBatch, tracked_t
 from stack.loop.metrics import EpisodeMetricsBatch
 from stack.loop.safety_metrics import classify_collision
 from stack.results.episode_fields import record_fields
+from stack.results.episode_measures import measured
 from stack.results.episode_result import EpisodeResult
 from stack.settings.run import RunConfig, episode_sensor, training_worlds
 from stack.sim.batch.traffic import TrafficBatch
@@ -372,7 +373,7 @@ class ClosedLoopBatch:
             **record_fields(BrakingsByCause.of(self.causes.counts[world])),
             solve_ms_p50=p50_ms,
             solve_ms_p95=p95_ms,
-            **record_fields(self.metrics.driven(world)),
+            **measured(EpisodeResult, self.metrics.samples(world)),
             **record_fields(self.metrics.measured(world, departed)),
         )
 

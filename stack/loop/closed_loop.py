@@ -37,6 +37,7 @@ from stack.loop.loop_records import Acted, LoopStatus, SolveStatistics, Tick
 from stack.loop.metrics import EpisodeRecorder, Traces
 from stack.loop.safety_metrics import SafetyMonitor
 from stack.results.episode_fields import record_fields
+from stack.results.episode_measures import measured
 from stack.results.episode_result import EpisodeResult
 from stack.settings.run import RunConfig, episode_sensor, grid_config
 
@@ -372,7 +373,8 @@ class ClosedLoop:
 
     def result(self, episode: int) -> EpisodeResult:
         """The episode's result, as its parts measured it so far: what the recorder and the safety
-        monitor measured goes in whole (`Driven`, `SafetyMeasures`: fields named as the result's)."""
+        monitor measured goes in whole (every field measured from the recorder's samples as it declares,
+        `SafetyMeasures`: fields named as the result's)."""
         safety, solves = self.safety.counts, self.solve_statistics()
         return EpisodeResult(
             episode=episode,
@@ -388,6 +390,6 @@ class ClosedLoop:
             solve_ms_p50=solves.p50_ms,
             solve_ms_p95=solves.p95_ms,
             snapshot=self.snapshot,
-            **record_fields(self._recorded().driven(self.plant.dt)),
+            **measured(EpisodeResult, self._recorded().samples(self.plant.dt)),
             **record_fields(self.monitor.measured()),
         )

@@ -1,14 +1,13 @@
-"""Episode and tracking metrics, with the definitions of docs/architecture.md.
+"""The episode's recorders, and the tracking metrics of a lane change, with the definitions of
+docs/architecture.md.
 
 - passed car: a vehicle counts once, the first time it goes from ahead of the ego to behind it;
-- accuracy: passed / (passed + collided) x 100 over all episodes;
-- comfort: peak |lateral acceleration| (a_y = v * yaw rate relative to the reference lane, so a
-  bend's own v^2 / R is not counted) and peak lateral jerk, both over a 500 ms moving average, as
-  UN R79 measures them.
+- accuracy: passed / (passed + collided) x 100 over all episodes.
 
 `EpisodeRecorder` records one world's episode; `EpisodeMetricsBatch` records those of many worlds at
-once as rows of arrays, measured with the same functions (`driven_of`, the safety monitor's
-`leaders_ahead`).
+once as rows of arrays. Both hand their samples (`EpisodeSamples`) to the measurers the episode
+record's fields declare (`stack.results.episode_measures.measured`), and the surroundings to the
+safety monitor's `leaders_ahead`: one measure, one function, for one world and many.
 """
 
 from __future__ import annotations
@@ -25,41 +24,13 @@ from records import WorldState
 from records.batch import WorldBatch
 from stack.loop.loop_records import Tick
 from stack.loop.safety_metrics import (
-    STOPPED_SPEED_MPS,
     Collision,
     SafetyMeasures,
     leaders_ahead_batch,
     r157_min_following_distances,
 )
+from stack.results.episode_measures import EpisodeSamples, lateral_comfort
 from stack.results.episode_result import TTC_CAP_S
-
-COMFORT_WINDOW_S = 0.5
-"""Moving-average window for lateral acceleration and jerk [s] (UN R79)."""
-
-
-def moving_average(values: np.ndarray, window: int) -> np.ndarray:
-    """Trailing moving average over `window` samples (shorter at the start)."""
-    if window <= 1 or len(values) == 0:
-        return values
-    sums = np.cumsum(np.insert(values, 0, 0.0))
-    counts = np.minimum(np.arange(1, len(values) + 1), window)
-    return (sums[1:] - sums[np.maximum(np.arange(1, len(values) + 1) - window, 0)]) / counts
-
-
-def lateral_series(heading: np.ndarray, speed: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """(a_y [m/s^2] from the second sample on, jerk [m/s^3] from the third), each a 500 ms moving
-    average, from heading [rad] and speed [m/s] samples `dt` seconds apart."""
-    window = max(1, round(COMFORT_WINDOW_S / dt))
-    lateral_acceleration = moving_average(speed[1:] * np.diff(heading) / dt, window)
-    return lateral_acceleration, moving_average(np.diff(lateral_acceleration) / dt, window)
-
-
-def lateral_comfort(heading: np.ndarray, speed: np.ndarray, dt: float) -> tuple[float, float]:
-    """(peak |a_y| [m/s^2], peak |jerk| [m/s^3]) from heading [rad] and speed [m/s] samples."""
-    if len(heading) < 3:
-        return 0.0, 0.0
-    lateral_acceleration, jerk = lateral_series(heading, speed, dt)
-    return float(np.max(np.abs(lateral_acceleration))), float(np.max(np.abs(jerk)))
 
 
 @dataclass(frozen=True)
@@ -102,27 +73,6 @@ def tracking(
         peak_lat_accel=peak_accel,
         peak_lat_jerk=peak_jerk,
     )
-
-
-@dataclass(frozen=True)
-class Driven:
-    """What the recorder measured of an episode: control ticks (`steps`), duration [s], passed
-    cars, the ego's mean speed [m/s], peak |lateral acceleration| [m/s^2] and jerk [m/s^3], its
-    longest standstill [s] (the most ticks in a row that ended with it below `STOPPED_SPEED_MPS`,
-    times the tick: an ego that cannot get round a blocked lane stands still for the rest of the
-    episode), its time in the leftmost lane [s] (the ticks that ended with it in lane 0, the lane
-    that keep-right rules reserve for overtaking, times the tick), and the per-tick `trace` of time
-    [s], speed [m/s] and lateral offset [m]. Its fields are `EpisodeResult`'s of the same names."""
-
-    steps: int
-    duration_s: float
-    passed_cars: int
-    mean_speed: float
-    peak_lat_accel: float
-    peak_lat_jerk: float
-    longest_standstill_s: float
-    time_in_leftmost_lane_s: float
-    trace: dict[str, list[float]]
 
 
 @dataclass(frozen=True, eq=False)
@@ -194,43 +144,11 @@ class EpisodeRecorder:
             steering=np.array(self.steering),
         )
 
-    def driven(self, dt: float) -> Driven:
-        """What was recorded, measured (ticks `dt` seconds apart)."""
-        trace = {"time": self.time, "speed": self.speed, "d": self.d}
-        time, speed, heading, lane = map(np.array, (self.time, self.speed, self.heading, self.lane))
-        return driven_of(time, speed, heading, lane, len(self.passed), dt, trace)
-
-
-def driven_of(
-    time: np.ndarray,
-    speed: np.ndarray,
-    heading: np.ndarray,
-    lane: np.ndarray,
-    passed_cars: int,
-    dt: float,
-    trace: dict[str, list[float]],
-) -> Driven:
-    """An episode measured (`Driven`) from its samples `dt` seconds apart (at the start and after
-    every tick: time [s], the ego's speed [m/s], heading to the lane [rad] and lane), its
-    `passed_cars` and its `trace`."""
-    peak_accel, peak_jerk = lateral_comfort(heading, speed, dt)
-    return Driven(
-        steps=len(time) - 1,
-        duration_s=float(time[-1] - time[0]),
-        passed_cars=passed_cars,
-        mean_speed=float(np.mean(speed)),
-        peak_lat_accel=peak_accel,
-        peak_lat_jerk=peak_jerk,
-        longest_standstill_s=longest_run(speed[1:] < STOPPED_SPEED_MPS) * dt,
-        time_in_leftmost_lane_s=float(np.count_nonzero(lane[1:] == 0) * dt),
-        trace=trace,
-    )
-
-
-def longest_run(flags: np.ndarray) -> int:
-    """Length of the longest run of True in `flags` (0 if none)."""
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], flags.astype(np.int8), [0]))))
-    return int((edges[1::2] - edges[::2]).max(initial=0))
+    def samples(self, dt: float) -> EpisodeSamples:
+        """What was recorded, as the measurers take it (ticks `dt` seconds apart)."""
+        recorded = (self.time, self.speed, self.heading, self.d, self.lane)
+        time, speed, heading, d, lane = (np.array(values) for values in recorded)
+        return EpisodeSamples(time, speed, heading, d, lane, len(self.passed), dt)
 
 
 SERIES = ("time", "speed", "heading", "d", "lane", "control_s")
@@ -241,7 +159,7 @@ wall-clock time shared evenly by the worlds it ran for [s]; none at the first sa
 class EpisodeMetricsBatch:
     """Per world, the episode under way as `EpisodeRecorder` and `SafetyMonitor` see it: `reset`
     at a world's reset, `record` after every tick, `collided` at its first crash frame, and
-    `driven(world)` / `measured(world)` when its episode ends. Ticks are `dt` seconds apart."""
+    `samples(world)` / `measured(world)` when its episode ends. Ticks are `dt` seconds apart."""
 
     def __init__(self, worlds: int, dt: float) -> None:
         self.worlds, self.dt = worlds, dt
@@ -332,14 +250,11 @@ class EpisodeMetricsBatch:
     def _samples(self, world: int, name: str) -> np.ndarray:
         return self.series[name][world, : self.ticks[world]]
 
-    def driven(self, world: int) -> Driven:
-        """`EpisodeRecorder.driven` of world `world`'s episode so far."""
-        time, speed, d = (self._samples(world, name) for name in ("time", "speed", "d"))
-        trace = {"time": time.tolist(), "speed": speed.tolist(), "d": d.tolist()}
-        heading, lane = self._samples(world, "heading"), self._samples(world, "lane")
-        return driven_of(
-            time, speed, heading, lane, int(np.count_nonzero(self.passed[world])), self.dt, trace
-        )
+    def samples(self, world: int) -> EpisodeSamples:
+        """`EpisodeRecorder.samples` of world `world`'s episode so far."""
+        time, speed, heading, d = (self._samples(world, name) for name in ("time", "speed", "heading", "d"))
+        passed = int(np.count_nonzero(self.passed[world]))
+        return EpisodeSamples(time, speed, heading, d, self._samples(world, "lane"), passed, self.dt)
 
     def control_ms(self, world: int) -> tuple[float, float]:
         """(p50, p95) of world `world`'s share of the control step per tick [ms] this episode, as

@@ -57,12 +57,11 @@ from common.r157 import (  # noqa: F401  (R157's distance, read here by the loop
 from records import WorldState
 from records.batch import BatchColumns
 from stack.fault.preventability import Fault, WorldHistory, judge
+from stack.results.episode_measures import STOPPED_SPEED_MPS
 from stack.results.episode_result import TTC_CAP_S
 
 DEPARTURE_TOLERANCE_M = 0.3
 """How far a footprint corner may lie beyond the road edge before it counts as a departure [m]."""
-STOPPED_SPEED_MPS = 0.5
-"""Below this speed a vehicle counts as stopped [m/s]."""
 TTC_FLOOR_S = 1.5
 """Time to collision below which a tick counts towards the time below the TTC floor [s]."""
 
