@@ -22,7 +22,9 @@ def test_a_vehicle_counts_as_passed_once():
     reference, actuation = Reference(4.0, 0.0, 0.0, set_speed=25.0), Actuation(0.0, 0.01)
     for ego_x in (25.0, 10.0, 30.0):
         recorder.record(Tick(reference, actuation, scene(3, (ego_x, 1), [(20.0, 4.0), (-30.0, 0.0)]), 1, 1))
-    assert recorder.passed == {1}, "passed once; a car that was always behind never counts"
+    assert np.flatnonzero(recorder.passed).tolist() == [1] and recorder.passed_cars == 1, (
+        "passed once; a car that was always behind never counts"
+    )
     assert recorder.d_reference == [4.0] * 3 and recorder.steering == [0.01] * 3
     assert len(recorder.time) == 4, "the start and the world after each tick"
 

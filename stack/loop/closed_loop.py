@@ -355,7 +355,7 @@ class ClosedLoop:
         return LoopStatus(
             crashed=self.crashed,
             speed=float(self.world.speed[0]),
-            passed_cars=len(self._recorded().passed),
+            passed_cars=self._recorded().passed_cars,
             lane_changes=self.maneuver.counts.lane_changes,
             masked=safety.masked,
             aborted=safety.aborted,

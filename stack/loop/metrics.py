@@ -18,7 +18,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba.extending import register_jitable
 
+from common.compiled import Kernel
 from common.neighbours import lateral_extents
 from records import WorldState
 from records.batch import WorldBatch
@@ -95,8 +97,8 @@ class EpisodeRecorder:
     and the reference and actuation of every tick."""
 
     def __init__(self, world: WorldState) -> None:
-        self.was_ahead = dict(zip(world.ids.tolist(), (world.s > world.s[0]).tolist(), strict=True))
-        self.passed: set[int] = set()
+        self.was_ahead = np.zeros(0, dtype=bool)
+        self.passed = np.zeros(0, dtype=bool)
         self.time: list[float] = []
         self.speed: list[float] = []
         self.heading: list[float] = []
@@ -121,12 +123,18 @@ class EpisodeRecorder:
         self.steering.append(tick.actuation.steering)
         self._record_world(tick.world)
 
+    @property
+    def passed_cars(self) -> int:
+        """The vehicles passed so far (`passing`)."""
+        return int(np.count_nonzero(self.passed))
+
     def _record_world(self, world: WorldState) -> None:
-        ahead = (world.s > world.s[0]).tolist()
-        for vehicle_id, is_ahead in zip(world.ids[1:].tolist(), ahead[1:], strict=True):
-            if self.was_ahead.get(vehicle_id) and not is_ahead:
-                self.passed.add(vehicle_id)
-            self.was_ahead[vehicle_id] = is_ahead
+        more = int(world.ids.max()) + 1 - len(self.passed)
+        if more > 0:
+            self.was_ahead, self.passed = (
+                np.pad(flags, (0, more)) for flags in (self.was_ahead, self.passed)
+            )
+        _passing(world.s, world.ids, self.was_ahead, self.passed)
         self.time.append(world.time)
         self.speed.append(float(world.speed[0]))
         self.heading.append(float(world.heading[0]) - world.lanes[0].heading_at(float(world.s[0])))
@@ -148,7 +156,35 @@ class EpisodeRecorder:
         """What was recorded, as the measurers take it (ticks `dt` seconds apart)."""
         recorded = (self.time, self.speed, self.heading, self.d, self.lane)
         time, speed, heading, d, lane = (np.array(values) for values in recorded)
-        return EpisodeSamples(time, speed, heading, d, lane, len(self.passed), dt)
+        return EpisodeSamples(time, speed, heading, d, lane, self.passed_cars, dt)
+
+
+@register_jitable
+def passing(s: np.ndarray, kept: np.ndarray, was_ahead: np.ndarray, passed: np.ndarray) -> None:
+    """One sample of the passed-car rule in one world, whose vehicles stand at `s` [m] along the
+    road (row 0 the ego), each kept as `kept[row]` in the flags `was_ahead` and `passed`: another
+    vehicle counts as passed (once: a flag) the first time it goes from ahead of the ego to behind
+    it; one not seen before was not ahead."""
+    for row in range(1, len(kept)):
+        ahead = s[row] > s[0]
+        if was_ahead[kept[row]] and not ahead:
+            passed[kept[row]] = True
+        was_ahead[kept[row]] = ahead
+
+
+_passing = Kernel(passing)
+
+
+@Kernel
+def passing_batch(
+    flags: np.ndarray, s: np.ndarray, count: np.ndarray, was_ahead: np.ndarray, passed: np.ndarray
+) -> None:  # pragma: no cover - compiled
+    """`passing` in each world flagged in `flags`, its vehicles the first `count` rows of `s` and of
+    its flags; the rows beyond hold no vehicle, so none of them is ahead."""
+    for w in range(flags.shape[0]):
+        if flags[w]:
+            passing(s[w], np.arange(count[w]), was_ahead[w], passed[w])
+            was_ahead[w, count[w] : s.shape[1]] = False
 
 
 SERIES = ("time", "speed", "heading", "d", "lane", "control_s")
@@ -238,14 +274,7 @@ class EpisodeMetricsBatch:
         for name, value in values.items():
             self.series[name][rows, at] = value[rows]
         self.ticks[rows] += 1
-        vehicles = batch.s.shape[1]
-        others = np.arange(vehicles)[None, :]
-        present = (others >= 1) & (others < batch.count[:, None])
-        ahead = (batch.s > batch.s[:, :1]) & present
-        was_ahead = self.was_ahead[:, :vehicles]
-        passing = flags[:, None] & was_ahead & ~ahead & present
-        self.passed[:, :vehicles] |= passing
-        self.was_ahead[:, :vehicles] = np.where(flags[:, None], ahead, was_ahead)
+        passing_batch(flags, batch.s, batch.count, self.was_ahead, self.passed)
 
     def _samples(self, world: int, name: str) -> np.ndarray:
         return self.series[name][world, : self.ticks[world]]
