@@ -38,7 +38,7 @@ from stack.batch.loop_kernels import (
 )
 from stack.fault.emergency_causes import BrakingsByCause, CausesBatch, tracked_true_rows
 from stack.loop.metrics import EpisodeMetricsBatch
-from stack.loop.safety_metrics import classify_collision
+from stack.loop.safety_metrics import classify_collision, monitored
 from stack.results.episode_fields import record_fields
 from stack.results.episode_measures import measured
 from stack.results.episode_result import EpisodeResult
@@ -375,6 +375,7 @@ class ClosedLoopBatch:
             solve_ms_p95=p95_ms,
             **measured(EpisodeResult, self.metrics.samples(world)),
             **record_fields(self.metrics.measured(world, departed)),
+            **monitored(self.metrics.kept, world),
         )
 
     def world_state(self, world: int) -> WorldState:

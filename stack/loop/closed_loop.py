@@ -35,7 +35,7 @@ from records import Actuation, Command, Encoding, GridConfig, WorldState
 from stack.fault.emergency_causes import BrakingsByCause, CauseTracker, cause_label
 from stack.loop.loop_records import Acted, LoopStatus, SolveStatistics, Tick
 from stack.loop.metrics import EpisodeRecorder, Traces
-from stack.loop.safety_metrics import SafetyMonitor
+from stack.loop.safety_metrics import SafetyMonitor, monitored
 from stack.results.episode_fields import record_fields
 from stack.results.episode_measures import measured
 from stack.results.episode_result import EpisodeResult
@@ -392,4 +392,5 @@ class ClosedLoop:
             snapshot=self.snapshot,
             **measured(EpisodeResult, self._recorded().samples(self.plant.dt)),
             **record_fields(self.monitor.measured()),
+            **monitored(self.monitor.kept, 0),
         )

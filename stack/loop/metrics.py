@@ -29,10 +29,11 @@ from stack.loop.safety_metrics import (
     Collision,
     SafetyMeasures,
     leaders_ahead_batch,
+    monitor_measures,
     r157_min_following_distances,
+    restart,
 )
 from stack.results.episode_measures import EpisodeSamples, lateral_comfort
-from stack.results.episode_result import TTC_CAP_S
 
 
 @dataclass(frozen=True)
@@ -203,9 +204,7 @@ class EpisodeMetricsBatch:
         self.series = {name: np.zeros((worlds, 0)) for name in SERIES}
         self.was_ahead = np.zeros((worlds, 0), dtype=bool)
         self.passed = np.zeros((worlds, 0), dtype=bool)
-        self.min_ttc_s = np.full(worlds, TTC_CAP_S)
-        self.time_below_ttc_floor_s = np.zeros(worlds)
-        self.time_below_min_distance_s = np.zeros(worlds)
+        self.kept = monitor_measures(worlds)
         self.collision: list[Collision | None] = [None] * worlds
 
     def _room(self, ticks: int, vehicles: int) -> None:
@@ -225,9 +224,7 @@ class EpisodeMetricsBatch:
         self.ticks[rows] = 0
         self.passed[rows] = False
         self.was_ahead[rows] = False
-        self.min_ttc_s[rows] = TTC_CAP_S
-        self.time_below_ttc_floor_s[rows] = 0.0
-        self.time_below_min_distance_s[rows] = 0.0
+        restart(self.kept, rows)
         for world in rows.tolist():
             self.collision[world] = None
         flags = np.zeros(self.worlds, dtype=bool)
@@ -242,16 +239,10 @@ class EpisodeMetricsBatch:
         `crashed` on it for the first time: classify each (`collided`)."""
         self._record_world(stepped, batch, time, control_s / max(int(stepped.sum()), 1))
         reach = (batch.lane_width + lateral_extents(batch)) / 2
-        ego_lane_gap = np.full(self.worlds, np.nan)
-        below_floor = np.zeros(self.worlds, dtype=bool)
         leaders_ahead_batch(
             stepped, batch.columns(), batch.heading, batch.lane_heading, reach, batch.lane_width,
-            self.min_ttc_s, below_floor, ego_lane_gap,
+            r157_min_following_distances(batch.speed[:, 0]), self.kept, self.dt,
         )  # fmt: skip
-        self.time_below_ttc_floor_s[stepped] += self.dt * below_floor[stepped]
-        minimum = r157_min_following_distances(batch.speed[:, 0])
-        below_distance = stepped & (ego_lane_gap < minimum)
-        self.time_below_min_distance_s[below_distance] += self.dt
         return [w for w in np.flatnonzero(stepped & crashed).tolist() if self.collision[w] is None]
 
     def collided(self, world: int, collision: Collision) -> None:
@@ -298,11 +289,4 @@ class EpisodeMetricsBatch:
         """`SafetyMonitor.measured` of world `world`'s episode so far, which `departed` the road or
         not (`ClosedLoopBatch.departed`), its collision's fault by the contact's geometry alone
         (the batch keeps no history to replay: `stack.runs.batch_episodes` judges it)."""
-        return SafetyMeasures.of(
-            departed,
-            self.collision[world],
-            None,
-            float(self.min_ttc_s[world]),
-            float(self.time_below_min_distance_s[world]),
-            float(self.time_below_ttc_floor_s[world]),
-        )
+        return SafetyMeasures.of(departed, self.collision[world], None)
