@@ -25,9 +25,10 @@
   ego occupies is below `TTC_FLOOR_S` (nuPlan's TTC metric, whose floor is 0.95 s; the benchmark's
   share of time above a floor).
 
-The per-tick law of the leaders' TTC and gap is one plain function of one world's rows
-(`leaders_ahead`, which numba compiles): `SafetyMonitor` calls it compiled on its world, and
-`leaders_ahead_batch` loops over the worlds of a batch (`stack.loop.metrics.EpisodeMetricsBatch`).
+The per-tick laws are plain functions of one world's rows, which numba compiles: the leaders' TTC
+and gap (`leaders_ahead`) and what the monitor adds up of them (`watch`, into `MonitorMeasures`).
+`SafetyMonitor` calls them on its world, and `leaders_ahead_batch` loops over the worlds of a batch
+(`stack.loop.metrics.EpisodeMetricsBatch`).
 """
 
 from __future__ import annotations
