@@ -21,6 +21,7 @@ from stack.fault.emergency_causes import (
     PHANTOM,
     emergency_cause,
 )
+from stack.fault.reference_driver import TrafficCarefulDriver
 from stack.loop.closed_loop import ClosedLoop
 from stack.loop.safety_metrics import SafetyMeasures, SafetyMonitor
 from stack.runs.alone import run_agent_episode
@@ -60,14 +61,36 @@ class Timed:
         return False
 
 
-def drive(actors: list[Actor], script: Timed, steering: float = 0.0, seconds: float = 15.0) -> SafetyMeasures:
-    """The inattentive ego (no throttle, no brake, `steering` [rad]) on the scripted road until it
-    collides: what the safety monitor measured, judging the contact."""
+class Moves:
+    """At each `(time [s], actor, lane)` of `moves` that actor heads for `lane` at 3 m/s sideways."""
+
+    def __init__(self, *moves: tuple[float, int, int]) -> None:
+        self.moves = moves
+
+    def update(self, time: float, ego_s: float, actors: list[Actor]) -> None:
+        for move_at, index, lane in self.moves:
+            actor = actors[index]
+            if time >= move_at - 1e-9 and actor.target_d is None:
+                actor.target_d, actor.lateral_speed = lane_centre(lane), 3.0
+
+    def settled(self, actors: list[Actor]) -> bool:
+        return False
+
+
+def drive(
+    actors: list[Actor],
+    script: Timed | Moves,
+    steering: float = 0.0,
+    seconds: float = 15.0,
+    acceleration: float = 0.0,
+) -> SafetyMeasures:
+    """The inattentive ego (`acceleration` [m/s^2], no brake, `steering` [rad]) on the scripted
+    road until it collides: what the safety monitor measured, judging the contact."""
     road = ScriptedRoad(3, EGO_LANE, SPEED, actors, script, "kinematic", DT, seconds)
     monitor = SafetyMonitor(DT)
     monitor.start(road.reset())
     while not road.done:
-        monitor.record(road.step(Actuation(acceleration=0.0, steering=steering)), steering != 0.0)
+        monitor.record(road.step(Actuation(acceleration=acceleration, steering=steering)), steering != 0.0)
     assert road.crashed
     return monitor.measured()
 
@@ -81,6 +104,37 @@ def test_a_car_cutting_in_5_m_ahead_and_braking_is_not_the_ego_s_fault() -> None
     measured = drive([ahead(5.0, EGO_LANE + 1)], Timed(move_at=0.5, brake_at=1.5, braking=5.0))
     assert measured.collision_kind == "front"
     assert not measured.at_fault_collision
+    assert measured.fault_reason == "cut-in not preventable"
+
+
+def test_a_cut_out_far_ahead_does_not_let_the_reference_brake_sooner_for_a_later_cut_in() -> None:
+    """A car 60 m ahead leaves the ego's lane at 0.3 s; 2 s later a car 5 m/s slower and 5 m ahead
+    cuts in.
+    R157's driver reacts to each vehicle's risk after its own 1.15 s: the earlier, unrelated risk
+    does not start its braking for the cut-in sooner, so the contact was not preventable."""
+    far, cutting = ahead(60.0, speed=20.0), ahead(16.7, EGO_LANE + 1, speed=20.0)
+    measured = drive([far, cutting], Moves((0.3, 0, EGO_LANE + 1), (2.3, 1, EGO_LANE)))
+    assert measured.collision_kind == "front"
+    assert measured.fault_reason == "cut-in not preventable"
+
+
+def test_a_lane_change_far_down_the_road_is_no_risk_to_the_reference_driver() -> None:
+    road = ScriptedRoad(
+        3, EGO_LANE, SPEED, [ahead(400.0, EGO_LANE + 1)], Moves((0.0, 0, EGO_LANE)), "kinematic", DT, 5.0
+    )
+    world, driver = road.reset(), TrafficCarefulDriver()
+    while not road.done:
+        assert driver.step(world, DT).acceleration == 0.0
+        world = road.step(Actuation(0.0, 0.0))
+    assert driver.risks == {}
+
+
+def test_the_reference_drives_as_the_ego_drove_until_it_reacts() -> None:
+    """The ego speeds up at 1.5 m/s^2 beside a car 20 m ahead in the next lane at its own start
+    speed, which cuts in once the ego is 12 m nearer: a reference that had held its start speed
+    would never have met it, one that drove as the ego did until R157's reaction meets it."""
+    measured = drive([ahead(20.0, EGO_LANE + 1)], Moves((4.0, 0, EGO_LANE)), acceleration=1.5)
+    assert measured.collision_kind == "front"
     assert measured.fault_reason == "cut-in not preventable"
 
 

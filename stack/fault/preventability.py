@@ -6,13 +6,13 @@ unless a careful and competent driver in its place could not have avoided it eit
   a maneuver the ego chose.
 - Being hit from behind or standing (`rear`, `ego stopped`) while keeping its lane is the other's:
   the follower's recorded path answered the ego's own braking, so no replay can judge it.
-- Any other contact (front, stopped vehicle, side swipe) is replayed: R157's
-  reference driver (`stack.fault.reference_driver.CarefulDriver`: risk perception 0.4 s,
-  reaction 0.75 s, a 0.6 s ramp to the plant's 5 m/s^2, keeping R157's minimum following
-  distance) takes the ego's place `REPLAY_S` seconds before the contact, in the lane the ego
-  collided in, at the ego's position and speed then, against the other vehicles' recorded
-  trajectories, and for `BEYOND_S` past the contact's time against
-  them extrapolated (each holding its last acceleration; one moving sideways goes on to the
+- Any other contact (front, stopped vehicle, side swipe) is replayed: R157's reference driver in
+  traffic (`stack.fault.reference_driver.TrafficCarefulDriver`: for each vehicle's risk, perception
+  0.4 s, reaction 0.75 s, a 0.6 s ramp to the plant's 5 m/s^2; keeping R157's minimum following
+  distance; heeding the vehicles near enough to matter) takes the ego's place `REPLAY_S` seconds
+  before the contact, in the lane the ego collided in, at the ego's position and speed then,
+  against the other vehicles' recorded trajectories, and for `BEYOND_S` past the contact's time
+  against them extrapolated (each holding its last acceleration; one moving sideways goes on to the
   next lane's centre). If it touches nobody, the collision was preventable: at fault. The other
   vehicles replay what they did; they do not react to the reference driver, so after a frontal
   contact only vehicles ahead of it count (a recorded follower that followed the ego elsewhere is
@@ -29,13 +29,14 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from itertools import pairwise
 from typing import Any
 
 import numpy as np
 
 from records import WorldState
 from stack.fault.emergency_causes import CLOSING_IN, NEVER, CauseTracker, cause_label, emergency_cause
-from stack.fault.reference_driver import CarefulDriver
+from stack.fault.reference_driver import TrafficCarefulDriver
 
 REPLAY_S = 5.0
 """How long before the contact the reference driver takes the ego's place [s]."""
@@ -115,18 +116,24 @@ def careful_driver_avoids(history: Sequence[WorldState], dt: float, from_behind:
     """Whether R157's reference driver, in the ego's place from the first of `history` (its position
     and speed then, the centre of the lane the ego is in at the last), touches no vehicle of the
     recorded frames and of their extrapolation (`extrapolated`, `BEYOND_S`; only vehicles ahead of
-    it count unless the contact came `from_behind`)."""
-    driver = CarefulDriver(keeps_distance=True)
+    it count unless the contact came `from_behind`). It drives as the ego drove (the ego's recorded
+    acceleration, none past the contact) until it first brakes for a risk, and from then on only
+    brakes or holds its speed: a careful driver in the ego's place, not one that never sped up."""
+    driver = TrafficCarefulDriver()
     start, crash = history[0], history[-1]
     lane = crash.ego_lane
     s, speed = float(start.s[0]), float(start.speed[0])
     d = float(crash.lane_offsets[lane])
+    driven = [(after.speed[0] - before.speed[0]) / dt for before, after in pairwise(history)]
     beyond = extrapolated(history, dt, BEYOND_S)
-    for world in [*history, *beyond]:
+    reacted = False
+    for tick, world in enumerate([*history, *beyond]):
         placed = _with_ego(world, s, d, speed, lane)
         if _touches(placed, from_behind):
             return False
-        acceleration = driver.step(placed, dt).acceleration
+        braking = driver.step(placed, dt).acceleration
+        reacted = reacted or braking < 0
+        acceleration = braking if reacted else float(driven[tick]) if tick < len(driven) else 0.0
         s += speed * dt
         speed = max(speed + acceleration * dt, 0.0)
     return True
