@@ -188,7 +188,7 @@ def test_an_emergency_braking_s_cause_is_the_first_that_holds(
     ("kind", "point", "cause"),
     [
         ("lead-braking", "speed=25,time_gap=1.0,deceleration=6", "leader_braking"),
-        ("cut-in", "speed=25,gap=4,relative_speed=3,lateral_speed=1.5", "cut_in"),
+        ("cut-in", "speed=25,gap=4,relative_speed=6,lateral_speed=3", "cut_in"),
     ],
 )
 def test_the_stack_s_emergency_braking_is_counted_by_its_cause(kind: str, point: str, cause: str) -> None:

@@ -117,8 +117,10 @@ class CarefulDriver:
 
 class TrafficCarefulDriver(CarefulDriver):
     """R157's careful driver among many vehicles (module docstring): each risk is a vehicle's, with
-    its own perception, reaction and ramp; only vehicles it `heeds` count; it brakes as hard as it
-    must (`needed`) to keep `kept_distance` to the vehicles at risk ahead in its lane."""
+    its own perception, reaction and ramp, and ends once that vehicle has settled in another lane
+    than the ego's (a later maneuver of it is a new risk); only vehicles it `heeds` count; it brakes
+    as hard as it must (`needed`) to keep `kept_distance` to the vehicles at risk ahead in its
+    lane."""
 
     def reset(self) -> None:
         super().reset()
@@ -126,8 +128,14 @@ class TrafficCarefulDriver(CarefulDriver):
         """Vehicle id -> the time its risk began [s]."""
 
     def step(self, world: WorldState, dt: float) -> Actuation:
-        for vehicle in self._risky(world, dt):
+        risky = self._risky(world, dt)
+        for vehicle in risky:
             self.risks.setdefault(vehicle, world.time)
+        for row in range(1, world.count):
+            vehicle, lane = int(world.ids[row]), int(world.lane[row])
+            settled = abs(float(world.d[row] - world.lane_offsets[lane])) <= WANDERING_M
+            if vehicle in self.risks and vehicle not in risky and settled and lane != world.ego_lane:
+                del self.risks[vehicle]
         self.speeds = {int(i): float(v) for i, v in zip(world.ids[1:], world.speed[1:], strict=True)}
         braking = max(
             (
@@ -174,7 +182,11 @@ class TrafficCarefulDriver(CarefulDriver):
             if abs(float(world.d[row] - world.lane_offsets[lane])) > WANDERING_M:
                 risky.append(int(world.ids[row]))
                 if lane == ego_lane:
-                    risky += [int(world.ids[r]) for r in in_lane if world.s[r] > world.s[row]]
+                    risky += [
+                        int(world.ids[r])
+                        for r in in_lane
+                        if world.s[r] > world.s[row] and self.heeds(world, r)
+                    ]
         leader = self._leader_row(world)
         if leader is not None:
             before = self.speeds.get(int(world.ids[leader]))
