@@ -6,10 +6,11 @@ driver, replayed in its place over the last seconds, decides whether the contact
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import pytest
 
-from records import Actuation
+from records import Actuation, WorldState
 from stack.assessment.safety_assessment import plant_for, point_config
 from stack.fault.emergency_causes import (
     CAUSES,
@@ -21,6 +22,7 @@ from stack.fault.emergency_causes import (
     PHANTOM,
     emergency_cause,
 )
+from stack.fault.preventability import judge
 from stack.fault.reference_driver import TrafficCarefulDriver
 from stack.loop.closed_loop import ClosedLoop
 from stack.loop.safety_metrics import SafetyMeasures, SafetyMonitor
@@ -136,6 +138,45 @@ def test_the_reference_drives_as_the_ego_drove_until_it_reacts() -> None:
     measured = drive([ahead(20.0, EGO_LANE + 1)], Moves((4.0, 0, EGO_LANE)), acceleration=1.5)
     assert measured.collision_kind == "front"
     assert measured.fault_reason == "cut-in not preventable"
+
+
+@pytest.mark.parametrize(("settled_s", "reason"), [(0.3, "cut-in not preventable"), (1.0, "own lane change")])
+def test_a_cut_in_after_the_ego_s_lane_change_is_judged_by_the_replay(settled_s: float, reason: str) -> None:
+    """The contact of `test_a_car_cutting_in_5_m_ahead_and_braking...` (the cut-in starts at 0.5 s),
+    its frames rewritten as if the ego had come from the next lane and settled at `settled_s`: a
+    cut-in that began after the ego had settled is judged by the replay, one that began while it
+    was still changing lane is its own lane change."""
+    road = ScriptedRoad(
+        3,
+        EGO_LANE,
+        SPEED,
+        [ahead(5.0, EGO_LANE + 1)],
+        Timed(0.5, brake_at=1.5, braking=5.0),
+        "kinematic",
+        DT,
+        15.0,
+    )
+    monitor = SafetyMonitor(DT)
+    world = road.reset()
+    frames = [world]
+    while not road.crashed:
+        world = road.step(Actuation(0.0, 0.0))
+        frames.append(world)
+    monitor.start(frames[0])
+    for frame in frames[1:]:
+        monitor.record(frame, False)
+    assert monitor.collision is not None
+    came_from = lane_centre(EGO_LANE - 1)
+
+    def changing(frame: WorldState) -> WorldState:
+        if frame.time >= settled_s:
+            return frame
+        lane, d = frame.lane.copy(), frame.d.copy()
+        lane[0], d[0] = EGO_LANE - 1, came_from + 0.6 * (d[0] - came_from)
+        return replace(frame, lane=lane, d=d)
+
+    fault = judge(monitor.collision.kind, monitor.collision.other, [changing(f) for f in frames[-76:]], DT)
+    assert fault.reason == reason and fault.at_fault == (reason == "own lane change")
 
 
 def test_the_ego_changing_lane_into_a_car_is_at_fault() -> None:

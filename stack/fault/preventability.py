@@ -2,8 +2,9 @@
 unless a careful and competent driver in its place could not have avoided it either.
 
 - The ego's own lane change (the geometric `lane change` contact, or the ego's lane differing
-  anywhere in the last `REPLAY_S` seconds) and leaving the road stay at fault: no replay excuses
-  a maneuver the ego chose.
+  anywhere in the last `REPLAY_S` seconds, unless the collided vehicle's cut-in began only after
+  the ego had settled in its new lane) and leaving the road stay at fault: no replay excuses a
+  maneuver the ego chose.
 - Being hit from behind or standing (`rear`, `ego stopped`) while keeping its lane is the other's:
   the follower's recorded path answered the ego's own braking, so no replay can judge it.
 - Any other contact (front, stopped vehicle, side swipe) is replayed: R157's reference driver in
@@ -36,7 +37,7 @@ import numpy as np
 
 from records import WorldState
 from stack.fault.emergency_causes import CLOSING_IN, NEVER, CauseTracker, cause_label, emergency_cause
-from stack.fault.reference_driver import TrafficCarefulDriver
+from stack.fault.reference_driver import WANDERING_M, TrafficCarefulDriver
 
 REPLAY_S = 5.0
 """How long before the contact the reference driver takes the ego's place [s]."""
@@ -87,16 +88,38 @@ def judge(kind: str, other: int | None, history: Sequence[WorldState], dt: float
     if kind == "off road":
         return Fault(True, "off road")
     crash = history[-1]
-    if kind == "lane change" or any(world.ego_lane != crash.ego_lane for world in history):
+    situation = _situation(other, history, dt)
+    changed = any(world.ego_lane != crash.ego_lane for world in history)
+    if kind == "lane change" or (
+        changed and not (situation == "cut-in" and _settled_before_cut_in(other, history))
+    ):
         return Fault(True, "own lane change")
     if kind in HIT_FROM_BEHIND_KINDS:
         return Fault(False, f"{kind} not preventable")
     from_behind = kind in FROM_BEHIND_KINDS
-    situation = _situation(other, history, dt)
     if (from_behind and situation != "cut-in") or (kind == "stopped vehicle" and situation == "closing in"):
         situation = kind
     avoided = careful_driver_avoids(history, dt, from_behind)
     return Fault(avoided, f"{situation} {'preventable' if avoided else 'not preventable'}")
+
+
+def _settled_before_cut_in(other: int | None, history: Sequence[WorldState]) -> bool:
+    """Whether the ego had finished its lane change before the vehicle of id `other` began to cut
+    in: from the first frame of `history` in which that vehicle is outside its lane's wandering zone
+    on, the ego is in the lane it collided in, its centre within the wandering zone."""
+    crash = history[-1]
+    cutting = False
+    for world in history:
+        rows = np.flatnonzero(world.ids == other)
+        if not cutting and rows.size:
+            row = int(rows[0])
+            cutting = abs(float(world.d[row] - world.lane_offsets[int(world.lane[row])])) > WANDERING_M
+        settled = world.ego_lane == crash.ego_lane and (
+            abs(float(world.d[0] - world.lane_offsets[crash.ego_lane])) <= WANDERING_M
+        )
+        if cutting and not settled:
+            return False
+    return cutting
 
 
 def _situation(other: int | None, history: Sequence[WorldState], dt: float) -> str:
