@@ -91,6 +91,7 @@ class ClosedLoopBatch:
             self.min_speed,
             math.tan(max_course),
             control_config.set_speed_mps,
+            control_config.cut_in_lookahead_s,
         )
         self.safety = safety_settings(safety)
         self.abort_lookahead_s = safety.abort_lookahead_s
