@@ -31,11 +31,12 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from itertools import pairwise
 from typing import Any
 
 import numpy as np
+from highway_env.utils import rotated_rectangles_intersect
 
+from common.neighbours import turned_width
 from records import WorldState
 from stack.fault.emergency_causes import CLOSING_IN, NEVER, CauseTracker, cause_label, emergency_cause
 from stack.fault.reference_driver import WANDERING_M, TrafficCarefulDriver
@@ -144,27 +145,29 @@ def careful_driver_avoids(history: Sequence[WorldState], dt: float, from_behind:
     (`extrapolated`, `BEYOND_S`; only vehicles ahead of it count unless the contact came
     `from_behind`). It keeps the ego's path across the road (its recorded lateral position and
     lane; past the contact, the centre of the lane it collided in), and drives as the ego drove
-    along it (the ego's recorded acceleration, none past the contact) until it first brakes for a
-    risk, and from then on only brakes or holds its speed: a careful driver in the ego's place, not
-    one that never sped up or that was elsewhere."""
+    along it (the ego's recorded speed; past the contact, it holds its speed) until it first brakes
+    for a risk, and from then on only brakes or holds its speed: a careful driver in the ego's
+    place, not one that never sped up or that was elsewhere. Its position is the ego's recorded
+    one less how far it fell behind (the speeds' difference integrated), so where it drove as the
+    ego did it is exactly where the ego was, whatever the plant's integration."""
     driver = TrafficCarefulDriver()
     start, crash = history[0], history[-1]
-    s, speed = float(start.s[0]), float(start.speed[0])
-    driven = [(after.speed[0] - before.speed[0]) / dt for before, after in pairwise(history)]
-    beyond = extrapolated(history, dt, BEYOND_S)
-    reacted = False
+    frames = [*history, *extrapolated(history, dt, BEYOND_S)]
     path = [(float(world.d[0]), world.ego_lane) for world in history]
-    path += [(float(crash.lane_offsets[crash.ego_lane]), crash.ego_lane)] * len(beyond)
-    for tick, world in enumerate([*history, *beyond]):
+    path += [(float(crash.lane_offsets[crash.ego_lane]), crash.ego_lane)] * (len(frames) - len(history))
+    speed, behind, reacted = float(start.speed[0]), 0.0, False
+    for tick, world in enumerate(frames):
         d, lane = path[tick]
-        placed = _with_ego(world, s, d, speed, lane)
+        placed = _with_ego(world, float(world.s[0]) - behind, d, speed, lane)
         if _touches(placed, from_behind):
             return False
         braking = driver.step(placed, dt).acceleration
         reacted = reacted or braking < 0
-        acceleration = braking if reacted else float(driven[tick]) if tick < len(driven) else 0.0
-        s += speed * dt
-        speed = max(speed + acceleration * dt, 0.0)
+        behind += (float(world.speed[0]) - speed) * dt
+        if reacted:
+            speed = max(speed + braking * dt, 0.0)
+        elif tick + 1 < len(history):
+            speed = float(history[tick + 1].speed[0])
     return True
 
 
@@ -221,10 +224,33 @@ def _with_ego(world: WorldState, s: float, d: float, speed: float, lane: int) ->
 
 
 def _touches(world: WorldState, from_behind: bool) -> bool:
-    """The ego's footprint overlaps another's in the lane frame (lengths and widths, headings
-    ignored); only vehicles whose centre is ahead of the ego's count unless `from_behind`."""
+    """The ego's footprint overlaps another's in the lane frame: the rectangles turned by their
+    headings to the lane (highway-env's `rotated_rectangles_intersect`, after a bounding-box test
+    on their extents along and across the road); only vehicles whose centre is ahead of the ego's
+    count unless `from_behind`."""
+    heading = world.heading - world.lanes[0].heading_at(float(world.s[0]))
+    across = turned_width(world.length, world.width, heading)
+    along = turned_width(world.width, world.length, heading)
     others = np.arange(1, world.count)
-    along = np.abs(world.s[others] - world.s[0]) < (world.length[others] + world.length[0]) / 2
-    across = np.abs(world.d[others] - world.d[0]) < (world.width[others] + world.width[0]) / 2
+    near = (np.abs(world.s[others] - world.s[0]) < (along[others] + along[0]) / 2) & (
+        np.abs(world.d[others] - world.d[0]) < (across[others] + across[0]) / 2
+    )
     counted = np.ones(others.size, dtype=bool) if from_behind else world.s[others] > world.s[0]
-    return bool(np.any(along & across & counted))
+    ego = (
+        np.array([world.s[0], world.d[0]]),
+        float(world.length[0]),
+        float(world.width[0]),
+        float(heading[0]),
+    )
+    return any(
+        rotated_rectangles_intersect(
+            ego,
+            (
+                np.array([world.s[row], world.d[row]]),
+                float(world.length[row]),
+                float(world.width[row]),
+                float(heading[row]),
+            ),
+        )
+        for row in others[near & counted].tolist()
+    )
