@@ -10,7 +10,9 @@ import numpy as np
 from numba import njit
 from numba.extending import register_jitable
 
+from common.longitudinal import STOP_MARGIN_M
 from common.neighbours import lateral_extent, swept_distance
+from controllers.reference import road_to_reach
 from records import Neighbour, WorldState
 
 LEAVING_M = 1.0
@@ -20,6 +22,39 @@ lane, and no longer hides the vehicle ahead of it [m]."""
 
 SIDE_MARGIN_M = 0.3
 """Lateral room a passed vehicle must still have to the ego's side when the ego is by [m]."""
+LEAVE_MARGIN_M = 0.3
+"""How far past the origin lane's edge the ego's centre must be, beyond half its width, before its
+turned footprint has left the lane [m] (a 5 m car at 3 deg reaches 0.26 m further across)."""
+LEAVE_SAFETY = 1.5
+"""Margin on the road a lane change still needs to leave its origin lane: a vehicle ahead there is
+passed by only when it is farther than this times that road [-]."""
+
+
+@register_jitable
+def road_to_leave(
+    coefficients: tuple[float, float, float, float, float, float],
+    t0: float,
+    duration: float,
+    d1: float,
+    profile_time: float,
+    peak_lateral_speed: float,
+    origin_offset: float,
+    lane_width: float,
+    ego_width: float,
+    speed: float,
+    tan_max_course: float,
+) -> float:
+    """Road [m] a lane change on the quintic `coefficients` (from `t0`, over `duration` [s], to
+    `d1` [m]; now at `profile_time` [s] on its clock) still needs before the ego's footprint is out
+    of the origin lane centred at `origin_offset` [m]: until its centre is half the lane, half the
+    ego's `width` and `LEAVE_MARGIN_M` past that centre (`controllers.reference.road_to_reach`)."""
+    towards = 1.0 if d1 > origin_offset else -1.0
+    beyond = origin_offset + towards * (lane_width / 2 + ego_width / 2 + LEAVE_MARGIN_M)
+    c0, c1, c2, c3, c4, c5 = coefficients
+    return road_to_reach(
+        c0, c1, c2, c3, c4, c5, t0, duration, d1, profile_time, beyond, towards, speed, tan_max_course,
+        peak_lateral_speed,
+    )  # fmt: skip
 
 
 @register_jitable
@@ -49,7 +84,11 @@ def passes_before_reached(
 
 
 def leaders(
-    world: WorldState, lanes: tuple[int, ...], cut_in_lookahead_s: float = 0.0
+    world: WorldState,
+    lanes: tuple[int, ...],
+    cut_in_lookahead_s: float = 0.0,
+    leaving_lane: int = -1,
+    leaving_within_m: float = math.inf,
 ) -> tuple[Neighbour, ...]:
     """For each lane in `lanes`, the closest vehicle ahead reaching into it, now or within
     `cut_in_lookahead_s` [s] at its present sideways speed (a car cutting in is a leader before it
@@ -59,7 +98,12 @@ def leaders(
     centre), the next one ahead that it no longer hides, and so on: a cut-out reveals the car
     beyond at once. A slower vehicle entering the lane that the ego passes before it reaches
     the ego's side (`passes_before_reached`) is not followed: braking for it would only keep
-    the two side by side for longer. `leaders_in_rows`, compiled, on the world's rows."""
+    the two side by side for longer. In `leaving_lane` (the lane a lane change is leaving; -1:
+    none) a vehicle farther ahead than `LEAVE_SAFETY` times `leaving_within_m` [m] (the road the
+    change still needs to leave it, `controllers.reference.road_to_reach`) plus the stop margin is
+    not followed: the ego is out of that lane before it gets there, and stopping for it would stall
+    the change beside it (the profile's clock stops with the car). `leaders_in_rows`, compiled, on
+    the world's rows."""
     n = world.count
     found_most = n * len(lanes)
     gaps, speeds, rows = np.empty(found_most), np.empty(found_most), np.empty(found_most, dtype=np.int64)
@@ -68,7 +112,8 @@ def leaders(
         np.array(lanes, dtype=np.int64), n, world.s, world.d, world.speed,
         world.heading - np.array([reference.heading_at(s) for s in world.s.tolist()]),
         world.length, world.width, np.concatenate(((0.0,), lateral_extent(world))),
-        world.lane_offsets, world.lane_width, cut_in_lookahead_s, gaps, speeds, rows,
+        world.lane_offsets, world.lane_width, cut_in_lookahead_s, leaving_lane, leaving_within_m,
+        gaps, speeds, rows,
     )  # fmt: skip
     ids = world.ids
     return tuple(
@@ -93,6 +138,8 @@ def leaders_in_rows(
     offsets: np.ndarray,
     lane_width: float,
     cut_in_lookahead_s: float,
+    leaving_lane: int,
+    leaving_within_m: float,
     gaps: np.ndarray,
     speeds: np.ndarray,
     rows: np.ndarray,
@@ -100,8 +147,9 @@ def leaders_in_rows(
     """`leaders(world, lanes)` of one world's `n` vehicles as rows of arrays (row 0 the ego;
     `heading_to_lane`: each one's heading to the lane at its position [rad]; `extent`: its turned
     footprint across the road [m]; `cut_in_lookahead_s` [s]: how far ahead its sideways motion,
-    speed times the sine of `heading_to_lane`, counts): writes each leader's gap [m], speed [m/s]
-    and row in order and returns how many."""
+    speed times the sine of `heading_to_lane`, counts; `leaving_lane`, `leaving_within_m` as
+    `leaders` takes them): writes each leader's gap [m], speed [m/s] and row in order and returns
+    how many."""
     found = 0
     candidates = np.empty(n, dtype=np.int64)
     for lane in lanes:
@@ -112,6 +160,9 @@ def leaders_in_rows(
             drift = speed[row] * math.sin(heading_to_lane[row]) * cut_in_lookahead_s
             across = swept_distance(d[row], drift, offsets[lane])
             if not (across < (lane_width + extent[row]) / 2 and rel > 0):
+                continue
+            gap = rel - (length[row] + length[0]) / 2
+            if lane == leaving_lane and gap > LEAVE_SAFETY * leaving_within_m + STOP_MARGIN_M:
                 continue
             if offset > LEAVING_M and speed[row] < speed[0]:
                 towards = math.copysign(1.0, d[0] - d[row])

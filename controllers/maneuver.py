@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from numba.extending import register_jitable
 
 from common.neighbours import occupied_lanes
-from controllers.leaders import leaders
+from controllers.leaders import leaders, road_to_leave
 from controllers.reference import (
     QuinticProfile,
     WarpedProfile,
@@ -134,13 +134,17 @@ class Maneuver:
         self.clock = self.clock.at_rate(world.time, self._rate(float(world.speed[0])))
         lanes = (self.target, *(lane for lane in occupied_lanes(world) if lane != self.target))
         heading_for = self.target if self.clock.profile_time(world.time) >= self.profile.t0 else self.lane
-        return Reference.sampled(
-            self.clock,
-            world.time,
-            self.set_speed,
-            leaders(world, lanes, self.cut_in_lookahead_s),
-            target_lane=heading_for,
-        )
+        leaving_lane, leaving_within = -1, math.inf
+        if self.changing_lane:
+            profile = self.profile
+            leaving_lane, leaving_within = self.lane, road_to_leave(
+                tuple(profile.coefficients.tolist()), profile.t0, profile.duration, profile.d1,
+                self.clock.profile_time(world.time), profile.peak_lateral_speed,
+                float(world.lane_offsets[self.lane]), world.lane_width, float(world.width[0]),
+                float(world.speed[0]), math.tan(self.max_course),
+            )  # fmt: skip
+        found = leaders(world, lanes, self.cut_in_lookahead_s, leaving_lane, leaving_within)
+        return Reference.sampled(self.clock, world.time, self.set_speed, found, target_lane=heading_for)
 
     def _rate(self, speed: float) -> float:
         """How fast the profile's clock runs at `speed` [m/s] (see the class docstring)."""

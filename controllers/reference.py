@@ -131,6 +131,40 @@ def clock_rate(speed: float, tan_max_course: float, peak_lateral_speed: float) -
     return min(1.0, max(speed, 0.0) * tan_max_course / peak_lateral_speed)
 
 
+@register_jitable
+def road_to_reach(
+    c0: float,
+    c1: float,
+    c2: float,
+    c3: float,
+    c4: float,
+    c5: float,
+    t0: float,
+    duration: float,
+    d1: float,
+    profile_time: float,
+    beyond: float,
+    towards: float,
+    speed: float,
+    tan_max_course: float,
+    peak_lateral_speed: float,
+) -> float:
+    """Road [m] the ego covers from profile time `profile_time` [s] until the quintic c0..c5 (from
+    `t0`, over `duration` [s], ending at `d1` [m]) is past `beyond` [m] in the direction `towards`
+    (+-1); inf when it never gets there. The profile is stepped in `PEAK_SAMPLES`ths of its duration
+    (the first step past counts whole), and a profile second is max(`speed`, peak lateral speed /
+    tan(max course)) metres of road: the profile's clock slows with the car (`clock_rate`), so at a
+    crawl the road to a lateral position is the course's geometry, whatever the speed."""
+    step = duration / PEAK_SAMPLES
+    tau = max(profile_time, t0)
+    while towards * (quintic_sample(c0, c1, c2, c3, c4, c5, t0, duration, d1, tau)[0] - beyond) < 0.0:
+        if tau >= t0 + duration:
+            return math.inf
+        tau += step
+    per_profile_second = max(speed, peak_lateral_speed / tan_max_course if tan_max_course > 0 else math.inf)
+    return (tau - max(profile_time, t0)) * per_profile_second
+
+
 @dataclass(frozen=True)
 class QuinticProfile:
     """d(t) from (d0, v0, a0) at t0 to (d1, 0, 0) at t0 + duration; constant d1 afterwards.

@@ -3,12 +3,14 @@ scenario's geometry, an assessment that can fail (a stack that never brakes), th
 on the way kept as regression points, and a CLI smoke run on a tiny grid."""
 
 import json
+import math
 
 import pytest
 from typer.testing import CliRunner
 
 from controllers.emergency import EmergencyBraking
 from controllers.leaders import leaders
+from controllers.reference import QuinticProfile, road_to_reach
 from records import Actuation, Neighbour
 from stack.apps.cli import app
 from stack.assessment.safety_assessment import assess, drive_reference
@@ -177,6 +179,30 @@ def test_a_car_cutting_in_is_a_leader_before_it_reaches_the_lane():
     (anticipated,) = leaders(world, (1,), cut_in_lookahead_s=1.0)
     assert anticipated.speed == road.actors[0].speed
     assert leaders(world, (2,), cut_in_lookahead_s=1.0)[0].vehicle == anticipated.vehicle
+
+
+def test_the_road_a_lane_change_needs_is_the_course_s_geometry_at_a_crawl():
+    """A 4 m change over 5 s reaches its middle after 2.5 s of its profile: 75 m at 30 m/s; at
+    1 m/s its clock slows with the car, so the road is 2.5 s x peak lateral speed / tan(12 deg)."""
+    profile = QuinticProfile(d0=0.0, d1=4.0, t0=0.0, duration=5.0)
+    c = tuple(profile.coefficients.tolist())
+    tan_course, step = math.tan(math.radians(12.0)), 5.0 / 64
+    for speed, per_second in ((30.0, 30.0), (1.0, profile.peak_lateral_speed / tan_course)):
+        road = road_to_reach(*c, 0.0, 5.0, 4.0, 0.0, 2.0, 1.0, speed, tan_course, profile.peak_lateral_speed)
+        assert 2.5 * per_second <= road <= (2.5 + step) * per_second
+    assert road_to_reach(*c, 0.0, 5.0, 4.0, 0.0, 5.0, 1.0, 30.0, tan_course, 1.0) == math.inf
+
+
+@pytest.mark.parametrize(("road_to_leave", "followed"), [(10.0, False), (15.0, True)])
+def test_a_stopped_car_in_the_lane_being_left_is_passed_when_the_change_leaves_it_first(
+    road_to_leave, followed
+):
+    """20 m ahead in the lane a change is leaving: not followed while the change is out of that lane
+    within 1.5 x its road (plus 1 m), else followed; in other lanes always."""
+    stopped = Actor(EGO_START_S + LENGTH + 20.0, safety_scenarios.lane_centre(1), 0.0)
+    world = ScriptedRoad(4, 1, 3.0, [stopped], Stationary(), "kinematic", DT, 5.0).reset()
+    assert len(leaders(world, (1,), 0.0, 1, road_to_leave)) == followed
+    assert len(leaders(world, (1,), 0.0, 2, road_to_leave)) == 1
 
 
 def test_reference_driver_on_a_lead_braking_point_it_cannot_avoid():

@@ -14,6 +14,8 @@ activations, slot braked for]) and the road departure flag."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -22,7 +24,7 @@ from common.longitudinal import BrakingLimits, gap_acceleration, needs_full_brak
 from common.neighbours import VehicleRows, footprint_across, reaches_lane
 from controllers.emergency import braked_acceleration, leader_braking
 from controllers.lateral import LateralMemory, lateral_steering
-from controllers.leaders import leaders_in_rows
+from controllers.leaders import leaders_in_rows, road_to_leave
 from controllers.maneuver import lane_change_target, left_origin
 from controllers.pid import PIDMemory, pid_output
 from controllers.reference import (
@@ -206,9 +208,18 @@ def control(
         d_ref, d_dot_ref, d_ddot_ref = _sample(w, coef, profile, clock, t)
         for row in range(n):
             heading_to_lane[row] = heading[w, row] - lane_heading[w]
+        leaving_lane, leaving_within = -1, math.inf
+        if lane[w] != target[w]:
+            c = coef[w]
+            leaving_lane, leaving_within = lane[w], road_to_leave(
+                (c[0], c[1], c[2], c[3], c[4], c[5]), profile[w, 0], profile[w, 1], profile[w, 2],
+                warped_time(warp, t), profile[w, 3], offsets[w, lane[w]], lane_width, width[w, 0],
+                speed[w, 0], settings.tan_max_course,
+            )  # fmt: skip
         found = leaders_in_rows(
             lanes[:used], n, s[w], d[w], speed[w], heading_to_lane, length[w], width[w],
-            extent[w], offsets[w], lane_width, settings.cut_in_lookahead_s, gaps, speeds, rows,
+            extent[w], offsets[w], lane_width, settings.cut_in_lookahead_s, leaving_lane, leaving_within,
+            gaps, speeds, rows,
         )  # fmt: skip
         for k in range(found):
             rows[k] = slots[w, rows[k]]
