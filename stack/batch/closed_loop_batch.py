@@ -253,6 +253,12 @@ class ClosedLoopBatch:
         if self.metrics is not None:
             self.metrics.reset(worlds, self.batch, self.traffic.time)
 
+    def loaded(self) -> None:
+        """What the layers read, anew after worlds were written in place (`stack.batch.loop_copies`)."""
+        self._memory(self.traffic.arrays.vehicles)
+        self.batch = self.traffic.arrays.world_batch()
+        self._sense(np.ones(self.worlds, dtype=bool), warm_up=True)
+
     def _maneuver(self) -> ManeuverArrays:
         return ManeuverArrays(self.lane, self.target, self.coef, self.profile, self.clock, self.counts)
 
