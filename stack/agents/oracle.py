@@ -9,12 +9,16 @@ ego gains along the road by then (minus infinity on a crash); a lane change must
 more than staying. With the shipped Double DQN as `base` (the default) the rollouts drive the best
 agent there is and the tree adds what changing its next decisions gains with the future known: a
 reference ceiling for any agent on the same seeds, controllers and safety layer, though not an
-exhaustive optimum. It is slow: up to 3^depth look-ahead rollouts per decision (the cost per episode
-is in BENCHMARKS.md), fewer where a search goes on from the last one: its leaves are kept, and when
-the loop then stands where one of its root commands led (the same world, bit for bit: the simulator
-is deterministic), a leaf of the new search whose commands are a kept leaf's after the first (its
-base agent's first command included) is that same future, played on only for the time the root
-moved on. Every value, so every decision, is the one a search from scratch makes.
+exhaustive optimum. It costs up to 3^depth look-ahead rollouts per decision (the cost per episode
+is in BENCHMARKS.md). Where the loop copies into a batch of worlds (the `vector` backend's highway
+road, the PID tracker on the kinematic plant, no sensor model: `stack.batch.loop_copies`), the
+3^depth command paths are played as one batch, stepped together (`stack.agents.oracle_search`;
+about 3x cheaper an episode). Elsewhere they are forks of the loop played one at a time, fewer
+where a search goes on from the last one: its leaves are kept, and when the loop then stands where
+one of its root commands led (the same world, bit for bit: the simulator is deterministic), a leaf
+of the new search whose commands are a kept leaf's after the first (its base agent's first command
+included) is that same future, played on only for the time the root moved on. Either way every
+value, so every decision, is the one a search from scratch on forks makes.
 
 It is an agent, one of `drivestack agents`, but it lives here, beside the closed loop, rather than
 in `planner/` with the others: it plans on the loop itself (`ClosedLoop.fork`, `permits`,
