@@ -210,6 +210,14 @@ def _headings_to_the_lane(batch: WorldBatch) -> np.ndarray:
 
 
 @register_jitable
+def swept_distance(d: float, drift: float, centre: float) -> float:
+    """How far across the road [m] a centre moving from `d` to `d + drift` [m] comes to `centre`
+    [m] on its way (0 when it crosses it)."""
+    low, high = min(d, d + drift), max(d, d + drift)
+    return 0.0 if low <= centre <= high else min(abs(low - centre), abs(high - centre))
+
+
+@register_jitable
 def nearest_in_lane(rows: VehicleRows, centre: float) -> tuple[int, int]:
     """(row ahead, row behind; -1: none) of the vehicles nearest the ego along the road (the first on
     ties) among one world's `rows` that reach into the lane centred at `centre` [m], anywhere
@@ -218,9 +226,7 @@ def nearest_in_lane(rows: VehicleRows, centre: float) -> tuple[int, int]:
     ahead, behind = -1, -1
     best_ahead, best_behind = math.inf, math.inf
     for v in range(1, rows.vehicles):
-        low, high = min(d[v], d[v] + drift[v]), max(d[v], d[v] + drift[v])
-        across = 0.0 if low <= centre <= high else min(abs(low - centre), abs(high - centre))
-        if not across < reach[v]:
+        if not swept_distance(d[v], drift[v], centre) < reach[v]:
             continue
         rel = s[v] - s[0]
         if rel > 0:

@@ -144,8 +144,9 @@ class ControllerConfig(_Settings):
     installed package registers under the entry points `drivestack.controllers`, or a plug-in class
     `module.path:Class` / `file.py:Class`, see docs/plugins.md), its gains, the lane change (nominal
     duration, the course limit that stretches it at low speed, the speed below which none starts),
-    the adaptive cruise (set speed, time gap, standstill gap, comfort deceleration) and emergency
-    braking (`controllers.emergency`: deceleration, trigger time to collision)."""
+    the adaptive cruise (set speed, time gap, standstill gap, comfort deceleration), emergency
+    braking (`controllers.emergency`: deceleration, trigger time to collision) and how early both
+    take a vehicle cutting in as a leader (`controllers.leaders`)."""
 
     type: Annotated[str, plugin_name("controller", CONTROLLER_NAMES, CONTROLLER_GROUP)] = "pid"
     pid: PIDGains = PIDGains()
@@ -169,6 +170,13 @@ class ControllerConfig(_Settings):
     )
     emergency_ttc_s: float = Field(
         1.0, ge=0, le=10, description="emergency braking below this time to collision [s]"
+    )
+    cut_in_lookahead_s: float = Field(
+        1.0,
+        ge=0,
+        le=3,
+        description="a vehicle whose sideways motion carries it into a lane within this time is "
+        "that lane's leader for the cruise and emergency braking [s]; 0: only once it is in",
     )
 
     @model_validator(mode="after")

@@ -10,7 +10,7 @@ import numpy as np
 from numba import njit
 from numba.extending import register_jitable
 
-from common.neighbours import lateral_extent
+from common.neighbours import lateral_extent, swept_distance
 from records import Neighbour, WorldState
 
 LEAVING_M = 1.0
@@ -48,8 +48,13 @@ def passes_before_reached(
     return lateral <= 0 or clear_s < side_gap / lateral
 
 
-def leaders(world: WorldState, lanes: tuple[int, ...]) -> tuple[Neighbour, ...]:
-    """For each lane in `lanes`, the closest vehicle ahead reaching into it (none if nobody) and,
+def leaders(
+    world: WorldState, lanes: tuple[int, ...], cut_in_lookahead_s: float = 0.0
+) -> tuple[Neighbour, ...]:
+    """For each lane in `lanes`, the closest vehicle ahead reaching into it, now or within
+    `cut_in_lookahead_s` [s] at its present sideways speed (a car cutting in is a leader before it
+    arrives: R157's careful driver perceives a cut-in once it leaves its lane's wandering zone),
+    none if nobody, and,
     while that one is leaving or entering the lane (centre more than `LEAVING_M` off the lane's
     centre), the next one ahead that it no longer hides, and so on: a cut-out reveals the car
     beyond at once. A slower vehicle entering the lane that the ego passes before it reaches
@@ -63,7 +68,7 @@ def leaders(world: WorldState, lanes: tuple[int, ...]) -> tuple[Neighbour, ...]:
         np.array(lanes, dtype=np.int64), n, world.s, world.d, world.speed,
         world.heading - np.array([reference.heading_at(s) for s in world.s.tolist()]),
         world.length, world.width, np.concatenate(((0.0,), lateral_extent(world))),
-        world.lane_offsets, world.lane_width, gaps, speeds, rows,
+        world.lane_offsets, world.lane_width, cut_in_lookahead_s, gaps, speeds, rows,
     )  # fmt: skip
     ids = world.ids
     return tuple(
@@ -87,14 +92,16 @@ def leaders_in_rows(
     extent: np.ndarray,
     offsets: np.ndarray,
     lane_width: float,
+    cut_in_lookahead_s: float,
     gaps: np.ndarray,
     speeds: np.ndarray,
     rows: np.ndarray,
 ) -> int:
     """`leaders(world, lanes)` of one world's `n` vehicles as rows of arrays (row 0 the ego;
     `heading_to_lane`: each one's heading to the lane at its position [rad]; `extent`: its turned
-    footprint across the road [m]): writes each leader's gap [m], speed [m/s] and row in order
-    and returns how many."""
+    footprint across the road [m]; `cut_in_lookahead_s` [s]: how far ahead its sideways motion,
+    speed times the sine of `heading_to_lane`, counts): writes each leader's gap [m], speed [m/s]
+    and row in order and returns how many."""
     found = 0
     candidates = np.empty(n, dtype=np.int64)
     for lane in lanes:
@@ -102,7 +109,9 @@ def leaders_in_rows(
         for row in range(1, n):
             rel = s[row] - s[0]
             offset = abs(d[row] - offsets[lane])
-            if not (offset < (lane_width + extent[row]) / 2 and rel > 0):
+            drift = speed[row] * math.sin(heading_to_lane[row]) * cut_in_lookahead_s
+            across = swept_distance(d[row], drift, offsets[lane])
+            if not (across < (lane_width + extent[row]) / 2 and rel > 0):
                 continue
             if offset > LEAVING_M and speed[row] < speed[0]:
                 towards = math.copysign(1.0, d[0] - d[row])

@@ -73,8 +73,10 @@ class Maneuver:
         should_abort: AbortRule = never_abort,
         min_speed: float = 0.0,
         max_course: float = math.radians(12.0),
+        cut_in_lookahead_s: float = 0.0,
     ) -> None:
         self.duration = duration
+        self.cut_in_lookahead_s = cut_in_lookahead_s
         self.set_speed = set_speed
         self.should_abort = should_abort
         self.min_speed = min_speed
@@ -133,7 +135,11 @@ class Maneuver:
         lanes = (self.target, *(lane for lane in occupied_lanes(world) if lane != self.target))
         heading_for = self.target if self.clock.profile_time(world.time) >= self.profile.t0 else self.lane
         return Reference.sampled(
-            self.clock, world.time, self.set_speed, leaders(world, lanes), target_lane=heading_for
+            self.clock,
+            world.time,
+            self.set_speed,
+            leaders(world, lanes, self.cut_in_lookahead_s),
+            target_lane=heading_for,
         )
 
     def _rate(self, speed: float) -> float:

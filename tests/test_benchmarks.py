@@ -43,6 +43,10 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
     )
     assert "p95" in run("lookahead_cost.py", "--episodes", "1", "--duration", "2", "--scenarios", "jam")
     assert "| control ticks" in run("oracle_cost.py", "--profile", "--seeds", "0", "--duration", "2")
+    assert "| True |" in run("batch_of_one.py", "--episodes", "1", "--repeats", "1", "--duration", "2")
+    assert "| batch of one step |" in run(
+        "batch_of_one.py", "--traffic-only", "--repeats", "1", "--frames", "5"
+    )
     assert "| all |" in run("record_cost.py", "--seeds", "0", "--duration", "2", "--repeats", "1")
     rates = run("train_rate.py", "--steps", "510", "--world-steps", "640")
     assert "| 64 batched worlds |" in rates and "| 64 batched worlds in 2 processes | 0.0625 |" in rates

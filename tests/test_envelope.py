@@ -13,7 +13,6 @@ from controllers.lateral import MAX_COURSE, LateralPID
 from controllers.maneuver import Maneuver
 from controllers.reference import QuinticProfile, WarpedProfile, drivable_duration
 from records import Actuation, Command, EgoState, Neighbour, Reference
-from stack.loop.metrics import longest_run
 from stack.loop.safety_metrics import (
     SafetyMonitor,
     classify_collision,
@@ -21,6 +20,7 @@ from stack.loop.safety_metrics import (
     occupied_lanes,
     r157_min_following_distance,
 )
+from stack.results.episode_measures import longest_run
 from stack.runs.episodes import run
 from stack.settings.run import ConfigError, build_config
 from stack.sim.plant import StableBicycleVehicle, substeps

@@ -6,10 +6,11 @@ driver, replayed in its place over the last seconds, decides whether the contact
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import pytest
 
-from records import Actuation
+from records import Actuation, WorldState
 from stack.assessment.safety_assessment import plant_for, point_config
 from stack.fault.emergency_causes import (
     CAUSES,
@@ -21,6 +22,8 @@ from stack.fault.emergency_causes import (
     PHANTOM,
     emergency_cause,
 )
+from stack.fault.preventability import judge
+from stack.fault.reference_driver import TrafficCarefulDriver
 from stack.loop.closed_loop import ClosedLoop
 from stack.loop.safety_metrics import SafetyMeasures, SafetyMonitor
 from stack.runs.alone import run_agent_episode
@@ -60,14 +63,36 @@ class Timed:
         return False
 
 
-def drive(actors: list[Actor], script: Timed, steering: float = 0.0, seconds: float = 15.0) -> SafetyMeasures:
-    """The inattentive ego (no throttle, no brake, `steering` [rad]) on the scripted road until it
-    collides: what the safety monitor measured, judging the contact."""
+class Moves:
+    """At each `(time [s], actor, lane)` of `moves` that actor heads for `lane` at 3 m/s sideways."""
+
+    def __init__(self, *moves: tuple[float, int, int]) -> None:
+        self.moves = moves
+
+    def update(self, time: float, ego_s: float, actors: list[Actor]) -> None:
+        for move_at, index, lane in self.moves:
+            actor = actors[index]
+            if time >= move_at - 1e-9 and actor.target_d is None:
+                actor.target_d, actor.lateral_speed = lane_centre(lane), 3.0
+
+    def settled(self, actors: list[Actor]) -> bool:
+        return False
+
+
+def drive(
+    actors: list[Actor],
+    script: Timed | Moves,
+    steering: float = 0.0,
+    seconds: float = 15.0,
+    acceleration: float = 0.0,
+) -> SafetyMeasures:
+    """The inattentive ego (`acceleration` [m/s^2], no brake, `steering` [rad]) on the scripted
+    road until it collides: what the safety monitor measured, judging the contact."""
     road = ScriptedRoad(3, EGO_LANE, SPEED, actors, script, "kinematic", DT, seconds)
     monitor = SafetyMonitor(DT)
     monitor.start(road.reset())
     while not road.done:
-        monitor.record(road.step(Actuation(acceleration=0.0, steering=steering)), steering != 0.0)
+        monitor.record(road.step(Actuation(acceleration=acceleration, steering=steering)), steering != 0.0)
     assert road.crashed
     return monitor.measured()
 
@@ -82,6 +107,76 @@ def test_a_car_cutting_in_5_m_ahead_and_braking_is_not_the_ego_s_fault() -> None
     assert measured.collision_kind == "front"
     assert not measured.at_fault_collision
     assert measured.fault_reason == "cut-in not preventable"
+
+
+def test_a_cut_out_far_ahead_does_not_let_the_reference_brake_sooner_for_a_later_cut_in() -> None:
+    """A car 60 m ahead leaves the ego's lane at 0.3 s; 2 s later a car 5 m/s slower and 5 m ahead
+    cuts in.
+    R157's driver reacts to each vehicle's risk after its own 1.15 s: the earlier, unrelated risk
+    does not start its braking for the cut-in sooner, so the contact was not preventable."""
+    far, cutting = ahead(60.0, speed=20.0), ahead(16.7, EGO_LANE + 1, speed=20.0)
+    measured = drive([far, cutting], Moves((0.3, 0, EGO_LANE + 1), (2.3, 1, EGO_LANE)))
+    assert measured.collision_kind == "front"
+    assert measured.fault_reason == "cut-in not preventable"
+
+
+def test_a_lane_change_far_down_the_road_is_no_risk_to_the_reference_driver() -> None:
+    road = ScriptedRoad(
+        3, EGO_LANE, SPEED, [ahead(400.0, EGO_LANE + 1)], Moves((0.0, 0, EGO_LANE)), "kinematic", DT, 5.0
+    )
+    world, driver = road.reset(), TrafficCarefulDriver()
+    while not road.done:
+        assert driver.step(world, DT).acceleration == 0.0
+        world = road.step(Actuation(0.0, 0.0))
+    assert driver.risks == {}
+
+
+def test_the_reference_drives_as_the_ego_drove_until_it_reacts() -> None:
+    """The ego speeds up at 1.5 m/s^2 beside a car 20 m ahead in the next lane at its own start
+    speed, which cuts in once the ego is 12 m nearer: a reference that had held its start speed
+    would never have met it, one that drove as the ego did until R157's reaction meets it."""
+    measured = drive([ahead(20.0, EGO_LANE + 1)], Moves((4.0, 0, EGO_LANE)), acceleration=1.5)
+    assert measured.collision_kind == "front"
+    assert measured.fault_reason == "cut-in not preventable"
+
+
+@pytest.mark.parametrize(("settled_s", "reason"), [(0.3, "cut-in not preventable"), (1.0, "own lane change")])
+def test_a_cut_in_after_the_ego_s_lane_change_is_judged_by_the_replay(settled_s: float, reason: str) -> None:
+    """The contact of `test_a_car_cutting_in_5_m_ahead_and_braking...` (the cut-in starts at 0.5 s),
+    its frames rewritten as if the ego had come from the next lane and settled at `settled_s`: a
+    cut-in that began after the ego had settled is judged by the replay, one that began while it
+    was still changing lane is its own lane change."""
+    road = ScriptedRoad(
+        3,
+        EGO_LANE,
+        SPEED,
+        [ahead(5.0, EGO_LANE + 1)],
+        Timed(0.5, brake_at=1.5, braking=5.0),
+        "kinematic",
+        DT,
+        15.0,
+    )
+    monitor = SafetyMonitor(DT)
+    world = road.reset()
+    frames = [world]
+    while not road.crashed:
+        world = road.step(Actuation(0.0, 0.0))
+        frames.append(world)
+    monitor.start(frames[0])
+    for frame in frames[1:]:
+        monitor.record(frame, False)
+    assert monitor.collision is not None
+    came_from = lane_centre(EGO_LANE - 1)
+
+    def changing(frame: WorldState) -> WorldState:
+        if frame.time >= settled_s:
+            return frame
+        lane, d = frame.lane.copy(), frame.d.copy()
+        lane[0], d[0] = EGO_LANE - 1, came_from + 0.6 * (d[0] - came_from)
+        return replace(frame, lane=lane, d=d)
+
+    fault = judge(monitor.collision.kind, monitor.collision.other, [changing(f) for f in frames[-76:]], DT)
+    assert fault.reason == reason and fault.at_fault == (reason == "own lane change")
 
 
 def test_the_ego_changing_lane_into_a_car_is_at_fault() -> None:
@@ -134,7 +229,7 @@ def test_an_emergency_braking_s_cause_is_the_first_that_holds(
     ("kind", "point", "cause"),
     [
         ("lead-braking", "speed=25,time_gap=1.0,deceleration=6", "leader_braking"),
-        ("cut-in", "speed=25,gap=4,relative_speed=3,lateral_speed=1.5", "cut_in"),
+        ("cut-in", "speed=25,gap=4,relative_speed=6,lateral_speed=3", "cut_in"),
     ],
 )
 def test_the_stack_s_emergency_braking_is_counted_by_its_cause(kind: str, point: str, cause: str) -> None:

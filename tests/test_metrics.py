@@ -4,8 +4,9 @@ import pytest
 from records import Actuation, Reference
 from stack.apps.compare import intervals, markdown
 from stack.loop.loop_records import Tick
-from stack.loop.metrics import EpisodeRecorder, lateral_comfort, moving_average
+from stack.loop.metrics import EpisodeRecorder
 from stack.results.episode_fields import columns, reported, summary_rows
+from stack.results.episode_measures import lateral_comfort, measured, moving_average
 from stack.results.episode_result import TIMING_FIELDS, EpisodeResult, summarize
 from stack.runs.episodes import RunResults
 from tests.helpers import scene
@@ -21,7 +22,9 @@ def test_a_vehicle_counts_as_passed_once():
     reference, actuation = Reference(4.0, 0.0, 0.0, set_speed=25.0), Actuation(0.0, 0.01)
     for ego_x in (25.0, 10.0, 30.0):
         recorder.record(Tick(reference, actuation, scene(3, (ego_x, 1), [(20.0, 4.0), (-30.0, 0.0)]), 1, 1))
-    assert recorder.passed == {1}, "passed once; a car that was always behind never counts"
+    assert np.flatnonzero(recorder.passed).tolist() == [1] and recorder.passed_cars == 1, (
+        "passed once; a car that was always behind never counts"
+    )
     assert recorder.d_reference == [4.0] * 3 and recorder.steering == [0.01] * 3
     assert len(recorder.time) == 4, "the start and the world after each tick"
 
@@ -47,7 +50,8 @@ def test_time_in_the_leftmost_lane_counts_the_ticks_that_end_there():
     reference, actuation = Reference(0.0, 0.0, 0.0, set_speed=25.0), Actuation(0.0, 0.0)
     for tick, lane in enumerate((0, 1, 0, 0, 2), start=1):
         recorder.record(Tick(reference, actuation, scene(3, (2.0 * tick, lane), time=0.1 * tick), lane, lane))
-    assert recorder.driven(0.1).time_in_leftmost_lane_s == pytest.approx(0.3), "the start is no tick"
+    leftmost_s = measured(EpisodeResult, recorder.samples(0.1))["time_in_leftmost_lane_s"]
+    assert leftmost_s == pytest.approx(0.3), "the start is no tick"
 
 
 def episode(number: int, crashed: bool, leftmost_s: float) -> EpisodeResult:

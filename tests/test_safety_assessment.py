@@ -165,6 +165,20 @@ def test_leaving_leader_no_longer_hides_the_vehicle_beyond():
     assert [leader.speed for leader in leaders(world, (1,))] == [20.0, 0.0]
 
 
+def test_a_car_cutting_in_is_a_leader_before_it_reaches_the_lane():
+    """1.5 m/s sideways, 12 m ahead: once it moves, its footprint reaches the ego's lane within the
+    cut-in lookahead (1 s) before it reaches it; with none the cruise waits until it is in."""
+    road = build(Point("cut-in", (30.0, 4.0, 12.0, 1.5)), 4, "kinematic", DT)
+    world = road.reset()
+    while road.script.started_at is None or road.actors[0].d > 7.6:
+        world = road.step(Actuation(0.0, 0.0))
+        assert leaders(world, (1,)) == ()
+    assert leaders(world, (1,), cut_in_lookahead_s=0.0) == ()
+    (anticipated,) = leaders(world, (1,), cut_in_lookahead_s=1.0)
+    assert anticipated.speed == road.actors[0].speed
+    assert leaders(world, (2,), cut_in_lookahead_s=1.0)[0].vehicle == anticipated.vehicle
+
+
 def test_reference_driver_on_a_lead_braking_point_it_cannot_avoid():
     config = build_config({})
     assert drive_reference(config, Point("lead-braking", (36.11, 0.8, 8.0))).collided

@@ -34,8 +34,9 @@ from stack.apps.track_record import TrackedLaneChange
 from stack.apps.track_report import plot_maneuvers, print_tracking, speed_label
 from stack.apps.view import view_command_line
 from stack.loop.closed_loop import ClosedLoop
-from stack.loop.metrics import Tracking, lateral_series, tracking
+from stack.loop.metrics import Tracking, tracking
 from stack.loop.recording import RECORDINGS, episode_recording
+from stack.results.episode_measures import lateral_series
 from stack.runtime.executors import completed
 from stack.runtime.files import write_json
 from stack.runtime.interrupts import deferred

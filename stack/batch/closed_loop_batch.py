@@ -38,8 +38,9 @@ from stack.batch.loop_kernels import (
 )
 from stack.fault.emergency_causes import BrakingsByCause, CausesBatch, tracked_true_rows
 from stack.loop.metrics import EpisodeMetricsBatch
-from stack.loop.safety_metrics import classify_collision
+from stack.loop.safety_metrics import classify_collision, monitored
 from stack.results.episode_fields import record_fields
+from stack.results.episode_measures import measured
 from stack.results.episode_result import EpisodeResult
 from stack.settings.run import RunConfig, episode_sensor, training_worlds
 from stack.sim.batch.traffic import TrafficBatch
@@ -90,6 +91,7 @@ class ClosedLoopBatch:
             self.min_speed,
             math.tan(max_course),
             control_config.set_speed_mps,
+            control_config.cut_in_lookahead_s,
         )
         self.safety = safety_settings(safety)
         self.abort_lookahead_s = safety.abort_lookahead_s
@@ -107,11 +109,8 @@ class ClosedLoopBatch:
         )
         self.lane = np.zeros(worlds, dtype=np.int64)
         self.target = np.zeros(worlds, dtype=np.int64)
-        self.coef, self.profile, self.clock = (
-            np.zeros((worlds, 6)),
-            np.zeros((worlds, 4)),
-            np.zeros((worlds, 3)),
-        )
+        self.coef, self.profile = np.zeros((worlds, 6)), np.zeros((worlds, 4))
+        self.clock = np.zeros((worlds, 3))
         self.counts = np.zeros((worlds, 3), dtype=np.int64)
         self.lateral, self.speed_pi = np.zeros((worlds, 4)), np.zeros((worlds, 3))
         self.flags = np.zeros((worlds, 3), dtype=np.int64)
@@ -378,8 +377,9 @@ class ClosedLoopBatch:
             **record_fields(BrakingsByCause.of(self.causes.counts[world])),
             solve_ms_p50=p50_ms,
             solve_ms_p95=p95_ms,
-            **record_fields(self.metrics.driven(world)),
+            **measured(EpisodeResult, self.metrics.samples(world)),
             **record_fields(self.metrics.measured(world, departed)),
+            **monitored(self.metrics.kept, world),
         )
 
     def world_state(self, world: int) -> WorldState:

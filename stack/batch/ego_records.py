@@ -24,6 +24,8 @@ class ManeuverSettings(NamedTuple):
     """Tangent of the largest course a lane change asks for."""
     set_speed: float
     """The cruise's set speed [m/s]."""
+    cut_in_lookahead_s: float
+    """How far ahead a vehicle's sideways motion makes it a lane's leader [s] (`leaders_in_rows`)."""
 
 
 class ManeuverArrays(NamedTuple):

@@ -208,7 +208,7 @@ def control(
             heading_to_lane[row] = heading[w, row] - lane_heading[w]
         found = leaders_in_rows(
             lanes[:used], n, s[w], d[w], speed[w], heading_to_lane, length[w], width[w],
-            extent[w], offsets[w], lane_width, gaps, speeds, rows,
+            extent[w], offsets[w], lane_width, settings.cut_in_lookahead_s, gaps, speeds, rows,
         )  # fmt: skip
         for k in range(found):
             rows[k] = slots[w, rows[k]]

@@ -4,7 +4,8 @@ own maneuver over the last `RECENT_S` seconds, checked in this order:
 
 - `phantom`: the vehicle braked for does not exist in the truth (a false positive of the sensor);
 - `cut_in`: it left the wandering zone of its lane (R157's 0.375 m: a lane change of its own
-  under way, in or out) within `RECENT_S`;
+  under way, in or out), or was moving sideways fast enough to leave it within `LEAVING_SOON_S`
+  (the cruise takes a car cutting in as a leader that early), within `RECENT_S`;
 - `leader_braking`: it slowed at about 3 m/s^2 or harder (`HARD_BRAKING_MPS2`) on some tick
   within `RECENT_S`;
 - `own_lane_change`: the ego's lane change was under way within `RECENT_S` (aborted ones too);
@@ -71,6 +72,9 @@ CUT_IN, LEADER_BRAKING, OWN_LANE_CHANGE, CLOSING_IN, PHANTOM = range(len(CAUSES)
 RECENT_S = 2.0
 """How far back a vehicle's lane change or hard braking, or the ego's lane change, causes an
 activation [s]."""
+LEAVING_SOON_S = 1.0
+"""A vehicle whose sideways speed carries it out of its wandering zone within this time is
+leaving it already [s]: `controller.cut_in_lookahead_s`'s default."""
 HARD_BRAKING_MPS2 = 2.9
 """A vehicle slowing harder than this on a tick brakes hard [m/s^2]: 3 m/s^2 or more, with slack
 for a tick's rounding."""
@@ -142,6 +146,7 @@ def observe_rows(
     count: int,
     d: np.ndarray,
     speed: np.ndarray,
+    heading_to_lane: np.ndarray,
     lane: np.ndarray,
     offsets: np.ndarray,
     columns: np.ndarray,
@@ -154,11 +159,15 @@ def observe_rows(
     """`vehicle_events` of the vehicles in rows 1 to `count` - 1 of one world's truth at `time` [s]
     (lateral offset `d` [m], `speed` [m/s], `lane` of lanes centred at `offsets` [m]), row r's memory
     in column `columns[r]`: `seen` 1 where the vehicle was in the last frame, its speed then in
-    `speed_before` [m/s], `drifted_at` and `braked_at` [s]."""
+    `speed_before` [m/s], `drifted_at` and `braked_at` [s]. Its drift is the farther of where it is
+    and where its sideways speed (speed times the sine of `heading_to_lane` [rad]) takes it in
+    `LEAVING_SOON_S`, as the cruise's leaders see a car cutting in (`controllers.leaders`)."""
     for row in range(1, count):
         column = columns[row]
         slowing = (speed_before[column] - speed[row]) / dt if seen[column] else 0.0
-        drift = abs(d[row] - offsets[lane[row]])
+        sideways = speed[row] * math.sin(heading_to_lane[row])
+        off = d[row] - offsets[lane[row]]
+        drift = max(abs(off), abs(off + sideways * LEAVING_SOON_S))
         drifted_at[column], braked_at[column] = vehicle_events(
             drift, slowing, time, drifted_at[column], braked_at[column]
         )
@@ -202,8 +211,9 @@ class CauseTracker:
         """The truth `world` after a frame (or at the start)."""
         columns = np.array([self._column(vehicle) for vehicle in world.ids.tolist()], dtype=np.int64)
         _observe_rows(
-            world.time, world.count, world.d, world.speed, world.lane, world.lane_offsets, columns,
-            self.dt, self.seen, self.speed_before, self.drifted_at, self.braked_at,
+            world.time, world.count, world.d, world.speed,
+            world.heading - world.lanes[0].heading_at(float(world.s[0])), world.lane, world.lane_offsets,
+            columns, self.dt, self.seen, self.speed_before, self.drifted_at, self.braked_at,
         )  # fmt: skip
 
     def ego(self, time: float, changing_lane: bool) -> None:
@@ -240,6 +250,7 @@ def observe_batch(
     stepped: np.ndarray,
     time: np.ndarray,
     columns: BatchColumns,
+    heading_to_lane: np.ndarray,
     dt: float,
     seen: np.ndarray,
     speed_before: np.ndarray,
@@ -247,13 +258,15 @@ def observe_batch(
     braked_at: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
     """`observe_rows` in each `stepped` world of a batch, a memory column per row (a vehicle):
-    `seen`, `speed_before` [m/s], `drifted_at` and `braked_at` [s] (W, rows)."""
+    `seen`, `speed_before` [m/s], `drifted_at` and `braked_at` [s] (W, rows); each vehicle's
+    `heading_to_lane` [rad] (W, rows)."""
     rows = np.arange(seen.shape[1])
     for w in range(stepped.shape[0]):
         if stepped[w]:
             observe_rows(
-                time[w], columns.vehicles[w], columns.d[w], columns.speed[w], columns.lane[w],
-                columns.lane_offsets[w], rows, dt, seen[w], speed_before[w], drifted_at[w], braked_at[w],
+                time[w], columns.vehicles[w], columns.d[w], columns.speed[w], heading_to_lane[w],
+                columns.lane[w], columns.lane_offsets[w], rows, dt, seen[w], speed_before[w], drifted_at[w],
+                braked_at[w],
             )  # fmt: skip
 
 
@@ -291,8 +304,9 @@ class CausesBatch:
         """The truth `batch` after a frame of the worlds flagged `stepped`."""
         self._room(batch.s.shape[1])
         observe_batch(
-            stepped, time, batch.columns(), dt, self.seen, self.speed_before, self.drifted_at, self.braked_at
-        )
+            stepped, time, batch.columns(), batch.heading - batch.lane_heading[:, None], dt, self.seen,
+            self.speed_before, self.drifted_at, self.braked_at,
+        )  # fmt: skip
 
     def attribute(
         self,

@@ -2,21 +2,23 @@
 unless a careful and competent driver in its place could not have avoided it either.
 
 - The ego's own lane change (the geometric `lane change` contact, or the ego's lane differing
-  anywhere in the last `REPLAY_S` seconds) and leaving the road stay at fault: no replay excuses
-  a maneuver the ego chose.
+  anywhere in the last `REPLAY_S` seconds, unless the collided vehicle's cut-in began only after
+  the ego had settled in its new lane) and leaving the road stay at fault: no replay excuses a
+  maneuver the ego chose.
 - Being hit from behind or standing (`rear`, `ego stopped`) while keeping its lane is the other's:
   the follower's recorded path answered the ego's own braking, so no replay can judge it.
-- Any other contact (front, stopped vehicle, side swipe) is replayed: R157's
-  reference driver (`stack.fault.reference_driver.CarefulDriver`: risk perception 0.4 s,
-  reaction 0.75 s, a 0.6 s ramp to the plant's 5 m/s^2, keeping R157's minimum following
-  distance) takes the ego's place `REPLAY_S` seconds before the contact, in the lane the ego
-  collided in, at the ego's position and speed then, against the other vehicles' recorded
-  trajectories, and for `BEYOND_S` past the contact's time against
-  them extrapolated (each holding its last acceleration; one moving sideways goes on to the
-  next lane's centre). If it touches nobody, the collision was preventable: at fault. The other
-  vehicles replay what they did; they do not react to the reference driver, so after a frontal
-  contact only vehicles ahead of it count (a recorded follower that followed the ego elsewhere is
-  no evidence), after being hit from behind or side on every vehicle counts.
+- Any other contact (front, stopped vehicle, side swipe) is replayed: R157's reference driver in
+  traffic (`stack.fault.reference_driver.TrafficCarefulDriver`: for each vehicle's risk, perception
+  0.4 s, reaction 0.75 s, a 0.6 s ramp to the plant's 5 m/s^2; keeping R157's minimum following
+  distance; heeding the vehicles near enough to matter) takes the ego's place `REPLAY_S` seconds
+  before the contact, at the ego's position and speed then, keeps the ego's path across the road
+  and drives as the ego drove until it first brakes, against the other vehicles' recorded
+  trajectories, and for `BEYOND_S` past the contact's time against them extrapolated (each holding
+  its last acceleration; one moving sideways goes on to the next lane's centre). If it touches
+  nobody, the collision was preventable: at fault. The other vehicles replay what they did; they do
+  not react to the reference driver, so after a frontal contact only vehicles ahead of it count (a
+  recorded follower that followed the ego elsewhere is no evidence), after being hit from behind or
+  side on every vehicle counts.
 
 The reason says why: the situation (the collided vehicle's cut-in within the replayed seconds, by
 emergency braking's attribution law, `stack.fault.emergency_causes`; for a vehicle ahead, its hard
@@ -29,13 +31,14 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from itertools import pairwise
 from typing import Any
 
 import numpy as np
 
 from records import WorldState
 from stack.fault.emergency_causes import CLOSING_IN, NEVER, CauseTracker, cause_label, emergency_cause
-from stack.fault.reference_driver import CarefulDriver
+from stack.fault.reference_driver import WANDERING_M, TrafficCarefulDriver
 
 REPLAY_S = 5.0
 """How long before the contact the reference driver takes the ego's place [s]."""
@@ -86,16 +89,40 @@ def judge(kind: str, other: int | None, history: Sequence[WorldState], dt: float
     if kind == "off road":
         return Fault(True, "off road")
     crash = history[-1]
-    if kind == "lane change" or any(world.ego_lane != crash.ego_lane for world in history):
+    situation = _situation(other, history, dt)
+    changed = any(world.ego_lane != crash.ego_lane for world in history)
+    if kind == "lane change" or (
+        changed and not (situation == "cut-in" and _settled_before_cut_in(other, history))
+    ):
         return Fault(True, "own lane change")
     if kind in HIT_FROM_BEHIND_KINDS:
         return Fault(False, f"{kind} not preventable")
     from_behind = kind in FROM_BEHIND_KINDS
-    situation = _situation(other, history, dt)
     if (from_behind and situation != "cut-in") or (kind == "stopped vehicle" and situation == "closing in"):
         situation = kind
     avoided = careful_driver_avoids(history, dt, from_behind)
     return Fault(avoided, f"{situation} {'preventable' if avoided else 'not preventable'}")
+
+
+def _settled_before_cut_in(other: int | None, history: Sequence[WorldState]) -> bool:
+    """Whether the ego had finished its lane change before the vehicle of id `other` began the cut-in
+    that ended in the contact: after the last frame of `history` in which that vehicle kept a lane
+    other than the one the ego collided in (its centre within the lane's wandering zone), the ego is
+    in the lane it collided in, its centre within the wandering zone."""
+    lane = history[-1].ego_lane
+    cut_from = None
+    for index, world in enumerate(history):
+        rows = np.flatnonzero(world.ids == other)
+        if rows.size:
+            row, its_lane = int(rows[0]), int(world.lane[int(rows[0])])
+            kept = abs(float(world.d[row] - world.lane_offsets[its_lane])) <= WANDERING_M
+            cut_from = index + 1 if kept and its_lane != lane else cut_from
+    if cut_from is None:
+        return False
+    return all(
+        world.ego_lane == lane and abs(float(world.d[0] - world.lane_offsets[lane])) <= WANDERING_M
+        for world in list(history)[cut_from:]
+    )
 
 
 def _situation(other: int | None, history: Sequence[WorldState], dt: float) -> str:
@@ -113,20 +140,29 @@ def _situation(other: int | None, history: Sequence[WorldState], dt: float) -> s
 
 def careful_driver_avoids(history: Sequence[WorldState], dt: float, from_behind: bool) -> bool:
     """Whether R157's reference driver, in the ego's place from the first of `history` (its position
-    and speed then, the centre of the lane the ego is in at the last), touches no vehicle of the
-    recorded frames and of their extrapolation (`extrapolated`, `BEYOND_S`; only vehicles ahead of
-    it count unless the contact came `from_behind`)."""
-    driver = CarefulDriver(keeps_distance=True)
+    and speed then), touches no vehicle of the recorded frames and of their extrapolation
+    (`extrapolated`, `BEYOND_S`; only vehicles ahead of it count unless the contact came
+    `from_behind`). It keeps the ego's path across the road (its recorded lateral position and
+    lane; past the contact, the centre of the lane it collided in), and drives as the ego drove
+    along it (the ego's recorded acceleration, none past the contact) until it first brakes for a
+    risk, and from then on only brakes or holds its speed: a careful driver in the ego's place, not
+    one that never sped up or that was elsewhere."""
+    driver = TrafficCarefulDriver()
     start, crash = history[0], history[-1]
-    lane = crash.ego_lane
     s, speed = float(start.s[0]), float(start.speed[0])
-    d = float(crash.lane_offsets[lane])
+    driven = [(after.speed[0] - before.speed[0]) / dt for before, after in pairwise(history)]
     beyond = extrapolated(history, dt, BEYOND_S)
-    for world in [*history, *beyond]:
+    reacted = False
+    path = [(float(world.d[0]), world.ego_lane) for world in history]
+    path += [(float(crash.lane_offsets[crash.ego_lane]), crash.ego_lane)] * len(beyond)
+    for tick, world in enumerate([*history, *beyond]):
+        d, lane = path[tick]
         placed = _with_ego(world, s, d, speed, lane)
         if _touches(placed, from_behind):
             return False
-        acceleration = driver.step(placed, dt).acceleration
+        braking = driver.step(placed, dt).acceleration
+        reacted = reacted or braking < 0
+        acceleration = braking if reacted else float(driven[tick]) if tick < len(driven) else 0.0
         s += speed * dt
         speed = max(speed + acceleration * dt, 0.0)
     return True

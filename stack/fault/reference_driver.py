@@ -11,9 +11,14 @@ in the ego's or a neighbouring lane leaves the wandering zone of its lane (its c
 lane brakes harder than `BRAKE_LIGHT_MPS2`. The driver keeps its lane and speed until it
 reacts, then brakes while it closes in on any vehicle ahead reaching into its lane.
 
-A driver that `keeps_distance` (the replay that decides a collision's fault, `stack.fault.preventability`)
-also perceives a risk when it closes in on the leader of its lane within R157's minimum following
-distance (`common.r157`): a careful driver does not drive up to a slower vehicle unawares.
+In traffic (`TrafficCarefulDriver`, the replay that decides a collision's fault,
+`stack.fault.preventability`) the same driver meets many vehicles, and R157's model is applied to
+each: a risk belongs to a vehicle (the one that leaves its wandering zone, or that a cut-out
+reveals, or the leader that brakes or is closed in on within R157's minimum following distance,
+`common.r157`), and the driver brakes for that vehicle only after its own perception and reaction
+time and ramp, as hard as it must not to come nearer than that distance. It heeds only vehicles
+near enough to matter (`TrafficCarefulDriver.heeds`): a lane change a kilometre ahead is no risk,
+and an earlier risk elsewhere does not let it brake for a later cut-in sooner than R157 allows.
 """
 
 from __future__ import annotations
@@ -35,20 +40,21 @@ WANDERING_M = 0.375
 """R157's lateral wandering zone: how far a vehicle may drift from its lane centre unnoticed [m]."""
 BRAKE_LIGHT_MPS2 = 1.0
 """A leader decelerating harder than this is seen braking [m/s^2]."""
+STANDSTILL_GAP_M = 2.0
+"""The gap a careful driver in traffic leaves to the vehicle ahead where R157 sets no distance
+(below 7.2 km/h) [m]."""
 PLANT_MAX_DECELERATION = 5.0
 """The plant's braking limit (highway-env ContinuousAction) [m/s^2]."""
 
 
 class CarefulDriver:
     """R157's careful and competent driver as a longitudinal controller (steering 0: the straight
-    road's lane is kept without it). `step(world, dt)` is one control tick of `dt` [s]; with
-    `keeps_distance`, closing in within R157's minimum following distance is a risk too."""
+    road's lane is kept without it), for the assessment's scenarios: one risk, the first, and full
+    braking while closing in on any vehicle ahead. `step(world, dt)` is one control tick of `dt`
+    [s]."""
 
-    def __init__(
-        self, max_deceleration: float = PLANT_MAX_DECELERATION, keeps_distance: bool = False
-    ) -> None:
+    def __init__(self, max_deceleration: float = PLANT_MAX_DECELERATION) -> None:
         self.max_deceleration = max_deceleration
-        self.keeps_distance = keeps_distance
         self.reset()
 
     def reset(self) -> None:
@@ -63,9 +69,12 @@ class CarefulDriver:
     def deceleration(self, time: float) -> float:
         """The braking the driver applies at `time` [s] when it brakes [m/s^2]: 0 before the delay,
         then a linear ramp to the maximum over RAMP_S."""
-        if self.risk_at is None:
-            return 0.0
-        ramp = (time - self.risk_at - self.delay_s) / RAMP_S
+        return 0.0 if self.risk_at is None else self.ramped(time - self.risk_at)
+
+    def ramped(self, since_risk_s: float) -> float:
+        """The braking [m/s^2] available `since_risk_s` [s] after a risk began: 0 before the delay,
+        then a linear ramp to the maximum over RAMP_S."""
+        ramp = (since_risk_s - self.delay_s) / RAMP_S
         return self.max_deceleration * float(np.clip(ramp, 0.0, 1.0))
 
     def step(self, world: WorldState, dt: float) -> Actuation:
@@ -73,20 +82,19 @@ class CarefulDriver:
             self.risk_at = world.time
         self.speeds = {int(i): float(v) for i, v in zip(world.ids[1:], world.speed[1:], strict=True)}
         speed = float(world.speed[0])
-        closing = any(speed > other for other in self._in_lane_speeds(world))
+        closing = any(speed > world.speed[row] for row in self._in_lane_rows(world))
         braking = self.deceleration(world.time) if closing else 0.0
         return Actuation(acceleration=-min(braking, speed / dt), steering=0.0)
 
-    def _in_lane_speeds(self, world: WorldState) -> list[float]:
-        """Speeds [m/s] of the vehicles ahead whose footprint reaches into the ego's lane."""
+    def _in_lane_rows(self, world: WorldState) -> list[int]:
+        """Rows of the vehicles ahead whose footprint reaches into the ego's lane."""
         centre = float(world.lane_offsets[world.ego_lane])
         reach = (world.lane_width + world.width[1:]) / 2
         ahead = (world.s[1:] > world.s[0]) & (np.abs(world.d[1:] - centre) < reach)
-        return [float(v) for v in world.speed[1:][ahead]]
+        return [int(row) + 1 for row in np.flatnonzero(ahead)]
 
     def _risk(self, world: WorldState, dt: float) -> bool:
-        """A vehicle ahead left its wandering zone, or the ego lane's leader brakes (or, keeping
-        distance, is closed in on within R157's minimum following distance)."""
+        """A vehicle ahead left its wandering zone, or the ego lane's leader brakes."""
         ego_lane = world.ego_lane
         for row in range(1, world.count):
             if world.s[row] <= world.s[0] or abs(int(world.lane[row]) - ego_lane) > 1:
@@ -95,17 +103,9 @@ class CarefulDriver:
             if drift > WANDERING_M:
                 return True
         leader = self._leader_row(world)
-        if leader is not None and self.keeps_distance and self._too_close(world, leader):
-            return True
         if leader is not None and (before := self.speeds.get(int(world.ids[leader]))) is not None:
             return (before - float(world.speed[leader])) / dt > BRAKE_LIGHT_MPS2
         return False
-
-    def _too_close(self, world: WorldState, leader: int) -> bool:
-        """Closing in on `leader` (a row) within R157's minimum following distance."""
-        speed = float(world.speed[0])
-        gap = float(world.s[leader] - world.s[0]) - float(world.length[leader] + world.length[0]) / 2
-        return speed > float(world.speed[leader]) and gap < r157_min_following_distance(speed)
 
     def _leader_row(self, world: WorldState) -> int | None:
         """Row of the closest vehicle ahead in the ego's lane."""
@@ -113,6 +113,102 @@ class CarefulDriver:
             r for r in range(1, world.count) if world.lane[r] == world.ego_lane and world.s[r] > world.s[0]
         ]
         return min(rows, key=lambda r: float(world.s[r])) if rows else None
+
+
+class TrafficCarefulDriver(CarefulDriver):
+    """R157's careful driver among many vehicles (module docstring): each risk is a vehicle's, with
+    its own perception, reaction and ramp, and ends once that vehicle has settled in another lane
+    than the ego's (a later maneuver of it is a new risk); only vehicles it `heeds` count; it brakes
+    as hard as it must (`needed`) to keep `kept_distance` to the vehicles at risk ahead in its
+    lane."""
+
+    def reset(self) -> None:
+        super().reset()
+        self.risks: dict[int, float] = {}
+        """Vehicle id -> the time its risk began [s]."""
+
+    def step(self, world: WorldState, dt: float) -> Actuation:
+        risky = self._risky(world, dt)
+        for vehicle in risky:
+            self.risks.setdefault(vehicle, world.time)
+        for row in range(1, world.count):
+            vehicle, lane = int(world.ids[row]), int(world.lane[row])
+            settled = abs(float(world.d[row] - world.lane_offsets[lane])) <= WANDERING_M
+            if vehicle in self.risks and vehicle not in risky and settled and lane != world.ego_lane:
+                del self.risks[vehicle]
+        self.speeds = {int(i): float(v) for i, v in zip(world.ids[1:], world.speed[1:], strict=True)}
+        braking = max(
+            (
+                min(self.ramped(world.time - self.risks[int(world.ids[row])]), self.needed(world, row))
+                for row in self._in_lane_rows(world)
+                if int(world.ids[row]) in self.risks and self.heeds(world, row)
+            ),
+            default=0.0,
+        )
+        speed = float(world.speed[0])
+        return Actuation(acceleration=-min(braking, speed / dt), steering=0.0)
+
+    def needed(self, world: WorldState, row: int) -> float:
+        """The deceleration [m/s^2] that sheds the ego's closing speed on the vehicle in `row`
+        before it is nearer than `kept_distance`: closing^2 / 2 (gap - kept), unbounded (full
+        braking) once within it; 0 when not closing in."""
+        speed = float(world.speed[0])
+        closing = speed - float(world.speed[row])
+        if closing <= 0:
+            return 0.0
+        room = _gap(world, row) - kept_distance(speed)
+        return closing**2 / (2 * room) if room > 0 else math.inf
+
+    def heeds(self, world: WorldState, row: int) -> bool:
+        """Whether the vehicle in `row`, ahead, is near enough to matter: its gap [m] is below the
+        road covered in `delay_s` at the ego's speed, plus `kept_distance`, plus closing^2 / 2
+        `max_deceleration` when the ego is faster."""
+        speed = float(world.speed[0])
+        closing = max(speed - float(world.speed[row]), 0.0)
+        reach = speed * self.delay_s + kept_distance(speed) + closing**2 / (2 * self.max_deceleration)
+        return _gap(world, row) < reach
+
+    def _risky(self, world: WorldState, dt: float) -> list[int]:
+        """Ids of the vehicles whose risk begins or goes on now: a heeded vehicle ahead, in the
+        ego's or a neighbouring lane, outside its wandering zone, and when it is in the ego's lane
+        (a cut-out) every vehicle ahead of it there that it reveals; the ego lane's leader when it
+        brakes or is closed in on within R157's minimum following distance."""
+        ego_lane, risky = world.ego_lane, []
+        in_lane = self._in_lane_rows(world)
+        for row in range(1, world.count):
+            lane = int(world.lane[row])
+            if world.s[row] <= world.s[0] or abs(lane - ego_lane) > 1 or not self.heeds(world, row):
+                continue
+            if abs(float(world.d[row] - world.lane_offsets[lane])) > WANDERING_M:
+                risky.append(int(world.ids[row]))
+                if lane == ego_lane:
+                    risky += [
+                        int(world.ids[r])
+                        for r in in_lane
+                        if world.s[r] > world.s[row] and self.heeds(world, r)
+                    ]
+        leader = self._leader_row(world)
+        if leader is not None:
+            before = self.speeds.get(int(world.ids[leader]))
+            braking = before is not None and (before - float(world.speed[leader])) / dt > BRAKE_LIGHT_MPS2
+            speed = float(world.speed[0])
+            close = speed > float(world.speed[leader]) and _gap(world, leader) < r157_min_following_distance(
+                speed
+            )
+            if braking or close:
+                risky.append(int(world.ids[leader]))
+        return risky
+
+
+def kept_distance(speed: float) -> float:
+    """The distance [m] a careful driver keeps in traffic at `speed` [m/s]: R157's minimum following
+    distance, at least `STANDSTILL_GAP_M`."""
+    return max(r157_min_following_distance(speed), STANDSTILL_GAP_M)
+
+
+def _gap(world: WorldState, row: int) -> float:
+    """Bumper-to-bumper gap [m] from the ego to the vehicle in `row` ahead."""
+    return float(world.s[row] - world.s[0]) - float(world.length[row] + world.length[0]) / 2
 
 
 def stopping_distance(speed: float, delay_s: float, ramp_s: float, deceleration: float) -> float:

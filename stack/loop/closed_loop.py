@@ -35,8 +35,9 @@ from records import Actuation, Command, Encoding, GridConfig, WorldState
 from stack.fault.emergency_causes import BrakingsByCause, CauseTracker, cause_label
 from stack.loop.loop_records import Acted, LoopStatus, SolveStatistics, Tick
 from stack.loop.metrics import EpisodeRecorder, Traces
-from stack.loop.safety_metrics import SafetyMonitor
+from stack.loop.safety_metrics import SafetyMonitor, monitored
 from stack.results.episode_fields import record_fields
+from stack.results.episode_measures import measured
 from stack.results.episode_result import EpisodeResult
 from stack.settings.run import RunConfig, episode_sensor, grid_config
 
@@ -133,6 +134,7 @@ class ClosedLoop:
             self.safety.should_abort,
             min_speed=control.min_lane_change_speed_mps,
             max_course=math.radians(control.lane_change_max_course_deg),
+            cut_in_lookahead_s=control.cut_in_lookahead_s,
         )
         self.emergency = EmergencyBraking(
             control.emergency_decel_mps2, control.comfort_decel_mps2, control.emergency_ttc_s
@@ -354,7 +356,7 @@ class ClosedLoop:
         return LoopStatus(
             crashed=self.crashed,
             speed=float(self.world.speed[0]),
-            passed_cars=len(self._recorded().passed),
+            passed_cars=self._recorded().passed_cars,
             lane_changes=self.maneuver.counts.lane_changes,
             masked=safety.masked,
             aborted=safety.aborted,
@@ -372,7 +374,8 @@ class ClosedLoop:
 
     def result(self, episode: int) -> EpisodeResult:
         """The episode's result, as its parts measured it so far: what the recorder and the safety
-        monitor measured goes in whole (`Driven`, `SafetyMeasures`: fields named as the result's)."""
+        monitor measured goes in whole (every field measured from the recorder's samples as it declares,
+        `SafetyMeasures`: fields named as the result's)."""
         safety, solves = self.safety.counts, self.solve_statistics()
         return EpisodeResult(
             episode=episode,
@@ -388,6 +391,7 @@ class ClosedLoop:
             solve_ms_p50=solves.p50_ms,
             solve_ms_p95=solves.p95_ms,
             snapshot=self.snapshot,
-            **record_fields(self._recorded().driven(self.plant.dt)),
+            **measured(EpisodeResult, self._recorded().samples(self.plant.dt)),
             **record_fields(self.monitor.measured()),
+            **monitored(self.monitor.kept, 0),
         )

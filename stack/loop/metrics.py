@@ -1,14 +1,13 @@
-"""Episode and tracking metrics, with the definitions of docs/architecture.md.
+"""The episode's recorders, and the tracking metrics of a lane change, with the definitions of
+docs/architecture.md.
 
 - passed car: a vehicle counts once, the first time it goes from ahead of the ego to behind it;
-- accuracy: passed / (passed + collided) x 100 over all episodes;
-- comfort: peak |lateral acceleration| (a_y = v * yaw rate relative to the reference lane, so a
-  bend's own v^2 / R is not counted) and peak lateral jerk, both over a 500 ms moving average, as
-  UN R79 measures them.
+- accuracy: passed / (passed + collided) x 100 over all episodes.
 
 `EpisodeRecorder` records one world's episode; `EpisodeMetricsBatch` records those of many worlds at
-once as rows of arrays, measured with the same functions (`driven_of`, the safety monitor's
-`leaders_ahead`).
+once as rows of arrays. Both hand their samples (`EpisodeSamples`) to the measurers the episode
+record's fields declare (`stack.results.episode_measures.measured`), and the surroundings to the
+safety monitor's `leaders_ahead`: one measure, one function, for one world and many.
 """
 
 from __future__ import annotations
@@ -19,47 +18,22 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba.extending import register_jitable
 
+from common.compiled import Kernel
 from common.neighbours import lateral_extents
 from records import WorldState
 from records.batch import WorldBatch
 from stack.loop.loop_records import Tick
 from stack.loop.safety_metrics import (
-    STOPPED_SPEED_MPS,
     Collision,
     SafetyMeasures,
     leaders_ahead_batch,
+    monitor_measures,
     r157_min_following_distances,
+    restart,
 )
-from stack.results.episode_result import TTC_CAP_S
-
-COMFORT_WINDOW_S = 0.5
-"""Moving-average window for lateral acceleration and jerk [s] (UN R79)."""
-
-
-def moving_average(values: np.ndarray, window: int) -> np.ndarray:
-    """Trailing moving average over `window` samples (shorter at the start)."""
-    if window <= 1 or len(values) == 0:
-        return values
-    sums = np.cumsum(np.insert(values, 0, 0.0))
-    counts = np.minimum(np.arange(1, len(values) + 1), window)
-    return (sums[1:] - sums[np.maximum(np.arange(1, len(values) + 1) - window, 0)]) / counts
-
-
-def lateral_series(heading: np.ndarray, speed: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """(a_y [m/s^2] from the second sample on, jerk [m/s^3] from the third), each a 500 ms moving
-    average, from heading [rad] and speed [m/s] samples `dt` seconds apart."""
-    window = max(1, round(COMFORT_WINDOW_S / dt))
-    lateral_acceleration = moving_average(speed[1:] * np.diff(heading) / dt, window)
-    return lateral_acceleration, moving_average(np.diff(lateral_acceleration) / dt, window)
-
-
-def lateral_comfort(heading: np.ndarray, speed: np.ndarray, dt: float) -> tuple[float, float]:
-    """(peak |a_y| [m/s^2], peak |jerk| [m/s^3]) from heading [rad] and speed [m/s] samples."""
-    if len(heading) < 3:
-        return 0.0, 0.0
-    lateral_acceleration, jerk = lateral_series(heading, speed, dt)
-    return float(np.max(np.abs(lateral_acceleration))), float(np.max(np.abs(jerk)))
+from stack.results.episode_measures import EpisodeSamples, lateral_comfort
 
 
 @dataclass(frozen=True)
@@ -104,27 +78,6 @@ def tracking(
     )
 
 
-@dataclass(frozen=True)
-class Driven:
-    """What the recorder measured of an episode: control ticks (`steps`), duration [s], passed
-    cars, the ego's mean speed [m/s], peak |lateral acceleration| [m/s^2] and jerk [m/s^3], its
-    longest standstill [s] (the most ticks in a row that ended with it below `STOPPED_SPEED_MPS`,
-    times the tick: an ego that cannot get round a blocked lane stands still for the rest of the
-    episode), its time in the leftmost lane [s] (the ticks that ended with it in lane 0, the lane
-    that keep-right rules reserve for overtaking, times the tick), and the per-tick `trace` of time
-    [s], speed [m/s] and lateral offset [m]. Its fields are `EpisodeResult`'s of the same names."""
-
-    steps: int
-    duration_s: float
-    passed_cars: int
-    mean_speed: float
-    peak_lat_accel: float
-    peak_lat_jerk: float
-    longest_standstill_s: float
-    time_in_leftmost_lane_s: float
-    trace: dict[str, list[float]]
-
-
 @dataclass(frozen=True, eq=False)
 class Traces:
     """What the recorder recorded, as arrays (copies): the ego's `time` [s], lateral offset `d`
@@ -145,8 +98,8 @@ class EpisodeRecorder:
     and the reference and actuation of every tick."""
 
     def __init__(self, world: WorldState) -> None:
-        self.was_ahead = dict(zip(world.ids.tolist(), (world.s > world.s[0]).tolist(), strict=True))
-        self.passed: set[int] = set()
+        self.was_ahead = np.zeros(0, dtype=bool)
+        self.passed = np.zeros(0, dtype=bool)
         self.time: list[float] = []
         self.speed: list[float] = []
         self.heading: list[float] = []
@@ -171,12 +124,18 @@ class EpisodeRecorder:
         self.steering.append(tick.actuation.steering)
         self._record_world(tick.world)
 
+    @property
+    def passed_cars(self) -> int:
+        """The vehicles passed so far (`passing`)."""
+        return int(np.count_nonzero(self.passed))
+
     def _record_world(self, world: WorldState) -> None:
-        ahead = (world.s > world.s[0]).tolist()
-        for vehicle_id, is_ahead in zip(world.ids[1:].tolist(), ahead[1:], strict=True):
-            if self.was_ahead.get(vehicle_id) and not is_ahead:
-                self.passed.add(vehicle_id)
-            self.was_ahead[vehicle_id] = is_ahead
+        more = int(world.ids.max()) + 1 - len(self.passed)
+        if more > 0:
+            self.was_ahead, self.passed = (
+                np.pad(flags, (0, more)) for flags in (self.was_ahead, self.passed)
+            )
+        _passing(world.s, world.ids, self.was_ahead, self.passed)
         self.time.append(world.time)
         self.speed.append(float(world.speed[0]))
         self.heading.append(float(world.heading[0]) - world.lanes[0].heading_at(float(world.s[0])))
@@ -194,43 +153,39 @@ class EpisodeRecorder:
             steering=np.array(self.steering),
         )
 
-    def driven(self, dt: float) -> Driven:
-        """What was recorded, measured (ticks `dt` seconds apart)."""
-        trace = {"time": self.time, "speed": self.speed, "d": self.d}
-        time, speed, heading, lane = map(np.array, (self.time, self.speed, self.heading, self.lane))
-        return driven_of(time, speed, heading, lane, len(self.passed), dt, trace)
+    def samples(self, dt: float) -> EpisodeSamples:
+        """What was recorded, as the measurers take it (ticks `dt` seconds apart)."""
+        recorded = (self.time, self.speed, self.heading, self.d, self.lane)
+        time, speed, heading, d, lane = (np.array(values) for values in recorded)
+        return EpisodeSamples(time, speed, heading, d, lane, self.passed_cars, dt)
 
 
-def driven_of(
-    time: np.ndarray,
-    speed: np.ndarray,
-    heading: np.ndarray,
-    lane: np.ndarray,
-    passed_cars: int,
-    dt: float,
-    trace: dict[str, list[float]],
-) -> Driven:
-    """An episode measured (`Driven`) from its samples `dt` seconds apart (at the start and after
-    every tick: time [s], the ego's speed [m/s], heading to the lane [rad] and lane), its
-    `passed_cars` and its `trace`."""
-    peak_accel, peak_jerk = lateral_comfort(heading, speed, dt)
-    return Driven(
-        steps=len(time) - 1,
-        duration_s=float(time[-1] - time[0]),
-        passed_cars=passed_cars,
-        mean_speed=float(np.mean(speed)),
-        peak_lat_accel=peak_accel,
-        peak_lat_jerk=peak_jerk,
-        longest_standstill_s=longest_run(speed[1:] < STOPPED_SPEED_MPS) * dt,
-        time_in_leftmost_lane_s=float(np.count_nonzero(lane[1:] == 0) * dt),
-        trace=trace,
-    )
+@register_jitable
+def passing(s: np.ndarray, kept: np.ndarray, was_ahead: np.ndarray, passed: np.ndarray) -> None:
+    """One sample of the passed-car rule in one world, whose vehicles stand at `s` [m] along the
+    road (row 0 the ego), each kept as `kept[row]` in the flags `was_ahead` and `passed`: another
+    vehicle counts as passed (once: a flag) the first time it goes from ahead of the ego to behind
+    it; one not seen before was not ahead."""
+    for row in range(1, len(kept)):
+        ahead = s[row] > s[0]
+        if was_ahead[kept[row]] and not ahead:
+            passed[kept[row]] = True
+        was_ahead[kept[row]] = ahead
 
 
-def longest_run(flags: np.ndarray) -> int:
-    """Length of the longest run of True in `flags` (0 if none)."""
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], flags.astype(np.int8), [0]))))
-    return int((edges[1::2] - edges[::2]).max(initial=0))
+_passing = Kernel(passing)
+
+
+@Kernel
+def passing_batch(
+    flags: np.ndarray, s: np.ndarray, count: np.ndarray, was_ahead: np.ndarray, passed: np.ndarray
+) -> None:  # pragma: no cover - compiled
+    """`passing` in each world flagged in `flags`, its vehicles the first `count` rows of `s` and of
+    its flags; the rows beyond hold no vehicle, so none of them is ahead."""
+    for w in range(flags.shape[0]):
+        if flags[w]:
+            passing(s[w], np.arange(count[w]), was_ahead[w], passed[w])
+            was_ahead[w, count[w] : s.shape[1]] = False
 
 
 SERIES = ("time", "speed", "heading", "d", "lane", "control_s")
@@ -241,7 +196,7 @@ wall-clock time shared evenly by the worlds it ran for [s]; none at the first sa
 class EpisodeMetricsBatch:
     """Per world, the episode under way as `EpisodeRecorder` and `SafetyMonitor` see it: `reset`
     at a world's reset, `record` after every tick, `collided` at its first crash frame, and
-    `driven(world)` / `measured(world)` when its episode ends. Ticks are `dt` seconds apart."""
+    `samples(world)` / `measured(world)` when its episode ends. Ticks are `dt` seconds apart."""
 
     def __init__(self, worlds: int, dt: float) -> None:
         self.worlds, self.dt = worlds, dt
@@ -249,9 +204,7 @@ class EpisodeMetricsBatch:
         self.series = {name: np.zeros((worlds, 0)) for name in SERIES}
         self.was_ahead = np.zeros((worlds, 0), dtype=bool)
         self.passed = np.zeros((worlds, 0), dtype=bool)
-        self.min_ttc_s = np.full(worlds, TTC_CAP_S)
-        self.time_below_ttc_floor_s = np.zeros(worlds)
-        self.time_below_min_distance_s = np.zeros(worlds)
+        self.kept = monitor_measures(worlds)
         self.collision: list[Collision | None] = [None] * worlds
 
     def _room(self, ticks: int, vehicles: int) -> None:
@@ -271,9 +224,7 @@ class EpisodeMetricsBatch:
         self.ticks[rows] = 0
         self.passed[rows] = False
         self.was_ahead[rows] = False
-        self.min_ttc_s[rows] = TTC_CAP_S
-        self.time_below_ttc_floor_s[rows] = 0.0
-        self.time_below_min_distance_s[rows] = 0.0
+        restart(self.kept, rows)
         for world in rows.tolist():
             self.collision[world] = None
         flags = np.zeros(self.worlds, dtype=bool)
@@ -288,16 +239,10 @@ class EpisodeMetricsBatch:
         `crashed` on it for the first time: classify each (`collided`)."""
         self._record_world(stepped, batch, time, control_s / max(int(stepped.sum()), 1))
         reach = (batch.lane_width + lateral_extents(batch)) / 2
-        ego_lane_gap = np.full(self.worlds, np.nan)
-        below_floor = np.zeros(self.worlds, dtype=bool)
         leaders_ahead_batch(
             stepped, batch.columns(), batch.heading, batch.lane_heading, reach, batch.lane_width,
-            self.min_ttc_s, below_floor, ego_lane_gap,
+            r157_min_following_distances(batch.speed[:, 0]), self.kept, self.dt,
         )  # fmt: skip
-        self.time_below_ttc_floor_s[stepped] += self.dt * below_floor[stepped]
-        minimum = r157_min_following_distances(batch.speed[:, 0])
-        below_distance = stepped & (ego_lane_gap < minimum)
-        self.time_below_min_distance_s[below_distance] += self.dt
         return [w for w in np.flatnonzero(stepped & crashed).tolist() if self.collision[w] is None]
 
     def collided(self, world: int, collision: Collision) -> None:
@@ -320,26 +265,16 @@ class EpisodeMetricsBatch:
         for name, value in values.items():
             self.series[name][rows, at] = value[rows]
         self.ticks[rows] += 1
-        vehicles = batch.s.shape[1]
-        others = np.arange(vehicles)[None, :]
-        present = (others >= 1) & (others < batch.count[:, None])
-        ahead = (batch.s > batch.s[:, :1]) & present
-        was_ahead = self.was_ahead[:, :vehicles]
-        passing = flags[:, None] & was_ahead & ~ahead & present
-        self.passed[:, :vehicles] |= passing
-        self.was_ahead[:, :vehicles] = np.where(flags[:, None], ahead, was_ahead)
+        passing_batch(flags, batch.s, batch.count, self.was_ahead, self.passed)
 
     def _samples(self, world: int, name: str) -> np.ndarray:
         return self.series[name][world, : self.ticks[world]]
 
-    def driven(self, world: int) -> Driven:
-        """`EpisodeRecorder.driven` of world `world`'s episode so far."""
-        time, speed, d = (self._samples(world, name) for name in ("time", "speed", "d"))
-        trace = {"time": time.tolist(), "speed": speed.tolist(), "d": d.tolist()}
-        heading, lane = self._samples(world, "heading"), self._samples(world, "lane")
-        return driven_of(
-            time, speed, heading, lane, int(np.count_nonzero(self.passed[world])), self.dt, trace
-        )
+    def samples(self, world: int) -> EpisodeSamples:
+        """`EpisodeRecorder.samples` of world `world`'s episode so far."""
+        time, speed, heading, d = (self._samples(world, name) for name in ("time", "speed", "heading", "d"))
+        passed = int(np.count_nonzero(self.passed[world]))
+        return EpisodeSamples(time, speed, heading, d, self._samples(world, "lane"), passed, self.dt)
 
     def control_ms(self, world: int) -> tuple[float, float]:
         """(p50, p95) of world `world`'s share of the control step per tick [ms] this episode, as
@@ -354,11 +289,4 @@ class EpisodeMetricsBatch:
         """`SafetyMonitor.measured` of world `world`'s episode so far, which `departed` the road or
         not (`ClosedLoopBatch.departed`), its collision's fault by the contact's geometry alone
         (the batch keeps no history to replay: `stack.runs.batch_episodes` judges it)."""
-        return SafetyMeasures.of(
-            departed,
-            self.collision[world],
-            None,
-            float(self.min_ttc_s[world]),
-            float(self.time_below_min_distance_s[world]),
-            float(self.time_below_ttc_floor_s[world]),
-        )
+        return SafetyMeasures.of(departed, self.collision[world], None)

@@ -25,15 +25,17 @@
   ego occupies is below `TTC_FLOOR_S` (nuPlan's TTC metric, whose floor is 0.95 s; the benchmark's
   share of time above a floor).
 
-The per-tick law of the leaders' TTC and gap is one plain function of one world's rows
-(`leaders_ahead`, which numba compiles): `SafetyMonitor` calls it compiled on its world, and
-`leaders_ahead_batch` loops over the worlds of a batch (`stack.loop.metrics.EpisodeMetricsBatch`).
+The per-tick laws are plain functions of one world's rows, which numba compiles: the leaders' TTC
+and gap (`leaders_ahead`) and what the monitor adds up of them (`watch`, into `MonitorMeasures`).
+`SafetyMonitor` calls them on its world, and `leaders_ahead_batch` loops over the worlds of a batch
+(`stack.loop.metrics.EpisodeMetricsBatch`).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba.extending import register_jitable
@@ -57,12 +59,11 @@ from common.r157 import (  # noqa: F401  (R157's distance, read here by the loop
 from records import WorldState
 from records.batch import BatchColumns
 from stack.fault.preventability import Fault, WorldHistory, judge
+from stack.results.episode_measures import STOPPED_SPEED_MPS
 from stack.results.episode_result import TTC_CAP_S
 
 DEPARTURE_TOLERANCE_M = 0.3
 """How far a footprint corner may lie beyond the road edge before it counts as a departure [m]."""
-STOPPED_SPEED_MPS = 0.5
-"""Below this speed a vehicle counts as stopped [m/s]."""
 TTC_FLOOR_S = 1.5
 """Time to collision below which a tick counts towards the time below the TTC floor [s]."""
 
@@ -143,27 +144,16 @@ def _collided_with(world: WorldState) -> int | None:
 
 @dataclass(frozen=True)
 class SafetyMeasures:
-    """What the safety monitor measured of an episode (module docstring; times in s): its fields
-    are `EpisodeResult`'s of the same names."""
+    """How the safety monitor judged an episode (module docstring): its fields are
+    `EpisodeResult`'s of the same names."""
 
     road_departure: bool
     at_fault_collision: bool
     collision_kind: str
     fault_reason: str
-    min_ttc_s: float
-    time_below_min_distance_s: float
-    time_below_ttc_floor_s: float
 
     @classmethod
-    def of(
-        cls,
-        road_departure: bool,
-        collision: Collision | None,
-        fault: Fault | None,
-        min_ttc_s: float,
-        time_below_min_distance_s: float,
-        time_below_ttc_floor_s: float,
-    ) -> SafetyMeasures:
+    def of(cls, road_departure: bool, collision: Collision | None, fault: Fault | None) -> SafetyMeasures:
         """The measures of an episode that ended in `collision` (none: it did not collide), judged
         `fault` (none: by its geometry alone, the reason left empty)."""
         if fault is None and collision is not None:
@@ -173,10 +163,51 @@ class SafetyMeasures:
             at_fault_collision=fault is not None and fault.at_fault,
             collision_kind=collision.kind if collision is not None else "",
             fault_reason=fault.reason if fault is not None else "",
-            min_ttc_s=min_ttc_s,
-            time_below_min_distance_s=time_below_min_distance_s,
-            time_below_ttc_floor_s=time_below_ttc_floor_s,
         )
+
+
+class MonitorMeasures(NamedTuple):
+    """What the safety monitor adds up over an episode's ticks (module docstring; times in s), one
+    value a world (row `w` of each array): each starts at its `MONITOR_START` value and changes in
+    `watch` only; its fields are `EpisodeResult`'s of the same names."""
+
+    min_ttc_s: np.ndarray
+    time_below_min_distance_s: np.ndarray
+    time_below_ttc_floor_s: np.ndarray
+
+
+MONITOR_START = (TTC_CAP_S, 0.0, 0.0)
+"""Each of `MonitorMeasures`' values before an episode's first tick."""
+
+
+def monitor_measures(worlds: int) -> MonitorMeasures:
+    """`MonitorMeasures` of `worlds` worlds, each at its start."""
+    return MonitorMeasures(*(np.full(worlds, start) for start in MONITOR_START))
+
+
+def restart(kept: MonitorMeasures, worlds: np.ndarray) -> None:
+    """The rows `worlds` of `kept` back at their start (an episode begins there)."""
+    for values, start in zip(kept, MONITOR_START, strict=True):
+        values[worlds] = start
+
+
+def monitored(kept: MonitorMeasures, world: int) -> dict[str, Any]:
+    """World `world`'s `MonitorMeasures` by name."""
+    return {name: float(values[world]) for name, values in zip(MonitorMeasures._fields, kept, strict=True)}
+
+
+@register_jitable
+def watch(
+    kept: MonitorMeasures, w: int, ttc: float, ego_lane_gap: float, min_distance: float, dt: float
+) -> None:
+    """One tick of `dt` [s] in world `w` of `kept` (`MonitorMeasures`), its leaders as
+    `leaders_ahead` found them: the smallest TTC [s] and the gap [m] to the leader in the ego's
+    lane (NaN: none), against R157's minimum following distance at the ego's speed [m]."""
+    kept.min_ttc_s[w] = min(kept.min_ttc_s[w], ttc)
+    if ttc < TTC_FLOOR_S:
+        kept.time_below_ttc_floor_s[w] += dt
+    if ego_lane_gap < min_distance:
+        kept.time_below_min_distance_s[w] += dt
 
 
 class SafetyMonitor:
@@ -187,11 +218,17 @@ class SafetyMonitor:
         self.dt = dt
         self.history = WorldHistory(dt)
         self.fault: Fault | None = None
-        self.min_ttc_s = TTC_CAP_S
-        self.time_below_min_distance_s = 0.0
-        self.time_below_ttc_floor_s = 0.0
+        self.kept = monitor_measures(1)
         self.road_departure = False
         self.collision: Collision | None = None
+
+    @property
+    def min_ttc_s(self) -> float:
+        return float(self.kept.min_ttc_s[0])
+
+    @property
+    def time_below_min_distance_s(self) -> float:
+        return float(self.kept.time_below_min_distance_s[0])
 
     def record_departure(self, world: WorldState) -> None:
         """Only whether the ego left the road in `world` (what ends an episode early)."""
@@ -216,21 +253,13 @@ class SafetyMonitor:
             *extent,
             world.lane_width,
         )
-        self.min_ttc_s = min(self.min_ttc_s, ttc)
-        self.time_below_ttc_floor_s += self.dt * (ttc < TTC_FLOOR_S)
-        if not math.isnan(ego_lane_gap) and ego_lane_gap < r157_min_following_distance(float(world.speed[0])):
-            self.time_below_min_distance_s += self.dt
+        seen = not math.isnan(ego_lane_gap)
+        min_distance = r157_min_following_distance(float(world.speed[0])) if seen else 0.0
+        watch(self.kept, 0, ttc, ego_lane_gap, min_distance, self.dt)
 
     def measured(self) -> SafetyMeasures:
-        """The episode so far (see `SafetyMeasures`)."""
-        return SafetyMeasures.of(
-            self.road_departure,
-            self.collision,
-            self.fault,
-            self.min_ttc_s,
-            self.time_below_min_distance_s,
-            self.time_below_ttc_floor_s,
-        )
+        """How the episode so far is judged (its sums: `kept`, `monitored`)."""
+        return SafetyMeasures.of(self.road_departure, self.collision, self.fault)
 
 
 @register_jitable
@@ -276,13 +305,12 @@ def leaders_ahead_batch(
     lane_heading: np.ndarray,
     reach: np.ndarray,
     lane_width: float,
-    min_ttc: np.ndarray,
-    below_floor: np.ndarray,
-    ego_lane_gap: np.ndarray,
+    min_distance: np.ndarray,
+    kept: MonitorMeasures,
+    dt: float,
 ) -> None:  # pragma: no cover - compiled
-    """`leaders_ahead` in each `stepped` world of a batch (`reach` (W, V)), as `SafetyMonitor.record`
-    takes it: the smallest TTC kept in `min_ttc` [s], whether it is below `TTC_FLOOR_S` in
-    `below_floor`, and the gap to the leader in the ego's lane (NaN: none) in `ego_lane_gap` [m]."""
+    """`leaders_ahead` and `watch` in each `stepped` world of a batch (`reach` (W, V); R157's
+    `min_distance` [m] at each ego's speed), as `SafetyMonitor.record` takes them, into `kept`."""
     count, s, d, speed, length, width = (
         columns.vehicles,
         columns.s,
@@ -298,8 +326,5 @@ def leaders_ahead_batch(
             continue
         low, high = footprint_across(d[w, 0], length[w, 0], width[w, 0], heading[w, 0] - lane_heading[w])
         rows = VehicleRows(count[w], s[w], d[w], speed[w], length[w], reach[w], now)
-        ttc, ego_lane_gap[w] = leaders_ahead(
-            rows, offsets[w], lanes_count[w], lane[w, 0], low, high, lane_width
-        )
-        min_ttc[w] = min(min_ttc[w], ttc)
-        below_floor[w] = ttc < TTC_FLOOR_S
+        ttc, ego_lane_gap = leaders_ahead(rows, offsets[w], lanes_count[w], lane[w, 0], low, high, lane_width)
+        watch(kept, w, ttc, ego_lane_gap, min_distance[w], dt)

@@ -11,9 +11,12 @@ once on the field (`declared(...)` as its metadata) and read by every report:
 - its `interval`: the 95 % interval `compare` reports (of the mean, or of the rate of a flag), and
   its `columns` in compare's two tables (agents, safety);
 - whether it is measured in wall-clock time (`timing`: never in episodes.csv, never part of a
-  result's identity).
+  result's identity);
+- its `measure`, for a field measured from the samples every recorder keeps: a function of the
+  episode's `stack.results.episode_measures.EpisodeSamples`, which both paths run.
 
-Adding a metric is computing it and declaring its field with these; the files and tables follow.
+Adding a metric of those samples is declaring its field with these and its measurer; the files,
+tables and both paths follow.
 """
 
 from __future__ import annotations
@@ -126,6 +129,7 @@ class Reported:
     interval: CompareInterval | None = None
     columns: tuple[Column, ...] = ()
     timing: bool = False
+    measure: Callable[[Any], object] | None = None
 
 
 def declared(
@@ -136,9 +140,11 @@ def declared(
     interval: CompareInterval | None = None,
     columns: tuple[Column, ...] = (),
     timing: bool = False,
+    measure: Callable[[Any], object] | None = None,
 ) -> dict[str, Reported]:
-    """A field's metadata: how it is reported (`Reported`)."""
-    return {"reported": Reported(unit, section, summary, rows, interval, columns, timing)}
+    """A field's metadata: how it is reported and, for a field measured from the recorded samples,
+    how it is measured (`Reported`)."""
+    return {"reported": Reported(unit, section, summary, rows, interval, columns, timing, measure)}
 
 
 def record_fields(record: Any) -> dict[str, Any]:

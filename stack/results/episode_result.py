@@ -6,12 +6,12 @@ these declarations, so a new metric is its computation plus its field here."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any
 
 from perception.grid import OccupancyGrid
 from records import WorldState
+from stack.results import episode_measures as measures
 from stack.results.episode_fields import (
     Column,
     CompareInterval,
@@ -33,22 +33,6 @@ from stack.results.episode_fields import (
 
 TTC_CAP_S = 99.0
 """The minimum TTC an episode reports when nothing ever closed in on a leader [s]."""
-
-
-def _not_at_fault(values: list[bool], episodes: Sequence[EpisodeResult]) -> int:
-    """Collisions not at fault: all collisions but those at fault (`values`)."""
-    return sum(e.crashed for e in episodes) - sum(values)
-
-
-def _failures(values: list[bool], episodes: Sequence[EpisodeResult]) -> int:
-    """Episodes with an at-fault collision or a road departure."""
-    return sum(e.at_fault_collision or e.road_departure for e in episodes)
-
-
-def _accuracy(values: list[int], episodes: Sequence[EpisodeResult]) -> float | None:
-    """The paper's accuracy [%]: passed / (passed + collided) x 100; None when both are 0."""
-    passed, collisions = sum(values), sum(e.crashed for e in episodes)
-    return 100.0 * passed / (passed + collisions) if passed + collisions else None
 
 
 def _by_cause(cause: str, label: str) -> dict:
@@ -78,8 +62,8 @@ class EpisodeResult:
     seed: int = field(
         metadata=declared("", "episode", columns=(Column("episodes", "seed", episode_cell("{seed}")),))
     )
-    steps: int = field(metadata=declared("control ticks", "episode"))
-    duration_s: float = field(metadata=declared("s", "episode"))
+    steps: int = field(metadata=declared("control ticks", "episode", measure=measures.steps))
+    duration_s: float = field(metadata=declared("s", "episode", measure=measures.duration_s))
     crashed: bool = field(
         metadata=declared(
             "flag",
@@ -97,7 +81,8 @@ class EpisodeResult:
         metadata=declared(
             "vehicles",
             "progress",
-            summary=(Summarized("passed_cars", total), Summarized("accuracy", _accuracy)),
+            measure=measures.passed_cars,
+            summary=(Summarized("passed_cars", total), Summarized("accuracy", measures.accuracy)),
             rows=(SummaryRow("accuracy", "{accuracy:.2f} %"), SummaryRow("passed cars", "{passed_cars}")),
             columns=(
                 Column("episodes", "passed", episode_cell("{passed_cars}")),
@@ -122,6 +107,7 @@ class EpisodeResult:
         metadata=declared(
             "m/s",
             "progress",
+            measure=measures.mean_speed,
             summary=(Summarized("mean_speed", mean),),
             rows=(SummaryRow("mean speed", "{mean_speed:.2f} m/s"),),
             interval=CompareInterval("mean_speed", "mean"),
@@ -135,6 +121,7 @@ class EpisodeResult:
         metadata=declared(
             "m/s^2",
             "comfort",
+            measure=measures.peak_lat_accel,
             summary=(Summarized("peak_lat_accel", largest),),
             columns=(Column("episodes", "peak |a_y| [m/s²]", episode_cell("{peak_lat_accel:.2f}")),),
         )
@@ -143,6 +130,7 @@ class EpisodeResult:
         metadata=declared(
             "m/s^3",
             "comfort",
+            measure=measures.peak_lat_jerk,
             summary=(Summarized("peak_lat_jerk", largest),),
             columns=(Column("episodes", "peak jerk [m/s³]", episode_cell("{peak_lat_jerk:.2f}")),),
         )
@@ -195,7 +183,7 @@ class EpisodeResult:
         metadata=declared(
             "flag",
             "safety",
-            summary=(Summarized("road_departures", total), Summarized("failures", _failures)),
+            summary=(Summarized("road_departures", total), Summarized("failures", measures.failures)),
             rows=(SummaryRow("road departures", "{road_departures}"),),
             interval=CompareInterval("road_departure_rate", "rate"),
             columns=(
@@ -211,7 +199,7 @@ class EpisodeResult:
             "collisions",
             summary=(
                 Summarized("at_fault_collisions", total),
-                Summarized("not_at_fault_collisions", _not_at_fault),
+                Summarized("not_at_fault_collisions", measures.not_at_fault),
             ),
             rows=(
                 SummaryRow("at fault / not at fault", "{at_fault_collisions} / {not_at_fault_collisions}"),
@@ -300,6 +288,7 @@ class EpisodeResult:
         metadata=declared(
             "s",
             "safety",
+            measure=measures.longest_standstill_s,
             summary=(Summarized("longest_standstill_s", mean),),
             rows=(SummaryRow("longest standstill / episode", "{longest_standstill_s:.2f} s"),),
             interval=CompareInterval("longest_standstill_s", "mean"),
@@ -328,6 +317,7 @@ class EpisodeResult:
         metadata=declared(
             "s",
             "decisions",
+            measure=measures.time_in_leftmost_lane_s,
             summary=(Summarized("time_in_leftmost_lane_s", mean),),
             rows=(SummaryRow("time in the leftmost lane / episode", "{time_in_leftmost_lane_s:.2f} s"),),
             interval=CompareInterval("time_in_leftmost_lane_s", "mean"),
@@ -396,4 +386,5 @@ def summarize(results: list[EpisodeResult], **identity: object) -> dict:
     The controller's compute time per tick [ms] is the median of the episodes' medians
     (`solve_ms_p50`) and the worst episode's 95th percentile (`solve_ms_p95`): measured, so the
     only fields that differ between two runs of one seed (see `TIMING_FIELDS`)."""
-    return {**identity, "episodes": len(results), **summary_entries(EpisodeResult, results)}
+    record = type(results[0]) if results else EpisodeResult
+    return {**identity, "episodes": len(results), **summary_entries(record, results)}
