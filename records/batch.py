@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -63,6 +63,11 @@ class WorldBatch:
             self.lanes_count,
             self.lane_offsets,
         )
+
+    def rows(self, worlds: np.ndarray) -> WorldBatch:
+        """The worlds `worlds` (indices, in that order) as a batch of their own."""
+        arrays = [field.name for field in fields(self) if field.name != "lane_width"]
+        return replace(self, **{name: getattr(self, name)[worlds] for name in arrays})
 
     @classmethod
     def of(cls, worlds: list[WorldState]) -> WorldBatch:

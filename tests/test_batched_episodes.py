@@ -42,6 +42,8 @@ def both_ways(episodes: int, **overrides: object) -> tuple[list[EpisodeResult], 
         ("incident", "rule"),
         ("overtaking", "lookahead"),
         ("random", "lookahead"),
+        ("random", "rule"),
+        ("random", "mobil"),
     ],
 )
 def test_each_episode_of_a_batch_is_the_episode_run_alone(scenario: str, agent: str) -> None:
@@ -94,7 +96,6 @@ def test_a_run_stepped_one_world_at_a_time_says_why_in_its_summary() -> None:
         ({"controller__type": "mpc"}, "PID tracker"),
         ({"sim__backend": "fast"}, "vector backend"),
         ({"sim__plant": "dynamic"}, "kinematic plant"),
-        ({"scenario": "random", "planner__agent": "rule"}, "several sizes"),
     ],
 )
 def test_what_a_batch_does_not_run_is_refused_in_one_line(overrides: dict, reason: str) -> None:

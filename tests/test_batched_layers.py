@@ -93,6 +93,14 @@ def test_a_world_alone_and_in_any_batch_is_encoded_the_same(worlds):
         np.testing.assert_array_equal(part, whole[start : start + 3])
 
 
+def test_the_worlds_of_one_lane_count_taken_from_a_batch_are_encoded_as_a_batch_of_their_own(worlds):
+    batch, grid = WorldBatch.of(worlds), GridConfig()
+    for lanes in (3, 5):
+        picked = np.flatnonzero(batch.lanes_count == lanes)
+        alone = WorldBatch.of([worlds[k] for k in picked.tolist()])
+        np.testing.assert_array_equal(observe_batch(grid, batch.rows(picked)), observe_batch(grid, alone))
+
+
 def test_what_the_batch_cannot_encode_is_refused_in_one_line(worlds):
     batch = WorldBatch.of(worlds)
     with pytest.raises(

@@ -16,7 +16,13 @@ from stack.sim.highway import HighwayAdapter
 SHORT = {"episodes": 1, "seed": 3, "highway": {"duration": 6}, "planner": {"agent": "oracle"}}
 
 
-def test_the_tree_searches_copies_and_leaves_the_loop_untouched(monkeypatch):
+@pytest.fixture
+def forks(monkeypatch):
+    """The oracle's rollouts as forks of the loop, one at a time (not a batch of worlds)."""
+    monkeypatch.setattr("stack.agents.oracle.search_refusal", lambda loop, base: "forks asked for")
+
+
+def test_the_tree_searches_copies_and_leaves_the_loop_untouched(monkeypatch, forks):
     config = build_config(
         {**SHORT, "planner": {"agent": "oracle", "oracle": {"horizon_s": 3}}}, scenario="overtaking"
     )
@@ -79,7 +85,7 @@ def test_a_command_the_safety_layer_masks_is_refused_before_any_copy(monkeypatch
         assert oracle.plan(loop) is Command.STAY and not copies
 
 
-def test_a_search_that_goes_on_from_the_last_one_rates_every_command_as_a_fresh_search(monkeypatch):
+def test_a_search_that_goes_on_from_the_last_one_rates_every_command_as_a_fresh_search(monkeypatch, forks):
     """The leaves the last search kept, played on for the time the root moved on: every decision's
     values are those of a search that keeps nothing."""
     config = build_config(
@@ -110,3 +116,63 @@ def test_a_search_that_goes_on_from_the_last_one_rates_every_command_as_a_fresh_
             searched += not np.isnan(keeping.values).all()
             loop.act(command)
     assert searched >= 3 and continued, "some searches went on from the last one's leaves"
+
+
+def _decisions_both_ways(config, seed, monkeypatch):
+    """Per decision of one episode: whether the batched search and the forks gave the same command
+    and values, and whether the batched search ran."""
+    batched, forked = build_agent(config, 0), build_agent(config, 0)
+    assert isinstance(batched, Oracle) and isinstance(forked, Oracle)
+    batched_values = Oracle._batched_values
+    ran: list[bool] = []
+
+    def chosen(self, *args):
+        if self is forked:
+            return None
+        values = batched_values(self, *args)
+        ran.append(values is not None)
+        return values
+
+    monkeypatch.setattr(Oracle, "_batched_values", chosen)
+    same: list[bool] = []
+    with HighwayAdapter(config.highway, config.sim.backend) as adapter:
+        loop = ClosedLoop(config, adapter, grid=batched.grid_config)
+        loop.reset(seed)
+        while not loop.done:
+            loop.perceive()
+            before, time = loop.world, adapter.env.unwrapped.time
+            command = batched.plan(loop)
+            assert loop.world is before and adapter.env.unwrapped.time == time, "only copies moved"
+            same.append(
+                forked.plan(loop) is command and np.array_equal(batched.values, forked.values, equal_nan=True)
+            )
+            loop.act(command)
+    return same, ran
+
+
+def test_the_batched_search_rates_every_command_as_the_forks_do(monkeypatch):
+    """Every path of the tree a world of one batch: each decision's values, bit for bit, those of
+    the forks played one at a time."""
+    config = build_config(
+        {**SHORT, "highway": {"duration": 14}, "planner": {"agent": "oracle", "oracle": {"horizon_s": 6}}},
+        scenario="overtaking",
+    )
+    same, ran = _decisions_both_ways(config, 3, monkeypatch)
+    assert all(same) and sum(ran) >= 3, (same, ran)
+
+
+def test_a_loop_seen_through_a_sensor_is_searched_on_forks(monkeypatch):
+    config = build_config(
+        {**SHORT, "highway": {"duration": 4}, "planner": {"agent": "oracle", "oracle": {"horizon_s": 2}}},
+        scenario="noisy",
+    )
+    same, ran = _decisions_both_ways(config, 3, monkeypatch)
+    assert all(same) and not any(ran)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", ["overtaking", "dense", "incident"])
+def test_the_batched_search_decides_as_the_forks_over_whole_episodes(monkeypatch, scenario):
+    config = build_config({**SHORT, "highway": {"duration": 40}}, scenario=scenario)
+    same, ran = _decisions_both_ways(config, 1014100, monkeypatch)
+    assert all(same) and any(ran)

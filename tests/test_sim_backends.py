@@ -410,3 +410,30 @@ def test_the_drop_in_ids_are_highway_v0_vehicle_for_vehicle(env_id, config):
     for _ in range(4):
         np.testing.assert_array_equal(vehicles(ours), vehicles(stock))
         stock.step(1), ours.step(1)
+
+
+@pytest.mark.parametrize("driver", DRIVERS)
+def test_the_exit_road_on_the_fast_road_matches_stock(driver):
+    """The exit's curve searched through its own distance, its straight lanes in plain floats: every
+    vehicle's state and full lane index (segment included), frame for frame, as stock's."""
+    highway = build_config({}, scenario="exit").highway
+    runs = []
+    for env_id in (envs.EXIT, envs.FAST_EXIT):
+        env = gym.make(env_id, config=env_config(highway), disable_env_checker=True)
+        env.reset(seed=3)
+        frames = []
+        for frame in range(150):
+            _, _, _, truncated, _ = env.step(DRIVERS[driver](frame))
+            vehicles = env.unwrapped.road.vehicles
+            frames.append(([state(v) for v in vehicles], [v.lane_index for v in vehicles]))
+            if truncated:
+                break
+        env.close()
+        runs.append(frames)
+    assert len(runs[0]) == len(runs[1]) > 100
+    for frame, (stock, fast) in enumerate(zip(*runs, strict=True)):
+        np.testing.assert_array_equal(np.array(fast[0]).view(np.uint64), np.array(stock[0]).view(np.uint64))
+        assert fast[1] == stock[1], frame
+    assert any(index[1] == "exit" for index in runs[0][-1][1]) or any(
+        index[0] == "1" for index in runs[0][-1][1]
+    ), "vehicles reach the exit's segments"

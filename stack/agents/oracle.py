@@ -9,12 +9,16 @@ ego gains along the road by then (minus infinity on a crash); a lane change must
 more than staying. With the shipped Double DQN as `base` (the default) the rollouts drive the best
 agent there is and the tree adds what changing its next decisions gains with the future known: a
 reference ceiling for any agent on the same seeds, controllers and safety layer, though not an
-exhaustive optimum. It is slow: up to 3^depth look-ahead rollouts per decision (the cost per episode
-is in BENCHMARKS.md), fewer where a search goes on from the last one: its leaves are kept, and when
-the loop then stands where one of its root commands led (the same world, bit for bit: the simulator
-is deterministic), a leaf of the new search whose commands are a kept leaf's after the first (its
-base agent's first command included) is that same future, played on only for the time the root
-moved on. Every value, so every decision, is the one a search from scratch makes.
+exhaustive optimum. It costs up to 3^depth look-ahead rollouts per decision (the cost per episode
+is in BENCHMARKS.md). Where the loop copies into a batch of worlds (the `vector` backend's highway
+road, the PID tracker on the kinematic plant, no sensor model: `stack.batch.loop_copies`), the
+3^depth command paths are played as one batch, stepped together (`stack.agents.oracle_search`;
+about 3x cheaper an episode). Elsewhere they are forks of the loop played one at a time, fewer
+where a search goes on from the last one: its leaves are kept, and when the loop then stands where
+one of its root commands led (the same world, bit for bit: the simulator is deterministic), a leaf
+of the new search whose commands are a kept leaf's after the first (its base agent's first command
+included) is that same future, played on only for the time the root moved on. Either way every
+value, so every decision, is the one a search from scratch on forks makes.
 
 It is an agent, one of `drivestack agents`, but it lives here, beside the closed loop, rather than
 in `planner/` with the others: it plans on the loop itself (`ClosedLoop.fork`, `permits`,
@@ -33,10 +37,11 @@ from perception.grid import OccupancyGridBuilder
 from planner.agents import Action, Agent, Policy, decide, sees_permitted
 from planner.factory import make_agent
 from records import Command, Encoding, GridConfig, WorldState
+from stack.agents.oracle_search import COMMANDS, BatchedSearch, search_refusal
 from stack.loop.closed_loop import ClosedLoop
 from stack.settings.layers import OracleConfig
+from stack.sim.batch.arrays import UnsupportedRoad
 
-COMMANDS = (Command.STAY, Command.LEFT, Command.RIGHT)
 Path = tuple[Command, ...]
 """Commands given from a search's root."""
 
@@ -65,6 +70,7 @@ class Oracle(Policy):
         self._leaves: list[Leaf] = []
         self._reached: dict[Command, tuple[WorldState, bool]] = {}
         self._kept: dict[Path, Leaf] = {}
+        self._search: BatchedSearch | None = None
 
     @classmethod
     def for_road(cls, config: OracleConfig, lanes: int, grid: GridConfig) -> Oracle:
@@ -89,12 +95,31 @@ class Oracle(Policy):
         self._leaves, self._reached = [], {}
         if not any(loop.permits(c) for c in COMMANDS[1:]):
             return Command.STAY
-        values = [self._value(loop, command, self.config.depth, start_s, start_time) for command in COMMANDS]
+        values = self._batched_values(loop, start_s, start_time)
+        if values is None:
+            values = [
+                self._value(loop, command, self.config.depth, start_s, start_time) for command in COMMANDS
+            ]
         values[1:] = [value - self.config.margin_m for value in values[1:]]
         for command, value in zip(COMMANDS, values, strict=True):
             self.values[command] = value
         self._kept = {}
         return COMMANDS[int(np.argmax(values))]
+
+    def _batched_values(self, loop: ClosedLoop, start_s: float, start_time: float) -> list[float] | None:
+        """The root commands' values from the tree played as one batch of worlds
+        (`stack.agents.oracle_search`), or None where the loop cannot be copied into one."""
+        if search_refusal(loop, self.base) is not None:
+            return None
+        if self._search is None or self._search.run is not loop.config:
+            if self._search is not None:
+                self._search.close()
+            self._search = BatchedSearch(self.config, self.base, loop.config)
+        roots = [loop.changing_lane or loop.permits(command) for command in COMMANDS]
+        try:
+            return self._search.values(loop, roots, start_s, start_time)
+        except UnsupportedRoad:
+            return None
 
     def _continued(self, loop: ClosedLoop) -> dict[Path, Leaf]:
         """The last search's leaves that go on from `loop`, by their tree's commands from it: those

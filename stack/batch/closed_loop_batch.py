@@ -109,11 +109,8 @@ class ClosedLoopBatch:
         )
         self.lane = np.zeros(worlds, dtype=np.int64)
         self.target = np.zeros(worlds, dtype=np.int64)
-        self.coef, self.profile, self.clock = (
-            np.zeros((worlds, 6)),
-            np.zeros((worlds, 4)),
-            np.zeros((worlds, 3)),
-        )
+        self.coef, self.profile = np.zeros((worlds, 6)), np.zeros((worlds, 4))
+        self.clock = np.zeros((worlds, 3))
         self.counts = np.zeros((worlds, 3), dtype=np.int64)
         self.lateral, self.speed_pi = np.zeros((worlds, 4)), np.zeros((worlds, 3))
         self.flags = np.zeros((worlds, 3), dtype=np.int64)
@@ -254,6 +251,12 @@ class ClosedLoopBatch:
             self.causes.reset(reset, self.batch, self.traffic.time, self.dt)
         if self.metrics is not None:
             self.metrics.reset(worlds, self.batch, self.traffic.time)
+
+    def loaded(self) -> None:
+        """What the layers read, anew after worlds were written in place (`stack.batch.loop_copies`)."""
+        self._memory(self.traffic.arrays.vehicles)
+        self.batch = self.traffic.arrays.world_batch()
+        self._sense(np.ones(self.worlds, dtype=bool), warm_up=True)
 
     def _maneuver(self) -> ManeuverArrays:
         return ManeuverArrays(self.lane, self.target, self.coef, self.profile, self.clock, self.counts)

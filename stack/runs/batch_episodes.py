@@ -61,7 +61,7 @@ def batch_refusal(config: RunConfig) -> str | None:
     grid = decision_grid(config, agent)
     if unbatched := [name for name in grid.features if name not in BATCHED_FEATURES]:
         return f"batched worlds do not compute the grid feature {unbatched[0]!r}"
-    if len(config.highway.lane_counts) > 1 and (grid.lanes != "ego" or grid.lane_code != "sides"):
+    if len(config.highway.lane_counts) > 1 and not _one_size(grid) and isinstance(agent, BatchPolicy):
         return "roads of several lane counts give this agent observations of several sizes"
     return None
 
@@ -141,22 +141,43 @@ def _judged(config: RunConfig, result: EpisodeResult) -> EpisodeResult:
     return replace(result, at_fault_collision=alone.at_fault_collision, fault_reason=alone.fault_reason)
 
 
-def _seen(loop: ClosedLoopBatch, grid: GridConfig, with_permitted: bool) -> np.ndarray:
-    """(worlds, values): every world's observation on `grid`, followed by its permitted commands
-    for an agent trained with an action mask (`with_permitted`)."""
-    assert loop.perceived is not None
-    seen = observe_batch(grid, loop.perceived)
-    return np.concatenate([seen, loop.permitted()], axis=1) if with_permitted else seen
+def _seen(loop: ClosedLoopBatch, grid: GridConfig, with_permitted: bool) -> np.ndarray | list[np.ndarray]:
+    """Every world's observation on `grid`, followed by its permitted commands for an agent trained
+    with an action mask (`with_permitted`): (worlds, values), or a list of one row a world where
+    the worlds' roads have several lane counts and `grid` sizes its observation by them (each
+    lane count's worlds encoded together)."""
+    perceived = loop.perceived
+    assert perceived is not None
+    permitted = loop.permitted() if with_permitted else None
+    lane_counts = np.unique(perceived.lanes_count)
+    if len(lane_counts) == 1 or _one_size(grid):
+        seen = observe_batch(grid, perceived)
+        return seen if permitted is None else np.concatenate([seen, permitted], axis=1)
+    rows: list[np.ndarray] = [np.empty(0, dtype=np.float32)] * perceived.worlds
+    for lanes in lane_counts.tolist():
+        worlds = np.flatnonzero(perceived.lanes_count == lanes)
+        part = observe_batch(grid, perceived.rows(worlds))
+        if permitted is not None:
+            part = np.concatenate([part, permitted[worlds]], axis=1)
+        for row, world in enumerate(worlds.tolist()):
+            rows[world] = part[row]
+    return rows
+
+
+def _one_size(grid: GridConfig) -> bool:
+    """Whether `grid`'s observation has one size on roads of any lane count."""
+    return grid.lanes == "ego" and grid.lane_code == "sides"
 
 
 def decide_worlds(
-    agents: Sequence[Agent], seen: np.ndarray, deciding: np.ndarray, commands: np.ndarray
+    agents: Sequence[Agent], seen: np.ndarray | list[np.ndarray], deciding: np.ndarray, commands: np.ndarray
 ) -> list[int]:
     """Each world flagged `deciding` decides on its row of `seen`: its command (a `Command` value)
     written to `commands`; one call for them all when the agents decide as a batch
     (`BatchPolicy`). Returns the worlds whose gate (`Gate`) hands the decision to its fallback."""
     worlds = np.flatnonzero(deciding)
     if isinstance(agents[0], BatchPolicy):
+        assert isinstance(seen, np.ndarray), "an agent deciding as a batch sees observations of one size"
         commands[worlds] = agents[0].choose_batch(seen[worlds])
         return []
     handed = []

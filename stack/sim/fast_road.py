@@ -140,33 +140,35 @@ class LaneProjections:
 
 class FastRoadNetwork(RoadNetwork):
     """A `RoadNetwork` whose closest-lane search, called by every vehicle every frame, evaluates
-    highway-env's `distance_with_heading` for straight lanes in plain floats."""
+    highway-env's `distance_with_heading` for straight lanes in plain floats (other lanes, such as
+    an exit's curve, through their own `distance_with_heading`, as stock does)."""
 
-    _straight_lanes: list[tuple[LaneIndex, StraightLane]] | None = None
+    _lanes: list[tuple[LaneIndex, AbstractLane, bool]] | None = None
+    """Every lane in stock's search order, with whether it is a `StraightLane`."""
 
     def get_closest_lane_index(self, position: np.ndarray, heading: float | None = None) -> LaneIndex | None:
         """Stock's closest lane (by position and heading); None only on a network without lanes."""
-        lanes = self._straight_lanes
         if heading is None:
             return super().get_closest_lane_index(position, heading)
+        lanes = self._lanes
         if lanes is None:
-            lanes = [
-                ((_from, _to, _id), lane)
+            lanes = self._lanes = [
+                ((_from, _to, _id), lane, type(lane) is StraightLane)
                 for _from, to_dict in self.graph.items()
                 for _to, lane_list in to_dict.items()
                 for _id, lane in enumerate(lane_list)
             ]
-            if any(type(lane) is not StraightLane for _, lane in lanes):
-                return super().get_closest_lane_index(position, heading)
-            self._straight_lanes = lanes
         x, y = float(position[0]), float(position[1])
         best_index, best = None, None
-        for index, lane in lanes:
-            dx, dy = x - lane.start[0], y - lane.start[1]
-            s = dx * lane.direction[0] + dy * lane.direction[1]
-            r = dx * lane.direction_lateral[0] + dy * lane.direction_lateral[1]
-            angle = abs(wrap_to_pi(heading - lane.heading))
-            distance = abs(r) + max(s - lane.length, 0) + max(0 - s, 0) + angle
+        for index, lane, straight in lanes:
+            if straight:
+                dx, dy = x - lane.start[0], y - lane.start[1]
+                s = dx * lane.direction[0] + dy * lane.direction[1]
+                r = dx * lane.direction_lateral[0] + dy * lane.direction_lateral[1]
+                angle = abs(wrap_to_pi(heading - lane.heading))
+                distance = abs(r) + max(s - lane.length, 0) + max(0 - s, 0) + angle
+            else:
+                distance = lane.distance_with_heading(position, heading)
             if best is None or distance < best:
                 best_index, best = index, distance
         return best_index

@@ -216,7 +216,8 @@ class BatchArrays:
         """Every row's past s and speed, kept once a loaded world holds a driver with a delay."""
 
     def __getattr__(self, name: str) -> np.ndarray:
-        """A vehicle column (worlds, vehicles) or lane column (worlds, lanes) by name."""
+        """A vehicle column (worlds, vehicles) or lane column (worlds, lanes) by name (each is also
+        set as an attribute, so this runs only for a name that is none)."""
         for table in ("columns", "lane_columns"):
             held = self.__dict__.get(table, {})
             if name in held:
@@ -248,6 +249,10 @@ class BatchArrays:
             self.lane_columns["direction"] = np.zeros((self.worlds, 2))
             self.lane_columns["lane_count"] = np.zeros(self.worlds, dtype=np.int64)
         self.vehicles, self.lanes = vehicles, lanes
+        self.flat = {name: column.reshape(-1) for name, column in self.columns.items()}
+        """Every vehicle column as one row of all the worlds' vehicles (views: written through)."""
+        self.__dict__.update(self.columns)
+        self.__dict__.update(self.lane_columns)
 
     def load(self, world: int, spawned: SpawnedWorld) -> None:
         """Write a spawned world into world `world`'s rows."""

@@ -33,11 +33,11 @@ import numpy as np
 import numpy.typing as npt
 from highway_env import utils
 from highway_env.envs.common.action import ContinuousAction
-from highway_env.road.road import RoadNetwork
+from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.kinematics import Vehicle
 
 from stack.settings.world import HighwayConfig
-from stack.sim.batch.arrays import BatchArrays, read_world, road_of
+from stack.sim.batch.arrays import BatchArrays, UnsupportedRoad, read_world, road_of
 from stack.sim.batch.traffic_frame import act, move
 from stack.sim.fast_road import FastRoadNetwork
 from stack.sim.highway import MAX_ACCELERATION, MAX_STEERING, env_config
@@ -136,6 +136,27 @@ class TrafficBatch:
         self.time[world] = env.time
         self.ended.terminated[world] = self.ended.truncated[world] = False
         self._pending_reset[world] = False
+
+    def load_worlds(
+        self, worlds: Sequence[int], road: Road, ego: Vehicle, time: float, acts: int, member: int = 0
+    ) -> None:
+        """Each world of `worlds` set to a road some env drives alone, as it stands `time` [s] into
+        its episode (copies to play its futures on: `road` is only read): its vehicles, lanes and
+        ego read into the arrays, its sudden brakings' clock at `acts` frames, as the mix's
+        `member`. `UnsupportedRoad` for a road the arrays cannot hold, or with a driver who acts on
+        a delayed view (the arrays would need the past it saw)."""
+        spawned = read_world(road, ego)
+        if spawned.columns["delay_frames"].any():
+            raise UnsupportedRoad("a copied world holds no driver acting on a delayed view")
+        for world in worlds:
+            self._member[world], self._duration[world] = member, self._durations[member]
+            self.arrays.load(world, spawned)
+            self.arrays.acts[world] = acts
+            self._rngs[world] = road.np_random
+            self._lane_tables[world], self._networks[world] = spawned.lanes, spawned.network
+            self.time[world] = time
+            self.ended.terminated[world] = self.ended.truncated[world] = False
+            self._pending_reset[world] = False
 
     def step(
         self, acceleration: npt.ArrayLike, steering: npt.ArrayLike, only: np.ndarray | None = None

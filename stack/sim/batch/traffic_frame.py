@@ -58,7 +58,7 @@ def lane_frame(
 
 def act(arrays: BatchArrays, active: np.ndarray) -> None:
     """`Road.act()` of every active world: the IDM drivers' decisions, steering and acceleration."""
-    flat = {name: column.reshape(-1) for name, column in arrays.columns.items()}
+    flat = arrays.flat
     lanes = arrays.lane_columns
     lane_count = lanes["lane_count"]
     arrays.acts[active > 0] += 1
@@ -246,7 +246,7 @@ def _yield(
 
 def move(arrays: BatchArrays, active: np.ndarray, dt: float) -> None:
     """`Road.step(dt)` of every active world: the vehicles' steps, then the collisions."""
-    flat = {name: column.reshape(-1) for name, column in arrays.columns.items()}
+    flat = arrays.flat
     in_world = np.arange(arrays.vehicles)[None, :] < active[:, None]
     rows = np.flatnonzero(in_world.reshape(-1))
     if len(rows) == 0:
