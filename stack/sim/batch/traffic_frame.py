@@ -70,7 +70,7 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
         return
     if arrays.seen is not None:
         acting = np.flatnonzero(active > 0)
-        arrays.seen.push(acting, s[acting], arrays.speed[acting])
+        arrays.seen.push(acting, s, arrays.speed)
     world_of = np.repeat(np.arange(arrays.worlds), arrays.vehicles)
     heading, speed = flat["heading"], flat["speed"]
     direction_of = np.empty((len(heading), 2))
@@ -119,7 +119,7 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
     egos = np.concatenate([side_rear, side_rear, me, me, mover_rear, mover_rear, drivers])
     leaders = np.concatenate([side_front, me, side_front, mover_front, me, mover_front, own_front])
     evaluators = np.concatenate([me] * 6 + [drivers])
-    a = kinematics.idm(egos, leaders, laws, evaluators)
+    a, free_road = kinematics.idm_and_free_road(egos, leaders, laws, evaluators)
     blocks = 6 * len(me)
     side_accelerations, own_acceleration = a[:blocks].reshape(6, -1), a[blocks:]
     changer = drivers[pair_driver]
@@ -150,7 +150,7 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
     changing = (lane[drivers] != goal).nonzero()[0]
     acceleration = own_acceleration
     if arrays.seen is not None:
-        _delayed(arrays, flat, kinematics, laws, drivers, own_front, acceleration)
+        _delayed(arrays, flat, kinematics, laws, drivers, own_front, free_road[blocks:], acceleration)
     if len(changing):
         movers = drivers[changing]
         target_front, _ = lane_neighbours(movers, goal[changing], s, on, on_count)
@@ -178,10 +178,12 @@ def _delayed(
     laws: DriverLaws,
     drivers: np.ndarray,
     own_front: np.ndarray,
+    free_road: np.ndarray,
     acceleration: np.ndarray,
 ) -> None:
     """The own-lane IDM of the drivers that act on a delayed view, in place
-    (`delayed_accelerations` over the worlds' `seen` past), as the vector road computes it."""
+    (`delayed_accelerations` over the worlds' `seen` past, from the drivers' `free_road` terms
+    [m/s^2]), as the vector road computes it."""
     seen, width = arrays.seen, arrays.vehicles
     assert seen is not None
     delay = flat["delay_frames"][drivers]
@@ -190,10 +192,9 @@ def _delayed(
         return
     rows, fronts = drivers[delayed], own_front[delayed]
     seen_acceleration = acceleration[delayed]
-    free = kinematics.idm(rows, np.full(len(rows), -1), laws, rows)
     delayed_accelerations(
         seen_acceleration, rows // width, rows % width, fronts % width, delay[delayed], seen.s, seen.speed,
-        seen.pushed, free, kinematics.speed[rows], laws.a_max[rows], laws.distance_wanted[rows],
+        seen.pushed, free_road[delayed], kinematics.speed[rows], laws.a_max[rows], laws.distance_wanted[rows],
         laws.time_wanted[rows], laws.braking_term[rows],
     )  # fmt: skip
     acceleration[delayed] = seen_acceleration

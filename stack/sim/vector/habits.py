@@ -201,6 +201,26 @@ class HabitColumns:
         return self.delayed or self.brakes_suddenly or self.blind or self.yields
 
 
+@Kernel
+def push_frame(
+    seen_s: np.ndarray,
+    seen_speed: np.ndarray,
+    pushed: np.ndarray,
+    worlds: np.ndarray,
+    s: np.ndarray,
+    speed: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """Write the frame's `s` [m] and `speed` [m/s] (world, row) of each of `worlds` into its ring
+    (`seen_s`, `seen_speed`: world, slot, row) at the slot after the `pushed` frames, in place."""
+    frames = seen_s.shape[1]
+    for w in worlds:
+        slot = pushed[w] % frames
+        for row in range(s.shape[1]):
+            seen_s[w, slot, row] = s[w, row]
+            seen_speed[w, slot, row] = speed[w, row]
+        pushed[w] += 1
+
+
 class SeenPast:
     """The last `SEEN_FRAMES` frames' s [m] and speed [m/s] of every row of `worlds` worlds of
     `rows` rows each, as rings, and how many frames each world pushed since its reset."""
@@ -223,15 +243,6 @@ class SeenPast:
         return grown
 
     def push(self, worlds: np.ndarray, s: np.ndarray, speed: np.ndarray) -> None:
-        """Write this frame's `s` and `speed` (len(worlds), rows) of `worlds` into their rings."""
-        if len(worlds) == 1:
-            world = int(worlds[0])
-            slot_of = int(self.pushed[world]) % SEEN_FRAMES
-            self.s[world, slot_of, : s.shape[1]] = s[0]
-            self.speed[world, slot_of, : speed.shape[1]] = speed[0]
-            self.pushed[world] += 1
-            return
-        slot = self.pushed[worlds] % SEEN_FRAMES
-        self.s[worlds, slot, : s.shape[1]] = s
-        self.speed[worlds, slot, : speed.shape[1]] = speed
-        self.pushed[worlds] += 1
+        """Write this frame's `s` and `speed` of `worlds` (rows of `s` and `speed`: every world,
+        one row each) into their rings (`push_frame`)."""
+        push_frame(self.s, self.speed, self.pushed, worlds, s, speed)

@@ -250,7 +250,7 @@ class VectorRoad(FastRoad):
         follow the road onto the next lane), keyed by their position in `plan.drivers`: the side
         lane MOBIL picks (the last one that passes, as stock overwrites), or None to keep the lane.
         Also evaluates every driver's IDM acceleration behind its own leader
-        (`plan.own_acceleration`), in the same array call."""
+        (`plan.own_acceleration`, and its free-road term `plan.own_free_road`), in the same array call."""
         frame, drivers = plan.frame, plan.drivers
         deciding = plan.timer_due & free & plan.enable_lane_change & plan.on_target & ~plan.routed
         due = deciding.nonzero()[0].tolist()
@@ -270,7 +270,7 @@ class VectorRoad(FastRoad):
             pairs = [pair for pair, keep in zip(pairs, reachable.tolist(), strict=True) if keep]
             index, sides, me = index[reachable], sides[reachable], me[reachable]
         if not pairs:
-            plan.own_acceleration = frame.idm(*own)
+            plan.own_acceleration, plan.own_free_road = frame.idm_and_free_road(*own)
             return decisions
         new_front, new_rear = frame.neighbours(me, sides)
         if plan.habits is not None and plan.habits.blind:
@@ -281,8 +281,8 @@ class VectorRoad(FastRoad):
         egos = np.concatenate([new_rear, new_rear, me, me, own_rear, own_rear, plan.me])
         leaders = np.concatenate([new_front, me, new_front, own_front, me, own_front, plan.own_front])
         laws = plan.laws
-        a = frame.idm(egos, leaders, laws, evaluators)
-        plan.own_acceleration = a[blocks * len(me) :]
+        a, free_road = frame.idm_and_free_road(egos, leaders, laws, evaluators)
+        plan.own_acceleration, plan.own_free_road = a[blocks * len(me) :], free_road[blocks * len(me) :]
         accept = mobil_verdicts(
             a[: blocks * len(me)].reshape(blocks, -1),
             index,
