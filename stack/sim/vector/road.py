@@ -71,7 +71,8 @@ def abort_contested_change(driver: IDMVehicle, vehicles: list[Vehicle]) -> None:
     """`IDMVehicle.change_lane_policy` for a `driver` whose lane change runs, as stock decides it:
     back to its own lane when another controlled vehicle of `vehicles`, not in the target lane, is
     changing into it and lies ahead closer than the driver's desired gap. Stock's conditions, the
-    cheapest first (the target lane's comparison; the ABC `isinstance` last, for the few left)."""
+    cheapest first (the target lane's comparison; the ABC `isinstance` last, for the few left; the
+    desired gap only for a vehicle ahead)."""
     target = driver.target_lane_index
     if driver.lane_index[:2] != target[:2]:
         return
@@ -83,8 +84,7 @@ def abort_contested_change(driver: IDMVehicle, vehicles: list[Vehicle]) -> None:
             and isinstance(v, ControlledVehicle)
         ):
             d = driver.lane_distance_to(v)
-            d_star = driver.desired_gap(driver, v)
-            if 0 < d < d_star:
+            if 0 < d and d < driver.desired_gap(driver, v):
                 driver.target_lane_index = driver.lane_index
                 break
 
