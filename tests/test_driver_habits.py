@@ -91,7 +91,7 @@ def test_a_delayed_driver_acts_on_the_gap_it_saw():
     now, then = (seen_acceleration(free, 20.0, *laws, gap, 0.0) for gap in (31.0, 41.0))
     acceleration = np.zeros(1)
     delayed_accelerations(
-        acceleration, np.zeros(1, dtype=np.int64), np.array([0]), np.array([1]), np.array([10]),
+        acceleration, np.zeros(1, dtype=np.int64), np.array([0]), np.array([1]), 2, np.array([10]),
         seen.s, seen.speed, seen.pushed, np.array([free]), np.array([20.0]),
         *(np.array([value]) for value in laws),
     )  # fmt: skip

@@ -184,20 +184,13 @@ def _delayed(
     """The own-lane IDM of the drivers that act on a delayed view, in place
     (`delayed_accelerations` over the worlds' `seen` past, from the drivers' `free_road` terms
     [m/s^2]), as the vector road computes it."""
-    seen, width = arrays.seen, arrays.vehicles
+    seen = arrays.seen
     assert seen is not None
-    delay = flat["delay_frames"][drivers]
-    delayed = np.flatnonzero((delay > 0) & (own_front >= 0))
-    if len(delayed) == 0:
-        return
-    rows, fronts = drivers[delayed], own_front[delayed]
-    seen_acceleration = acceleration[delayed]
     delayed_accelerations(
-        seen_acceleration, rows // width, rows % width, fronts % width, delay[delayed], seen.s, seen.speed,
-        seen.pushed, free_road[delayed], kinematics.speed[rows], laws.a_max[rows], laws.distance_wanted[rows],
-        laws.time_wanted[rows], laws.braking_term[rows],
+        acceleration, drivers, drivers, own_front, arrays.vehicles, flat["delay_frames"], seen.s, seen.speed,
+        seen.pushed, free_road, kinematics.speed, laws.a_max, laws.distance_wanted, laws.time_wanted,
+        laws.braking_term,
     )  # fmt: skip
-    acceleration[delayed] = seen_acceleration
 
 
 def _yield_and_brake(

@@ -68,9 +68,10 @@ def seen_acceleration(
 @Kernel
 def delayed_accelerations(
     acceleration: np.ndarray,
-    world: np.ndarray,
+    law_row: np.ndarray,
     me: np.ndarray,
     leader: np.ndarray,
+    width: int,
     delay: np.ndarray,
     seen_s: np.ndarray,
     seen_speed: np.ndarray,
@@ -82,27 +83,29 @@ def delayed_accelerations(
     time_wanted: np.ndarray,
     braking_term: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
-    """Replace, in place, the own-lane IDM `acceleration` [m/s^2] of each driver with a `delay`
-    (frames) and a `leader` (its row in its `world`, -1: none; `me` its own) by `seen_acceleration`
-    on the gap and closing speed of `delay` frames ago (the oldest kept, early on): from `seen_s`
-    and `seen_speed` (worlds, `SEEN_FRAMES`, rows), a ring of which `pushed` (per world) frames were
-    written. The other parameters are per driver, now: its free-road acceleration [m/s^2] (IDM
-    behind no leader), speed [m/s], IDM's a_max [m/s^2], d0 [m], T [s], 2 sqrt(a b) [m/s^2]."""
+    """Replace, in place, the own-lane IDM `acceleration` [m/s^2] of each driver k with a `delay`
+    (frames) and a `leader` by `seen_acceleration` on the gap and closing speed of `delay` frames
+    ago (the oldest kept, early on): from `seen_s` and `seen_speed` (worlds, `SEEN_FRAMES`, rows), a
+    ring of which `pushed` (per world) frames were written. `me[k]` and `leader[k]` (-1: none) are
+    rows world x `width` + row; `free[k]` is the driver's free-road acceleration [m/s^2] (IDM behind
+    no leader); its delay, speed [m/s], IDM's a_max [m/s^2], d0 [m], T [s] and 2 sqrt(a b) [m/s^2]
+    are at `law_row[k]` of their arrays."""
+    frames = seen_s.shape[1]
     for k in range(acceleration.shape[0]):
-        if delay[k] <= 0 or leader[k] < 0:
+        row = law_row[k]
+        if delay[row] <= 0 or leader[k] < 0:
             continue
-        w = world[k]
-        frames = seen_s.shape[1]
-        then = max(max(pushed[w] - 1 - delay[k], 0), pushed[w] - frames) % frames
-        gap = seen_s[w, then, leader[k]] - seen_s[w, then, me[k]]
-        closing = seen_speed[w, then, me[k]] - seen_speed[w, then, leader[k]]
+        w, mine, theirs = me[k] // width, me[k] % width, leader[k] % width
+        then = max(max(pushed[w] - 1 - delay[row], 0), pushed[w] - frames) % frames
+        gap = seen_s[w, then, theirs] - seen_s[w, then, mine]
+        closing = seen_speed[w, then, mine] - seen_speed[w, then, theirs]
         acceleration[k] = seen_acceleration(
             free[k],
-            speed[k],
-            a_max[k],
-            distance_wanted[k],
-            time_wanted[k],
-            braking_term[k],
+            speed[row],
+            a_max[row],
+            distance_wanted[row],
+            time_wanted[row],
+            braking_term[row],
             gap,
             closing,
         )

@@ -74,7 +74,7 @@ def delayed(plan: Drivers, seen: SeenPast, acceleration: np.ndarray) -> None:
     frame, me, laws = plan.frame, plan.me, plan.laws
     assert plan.habits is not None
     delayed_accelerations(
-        acceleration, np.zeros(len(me), dtype=np.int64), me, plan.own_front, plan.habits.delay_frames,
+        acceleration, plan.everyone, me, plan.own_front, seen.s.shape[2], plan.habits.delay_frames,
         seen.s, seen.speed, seen.pushed, plan.own_free_road, frame.speed[me], laws.a_max,
         laws.distance_wanted, laws.time_wanted, laws.braking_term,
     )  # fmt: skip
