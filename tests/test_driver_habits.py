@@ -55,11 +55,12 @@ def test_sudden_brakings_come_at_the_stated_rate_and_strength():
     acceleration = np.zeros(frames)
     sudden_accelerations(
         acceleration,
+        np.zeros(frames, dtype=np.int64),
         np.arange(frames),
-        np.full(frames, 1002001),
-        np.full(frames, chance),
-        np.full(frames, 15),
-        np.full(frames, 4.5),
+        np.array([1002001]),
+        np.array([chance]),
+        np.array([15]),
+        np.array([4.5]),
     )
     braking = acceleration < 0
     onsets = int((braking[1:] & ~braking[:-1]).sum())

@@ -204,14 +204,12 @@ def _yield_and_brake(
     """The yielding drivers behind their ego's lane change (`yielders`, `yielding`) and the sudden
     brakings (`sudden_accelerations`), in place, as the vector road computes them."""
     world = drivers // arrays.vehicles
-    yields = flat["yields_to_ego"][drivers]
-    if yields.any():
-        _yield(arrays, flat, kinematics, laws, drivers, world, yields, acceleration)
-    chance = flat["sudden_braking_chance"][drivers]
-    if (chance > 0).any():
+    if flat["yields_to_ego"].any():
+        _yield(arrays, flat, kinematics, laws, drivers, world, flat["yields_to_ego"][drivers], acceleration)
+    if flat["sudden_braking_chance"].any():
         sudden_accelerations(
-            acceleration, arrays.acts[world] - 1, flat["habit_key"][drivers], chance,
-            flat["sudden_braking_frames"][drivers], flat["sudden_braking_mps2"][drivers],
+            acceleration, drivers, arrays.acts[world] - 1, flat["habit_key"], flat["sudden_braking_chance"],
+            flat["sudden_braking_frames"], flat["sudden_braking_mps2"],
         )  # fmt: skip
 
 

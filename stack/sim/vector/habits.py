@@ -114,18 +114,21 @@ def delayed_accelerations(
 @Kernel
 def sudden_accelerations(
     acceleration: np.ndarray,
+    law_row: np.ndarray,
     frame: np.ndarray,
     key: np.ndarray,
     chance: np.ndarray,
     frames: np.ndarray,
     mps2: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
-    """Each driver's `acceleration` [m/s^2], in place, no more than minus its `sudden_braking`
-    at its world's `frame` (acts since the reset)."""
+    """Each driver k's `acceleration` [m/s^2], in place, no more than minus its `sudden_braking`
+    at its world's `frame[k]` (acts since the reset); its key, chance, frames and deceleration are
+    at `law_row[k]` of their arrays."""
     for k in range(acceleration.shape[0]):
-        if chance[k] <= 0:
+        row = law_row[k]
+        if chance[row] <= 0:
             continue
-        braking = sudden_braking(key[k], frame[k], chance[k], frames[k], mps2[k])
+        braking = sudden_braking(key[row], frame[k], chance[row], frames[row], mps2[row])
         if braking > 0 and -braking < acceleration[k]:
             acceleration[k] = -braking
 

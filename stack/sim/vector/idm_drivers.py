@@ -101,6 +101,6 @@ def yield_and_brake(plan: Drivers, acceleration: np.ndarray) -> None:
             )
     if habits.brakes_suddenly:
         sudden_accelerations(
-            acceleration, np.full(len(me), plan.frame_index), habits.key, habits.sudden_braking_chance,
-            habits.sudden_braking_frames, habits.sudden_braking_mps2,
+            acceleration, plan.everyone, np.full(len(me), plan.frame_index), habits.key,
+            habits.sudden_braking_chance, habits.sudden_braking_frames, habits.sudden_braking_mps2,
         )  # fmt: skip
