@@ -55,11 +55,12 @@ def test_sudden_brakings_come_at_the_stated_rate_and_strength():
     acceleration = np.zeros(frames)
     sudden_accelerations(
         acceleration,
+        np.zeros(frames, dtype=np.int64),
         np.arange(frames),
-        np.full(frames, 1002001),
-        np.full(frames, chance),
-        np.full(frames, 15),
-        np.full(frames, 4.5),
+        np.array([1002001]),
+        np.array([chance]),
+        np.array([15]),
+        np.array([4.5]),
     )
     braking = acceleration < 0
     onsets = int((braking[1:] & ~braking[:-1]).sum())
@@ -91,7 +92,7 @@ def test_a_delayed_driver_acts_on_the_gap_it_saw():
     now, then = (seen_acceleration(free, 20.0, *laws, gap, 0.0) for gap in (31.0, 41.0))
     acceleration = np.zeros(1)
     delayed_accelerations(
-        acceleration, np.zeros(1, dtype=np.int64), np.array([0]), np.array([1]), np.array([10]),
+        acceleration, np.zeros(1, dtype=np.int64), np.array([0]), np.array([1]), 2, np.array([10]),
         seen.s, seen.speed, seen.pushed, np.array([free]), np.array([20.0]),
         *(np.array([value]) for value in laws),
     )  # fmt: skip

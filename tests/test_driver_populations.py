@@ -16,10 +16,17 @@ from stack.apps.cli import app
 from stack.runs.batch_episodes import batch_refusal, run_batched
 from stack.runs.episodes import run, run_episode
 from stack.settings.run import ConfigError, build_config, drivers_of, in_scenario
-from stack.sim.drivers import draws_nothing
+from stack.sim.drivers import draw_driver, draws_nothing
 from stack.sim.envs import VECTOR_HIGHWAY
 from stack.sim.highway import env_config
-from stack.worlds.drivers import DRIVER_PARAMETERS, POPULATION_RANGES, POPULATIONS, population_shares
+from stack.worlds.drivers import (
+    DRIVER_PARAMETERS,
+    POPULATION_RANGES,
+    POPULATIONS,
+    LogNormal,
+    limits,
+    population_shares,
+)
 from tests.test_batched_episodes import assert_same_episodes
 from tests.test_sim_backends import assert_identical
 from tests.test_sim_batched import assert_worlds_identical
@@ -58,12 +65,50 @@ def test_each_driver_draws_its_parameters_within_the_populations_ranges(populati
     drivers = drawn_drivers("overtaking", population, seed=4)
     ranges = POPULATION_RANGES[population]
     for column, name in ((1, "time_gap_s"), (2, "max_acceleration"), (4, "politeness")):
-        low, high = getattr(ranges, name)
+        low, high = limits(getattr(ranges, name))
         assert ((low <= drivers[:, column]) & (drivers[:, column] <= high)).all(), name
-    low, high = ranges.comfortable_deceleration
+    low, high = limits(ranges.comfortable_deceleration)
     assert ((low <= -drivers[:, 3]) & (-drivers[:, 3] <= high)).all()
-    if ranges.time_gap_s[0] < ranges.time_gap_s[1]:
+    if limits(ranges.time_gap_s)[0] < limits(ranges.time_gap_s)[1]:
         assert len(set(drivers[:, 1].tolist())) == len(drivers), "each driver draws its own"
+
+
+CALIBRATED_MEDIANS = {
+    "time_gap_s": 0.96,
+    "max_acceleration": 1.05,
+    "comfortable_deceleration": 1.51,
+    "jam_clearance_m": 3.77,
+}
+"""The population medians of Zhang and Sun's hierarchical calibration of IDM on highD (docs/traffic.md)."""
+
+
+def test_the_calibrated_drivers_are_log_normal_around_the_sources_medians():
+    """400 drivers: each IDM parameter's sample median and log standard deviation are the
+    source's median and the stated spread (0.2), within sampling error, and inside the truncation."""
+    ranges = POPULATION_RANGES["calibrated"]
+    rng = np.random.default_rng(1015000)
+    drawn = [draw_driver(rng, ["calibrated"], np.ones(1)).values for _ in range(400)]
+    for name, median in CALIBRATED_MEDIANS.items():
+        spread = getattr(ranges, name)
+        assert isinstance(spread, LogNormal) and spread.median == median
+        values = np.array([driver[name] for driver in drawn])
+        assert ((spread.low <= values) & (values <= spread.high)).all(), name
+        assert np.median(values) == pytest.approx(median, rel=0.05), name
+        assert np.log(values).std() == pytest.approx(spread.log_std, rel=0.15), name
+    politeness = np.array([driver["politeness"] for driver in drawn])
+    assert politeness.mean() == pytest.approx(0.25, abs=0.03) and politeness.max() <= 0.5
+
+
+def test_the_calibrated_draw_is_the_same_per_seed_and_the_other_populations_draw_as_before():
+    """One uniform draw per parameter, whatever the distribution: the same seed, the same drivers;
+    a population of uniform ranges draws exactly `rng.uniform(lows, highs)`."""
+    one = [draw_driver(np.random.default_rng(1015001), ["calibrated"], np.ones(1)) for _ in range(2)]
+    assert one[0] == one[1]
+    rng, again = np.random.default_rng(1015002), np.random.default_rng(1015002)
+    aggressive = POPULATION_RANGES["aggressive"]
+    lows, highs = zip(*(limits(getattr(aggressive, name)) for name in DRIVER_PARAMETERS), strict=True)
+    expected = again.uniform(lows, highs).tolist()
+    assert list(draw_driver(rng, ["aggressive"], np.ones(1)).values.values()) == expected
 
 
 def test_the_aggressive_drivers_are_the_issues():
@@ -93,7 +138,9 @@ def test_the_fast_road_drives_the_drivers_as_stock_does_bit_for_bit():
     assert_identical(highway_in("dense", STOCK_MIX), seed=22, frames=120, backend="fast")
 
 
-@pytest.mark.parametrize(("scenario", "population"), [("overtaking", "aggressive"), ("dense", "mixed")])
+@pytest.mark.parametrize(
+    ("scenario", "population"), [("overtaking", "aggressive"), ("dense", "mixed"), ("dense", "calibrated")]
+)
 def test_each_batched_world_is_the_vector_world_under_a_population(scenario, population):
     assert_worlds_identical(highway_in(scenario, population), [3, 4], frames=120)
 

@@ -8,10 +8,12 @@ highway-env's `IDMVehicle` reads (`TIME_WANTED`, `COMFORT_ACC_MAX`, ...): stock'
 three drive the same traffic. The `highway-env` population draws nothing and sets nothing: the
 spawn, the generator's stream and every trajectory stay highway-v0's.
 
-`calibrated` is built around the highway parameter set of Treiber and Kesting's calibrations of IDM
-and MOBIL (docs/traffic.md names the sources and the mapping); `aggressive`, `cautious` and the
-shares of `mixed` are this project's. Every range is drawn uniformly, one driver after another in
-road order, parameters in `DRIVER_PARAMETERS` order, then a distracted driver's `HABIT_PARAMETERS`
+`calibrated` draws its IDM parameters log-normally around the population medians of Zhang and
+Sun's hierarchical calibration of IDM to highD, its MOBIL parameters as Kesting, Treiber and Helbing
+give them (docs/traffic.md names the sources and the mapping); `aggressive`, `cautious` and the
+shares of `mixed` are this project's. Each parameter is one uniform draw (through a `LogNormal`'s
+inverse CDF where the population gives one), one driver after another in road order, parameters in
+`DRIVER_PARAMETERS` order, then a distracted driver's `HABIT_PARAMETERS`
 and the key of its sudden brakings. A driver's habits (`DriverHabits`: its perception delay, its
 sudden brakings, blind to the ego, yielding to it) are set as its `habits`; stock highway-env
 knows none of them (`stack.worlds.drivers.STOCK_POPULATIONS`)."""
@@ -20,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from statistics import NormalDist
 from typing import Any
 
 import numpy as np
@@ -32,6 +35,7 @@ from stack.worlds.drivers import (
     RANDOM,
     RANDOM_CHOICES,
     DriverRanges,
+    LogNormal,
     population_shares,
 )
 
@@ -75,10 +79,34 @@ def draws_nothing(drivers: str | Mapping[str, float] | None) -> bool:
     return drivers is None or (drivers != RANDOM and population_shares(drivers) == {HIGHWAY_ENV: 1.0})
 
 
-def bounds(ranges: DriverRanges) -> tuple[np.ndarray, np.ndarray]:
-    """The lows and highs of `ranges`, in `DRIVER_PARAMETERS` order."""
-    pairs = [getattr(ranges, name) for name in DRIVER_PARAMETERS]
-    return np.array([low for low, _ in pairs]), np.array([high for _, high in pairs])
+STANDARD_NORMAL = NormalDist()
+
+
+def uniform_bounds(ranges: DriverRanges) -> tuple[np.ndarray, np.ndarray]:
+    """The bounds of the one uniform draw per parameter of `ranges`, in `DRIVER_PARAMETERS` order:
+    a range's low and high, a `LogNormal`'s truncation as quantiles of the standard normal."""
+    lows, highs = [], []
+    for name in DRIVER_PARAMETERS:
+        spread = getattr(ranges, name)
+        if isinstance(spread, LogNormal):
+            lows.append(STANDARD_NORMAL.cdf(np.log(spread.low / spread.median) / spread.log_std))
+            highs.append(STANDARD_NORMAL.cdf(np.log(spread.high / spread.median) / spread.log_std))
+        else:
+            lows.append(spread[0])
+            highs.append(spread[1])
+    return np.array(lows), np.array(highs)
+
+
+def from_uniform(ranges: DriverRanges, uniform: np.ndarray) -> list[float]:
+    """The parameters of `ranges` for one uniform draw each (`uniform_bounds`): a range's as drawn, a
+    `LogNormal`'s by its inverse CDF, clipped to its truncation."""
+    values = uniform.tolist()
+    for index, name in enumerate(DRIVER_PARAMETERS):
+        spread = getattr(ranges, name)
+        if isinstance(spread, LogNormal):
+            drawn = spread.median * np.exp(spread.log_std * STANDARD_NORMAL.inv_cdf(values[index]))
+            values[index] = float(min(max(drawn, spread.low), spread.high))
+    return values
 
 
 @dataclass(frozen=True)
@@ -92,14 +120,15 @@ class DrawnDriver:
 
 def draw_driver(rng: np.random.Generator, names: list[str], odds: np.ndarray) -> DrawnDriver:
     """One driver: its population drawn by `odds` among `names` (no draw for a single one), then,
-    unless it is `highway-env`'s, its parameters (one uniform draw per parameter, in order), then
+    unless it is `highway-env`'s, its parameters (one uniform draw per parameter, in order, mapped
+    through a `LogNormal`'s inverse CDF where the population gives one), then
     its habits' parameters and its key (a population with habits to draw)."""
     population = names[int(rng.choice(len(names), p=odds))] if len(names) > 1 else names[0]
     if population == HIGHWAY_ENV:
         return DrawnDriver(population, {})
     ranges = POPULATION_RANGES[population]
-    low, high = bounds(ranges)
-    values = dict(zip(DRIVER_PARAMETERS, rng.uniform(low, high).tolist(), strict=True))
+    low, high = uniform_bounds(ranges)
+    values = dict(zip(DRIVER_PARAMETERS, from_uniform(ranges, rng.uniform(low, high)), strict=True))
     if ranges.perception_delay_s is None:
         return DrawnDriver(population, values)
     habit_ranges = [getattr(ranges, name) for name in HABIT_PARAMETERS]

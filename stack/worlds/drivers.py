@@ -1,7 +1,8 @@
-"""Driver populations as data: the ranges each population draws its drivers' IDM and MOBIL
-parameters (and the distracted drivers' delay and sudden brakings) from, the habits of its drivers
-(blind to the ego, yielding to it), the shares of `mixed`, and the check of a population spec (a
-name, `random`, or shares of names); drawing and setting them is `stack.sim.drivers`.
+"""Driver populations as data: the ranges (or log-normals) each population draws its drivers' IDM
+and MOBIL parameters (and the distracted drivers' delay and sudden brakings) from, the habits of
+its drivers (blind to the ego, yielding to it), the shares of `mixed`, and the check of a
+population spec (a name, `random`, or shares of names); drawing and setting them is
+`stack.sim.drivers`.
 docs/traffic.md names the sources and the rates."""
 
 from __future__ import annotations
@@ -18,8 +19,35 @@ HIGHWAY_ENV = "highway-env"
 
 
 @dataclass(frozen=True)
+class LogNormal:
+    """A parameter drawn log-normally per driver: `median`, and `log_std` the standard deviation of
+    its natural logarithm, truncated to [`low`, `high`] (both > 0), in the parameter's own unit.
+    Drawn by the inverse CDF of one uniform draw, so it consumes the generator as a uniform range
+    does (`stack.sim.drivers.draw_driver`)."""
+
+    median: float
+    log_std: float
+    low: float
+    high: float
+
+    def __post_init__(self) -> None:
+        if not 0 < self.low <= self.median <= self.high or self.log_std <= 0:
+            raise ValueError(f"a log-normal needs 0 < low <= median <= high and log_std > 0, got {self}")
+
+
+Spread = tuple[float, float] | LogNormal
+"""How a parameter is drawn: a uniform range (low, high), or a truncated `LogNormal`."""
+
+
+def limits(spread: Spread) -> tuple[float, float]:
+    """The lowest and highest value `spread` draws."""
+    return (spread.low, spread.high) if isinstance(spread, LogNormal) else spread
+
+
+@dataclass(frozen=True)
 class DriverRanges:
-    """The uniform ranges [low, high] a population draws each driver's parameters from.
+    """What a population draws each driver's parameters from: a uniform range [low, high], or (the
+    `calibrated` drivers' IDM parameters) a truncated `LogNormal`.
 
     desired_speed_factor: multiplies the driver's desired (IDM target) speed as the scenario drew it;
     time_gap_s: IDM's time gap T [s]; max_acceleration: IDM's a [m/s^2]; comfortable_deceleration:
@@ -28,15 +56,15 @@ class DriverRanges:
     incentive threshold [m/s^2]; safe_braking: the most braking [m/s^2] a lane change may impose on
     the new follower (MOBIL's b_safe); decision_period_s: how often MOBIL is evaluated [s]."""
 
-    desired_speed_factor: tuple[float, float]
-    time_gap_s: tuple[float, float]
-    max_acceleration: tuple[float, float]
-    comfortable_deceleration: tuple[float, float]
-    jam_clearance_m: tuple[float, float]
-    politeness: tuple[float, float]
-    threshold: tuple[float, float]
-    safe_braking: tuple[float, float]
-    decision_period_s: tuple[float, float]
+    desired_speed_factor: Spread
+    time_gap_s: Spread
+    max_acceleration: Spread
+    comfortable_deceleration: Spread
+    jam_clearance_m: Spread
+    politeness: Spread
+    threshold: Spread
+    safe_braking: Spread
+    decision_period_s: Spread
     perception_delay_s: tuple[float, float] | None = None
     sudden_braking_per_minute: tuple[float, float] | None = None
     sudden_braking_mps2: tuple[float, float] | None = None
@@ -63,13 +91,18 @@ HABIT_PARAMETERS = (
 """The parameters a population with habits draws after `DRIVER_PARAMETERS`, in that order."""
 
 
+def _spread(value: Any) -> Any:
+    """A YAML value as drawn: a flag as it is, a mapping as a `LogNormal`, a pair as a range."""
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, dict):
+        return LogNormal(**{key: float(number) for key, number in value.items()})
+    return (float(value[0]), float(value[1]))
+
+
 def _ranges(data: dict[str, Any]) -> DriverRanges:
-    """A population's `DriverRanges` from its YAML mapping (flags as they are, ranges as floats)."""
-    values: dict[str, Any] = {
-        key: value if isinstance(value, bool) else (float(value[0]), float(value[1]))
-        for key, value in data.items()
-    }
-    return DriverRanges(**values)
+    """A population's `DriverRanges` from its YAML mapping."""
+    return DriverRanges(**{key: _spread(value) for key, value in data.items()})
 
 
 POPULATION_RANGES: dict[str, DriverRanges] = {

@@ -70,7 +70,7 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
         return
     if arrays.seen is not None:
         acting = np.flatnonzero(active > 0)
-        arrays.seen.push(acting, s[acting], arrays.speed[acting])
+        arrays.seen.push(acting, s, arrays.speed)
     world_of = np.repeat(np.arange(arrays.worlds), arrays.vehicles)
     heading, speed = flat["heading"], flat["speed"]
     direction_of = np.empty((len(heading), 2))
@@ -119,7 +119,7 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
     egos = np.concatenate([side_rear, side_rear, me, me, mover_rear, mover_rear, drivers])
     leaders = np.concatenate([side_front, me, side_front, mover_front, me, mover_front, own_front])
     evaluators = np.concatenate([me] * 6 + [drivers])
-    a = kinematics.idm(egos, leaders, laws, evaluators)
+    a, free_road = kinematics.idm_and_free_road(egos, leaders, laws, evaluators)
     blocks = 6 * len(me)
     side_accelerations, own_acceleration = a[:blocks].reshape(6, -1), a[blocks:]
     changer = drivers[pair_driver]
@@ -150,7 +150,7 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
     changing = (lane[drivers] != goal).nonzero()[0]
     acceleration = own_acceleration
     if arrays.seen is not None:
-        _delayed(arrays, flat, kinematics, laws, drivers, own_front, acceleration)
+        _delayed(arrays, flat, kinematics, laws, drivers, own_front, free_road[blocks:], acceleration)
     if len(changing):
         movers = drivers[changing]
         target_front, _ = lane_neighbours(movers, goal[changing], s, on, on_count)
@@ -178,25 +178,19 @@ def _delayed(
     laws: DriverLaws,
     drivers: np.ndarray,
     own_front: np.ndarray,
+    free_road: np.ndarray,
     acceleration: np.ndarray,
 ) -> None:
     """The own-lane IDM of the drivers that act on a delayed view, in place
-    (`delayed_accelerations` over the worlds' `seen` past), as the vector road computes it."""
-    seen, width = arrays.seen, arrays.vehicles
+    (`delayed_accelerations` over the worlds' `seen` past, from the drivers' `free_road` terms
+    [m/s^2]), as the vector road computes it."""
+    seen = arrays.seen
     assert seen is not None
-    delay = flat["delay_frames"][drivers]
-    delayed = np.flatnonzero((delay > 0) & (own_front >= 0))
-    if len(delayed) == 0:
-        return
-    rows, fronts = drivers[delayed], own_front[delayed]
-    seen_acceleration = acceleration[delayed]
-    free = kinematics.idm(rows, np.full(len(rows), -1), laws, rows)
     delayed_accelerations(
-        seen_acceleration, rows // width, rows % width, fronts % width, delay[delayed], seen.s, seen.speed,
-        seen.pushed, free, kinematics.speed[rows], laws.a_max[rows], laws.distance_wanted[rows],
-        laws.time_wanted[rows], laws.braking_term[rows],
+        acceleration, drivers, drivers, own_front, arrays.vehicles, flat["delay_frames"], seen.s, seen.speed,
+        seen.pushed, free_road, kinematics.speed, laws.a_max, laws.distance_wanted, laws.time_wanted,
+        laws.braking_term,
     )  # fmt: skip
-    acceleration[delayed] = seen_acceleration
 
 
 def _yield_and_brake(
@@ -210,14 +204,12 @@ def _yield_and_brake(
     """The yielding drivers behind their ego's lane change (`yielders`, `yielding`) and the sudden
     brakings (`sudden_accelerations`), in place, as the vector road computes them."""
     world = drivers // arrays.vehicles
-    yields = flat["yields_to_ego"][drivers]
-    if yields.any():
-        _yield(arrays, flat, kinematics, laws, drivers, world, yields, acceleration)
-    chance = flat["sudden_braking_chance"][drivers]
-    if (chance > 0).any():
+    if flat["yields_to_ego"].any():
+        _yield(arrays, flat, kinematics, laws, drivers, world, flat["yields_to_ego"][drivers], acceleration)
+    if flat["sudden_braking_chance"].any():
         sudden_accelerations(
-            acceleration, arrays.acts[world] - 1, flat["habit_key"][drivers], chance,
-            flat["sudden_braking_frames"][drivers], flat["sudden_braking_mps2"][drivers],
+            acceleration, drivers, arrays.acts[world] - 1, flat["habit_key"], flat["sudden_braking_chance"],
+            flat["sudden_braking_frames"], flat["sudden_braking_mps2"],
         )  # fmt: skip
 
 

@@ -163,19 +163,22 @@ def idm_accelerations(
     gap_power: np.ndarray,
     evaluator: np.ndarray,
     a_max: np.ndarray,
-) -> np.ndarray:  # pragma: no cover - compiled; covered through TrafficFrame.idm
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled; covered through TrafficFrame.idm
     """IDM's a_max (1 - (v / v0)^delta) - a_max (s* / s)^2 per evaluating row from the powers numpy
-    computed, `a_max` [m/s^2] of each pair's `evaluator`, 0 for rows without a valid ego."""
+    computed, `a_max` [m/s^2] of each pair's `evaluator`, 0 for rows without a valid ego; and its
+    free-road term a_max (1 - (v / v0)^delta) [m/s^2] alone (what IDM gives behind no leader)."""
     acceleration = np.zeros(rows)
+    free_road = np.zeros(rows)
     j = 0
     for i in range(valid.shape[0]):
         a_row = a_max[evaluator[valid[i]]]
         a = a_row * (1 - free_power[i])
+        free_road[valid[i]] = a
         if led[i]:
             a = a - a_row * gap_power[j]
             j += 1
         acceleration[valid[i]] = a
-    return acceleration
+    return acceleration, free_road
 
 
 @njit(cache=True, nogil=True, inline="always")

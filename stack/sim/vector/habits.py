@@ -68,9 +68,10 @@ def seen_acceleration(
 @Kernel
 def delayed_accelerations(
     acceleration: np.ndarray,
-    world: np.ndarray,
+    law_row: np.ndarray,
     me: np.ndarray,
     leader: np.ndarray,
+    width: int,
     delay: np.ndarray,
     seen_s: np.ndarray,
     seen_speed: np.ndarray,
@@ -82,27 +83,29 @@ def delayed_accelerations(
     time_wanted: np.ndarray,
     braking_term: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
-    """Replace, in place, the own-lane IDM `acceleration` [m/s^2] of each driver with a `delay`
-    (frames) and a `leader` (its row in its `world`, -1: none; `me` its own) by `seen_acceleration`
-    on the gap and closing speed of `delay` frames ago (the oldest kept, early on): from `seen_s`
-    and `seen_speed` (worlds, `SEEN_FRAMES`, rows), a ring of which `pushed` (per world) frames were
-    written. The other parameters are per driver, now: its free-road acceleration [m/s^2] (IDM
-    behind no leader), speed [m/s], IDM's a_max [m/s^2], d0 [m], T [s], 2 sqrt(a b) [m/s^2]."""
+    """Replace, in place, the own-lane IDM `acceleration` [m/s^2] of each driver k with a `delay`
+    (frames) and a `leader` by `seen_acceleration` on the gap and closing speed of `delay` frames
+    ago (the oldest kept, early on): from `seen_s` and `seen_speed` (worlds, `SEEN_FRAMES`, rows), a
+    ring of which `pushed` (per world) frames were written. `me[k]` and `leader[k]` (-1: none) are
+    rows world x `width` + row; `free[k]` is the driver's free-road acceleration [m/s^2] (IDM behind
+    no leader); its delay, speed [m/s], IDM's a_max [m/s^2], d0 [m], T [s] and 2 sqrt(a b) [m/s^2]
+    are at `law_row[k]` of their arrays."""
+    frames = seen_s.shape[1]
     for k in range(acceleration.shape[0]):
-        if delay[k] <= 0 or leader[k] < 0:
+        row = law_row[k]
+        if delay[row] <= 0 or leader[k] < 0:
             continue
-        w = world[k]
-        frames = seen_s.shape[1]
-        then = max(max(pushed[w] - 1 - delay[k], 0), pushed[w] - frames) % frames
-        gap = seen_s[w, then, leader[k]] - seen_s[w, then, me[k]]
-        closing = seen_speed[w, then, me[k]] - seen_speed[w, then, leader[k]]
+        w, mine, theirs = me[k] // width, me[k] % width, leader[k] % width
+        then = max(max(pushed[w] - 1 - delay[row], 0), pushed[w] - frames) % frames
+        gap = seen_s[w, then, theirs] - seen_s[w, then, mine]
+        closing = seen_speed[w, then, mine] - seen_speed[w, then, theirs]
         acceleration[k] = seen_acceleration(
             free[k],
-            speed[k],
-            a_max[k],
-            distance_wanted[k],
-            time_wanted[k],
-            braking_term[k],
+            speed[row],
+            a_max[row],
+            distance_wanted[row],
+            time_wanted[row],
+            braking_term[row],
             gap,
             closing,
         )
@@ -111,18 +114,21 @@ def delayed_accelerations(
 @Kernel
 def sudden_accelerations(
     acceleration: np.ndarray,
+    law_row: np.ndarray,
     frame: np.ndarray,
     key: np.ndarray,
     chance: np.ndarray,
     frames: np.ndarray,
     mps2: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
-    """Each driver's `acceleration` [m/s^2], in place, no more than minus its `sudden_braking`
-    at its world's `frame` (acts since the reset)."""
+    """Each driver k's `acceleration` [m/s^2], in place, no more than minus its `sudden_braking`
+    at its world's `frame[k]` (acts since the reset); its key, chance, frames and deceleration are
+    at `law_row[k]` of their arrays."""
     for k in range(acceleration.shape[0]):
-        if chance[k] <= 0:
+        row = law_row[k]
+        if chance[row] <= 0:
             continue
-        braking = sudden_braking(key[k], frame[k], chance[k], frames[k], mps2[k])
+        braking = sudden_braking(key[row], frame[k], chance[row], frames[row], mps2[row])
         if braking > 0 and -braking < acceleration[k]:
             acceleration[k] = -braking
 
@@ -201,6 +207,26 @@ class HabitColumns:
         return self.delayed or self.brakes_suddenly or self.blind or self.yields
 
 
+@Kernel
+def push_frame(
+    seen_s: np.ndarray,
+    seen_speed: np.ndarray,
+    pushed: np.ndarray,
+    worlds: np.ndarray,
+    s: np.ndarray,
+    speed: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """Write the frame's `s` [m] and `speed` [m/s] (world, row) of each of `worlds` into its ring
+    (`seen_s`, `seen_speed`: world, slot, row) at the slot after the `pushed` frames, in place."""
+    frames = seen_s.shape[1]
+    for w in worlds:
+        slot = pushed[w] % frames
+        for row in range(s.shape[1]):
+            seen_s[w, slot, row] = s[w, row]
+            seen_speed[w, slot, row] = speed[w, row]
+        pushed[w] += 1
+
+
 class SeenPast:
     """The last `SEEN_FRAMES` frames' s [m] and speed [m/s] of every row of `worlds` worlds of
     `rows` rows each, as rings, and how many frames each world pushed since its reset."""
@@ -223,15 +249,6 @@ class SeenPast:
         return grown
 
     def push(self, worlds: np.ndarray, s: np.ndarray, speed: np.ndarray) -> None:
-        """Write this frame's `s` and `speed` (len(worlds), rows) of `worlds` into their rings."""
-        if len(worlds) == 1:
-            world = int(worlds[0])
-            slot_of = int(self.pushed[world]) % SEEN_FRAMES
-            self.s[world, slot_of, : s.shape[1]] = s[0]
-            self.speed[world, slot_of, : speed.shape[1]] = speed[0]
-            self.pushed[world] += 1
-            return
-        slot = self.pushed[worlds] % SEEN_FRAMES
-        self.s[worlds, slot, : s.shape[1]] = s
-        self.speed[worlds, slot, : speed.shape[1]] = speed
-        self.pushed[worlds] += 1
+        """Write this frame's `s` and `speed` of `worlds` (rows of `s` and `speed`: every world,
+        one row each) into their rings (`push_frame`)."""
+        push_frame(self.s, self.speed, self.pushed, worlds, s, speed)

@@ -25,6 +25,8 @@ class Drivers:
 
     own_acceleration: np.ndarray
     """IDM acceleration [m/s^2] behind the own lane's leader, per driver (set by `_mobil`)."""
+    own_free_road: np.ndarray
+    """Its free-road term [m/s^2] (IDM behind no leader), per driver (set by `_mobil`)."""
     habits: HabitColumns | None = None
     """The drivers' habits, None when none has one (`VectorRoad._read_habits` sets the rest)."""
     frame_index: int = 0
@@ -71,11 +73,10 @@ def delayed(plan: Drivers, seen: SeenPast, acceleration: np.ndarray) -> None:
     (`delayed_accelerations` over the road's `seen` past)."""
     frame, me, laws = plan.frame, plan.me, plan.laws
     assert plan.habits is not None
-    free = frame.idm(me, np.full(len(me), -1), laws, plan.everyone)
     delayed_accelerations(
-        acceleration, np.zeros(len(me), dtype=np.int64), me, plan.own_front, plan.habits.delay_frames,
-        seen.s, seen.speed, seen.pushed, free, frame.speed[me], laws.a_max, laws.distance_wanted,
-        laws.time_wanted, laws.braking_term,
+        acceleration, plan.everyone, me, plan.own_front, seen.s.shape[2], plan.habits.delay_frames,
+        seen.s, seen.speed, seen.pushed, plan.own_free_road, frame.speed[me], laws.a_max,
+        laws.distance_wanted, laws.time_wanted, laws.braking_term,
     )  # fmt: skip
 
 
@@ -100,6 +101,6 @@ def yield_and_brake(plan: Drivers, acceleration: np.ndarray) -> None:
             )
     if habits.brakes_suddenly:
         sudden_accelerations(
-            acceleration, np.full(len(me), plan.frame_index), habits.key, habits.sudden_braking_chance,
-            habits.sudden_braking_frames, habits.sudden_braking_mps2,
+            acceleration, plan.everyone, np.full(len(me), plan.frame_index), habits.key,
+            habits.sudden_braking_chance, habits.sudden_braking_frames, habits.sudden_braking_mps2,
         )  # fmt: skip

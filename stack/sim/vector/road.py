@@ -34,6 +34,7 @@ from operator import attrgetter, itemgetter
 
 import numpy as np
 from highway_env.vehicle.behavior import IDMVehicle
+from highway_env.vehicle.controller import ControlledVehicle
 from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import RoadObject
 
@@ -64,6 +65,28 @@ from stack.sim.vector.road_frame import TrafficFrame
 def _plain_velocity(cls: type) -> bool:
     """Whether objects of `cls` move along their heading at their speed (the vectorised kinematics)."""
     return cls.velocity is Vehicle.velocity or cls.velocity is RoadObject.velocity  # type: ignore[attr-defined]
+
+
+def abort_contested_change(driver: IDMVehicle, vehicles: list[Vehicle]) -> None:
+    """`IDMVehicle.change_lane_policy` for a `driver` whose lane change runs, as stock decides it:
+    back to its own lane when another controlled vehicle of `vehicles`, not in the target lane, is
+    changing into it and lies ahead closer than the driver's desired gap. Stock's conditions, the
+    cheapest first (the target lane's comparison; the ABC `isinstance` last, for the few left; the
+    desired gap only for a vehicle ahead)."""
+    target = driver.target_lane_index
+    if driver.lane_index[:2] != target[:2]:
+        return
+    for v in vehicles:
+        if (
+            getattr(v, "target_lane_index", None) == target
+            and v is not driver
+            and v.lane_index != target
+            and isinstance(v, ControlledVehicle)
+        ):
+            d = driver.lane_distance_to(v)
+            if 0 < d and d < driver.desired_gap(driver, v):
+                driver.target_lane_index = driver.lane_index
+                break
 
 
 class VectorRoad(FastRoad):
@@ -232,15 +255,18 @@ class VectorRoad(FastRoad):
                 retargeted.append(k)
         plan.retarget(retargeted)
 
-    @staticmethod
-    def _stock_decisions(driver: IDMVehicle, at_lane_end: bool) -> bool:
+    def _stock_decisions(self, driver: IDMVehicle, at_lane_end: bool) -> bool:
         """`IDMVehicle.act`'s decisions for a driver MOBIL's batch left out: onto the next lane at
         its lane's end (`follow_road`), then `change_lane_policy` when its change is due or runs (a
-        contested change is aborted there). Whether its target lane may have changed."""
+        contested change is aborted there: `abort_contested_change`). Whether its target lane may
+        have changed."""
         if at_lane_end:
             driver.follow_road()
         due = driver.LANE_CHANGE_DELAY < driver.timer
-        if driver.enable_lane_change and (due or driver.lane_index != driver.target_lane_index):
+        if driver.enable_lane_change and driver.lane_index != driver.target_lane_index:
+            abort_contested_change(driver, self.vehicles)
+            return True
+        if driver.enable_lane_change and due:
             driver.change_lane_policy()
             return True
         return at_lane_end
@@ -250,7 +276,7 @@ class VectorRoad(FastRoad):
         follow the road onto the next lane), keyed by their position in `plan.drivers`: the side
         lane MOBIL picks (the last one that passes, as stock overwrites), or None to keep the lane.
         Also evaluates every driver's IDM acceleration behind its own leader
-        (`plan.own_acceleration`), in the same array call."""
+        (`plan.own_acceleration`, and its free-road term `plan.own_free_road`), in the same array call."""
         frame, drivers = plan.frame, plan.drivers
         deciding = plan.timer_due & free & plan.enable_lane_change & plan.on_target & ~plan.routed
         due = deciding.nonzero()[0].tolist()
@@ -270,7 +296,7 @@ class VectorRoad(FastRoad):
             pairs = [pair for pair, keep in zip(pairs, reachable.tolist(), strict=True) if keep]
             index, sides, me = index[reachable], sides[reachable], me[reachable]
         if not pairs:
-            plan.own_acceleration = frame.idm(*own)
+            plan.own_acceleration, plan.own_free_road = frame.idm_and_free_road(*own)
             return decisions
         new_front, new_rear = frame.neighbours(me, sides)
         if plan.habits is not None and plan.habits.blind:
@@ -281,8 +307,8 @@ class VectorRoad(FastRoad):
         egos = np.concatenate([new_rear, new_rear, me, me, own_rear, own_rear, plan.me])
         leaders = np.concatenate([new_front, me, new_front, own_front, me, own_front, plan.own_front])
         laws = plan.laws
-        a = frame.idm(egos, leaders, laws, evaluators)
-        plan.own_acceleration = a[blocks * len(me) :]
+        a, free_road = frame.idm_and_free_road(egos, leaders, laws, evaluators)
+        plan.own_acceleration, plan.own_free_road = a[blocks * len(me) :], free_road[blocks * len(me) :]
         accept = mobil_verdicts(
             a[: blocks * len(me)].reshape(blocks, -1),
             index,

@@ -87,8 +87,14 @@ class TrafficFrame:
         """`IDMVehicle.acceleration(ego_vehicle=ego, front_vehicle=front)` [m/s^2] per row, for
         the evaluating IDM driver of each pair (its row of `laws` in `evaluator`); rows -1 stand
         for no vehicle (0 without ego); the gap is measured along the ego's lane, as stock does."""
+        return self.idm_and_free_road(ego, front, laws, evaluator)[0]
+
+    def idm_and_free_road(
+        self, ego: np.ndarray, front: np.ndarray, laws: DriverLaws, evaluator: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """`idm`, and each pair's free-road term [m/s^2] (`IdmRows.idm_and_free_road`)."""
         rows = IdmRows(**{column.name: getattr(self, column.name) for column in fields(IdmRows)})
-        return rows.idm(ego, front, laws, evaluator)
+        return rows.idm_and_free_road(ego, front, laws, evaluator)
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,6 +162,13 @@ class IdmRows:
         """`IDMVehicle.acceleration(ego_vehicle=ego, front_vehicle=front)` [m/s^2] per pair of rows
         (-1: none), evaluated by the IDM driver in row `evaluator` of `laws` per pair: compiled
         arithmetic around numpy's powers and dot products (highway-env's bits)."""
+        return self.idm_and_free_road(ego, front, laws, evaluator)[0]
+
+    def idm_and_free_road(
+        self, ego: np.ndarray, front: np.ndarray, laws: DriverLaws, evaluator: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """`idm`, and each pair's free-road term [m/s^2] (its IDM behind no leader), bit for bit
+        what `idm` gives for the ego with front -1."""
         valid, base, led, relative, heading, gap, led_speed = idm_inputs(
             ego,
             front,
