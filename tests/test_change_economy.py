@@ -67,7 +67,7 @@ def test_the_calibrated_margin_travels_in_the_model_file_and_the_config_override
     mine = build_config({"planner": {"agent": "ddqn", "model": str(path), "change_margin": 0.1}}, "test")
     overridden = build_agent(mine, 0)
     assert isinstance(overridden, LearnedAgent) and overridden.change_margin == 0.1
-    plain = with_metadata(tmp_path)
+    plain = with_metadata(tmp_path, change_margin=None, change_margin_calibration=None)
     assert load_agent(plain).change_margin == 0.0
 
 
