@@ -22,7 +22,7 @@ ROAD = {"vehicles_count": 30, "duration": 12}
 CHANGES_ROAD = {**ROAD, "duration": 20}
 """The lane-change cases' road: from a drivable start the ego meets slower traffic after 12 s."""
 CASES = {
-    "ddqn-pid": {"seed": 1, "planner": {"agent": "ddqn", "change_margin": 0.0}},
+    "ddqn-pid": {"seed": 1, "planner": {"agent": "ddqn"}},
     "mobil-mpc-changes": {
         "seed": 2,
         "planner": {"agent": "mobil"},
@@ -47,10 +47,8 @@ CASES = {
         },
     },
 }
-"""`ddqn-pid` decides with no change margin (the shipped file's calibrated margin keeps the lane
-there): the case's lane change exercises the maneuver and controllers. The summary's `backend` is
-left out: every backend gives stock's trajectories, so the results were written on `fast` and hold
-on `vector`. `rule-pid-noisy-control-on-ground-truth` keeps the
+"""The summary's `backend` is left out: every backend gives stock's trajectories, so the results
+were written on `fast` and hold on `vector`. `rule-pid-noisy-control-on-ground-truth` keeps the
 result of the noisy case from before safety and cruise acted on the perceived world (the agent
 alone saw the noise then); `rule-pid-noisy` keeps its result from before the tracker (it acts on
 each frame's raw detections: `perception.tracker.mode: off`)."""
