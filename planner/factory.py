@@ -42,12 +42,13 @@ def make_agent(
     seed: int = 0,
     model: Path | str | None = None,
     lookahead: LookaheadSetup | None = None,
-    change_margin: float = 0.0,
+    change_margin: float | None = None,
 ) -> Agent:
     """Build the agent `name` for a road of `lanes` lanes seen through `grid`; learned agents load
-    `model` (by default the shipped one; a Q-network decides with the hysteresis `change_margin`),
-    the lookahead takes the run's `lookahead` setup (by default the stack's defaults). Any other
-    name is a plug-in (`planner.plugins`), given `model` if it takes one."""
+    `model` (by default the shipped one; a Q-network decides with the hysteresis `change_margin`,
+    None: the one its file holds), the lookahead takes the run's `lookahead` setup (by default the
+    stack's defaults). Any other name is a plug-in (`planner.plugins`), given `model` if it takes
+    one."""
     if (path := model_path(name, model)) is not None:
         from planner.learned import load_agent
 

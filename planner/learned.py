@@ -53,11 +53,16 @@ class LearnedAgent(Policy):
     """Greedy agent over a Q-network (with the MOBIL prior its file declares); `grid_config` and
     `encoding` say what it must be shown, and `sees_permitted` whether the loop appends the safety
     layer's permitted commands to it (a model trained with an action mask): it then decides among
-    them. A lane change must beat STAY's Q-value by `change_margin`: a hysteresis, so near-ties
-    between lanes the network rates alike keep the lane instead of swinging between them."""
+    them. A lane change must beat STAY's Q-value by `change_margin` (None: the margin calibrated
+    into its model file, else 0; `economical_choice`): a hysteresis, so near-ties between lanes the
+    network rates alike keep the lane instead of swinging between them."""
 
     def __init__(
-        self, network: nn.Module, metadata: ModelMetadata, source: str = "model", change_margin: float = 0.0
+        self,
+        network: nn.Module,
+        metadata: ModelMetadata,
+        source: str = "model",
+        change_margin: float | None = None,
     ) -> None:
         assert metadata.observation_size is not None, "a Q-network's metadata names its input size"
         self.network = network.eval()
@@ -68,7 +73,7 @@ class LearnedAgent(Policy):
         self.grid_config: GridConfig = metadata.grid
         self.prior = MobilPrior(metadata.grid, metadata.mobil_prior) if metadata.mobil_prior else None
         self.sees_permitted = metadata.action_mask
-        self.change_margin = change_margin
+        self.change_margin = change_margin if change_margin is not None else metadata.change_margin or 0.0
         self.last_rated: tuple[np.ndarray | None, np.ndarray] = (None, np.zeros((1, N_ACTIONS)))
         """The last observation decided on and its `rated` values (`scores` reads them)."""
 
@@ -131,11 +136,21 @@ class LearnedAgent(Policy):
     def _greedy(self, observation: np.ndarray, q_values: np.ndarray) -> Action:
         """The greedy command of each row of rated `q_values`, among the permitted ones."""
         self.last_rated = (observation, q_values)
+        permitted = None
         if self.sees_permitted:
             permitted = np.asarray(observation).reshape(len(q_values), -1)[:, -N_ACTIONS:] >= 0.5
-            q_values = np.where(permitted, q_values, -np.inf)
-        actions = (q_values - self.change_margin * _CHANGES).argmax(axis=1)
+        actions = economical_choice(q_values, permitted, self.change_margin)
         return actions[0] if np.asarray(observation).ndim == 1 else actions
+
+
+def economical_choice(q_values: np.ndarray, permitted: np.ndarray | None, change_margin: float) -> np.ndarray:
+    """(batch,) the command of each row of `q_values` (batch, actions), among the `permitted` ones
+    (None: all), where a lane change must beat STAY's Q-value by at least `change_margin`
+    [Q-value]: the one decision law of every learned agent, whether it decides for one world or
+    for a batch (0: the plain argmax, which takes LEFT on a tie with STAY)."""
+    if permitted is not None:
+        q_values = np.where(permitted, q_values, -np.inf)
+    return np.asarray((q_values - change_margin * _CHANGES).argmax(axis=1))
 
 
 class TabularAgent(Policy):
@@ -190,12 +205,12 @@ def save_q_table(agent: QLearning, path: Path | str, metadata: ModelMetadata) ->
 
 
 def load_agent(
-    path: Path | str, expected_algorithms: tuple[str, ...] | None = None, change_margin: float = 0.0
+    path: Path | str, expected_algorithms: tuple[str, ...] | None = None, change_margin: float | None = None
 ) -> LearnedAgent | TabularAgent:
-    """The agent stored in `path` (a Q-network decides with the hysteresis `change_margin`). Its
-    metadata is checked before anything is built: the kind, algorithm, encoding, grid and action
-    count the loop can use, network sizes within bounds and the arrays' shapes equal to the ones
-    those sizes give, every weight finite."""
+    """The agent stored in `path` (a Q-network decides with the hysteresis `change_margin`; None:
+    the one calibrated into the file, else 0). Its metadata is checked before anything is built:
+    the kind, algorithm, encoding, grid and action count the loop can use, network sizes within
+    bounds and the arrays' shapes equal to the ones those sizes give, every weight finite."""
     arrays, metadata = checked_model(path, expected_algorithms)
     if metadata.kind == "qtable":
         return TabularAgent(arrays["q_table"].astype(np.float64), metadata, str(path))

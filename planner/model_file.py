@@ -110,6 +110,15 @@ def save_model(path: Path | str, arrays: dict[str, np.ndarray], metadata: dict) 
     return path
 
 
+def with_metadata(source: Path | str, out: Path | str, fields: dict) -> Path:
+    """`source` written to `out` (which may be `source`) with `fields` set in its metadata, its
+    weights and every other metadata field as they were: how a calibration is written into a model
+    file (the gate's threshold, the learned agents' change margin)."""
+    arrays, metadata = load_model(source)
+    kept = {key: value for key, value in metadata.items() if key != "format"}
+    return save_model(out, arrays, {**kept, **fields})
+
+
 def load_model(
     path: Path | str, max_bytes: int = MODEL_BYTES, arrays: bool = True, expected: HeaderCheck | None = None
 ) -> tuple[dict[str, np.ndarray], dict]:

@@ -12,6 +12,10 @@ from records import N_ACTIONS, Encoding, GridConfig
 
 ModelKind = Literal["mlp", "lane-mlp", "qtable"]
 
+MAX_CHANGE_MARGIN = 10.0
+"""Largest change margin [Q-value] a run config or a model file may set: the shipped ensemble's
+Q-values span about 0-80, and its changes' advantages over STAY rarely exceed a few units."""
+
 
 @dataclass(frozen=True, kw_only=True)
 class ModelMetadata:
@@ -28,8 +32,10 @@ class ModelMetadata:
     1: not written) are needed to use it (`planner.model_check` checks them), and an ensemble's
     `uncertainty_threshold` (the members' disagreement above which a fallback decides,
     `planner.uncertainty`; with how it was calibrated, `uncertainty_calibration`: None when never
-    calibrated) to gate it; the rest describes where it came from and is None (`member_seeds`:
-    empty) in a file that does not say."""
+    calibrated) to gate it, and its `change_margin` (the Q-value by which a lane change must beat
+    STAY, `planner.learned.LearnedAgent`; with how it was calibrated, `change_margin_calibration`:
+    None when never calibrated, and the agent then decides on its plain argmax) to decide; the rest
+    describes where it came from and is None (`member_seeds`: empty) in a file that does not say."""
 
     kind: ModelKind
     algorithm: str | None = None
@@ -49,6 +55,8 @@ class ModelMetadata:
     member_seeds: tuple[int, ...] = ()
     uncertainty_threshold: float | None = None
     uncertainty_calibration: str | None = None
+    change_margin: float | None = None
+    change_margin_calibration: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The metadata member's keys in the order drivestack has always written them; a field
@@ -72,6 +80,8 @@ class ModelMetadata:
             "member_seeds": list(self.member_seeds) or None,
             "uncertainty_threshold": self.uncertainty_threshold,
             "uncertainty_calibration": self.uncertainty_calibration,
+            "change_margin": self.change_margin,
+            "change_margin_calibration": self.change_margin_calibration,
         }
         return {key: value for key, value in data.items() if value is not None}
 
@@ -99,6 +109,8 @@ class ModelMetadata:
             member_seeds=_member_seeds(data),
             uncertainty_threshold=_number(data.get("uncertainty_threshold")),
             uncertainty_calibration=_typed(data, "uncertainty_calibration", str),
+            change_margin=_number(data.get("change_margin")),
+            change_margin_calibration=_typed(data, "change_margin_calibration", str),
         )
 
 

@@ -198,15 +198,17 @@ def test_a_resolved_config_written_before_the_abort_looked_ahead_reproduces_its_
 
 def test_a_resolved_config_written_before_the_change_margin_reproduces_its_run():
     """A folder's config.yaml written before `planner.change_margin` (and the abort's lookahead)
-    existed reads both as its run had them and keeps its fingerprint; a margin changes it."""
-    then = build_config(WORLDS, planner__safety__abort_lookahead_s=0.0)
+    existed reads both as its run had them (no margin) and keeps its fingerprint; a margin, or the
+    default that reads the model file's, changes it."""
+    then = build_config(WORLDS, planner__safety__abort_lookahead_s=0.0, planner__change_margin=0.0)
     written = then.model_dump(mode="json")
     written["planner"].pop("change_margin"), written["planner"]["safety"].pop("abort_lookahead_s")
     read = build_config(written)
     assert read == then and read.planner.change_margin == 0.0
     assert training_owner(read).config == _fingerprint_without(
-        then, *FORMER, "planner.safety.abort_lookahead_s"
+        then, *FORMER, "planner.change_margin", "planner.safety.abort_lookahead_s"
     )
+    assert build_config(WORLDS).planner.change_margin is None
     held = build_config(WORLDS, planner__change_margin=0.4)
     assert training_owner(held).config != training_owner(build_config(WORLDS)).config
 
@@ -241,7 +243,7 @@ def test_a_resolved_config_written_before_the_follower_check_reproduces_its_run(
     assert training_owner(build_config(WORLDS)).config != training_owner(read).config
 
 
-FORMER = ("train.overlap", "train.members", "planner.change_margin", "planner.safety.follower_reaction_s")
+FORMER = ("train.overlap", "train.members", "planner.safety.follower_reaction_s")
 """The keys added later that `WORLDS` holds at their former values."""
 
 

@@ -74,8 +74,9 @@ class Oracle(Policy):
 
     @classmethod
     def for_road(cls, config: OracleConfig, lanes: int, grid: GridConfig) -> Oracle:
-        """The oracle whose base policy is `config.base` as built for this road."""
-        return cls(config, make_agent(config.base, lanes, grid))
+        """The oracle whose base policy is `config.base` as built for this road; a learned base
+        decides on its network's own argmax (no change margin), as when the ceilings were measured."""
+        return cls(config, make_agent(config.base, lanes, grid, change_margin=0.0))
 
     score_name = "distance reached [m] (lane changes less the margin)"
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from planner.agents import Agent, Gated
 from planner.learned import LearnedAgent, load_agent
-from planner.model_file import load_model, save_model
+from planner.model_file import with_metadata
 from planner.uncertainty import GatedAgent
 from records import child_seed
 from stack.loop.closed_loop import ClosedLoop
@@ -101,11 +101,11 @@ def calibrate(config: RunConfig, model: Path, episodes: int, seed: int, percenti
 def write_threshold(model: Path, out: Path, calibration: Calibration) -> Path:
     """`model` written to `out` with the calibrated threshold in its metadata (its weights and
     other metadata as they were)."""
-    arrays, metadata = load_model(model)
-    metadata = {key: value for key, value in metadata.items() if key != "format"}
-    metadata["uncertainty_threshold"] = round(calibration.threshold, 6)
-    metadata["uncertainty_calibration"] = calibration.description()
-    return save_model(out, arrays, metadata)
+    fields = {
+        "uncertainty_threshold": round(calibration.threshold, 6),
+        "uncertainty_calibration": calibration.description(),
+    }
+    return with_metadata(model, out, fields)
 
 
 def calibration_table(calibration: Calibration) -> str:

@@ -13,6 +13,7 @@ from common.plugins import AGENT_GROUP, plugin_name
 from perception.sensor import SensorConfig
 from perception.tracking import TrackerConfig
 from planner.lookahead_config import LookaheadConfig
+from planner.model_metadata import MAX_CHANGE_MARGIN
 from planner.safety import SafetyConfig
 from records import AGENT_NAMES, GridConfig
 from stack.settings.train import Strict
@@ -51,12 +52,13 @@ class PlannerConfig(Strict):
     safety: SafetyConfig = SafetyConfig()
     oracle: OracleConfig = OracleConfig()
     lookahead: LookaheadConfig = LookaheadConfig()
-    change_margin: float = Field(
-        0.0,
+    change_margin: float | None = Field(
+        None,
         ge=0,
-        le=10,
+        le=MAX_CHANGE_MARGIN,
         description="[Q-value] the learned agents' hysteresis: ddqn and dqn change lane only when the "
-        "change's Q-value beats STAY's by at least this much",
+        "change's Q-value beats STAY's by at least this much; null: the one calibrated into the "
+        "model file, else 0",
     )
     fallback: Literal["lookahead", "mobil", "none"] = Field(
         "lookahead", description="who decides where an ensemble's members disagree on its command by "
