@@ -9,11 +9,12 @@ and its reported velocity in that direction (a radar's range rate, a camera's he
 velocity's noise `speed_variance`. A frame: every live track is predicted `dt` ahead; each
 (track, detection) pair (the detections sorted along the road, so each track checks only those
 within its gate's reach) whose Mahalanobis distance (4 degrees of freedom) is within the gate is a
-candidate; candidates are assigned greedily, nearest first
-(`assign_greedy`); assigned tracks are updated, the others coast; a track is confirmed once
-`confirm_hits` of its last `confirm_frames` frames had a detection, a tentative one is dropped
-once it can no longer reach that, a confirmed one after `coast_frames` frames running without
-one; detections left over start tentative tracks in the lowest free slots."""
+candidate; candidates are assigned greedily, nearest first, confirmed tracks before tentative
+ones (`assign_greedy`, `TENTATIVE_RANK`); assigned tracks are updated, the others coast; a track
+is confirmed once `confirm_hits` of its last `confirm_frames` frames had a detection, a
+tentative one is dropped once it can no longer reach that, a confirmed one after `coast_frames`
+frames running without one; detections left over start tentative tracks in the lowest free
+slots, except those lying on a confirmed track's vehicle (`on_a_confirmed_track`)."""
 
 from __future__ import annotations
 
@@ -29,6 +30,11 @@ FREE, TENTATIVE, CONFIRMED = 0, 1, 2
 """A track slot's status."""
 GATE_WINDOW_MARGIN_M = 1e-6
 """How far past a track's gate along the road detections are still checked [m] (rounding)."""
+TENTATIVE_RANK = 1.0
+"""Added, with the gate, to the cost of a tentative track's candidate pairs, so assignment serves
+every confirmed track before any tentative one (a cascade): a tentative track started beside a
+vehicle (by a phantom, or by a detection noisier than the gate) never takes the detections of
+that vehicle's confirmed track and dies, rather than sharing them and living as a second track."""
 STATE_SIZE = 4
 """A track's state: s [m], ds/dt [m/s], d [m], dd/dt [m/s]."""
 COVARIANCE_SIZE = 6
@@ -195,6 +201,22 @@ def assign_greedy(
 
 
 @register_jitable
+def on_a_confirmed_track(tracks: Tracks, found: Measured, j: int) -> bool:
+    """Whether detection `j` of `found` lies on a confirmed track's vehicle: their footprints (the
+    track's last detected length and width about its filtered s and d) overlap. Two vehicles
+    cannot overlap, so such a detection is that vehicle seen badly (noise beyond its gate) or a
+    phantom over it, never a new vehicle: no track is started for it."""
+    for t in range(len(tracks.status)):
+        if tracks.status[t] != CONFIRMED:
+            continue
+        reach_s = (tracks.size[t, 0] + found.length[j]) / 2
+        reach_d = (tracks.size[t, 1] + found.width[j]) / 2
+        if abs(found.s[j] - tracks.state[t, 0]) < reach_s and abs(found.d[j] - tracks.state[t, 2]) < reach_d:
+            return True
+    return False
+
+
+@register_jitable
 def _popcount(bits: int) -> int:
     count = 0
     while bits:
@@ -241,6 +263,8 @@ def track_frame(
                 continue
             cost = distance(state, covariance, found, j + 1, r, rv)
             if cost <= law.gate:
+                if tracks.status[t] == TENTATIVE:
+                    cost += law.gate + TENTATIVE_RANK
                 pair_track[pairs], pair_found[pairs], pair_cost[pairs] = t, j, cost
                 pairs += 1
     assigned = assign_greedy(pair_track, pair_found, pair_cost, pairs, slots, detections)
@@ -268,7 +292,7 @@ def track_frame(
             tracks.status[t] = FREE
     slot = 0
     for j in range(detections):
-        if assigned[j] >= 0:
+        if assigned[j] >= 0 or on_a_confirmed_track(tracks, found, j + 1):
             continue
         while slot < slots and tracks.status[slot] != FREE:
             slot += 1

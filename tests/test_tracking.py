@@ -105,6 +105,39 @@ def test_phantoms_at_the_sensor_s_rate_are_not_confirmed() -> None:
     assert confirmed == 0
 
 
+def confirmed_at(world: OneWorld, s: float, frames: int = 20) -> None:
+    """A vehicle standing at `s` [m] on lane 0, seen `frames` frames: confirmed in slot 0."""
+    for _ in range(frames):
+        world.frame([(s, 0.0, 0.0)])
+    assert world.status(0) == CONFIRMED
+
+
+def test_a_detection_on_a_confirmed_vehicle_starts_no_track() -> None:
+    """A detection beyond the confirmed track's gate but within its vehicle (5 m long) is that
+    vehicle seen badly or a phantom over it, never a new vehicle; one beyond the vehicle is."""
+    world = OneWorld(noise_m=0.1)
+    confirmed_at(world, 20.0)
+    world.frame([(20.0, 0.0, 0.0), (23.0, 0.5, 0.0)])
+    assert world.status(1) == FREE
+    world.frame([(20.0, 0.0, 0.0), (26.0, 0.5, 0.0)])
+    assert world.status(1) == TENTATIVE
+
+
+def test_a_tentative_track_beside_a_vehicle_never_takes_its_detections() -> None:
+    """Assignment serves confirmed tracks first: a tentative track started on a tracked vehicle
+    (here placed 0.5 m from it) is starved and deleted, even with the detections nearer it, rather
+    than sharing them and living as a second track of one vehicle."""
+    world = OneWorld()
+    confirmed_at(world, 20.0)
+    world.tracks.state[1] = (20.6, 0.0, 0.0, 0.0)
+    world.tracks.covariance[1] = world.tracks.covariance[0]
+    world.tracks.hits[1], world.tracks.age[1], world.tracks.status[1] = 1, 1, TENTATIVE
+    for _ in range(CONFIG.confirm_frames):
+        assert world.frame([(20.6, 0.0, 0.0)]) == 1
+        assert world.tracks.misses[0] == 0
+    assert world.status(1) == FREE
+
+
 @pytest.mark.parametrize("seed", range(1003010, 1003030))
 def test_greedy_assignment_is_scipy_s_on_scenes_of_separated_vehicles(seed: int) -> None:
     rng = np.random.default_rng(seed)
