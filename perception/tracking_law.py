@@ -18,6 +18,7 @@ slots, except those lying on a confirmed track's vehicle (`on_a_confirmed_track`
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -37,6 +38,9 @@ vehicle (by a phantom, or by a detection noisier than the gate) never takes the 
 that vehicle's confirmed track and dies, rather than sharing them and living as a second track."""
 STATE_SIZE = 4
 """A track's state: s [m], ds/dt [m/s], d [m], dd/dt [m/s]."""
+ROW_FIELDS = 8
+"""A reported track's row (`tracked_rows`): s, d [m], velocity along and across the lane, speed
+[m/s], heading [rad], length, width [m]."""
 COVARIANCE_SIZE = 6
 """A track's covariance, two symmetric 2 x 2 blocks: [P_ss, P_sv, P_vv, P_dd, P_dw, P_ww]."""
 
@@ -331,6 +335,23 @@ def confirmed_tracks(
     return count
 
 
+@register_jitable
+def tracked_rows(
+    tracks: Tracks, slots: np.ndarray, count: int, lane_heading: float, rows_out: np.ndarray
+) -> None:
+    """The rows (`ROW_FIELDS`) of the `count` tracks in `slots` into `rows_out`: filtered position
+    and velocity, speed and heading from the velocity (the lane's heading at the ego
+    `lane_heading` [rad] plus the velocity's angle to it), size of the last detection."""
+    for k in range(count):
+        t = slots[k]
+        along, across = tracks.state[t, 1], tracks.state[t, 3]
+        rows_out[k, 0], rows_out[k, 1] = tracks.state[t, 0], tracks.state[t, 2]
+        rows_out[k, 2], rows_out[k, 3] = along, across
+        rows_out[k, 4] = math.hypot(along, across)
+        rows_out[k, 5] = lane_heading + math.atan2(across, along)
+        rows_out[k, 6], rows_out[k, 7] = tracks.size[t, 0], tracks.size[t, 1]
+
+
 @Kernel
 def track_world(
     law: TrackerLaw,
@@ -340,16 +361,22 @@ def track_world(
     dt: float,
     lane_offsets: np.ndarray,
     lanes_count: int,
+    lane_heading: float,
     slots_out: np.ndarray,
     lane_out: np.ndarray,
+    rows_out: np.ndarray,
 ) -> int:  # pragma: no cover - compiled; covered through perception.tracking.Tracker
-    """`track_frame` then `confirmed_tracks` on one world: what the per-world tracker calls."""
+    """`track_frame`, `confirmed_tracks` and `tracked_rows` on one world: what the per-world
+    tracker calls."""
     track_frame(law, tracks, found, position_variance, dt)
-    return confirmed_tracks(tracks, lane_offsets, lanes_count, slots_out, lane_out)
+    count = confirmed_tracks(tracks, lane_offsets, lanes_count, slots_out, lane_out)
+    tracked_rows(tracks, slots_out, count, lane_heading, rows_out)
+    return count
 
 
 _track_frame = njit(cache=True, nogil=True, inline="always")(track_frame)
 _confirmed_tracks = njit(cache=True, nogil=True, inline="always")(confirmed_tracks)
+_tracked_rows = njit(cache=True, nogil=True, inline="always")(tracked_rows)
 
 
 @Kernel
@@ -362,8 +389,10 @@ def track_worlds(
     worlds: np.ndarray,
     lane_offsets: np.ndarray,
     lanes_count: np.ndarray,
+    lane_heading: np.ndarray,
     slots_out: np.ndarray,
     lane_out: np.ndarray,
+    rows_out: np.ndarray,
     counts_out: np.ndarray,
 ) -> None:  # pragma: no cover - compiled; covered through perception.tracking.TrackerBatch
     """`track_world` on each world flagged in `worlds` (its rows of `tracks` and `found`, the
@@ -393,3 +422,42 @@ def track_worlds(
         )
         _track_frame(law, one, measured, position_variance[w], dt)
         counts_out[w] = _confirmed_tracks(one, lane_offsets[w], lanes_count[w], slots_out[w], lane_out[w])
+        _tracked_rows(one, slots_out[w], counts_out[w], lane_heading[w], rows_out[w])
+
+
+@Kernel
+def report_worlds(
+    tracked: np.ndarray,
+    counts: np.ndarray,
+    slots: np.ndarray,
+    lanes: np.ndarray,
+    rows: np.ndarray,
+    detected: tuple[np.ndarray, ...],
+    detected_lane: np.ndarray,
+    out: tuple[np.ndarray, ...],
+    out_lane: np.ndarray,
+    out_slot: np.ndarray,
+) -> None:  # pragma: no cover - compiled; covered through perception.tracking.TrackerBatch
+    """What every world reports (`TrackerBatch.update`): into `out` (s, d, speed, heading, length,
+    width, each (worlds, columns)), `out_lane` and `out_slot` (the track slot of each row, -1
+    none), a tracked world's ego row then its `counts` confirmed tracks (`slots`, `lanes`, `rows`
+    of `track_worlds`), zeros to column `columns_tracked` = 1 + the most tracks of any world and
+    the detections beyond; an untracked world's `detected` rows (s, d, speed, heading, length,
+    width) and `detected_lane`."""
+    fields = ((0, 0), (1, 1), (2, 4), (3, 5), (4, 6), (5, 7))
+    columns_tracked = 1 + counts.max() if len(counts) else 1
+    for w in range(len(tracked)):
+        for c in range(detected_lane.shape[1]):
+            out_lane[w, c] = detected_lane[w, c]
+        for f in range(len(detected)):
+            for c in range(detected[f].shape[1]):
+                out[f][w, c] = detected[f][w, c]
+        if not tracked[w]:
+            continue
+        for c in range(1, columns_tracked):
+            k = c - 1
+            live = k < counts[w]
+            out_lane[w, c] = lanes[w, k] if live else 0
+            out_slot[w, c] = slots[w, k] if live else -1
+            for f, column in fields:
+                out[f][w, c] = rows[w, k, column] if live else 0.0

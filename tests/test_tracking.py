@@ -11,7 +11,15 @@ from scipy.optimize import linear_sum_assignment
 
 from perception.sensor import SensorConfig
 from perception.tracking import TRACK_ID_BASE, TrackerConfig, empty_tracks
-from perception.tracking_law import CONFIRMED, FREE, TENTATIVE, Measured, assign_greedy, track_world
+from perception.tracking_law import (
+    CONFIRMED,
+    FREE,
+    ROW_FIELDS,
+    TENTATIVE,
+    Measured,
+    assign_greedy,
+    track_world,
+)
 from stack.runs.batch_episodes import batch_refusal, run_batched
 from stack.runs.episodes import run_episode
 from stack.settings.run import build_config
@@ -29,6 +37,7 @@ class OneWorld:
         self.tracks = empty_tracks(config.max_tracks)
         self.slots = np.zeros(config.max_tracks, dtype=np.int64)
         self.lanes = np.zeros(config.max_tracks, dtype=np.int64)
+        self.rows = np.zeros((config.max_tracks, ROW_FIELDS))
 
     def frame(self, detections: list[tuple[float, ...]], dt: float = DT) -> int:
         """One frame of detections (s, d, speed along the lane[, across it])."""
@@ -37,7 +46,19 @@ class OneWorld:
         sizes = np.full(len(rows), 5.0), np.full(len(rows), 2.0)
         found = Measured(len(rows), s, d, speed, across, *sizes)
         return int(
-            track_world(self.law, self.tracks, found, self.variance, dt, LANES, 3, self.slots, self.lanes)
+            track_world(
+                self.law,
+                self.tracks,
+                found,
+                self.variance,
+                dt,
+                LANES,
+                3,
+                0.0,
+                self.slots,
+                self.lanes,
+                self.rows,
+            )
         )
 
     def status(self, slot: int = 0) -> int:
