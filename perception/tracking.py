@@ -17,7 +17,7 @@ than with an empty road."""
 from __future__ import annotations
 
 import dataclasses
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -254,16 +254,7 @@ class TrackerBatch:
             self.tracked, self.counts, self.slots, self.lanes, self.rows, detected,
             np.ascontiguousarray(sensed.lane), out, lane, slot,
         )  # fmt: skip
-        s, d, speed, heading, length, width = out
-        batch = dataclasses.replace(
-            sensed,
-            count=np.where(self.tracked, 1 + self.counts, sensed.count),
-            s=s,
-            d=d,
-            speed=speed,
-            heading=heading,
-            length=length,
-            width=width,
-            lane=lane,
-        )
+        fields: dict[str, Any] = dict(zip(names, out, strict=True))
+        count = np.where(self.tracked, 1 + self.counts, sensed.count)
+        batch = dataclasses.replace(sensed, count=count, lane=lane, **fields)
         return TrackedBatch(batch, slot)
