@@ -13,8 +13,9 @@ candidate; candidates are assigned greedily, nearest first, confirmed tracks bef
 ones (`assign_greedy`, `TENTATIVE_RANK`); assigned tracks are updated, the others coast; a track
 is confirmed once `confirm_hits` of its last `confirm_frames` frames had a detection, a
 tentative one is dropped once it can no longer reach that, a confirmed one after `coast_frames`
-frames running without one; detections left over start tentative tracks in the lowest free
-slots, except those lying on a confirmed track's vehicle (`on_a_confirmed_track`)."""
+frames running without one; a track confirmed over another confirmed track's vehicle settles
+which of the two goes (`settle_twin`); detections left over start tentative tracks in the lowest
+free slots."""
 
 from __future__ import annotations
 
@@ -205,19 +206,28 @@ def assign_greedy(
 
 
 @register_jitable
-def on_a_confirmed_track(tracks: Tracks, found: Measured, j: int) -> bool:
-    """Whether detection `j` of `found` lies on a confirmed track's vehicle: their footprints (the
-    track's last detected length and width about its filtered s and d) overlap. Two vehicles
-    cannot overlap, so such a detection is that vehicle seen badly (noise beyond its gate) or a
-    phantom over it, never a new vehicle: no track is started for it."""
-    for t in range(len(tracks.status)):
-        if tracks.status[t] != CONFIRMED:
+def overlap(tracks: Tracks, t: int, u: int) -> bool:
+    """Whether tracks `t` and `u` overlap: their footprints (each one's last detected length and
+    width about its filtered s and d) intersect, which two vehicles cannot."""
+    reach_s = (tracks.size[t, 0] + tracks.size[u, 0]) / 2
+    reach_d = (tracks.size[t, 1] + tracks.size[u, 1]) / 2
+    ds, dd = tracks.state[t, 0] - tracks.state[u, 0], tracks.state[t, 2] - tracks.state[u, 2]
+    return abs(ds) < reach_s and abs(dd) < reach_d
+
+
+@register_jitable
+def settle_twin(tracks: Tracks, t: int, hit: np.ndarray) -> None:
+    """Track `t`, confirmed this frame, against the confirmed tracks it overlaps (one vehicle's two
+    tracks): one that had no detection this frame has lost its vehicle to `t` (a manoeuvre took
+    the detections out of its gate) and is deleted; one that had is the vehicle's own, and `t`
+    (fed by phantoms or noise beside it) is deleted instead."""
+    for u in range(len(tracks.status)):
+        if u == t or tracks.status[u] != CONFIRMED or not overlap(tracks, t, u):
             continue
-        reach_s = (tracks.size[t, 0] + found.length[j]) / 2
-        reach_d = (tracks.size[t, 1] + found.width[j]) / 2
-        if abs(found.s[j] - tracks.state[t, 0]) < reach_s and abs(found.d[j] - tracks.state[t, 2]) < reach_d:
-            return True
-    return False
+        if hit[u]:
+            tracks.status[t] = FREE
+            return
+        tracks.status[u] = FREE
 
 
 @register_jitable
@@ -290,13 +300,14 @@ def track_frame(
         if tracks.status[t] == TENTATIVE:
             if hits >= law.confirm_hits:
                 tracks.status[t] = CONFIRMED
+                settle_twin(tracks, t, hit)
             elif hits + law.confirm_frames - tracks.age[t] < law.confirm_hits:
                 tracks.status[t] = FREE
         elif tracks.misses[t] >= law.coast_frames:
             tracks.status[t] = FREE
     slot = 0
     for j in range(detections):
-        if assigned[j] >= 0 or on_a_confirmed_track(tracks, found, j + 1):
+        if assigned[j] >= 0:
             continue
         while slot < slots and tracks.status[slot] != FREE:
             slot += 1

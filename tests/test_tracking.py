@@ -133,15 +133,27 @@ def confirmed_at(world: OneWorld, s: float, frames: int = 20) -> None:
     assert world.status(0) == CONFIRMED
 
 
-def test_a_detection_on_a_confirmed_vehicle_starts_no_track() -> None:
-    """A detection beyond the confirmed track's gate but within its vehicle (5 m long) is that
-    vehicle seen badly or a phantom over it, never a new vehicle; one beyond the vehicle is."""
+def test_a_track_that_lost_its_vehicle_to_a_new_one_goes_when_that_is_confirmed() -> None:
+    """The vehicle jumps sideways out of its track's gate (a manoeuvre the model did not follow):
+    a new track takes its detections, and once confirmed over the old one's vehicle the old one,
+    coasting, is deleted rather than living on beside it as a second track."""
     world = OneWorld(noise_m=0.1)
     confirmed_at(world, 20.0)
-    world.frame([(20.0, 0.0, 0.0), (23.0, 0.5, 0.0)])
-    assert world.status(1) == FREE
-    world.frame([(20.0, 0.0, 0.0), (26.0, 0.5, 0.0)])
+    for _ in range(CONFIG.confirm_hits - 1):
+        assert world.frame([(20.0, 1.5, 0.0)]) == 1
     assert world.status(1) == TENTATIVE
+    assert world.frame([(20.0, 1.5, 0.0)]) == 1
+    assert world.status(0) == FREE and world.status(1) == CONFIRMED
+
+
+def test_a_track_confirmed_over_a_vehicle_that_keeps_its_detections_goes() -> None:
+    """A second detection on a vehicle every frame (beyond its track's gate, within its footprint)
+    confirms a track over it; the vehicle's own track had its detection, so the newcomer goes."""
+    world = OneWorld(noise_m=0.1)
+    confirmed_at(world, 20.0)
+    for _ in range(CONFIG.confirm_frames):
+        assert world.frame([(20.0, 0.0, 0.0), (22.0, 0.5, 0.0)]) == 1
+    assert world.status(0) == CONFIRMED and world.tracks.misses[0] == 0
 
 
 def test_a_tentative_track_beside_a_vehicle_never_takes_its_detections() -> None:
