@@ -17,7 +17,7 @@ than with an empty road."""
 from __future__ import annotations
 
 import dataclasses
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -25,11 +25,13 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 from perception.sensor import SensorConfig
 from perception.tracking_law import (
     COVARIANCE_SIZE,
+    ROW_FIELDS,
     STATE_SIZE,
     Measured,
     MeasuredWorlds,
     TrackerLaw,
     Tracks,
+    report_worlds,
     track_world,
     track_worlds,
 )
@@ -144,6 +146,7 @@ class Tracker:
         self.tracks = empty_tracks(config.max_tracks)
         self.slots = np.zeros(config.max_tracks, dtype=np.int64)
         self.lanes = np.zeros(config.max_tracks, dtype=np.int64)
+        self.rows = np.zeros((config.max_tracks, ROW_FIELDS))
 
     def warm_up(self, detections: list[WorldState]) -> WorldState:
         """The tracked world after `detections`, the sensor's observations of the frozen first world."""
@@ -168,28 +171,25 @@ class Tracker:
         offsets = _floats(detected.lane_offsets)
         count = track_world(
             self.law, self.tracks, found, self.position_variance, dt, offsets, detected.lanes_count,
-            self.slots, self.lanes,
+            float(lane_heading), self.slots, self.lanes, self.rows,
         )  # fmt: skip
-        rows = self.slots[:count]
-        state = self.tracks.state[rows]
-        s, vs, d, vd = state[:, 0], state[:, 1], state[:, 2], state[:, 3]
-        length, width = self.tracks.size[rows, 0], self.tracks.size[rows, 1]
+        rows = self.rows[:count]
 
         def with_ego(name: str, tracked: np.ndarray) -> np.ndarray:
             return np.concatenate([getattr(detected, name)[:1], tracked])
 
         return dataclasses.replace(
             detected,
-            ids=with_ego("ids", self.tracks.ident[rows]),
-            position=np.concatenate([detected.position[:1], np.stack([s, d], axis=1)]),
-            heading=with_ego("heading", lane_heading + np.arctan2(vd, vs)),
-            speed=with_ego("speed", np.hypot(vs, vd)),
-            velocity=np.concatenate([detected.velocity[:1], np.stack([vs, vd], axis=1)]),
+            ids=with_ego("ids", self.tracks.ident[self.slots[:count]]),
+            position=np.concatenate([detected.position[:1], rows[:, 0:2]]),
+            heading=with_ego("heading", rows[:, 5]),
+            speed=with_ego("speed", rows[:, 4]),
+            velocity=np.concatenate([detected.velocity[:1], rows[:, 2:4]]),
             lane=with_ego("lane", self.lanes[:count].copy()),
-            length=with_ego("length", length),
-            width=with_ego("width", width),
-            s=with_ego("s", s),
-            d=with_ego("d", d),
+            length=with_ego("length", rows[:, 6]),
+            width=with_ego("width", rows[:, 7]),
+            s=with_ego("s", rows[:, 0]),
+            d=with_ego("d", rows[:, 1]),
             crashed=with_ego("crashed", np.zeros(count, dtype=bool)),
         )
 
@@ -217,6 +217,7 @@ class TrackerBatch:
         self.position_variance = np.ones(worlds)
         self.slots = np.zeros((worlds, slots), dtype=np.int64)
         self.lanes = np.zeros((worlds, slots), dtype=np.int64)
+        self.rows = np.zeros((worlds, slots, ROW_FIELDS))
         self.counts = np.zeros(worlds, dtype=np.int64)
 
     def reset_world(self, world: int, sensor: SensorConfig) -> None:
@@ -236,44 +237,24 @@ class TrackerBatch:
         found = MeasuredWorlds(sensed.count, sensed.s, sensed.d, along, across, sensed.length, sensed.width)
         track_worlds(
             self.law, self.tracks, found, self.position_variance, dt, flagged, sensed.lane_offsets,
-            sensed.lanes_count, self.slots, self.lanes, self.counts,
+            sensed.lanes_count, _floats(sensed.lane_heading), self.slots, self.lanes, self.rows, self.counts,
         )  # fmt: skip
         return self._report(sensed)
 
     def _report(self, sensed: WorldBatch) -> TrackedBatch:
-        """The tracked worlds' rows (ego, then confirmed tracks), the others' detections."""
-        slots_most = int(self.counts.max(initial=0))
-        rows = max(sensed.s.shape[1], 1 + slots_most)
-        tracked = self.tracked[:, None]
-        column = np.arange(slots_most)[None, :]
-        live = column < self.counts[:, None]
-        slots, lanes = self.slots[:, :slots_most], self.lanes[:, :slots_most]
-        slot = np.where(live, slots, 0)
-        state = np.take_along_axis(self.tracks.state, slot[:, :, None], axis=1)
-        s, vs, d, vd = (np.where(live, state[:, :, k], 0.0) for k in range(STATE_SIZE))
-        size = np.take_along_axis(self.tracks.size, slot[:, :, None], axis=1)
-        length, width = np.where(live, size[:, :, 0], 0.0), np.where(live, size[:, :, 1], 0.0)
-
-        def merged(name: str, tracked_rows: np.ndarray) -> np.ndarray:
-            detected = getattr(sensed, name)
-            out = np.zeros((sensed.worlds, rows), dtype=detected.dtype)
-            out[:, : detected.shape[1]] = detected
-            with_ego = np.concatenate([detected[:, :1], tracked_rows.astype(detected.dtype)], axis=1)
-            out[:, : 1 + slots_most] = np.where(tracked, with_ego, out[:, : 1 + slots_most])
-            return out
-
-        heading = sensed.lane_heading[:, None] + np.arctan2(vd, vs)
-        batch = dataclasses.replace(
-            sensed,
-            count=np.where(self.tracked, 1 + self.counts, sensed.count),
-            s=merged("s", s),
-            d=merged("d", d),
-            speed=merged("speed", np.where(live, np.hypot(vs, vd), 0.0)),
-            heading=merged("heading", np.where(live, heading, 0.0)),
-            length=merged("length", length),
-            width=merged("width", width),
-            lane=merged("lane", np.where(live, lanes, 0)),
-        )
-        slot_rows = np.full((sensed.worlds, rows), -1, dtype=np.int64)
-        slot_rows[:, 1 : 1 + slots_most] = np.where(tracked & live, slots, -1)
-        return TrackedBatch(batch, slot_rows)
+        """The tracked worlds' rows (ego, then confirmed tracks), the others' detections
+        (`report_worlds`, compiled)."""
+        columns = max(sensed.s.shape[1], 1 + int(self.counts.max(initial=0)))
+        names = ("s", "d", "speed", "heading", "length", "width")
+        detected = tuple(_floats(getattr(sensed, name)) for name in names)
+        out = tuple(np.zeros((sensed.worlds, columns)) for _ in names)
+        lane = np.zeros((sensed.worlds, columns), dtype=sensed.lane.dtype)
+        slot = np.full((sensed.worlds, columns), -1, dtype=np.int64)
+        report_worlds(
+            self.tracked, self.counts, self.slots, self.lanes, self.rows, detected,
+            np.ascontiguousarray(sensed.lane), out, lane, slot,
+        )  # fmt: skip
+        fields: dict[str, Any] = dict(zip(names, out, strict=True))
+        count = np.where(self.tracked, 1 + self.counts, sensed.count)
+        batch = dataclasses.replace(sensed, count=count, lane=lane, **fields)
+        return TrackedBatch(batch, slot)

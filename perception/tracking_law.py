@@ -9,14 +9,17 @@ and its reported velocity in that direction (a radar's range rate, a camera's he
 velocity's noise `speed_variance`. A frame: every live track is predicted `dt` ahead; each
 (track, detection) pair (the detections sorted along the road, so each track checks only those
 within its gate's reach) whose Mahalanobis distance (4 degrees of freedom) is within the gate is a
-candidate; candidates are assigned greedily, nearest first
-(`assign_greedy`); assigned tracks are updated, the others coast; a track is confirmed once
-`confirm_hits` of its last `confirm_frames` frames had a detection, a tentative one is dropped
-once it can no longer reach that, a confirmed one after `coast_frames` frames running without
-one; detections left over start tentative tracks in the lowest free slots."""
+candidate; candidates are assigned greedily, nearest first, confirmed tracks before tentative
+ones (`assign_greedy`, `TENTATIVE_RANK`); assigned tracks are updated, the others coast; a track
+is confirmed once `confirm_hits` of its last `confirm_frames` frames had a detection, a
+tentative one is dropped once it can no longer reach that, a confirmed one after `coast_frames`
+frames running without one; a track confirmed over another confirmed track's vehicle settles
+which of the two goes (`settle_twin`); detections left over start tentative tracks in the lowest
+free slots."""
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -29,8 +32,16 @@ FREE, TENTATIVE, CONFIRMED = 0, 1, 2
 """A track slot's status."""
 GATE_WINDOW_MARGIN_M = 1e-6
 """How far past a track's gate along the road detections are still checked [m] (rounding)."""
+TENTATIVE_RANK = 1.0
+"""Added, with the gate, to the cost of a tentative track's candidate pairs, so assignment serves
+every confirmed track before any tentative one (a cascade): a tentative track started beside a
+vehicle (by a phantom, or by a detection noisier than the gate) never takes the detections of
+that vehicle's confirmed track and dies, rather than sharing them and living as a second track."""
 STATE_SIZE = 4
 """A track's state: s [m], ds/dt [m/s], d [m], dd/dt [m/s]."""
+ROW_FIELDS = 8
+"""A reported track's row (`tracked_rows`): s, d [m], velocity along and across the lane, speed
+[m/s], heading [rad], length, width [m]."""
 COVARIANCE_SIZE = 6
 """A track's covariance, two symmetric 2 x 2 blocks: [P_ss, P_sv, P_vv, P_dd, P_dw, P_ww]."""
 
@@ -195,6 +206,31 @@ def assign_greedy(
 
 
 @register_jitable
+def overlap(tracks: Tracks, t: int, u: int) -> bool:
+    """Whether tracks `t` and `u` overlap: their footprints (each one's last detected length and
+    width about its filtered s and d) intersect, which two vehicles cannot."""
+    reach_s = (tracks.size[t, 0] + tracks.size[u, 0]) / 2
+    reach_d = (tracks.size[t, 1] + tracks.size[u, 1]) / 2
+    ds, dd = tracks.state[t, 0] - tracks.state[u, 0], tracks.state[t, 2] - tracks.state[u, 2]
+    return abs(ds) < reach_s and abs(dd) < reach_d
+
+
+@register_jitable
+def settle_twin(tracks: Tracks, t: int, hit: np.ndarray) -> None:
+    """Track `t`, confirmed this frame, against the confirmed tracks it overlaps (one vehicle's two
+    tracks): one that had no detection this frame has lost its vehicle to `t` (a manoeuvre took
+    the detections out of its gate) and is deleted; one that had is the vehicle's own, and `t`
+    (fed by phantoms or noise beside it) is deleted instead."""
+    for u in range(len(tracks.status)):
+        if u == t or tracks.status[u] != CONFIRMED or not overlap(tracks, t, u):
+            continue
+        if hit[u]:
+            tracks.status[t] = FREE
+            return
+        tracks.status[u] = FREE
+
+
+@register_jitable
 def _popcount(bits: int) -> int:
     count = 0
     while bits:
@@ -241,6 +277,8 @@ def track_frame(
                 continue
             cost = distance(state, covariance, found, j + 1, r, rv)
             if cost <= law.gate:
+                if tracks.status[t] == TENTATIVE:
+                    cost += law.gate + TENTATIVE_RANK
                 pair_track[pairs], pair_found[pairs], pair_cost[pairs] = t, j, cost
                 pairs += 1
     assigned = assign_greedy(pair_track, pair_found, pair_cost, pairs, slots, detections)
@@ -262,6 +300,7 @@ def track_frame(
         if tracks.status[t] == TENTATIVE:
             if hits >= law.confirm_hits:
                 tracks.status[t] = CONFIRMED
+                settle_twin(tracks, t, hit)
             elif hits + law.confirm_frames - tracks.age[t] < law.confirm_hits:
                 tracks.status[t] = FREE
         elif tracks.misses[t] >= law.coast_frames:
@@ -307,6 +346,23 @@ def confirmed_tracks(
     return count
 
 
+@register_jitable
+def tracked_rows(
+    tracks: Tracks, slots: np.ndarray, count: int, lane_heading: float, rows_out: np.ndarray
+) -> None:
+    """The rows (`ROW_FIELDS`) of the `count` tracks in `slots` into `rows_out`: filtered position
+    and velocity, speed and heading from the velocity (the lane's heading at the ego
+    `lane_heading` [rad] plus the velocity's angle to it), size of the last detection."""
+    for k in range(count):
+        t = slots[k]
+        along, across = tracks.state[t, 1], tracks.state[t, 3]
+        rows_out[k, 0], rows_out[k, 1] = tracks.state[t, 0], tracks.state[t, 2]
+        rows_out[k, 2], rows_out[k, 3] = along, across
+        rows_out[k, 4] = math.hypot(along, across)
+        rows_out[k, 5] = lane_heading + math.atan2(across, along)
+        rows_out[k, 6], rows_out[k, 7] = tracks.size[t, 0], tracks.size[t, 1]
+
+
 @Kernel
 def track_world(
     law: TrackerLaw,
@@ -316,16 +372,22 @@ def track_world(
     dt: float,
     lane_offsets: np.ndarray,
     lanes_count: int,
+    lane_heading: float,
     slots_out: np.ndarray,
     lane_out: np.ndarray,
+    rows_out: np.ndarray,
 ) -> int:  # pragma: no cover - compiled; covered through perception.tracking.Tracker
-    """`track_frame` then `confirmed_tracks` on one world: what the per-world tracker calls."""
+    """`track_frame`, `confirmed_tracks` and `tracked_rows` on one world: what the per-world
+    tracker calls."""
     track_frame(law, tracks, found, position_variance, dt)
-    return confirmed_tracks(tracks, lane_offsets, lanes_count, slots_out, lane_out)
+    count = confirmed_tracks(tracks, lane_offsets, lanes_count, slots_out, lane_out)
+    tracked_rows(tracks, slots_out, count, lane_heading, rows_out)
+    return count
 
 
 _track_frame = njit(cache=True, nogil=True, inline="always")(track_frame)
 _confirmed_tracks = njit(cache=True, nogil=True, inline="always")(confirmed_tracks)
+_tracked_rows = njit(cache=True, nogil=True, inline="always")(tracked_rows)
 
 
 @Kernel
@@ -338,8 +400,10 @@ def track_worlds(
     worlds: np.ndarray,
     lane_offsets: np.ndarray,
     lanes_count: np.ndarray,
+    lane_heading: np.ndarray,
     slots_out: np.ndarray,
     lane_out: np.ndarray,
+    rows_out: np.ndarray,
     counts_out: np.ndarray,
 ) -> None:  # pragma: no cover - compiled; covered through perception.tracking.TrackerBatch
     """`track_world` on each world flagged in `worlds` (its rows of `tracks` and `found`, the
@@ -369,3 +433,42 @@ def track_worlds(
         )
         _track_frame(law, one, measured, position_variance[w], dt)
         counts_out[w] = _confirmed_tracks(one, lane_offsets[w], lanes_count[w], slots_out[w], lane_out[w])
+        _tracked_rows(one, slots_out[w], counts_out[w], lane_heading[w], rows_out[w])
+
+
+@Kernel
+def report_worlds(
+    tracked: np.ndarray,
+    counts: np.ndarray,
+    slots: np.ndarray,
+    lanes: np.ndarray,
+    rows: np.ndarray,
+    detected: tuple[np.ndarray, ...],
+    detected_lane: np.ndarray,
+    out: tuple[np.ndarray, ...],
+    out_lane: np.ndarray,
+    out_slot: np.ndarray,
+) -> None:  # pragma: no cover - compiled; covered through perception.tracking.TrackerBatch
+    """What every world reports (`TrackerBatch.update`): into `out` (s, d, speed, heading, length,
+    width, each (worlds, columns)), `out_lane` and `out_slot` (the track slot of each row, -1
+    none), a tracked world's ego row then its `counts` confirmed tracks (`slots`, `lanes`, `rows`
+    of `track_worlds`), zeros to column `columns_tracked` = 1 + the most tracks of any world and
+    the detections beyond; an untracked world's `detected` rows (s, d, speed, heading, length,
+    width) and `detected_lane`."""
+    fields = ((0, 0), (1, 1), (2, 4), (3, 5), (4, 6), (5, 7))
+    columns_tracked = 1 + counts.max() if len(counts) else 1
+    for w in range(len(tracked)):
+        for c in range(detected_lane.shape[1]):
+            out_lane[w, c] = detected_lane[w, c]
+        for f in range(len(detected)):
+            for c in range(detected[f].shape[1]):
+                out[f][w, c] = detected[f][w, c]
+        if not tracked[w]:
+            continue
+        for c in range(1, columns_tracked):
+            k = c - 1
+            live = k < counts[w]
+            out_lane[w, c] = lanes[w, k] if live else 0
+            out_slot[w, c] = slots[w, k] if live else -1
+            for f, column in fields:
+                out[f][w, c] = rows[w, k, column] if live else 0.0

@@ -11,7 +11,15 @@ from scipy.optimize import linear_sum_assignment
 
 from perception.sensor import SensorConfig
 from perception.tracking import TRACK_ID_BASE, TrackerConfig, empty_tracks
-from perception.tracking_law import CONFIRMED, FREE, TENTATIVE, Measured, assign_greedy, track_world
+from perception.tracking_law import (
+    CONFIRMED,
+    FREE,
+    ROW_FIELDS,
+    TENTATIVE,
+    Measured,
+    assign_greedy,
+    track_world,
+)
 from stack.runs.batch_episodes import batch_refusal, run_batched
 from stack.runs.episodes import run_episode
 from stack.settings.run import build_config
@@ -29,6 +37,7 @@ class OneWorld:
         self.tracks = empty_tracks(config.max_tracks)
         self.slots = np.zeros(config.max_tracks, dtype=np.int64)
         self.lanes = np.zeros(config.max_tracks, dtype=np.int64)
+        self.rows = np.zeros((config.max_tracks, ROW_FIELDS))
 
     def frame(self, detections: list[tuple[float, ...]], dt: float = DT) -> int:
         """One frame of detections (s, d, speed along the lane[, across it])."""
@@ -37,7 +46,19 @@ class OneWorld:
         sizes = np.full(len(rows), 5.0), np.full(len(rows), 2.0)
         found = Measured(len(rows), s, d, speed, across, *sizes)
         return int(
-            track_world(self.law, self.tracks, found, self.variance, dt, LANES, 3, self.slots, self.lanes)
+            track_world(
+                self.law,
+                self.tracks,
+                found,
+                self.variance,
+                dt,
+                LANES,
+                3,
+                0.0,
+                self.slots,
+                self.lanes,
+                self.rows,
+            )
         )
 
     def status(self, slot: int = 0) -> int:
@@ -103,6 +124,51 @@ def test_phantoms_at_the_sensor_s_rate_are_not_confirmed() -> None:
         s, d = rng.uniform(-60, 60, count), LANES[rng.integers(0, 3, count)]
         confirmed += world.frame([(float(at), float(across), 0.0) for at, across in zip(s, d, strict=True)])
     assert confirmed == 0
+
+
+def confirmed_at(world: OneWorld, s: float, frames: int = 20) -> None:
+    """A vehicle standing at `s` [m] on lane 0, seen `frames` frames: confirmed in slot 0."""
+    for _ in range(frames):
+        world.frame([(s, 0.0, 0.0)])
+    assert world.status(0) == CONFIRMED
+
+
+def test_a_track_that_lost_its_vehicle_to_a_new_one_goes_when_that_is_confirmed() -> None:
+    """The vehicle jumps sideways out of its track's gate (a manoeuvre the model did not follow):
+    a new track takes its detections, and once confirmed over the old one's vehicle the old one,
+    coasting, is deleted rather than living on beside it as a second track."""
+    world = OneWorld(noise_m=0.1)
+    confirmed_at(world, 20.0)
+    for _ in range(CONFIG.confirm_hits - 1):
+        assert world.frame([(20.0, 1.5, 0.0)]) == 1
+    assert world.status(1) == TENTATIVE
+    assert world.frame([(20.0, 1.5, 0.0)]) == 1
+    assert world.status(0) == FREE and world.status(1) == CONFIRMED
+
+
+def test_a_track_confirmed_over_a_vehicle_that_keeps_its_detections_goes() -> None:
+    """A second detection on a vehicle every frame (beyond its track's gate, within its footprint)
+    confirms a track over it; the vehicle's own track had its detection, so the newcomer goes."""
+    world = OneWorld(noise_m=0.1)
+    confirmed_at(world, 20.0)
+    for _ in range(CONFIG.confirm_frames):
+        assert world.frame([(20.0, 0.0, 0.0), (22.0, 0.5, 0.0)]) == 1
+    assert world.status(0) == CONFIRMED and world.tracks.misses[0] == 0
+
+
+def test_a_tentative_track_beside_a_vehicle_never_takes_its_detections() -> None:
+    """Assignment serves confirmed tracks first: a tentative track started on a tracked vehicle
+    (here placed 0.5 m from it) is starved and deleted, even with the detections nearer it, rather
+    than sharing them and living as a second track of one vehicle."""
+    world = OneWorld()
+    confirmed_at(world, 20.0)
+    world.tracks.state[1] = (20.6, 0.0, 0.0, 0.0)
+    world.tracks.covariance[1] = world.tracks.covariance[0]
+    world.tracks.hits[1], world.tracks.age[1], world.tracks.status[1] = 1, 1, TENTATIVE
+    for _ in range(CONFIG.confirm_frames):
+        assert world.frame([(20.6, 0.0, 0.0)]) == 1
+        assert world.tracks.misses[0] == 0
+    assert world.status(1) == FREE
 
 
 @pytest.mark.parametrize("seed", range(1003010, 1003030))
