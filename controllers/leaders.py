@@ -83,6 +83,29 @@ def passes_before_reached(
     return lateral <= 0 or clear_s < side_gap / lateral
 
 
+FALL_BACK_MPS2 = 5.0
+"""The braking a fall back behind a vehicle alongside is reckoned at [m/s^2]: the plant's authority,
+emergency braking's default."""
+
+
+@register_jitable
+def passes_sooner_than_falls_back(rel_s: float, closing: float, lengths: float) -> bool:
+    """Whether the ego, already beside a vehicle `rel_s` [m] ahead (its front past the other's rear:
+    `rel_s` < `lengths`, the two half lengths [m]) and `closing` [m/s] faster, is past it (its rear
+    beyond the other's front, at constant speeds) sooner than braking at `FALL_BACK_MPS2` brings
+    its front back behind the other's rear. Then braking for it would only hold the two side by
+    side for longer: the judgement `passes_before_reached` makes for a vehicle that may reach the
+    ego's side first, where a few centimetres of its position decide."""
+    past_its_rear = lengths - rel_s
+    if past_its_rear <= 0:
+        return False
+    passing_s = (rel_s + lengths) / closing
+    falling_back_s = (
+        closing + math.sqrt(closing * closing + 2 * FALL_BACK_MPS2 * past_its_rear)
+    ) / FALL_BACK_MPS2
+    return passing_s < falling_back_s
+
+
 def leaders(
     world: WorldState,
     lanes: tuple[int, ...],
@@ -93,17 +116,17 @@ def leaders(
     """For each lane in `lanes`, the closest vehicle ahead reaching into it, now or within
     `cut_in_lookahead_s` [s] at its present sideways speed (a car cutting in is a leader before it
     arrives: R157's careful driver perceives a cut-in once it leaves its lane's wandering zone),
-    none if nobody, and,
-    while that one is leaving or entering the lane (centre more than `LEAVING_M` off the lane's
-    centre), the next one ahead that it no longer hides, and so on: a cut-out reveals the car
-    beyond at once. A slower vehicle entering the lane that the ego passes before it reaches
-    the ego's side (`passes_before_reached`) is not followed: braking for it would only keep
-    the two side by side for longer. In `leaving_lane` (the lane a lane change is leaving; -1:
-    none) a vehicle farther ahead than `LEAVE_SAFETY` times `leaving_within_m` [m] (the road the
-    change still needs to leave it, `controllers.reference.road_to_reach`) plus the stop margin is
-    not followed: the ego is out of that lane before it gets there, and stopping for it would stall
-    the change beside it (the profile's clock stops with the car). `leaders_in_rows`, compiled, on
-    the world's rows."""
+    none if nobody, and, while that one is leaving or entering the lane (centre more than
+    `LEAVING_M` off the lane's centre), the next one ahead that it no longer hides, and so on: a
+    cut-out reveals the car beyond at once. A slower vehicle entering the lane that the ego passes
+    before it reaches the ego's side (`passes_before_reached`), or that the ego is already beside
+    and passes sooner than it could fall back behind it (`passes_sooner_than_falls_back`), is not
+    followed: braking for it would only keep the two side by side for longer. In `leaving_lane`
+    (the lane a lane change is leaving; -1: none) a vehicle farther ahead than `LEAVE_SAFETY` times
+    `leaving_within_m` [m] (the road the change still needs to leave it,
+    `controllers.reference.road_to_reach`) plus the stop margin is not followed: the ego is out of
+    that lane before it gets there, and stopping for it would stall the change beside it (the
+    profile's clock stops with the car). `leaders_in_rows`, compiled, on the world's rows."""
     n = world.count
     found_most = n * len(lanes)
     gaps, speeds, rows = np.empty(found_most), np.empty(found_most), np.empty(found_most, dtype=np.int64)
@@ -167,10 +190,11 @@ def leaders_in_rows(
             if offset > LEAVING_M and speed[row] < speed[0]:
                 towards = math.copysign(1.0, d[0] - d[row])
                 apart = abs(d[row] - d[0]) - width[0] / 2 - SIDE_MARGIN_M
+                closing, lengths = speed[0] - speed[row], (length[0] + length[row]) / 2
                 if passes_before_reached(
-                    rel, speed[0] - speed[row], (length[0] + length[row]) / 2, towards, speed[row],
-                    heading_to_lane[row], apart, extent[row], width[row],
-                ):  # fmt: skip
+                    rel, closing, lengths, towards, speed[row], heading_to_lane[row], apart, extent[row],
+                    width[row],
+                ) or passes_sooner_than_falls_back(rel, closing, lengths):  # fmt: skip
                     continue
             position = m
             while position > 0 and s[candidates[position - 1]] - s[0] > rel:

@@ -9,7 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from controllers.emergency import EmergencyBraking
-from controllers.leaders import leaders
+from controllers.leaders import leaders, passes_sooner_than_falls_back
 from controllers.reference import QuinticProfile, road_to_reach
 from records import Actuation, Neighbour
 from stack.apps.cli import app
@@ -203,6 +203,17 @@ def test_a_stopped_car_in_the_lane_being_left_is_passed_when_the_change_leaves_i
     world = ScriptedRoad(4, 1, 3.0, [stopped], Stationary(), "kinematic", DT, 5.0).reset()
     assert len(leaders(world, (1,), 0.0, 1, road_to_leave)) == followed
     assert len(leaders(world, (1,), 0.0, 2, road_to_leave)) == 1
+
+
+@pytest.mark.parametrize(
+    ("rel_s", "closing", "passes"),
+    [(3.6, 6.0, True), (3.6, 0.5, False), (6.0, 6.0, False)],
+)
+def test_a_slower_car_alongside_is_passed_when_passing_is_sooner_than_falling_back(rel_s, closing, passes):
+    """Two 5 m cars, the other's centre `rel_s` ahead: 1.4 m beside it at 6 m/s faster the ego is
+    past it in 1.43 s, behind it braking at 5 m/s^2 only after 2.6 s; at 0.5 m/s faster it falls
+    back in 0.85 s; a car wholly ahead (no overlap) is always followed."""
+    assert passes_sooner_than_falls_back(rel_s, closing, 5.0) == passes
 
 
 def test_reference_driver_on_a_lead_braking_point_it_cannot_avoid():
