@@ -23,6 +23,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from perception.sensor import SensorConfig
+from perception.tracking_kernels import report_worlds, track_world, track_worlds
 from perception.tracking_law import (
     COVARIANCE_SIZE,
     ROW_FIELDS,
@@ -31,9 +32,6 @@ from perception.tracking_law import (
     MeasuredWorlds,
     TrackerLaw,
     Tracks,
-    report_worlds,
-    track_world,
-    track_worlds,
 )
 from records import WorldState
 from records.batch import WorldBatch

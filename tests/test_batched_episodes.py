@@ -54,10 +54,11 @@ def test_each_episode_of_a_batch_is_the_episode_run_alone(scenario: str, agent: 
 
 
 def test_collisions_are_classified_as_one_world_classifies_them() -> None:
-    """Random commands, no safety layer, late emergency braking: the ego collides, at fault."""
+    """Random commands in dense traffic, no safety layer, late emergency braking: the ego collides,
+    at fault (its own lane change)."""
     batched, alone = both_ways(
         8,
-        scenario="incident",
+        scenario="dense",
         planner__agent="random",
         planner__safety__enabled=False,
         controller__emergency_ttc_s=0.01,

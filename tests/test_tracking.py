@@ -11,6 +11,7 @@ from scipy.optimize import linear_sum_assignment
 
 from perception.sensor import SensorConfig
 from perception.tracking import TRACK_ID_BASE, TrackerConfig, empty_tracks
+from perception.tracking_kernels import track_world
 from perception.tracking_law import (
     CONFIRMED,
     FREE,
@@ -18,7 +19,6 @@ from perception.tracking_law import (
     TENTATIVE,
     Measured,
     assign_greedy,
-    track_world,
 )
 from stack.runs.batch_episodes import batch_refusal, run_batched
 from stack.runs.episodes import run_episode

@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 from highway_env.road.lane import StraightLane
 from highway_env.vehicle.behavior import IDMVehicle
+from highway_env.vehicle.controller import ControlledVehicle
+from highway_env.vehicle.kinematics import Vehicle
 
 from stack.sim.vector.habits import (
     HabitColumns,
@@ -104,3 +106,25 @@ def yield_and_brake(plan: Drivers, acceleration: np.ndarray) -> None:
             acceleration, plan.everyone, np.full(len(me), plan.frame_index), habits.key,
             habits.sudden_braking_chance, habits.sudden_braking_frames, habits.sudden_braking_mps2,
         )  # fmt: skip
+
+
+def abort_contested_change(driver: IDMVehicle, vehicles: list[Vehicle]) -> None:
+    """`IDMVehicle.change_lane_policy` for a `driver` whose lane change runs, as stock decides it:
+    back to its own lane when another controlled vehicle of `vehicles`, not in the target lane, is
+    changing into it and lies ahead closer than the driver's desired gap. Stock's conditions, the
+    cheapest first (the target lane's comparison; the ABC `isinstance` last, for the few left; the
+    desired gap only for a vehicle ahead)."""
+    target = driver.target_lane_index
+    if driver.lane_index[:2] != target[:2]:
+        return
+    for v in vehicles:
+        if (
+            getattr(v, "target_lane_index", None) == target
+            and v is not driver
+            and v.lane_index != target
+            and isinstance(v, ControlledVehicle)
+        ):
+            d = driver.lane_distance_to(v)
+            if 0 < d and d < driver.desired_gap(driver, v):
+                driver.target_lane_index = driver.lane_index
+                break

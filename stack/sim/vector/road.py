@@ -34,7 +34,6 @@ from operator import attrgetter, itemgetter
 
 import numpy as np
 from highway_env.vehicle.behavior import IDMVehicle
-from highway_env.vehicle.controller import ControlledVehicle
 from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import RoadObject
 
@@ -46,7 +45,7 @@ from stack.sim.vector.habits import (
     SeenPast,
     unseen_ego,
 )
-from stack.sim.vector.idm_drivers import Drivers, delayed, yield_and_brake
+from stack.sim.vector.idm_drivers import Drivers, abort_contested_change, delayed, yield_and_brake
 from stack.sim.vector.lanes import LaneTable, clip
 from stack.sim.vector.motion import (
     MOVER_CONSTANTS,
@@ -65,28 +64,6 @@ from stack.sim.vector.road_frame import TrafficFrame
 def _plain_velocity(cls: type) -> bool:
     """Whether objects of `cls` move along their heading at their speed (the vectorised kinematics)."""
     return cls.velocity is Vehicle.velocity or cls.velocity is RoadObject.velocity  # type: ignore[attr-defined]
-
-
-def abort_contested_change(driver: IDMVehicle, vehicles: list[Vehicle]) -> None:
-    """`IDMVehicle.change_lane_policy` for a `driver` whose lane change runs, as stock decides it:
-    back to its own lane when another controlled vehicle of `vehicles`, not in the target lane, is
-    changing into it and lies ahead closer than the driver's desired gap. Stock's conditions, the
-    cheapest first (the target lane's comparison; the ABC `isinstance` last, for the few left; the
-    desired gap only for a vehicle ahead)."""
-    target = driver.target_lane_index
-    if driver.lane_index[:2] != target[:2]:
-        return
-    for v in vehicles:
-        if (
-            getattr(v, "target_lane_index", None) == target
-            and v is not driver
-            and v.lane_index != target
-            and isinstance(v, ControlledVehicle)
-        ):
-            d = driver.lane_distance_to(v)
-            if 0 < d and d < driver.desired_gap(driver, v):
-                driver.target_lane_index = driver.lane_index
-                break
 
 
 class VectorRoad(FastRoad):
