@@ -171,6 +171,7 @@ def test_the_vector_env_says_what_a_seed_should_be_and_hints_sync_only_where_it_
     assert "highway.duration" in str(refused.value) and "vectorization_mode" not in str(refused.value)
 
 
+@pytest.mark.slow
 def test_resume_after_the_plug_in_file_was_edited_is_refused_naming_it(tmp_path):
     agent = tmp_path / "agent.py"
     agent.write_text(PLUGIN_AGENT.read_text())

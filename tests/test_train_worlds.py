@@ -96,7 +96,7 @@ OVERLAPPED = {**WORLDS, "train": {**WORLDS["train"], "overlap": True, "replay_ra
 
 @pytest.mark.parametrize(
     ("data", "envs"),
-    [(WORLDS, 1), (MIX, 1), (MIX, 2), (OVERLAPPED, 2)],
+    [(WORLDS, 1), (MIX, 1), pytest.param(MIX, 2, marks=pytest.mark.slow), (OVERLAPPED, 2)],
     ids=["one-world", "mix", "mix-on-2-shards", "overlapped-on-2-shards"],
 )
 def test_a_stopped_and_resumed_batched_run_gives_the_model_of_an_uninterrupted_one(tmp_path, data, envs):
