@@ -83,21 +83,6 @@ def passes_before_reached(
     return lateral <= 0 or clear_s < side_gap / lateral
 
 
-WANDERING_M = 0.375
-"""R157's lateral wandering zone [m]: a vehicle whose centre is farther from every lane's centre is
-between lanes, its lane change under way or given up."""
-
-
-@register_jitable
-def between_lanes(d: float, offsets: np.ndarray) -> bool:
-    """Whether a centre at `d` [m] is farther than `WANDERING_M` from every lane centre of
-    `offsets` [m]."""
-    nearest = math.inf
-    for centre in offsets:
-        nearest = min(nearest, abs(d - centre))
-    return nearest > WANDERING_M
-
-
 FALL_BACK_MPS2 = 5.0
 """The braking a fall back behind a vehicle alongside is reckoned at [m/s^2]: the plant's authority,
 emergency braking's default."""
@@ -130,9 +115,7 @@ def leaders(
 ) -> tuple[Neighbour, ...]:
     """For each lane in `lanes`, the closest vehicle ahead reaching into it, now or within
     `cut_in_lookahead_s` [s] at its present sideways speed (a car cutting in is a leader before it
-    arrives: R157's careful driver perceives a cut-in once it leaves its lane's wandering zone; one
-    between lanes, `between_lanes`, within the road the ego covers in that time, is taken to move
-    towards the lane at that speed: a weaving car close ahead may turn back),
+    arrives: R157's careful driver perceives a cut-in once it leaves its lane's wandering zone),
     none if nobody, and, while that one is leaving or entering the lane (centre more than
     `LEAVING_M` off the lane's centre), the next one ahead that it no longer hides, and so on: a
     cut-out reveals the car beyond at once. A slower vehicle entering the lane that the ego passes
@@ -197,12 +180,7 @@ def leaders_in_rows(
         for row in range(1, n):
             rel = s[row] - s[0]
             offset = abs(d[row] - offsets[lane])
-            heading = heading_to_lane[row]
-            if rel < speed[0] * cut_in_lookahead_s + (length[row] + length[0]) / 2 and between_lanes(
-                d[row], offsets
-            ):
-                heading = math.copysign(heading, offsets[lane] - d[row])
-            drift = speed[row] * math.sin(heading) * cut_in_lookahead_s
+            drift = speed[row] * math.sin(heading_to_lane[row]) * cut_in_lookahead_s
             across = swept_distance(d[row], drift, offsets[lane])
             if not (across < (lane_width + extent[row]) / 2 and rel > 0):
                 continue
@@ -214,7 +192,8 @@ def leaders_in_rows(
                 apart = abs(d[row] - d[0]) - width[0] / 2 - SIDE_MARGIN_M
                 closing, lengths = speed[0] - speed[row], (length[0] + length[row]) / 2
                 if passes_before_reached(
-                    rel, closing, lengths, towards, speed[row], heading, apart, extent[row], width[row],
+                    rel, closing, lengths, towards, speed[row], heading_to_lane[row], apart, extent[row],
+                    width[row],
                 ) or passes_sooner_than_falls_back(rel, closing, lengths):  # fmt: skip
                     continue
             position = m
