@@ -39,7 +39,7 @@ from highway_env.utils import rotated_rectangles_intersect
 from common.neighbours import turned_width
 from records import WorldState
 from stack.fault.emergency_causes import CLOSING_IN, NEVER, CauseTracker, cause_label, emergency_cause
-from stack.fault.reference_driver import WANDERING_M, TrafficCarefulDriver
+from stack.fault.reference_driver import TrafficCarefulDriver, in_wandering_zone
 
 REPLAY_S = 5.0
 """How long before the contact the reference driver takes the ego's place [s]."""
@@ -116,13 +116,11 @@ def _settled_before_cut_in(other: int | None, history: Sequence[WorldState]) -> 
         rows = np.flatnonzero(world.ids == other)
         if rows.size:
             row, its_lane = int(rows[0]), int(world.lane[int(rows[0])])
-            kept = abs(float(world.d[row] - world.lane_offsets[its_lane])) <= WANDERING_M
-            cut_from = index + 1 if kept and its_lane != lane else cut_from
+            cut_from = index + 1 if in_wandering_zone(world, row) and its_lane != lane else cut_from
     if cut_from is None:
         return False
     return all(
-        world.ego_lane == lane and abs(float(world.d[0] - world.lane_offsets[lane])) <= WANDERING_M
-        for world in list(history)[cut_from:]
+        world.ego_lane == lane and in_wandering_zone(world, 0, lane) for world in list(history)[cut_from:]
     )
 
 

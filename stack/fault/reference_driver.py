@@ -47,6 +47,13 @@ PLANT_MAX_DECELERATION = 5.0
 """The plant's braking limit (highway-env ContinuousAction) [m/s^2]."""
 
 
+def in_wandering_zone(world: WorldState, row: int, lane: int | None = None) -> bool:
+    """Whether the centre of the vehicle in `row` is within `WANDERING_M` of the centre of `lane`
+    (default: the lane it is in)."""
+    lane = int(world.lane[row]) if lane is None else lane
+    return abs(float(world.d[row] - world.lane_offsets[lane])) <= WANDERING_M
+
+
 class CarefulDriver:
     """R157's careful and competent driver as a longitudinal controller (steering 0: the straight
     road's lane is kept without it), for the assessment's scenarios: one risk, the first, and full
@@ -99,8 +106,7 @@ class CarefulDriver:
         for row in range(1, world.count):
             if world.s[row] <= world.s[0] or abs(int(world.lane[row]) - ego_lane) > 1:
                 continue
-            drift = abs(float(world.d[row] - world.lane_offsets[int(world.lane[row])]))
-            if drift > WANDERING_M:
+            if not in_wandering_zone(world, row):
                 return True
         leader = self._leader_row(world)
         if leader is not None and (before := self.speeds.get(int(world.ids[leader]))) is not None:
@@ -133,7 +139,7 @@ class TrafficCarefulDriver(CarefulDriver):
             self.risks.setdefault(vehicle, world.time)
         for row in range(1, world.count):
             vehicle, lane = int(world.ids[row]), int(world.lane[row])
-            settled = abs(float(world.d[row] - world.lane_offsets[lane])) <= WANDERING_M
+            settled = in_wandering_zone(world, row)
             if vehicle in self.risks and vehicle not in risky and settled and lane != world.ego_lane:
                 del self.risks[vehicle]
         self.speeds = {int(i): float(v) for i, v in zip(world.ids[1:], world.speed[1:], strict=True)}
@@ -179,7 +185,7 @@ class TrafficCarefulDriver(CarefulDriver):
             lane = int(world.lane[row])
             if world.s[row] <= world.s[0] or abs(lane - ego_lane) > 1 or not self.heeds(world, row):
                 continue
-            if abs(float(world.d[row] - world.lane_offsets[lane])) > WANDERING_M:
+            if not in_wandering_zone(world, row):
                 risky.append(int(world.ids[row]))
                 if lane == ego_lane:
                     risky += [
