@@ -21,6 +21,9 @@ from common.compiled import Kernel
 from records import Neighbour, WorldState
 from records.batch import WorldBatch
 
+WANDERING_M = 0.375
+"""R157's lateral wandering zone: how far a vehicle may drift from its lane centre unnoticed [m]."""
+
 
 class PerSnapshot:
     """Values derived from a `WorldState` once, by the snapshot's id while it lives. Kept beside the

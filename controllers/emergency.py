@@ -77,7 +77,9 @@ class EmergencyBraking:
         self, actuation: Actuation, speed: float, leaders: tuple[Neighbour, ...], dt: float
     ) -> Actuation:
         """`actuation` with full braking while an emergency lasts, and never a deceleration that would
-        reverse the car (speed [m/s] after one tick of `dt` [s] stays >= 0)."""
+        reverse the car (speed [m/s] after one tick of `dt` [s] stays >= 0). A leader that
+        `may_turn_back` is the cruise's alone until it turns in."""
+        leaders = tuple(leader for leader in leaders if not leader.may_turn_back)
         seen = {
             leader.vehicle: leader_braking(
                 self.speeds[leader.vehicle], leader.speed, self.slowing.get(leader.vehicle, 0.0), dt

@@ -11,7 +11,7 @@ from numba import njit
 from numba.extending import register_jitable
 
 from common.longitudinal import STOP_MARGIN_M
-from common.neighbours import lateral_extent, swept_distance
+from common.neighbours import WANDERING_M, lateral_extent, swept_distance
 from controllers.reference import road_to_reach
 from records import Neighbour, WorldState
 
@@ -126,23 +126,30 @@ def leaders(
     `leaving_within_m` [m] (the road the change still needs to leave it,
     `controllers.reference.road_to_reach`) plus the stop margin is not followed: the ego is out of
     that lane before it gets there, and stopping for it would stall the change beside it (the
-    profile's clock stops with the car). `leaders_in_rows`, compiled, on the world's rows."""
+    profile's clock stops with the car). Then the cars that may turn back into a lane
+    (`turning_back_in_rows`), marked `may_turn_back`. `leaders_in_rows`, compiled, on the world's
+    rows."""
     n = world.count
-    found_most = n * len(lanes)
+    found_most = n * (len(lanes) + 1)
     gaps, speeds, rows = np.empty(found_most), np.empty(found_most), np.empty(found_most, dtype=np.int64)
     reference = world.lanes[0]
+    watched = np.array(lanes, dtype=np.int64)
+    heading_to_lane = world.heading - np.array([reference.heading_at(s) for s in world.s.tolist()])
+    extent = np.concatenate(((0.0,), lateral_extent(world)))
     found = _leaders_in_rows(
-        np.array(lanes, dtype=np.int64), n, world.s, world.d, world.speed,
-        world.heading - np.array([reference.heading_at(s) for s in world.s.tolist()]),
-        world.length, world.width, np.concatenate(((0.0,), lateral_extent(world))),
+        watched, n, world.s, world.d, world.speed, heading_to_lane, world.length, world.width, extent,
         world.lane_offsets, world.lane_width, cut_in_lookahead_s, leaving_lane, leaving_within_m,
         gaps, speeds, rows,
     )  # fmt: skip
+    held = _turning_back_in_rows(
+        watched, n, world.s, world.d, world.speed, heading_to_lane, world.length, extent,
+        world.lane_offsets, world.lane_width, cut_in_lookahead_s, found, gaps, speeds, rows,
+    )  # fmt: skip
     ids = world.ids
     return tuple(
-        Neighbour(gap, speed, int(ids[row]))
-        for gap, speed, row in zip(
-            gaps[:found].tolist(), speeds[:found].tolist(), rows[:found].tolist(), strict=True
+        Neighbour(gap, speed, int(ids[row]), k >= found)
+        for k, (gap, speed, row) in enumerate(
+            zip(gaps[:held].tolist(), speeds[:held].tolist(), rows[:held].tolist(), strict=True)
         )
     )
 
@@ -213,3 +220,57 @@ def leaders_in_rows(
 
 
 _leaders_in_rows = njit(cache=True, nogil=True)(leaders_in_rows)
+
+
+@register_jitable
+def turning_back_in_rows(
+    lanes: np.ndarray,
+    n: int,
+    s: np.ndarray,
+    d: np.ndarray,
+    speed: np.ndarray,
+    heading_to_lane: np.ndarray,
+    length: np.ndarray,
+    extent: np.ndarray,
+    offsets: np.ndarray,
+    lane_width: float,
+    cut_in_lookahead_s: float,
+    found: int,
+    gaps: np.ndarray,
+    speeds: np.ndarray,
+    rows: np.ndarray,
+) -> int:
+    """Appends to the `found` leaders of `leaders_in_rows` (same arrays) each vehicle that is between
+    lanes (its centre farther than R157's wandering zone, `WANDERING_M`, from every lane centre)
+    within the road the ego covers in `cut_in_lookahead_s` [s], and that would reach into a lane of
+    `lanes` in that time if it turned back at its present sideways speed; returns the new count. A
+    car weaving at a lane boundary close ahead, moving away, may turn back into the lane the ego
+    is about to fill: the cruise keeps its time gap to it (the ego does not accelerate into the gap
+    it leaves), but emergency braking waits until it does turn in (`leaders_in_rows` finds it then),
+    so every cut-out close ahead is not a full brake."""
+    total = found
+    close = speed[0] * cut_in_lookahead_s
+    for row in range(1, n):
+        rel = s[row] - s[0]
+        lengths = (length[row] + length[0]) / 2
+        if not 0 < rel < close + lengths:
+            continue
+        nearest = math.inf
+        for centre in offsets:
+            nearest = min(nearest, abs(d[row] - centre))
+        listed = False
+        for k in range(found):
+            listed = listed or rows[k] == row
+        if nearest <= WANDERING_M or listed:
+            continue
+        reach = abs(speed[row] * math.sin(heading_to_lane[row])) * cut_in_lookahead_s
+        for lane in lanes:
+            back = math.copysign(reach, offsets[lane] - d[row])
+            if swept_distance(d[row], back, offsets[lane]) < (lane_width + extent[row]) / 2:
+                gaps[total], speeds[total], rows[total] = rel - lengths, speed[row], row
+                total += 1
+                break
+    return total
+
+
+_turning_back_in_rows = njit(cache=True, nogil=True)(turning_back_in_rows)

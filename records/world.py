@@ -36,6 +36,10 @@ class Neighbour:
     speed: float
     vehicle: int = -1
     """Which vehicle (its id in the world), so a tracker can follow it from tick to tick."""
+    may_turn_back: bool = False
+    """A vehicle between lanes close ahead that is moving away from the lane but could turn back
+    into it: the cruise keeps its time gap to it, emergency braking does not fire for it
+    (`controllers.leaders.turning_back_in_rows`)."""
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,7 @@
 scenario's geometry, an assessment that can fail (a stack that never brakes), the failures found
 on the way kept as regression points, and a CLI smoke run on a tiny grid."""
 
+import dataclasses
 import json
 import math
 
@@ -320,3 +321,25 @@ def test_a_stop_before_a_scenario_type_has_a_point_keeps_the_others_and_exits_13
     assert summary["interrupted"] and summary["scenarios"]["lead-braking"]["points"] == 1
     assert summary["scenarios"]["cut-out"]["points"] == 0 and not (out / "safety_cut-out.png").exists()
     assert (out / "safety_lead-braking.png").is_file()
+
+
+def test_a_car_between_lanes_close_ahead_is_the_cruise_s_leader_but_not_emergency_braking_s():
+    """A cut-out car past the ego lane's reach but short of its new lane's wandering zone: 60 m
+    ahead it is nobody's leader; 10 m ahead, within the road the ego covers in the 1 s lookahead,
+    the cruise keeps its gap to it (it may turn back), while emergency braking waits for it to."""
+    road = build(Point("cut-out", (20.0, 60.0, 2.0)), 4, "kinematic", DT)
+    world = road.reset()
+    while road.actors[0].d < 7.4:
+        world = road.step(Actuation(0.0, 0.0))
+    mover = int(abs(world.d - road.actors[0].d).argmin())
+    assert not any(leader.vehicle == world.ids[mover] for leader in leaders(world, (1,), 1.0))
+    s = world.s.copy()
+    s[mover] = s[0] + LENGTH + 10.0
+    close = dataclasses.replace(world, s=s)
+    assert not any(leader.vehicle == world.ids[mover] for leader in leaders(close, (1,), 0.0))
+    (held,) = [leader for leader in leaders(close, (1,), 1.0) if leader.vehicle == world.ids[mover]]
+    assert held.may_turn_back and held.gap == pytest.approx(10.0)
+    stopped_behind_it = Neighbour(held.gap, 0.0, held.vehicle, may_turn_back=False)
+    for leader, braked in ((stopped_behind_it, -5.0), (held, 0.0)):
+        acted = EmergencyBraking(5.0, 3.0, 1.0).apply(Actuation(0.0, 0.0), 20.0, (leader,), DT)
+        assert acted.acceleration == braked

@@ -24,7 +24,7 @@ from common.longitudinal import BrakingLimits, gap_acceleration, needs_full_brak
 from common.neighbours import VehicleRows, footprint_across, reaches_lane
 from controllers.emergency import braked_acceleration, leader_braking
 from controllers.lateral import LateralMemory, lateral_steering
-from controllers.leaders import leaders_in_rows, road_to_leave
+from controllers.leaders import leaders_in_rows, road_to_leave, turning_back_in_rows
 from controllers.maneuver import lane_change_target, left_origin
 from controllers.pid import PIDMemory, pid_output
 from controllers.reference import (
@@ -172,9 +172,9 @@ def control(
     lane, target, coef, profile, clock, counts = maneuver
     lateral, speed_pi, seen, seen_speed, seen_slowing, flags = controller
     vehicles, most_lanes = s.shape[1], offsets.shape[1]
-    gaps = np.empty(most_lanes * vehicles)
-    speeds = np.empty(most_lanes * vehicles)
-    rows = np.empty(most_lanes * vehicles, dtype=np.int64)
+    gaps = np.empty((most_lanes + 1) * vehicles)
+    speeds = np.empty((most_lanes + 1) * vehicles)
+    rows = np.empty((most_lanes + 1) * vehicles, dtype=np.int64)
     lanes = np.empty(most_lanes, dtype=np.int64)
     heading_to_lane = np.empty(vehicles)
     reach = (lane_width + extent) / 2
@@ -221,7 +221,11 @@ def control(
             extent[w], offsets[w], lane_width, settings.cut_in_lookahead_s, leaving_lane, leaving_within,
             gaps, speeds, rows,
         )  # fmt: skip
-        for k in range(found):
+        held = turning_back_in_rows(
+            lanes[:used], n, s[w], d[w], speed[w], heading_to_lane, length[w], extent[w], offsets[w],
+            lane_width, settings.cut_in_lookahead_s, found, gaps, speeds, rows,
+        )  # fmt: skip
+        for k in range(held):
             rows[k] = slots[w, rows[k]]
         ego_speed = speed[w, 0]
         memory = LateralMemory(
@@ -238,7 +242,7 @@ def control(
             memory.steering,
         )
         acceleration = cruise_acceleration(
-            speed_pi[w], laws, ego_speed, settings.set_speed, gaps, speeds, found, dt
+            speed_pi[w], laws, ego_speed, settings.set_speed, gaps, speeds, held, dt
         )
         acceleration = emergency_acceleration(
             acceleration, ego_speed, gaps, speeds, rows, found,

@@ -25,9 +25,9 @@ import numpy as np
 from numba.extending import register_jitable
 
 from common.compiled import Kernel
+from common.neighbours import WANDERING_M
 from records import WorldState
 from records.batch import BatchColumns, WorldBatch
-from stack.fault.reference_driver import WANDERING_M
 
 TRACK_MATCH_ALONG_M = 3.0
 """A tracked vehicle is a real one when a true vehicle's centre is this close along the road [m]

@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 
+from common.neighbours import WANDERING_M
 from common.r157 import r157_min_following_distance
 from records import Actuation, WorldState
 
@@ -36,8 +37,6 @@ REACTION_S = 0.75
 """R157's reaction time, from perception to the start of braking [s]."""
 RAMP_S = 0.6
 """R157's time for the deceleration to reach its maximum [s]."""
-WANDERING_M = 0.375
-"""R157's lateral wandering zone: how far a vehicle may drift from its lane centre unnoticed [m]."""
 BRAKE_LIGHT_MPS2 = 1.0
 """A leader decelerating harder than this is seen braking [m/s^2]."""
 STANDSTILL_GAP_M = 2.0
