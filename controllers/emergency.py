@@ -22,6 +22,15 @@ def leader_braking(
 
 
 @register_jitable
+def holds_braking(speed: float, gap: float, leader_speed: float) -> bool:
+    """Whether an emergency braking goes on for a leader `gap` [m] ahead at `leader_speed` [m/s]
+    with the ego at `speed` [m/s]: while the ego closes in on it, or is within the stop margin of it
+    (a car cutting in across the ego's front, a little faster than the ego, still reaches it
+    sideways: released at once, the ego would fall back at only the cruise's braking)."""
+    return speed > leader_speed or (gap < STOP_MARGIN_M and speed > 0)
+
+
+@register_jitable
 def braked_acceleration(
     limits: BrakingLimits, active: bool, acceleration: float, speed: float, dt: float
 ) -> float:
@@ -34,7 +43,8 @@ def braked_acceleration(
 class EmergencyBraking:
     """Full braking while a leader is closing in and stopping behind it needs more than the comfort
     deceleration (constant-speed prediction: closing^2 / 2 (gap - margin)) or its time to collision
-    is below `trigger_ttc_s`; released once no leader closes in. Counts activations (rising edges).
+    is below `trigger_ttc_s`; released once no leader closes in or is within the stop margin
+    (`holds_braking`). Counts activations (rising edges).
 
     The plant's braking authority is highway-env's ContinuousAction range, +-5 m/s^2 by default:
     the plant is left as highway-env defines it, so `max_deceleration` cannot exceed it."""
@@ -70,8 +80,9 @@ class EmergencyBraking:
                 return True
         return False
 
-    def closing_in(self, speed: float, leaders: tuple[Neighbour, ...]) -> bool:
-        return any(speed > leader.speed for leader in leaders)
+    def holds(self, speed: float, leaders: tuple[Neighbour, ...]) -> bool:
+        """Whether a running emergency braking goes on (`holds_braking` for some leader)."""
+        return any(holds_braking(speed, leader.gap, leader.speed) for leader in leaders)
 
     def apply(
         self, actuation: Actuation, speed: float, leaders: tuple[Neighbour, ...], dt: float
@@ -91,7 +102,7 @@ class EmergencyBraking:
         self.speeds = {leader.vehicle: leader.speed for leader in leaders}
         self.slowing = {vehicle: rates[0] for vehicle, rates in seen.items()}
         if self.active:
-            self.active = self.closing_in(speed, leaders)
+            self.active = self.holds(speed, leaders)
             self.cause = self.cause if self.active else None
         elif self.needed(speed, leaders, braking):
             self.active = True

@@ -22,7 +22,7 @@ from stack.fault.emergency_causes import (
     PHANTOM,
     emergency_cause,
 )
-from stack.fault.preventability import judge
+from stack.fault.preventability import judge, touches
 from stack.fault.reference_driver import TrafficCarefulDriver
 from stack.loop.closed_loop import ClosedLoop
 from stack.loop.safety_metrics import SafetyMeasures, SafetyMonitor
@@ -266,3 +266,16 @@ def test_being_hit_from_behind_or_standing_while_keeping_the_lane_is_the_other_s
         fault = judge(kind, 1, [world, world], 1 / 15)
         assert not fault.at_fault and fault.reason == f"{kind} not preventable"
     assert judge("lane change", 1, [world], 1 / 15).at_fault
+
+
+@pytest.mark.parametrize(("heading", "meets"), [(-0.2, True), (0.0, False)])
+def test_a_contact_is_what_the_simulation_counts_a_crash(heading: float, meets: bool) -> None:
+    """highway-env marks a crash when two footprints meet within the next tick at their velocities
+    (and pushes them apart, so the recorded crash frame may show a gap): a car 0.2 m beside the
+    ego's side and turned 0.2 rad towards it (5 m/s sideways) is a contact; one driving straight
+    is not."""
+    road = ScriptedRoad(3, EGO_LANE, SPEED, [ahead(-3.0, EGO_LANE + 1)], Timed(), "kinematic", DT, 5.0)
+    world = road.reset()
+    d, turned = world.d.copy(), world.heading.copy()
+    d[1], turned[1] = d[0] + world.width[0] / 2 + world.width[1] / 2 + 0.2, heading
+    assert touches(replace(world, d=d, heading=turned), False, DT) == meets

@@ -22,7 +22,7 @@ from numba import njit
 from common.compiled import Kernel, clip
 from common.longitudinal import BrakingLimits, gap_acceleration, needs_full_braking
 from common.neighbours import VehicleRows, footprint_across, reaches_lane
-from controllers.emergency import braked_acceleration, leader_braking
+from controllers.emergency import braked_acceleration, holds_braking, leader_braking
 from controllers.lateral import LateralMemory, lateral_steering
 from controllers.leaders import leaders_in_rows, road_to_leave, turning_back_in_rows
 from controllers.maneuver import lane_change_target, left_origin
@@ -310,10 +310,10 @@ def emergency_acceleration(
             seen_slowing[rows[k]] = rates[k]
             seen[rows[k]] = 2
     if flags[0] != 0:
-        closing_in = False
+        holds = False
         for k in range(leaders):
-            closing_in = closing_in or speed > speeds[k]
-        flags[0] = 1 if closing_in else 0
+            holds = holds or holds_braking(speed, gaps[k], speeds[k])
+        flags[0] = 1 if holds else 0
     else:
         for k in range(leaders):
             if needs_full_braking(limits, speed, gaps[k], speeds[k], braking[k]):

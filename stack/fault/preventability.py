@@ -28,18 +28,19 @@ and whether it was preventable ("cut-in not preventable", "leader braking preven
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from highway_env.utils import rotated_rectangles_intersect
 
 from common.neighbours import turned_width
 from records import WorldState
 from stack.fault.emergency_causes import CLOSING_IN, NEVER, CauseTracker, cause_label, emergency_cause
 from stack.fault.reference_driver import TrafficCarefulDriver, in_wandering_zone
+from stack.sim.batch.traffic_frame import Body
 
 REPLAY_S = 5.0
 """How long before the contact the reference driver takes the ego's place [s]."""
@@ -157,7 +158,7 @@ def careful_driver_avoids(history: Sequence[WorldState], dt: float, from_behind:
     for tick, world in enumerate(frames):
         d, lane = path[tick]
         placed = _with_ego(world, float(world.s[0]) - behind, d, speed, lane)
-        if _touches(placed, from_behind):
+        if touches(placed, from_behind, dt):
             return False
         braking = driver.step(placed, dt).acceleration
         reacted = reacted or braking < 0
@@ -221,34 +222,33 @@ def _with_ego(world: WorldState, s: float, d: float, speed: float, lane: int) ->
     )
 
 
-def _touches(world: WorldState, from_behind: bool) -> bool:
-    """The ego's footprint overlaps another's in the lane frame: the rectangles turned by their
-    headings to the lane (highway-env's `rotated_rectangles_intersect`, after a bounding-box test
-    on their extents along and across the road); only vehicles whose centre is ahead of the ego's
-    count unless `from_behind`."""
+def touches(world: WorldState, from_behind: bool, dt: float) -> bool:
+    """The ego's footprint meets another's in the lane frame as the simulation counts a crash:
+    highway-env's test (`RoadObject._is_colliding`: the rectangles turned by their headings to the
+    lane, intersecting now or within one tick of `dt` [s] at their velocities; such a vehicle is
+    pushed apart and marked crashed at its next step, so a recorded crash frame may show the two
+    already apart), after a bounding-box test on their extents along and across the road widened
+    by a tick's travel; only vehicles whose centre is ahead of the ego's count unless
+    `from_behind`."""
     heading = world.heading - world.lanes[0].heading_at(float(world.s[0]))
     across = turned_width(world.length, world.width, heading)
     along = turned_width(world.width, world.length, heading)
+    travel = (world.speed + world.speed[0]) * dt
     others = np.arange(1, world.count)
-    near = (np.abs(world.s[others] - world.s[0]) < (along[others] + along[0]) / 2) & (
-        np.abs(world.d[others] - world.d[0]) < (across[others] + across[0]) / 2
+    near = (np.abs(world.s[others] - world.s[0]) < (along[others] + along[0]) / 2 + travel[others]) & (
+        np.abs(world.d[others] - world.d[0]) < (across[others] + across[0]) / 2 + travel[others]
     )
     counted = np.ones(others.size, dtype=bool) if from_behind else world.s[others] > world.s[0]
-    ego = (
-        np.array([world.s[0], world.d[0]]),
-        float(world.length[0]),
-        float(world.width[0]),
-        float(heading[0]),
-    )
+    ego = _body(world, 0, heading)
     return any(
-        rotated_rectangles_intersect(
-            ego,
-            (
-                np.array([world.s[row], world.d[row]]),
-                float(world.length[row]),
-                float(world.width[row]),
-                float(heading[row]),
-            ),
-        )
-        for row in others[near & counted].tolist()
+        any(ego._is_colliding(_body(world, row, heading), dt)[:2]) for row in others[near & counted].tolist()
     )
+
+
+def _body(world: WorldState, row: int, heading: np.ndarray) -> Body:
+    """The vehicle in `row` of `world` in the lane frame, as highway-env's collision test reads it."""
+    length, width = float(world.length[row]), float(world.width[row])
+    return Body(
+        np.array([world.s[row], world.d[row]]), float(heading[row]), float(world.speed[row]), length, width,
+        math.hypot(length, width),
+    )  # fmt: skip

@@ -316,9 +316,9 @@ def collide(arrays: BatchArrays, active: np.ndarray, dt: float) -> None:
             arrays.crashed[world, i] = arrays.crashed[world, j] = True
 
 
-def _body(arrays: BatchArrays, world: int, row: int) -> _Body:
+def _body(arrays: BatchArrays, world: int, row: int) -> Body:
     columns = arrays.columns
-    return _Body(
+    return Body(
         np.array([columns["x"][world, row], columns["y"][world, row]]),
         float(columns["heading"][world, row]),
         float(columns["speed"][world, row]),
@@ -333,7 +333,7 @@ def _set_impact(arrays: BatchArrays, world: int, row: int, impact: np.ndarray) -
     arrays.impacted[world, row] = True
 
 
-class _Body(RoadObject):
+class Body(RoadObject):
     """A vehicle's footprint as highway-env's collision test reads it (`RoadObject._is_colliding`:
     position, heading, speed, size, diagonal), without a road."""
 
