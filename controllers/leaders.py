@@ -75,12 +75,30 @@ def passes_before_reached(
     side margin of the ego: `apart` [m] is its centre's distance to the ego's side less the margin,
     `extent` [m] its turned footprint across the road, `width` [m] its width. Both keep their
     speeds. Never while its turned footprint is already that close sideways."""
-    clear_s = (rel_s + lengths) / closing
-    lateral = towards * speed * math.sin(heading_to_lane)
     if apart - extent / 2 <= 0:
         return False
-    side_gap = apart - width / 2
-    return lateral <= 0 or clear_s < side_gap / lateral
+    return passes_before_it_closes_sideways(
+        rel_s, closing, lengths, towards, speed, heading_to_lane, apart, width
+    )
+
+
+@register_jitable
+def passes_before_it_closes_sideways(
+    rel_s: float,
+    closing: float,
+    lengths: float,
+    towards: float,
+    speed: float,
+    heading_to_lane: float,
+    apart: float,
+    width: float,
+) -> bool:
+    """Whether the ego's rear passes the front of a vehicle (as `passes_before_reached` takes it)
+    before that vehicle, moving sideways towards the ego at its `speed` and `heading_to_lane`, comes
+    within the side margin: always when it does not move towards the ego."""
+    clear_s = (rel_s + lengths) / closing
+    lateral = towards * speed * math.sin(heading_to_lane)
+    return lateral <= 0 or clear_s < (apart - width / 2) / lateral
 
 
 FALL_BACK_MPS2 = 5.0
@@ -95,7 +113,9 @@ def passes_sooner_than_falls_back(rel_s: float, closing: float, lengths: float) 
     beyond the other's front, at constant speeds) sooner than braking at `FALL_BACK_MPS2` brings
     its front back behind the other's rear. Then braking for it would only hold the two side by
     side for longer: the judgement `passes_before_reached` makes for a vehicle that may reach the
-    ego's side first, where a few centimetres of its position decide."""
+    ego's side first, where a few centimetres of its position decide. The leaders take it only for
+    a vehicle that does not close in sideways first (`passes_before_it_closes_sideways`): one
+    turning into the ego's side is followed."""
     past_its_rear = lengths - rel_s
     if past_its_rear <= 0:
         return False
@@ -201,7 +221,12 @@ def leaders_in_rows(
                 if passes_before_reached(
                     rel, closing, lengths, towards, speed[row], heading_to_lane[row], apart, extent[row],
                     width[row],
-                ) or passes_sooner_than_falls_back(rel, closing, lengths):  # fmt: skip
+                ) or (
+                    passes_sooner_than_falls_back(rel, closing, lengths)
+                    and passes_before_it_closes_sideways(
+                        rel, closing, lengths, towards, speed[row], heading_to_lane[row], apart, width[row]
+                    )
+                ):  # fmt: skip
                     continue
             position = m
             while position > 0 and s[candidates[position - 1]] - s[0] > rel:
