@@ -338,6 +338,20 @@ class BatchArrays:
         """Every world's segments: start, length (W, K) [m] and count (W,)."""
         return self.segment_start, self.segment_length, self.segment_count
 
+    def origins(self) -> np.ndarray:
+        """Where each world's snapshot measures s and d from (W, 2) [m]: the start of lane 0 of the
+        segment its ego is on (`segment_of`), as `stack.sim.highway.snapshot` takes the ego's
+        segment's lane 0; lane 0's start on a road of one segment."""
+        start, direction = self.lane_columns["start"][:, 0], self.lane_columns["direction"]
+        if not self.segmented:
+            return start
+        worlds = np.arange(self.worlds)
+        ego_x, ego_y = self.x[worlds, self.ego], self.y[worlds, self.ego]
+        s = (ego_x - start[:, 0]) * direction[:, 0] + (ego_y - start[:, 1]) * direction[:, 1]
+        behind = (s[:, None] - self.segment_start > self.segment_length).sum(axis=1)
+        segment = np.minimum(behind, self.segment_count - 1)
+        return start + self.segment_start[worlds, segment][:, None] * direction
+
     def lane_args(self) -> tuple[np.ndarray, ...]:
         """Lane count, start, direction and lateral of every world's lanes."""
         lanes = self.lane_columns
@@ -351,7 +365,7 @@ class BatchArrays:
         columns = (self.x, self.y, self.speed, self.heading, self.length, self.width, self.lane)
         lane_count, start, direction, lateral = self.lane_args()
         s, d, speed, heading, length, width, lane, offsets = world_rows(
-            self.count, self.ego, columns, lane_count, start, direction, lateral
+            self.count, self.ego, columns, lane_count, start, direction, lateral, self.origins()
         )
         return WorldBatch(
             count=self.count.copy(),
@@ -378,12 +392,13 @@ def world_rows(
     start: np.ndarray,
     direction: np.ndarray,
     lateral: np.ndarray,
+    origin: np.ndarray,
 ) -> tuple[np.ndarray, ...]:  # pragma: no cover - compiled
     """`BatchArrays.world_batch`'s rows: per world (`count` vehicles, the ego in row `ego`) its
     vehicles with the ego first, then the others in road order: s and d [m] in lane 0's frame
-    (`start` (W, L, 2), unit `direction` (W, 2), unit `lateral` (W, L, 2)), then each of `columns`
-    (x, y, speed, heading, length, width [floats], lane [ints]) but x and y; and each lane's
-    centre offset [m] (W, L). Zeros in the rows and lanes past the counts."""
+    from `origin` (W, 2) (`start` (W, L, 2), unit `direction` (W, 2), unit `lateral` (W, L, 2)),
+    then each of `columns` (x, y, speed, heading, length, width [floats], lane [ints]) but x and
+    y; and each lane's centre offset [m] (W, L). Zeros in the rows and lanes past the counts."""
     x, y, speed, heading, length, width, lane = columns
     worlds, vehicles = x.shape
     s, d = np.zeros((worlds, vehicles)), np.zeros((worlds, vehicles))
@@ -392,7 +407,7 @@ def world_rows(
     lanes = np.zeros((worlds, vehicles), dtype=np.int64)
     offsets = np.zeros((worlds, start.shape[1]))
     for w in range(worlds):
-        start_x, start_y = start[w, 0, 0], start[w, 0, 1]
+        start_x, start_y = origin[w, 0], origin[w, 1]
         lateral_x, lateral_y = lateral[w, 0, 0], lateral[w, 0, 1]
         for k in range(count[w]):
             i = ego[w] if k == 0 else k - 1 + (1 if k - 1 >= ego[w] else 0)
