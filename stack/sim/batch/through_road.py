@@ -7,19 +7,21 @@ keeps its lane (lane changes off, each car routed to the road's end), spawned in
 the stack's ego drives the through lanes only (its snapshot's lanes, `stack.sim.highway.snapshot`).
 Along the through lanes the segments continue each other (one centre line, width and speed limit
 per lane id), so the batch holds lane k of every segment as one straight lane from the road's
-start to its end (`through_road`), and its worlds run the highway road's kernels unchanged.
+start to its end (`through_road`) and runs the highway road's kernels on it, with what the
+segments still change kept as each world's segments (`SpawnedWorld.segment_start`, `segment_length`):
 
-Where a batched exit world may differ from the one the `vector` backend drives alone (highway-env's
-own road objects: `stack.sim.fast_road.FastExitEnv`), bit for bit not the same:
+- highway-env's neighbour search counts a car's leaders on its own segment's lane only, up to 5 m
+  (`StraightLane.VEHICLE_LENGTH`) past that segment's end, so a car before 400 m or 500 m is blind
+  to a leader further past the boundary (`traffic_kernels.segment_of`, `_neighbours`); from 2.5 m
+  before the end its route has switched its target lane to the next segment's, whose leader it
+  heeds as well (`traffic_kernels.crossing_drivers`);
+- the snapshot measures s from lane 0 of the ego's segment (`BatchArrays.origins`).
 
-- highway-env's neighbour search sees a car's leaders on its own segment's lane only, up to 5 m
-  (`StraightLane.VEHICLE_LENGTH`) past that segment's end; from 2.5 m before the end (its target
-  lane then the next segment's, which it checks as well) it sees past it. A car just before 400 m
-  or 500 m is blind to a leader further past the boundary; on the through road it is not;
-- s is measured from the road's start (the per-world snapshot's restarts at each segment: only
-  differences of s are read), so coordinates round differently after 400 m;
-- the exit lane (400-500 m) and the curve are not held: no car of the stack's world drives onto
-  them, and a vehicle read on them is refused (`UnsupportedRoad`)."""
+Each world is then the one the `vector` backend drives alone (highway-env's own road objects:
+`stack.sim.fast_road.FastExitEnv`), bit for bit (`tests/test_sim_batched.py`). The exit lane
+(400-500 m) and the curve are not held: no car of the stack's world drives onto them (an ego there
+has left the through lanes, a road departure), and a vehicle read on them is refused
+(`UnsupportedRoad`)."""
 
 from __future__ import annotations
 
@@ -45,9 +47,7 @@ def through_segments(network: RoadNetwork, lanes_count: int) -> list[tuple[str, 
     chain: list[tuple[str, str]] = []
     node = FIRST_NODE
     while node in graph:
-        ways = [
-            to for to, lanes in graph[node].items() if _continues(network, chain, (node, to), lanes_count)
-        ]
+        ways = [to for to in graph[node] if _continues(network, chain, (node, to), lanes_count)]
         if not ways:
             break
         if len(ways) > 1:

@@ -2,8 +2,8 @@
 
 Each world is highway-v0 with the stack's traffic (`stack.sim.traffic`) and an ego driven by a given
 actuation, the same world the `vector` backend drives alone through `HighwayAdapter`, bit for bit
-(or exit-v0's, its through lanes held as one segment: `stack.sim.batch.through_road` says where
-it differs from the per-world exit road):
+(or exit-v0's, its through lanes held as one segment with highway-env's per-segment neighbour
+search: `stack.sim.batch.through_road`):
 at reset highway-env spawns the world's road with the world's own generator (a seed, or the stream
 the world's last reset left, as one env's `reset()` continues it), the arrays read it once, and from
 then on a frame of every world is a fixed sequence of compiled kernels (`stack.sim.batch.traffic_kernels`,
