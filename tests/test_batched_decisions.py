@@ -162,6 +162,13 @@ MIX = {
 """A training mix of roads, traffic, lane counts and sensors, each world drawing its member."""
 
 
+def test_a_mix_with_the_exit_road_is_the_envs_mix():
+    """The exit road's worlds (its through lanes as one segment, `stack.sim.batch.through_road`)
+    beside the highway's in one batch, decision for decision as the per-world envs."""
+    seen = drive_both({**MIX, "train": {"scenarios": {"dense": 1.0, "exit": 1.0}}}, 6, 24, weaving)
+    assert seen["members"] == 2 and seen["lane_changes"] > 0
+
+
 def test_a_mix_draws_each_episode_s_member_as_the_env_does():
     seen = drive_both(MIX, 4, 6)
     assert seen["members"] >= 2
@@ -234,7 +241,6 @@ def test_aborts_match():
         ({"sim": {"plant": "dynamic"}}, "kinematic plant"),
         ({"scenario": "noisy", "perception": {"control_on_ground_truth": True}}, "ground_truth"),
         ({"train": {"encoding": "binary"}}, "encoding"),
-        ({**MIX, "train": {"scenarios": {"dense": 1.0, "exit": 1.0}}}, "highway road"),
         ({"scenario": "random"}, "batched worlds: the observation encoding has a different size"),
     ],
 )

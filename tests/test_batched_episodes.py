@@ -44,6 +44,7 @@ def both_ways(episodes: int, **overrides: object) -> tuple[list[EpisodeResult], 
         ("random", "lookahead"),
         ("random", "rule"),
         ("random", "mobil"),
+        ("exit", "random"),
     ],
 )
 def test_each_episode_of_a_batch_is_the_episode_run_alone(scenario: str, agent: str) -> None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from highway_env.road.lane import StraightLane
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.kinematics import Vehicle
 
@@ -15,10 +16,11 @@ from records.batch import WorldBatch
 from stack.settings.run import build_config
 from stack.settings.world import HighwayConfig
 from stack.sim.batch.arrays import BatchArrays, UnsupportedRoad, read_world
+from stack.sim.batch.through_road import read_through_road, through_segments
 from stack.sim.batch.traffic import TrafficBatch
 from stack.sim.batch.traffic_frame import lane_frame
 from stack.sim.batch.traffic_kernels import lane_neighbours
-from stack.sim.envs import HIGHWAY
+from stack.sim.envs import FAST_EXIT, HIGHWAY
 from stack.sim.highway import HighwayAdapter, env_config
 
 
@@ -104,7 +106,7 @@ def assert_worlds_identical(highway: HighwayConfig, seeds: list[int], frames: in
 
 
 @pytest.mark.parametrize(
-    ("scenario", "frames"), [("highway-v0", 200), ("overtaking", 120), ("incident", 120)]
+    ("scenario", "frames"), [("highway-v0", 200), ("overtaking", 120), ("incident", 120), ("exit", 300)]
 )
 def test_each_world_is_the_vector_backends_world_bit_for_bit(scenario, frames):
     highway = build_config({}, scenario=scenario).highway
@@ -158,8 +160,6 @@ def test_the_road_of_a_world_steps_on_in_highway_env_as_in_the_batch():
 
 
 def test_roads_the_batch_cannot_hold_are_refused_by_name():
-    with pytest.raises(ValueError, match="highway road"):
-        TrafficBatch(build_config({}, scenario="exit").highway, 1)
     env = gym.make("exit-v0", config={}, disable_env_checker=True)
     env.reset(seed=0)
     with pytest.raises(UnsupportedRoad, match="one segment"):
@@ -188,7 +188,10 @@ def test_the_neighbour_search_picks_highway_envs_neighbours_on_ties():
         s, _, on, on_count = lane_frame(arrays, arrays.count)
         for lane in range(3):
             rows = np.arange(len(road.vehicles))
-            front, rear = lane_neighbours(rows, np.full(len(rows), lane), s, on, on_count)
+            front, rear = lane_neighbours(
+                rows, np.full(len(rows), lane), s, on, on_count, np.zeros(len(rows), dtype=np.int64),
+                arrays.segment_start, arrays.segment_length, StraightLane.VEHICLE_LENGTH,
+            )  # fmt: skip
             for i, vehicle in enumerate(road.vehicles):
                 expected = road.neighbour_vehicles(vehicle, ("0", "1", lane))
                 got = tuple(road.vehicles[k] if k >= 0 else None for k in (front[i], rear[i]))
@@ -266,3 +269,26 @@ def test_the_world_batch_is_the_adapters_snapshots_stacked(scenario):
                 snapshots[k] = adapter.snapshot()
             else:
                 snapshots[k] = adapter.step(Actuation(*actuations[k]))
+
+
+def test_the_exit_road_is_held_as_its_through_lanes_in_segments():
+    """exit-v0's three straight segments chain into one through road of its six lanes (the exit
+    lane and the curve left out), each segment kept by where it starts and how long it is; a
+    vehicle on the exit lane is refused by name."""
+    env = gym.make(
+        FAST_EXIT, config=env_config(build_config({}, scenario="exit").highway), disable_env_checker=True
+    )
+    env.reset(seed=1022000)
+    road = env.unwrapped.road
+    assert through_segments(road.network, 6) == [("0", "1"), ("1", "2"), ("2", "3")]
+    spawned = read_through_road(road, env.unwrapped.vehicle, 6)
+    np.testing.assert_array_equal(spawned.segment_start, [0.0, 400.0, 500.0])
+    np.testing.assert_array_equal(spawned.segment_length, [400.0, 100.0, 500.0])
+    assert spawned.lanes.indices == [("0", "3", k) for k in range(6)]
+    np.testing.assert_array_equal(spawned.lanes.speed_limit, [26 - 3.4 * k for k in range(6)])
+    np.testing.assert_array_equal(spawned.lanes.length, np.full(6, 1000.0))
+    assert spawned.columns["lane"].tolist() == [v.lane_index[2] for v in road.vehicles]
+    road.vehicles[1].lane_index = ("1", "2", 6)
+    with pytest.raises(UnsupportedRoad, match="through road's lanes, not lane"):
+        read_through_road(road, env.unwrapped.vehicle, 6)
+    env.close()

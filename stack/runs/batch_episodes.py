@@ -46,8 +46,6 @@ def batch_refusal(config: RunConfig) -> str | None:
     the episodes draw."""
     if not config.sim.batched:
         return "sim.batched is off"
-    if config.highway.road != "highway":
-        return f"batched worlds run the highway road, not {config.highway.road!r}"
     if config.sim.backend != "vector":
         return f"batched worlds are the vector backend's, not sim.backend {config.sim.backend!r}"
     refused = refusal(_alone(config))

@@ -5,7 +5,8 @@ it (`BatchArrays.world_batch`, a `records.WorldBatch`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -16,6 +17,7 @@ from highway_env.vehicle.kinematics import Vehicle
 from common.compiled import Kernel
 from records.batch import WorldBatch
 from stack.sim.drivers import NO_HABITS, DriverHabits, habits_of
+from stack.sim.fast_road import LaneIndex
 from stack.sim.traffic import TrafficVehicle
 from stack.sim.vector.habits import SeenPast
 from stack.sim.vector.lanes import LaneTable
@@ -112,6 +114,10 @@ LANE_COLUMNS: dict[str, tuple[type, float]] = {
 (NaN: none), whether lane changes into it are forbidden."""
 
 
+ONE_SEGMENT = (np.zeros(1), np.full(1, np.inf))
+"""The segments (start, length [m]) of a road whose lanes are one segment: no limit beyond the lanes'."""
+
+
 class UnsupportedRoad(ValueError):
     """A road the batch cannot hold as arrays."""
 
@@ -125,6 +131,12 @@ class SpawnedWorld:
     lanes: LaneTable
     ego: int
     network: RoadNetwork
+    segment_start: np.ndarray = field(default_factory=lambda: ONE_SEGMENT[0])
+    """Where each segment of the road the lanes run through starts along them [m] (s, as
+    `lane_frames` measures it) and how long it is: highway-env's neighbour search counts a car's
+    leaders on its own segment only (`stack.sim.batch.through_road`); one endless segment on a road
+    of one segment."""
+    segment_length: np.ndarray = field(default_factory=lambda: ONE_SEGMENT[1])
 
 
 def read_world(road: Road, ego: Vehicle) -> SpawnedWorld:
@@ -134,6 +146,22 @@ def read_world(road: Road, ego: Vehicle) -> SpawnedWorld:
     lanes = LaneTable.fit(road.network)
     if lanes is None or len({index[:2] for index in lanes.indices}) != 1:
         raise UnsupportedRoad("batched traffic needs one segment of parallel, axis-aligned straight lanes")
+    return read_vehicles(road, ego, lanes, road.network, lanes.row.__getitem__, routed=False)
+
+
+def read_vehicles(
+    road: Road,
+    ego: Vehicle,
+    lanes: LaneTable,
+    network: RoadNetwork,
+    row_of: Callable[[LaneIndex], int],
+    routed: bool,
+    segments: tuple[np.ndarray, np.ndarray] = ONE_SEGMENT,
+) -> SpawnedWorld:
+    """The arrays of `road`'s vehicles on `lanes` (of `network`, kept for `road_of`), each lane
+    index of the road read as the row `row_of` gives it; `routed`: whether a lane-keeping vehicle
+    may follow a route (one along its lane's continuation, which `lanes` hold as one lane, made of
+    `segments`: `SpawnedWorld.segment_start` and `segment_length`)."""
     if road.objects or road.neighbour_vehicles_connected_lanes:
         raise UnsupportedRoad("batched traffic drives roads without objects or connected-lane neighbours")
     rows: list[dict[str, Any]] = []
@@ -141,15 +169,17 @@ def read_world(road: Road, ego: Vehicle) -> SpawnedWorld:
         kind = KINDS.get(type(vehicle))
         if kind is None:
             raise UnsupportedRoad(f"batched traffic has no {type(vehicle).__name__} (only {list(KINDS)})")
-        rows.append(_vehicle_row(vehicle, kind, lanes))
+        rows.append(_vehicle_row(vehicle, kind, row_of, routed))
     columns: dict[str, np.ndarray] = {
         name: np.array([row[name] for row in rows], dtype=dtype)
         for name, (dtype, _) in VEHICLE_COLUMNS.items()
     }
-    return SpawnedWorld(columns, lanes, road.vehicles.index(ego), road.network)
+    return SpawnedWorld(columns, lanes, road.vehicles.index(ego), network, *segments)
 
 
-def _vehicle_row(vehicle: Vehicle, kind: int, lanes: LaneTable) -> dict[str, Any]:
+def _vehicle_row(
+    vehicle: Vehicle, kind: int, row_of: Callable[[LaneIndex], int], routed: bool
+) -> dict[str, Any]:
     action, impact = vehicle.action, vehicle.impact
     row: dict[str, Any] = {
         "x": vehicle.position[0],
@@ -166,7 +196,7 @@ def _vehicle_row(vehicle: Vehicle, kind: int, lanes: LaneTable) -> dict[str, Any
         "acceleration": float(action["acceleration"]),
         "impact_x": 0.0 if impact is None else impact[0],
         "impact_y": 0.0 if impact is None else impact[1],
-        "lane": lanes.row[vehicle.lane_index],
+        "lane": row_of(vehicle.lane_index),
         "kind": kind,
         "crashed": vehicle.crashed,
         "impacted": impact is not None,
@@ -176,7 +206,7 @@ def _vehicle_row(vehicle: Vehicle, kind: int, lanes: LaneTable) -> dict[str, Any
         row |= {name: default[name][1] for name in (*DRIVER_LAWS, *HABITS, "timer", "enable_lane_change")}
         return row | {"target_lane": row["lane"]}
     assert isinstance(vehicle, IDMVehicle)
-    if vehicle.route:
+    if vehicle.route and not (routed and not vehicle.enable_lane_change):
         raise UnsupportedRoad("batched traffic has no vehicles following routes")
     return (
         row
@@ -184,7 +214,7 @@ def _vehicle_row(vehicle: Vehicle, kind: int, lanes: LaneTable) -> dict[str, Any
         | {name: getattr(habits_of(vehicle), field) for name, field in HABITS.items()}
         | {
             "timer": vehicle.timer,
-            "target_lane": lanes.row[vehicle.target_lane_index],
+            "target_lane": row_of(vehicle.target_lane_index),
             "enable_lane_change": vehicle.enable_lane_change,
         }
     )
@@ -214,6 +244,10 @@ class BatchArrays:
         """Whether a world ever loaded holds a driver with habits (`stack.sim.drivers.DriverHabits`)."""
         self.seen: SeenPast | None = None
         """Every row's past s and speed, kept once a loaded world holds a driver with a delay."""
+        self.segment_start, self.segment_length = np.zeros((worlds, 1)), np.full((worlds, 1), np.inf)
+        """Each world's road segments (W, K) [m] (`SpawnedWorld.segment_start`, `segment_length`)."""
+        self.segment_count = np.ones(worlds, dtype=np.int64)
+        """How many segments each world's road has."""
 
     def __getattr__(self, name: str) -> np.ndarray:
         """A vehicle column (worlds, vehicles) or lane column (worlds, lanes) by name (each is also
@@ -278,12 +312,45 @@ class BatchArrays:
         self.lane_columns["direction"][world] = table.direction
         self.lane_columns["lane_count"][world] = lanes
         self.count[world], self.ego[world] = n, spawned.ego
+        self._load_segments(world, spawned.segment_start, spawned.segment_length)
         self.acts[world], self.intent[world] = 0, -1
         columns = spawned.columns
         self.habits |= any(columns[name].any() for name in HABITS)
         if self.seen is not None or columns["delay_frames"].any():
             self.seen = SeenPast.grown(self.seen, self.worlds, self.vehicles)
             self.seen.pushed[world] = 0
+
+    def _load_segments(self, world: int, start: np.ndarray, length: np.ndarray) -> None:
+        more = len(start) - self.segment_start.shape[1]
+        if more > 0:
+            self.segment_start = np.pad(self.segment_start, ((0, 0), (0, more)))
+            self.segment_length = np.pad(self.segment_length, ((0, 0), (0, more)), constant_values=np.inf)
+        self.segment_start[world], self.segment_length[world] = 0.0, np.inf
+        self.segment_start[world, : len(start)], self.segment_length[world, : len(start)] = start, length
+        self.segment_count[world] = len(start)
+
+    @property
+    def segmented(self) -> bool:
+        """Whether some world's road has more than one segment."""
+        return bool((self.segment_count > 1).any())
+
+    def segment_args(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every world's segments: start, length (W, K) [m] and count (W,)."""
+        return self.segment_start, self.segment_length, self.segment_count
+
+    def origins(self) -> np.ndarray:
+        """Where each world's snapshot measures s and d from (W, 2) [m]: the start of lane 0 of the
+        segment its ego is on (`segment_of`), as `stack.sim.highway.snapshot` takes the ego's
+        segment's lane 0; lane 0's start on a road of one segment."""
+        start, direction = self.lane_columns["start"][:, 0], self.lane_columns["direction"]
+        if not self.segmented:
+            return start
+        worlds = np.arange(self.worlds)
+        ego_x, ego_y = self.x[worlds, self.ego], self.y[worlds, self.ego]
+        s = (ego_x - start[:, 0]) * direction[:, 0] + (ego_y - start[:, 1]) * direction[:, 1]
+        behind = (s[:, None] - self.segment_start > self.segment_length).sum(axis=1)
+        segment = np.minimum(behind, self.segment_count - 1)
+        return start + self.segment_start[worlds, segment][:, None] * direction
 
     def lane_args(self) -> tuple[np.ndarray, ...]:
         """Lane count, start, direction and lateral of every world's lanes."""
@@ -298,7 +365,7 @@ class BatchArrays:
         columns = (self.x, self.y, self.speed, self.heading, self.length, self.width, self.lane)
         lane_count, start, direction, lateral = self.lane_args()
         s, d, speed, heading, length, width, lane, offsets = world_rows(
-            self.count, self.ego, columns, lane_count, start, direction, lateral
+            self.count, self.ego, columns, lane_count, start, direction, lateral, self.origins()
         )
         return WorldBatch(
             count=self.count.copy(),
@@ -325,12 +392,13 @@ def world_rows(
     start: np.ndarray,
     direction: np.ndarray,
     lateral: np.ndarray,
+    origin: np.ndarray,
 ) -> tuple[np.ndarray, ...]:  # pragma: no cover - compiled
     """`BatchArrays.world_batch`'s rows: per world (`count` vehicles, the ego in row `ego`) its
     vehicles with the ego first, then the others in road order: s and d [m] in lane 0's frame
-    (`start` (W, L, 2), unit `direction` (W, 2), unit `lateral` (W, L, 2)), then each of `columns`
-    (x, y, speed, heading, length, width [floats], lane [ints]) but x and y; and each lane's
-    centre offset [m] (W, L). Zeros in the rows and lanes past the counts."""
+    from `origin` (W, 2) (`start` (W, L, 2), unit `direction` (W, 2), unit `lateral` (W, L, 2)),
+    then each of `columns` (x, y, speed, heading, length, width [floats], lane [ints]) but x and
+    y; and each lane's centre offset [m] (W, L). Zeros in the rows and lanes past the counts."""
     x, y, speed, heading, length, width, lane = columns
     worlds, vehicles = x.shape
     s, d = np.zeros((worlds, vehicles)), np.zeros((worlds, vehicles))
@@ -339,7 +407,7 @@ def world_rows(
     lanes = np.zeros((worlds, vehicles), dtype=np.int64)
     offsets = np.zeros((worlds, start.shape[1]))
     for w in range(worlds):
-        start_x, start_y = start[w, 0, 0], start[w, 0, 1]
+        start_x, start_y = origin[w, 0], origin[w, 1]
         lateral_x, lateral_y = lateral[w, 0, 0], lateral[w, 0, 1]
         for k in range(count[w]):
             i = ego[w] if k == 0 else k - 1 + (1 if k - 1 >= ego[w] else 0)

@@ -1,7 +1,9 @@
 """Many traffic worlds stepped together, with [worlds, vehicles] arrays as the state of record.
 
 Each world is highway-v0 with the stack's traffic (`stack.sim.traffic`) and an ego driven by a given
-actuation, the same world the `vector` backend drives alone through `HighwayAdapter`, bit for bit:
+actuation, the same world the `vector` backend drives alone through `HighwayAdapter`, bit for bit
+(or exit-v0's, its through lanes held as one segment with highway-env's per-segment neighbour
+search: `stack.sim.batch.through_road`):
 at reset highway-env spawns the world's road with the world's own generator (a seed, or the stream
 the world's last reset left, as one env's `reset()` continues it), the arrays read it once, and from
 then on a frame of every world is a fixed sequence of compiled kernels (`stack.sim.batch.traffic_kernels`,
@@ -32,14 +34,17 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 from highway_env import utils
+from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.envs.common.action import ContinuousAction
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.kinematics import Vehicle
 
+from records import RoadName
 from stack.settings.world import HighwayConfig
 from stack.sim.batch.arrays import BatchArrays, UnsupportedRoad, read_world, road_of
+from stack.sim.batch.through_road import read_through_road
 from stack.sim.batch.traffic_frame import act, move
-from stack.sim.fast_road import FastRoadNetwork
+from stack.sim.fast_road import FastExitEnv, FastRoadNetwork
 from stack.sim.highway import MAX_ACCELERATION, MAX_STEERING, env_config
 from stack.sim.traffic import ScenarioTraffic
 from stack.sim.vector.lanes import LaneTable
@@ -53,6 +58,10 @@ class SpawningTraffic(ScenarioTraffic):
     def _create_road(self) -> None:
         super()._create_road()
         self.road.network.__class__ = FastRoadNetwork
+
+
+SPAWNERS: dict[RoadName, type[AbstractEnv]] = {"highway": SpawningTraffic, "exit": FastExitEnv}
+"""The env that spawns a world of each road (exit-v0's the `vector` backend's own: the same draws)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,14 +82,10 @@ class TrafficBatch:
         if worlds < 1:
             raise ValueError(f"a batch needs at least one world, got {worlds}")
         members = [highway] if isinstance(highway, HighwayConfig) else list(highway)
-        for member in members:
-            if member.road != "highway":
-                raise ValueError(
-                    f"batched traffic runs the highway road, not {member.road!r} (a curved exit lane)"
-                )
         self.highway = members[0]
         self.worlds = worlds
-        self._spawners = [SpawningTraffic(config=env_config(member)) for member in members]
+        self._roads = [member.road for member in members]
+        self._spawners = [SPAWNERS[member.road](config=env_config(member)) for member in members]
         configs = [spawner.config for spawner in self._spawners]
         rates = {(config["simulation_frequency"], config["policy_frequency"]) for config in configs}
         if len(rates) != 1:
@@ -130,7 +135,10 @@ class TrafficBatch:
         self._rngs[world] = env.np_random
         if type(env.vehicle) is not Vehicle:
             raise ValueError("batched traffic drives a kinematic ego (plant: kinematic)")
-        spawned = read_world(env.road, env.vehicle)
+        if self._roads[int(self._member[world])] == "exit":
+            spawned = read_through_road(env.road, env.vehicle, int(env.config["lanes_count"]))
+        else:
+            spawned = read_world(env.road, env.vehicle)
         self.arrays.load(world, spawned)
         self._lane_tables[world], self._networks[world] = spawned.lanes, spawned.network
         self.time[world] = env.time

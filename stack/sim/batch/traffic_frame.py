@@ -15,10 +15,12 @@ from stack.sim.batch.arrays import DRIVER_LAWS, PLAIN, TRAFFIC, BatchArrays
 from stack.sim.batch.traffic_kernels import (
     closest_lane_rows,
     collision_candidates,
+    crossing_drivers,
     decide,
     lane_frames,
     lane_neighbours,
     plan_decisions,
+    segments_of,
 )
 from stack.sim.fast_road import BROAD_PHASE_MARGIN, NEIGHBOUR_MARGIN
 from stack.sim.vector.dynamics import bicycle_step, clipped_actions, steering_angles
@@ -108,6 +110,7 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
             laws.lane_change_delay,
             laws.time_wanted,
             laws.braking_term,
+            *arrays.segment_args(),
             StraightLane.VEHICLE_LENGTH,
         )
     )
@@ -151,13 +154,20 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
     acceleration = own_acceleration
     if arrays.seen is not None:
         _delayed(arrays, flat, kinematics, laws, drivers, own_front, free_road[blocks:], acceleration)
+    segment_start, segment_length, segment_count = arrays.segment_args()
     if len(changing):
         movers = drivers[changing]
-        target_front, _ = lane_neighbours(movers, goal[changing], s, on, on_count)
+        own_segment = segments_of(movers, s, segment_start, segment_length, segment_count)
+        target_front, _ = lane_neighbours(
+            movers, goal[changing], s, on, on_count, own_segment, segment_start, segment_length,
+            StraightLane.VEHICLE_LENGTH,
+        )  # fmt: skip
         on_target = kinematics.idm(movers, target_front, laws, movers)
         acceleration[changing] = np.where(
             on_target < acceleration[changing], on_target, acceleration[changing]
         )
+    if arrays.segmented:
+        _crossing(arrays, kinematics, laws, drivers, s, on, on_count, acceleration)
     if arrays.habits:
         _yield_and_brake(arrays, flat, kinematics, laws, drivers, acceleration)
     world, row = drivers // arrays.vehicles, drivers % arrays.vehicles
@@ -169,6 +179,33 @@ def act(arrays: BatchArrays, active: np.ndarray) -> None:
         speed[drivers],
     )
     flat["acceleration"][drivers] = clip(acceleration, IDMVehicle.ACC_MAX)
+
+
+def _crossing(
+    arrays: BatchArrays,
+    kinematics: IdmRows,
+    laws: DriverLaws,
+    drivers: np.ndarray,
+    s: np.ndarray,
+    on: np.ndarray,
+    on_count: np.ndarray,
+    acceleration: np.ndarray,
+) -> None:
+    """The drivers whose route already targets the next segment's lane (`crossing_drivers`): the
+    lower of their acceleration and the IDM's behind their leader there, in place."""
+    segment_start, segment_length, segment_count = arrays.segment_args()
+    crossing, following = crossing_drivers(
+        drivers, s, segment_start, segment_length, segment_count, StraightLane.VEHICLE_LENGTH
+    )
+    if len(crossing) == 0:
+        return
+    movers = drivers[crossing]
+    front, _ = lane_neighbours(
+        movers, arrays.flat["target_lane"][movers], s, on, on_count, following, segment_start,
+        segment_length, StraightLane.VEHICLE_LENGTH,
+    )  # fmt: skip
+    ahead = kinematics.idm(movers, front, laws, movers)
+    acceleration[crossing] = np.where(ahead < acceleration[crossing], ahead, acceleration[crossing])
 
 
 def _delayed(

@@ -67,10 +67,34 @@ def lane_frames(
 
 
 @njit(cache=True, nogil=True)
-def _neighbours(me: int, s_me: float, on: np.ndarray, on_count: int, s: np.ndarray) -> tuple[int, int]:
+def segment_of(
+    s: float, start: np.ndarray, length: np.ndarray, count: int
+) -> int:  # pragma: no cover - compiled
+    """The segment (of `count`, starting at `start` along the road and `length` long [m]) whose
+    lane highway-env's closest-lane search picks for an object at `s` [m] on a through road: the
+    first whose end is not behind it (a tie at a boundary goes to the earlier segment)."""
+    for k in range(count - 1):
+        if s - start[k] <= length[k]:
+            return k
+    return count - 1
+
+
+@njit(cache=True, nogil=True)
+def _neighbours(
+    me: int,
+    s_me: float,
+    on: np.ndarray,
+    on_count: int,
+    s: np.ndarray,
+    start: float,
+    length: float,
+    vehicle_length: float,
+) -> tuple[int, int]:  # pragma: no cover - compiled
     """(front, rear) of vehicle `me` at `s_me` [m] among the `on_count` vehicles `on` a lane (road
     order), as `Road.neighbour_vehicles` picks them: front the nearest at s_v >= s (the last in road
-    order on ties), rear the nearest at s_v < s (the first on ties), itself excluded; -1 for none."""
+    order on ties), rear the nearest at s_v < s (the first on ties), itself excluded; -1 for none.
+    Only vehicles on the lane's segment (from `start`, `length` long [m]) count, as `on_lane` counts
+    them, to `vehicle_length` [m] beyond both ends (a world of one segment: start 0, length inf)."""
     front, rear = -1, -1
     s_front, s_rear = 0.0, 0.0
     for k in range(on_count):
@@ -78,6 +102,8 @@ def _neighbours(me: int, s_me: float, on: np.ndarray, on_count: int, s: np.ndarr
         if v == me:
             continue
         s_v = s[v]
+        if not (-vehicle_length <= s_v - start and s_v - start < length + vehicle_length):
+            continue
         if s_me <= s_v and (front < 0 or s_v <= s_front):
             front, s_front = v, s_v
         if s_v < s_me and (rear < 0 or s_v > s_rear):
@@ -87,17 +113,29 @@ def _neighbours(me: int, s_me: float, on: np.ndarray, on_count: int, s: np.ndarr
 
 @Kernel
 def lane_neighbours(
-    rows: np.ndarray, lane_rows: np.ndarray, s: np.ndarray, on: np.ndarray, on_count: np.ndarray
+    rows: np.ndarray,
+    lane_rows: np.ndarray,
+    s: np.ndarray,
+    on: np.ndarray,
+    on_count: np.ndarray,
+    segment_rows: np.ndarray,
+    segment_start: np.ndarray,
+    segment_length: np.ndarray,
+    vehicle_length: float,
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Flat rows of the (front, rear) of the vehicles in flat `rows`, each on its lane of
-    `lane_rows`, from `lane_frames`' s (W, V) and occupancy (-1: none)."""
+    `lane_rows` in its segment of `segment_rows` (of `segment_start` and `segment_length`, (W, K)
+    [m]), from `lane_frames`' s (W, V) and occupancy (-1: none)."""
     width = s.shape[1]
     front = np.empty(rows.shape[0], dtype=np.int64)
     rear = np.empty(rows.shape[0], dtype=np.int64)
     for k in range(rows.shape[0]):
         w, i = rows[k] // width, rows[k] % width
-        lane = lane_rows[k]
-        f, b = _neighbours(i, s[w, i], on[w, lane], on_count[w, lane], s[w])
+        lane, segment = lane_rows[k], segment_rows[k]
+        f, b = _neighbours(
+            i, s[w, i], on[w, lane], on_count[w, lane], s[w],
+            segment_start[w, segment], segment_length[w, segment], vehicle_length,
+        )  # fmt: skip
         front[k] = w * width + f if f >= 0 else -1
         rear[k] = w * width + b if b >= 0 else -1
     return front, rear
@@ -125,6 +163,9 @@ def plan_decisions(
     lane_change_delay: np.ndarray,
     time_wanted: np.ndarray,
     braking_term: np.ndarray,
+    segment_start: np.ndarray,
+    segment_length: np.ndarray,
+    segment_count: np.ndarray,
     vehicle_length: float,
 ) -> tuple[
     np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray
@@ -132,7 +173,8 @@ def plan_decisions(
     """What the drivers' (flat rows `drivers`, road order) `change_lane_policy` needs, from their
     state at the frame's start (flat arrays, (W, V) for s, (W, L, V) for r):
 
-    - each driver's own-lane (front, rear);
+    - each driver's own-lane (front, rear), on the segment its position is on (`segment_of`; the
+      segments of each world (W, K): `segment_start`, `segment_length` [m], `segment_count`);
     - the MOBIL candidates of the drivers due to decide (lane-change timer past their
       `lane_change_delay` [s], on their target lane, lane changes on, |speed| >= 1 m/s): one per
       reachable side lane, in `side_lanes`' order: the driver's position k in `drivers`, the side
@@ -160,7 +202,9 @@ def plan_decisions(
         w, i = g // width, g % width
         s_w, s_me = s[w], s[w, i]
         own = lane[g]
-        f, b = _neighbours(i, s_me, on[w, own], on_count[w, own], s_w)
+        segment = segment_of(s_me, segment_start[w], segment_length[w], segment_count[w])
+        start, length = segment_start[w, segment], segment_length[w, segment]
+        f, b = _neighbours(i, s_me, on[w, own], on_count[w, own], s_w, start, length, vehicle_length)
         own_front[k] = w * width + f if f >= 0 else -1
         own_rear[k] = w * width + b if b >= 0 else -1
         if not enable_lane_change[g]:
@@ -192,7 +236,7 @@ def plan_decisions(
             near = abs(r[w, side, i]) <= 2 * (2 * half_width[w, side])
             if not (near and 0 <= s_me and s_me < lane_length[w, side] + vehicle_length):
                 continue
-            f, b = _neighbours(i, s_me, on[w, side], on_count[w, side], s_w)
+            f, b = _neighbours(i, s_me, on[w, side], on_count[w, side], s_w, start, length, vehicle_length)
             side_driver[sides], side_lane[sides] = k, side
             side_front[sides] = w * width + f if f >= 0 else -1
             side_rear[sides] = w * width + b if b >= 0 else -1
@@ -207,6 +251,55 @@ def plan_decisions(
         pair_driver[:pairs],
         pair_other[:pairs],
     )
+
+
+@Kernel
+def segments_of(
+    rows: np.ndarray,
+    s: np.ndarray,
+    segment_start: np.ndarray,
+    segment_length: np.ndarray,
+    segment_count: np.ndarray,
+) -> np.ndarray:  # pragma: no cover - compiled
+    """The segment (`segment_of`) of each vehicle of flat `rows`, from `lane_frames`' s (W, V)."""
+    width = s.shape[1]
+    segments = np.empty(rows.shape[0], dtype=np.int64)
+    for k in range(rows.shape[0]):
+        w, i = rows[k] // width, rows[k] % width
+        segments[k] = segment_of(s[w, i], segment_start[w], segment_length[w], segment_count[w])
+    return segments
+
+
+@Kernel
+def crossing_drivers(
+    drivers: np.ndarray,
+    s: np.ndarray,
+    segment_start: np.ndarray,
+    segment_length: np.ndarray,
+    segment_count: np.ndarray,
+    vehicle_length: float,
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """The drivers (positions in `drivers`, flat rows) whose route has switched their target lane to
+    the next segment's while they are still on their own (`follow_road`: past `vehicle_length` / 2
+    [m] before their segment's end), and that next segment: highway-env's IDM then takes the lower
+    of its accelerations behind the leaders on both (`IDMVehicle.act`)."""
+    width = s.shape[1]
+    found = np.empty(drivers.shape[0], dtype=np.int64)
+    following = np.empty(drivers.shape[0], dtype=np.int64)
+    total = 0
+    for k in range(drivers.shape[0]):
+        w, i = drivers[k] // width, drivers[k] % width
+        count = segment_count[w]
+        if count < 2:
+            continue
+        segment = segment_of(s[w, i], segment_start[w], segment_length[w], count)
+        if (
+            segment + 1 < count
+            and s[w, i] - segment_start[w, segment] > segment_length[w, segment] - vehicle_length / 2
+        ):
+            found[total], following[total] = k, segment + 1
+            total += 1
+    return found[:total], following[:total]
 
 
 @Kernel
