@@ -15,11 +15,12 @@ from records import Actuation
 from records.batch import WorldBatch
 from stack.settings.run import build_config
 from stack.settings.world import HighwayConfig
-from stack.sim.batch.arrays import BatchArrays, UnsupportedRoad, read_world
+from stack.sim.batch.arrays import BatchArrays
 from stack.sim.batch.through_road import read_through_road, through_segments
 from stack.sim.batch.traffic import TrafficBatch
 from stack.sim.batch.traffic_frame import lane_frame
 from stack.sim.batch.traffic_kernels import lane_neighbours
+from stack.sim.batch.world_reading import UnsupportedRoad, read_world
 from stack.sim.envs import FAST_EXIT, HIGHWAY
 from stack.sim.highway import HighwayAdapter, env_config
 

@@ -40,7 +40,7 @@ from records import Command, Encoding, GridConfig, WorldState
 from stack.agents.oracle_search import COMMANDS, BatchedSearch, search_refusal
 from stack.loop.closed_loop import ClosedLoop
 from stack.settings.layers import OracleConfig
-from stack.sim.batch.arrays import UnsupportedRoad
+from stack.sim.batch.world_reading import UnsupportedRoad
 
 Path = tuple[Command, ...]
 """Commands given from a search's root."""

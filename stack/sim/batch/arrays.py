@@ -1,23 +1,18 @@
-"""The state of record of a batch of traffic worlds: [worlds, vehicles] arrays, per-world lanes, and
-the translation from and to highway-env's road objects (a world is read from the road highway-env
-spawns at reset; `road_of` builds the objects back on request), and the batched layers' view of
-it (`BatchArrays.world_batch`, a `records.WorldBatch`)."""
+"""The state of record of a batch of traffic worlds: [worlds, vehicles] arrays, per-world lanes (a
+world is read from the road highway-env spawns at reset, `stack.sim.batch.world_reading`), and the
+batched layers' view of it (`BatchArrays.world_batch`, a `records.WorldBatch`)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
-from highway_env.road.road import Road, RoadNetwork
+from highway_env.road.road import RoadNetwork
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
 from common.compiled import Kernel
 from records.batch import WorldBatch
-from stack.sim.drivers import NO_HABITS, DriverHabits, habits_of
-from stack.sim.fast_road import LaneIndex
 from stack.sim.traffic import TrafficVehicle
 from stack.sim.vector.habits import SeenPast
 from stack.sim.vector.lanes import LaneTable
@@ -137,87 +132,6 @@ class SpawnedWorld:
     leaders on its own segment only (`stack.sim.batch.through_road`); one endless segment on a road
     of one segment."""
     segment_length: np.ndarray = field(default_factory=lambda: ONE_SEGMENT[1])
-
-
-def read_world(road: Road, ego: Vehicle) -> SpawnedWorld:
-    """The arrays of a highway-env road: parallel axis-aligned straight lanes of one segment, level at
-    their start (highway-v0's), no obstacles, and vehicles of the kinds in `KINDS` without routes;
-    `UnsupportedRoad` names what is not."""
-    lanes = LaneTable.fit(road.network)
-    if lanes is None or len({index[:2] for index in lanes.indices}) != 1:
-        raise UnsupportedRoad("batched traffic needs one segment of parallel, axis-aligned straight lanes")
-    return read_vehicles(road, ego, lanes, road.network, lanes.row.__getitem__, routed=False)
-
-
-def read_vehicles(
-    road: Road,
-    ego: Vehicle,
-    lanes: LaneTable,
-    network: RoadNetwork,
-    row_of: Callable[[LaneIndex], int],
-    routed: bool,
-    segments: tuple[np.ndarray, np.ndarray] = ONE_SEGMENT,
-) -> SpawnedWorld:
-    """The arrays of `road`'s vehicles on `lanes` (of `network`, kept for `road_of`), each lane
-    index of the road read as the row `row_of` gives it; `routed`: whether a lane-keeping vehicle
-    may follow a route (one along its lane's continuation, which `lanes` hold as one lane, made of
-    `segments`: `SpawnedWorld.segment_start` and `segment_length`)."""
-    if road.objects or road.neighbour_vehicles_connected_lanes:
-        raise UnsupportedRoad("batched traffic drives roads without objects or connected-lane neighbours")
-    rows: list[dict[str, Any]] = []
-    for vehicle in road.vehicles:
-        kind = KINDS.get(type(vehicle))
-        if kind is None:
-            raise UnsupportedRoad(f"batched traffic has no {type(vehicle).__name__} (only {list(KINDS)})")
-        rows.append(_vehicle_row(vehicle, kind, row_of, routed))
-    columns: dict[str, np.ndarray] = {
-        name: np.array([row[name] for row in rows], dtype=dtype)
-        for name, (dtype, _) in VEHICLE_COLUMNS.items()
-    }
-    return SpawnedWorld(columns, lanes, road.vehicles.index(ego), network, *segments)
-
-
-def _vehicle_row(
-    vehicle: Vehicle, kind: int, row_of: Callable[[LaneIndex], int], routed: bool
-) -> dict[str, Any]:
-    action, impact = vehicle.action, vehicle.impact
-    row: dict[str, Any] = {
-        "x": vehicle.position[0],
-        "y": vehicle.position[1],
-        "heading": vehicle.heading,
-        "speed": vehicle.speed,
-        "target_speed": getattr(vehicle, "target_speed", 0),
-        "length": vehicle.LENGTH,
-        "width": vehicle.WIDTH,
-        "diagonal": vehicle.diagonal,
-        "max_speed": vehicle.MAX_SPEED,
-        "min_speed": vehicle.MIN_SPEED,
-        "steering": float(action["steering"]),
-        "acceleration": float(action["acceleration"]),
-        "impact_x": 0.0 if impact is None else impact[0],
-        "impact_y": 0.0 if impact is None else impact[1],
-        "lane": row_of(vehicle.lane_index),
-        "kind": kind,
-        "crashed": vehicle.crashed,
-        "impacted": impact is not None,
-    }
-    if kind == PLAIN:
-        default = VEHICLE_COLUMNS
-        row |= {name: default[name][1] for name in (*DRIVER_LAWS, *HABITS, "timer", "enable_lane_change")}
-        return row | {"target_lane": row["lane"]}
-    assert isinstance(vehicle, IDMVehicle)
-    if vehicle.route and not (routed and not vehicle.enable_lane_change):
-        raise UnsupportedRoad("batched traffic has no vehicles following routes")
-    return (
-        row
-        | {name: getattr(vehicle, attribute) for name, attribute in DRIVER_LAWS.items()}
-        | {name: getattr(habits_of(vehicle), field) for name, field in HABITS.items()}
-        | {
-            "timer": vehicle.timer,
-            "target_lane": row_of(vehicle.target_lane_index),
-            "enable_lane_change": vehicle.enable_lane_change,
-        }
-    )
 
 
 class BatchArrays:
@@ -419,41 +333,3 @@ def world_rows(
         for j in range(lane_count[w]):
             offsets[w, j] = (start[w, j, 0] - start_x) * lateral_x + (start[w, j, 1] - start_y) * lateral_y
     return s, d, speeds, headings, lengths, widths, lanes, offsets
-
-
-def road_of(
-    columns: dict[str, np.ndarray], lanes: LaneTable, network: RoadNetwork, np_random: np.random.Generator
-) -> list[Vehicle]:
-    """highway-env vehicles on a new `Road` over `network`, in road order, built from one world's
-    columns (one row per vehicle): the objects stock would hold at this frame."""
-    road = Road(network=network, np_random=np_random)
-    for i in range(len(columns["x"])):
-        value = {name: column[i].item() for name, column in columns.items()}
-        cls = CLASSES[value["kind"]]
-        position = [value["x"], value["y"]]
-        if value["kind"] == PLAIN:
-            vehicle = cls(road, position, value["heading"], value["speed"])
-        else:
-            vehicle = cls(
-                road,
-                position,
-                value["heading"],
-                value["speed"],
-                target_lane_index=lanes.indices[value["target_lane"]],
-                target_speed=value["target_speed"],
-            )
-            vehicle.timer = value["timer"]
-            for name, attribute in DRIVER_LAWS.items():
-                setattr(vehicle, attribute, value[name])
-            habits = DriverHabits(**{field: value[name] for name, field in HABITS.items()})
-            if habits != NO_HABITS:
-                vehicle.habits = habits
-            vehicle.enable_lane_change = value["enable_lane_change"]
-        vehicle.LENGTH, vehicle.WIDTH, vehicle.diagonal = value["length"], value["width"], value["diagonal"]
-        vehicle.lane_index = lanes.indices[value["lane"]]
-        vehicle.lane = lanes.lanes[value["lane"]]
-        vehicle.crashed = value["crashed"]
-        vehicle.action = {"steering": value["steering"], "acceleration": value["acceleration"]}
-        vehicle.impact = np.array([value["impact_x"], value["impact_y"]]) if value["impacted"] else None
-        road.vehicles.append(vehicle)
-    return road.vehicles

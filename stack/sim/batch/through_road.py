@@ -12,9 +12,9 @@ segments still change kept as each world's segments (`SpawnedWorld.segment_start
 
 - highway-env's neighbour search counts a car's leaders on its own segment's lane only, up to 5 m
   (`StraightLane.VEHICLE_LENGTH`) past that segment's end, so a car before 400 m or 500 m is blind
-  to a leader further past the boundary (`traffic_kernels.segment_of`, `_neighbours`); from 2.5 m
+  to a leader further past the boundary (`segment_kernels.segment_of`, `_neighbours`); from 2.5 m
   before the end its route has switched its target lane to the next segment's, whose leader it
-  heeds as well (`traffic_kernels.crossing_drivers`);
+  heeds as well (`segment_kernels.crossing_drivers`);
 - the snapshot measures s from lane 0 of the ego's segment (`BatchArrays.origins`).
 
 Each world is then the one the `vector` backend drives alone (highway-env's own road objects:
@@ -30,7 +30,7 @@ from highway_env.road.lane import StraightLane
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.kinematics import Vehicle
 
-from stack.sim.batch.arrays import SpawnedWorld, UnsupportedRoad, read_vehicles
+from stack.sim.batch.world_reading import SpawnedWorld, UnsupportedRoad, read_vehicles
 from stack.sim.fast_road import LaneIndex
 from stack.sim.vector.lanes import LaneTable
 

@@ -41,9 +41,10 @@ from highway_env.vehicle.kinematics import Vehicle
 
 from records import RoadName
 from stack.settings.world import HighwayConfig
-from stack.sim.batch.arrays import BatchArrays, UnsupportedRoad, read_world, road_of
+from stack.sim.batch.arrays import BatchArrays
 from stack.sim.batch.through_road import read_through_road
 from stack.sim.batch.traffic_frame import act, move
+from stack.sim.batch.world_reading import UnsupportedRoad, read_world, road_of
 from stack.sim.fast_road import FastExitEnv, FastRoadNetwork
 from stack.sim.highway import MAX_ACCELERATION, MAX_STEERING, env_config
 from stack.sim.traffic import ScenarioTraffic

@@ -12,15 +12,14 @@ from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.objects import RoadObject
 
 from stack.sim.batch.arrays import DRIVER_LAWS, PLAIN, TRAFFIC, BatchArrays
+from stack.sim.batch.segment_kernels import crossing_drivers, segments_of
 from stack.sim.batch.traffic_kernels import (
     closest_lane_rows,
     collision_candidates,
-    crossing_drivers,
     decide,
     lane_frames,
     lane_neighbours,
     plan_decisions,
-    segments_of,
 )
 from stack.sim.fast_road import BROAD_PHASE_MARGIN, NEIGHBOUR_MARGIN
 from stack.sim.vector.dynamics import bicycle_step, clipped_actions, steering_angles

@@ -12,6 +12,7 @@ import numpy as np
 from numba import njit
 
 from common.compiled import Kernel
+from stack.sim.batch.segment_kernels import segment_of
 from stack.sim.vector.dynamics import desired_gap, mobil_accepts
 from stack.sim.vector.geometry_kernels import (
     closest_lanes,
@@ -64,19 +65,6 @@ def lane_frames(
                     k += 1
             on_count[w, lane] = k
     return s, r, on, on_count
-
-
-@njit(cache=True, nogil=True)
-def segment_of(
-    s: float, start: np.ndarray, length: np.ndarray, count: int
-) -> int:  # pragma: no cover - compiled
-    """The segment (of `count`, starting at `start` along the road and `length` long [m]) whose
-    lane highway-env's closest-lane search picks for an object at `s` [m] on a through road: the
-    first whose end is not behind it (a tie at a boundary goes to the earlier segment)."""
-    for k in range(count - 1):
-        if s - start[k] <= length[k]:
-            return k
-    return count - 1
 
 
 @njit(cache=True, nogil=True)
@@ -254,55 +242,6 @@ def plan_decisions(
 
 
 @Kernel
-def segments_of(
-    rows: np.ndarray,
-    s: np.ndarray,
-    segment_start: np.ndarray,
-    segment_length: np.ndarray,
-    segment_count: np.ndarray,
-) -> np.ndarray:  # pragma: no cover - compiled
-    """The segment (`segment_of`) of each vehicle of flat `rows`, from `lane_frames`' s (W, V)."""
-    width = s.shape[1]
-    segments = np.empty(rows.shape[0], dtype=np.int64)
-    for k in range(rows.shape[0]):
-        w, i = rows[k] // width, rows[k] % width
-        segments[k] = segment_of(s[w, i], segment_start[w], segment_length[w], segment_count[w])
-    return segments
-
-
-@Kernel
-def crossing_drivers(
-    drivers: np.ndarray,
-    s: np.ndarray,
-    segment_start: np.ndarray,
-    segment_length: np.ndarray,
-    segment_count: np.ndarray,
-    vehicle_length: float,
-) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
-    """The drivers (positions in `drivers`, flat rows) whose route has switched their target lane to
-    the next segment's while they are still on their own (`follow_road`: past `vehicle_length` / 2
-    [m] before their segment's end), and that next segment: highway-env's IDM then takes the lower
-    of its accelerations behind the leaders on both (`IDMVehicle.act`)."""
-    width = s.shape[1]
-    found = np.empty(drivers.shape[0], dtype=np.int64)
-    following = np.empty(drivers.shape[0], dtype=np.int64)
-    total = 0
-    for k in range(drivers.shape[0]):
-        w, i = drivers[k] // width, drivers[k] % width
-        count = segment_count[w]
-        if count < 2:
-            continue
-        segment = segment_of(s[w, i], segment_start[w], segment_length[w], count)
-        if (
-            segment + 1 < count
-            and s[w, i] - segment_start[w, segment] > segment_length[w, segment] - vehicle_length / 2
-        ):
-            found[total], following[total] = k, segment + 1
-            total += 1
-    return found[:total], following[:total]
-
-
-@Kernel
 def decide(
     drivers: np.ndarray,
     lane: np.ndarray,
@@ -440,20 +379,9 @@ def collision_candidates(
                 if not within_reach(a, b, x_w, y_w, speed_w, diagonal[w, :n], dt, broad_margin):
                     continue
                 close = could_touch(
-                    a,
-                    b,
-                    x_w,
-                    y_w,
-                    cos,
-                    sin,
-                    speed_w,
-                    length[w, :n],
-                    width[w, :n],
-                    diagonal[w, :n],
-                    dt,
-                    broad_margin,
-                    separation_margin,
-                )
+                    a, b, x_w, y_w, cos, sin, speed_w, length[w, :n], width[w, :n], diagonal[w, :n], dt,
+                    broad_margin, separation_margin,
+                )  # fmt: skip
                 if close:
                     if kept == pairs.shape[0]:
                         pairs = np.concatenate((pairs, np.empty_like(pairs)))
