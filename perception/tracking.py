@@ -251,9 +251,9 @@ class TrackerBatch:
         columns = max(sensed.s.shape[1], 1 + int(self.counts.max(initial=0)))
         names = ("s", "d", "speed", "heading", "length", "width")
         detected = tuple(_floats(getattr(sensed, name)) for name in names)
-        out = tuple(np.zeros((sensed.worlds, columns)) for _ in names)
-        lane = np.zeros((sensed.worlds, columns), dtype=sensed.lane.dtype)
-        slot = np.full((sensed.worlds, columns), -1, dtype=np.int64)
+        out = np.empty((len(names), sensed.worlds, columns))
+        lane = np.empty((sensed.worlds, columns), dtype=sensed.lane.dtype)
+        slot = np.empty((sensed.worlds, columns), dtype=np.int64)
         report_worlds(
             self.tracked, self.counts, self.slots, self.lanes, self.rows, detected,
             np.ascontiguousarray(sensed.lane), out, lane, slot,

@@ -171,6 +171,11 @@ def track_worlds(
         _tracked_rows(one, slots_out[w], counts_out[w], lane_heading[w], rows_out[w])
 
 
+REPORTED_ROW_COLUMNS = (0, 1, 4, 5, 6, 7)
+"""The `tracked_rows` column of each field `report_worlds` reports: s, d, speed, heading, length,
+width."""
+
+
 @Kernel
 def report_worlds(
     tracked: np.ndarray,
@@ -180,30 +185,28 @@ def report_worlds(
     rows: np.ndarray,
     detected: tuple[np.ndarray, ...],
     detected_lane: np.ndarray,
-    out: tuple[np.ndarray, ...],
+    out: np.ndarray,
     out_lane: np.ndarray,
     out_slot: np.ndarray,
 ) -> None:  # pragma: no cover - compiled; covered through perception.tracking.TrackerBatch
-    """What every world reports (`TrackerBatch.update`): into `out` (s, d, speed, heading, length,
-    width, each (worlds, columns)), `out_lane` and `out_slot` (the track slot of each row, -1
-    none), a tracked world's ego row then its `counts` confirmed tracks (`slots`, `lanes`, `rows`
-    of `track_worlds`), zeros to column `columns_tracked` = 1 + the most tracks of any world and
-    the detections beyond; an untracked world's `detected` rows (s, d, speed, heading, length,
-    width) and `detected_lane`."""
-    fields = ((0, 0), (1, 1), (2, 4), (3, 5), (4, 6), (5, 7))
+    """What every world reports (`TrackerBatch.update`), every element of `out` (s, d, speed,
+    heading, length, width: (6, worlds, columns)), `out_lane` and `out_slot` (the track slot of
+    each row, -1 none) written: a tracked world's ego row then its `counts` confirmed tracks
+    (`slots`, `lanes`, `rows` of `track_worlds`), zeros to column `columns_tracked` = 1 + the most
+    tracks of any world, then the detections beyond; an untracked world's `detected` rows (s, d,
+    speed, heading, length, width) and `detected_lane`; zeros past the detections."""
     columns_tracked = 1 + counts.max() if len(counts) else 1
+    found, columns = detected_lane.shape[1], out_lane.shape[1]
     for w in range(len(tracked)):
-        for c in range(detected_lane.shape[1]):
-            out_lane[w, c] = detected_lane[w, c]
-        for f in range(len(detected)):
-            for c in range(detected[f].shape[1]):
-                out[f][w, c] = detected[f][w, c]
-        if not tracked[w]:
-            continue
-        for c in range(1, columns_tracked):
+        tracks = columns_tracked if tracked[w] else 1
+        for c in range(columns):
             k = c - 1
-            live = k < counts[w]
-            out_lane[w, c] = lanes[w, k] if live else 0
-            out_slot[w, c] = slots[w, k] if live else -1
-            for f, column in fields:
-                out[f][w, c] = rows[w, k, column] if live else 0.0
+            if c < tracks and 0 <= k < counts[w]:
+                for f in range(len(REPORTED_ROW_COLUMNS)):
+                    out[f, w, c] = rows[w, k, REPORTED_ROW_COLUMNS[f]]
+                out_lane[w, c], out_slot[w, c] = lanes[w, k], slots[w, k]
+                continue
+            shown = c < found and (c == 0 or c >= tracks)
+            for f in range(len(REPORTED_ROW_COLUMNS)):
+                out[f, w, c] = detected[f][w, c] if shown else 0.0
+            out_lane[w, c], out_slot[w, c] = (detected_lane[w, c] if shown else 0), -1
