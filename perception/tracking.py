@@ -23,12 +23,17 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from perception.sensor import SensorConfig
-from perception.tracking_kernels import report_worlds, track_world, track_worlds
+from perception.tracking_kernels import (
+    WORLD_FLOATS,
+    WORLD_INTEGERS,
+    report_worlds,
+    track_world,
+    track_worlds,
+)
 from perception.tracking_law import (
     COVARIANCE_SIZE,
     ROW_FIELDS,
     STATE_SIZE,
-    Measured,
     MeasuredWorlds,
     TrackerLaw,
     Tracks,
@@ -142,9 +147,8 @@ class Tracker:
         self.config, self.law = config, config.law
         self.position_variance = position_variance(sensor)
         self.tracks = empty_tracks(config.max_tracks)
-        self.slots = np.zeros(config.max_tracks, dtype=np.int64)
-        self.lanes = np.zeros(config.max_tracks, dtype=np.int64)
-        self.rows = np.zeros((config.max_tracks, ROW_FIELDS))
+        self.columns = config.max_tracks + 1
+        """Rows a tracked world can have: the ego and every track."""
 
     def warm_up(self, detections: list[WorldState]) -> WorldState:
         """The tracked world after `detections`, the sensor's observations of the frozen first world."""
@@ -154,41 +158,43 @@ class Tracker:
         return tracked
 
     def update(self, detected: WorldState, dt: float) -> WorldState:
-        """The world of the confirmed tracks after the frame `detected`, `dt` [s] after the last."""
+        """The world of the confirmed tracks after the frame `detected`, `dt` [s] after the last:
+        `track_world` writes it into two fresh buffers, each field a slice of them (built
+        directly: `dataclasses.replace` costs twice as much; the other fields are `detected`'s)."""
         lane_heading = detected.lanes[0].heading_at(float(detected.s[0]))
         along, across = lane_velocity(detected.speed, detected.heading, lane_heading)
-        found = Measured(
-            detected.count,
-            _floats(detected.s),
-            _floats(detected.d),
-            _floats(along),
-            _floats(across),
-            _floats(detected.length),
-            _floats(detected.width),
-        )
-        offsets = _floats(detected.lane_offsets)
+        columns = self.columns
+        floats = np.empty(WORLD_FLOATS * columns)
+        integers = np.empty(WORLD_INTEGERS * columns, dtype=np.int64)
         count = track_world(
-            self.law, self.tracks, found, self.position_variance, dt, offsets, detected.lanes_count,
-            float(lane_heading), self.slots, self.lanes, self.rows,
+            *self.law, *self.tracks,
+            detected.count, detected.s, detected.d, along, across, detected.length, detected.width,
+            self.position_variance, dt, detected.lane_offsets, detected.lanes_count, float(lane_heading),
+            detected.ids, detected.lane, detected.position, detected.velocity, detected.heading,
+            detected.speed, floats, integers,
         )  # fmt: skip
-        rows = self.rows[:count]
-
-        def with_ego(name: str, tracked: np.ndarray) -> np.ndarray:
-            return np.concatenate([getattr(detected, name)[:1], tracked])
-
-        return dataclasses.replace(
-            detected,
-            ids=with_ego("ids", self.tracks.ident[self.slots[:count]]),
-            position=np.concatenate([detected.position[:1], rows[:, 0:2]]),
-            heading=with_ego("heading", rows[:, 5]),
-            speed=with_ego("speed", rows[:, 4]),
-            velocity=np.concatenate([detected.velocity[:1], rows[:, 2:4]]),
-            lane=with_ego("lane", self.lanes[:count].copy()),
-            length=with_ego("length", rows[:, 6]),
-            width=with_ego("width", rows[:, 7]),
-            s=with_ego("s", rows[:, 0]),
-            d=with_ego("d", rows[:, 1]),
-            crashed=with_ego("crashed", np.zeros(count, dtype=bool)),
+        rows = count + 1
+        pairs = floats[: 4 * columns].reshape(2, columns, 2)
+        fields = floats[4 * columns :].reshape(6, columns)
+        crashed = np.zeros(rows, dtype=bool)
+        crashed[0] = detected.crashed[0]
+        return WorldState(
+            time=detected.time,
+            ids=integers[:rows],
+            position=pairs[0, :rows],
+            heading=fields[0, :rows],
+            speed=fields[1, :rows],
+            velocity=pairs[1, :rows],
+            lane=integers[columns : columns + rows],
+            length=fields[2, :rows],
+            width=fields[3, :rows],
+            s=fields[4, :rows],
+            d=fields[5, :rows],
+            crashed=crashed,
+            lanes=detected.lanes,
+            lane_offsets=detected.lane_offsets,
+            ego_lateral_speed=detected.ego_lateral_speed,
+            ego_yaw_rate=detected.ego_yaw_rate,
         )
 
 
@@ -245,9 +251,9 @@ class TrackerBatch:
         columns = max(sensed.s.shape[1], 1 + int(self.counts.max(initial=0)))
         names = ("s", "d", "speed", "heading", "length", "width")
         detected = tuple(_floats(getattr(sensed, name)) for name in names)
-        out = tuple(np.zeros((sensed.worlds, columns)) for _ in names)
-        lane = np.zeros((sensed.worlds, columns), dtype=sensed.lane.dtype)
-        slot = np.full((sensed.worlds, columns), -1, dtype=np.int64)
+        out = np.empty((len(names), sensed.worlds, columns))
+        lane = np.empty((sensed.worlds, columns), dtype=sensed.lane.dtype)
+        slot = np.empty((sensed.worlds, columns), dtype=np.int64)
         report_worlds(
             self.tracked, self.counts, self.slots, self.lanes, self.rows, detected,
             np.ascontiguousarray(sensed.lane), out, lane, slot,

@@ -187,20 +187,64 @@ def assign_greedy(
     (track, detection, cost): the cheapest pair first, then the cheapest left whose track and
     detection are both free (global nearest neighbour, greedy; ties to the earlier pair).
 
+    A pair whose track and detection are in no other pair is taken whatever the order (nothing
+    else can take either), so only the contested pairs are sorted: most tracks on a highway have
+    one candidate, which has no other.
+
     Written by hand because the batch compiles it: scipy's `linear_sum_assignment` cannot run
     inside numba. Inside the gate vehicles stand a car length apart and detections are metres
     apart at most, so the nearest pair is almost always the optimal assignment's; the tests check
     it against scipy's on such scenes."""
-    order = np.argsort(pair_cost[:pairs], kind="mergesort")
-    track_taken = np.zeros(tracks, dtype=np.bool_)
+    track_pairs = np.zeros(tracks, dtype=np.int64)
+    found_pairs = np.zeros(found, dtype=np.int64)
+    for k in range(pairs):
+        track_pairs[pair_track[k]] += 1
+        found_pairs[pair_found[k]] += 1
     assigned = np.full(found, -1, dtype=np.int64)
-    for k in order:
+    contested = np.empty(pairs, dtype=np.int64)
+    contested_cost = np.empty(pairs)
+    count = 0
+    for k in range(pairs):
+        t, j = pair_track[k], pair_found[k]
+        if track_pairs[t] == 1 and found_pairs[j] == 1:
+            assigned[j] = t
+        else:
+            contested[count], contested_cost[count] = k, pair_cost[k]
+            count += 1
+    order = np.argsort(contested_cost[:count], kind="mergesort")
+    track_taken = track_pairs == 0
+    for i in order:
+        k = contested[i]
         t, j = pair_track[k], pair_found[k]
         if track_taken[t] or assigned[j] >= 0:
             continue
         track_taken[t] = True
         assigned[j] = t
     return assigned
+
+
+@register_jitable
+def stable_order(values: np.ndarray, ordered: np.ndarray) -> np.ndarray:
+    """The indices that sort `values` ascending, equal values in their order (as numpy's
+    mergesort), and the sorted values into `ordered`. Insertion sort: a sensor reports the road's
+    vehicles nearly in order along it, a few swaps; past `len(values)` moves, or on a NaN (which
+    numpy sorts last), numpy's mergesort does it instead (the same order)."""
+    n = len(values)
+    order = np.arange(n)
+    moves = 0
+    for i in range(n):
+        value, k = values[i], i
+        while k > 0 and ordered[k - 1] > value:
+            ordered[k], order[k] = ordered[k - 1], order[k - 1]
+            k -= 1
+            moves += 1
+        ordered[k], order[k] = value, i
+        if moves > n or value != value:
+            order = np.argsort(values, kind="mergesort")
+            for m in range(n):
+                ordered[m] = values[order[m]]
+            return order
+    return order
 
 
 @register_jitable
@@ -256,9 +300,8 @@ def track_frame(
     pair_found = np.empty(live * detections, dtype=np.int64)
     pair_cost = np.empty(live * detections)
     pairs = 0
-    along = found.s[1 : detections + 1]
-    order = np.argsort(along, kind="mergesort")
-    ordered = along[order]
+    ordered = np.empty(detections)
+    order = stable_order(found.s[1 : detections + 1], ordered)
     for t in range(slots):
         if tracks.status[t] == FREE:
             continue

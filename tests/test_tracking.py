@@ -10,16 +10,16 @@ import pytest
 from scipy.optimize import linear_sum_assignment
 
 from perception.sensor import SensorConfig
-from perception.tracking import TRACK_ID_BASE, TrackerConfig, empty_tracks
-from perception.tracking_kernels import track_world
+from perception.tracking import TRACK_ID_BASE, Tracker, TrackerConfig, empty_tracks
+from perception.tracking_kernels import WORLD_FLOATS, WORLD_INTEGERS, track_world
 from perception.tracking_law import (
     CONFIRMED,
     FREE,
-    ROW_FIELDS,
     TENTATIVE,
-    Measured,
     assign_greedy,
+    stable_order,
 )
+from records import WorldState
 from stack.runs.batch_episodes import batch_refusal, run_batched
 from stack.runs.episodes import run_episode
 from stack.settings.run import build_config
@@ -35,31 +35,22 @@ class OneWorld:
     def __init__(self, config: TrackerConfig = CONFIG, noise_m: float = 1.0) -> None:
         self.law, self.variance = config.law, noise_m**2
         self.tracks = empty_tracks(config.max_tracks)
-        self.slots = np.zeros(config.max_tracks, dtype=np.int64)
-        self.lanes = np.zeros(config.max_tracks, dtype=np.int64)
-        self.rows = np.zeros((config.max_tracks, ROW_FIELDS))
+        self.columns = config.max_tracks + 1
 
     def frame(self, detections: list[tuple[float, ...]], dt: float = DT) -> int:
         """One frame of detections (s, d, speed along the lane[, across it])."""
         rows = [(0.0, 0.0, 0.0, 0.0), *((*row, 0.0)[:4] for row in detections)]
         s, d, speed, across = (np.array(column, dtype=float) for column in zip(*rows, strict=True))
         sizes = np.full(len(rows), 5.0), np.full(len(rows), 2.0)
-        found = Measured(len(rows), s, d, speed, across, *sizes)
+        ego = np.zeros(len(rows), dtype=np.int64), np.zeros((len(rows), 2)), np.zeros(len(rows))
         return int(
             track_world(
-                self.law,
-                self.tracks,
-                found,
-                self.variance,
-                dt,
-                LANES,
-                3,
-                0.0,
-                self.slots,
-                self.lanes,
-                self.rows,
+                *self.law, *self.tracks, len(rows), s, d, speed, across, *sizes, self.variance, dt,
+                LANES, 3, 0.0, ego[0], ego[0], ego[1], ego[1], ego[2], ego[2],
+                np.empty(WORLD_FLOATS * self.columns),
+                np.empty(WORLD_INTEGERS * self.columns, dtype=np.int64),
             )
-        )
+        )  # fmt: skip
 
     def status(self, slot: int = 0) -> int:
         return int(self.tracks.status[slot])
@@ -193,6 +184,102 @@ def test_greedy_assignment_is_scipy_s_on_scenes_of_separated_vehicles(seed: int)
     kept = cost[rows, columns] <= CONFIG.gate
     optimal[columns[kept]] = rows[kept]
     np.testing.assert_array_equal(greedy, optimal)
+
+
+def greedy_over_every_pair(
+    pair_track: np.ndarray, pair_found: np.ndarray, pair_cost: np.ndarray, found: int
+) -> np.ndarray:
+    """The greedy assignment by its definition: every pair in cost order (stable)."""
+    assigned, taken = np.full(found, -1), set()
+    for k in np.argsort(pair_cost, kind="mergesort"):
+        t, j = int(pair_track[k]), int(pair_found[k])
+        if t not in taken and assigned[j] < 0:
+            taken.add(t)
+            assigned[j] = t
+    return assigned
+
+
+@pytest.mark.parametrize("seed", range(1023000, 1023020))
+def test_greedy_assignment_taking_uncontested_pairs_first_is_the_greedy_over_every_pair(seed: int) -> None:
+    """Crowded random candidates (tracks sharing detections, equal costs) and sparse ones."""
+    rng = np.random.default_rng(seed)
+    tracks, found = int(rng.integers(1, 30)), int(rng.integers(1, 30))
+    pairs = int(rng.integers(0, tracks * found + 1))
+    chosen = rng.choice(tracks * found, pairs, replace=False)
+    pair_track, pair_found = chosen // found, chosen % found
+    pair_cost = rng.integers(0, 4, pairs).astype(float) if seed % 2 else rng.uniform(0, 13.3, pairs)
+    np.testing.assert_array_equal(
+        assign_greedy(pair_track, pair_found, pair_cost, pairs, tracks, found),
+        greedy_over_every_pair(pair_track, pair_found, pair_cost, found),
+    )
+
+
+@pytest.mark.parametrize(
+    "values",
+    [
+        np.array([]),
+        np.array([3.0]),
+        np.array([10.0, 30.0, 25.0, 40.0, 40.0, 38.0, 60.0]),
+        np.random.default_rng(1023020).uniform(0, 300, 60),
+        np.random.default_rng(1023021).integers(0, 5, 40).astype(float),
+        np.array([5.0, np.nan, 1.0, 2.0]),
+        np.arange(50.0)[::-1],
+    ],
+)
+def test_the_detections_order_along_the_road_is_numpy_s_stable_sort(values: np.ndarray) -> None:
+    """Nearly sorted (insertion), shuffled or reversed (numpy's mergesort past n moves), ties, NaN."""
+    ordered = np.empty(len(values))
+    order = stable_order(values, ordered)
+    expected = np.argsort(values, kind="mergesort")
+    np.testing.assert_array_equal(order, expected)
+    np.testing.assert_array_equal(ordered, values[expected])
+
+
+class StraightLane:
+    width = 4.0
+
+    def heading_at(self, longitudinal: float) -> float:
+        return 0.0
+
+
+ROAD = (StraightLane(),) * 3
+
+
+def detected_world(s: list[float], d: list[float]) -> WorldState:
+    """A detected world on a straight road: the ego at row 0, vehicles at `s`, `d` at 25 m/s."""
+    count = len(s)
+    return WorldState(
+        time=1.5, ids=np.arange(count), position=np.stack([s, d], axis=1), heading=np.zeros(count),
+        speed=np.full(count, 25.0), velocity=np.stack([np.full(count, 25.0), np.zeros(count)], axis=1),
+        lane=np.round(np.array(d) / 4.0).astype(np.int64), length=np.full(count, 5.0),
+        width=np.full(count, 2.0), s=np.array(s), d=np.array(d), crashed=np.zeros(count, dtype=bool),
+        lanes=ROAD, lane_offsets=LANES, ego_lateral_speed=0.1, ego_yaw_rate=0.2,
+    )  # fmt: skip
+
+
+def test_the_tracked_world_is_the_detected_one_with_the_confirmed_tracks_and_keeps_across_frames() -> None:
+    """Row 0 the ego as detected, then each confirmed track; every other field of `WorldState`
+    the detected world's; each frame's world its own arrays (the next frame changes none)."""
+    tracker = Tracker(CONFIG, SensorConfig(position_noise_m=0.5))
+    worlds = [tracker.update(detected_world([0.0, 20.0 + 25 * k * DT], [0.0, 4.0]), DT) for k in range(6)]
+    before = [{name: np.copy(value) for name, value in vars(world).items()} for world in worlds]
+    tracker.update(detected_world([0.0, 20.0], [0.0, 4.0]), DT)
+    for world, kept in zip(worlds, before, strict=True):
+        for name, value in vars(world).items():
+            np.testing.assert_array_equal(value, kept[name], err_msg=name)
+    last, detected = worlds[-1], detected_world([0.0, 20.0 + 25 * 5 * DT], [0.0, 4.0])
+    assert last.count == 2 and last.ids[1] == TRACK_ID_BASE and last.lane.tolist() == [0, 1]
+    assert last.s[1] == pytest.approx(detected.s[1], abs=0.1) and last.speed[1] == pytest.approx(25.0)
+    np.testing.assert_array_equal(last.position[:, 0], last.s)
+    for name in ("ids", "position", "heading", "speed", "velocity", "lane", "length", "width", "s", "d"):
+        assert getattr(last, name)[0].tolist() == getattr(detected, name)[0].tolist(), name
+        assert getattr(last, name).dtype == getattr(detected, name).dtype, name
+        assert getattr(last, name).flags.c_contiguous, name
+    assert last.crashed.tolist() == [False, False]
+    for name in vars(detected).keys() - {
+        "ids", "position", "heading", "speed", "velocity", "lane", "length", "width", "s", "d", "crashed",
+    }:  # fmt: skip
+        assert np.all(getattr(last, name) == getattr(detected, name)), name
 
 
 def test_the_tracker_follows_the_sensor_unless_told() -> None:
