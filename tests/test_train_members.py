@@ -95,3 +95,32 @@ def test_an_ensemble_of_q_tables_or_in_a_sweep_is_refused_in_one_line(tmp_path):
     sweep.write_text(yaml.safe_dump({"config": "base.yaml", "space": {"seed": [1, 2]}}))
     result = CliRunner().invoke(app, ["sweep", "--config", str(sweep), "--out", str(tmp_path / "s")])
     assert result.exit_code == 2 and "train.members: a trial trains one model" in result.output, result.output
+
+
+def test_members_record_their_demonstrations_once_and_train_as_each_would_alone(tmp_path, monkeypatch):
+    """The demonstrations are seeded from their own seed, not the run's: the ensemble records them
+    for its first member and hands the same arrays to the next, which trains the model it would
+    have trained alone (recording them itself), bit for bit."""
+    from stack.training import demonstrations
+
+    recorded, collect = [], demonstrations.collect_demonstrations
+
+    def counted(config, *args, **kwargs):
+        recorded.append(config.seed)
+        return collect(config, *args, **kwargs)
+
+    monkeypatch.setattr(demonstrations, "collect_demonstrations", counted)
+    taught = {**ENSEMBLE["train"], "worlds": 4, "envs": 1, "action_mask": True}
+    taught["demonstrations"] = {"expert": "lookahead", "episodes": 3, "pretrain_steps": 5}
+    (config := tmp_path / "taught.yaml").write_text(yaml.safe_dump({**ENSEMBLE, "train": taught}))
+    code, output = train("--config", str(config), "--out", str(tmp_path / "out"))
+    assert code == 0, output
+    assert recorded == [5], "recorded for the first member only"
+    (single := tmp_path / "single.yaml").write_text(
+        yaml.safe_dump({**ENSEMBLE, "seed": 6, "train": {**taught, "members": 1}})
+    )
+    assert train("--config", str(single), "--out", str(tmp_path / "alone"))[0] == 0
+    assert recorded == [5, 6]
+    for name in ("best.npz", "final.npz"):
+        alone = (tmp_path / "alone" / name).read_bytes()
+        assert (tmp_path / "out" / "seed-6" / name).read_bytes() == alone, name

@@ -43,12 +43,25 @@ def train_members(config: RunConfig, folder: Path, progress: bool, ray: str | No
     """Train (or resume) each member in `folder/seed-S`, a finished one kept as it is, then write
     the ensemble of their best.npz and of their final.npz as `folder`'s and its summary.json. True
     when a signal stopped a member (its checkpoint written: `--resume folder` goes on)."""
-    from stack.apps.training import finished, train_or_fail, training_owner
-    from stack.runtime.owner import FolderRefused, claim
     from stack.settings.run import write_config
+    from stack.training.demonstrations import recorded_once
 
     write_config(config, folder / "config.yaml", "the resolved config; --resume reads it")
     members = member_configs(config)
+    with recorded_once():
+        stopped = _train_each(members, folder, progress, ray)
+    if stopped:
+        print(f"the ensemble goes on with `drivestack train --resume {folder}`", file=sys.stderr)
+        return True
+    write_ensemble(folder, list(members))
+    return False
+
+
+def _train_each(members: dict[str, RunConfig], folder: Path, progress: bool, ray: str | None) -> bool:
+    """Train (or resume) each member in `folder/seed-S` in turn; True when a signal stopped one."""
+    from stack.apps.training import finished, train_or_fail, training_owner
+    from stack.runtime.owner import FolderRefused, claim
+
     for number, (name, member) in enumerate(members.items(), 1):
         run, which = folder / name, f"member {number} of {len(members)} (seed {member.seed})"
         if finished(run, member.train.steps):
@@ -61,9 +74,7 @@ def train_members(config: RunConfig, folder: Path, progress: bool, ray: str | No
             fail(str(error))
         with lock:
             if train_or_fail(member, run, progress, ray):
-                print(f"the ensemble goes on with `drivestack train --resume {folder}`", file=sys.stderr)
                 return True
-    write_ensemble(folder, list(members))
     return False
 
 
