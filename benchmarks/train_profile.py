@@ -5,7 +5,7 @@ and the rest (acting, SB3's rollouts and replay buffer), on a reduced run of
 the full member and to the three-member training.
 
     .venv/bin/python benchmarks/train_profile.py [--steps 30000] [--demonstrations 128]
-        [--pretrain 2000] [--validation-episodes 50] [--seed 1024000] [--set KEY=VALUE ...]
+        [--pretrain 2000] [--validation-episodes 50] [--seed 1024000] [--one-world-validation]
 
 Each part is timed exclusively (a part called inside another counts for itself only) in CPU
 seconds of this process, so a machine shared with other runs barely moves the figures. The scaled
@@ -35,6 +35,7 @@ PARTS = [
     ["demonstrations", "stack.training.demonstrations:collect_demonstrations"],
     ["pre-training", "planner.ddqn:DoubleDQN.pretrain"],
     ["validation episodes", "planner.validation:validate"],
+    ["validation episodes", "stack.training.batch_validation:BatchedValidation.measure"],
     ["batched worlds' steps", "stack.training.batch_env:TrainingWorlds.step_wait"],
     ["gradient steps", "planner.ddqn:DoubleDQN._train"],
     ["checkpoints", "stack.training.trainer:Trainer._save_checkpoint"],
@@ -81,7 +82,14 @@ def main() -> None:
     parser.add_argument("--full-validation-episodes", type=int, default=580)
     parser.add_argument("--seed", type=int, default=1_024_000)
     parser.add_argument("--envs", type=int, default=1)
+    parser.add_argument(
+        "--one-world-validation", action="store_true", help="validate one world at a time, as before"
+    )
     args = parser.parse_args()
+    if args.one_world_validation:
+        from stack.training.batch_validation import BatchedValidation
+
+        BatchedValidation.of = classmethod(lambda cls, config: None)  # type: ignore[method-assign,assignment]
     spent: collections.Counter[str] = collections.Counter()
     calls: collections.Counter[str] = collections.Counter()
     instrument(spent, calls)

@@ -97,10 +97,18 @@ def test_an_ensemble_of_q_tables_or_in_a_sweep_is_refused_in_one_line(tmp_path):
     assert result.exit_code == 2 and "train.members: a trial trains one model" in result.output, result.output
 
 
-def test_members_record_their_demonstrations_once_and_train_as_each_would_alone(tmp_path, monkeypatch):
-    """The demonstrations are seeded from their own seed, not the run's: the ensemble records them
-    for its first member and hands the same arrays to the next, which trains the model it would
-    have trained alone (recording them itself), bit for bit."""
+TAUGHT = {
+    **ENSEMBLE["train"],
+    "worlds": 4,
+    "envs": 1,
+    "action_mask": True,
+    "demonstrations": {"expert": "lookahead", "episodes": 3, "pretrain_steps": 5},
+}
+"""The tiny ensemble on batched worlds, taught by the lookahead first."""
+
+
+def recordings(monkeypatch) -> list[int]:
+    """The seeds of the runs that record demonstrations from now on, in order."""
     from stack.training import demonstrations
 
     recorded, collect = [], demonstrations.collect_demonstrations
@@ -110,8 +118,14 @@ def test_members_record_their_demonstrations_once_and_train_as_each_would_alone(
         return collect(config, *args, **kwargs)
 
     monkeypatch.setattr(demonstrations, "collect_demonstrations", counted)
-    taught = {**ENSEMBLE["train"], "worlds": 4, "envs": 1, "action_mask": True}
-    taught["demonstrations"] = {"expert": "lookahead", "episodes": 3, "pretrain_steps": 5}
+    return recorded
+
+
+def test_members_record_their_demonstrations_once_and_train_as_each_would_alone(tmp_path, monkeypatch):
+    """The demonstrations are seeded from their own seed, not the run's: the ensemble records them
+    for its first member and hands the same arrays to the next, which trains the model it would
+    have trained alone (recording them itself), bit for bit."""
+    recorded, taught = recordings(monkeypatch), TAUGHT
     (config := tmp_path / "taught.yaml").write_text(yaml.safe_dump({**ENSEMBLE, "train": taught}))
     code, output = train("--config", str(config), "--out", str(tmp_path / "out"))
     assert code == 0, output
@@ -124,3 +138,32 @@ def test_members_record_their_demonstrations_once_and_train_as_each_would_alone(
     for name in ("best.npz", "final.npz"):
         alone = (tmp_path / "alone" / name).read_bytes()
         assert (tmp_path / "out" / "seed-6" / name).read_bytes() == alone, name
+
+
+def test_members_trained_at_once_are_the_members_trained_in_turn(tmp_path, monkeypatch):
+    """`train.member_jobs: 2`: both members in processes of their own, the demonstrations recorded
+    once here; every member file and the ensemble's, byte for byte, those of one after the other."""
+    recorded, taught = recordings(monkeypatch), TAUGHT
+    for jobs in (1, 2):
+        config = tmp_path / f"jobs-{jobs}.yaml"
+        config.write_text(yaml.safe_dump({**ENSEMBLE, "train": {**taught, "member_jobs": jobs}}))
+        code, output = train("--config", str(config), "--out", str(tmp_path / f"jobs-{jobs}"))
+        assert code == 0, output
+    assert recorded == [5, 5], "once for each ensemble"
+    for name in ("seed-5/best.npz", "seed-5/final.npz", "seed-6/final.npz", "best.npz", "final.npz"):
+        assert (tmp_path / "jobs-2" / name).read_bytes() == (tmp_path / "jobs-1" / name).read_bytes(), name
+
+
+def test_members_at_once_must_fit_in_memory_together():
+    from stack.settings.run import build_config
+    from stack.training.checks import demonstrations_bytes, memory_refusal, replay_buffer_bytes
+
+    data = {**ENSEMBLE, "train": {**ENSEMBLE["train"], "members": 3, "member_jobs": 3}}
+    config = build_config(data)
+    one = replay_buffer_bytes(config) + demonstrations_bytes(config)
+    available = int(2 * one / 0.8)
+    refusal = memory_refusal(config, available)
+    assert refusal is not None and refusal.startswith("train.member_jobs: 3 members at once need")
+    assert "\n" not in refusal
+    two_at_once = build_config({**data, "train": {**data["train"], "member_jobs": 2}})
+    assert memory_refusal(two_at_once, available) is None

@@ -241,6 +241,18 @@ def recorded_once() -> Iterator[None]:
         _shared = None
 
 
+def shared_now() -> dict[str, Demonstrations] | None:
+    """What `recorded_once` holds now, for a process of its own to `adopt_shared`."""
+    return None if _shared is None else dict(_shared)
+
+
+def adopt_shared(shared: dict[str, Demonstrations] | None) -> None:
+    """In a process of its own: record once as the process that handed it `shared`
+    (`shared_now`) does."""
+    global _shared
+    _shared = None if shared is None else dict(shared)
+
+
 def shared_demonstrations(
     config: RunConfig, progress: bool = True, stop_requested: Callable[[], bool] = lambda: False
 ) -> Demonstrations:
