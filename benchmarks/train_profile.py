@@ -12,7 +12,8 @@ seconds of this process, so a machine shared with other runs barely moves the fi
 estimate multiplies each part's CPU per unit (an episode, a gradient step, a decision) by the
 units of the full run: 900 demonstration episodes, 20,000 pre-training steps, 300,000 decisions,
 18,750 gradient steps and `--full-validation-episodes` validation episodes (a member of the shipped
-run validates 4 to 7 times on 100 episodes and 4 times on 20).
+run validates 4 to 7 times on 100 episodes and 4 times on 20). With `--envs 2` the worlds step and
+the demonstrations are recorded in worker processes, whose CPU this process does not see.
 """
 
 from __future__ import annotations
