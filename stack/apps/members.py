@@ -138,7 +138,11 @@ def _train_together(
     missing = unfinished(members, folder)
     fresh = [name for name in missing if not (folder / name / CHECKPOINT).is_file()]
     if fresh and members[fresh[0]].train.demonstrations is not None:
-        demonstrations.shared_demonstrations(members[fresh[0]], progress)
+        try:
+            demonstrations.shared_demonstrations(members[fresh[0]], progress)
+        except KeyboardInterrupt:
+            print("interrupted while the demonstrations were recorded; nothing trained", file=sys.stderr)
+            return True
     context = multiprocessing.get_context("spawn")
     waiting = list(missing)
     running: dict[str, Any] = {}
@@ -206,7 +210,7 @@ def write_ensemble(folder: Path, names: list[str]) -> None:
         fail(f"{cannot_write(error)}; the members are trained: free space, then `train --resume {folder}`")
     minutes = sum(summary["wall_time_s"] for summary in summaries) / 60
     kept = ", ".join(path for path in written.values() if path)
-    print(f"ensemble of {len(names)} members ({minutes:.0f} min of training): {kept}")
+    print(f"ensemble of {len(names)} members ({minutes:.0f} min of training, the members' added up): {kept}")
 
 
 def ensemble_of(folder: Path, names: list[str], kind: str) -> str | None:
