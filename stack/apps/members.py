@@ -105,6 +105,9 @@ def _member_process(
     """A member trained in a process of its own (no progress bar: several run at once), with the
     demonstrations the ensemble recorded (`shared`); exits 0 when it finished, `STOPPED` when a
     signal stopped it, else with its one-line error's code."""
+    from stack.runtime.interrupts import catch_signals
+
+    catch_signals()
     import typer
 
     from stack.training import demonstrations
@@ -114,6 +117,9 @@ def _member_process(
         stopped = _train_member(member, run, False, ray)
     except typer.Exit as error:
         sys.exit(error.exit_code)
+    except KeyboardInterrupt:
+        print(f"{run}: interrupted before training started; nothing trained", file=sys.stderr)
+        stopped = True
     sys.exit(STOPPED if stopped else 0)
 
 
@@ -123,8 +129,8 @@ def _train_together(
     """Train (or resume) the unfinished members `jobs` at a time, each in a spawned process, after
     recording the demonstrations once here (a member resumed from its checkpoint has its own).
     True when a signal stopped them (each writes its checkpoint; a signal here is passed on to
-    them); a member that failed (its one line printed) ends the command with its exit code once the
-    others are done."""
+    them, and one that ends a member still starting is a stop too); a member that failed (its one
+    line printed) ends the command with its exit code once the others are done."""
     import multiprocessing
     import os
     import signal
@@ -175,7 +181,7 @@ def _train_together(
                     del running[name]
             if stop:
                 waiting.clear()
-    failed = [code for code in codes.values() if code not in (0, STOPPED)]
+    failed = [code for code in codes.values() if code not in (0, STOPPED) and not (stop and code < 0)]
     if failed:
         raise typer.Exit(code=failed[0] if failed[0] > 0 else 1)
     return stop or STOPPED in codes.values()
