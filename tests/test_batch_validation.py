@@ -40,11 +40,11 @@ def test_batched_validation_scores_the_episodes_of_one_world_at_a_time_bit_for_b
     predict = greedy_on(weights)
     batched = BatchedValidation.of(config)
     assert batched is not None
-    for episodes, most in [(7, 64), (7, 3), (2, 64)]:
+    one_at_a_time = validate(predict, env, 5, seed=5)
+    for most in (64, 2):
         batched.most = most
-        one_at_a_time = validate(predict, env, episodes, seed=5)
-        assert batched.measure(predict, episodes, 5) == one_at_a_time
-    assert len(one_at_a_time.worlds) >= 1
+        assert batched.measure(predict, 5, 5) == one_at_a_time
+    assert len(one_at_a_time.worlds) >= 2, "a mix, scored per world"
     batched.close()
 
 
@@ -56,9 +56,9 @@ def test_a_run_on_batched_worlds_validates_on_them_and_keeps_what_one_world_at_a
     from stack.training import trainer as trainer_module
     from stack.training.trainer import Trainer
 
-    train = {**MIX["train"], "worlds": 4, "target_update_interval": 8, "steps": 60}
-    train["validation"] = {"short_every": 20, "short_episodes": 3, "long_every": 40, "long_episodes": 5}
-    train["demonstrations"] = {"expert": "mobil", "episodes": 3, "pretrain_steps": 5}
+    train = {**MIX["train"], "worlds": 4, "target_update_interval": 8, "steps": 40}
+    train["validation"] = {"short_every": 20, "short_episodes": 2, "long_every": 40, "long_episodes": 3}
+    train["demonstrations"] = {"expert": "mobil", "episodes": 2, "pretrain_steps": 5}
     config = build_config({**MIX, "train": train})
     batched = Trainer(config, tmp_path / "batched", progress=False)
     assert batched.batched_validation is not None
@@ -67,6 +67,6 @@ def test_a_run_on_batched_worlds_validates_on_them_and_keeps_what_one_world_at_a
     Trainer(config, tmp_path / "one-at-a-time", progress=False).run()
     history = [(tmp_path / run / "validation.json").read_text() for run in ("batched", "one-at-a-time")]
     assert history[0] == history[1]
-    assert len(json.loads(history[0])) >= 4
+    assert len(json.loads(history[0])) >= 3
     for name in ("best.npz", "final.npz"):
         assert (tmp_path / "batched" / name).read_bytes() == (tmp_path / "one-at-a-time" / name).read_bytes()

@@ -121,35 +121,29 @@ def recordings(monkeypatch) -> list[int]:
     return recorded
 
 
-def test_members_record_their_demonstrations_once_and_train_as_each_would_alone(tmp_path, monkeypatch):
+def test_members_record_their_demonstrations_once_and_are_the_runs_alone_in_turn_or_at_once(
+    tmp_path, monkeypatch
+):
     """The demonstrations are seeded from their own seed, not the run's: the ensemble records them
-    for its first member and hands the same arrays to the next, which trains the model it would
-    have trained alone (recording them itself), bit for bit."""
-    recorded, taught = recordings(monkeypatch), TAUGHT
-    (config := tmp_path / "taught.yaml").write_text(yaml.safe_dump({**ENSEMBLE, "train": taught}))
-    code, output = train("--config", str(config), "--out", str(tmp_path / "out"))
-    assert code == 0, output
-    assert recorded == [5], "recorded for the first member only"
-    (single := tmp_path / "single.yaml").write_text(
-        yaml.safe_dump({**ENSEMBLE, "seed": 6, "train": {**taught, "members": 1}})
-    )
-    assert train("--config", str(single), "--out", str(tmp_path / "alone"))[0] == 0
-    assert recorded == [5, 6]
-    for name in ("best.npz", "final.npz"):
-        alone = (tmp_path / "alone" / name).read_bytes()
-        assert (tmp_path / "out" / "seed-6" / name).read_bytes() == alone, name
-
-
-def test_members_trained_at_once_are_the_members_trained_in_turn(tmp_path, monkeypatch):
-    """`train.member_jobs: 2`: both members in processes of their own, the demonstrations recorded
-    once here; every member file and the ensemble's, byte for byte, those of one after the other."""
-    recorded, taught = recordings(monkeypatch), TAUGHT
+    for its first member and hands the same arrays to the next, which trains the model it trains
+    alone (recording them itself), bit for bit. `train.member_jobs: 2` trains both members in
+    processes of their own, the demonstrations recorded once here: every member file and the
+    ensemble's byte for byte those of one after the other."""
+    recorded = recordings(monkeypatch)
     for jobs in (1, 2):
         config = tmp_path / f"jobs-{jobs}.yaml"
-        config.write_text(yaml.safe_dump({**ENSEMBLE, "train": {**taught, "member_jobs": jobs}}))
+        config.write_text(yaml.safe_dump({**ENSEMBLE, "train": {**TAUGHT, "member_jobs": jobs}}))
         code, output = train("--config", str(config), "--out", str(tmp_path / f"jobs-{jobs}"))
         assert code == 0, output
-    assert recorded == [5, 5], "once for each ensemble"
+    assert recorded == [5, 5], "once for each ensemble, for its first member"
+    (single := tmp_path / "single.yaml").write_text(
+        yaml.safe_dump({**ENSEMBLE, "seed": 6, "train": {**TAUGHT, "members": 1}})
+    )
+    assert train("--config", str(single), "--out", str(tmp_path / "alone"))[0] == 0
+    assert recorded == [5, 5, 6]
+    for name in ("best.npz", "final.npz"):
+        alone = (tmp_path / "alone" / name).read_bytes()
+        assert (tmp_path / "jobs-1" / "seed-6" / name).read_bytes() == alone, name
     for name in ("seed-5/best.npz", "seed-5/final.npz", "seed-6/final.npz", "best.npz", "final.npz"):
         assert (tmp_path / "jobs-2" / name).read_bytes() == (tmp_path / "jobs-1" / name).read_bytes(), name
 
