@@ -10,7 +10,7 @@ once; the model is kept whenever a long validation beats the best long score.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -32,41 +32,66 @@ class Score:
     worlds: dict[str, WorldScore]
 
 
+@dataclass(frozen=True)
+class EpisodeScore:
+    """One validation episode: the world it drew (`""` without a mix), whether the ego crashed,
+    its return, and the ego's speed [m/s] after each decision."""
+
+    world: str
+    crashed: bool
+    total: float
+    speeds: list[float]
+
+
+def scored(episodes: Sequence[EpisodeScore]) -> Score:
+    """The score of validation episodes, in episode order (means over every decision's speed, per
+    world for the episodes that name one)."""
+    by_world: dict[str, list[EpisodeScore]] = {}
+    for episode in episodes:
+        by_world.setdefault(episode.world, []).append(episode)
+    worlds = {
+        name: WorldScore(
+            len(played), float(np.mean([episode.crashed for episode in played])), mean_speed_of(played)
+        )
+        for name, played in by_world.items()
+        if name
+    }
+    crashes = sum(episode.crashed for episode in episodes)
+    mean_return = float(np.mean([episode.total for episode in episodes]))
+    return Score(crashes / len(episodes), mean_return, mean_speed_of(episodes), worlds)
+
+
+def mean_speed_of(episodes: Sequence[EpisodeScore]) -> float:
+    """The mean of every decision's speed [m/s] over `episodes` (NaN for none)."""
+    speeds = [speed for episode in episodes for speed in episode.speeds]
+    return float(np.mean(speeds)) if speeds else float("nan")
+
+
 def validate(predict: Callable, env: gym.Env, episodes: int, seed: int) -> Score:
-    """The score of greedy `predict` over seeded episodes of `env`; an env that names the world of
-    each episode (`world_name`, as `HierarchicalHighwayEnv` with a training mix) is scored per world
-    too."""
-    crashes, returns, speeds = 0, [], []
-    by_world: dict[str, tuple[list[bool], list[float]]] = {}
+    """The score of greedy `predict` over seeded episodes of `env` (episode k from
+    `child_seed(seed, k)`); an env that names the world of each episode (`world_name`, as
+    `HierarchicalHighwayEnv` with a training mix) is scored per world too."""
+    played = []
     for episode in range(episodes):
         observation, _ = env.reset(seed=child_seed(seed, episode))
         world = str(getattr(env.unwrapped, "world_name", ""))
         total, done = 0.0, False
         info: dict[str, Any] = {}
-        episode_speeds = []
+        speeds = []
         while not done:
             action, _ = predict(observation, deterministic=True)
             observation, reward, terminated, truncated, info = env.step(action)
             total += float(reward)
             if "speed" in info:
-                episode_speeds.append(info["speed"])
+                speeds.append(info["speed"])
             done = terminated or truncated
-        crashed = bool(info.get("crashed", False))
-        crashes += crashed
-        returns.append(total)
-        speeds += episode_speeds
-        world_crashes, world_speeds = by_world.setdefault(world, ([], []))
-        world_crashes.append(crashed)
-        world_speeds += episode_speeds
-    worlds = {
-        name: WorldScore(
-            len(crashed), float(np.mean(crashed)), float(np.mean(speed)) if speed else float("nan")
-        )
-        for name, (crashed, speed) in by_world.items()
-        if name
-    }
-    mean_speed = float(np.mean(speeds)) if speeds else float("nan")
-    return Score(crashes / episodes, float(np.mean(returns)), mean_speed, worlds)
+        played.append(EpisodeScore(world, bool(info.get("crashed", False)), total, speeds))
+    return scored(played)
+
+
+Measure = Callable[[Callable, int, int], Score]
+"""(greedy predict, episodes, seed) -> their `Score`: `validate` on an env, or the same episodes
+on batched worlds."""
 
 
 class RealTimeValidation(BaseCallback):
@@ -89,8 +114,11 @@ class RealTimeValidation(BaseCallback):
         history: list[Validation] | None = None,
         best: dict[str, tuple[float, float] | None] | None = None,
         on_validation: Callable[[Validation], None] | None = None,
+        measure: Measure | None = None,
     ) -> None:
+        """`measure` scores the episodes (by default `validate` on `env`: one world at a time)."""
         super().__init__()
+        self.measure = measure
         self.on_validation = on_validation
         self.env = env
         self.short_every, self.short_episodes = short_every, short_episodes
@@ -130,7 +158,10 @@ class RealTimeValidation(BaseCallback):
 
     def run_validation(self, period: str, episodes: int) -> Validation:
         """Validate now; `improved` in the result means it beat the best score of its period."""
-        measured = validate(self.model.predict, self.env, episodes, self.seed)
+        if self.measure is not None:
+            measured = self.measure(self.model.predict, episodes, self.seed)
+        else:
+            measured = validate(self.model.predict, self.env, episodes, self.seed)
         score = (-measured.collision_rate, measured.mean_return)
         best = self.best[period]
         improved = best is None or score > best

@@ -50,6 +50,9 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
     assert "| all |" in run("record_cost.py", "--seeds", "0", "--duration", "2", "--repeats", "1")
     rates = run("train_rate.py", "--steps", "510", "--world-steps", "640")
     assert "| 64 batched worlds |" in rates and "| 64 batched worlds in 2 processes | 0.0625 |" in rates
+    parts = run("train_profile.py", *("--steps", "640", "--demonstrations", "2", "--pretrain", "5"))
+    assert "| validation episodes |" in parts and "| **total** |" in parts
+    assert "bit for bit: True" in run("batched_validation.py", "--episodes", "2")
     assert "| batch 4 |" in run("batched_decisions.py", "--runs", "1", "--duration", "2", "--sizes", "1,4")
     assert "of them between floors of stack: 0\n" in run("config_path.py")
     timed = run(

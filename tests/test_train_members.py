@@ -95,3 +95,69 @@ def test_an_ensemble_of_q_tables_or_in_a_sweep_is_refused_in_one_line(tmp_path):
     sweep.write_text(yaml.safe_dump({"config": "base.yaml", "space": {"seed": [1, 2]}}))
     result = CliRunner().invoke(app, ["sweep", "--config", str(sweep), "--out", str(tmp_path / "s")])
     assert result.exit_code == 2 and "train.members: a trial trains one model" in result.output, result.output
+
+
+TAUGHT = {
+    **ENSEMBLE["train"],
+    "worlds": 4,
+    "envs": 1,
+    "action_mask": True,
+    "demonstrations": {"expert": "lookahead", "episodes": 3, "pretrain_steps": 5},
+}
+"""The tiny ensemble on batched worlds, taught by the lookahead first."""
+
+
+def recordings(monkeypatch) -> list[int]:
+    """The seeds of the runs that record demonstrations from now on, in order."""
+    from stack.training import demonstrations
+
+    recorded, collect = [], demonstrations.collect_demonstrations
+
+    def counted(config, *args, **kwargs):
+        recorded.append(config.seed)
+        return collect(config, *args, **kwargs)
+
+    monkeypatch.setattr(demonstrations, "collect_demonstrations", counted)
+    return recorded
+
+
+def test_members_record_their_demonstrations_once_and_are_the_runs_alone_in_turn_or_at_once(
+    tmp_path, monkeypatch
+):
+    """The demonstrations are seeded from their own seed, not the run's: the ensemble records them
+    for its first member and hands the same arrays to the next, which trains the model it trains
+    alone (recording them itself), bit for bit. `train.member_jobs: 2` trains both members in
+    processes of their own, the demonstrations recorded once here: every member file and the
+    ensemble's byte for byte those of one after the other."""
+    recorded = recordings(monkeypatch)
+    for jobs in (1, 2):
+        config = tmp_path / f"jobs-{jobs}.yaml"
+        config.write_text(yaml.safe_dump({**ENSEMBLE, "train": {**TAUGHT, "member_jobs": jobs}}))
+        code, output = train("--config", str(config), "--out", str(tmp_path / f"jobs-{jobs}"))
+        assert code == 0, output
+    assert recorded == [5, 5], "once for each ensemble, for its first member"
+    (single := tmp_path / "single.yaml").write_text(
+        yaml.safe_dump({**ENSEMBLE, "seed": 6, "train": {**TAUGHT, "members": 1}})
+    )
+    assert train("--config", str(single), "--out", str(tmp_path / "alone"))[0] == 0
+    assert recorded == [5, 5, 6]
+    for name in ("best.npz", "final.npz"):
+        alone = (tmp_path / "alone" / name).read_bytes()
+        assert (tmp_path / "jobs-1" / "seed-6" / name).read_bytes() == alone, name
+    for name in ("seed-5/best.npz", "seed-5/final.npz", "seed-6/final.npz", "best.npz", "final.npz"):
+        assert (tmp_path / "jobs-2" / name).read_bytes() == (tmp_path / "jobs-1" / name).read_bytes(), name
+
+
+def test_members_at_once_must_fit_in_memory_together():
+    from stack.settings.run import build_config
+    from stack.training.checks import demonstrations_bytes, memory_refusal, replay_buffer_bytes
+
+    data = {**ENSEMBLE, "train": {**ENSEMBLE["train"], "members": 3, "member_jobs": 3}}
+    config = build_config(data)
+    one = replay_buffer_bytes(config) + demonstrations_bytes(config)
+    available = int(2 * one / 0.8)
+    refusal = memory_refusal(config, available)
+    assert refusal is not None and refusal.startswith("train.member_jobs: 3 members at once need")
+    assert "\n" not in refusal
+    two_at_once = build_config({**data, "train": {**data["train"], "member_jobs": 2}})
+    assert memory_refusal(two_at_once, available) is None

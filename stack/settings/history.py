@@ -8,7 +8,7 @@ from typing import Any
 
 from pydantic import BaseModel
 
-HOW_NOT_WHAT = {"sim": {"batched"}}
+HOW_NOT_WHAT = {"sim": {"batched"}, "train": {"member_jobs"}}
 """Config keys that change how a run is carried out, never its results: left out of the
 fingerprint that lets `--resume` go on with a folder (`stack.apps.resume`, `training_owner`)."""
 ADDED_LATER: dict[str, dict[str, Any]] = {

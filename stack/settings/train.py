@@ -249,6 +249,14 @@ class TrainConfig(Strict):
         "each in its own folder seed-S, then deciding together on the mean of their Q-values (an "
         "ensemble model file, `drivestack ensemble`; ddqn / dqn)",
     )
+    member_jobs: int = Field(
+        1,
+        ge=1,
+        le=MAX_MEMBERS,
+        description="members trained at once, each in a process of its own (1: one after the other); "
+        "each member is the run it is alone, bit for bit, its demonstrations recorded once for all; "
+        "the replay buffers of all of them must fit in memory",
+    )
     overlap: bool = Field(
         False,
         description="the gradient steps due after a step of the environments run while the env "

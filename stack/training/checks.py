@@ -74,6 +74,12 @@ def memory_refusal(config: RunConfig, available: int | None) -> str | None:
     if config.train.algorithm == "tabular" or available is None:
         return None
     buffer, demonstrations = replay_buffer_bytes(config), demonstrations_bytes(config)
+    together = min(config.train.member_jobs, config.train.members)
+    if together > 1 and (needed := together * (buffer + demonstrations)) > MEMORY_SHARE * available:
+        return (
+            f"train.member_jobs: {together} members at once need {needed / 2**30:.1f} GB for their "
+            f"replay buffers and demonstrations; {available / 2**30:.1f} GB of memory is available"
+        )
     if buffer > MEMORY_SHARE * available:
         return (
             f"train.buffer_size: {config.train.buffer_size} transitions need {buffer / 2**30:.1f} GB; "

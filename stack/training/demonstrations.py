@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import multiprocessing
 import signal
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from functools import partial
 
 import numpy as np
@@ -221,6 +222,51 @@ def collect_demonstrations(
     return Demonstrations.concatenate([episodes[index] for index in range(len(seeds))])
 
 
+_shared: dict[str, Demonstrations] | None = None
+"""Within `recorded_once`: the last demonstrations recorded, by the config they were recorded for
+with its seed left out."""
+
+
+@contextmanager
+def recorded_once() -> Iterator[None]:
+    """Within the block, runs whose configs differ only in their seed (an ensemble's members)
+    record their demonstrations once: the episodes are seeded from `train.demonstrations.seed`,
+    not from the run's seed, and recorded in other processes or from generators of their own, so
+    every member learns from the same arrays it would have recorded itself."""
+    global _shared
+    _shared = {}
+    try:
+        yield
+    finally:
+        _shared = None
+
+
+def shared_now() -> dict[str, Demonstrations] | None:
+    """What `recorded_once` holds now, for a process of its own to `adopt_shared`."""
+    return None if _shared is None else dict(_shared)
+
+
+def adopt_shared(shared: dict[str, Demonstrations] | None) -> None:
+    """In a process of its own: record once as the process that handed it `shared`
+    (`shared_now`) does."""
+    global _shared
+    _shared = None if shared is None else dict(shared)
+
+
+def shared_demonstrations(
+    config: RunConfig, progress: bool = True, stop_requested: Callable[[], bool] = lambda: False
+) -> Demonstrations:
+    """`collect_demonstrations(config)`, or within `recorded_once` the same arrays recorded
+    already for a config that differs from `config` in its seed alone."""
+    if _shared is None:
+        return collect_demonstrations(config, progress, stop_requested)
+    key = config.model_copy(update={"seed": 0}).model_dump_json()
+    if key not in _shared:
+        _shared.clear()
+        _shared[key] = collect_demonstrations(config, progress, stop_requested)
+    return _shared[key]
+
+
 def start_from_demonstrations(
     model: DoubleDQN,
     config: RunConfig,
@@ -233,7 +279,7 @@ def start_from_demonstrations(
     ends recording or pre-training at the next episode or gradient step with `StopTraining`."""
     settings = config.train.demonstrations
     assert settings is not None, "the run names no demonstrations"
-    model.demonstrations = collect_demonstrations(config, progress, stop_requested)
+    model.demonstrations = shared_demonstrations(config, progress, stop_requested)
 
     def stepped(bar: tqdm) -> None:
         bar.update(1)

@@ -30,6 +30,7 @@ from planner.tabular import QLearning
 from planner.validation import RealTimeValidation
 from records import child_seed
 from stack.settings.run import RunConfig, grid_config, load_config, write_config
+from stack.training.batch_validation import BatchedValidation
 from stack.training.checkpoint import Checkpoint, DqnCounters, TabularCounters, read_checkpoint
 from stack.training.checks import checkpoint_bytes, demonstration_rows
 from stack.training.decision_env import HierarchicalHighwayEnv
@@ -82,6 +83,11 @@ class Trainer:
         self.start = initial_model(config)
         self.env: Monitor | VecEnv = training_env(config, ray)
         self.validation_env = HierarchicalHighwayEnv(config)
+        self.batched_validation = (
+            BatchedValidation.of(config)
+            if config.train.worlds is not None and config.train.algorithm != "tabular"
+            else None
+        )
         self.history: list[Validation] = []
         self.best: dict[str, tuple[float, float] | None] | None = None
         self.started = time.perf_counter()
@@ -117,6 +123,8 @@ class Trainer:
                 raise EnvWorkerDied(death) from None
             finally:
                 close_env(self.env)
+                if self.batched_validation is not None:
+                    self.batched_validation.close()
             return self._finish(steps, interrupted)
 
     def _request_stop(self, signum: int, frame: object) -> None:
@@ -146,6 +154,7 @@ class Trainer:
             self.history,
             self.best,
             self._heard,
+            self.batched_validation.measure if self.batched_validation is not None else None,
         )
 
     def _heard(self, validation: Validation) -> None:
