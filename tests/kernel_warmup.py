@@ -1,0 +1,55 @@
+"""Compiles the numba kernels the suite calls into drivestack's cache before the test workers start.
+
+numba writes a compiled kernel to its cache (`common.numba_cache`) only once it is compiled, so on a
+cold cache every pytest worker compiled the closed loop's kernels itself, at the same time: some
+40 CPU-s each, twice. `tests/conftest.py` runs this module's two parts at once, one on each core,
+before the workers start: `batched` drives a few tiny episodes as batches of worlds, `per-world` the
+same episodes one world at a time (each with the lookahead, a tracked sensor and other drivers, so
+their kernels compile too); the workers then load every kernel from the cache. A part's failure is
+not the suite's: the tests that need the kernel compile it, and fail there if it is broken.
+
+    python -m tests.kernel_warmup batched|per-world
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+
+PARTS = ("batched", "per-world")
+"""The warm-up's parts, run side by side."""
+
+
+def tiny_config(folder: Path) -> Path:
+    """configs/highway.yaml with 10 vehicles and 2-s episodes, written into `folder`."""
+    data = yaml.safe_load((ROOT / "configs/highway.yaml").read_text())
+    data["highway"].update(vehicles_count=10, duration=2)
+    path = folder / "tiny.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def warm(part: str) -> None:
+    """Drive the tiny episodes of `part` (one of `PARTS`), writing their results into a temporary folder."""
+    from stack.apps.cli import app
+
+    batched = "true" if part == "batched" else "false"
+    with tempfile.TemporaryDirectory() as folder:
+        config = str(tiny_config(Path(folder)))
+        for index, options in enumerate(
+            (
+                ["--agent", "ddqn"],
+                ["--agent", "lookahead", "--traffic", "mixed", "--set", "perception.tracker.mode=on"],
+            )
+        ):
+            arguments = ["run", "-c", config, *options, "--episodes", "2", "--set", f"sim.batched={batched}"]
+            app([*arguments, "--out", f"{folder}/run{index}", "--no-progress"], standalone_mode=False)
+
+
+if __name__ == "__main__":
+    warm(sys.argv[1])
