@@ -3,10 +3,11 @@
 numba writes a compiled kernel to its cache (`common.numba_cache`) only once it is compiled, so on a
 cold cache every pytest worker compiled the closed loop's kernels itself, at the same time: some
 40 CPU-s each, twice. `tests/conftest.py` runs this module's two parts at once, one on each core,
-before the workers start: `batched` drives a few tiny episodes as batches of worlds, `per-world` the
-same episodes one world at a time (each with the lookahead, a tracked sensor and other drivers, so
-their kernels compile too); the workers then load every kernel from the cache. A part's failure is
-not the suite's: the tests that need the kernel compile it, and fail there if it is broken.
+before the workers start: `batched` drives a few tiny episodes as batches of worlds, `per-world`
+one world at a time, each also with a tracked sensor and other drivers (the lookahead one world
+at a time: it plans on batches itself), so their kernels compile too; the workers then load every
+kernel from the cache. A part's failure is not the suite's: the tests that need the kernel
+compile it, and fail there if it is broken.
 
     python -m tests.kernel_warmup batched|per-world
 """
@@ -38,15 +39,12 @@ def warm(part: str) -> None:
     """Drive the tiny episodes of `part` (one of `PARTS`), writing their results into a temporary folder."""
     from stack.apps.cli import app
 
-    batched = "true" if part == "batched" else "false"
+    batched = part == "batched"
+    drivers = ["--traffic", "mixed", "--set", "perception.tracker.mode=on"]
+    runs = [["--agent", "ddqn"], ["--agent", "mobil" if batched else "lookahead", *drivers]]
     with tempfile.TemporaryDirectory() as folder:
         config = str(tiny_config(Path(folder)))
-        for index, options in enumerate(
-            (
-                ["--agent", "ddqn"],
-                ["--agent", "lookahead", "--traffic", "mixed", "--set", "perception.tracker.mode=on"],
-            )
-        ):
+        for index, options in enumerate(runs):
             arguments = ["run", "-c", config, *options, "--episodes", "2", "--set", f"sim.batched={batched}"]
             app([*arguments, "--out", f"{folder}/run{index}", "--no-progress"], standalone_mode=False)
 
