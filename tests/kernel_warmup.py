@@ -18,6 +18,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -47,6 +48,18 @@ def warm(part: str) -> None:
         for index, options in enumerate(runs):
             arguments = ["run", "-c", config, *options, "--episodes", "2", "--set", f"sim.batched={batched}"]
             app([*arguments, "--out", f"{folder}/run{index}", "--no-progress"], standalone_mode=False)
+    if not batched:
+        rank_a_stopped_car_ahead()
+
+
+def rank_a_stopped_car_ahead() -> None:
+    """The lookahead's ranking of one scene, as its own tests call it (its per-world kernels)."""
+    from planner.lookahead import LookaheadAgent
+    from planner.lookahead_scene import Scene
+    from records import GridConfig
+
+    lane, one = np.zeros(1, np.int64), np.ones(1)
+    LookaheadAgent(GridConfig()).rank(Scene(25.0, True, True, lane, 120 * one, 5 * one, 0 * one))
 
 
 if __name__ == "__main__":
