@@ -9,7 +9,8 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 ARGS ?=
 # pytest-xdist: one worker per core of the 2-core CI machine; each test file stays in one worker so
-# its module fixtures are built once. `make test PYTEST_WORKERS=` runs serially.
+# its module fixtures are built once. `make test PYTEST_WORKERS=` runs serially. On a cold numba cache
+# tests/conftest.py first compiles the kernels once, one part a core (tests/kernel_warmup.py).
 PYTEST_WORKERS ?= -n 2 --dist loadfile
 
 .PHONY: run test test-slow bench lint clean

@@ -53,7 +53,10 @@ def absolute_spec(spec: str) -> str:
     """`spec` with its file made absolute (a module path is returned as it is), so processes and
     Ray workers started elsewhere load the same file; PluginError when it fits neither form."""
     if match := FILE_SPEC.fullmatch(spec):
-        return f"{Path(match['file']).expanduser().resolve()}:{match['name']}"
+        try:
+            return f"{Path(match['file']).expanduser().resolve()}:{match['name']}"
+        except RuntimeError:
+            raise PluginError(f"{spec[:120]!r}: no home directory for its '~'") from None
     if MODULE_SPEC.fullmatch(spec):
         return spec
     raise PluginError(f"{spec[:120]!r}: expected {SPEC_FORMS}")

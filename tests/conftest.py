@@ -5,13 +5,53 @@ test module imports torch; subprocesses inherit it. Results do not depend on it.
 
 import os
 import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import pytest
 
+from common.numba_cache import CACHE_FOLDER
 from stack.runtime import interrupts
 from stack.settings.run import build_config
+from tests.kernel_warmup import PARTS
+
+WARM_STAMP = CACHE_FOLDER / "suite-warm"
+"""Written once `tests.kernel_warmup` compiled this version's kernels into the cache."""
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Before pytest-xdist's workers start (its own hook runs last), compile the kernels once,
+    one warm-up part on each core (`tests.kernel_warmup`), unless this version's cache is warm: each
+    worker would otherwise compile them itself on a cold cache, both at once. Serial runs and the
+    workers themselves skip it."""
+    config = session.config
+    if hasattr(config, "workerinput") or config.getoption("dist", "no") == "no" or WARM_STAMP.exists():
+        return
+    started = time.perf_counter()
+    root = Path(__file__).resolve().parent.parent
+    errors = {part: tempfile.TemporaryFile() for part in PARTS}
+    parts = {
+        part: subprocess.Popen(
+            [sys.executable, "-m", "tests.kernel_warmup", part],
+            cwd=root,
+            stdout=subprocess.DEVNULL,
+            stderr=errors[part],
+        )
+        for part in PARTS
+    }
+    failed = [part for part, process in parts.items() if process.wait() != 0]
+    for part in failed:
+        errors[part].seek(0)
+        last = (errors[part].read().decode(errors="replace").strip().splitlines() or ["no output"])[-1]
+        sys.stderr.write(f"kernel warm-up {part!r} failed (exit {parts[part].returncode}): {last}\n")
+    if not failed:
+        WARM_STAMP.parent.mkdir(parents=True, exist_ok=True)
+        WARM_STAMP.write_text(f"{time.perf_counter() - started:.1f} s\n")
 
 
 @pytest.fixture

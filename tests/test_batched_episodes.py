@@ -71,7 +71,9 @@ def test_collisions_are_classified_as_one_world_classifies_them() -> None:
 
 
 def test_a_run_is_the_same_in_batches_and_over_processes() -> None:
-    config = build_config({}, "test", scenario="jam", planner__agent="mobil", seed=625100, episodes=5)
+    config = build_config(
+        {}, "test", scenario="jam", planner__agent="mobil", seed=625100, episodes=5, highway__duration=15
+    )
     one = run(config, progress=False, snapshot=False)
     two = run(config, progress=False, jobs=2, snapshot=False)
     assert [e.outcome_row() for e in one.episodes] == [e.outcome_row() for e in two.episodes]

@@ -6,6 +6,7 @@ import json
 import resource
 import string
 
+import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -81,6 +82,13 @@ def test_any_override_loads_or_is_one_line(key, value):
     one_line_or_valid(
         lambda: build_config({}, "config", {key: f"--set {key}"}, **{key.replace(".", "__"): value})
     )
+
+
+def test_a_path_from_the_home_of_no_user_is_one_line():
+    """`~0` (the home of a user named 0) found by the property above: pathlib raised a RuntimeError."""
+    for key, value in (("planner__model", "~0"), ("planner__agent", "~0/agent.py:Agent")):
+        with pytest.raises(ConfigError, match="no home directory for its '~'"):
+            build_config({}, "config", **{key: value})
 
 
 @settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -89,7 +89,7 @@ def test_a_search_that_goes_on_from_the_last_one_rates_every_command_as_a_fresh_
     """The leaves the last search kept, played on for the time the root moved on: every decision's
     values are those of a search that keeps nothing."""
     config = build_config(
-        {**SHORT, "highway": {"duration": 14}, "planner": {"agent": "oracle", "oracle": {"horizon_s": 6}}},
+        {**SHORT, "highway": {"duration": 8}, "planner": {"agent": "oracle", "oracle": {"horizon_s": 6}}},
         scenario="overtaking",
     )
     keeping, fresh = build_agent(config, 0), build_agent(config, 0)

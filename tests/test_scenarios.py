@@ -184,7 +184,8 @@ def test_run_and_train_take_a_scenario_from_the_cli(tmp_path):
     )
     assert ran.exit_code == 0, ran.output
     assert json.loads((run_out / "summary.json").read_text())["scenario"] == "exit"
-    small = ["--envs", "1", "--set", "train.buffer_size=1000", "--set", "highway.duration=5"]
+    small = ["--envs", "1", "--set", "train.members=1", "--set", "train.buffer_size=1000"]
+    small += ["--set", "highway.duration=5"]
     small += ["--set", "train.validation.short_episodes=1", "--set", "train.validation.long_episodes=1"]
     small += ["--set", "train.demonstrations.episodes=2", "--set", "train.demonstrations.pretrain_steps=5"]
     trained = CliRunner().invoke(

@@ -77,4 +77,9 @@ class PlannerConfig(Strict):
     def _absolute_model(cls, model: Path | None) -> Path | None:
         """The file as an absolute path (as plug-in files are): a run's config.yaml names the same
         file from any directory."""
-        return None if model is None else model.expanduser().resolve()
+        if model is None:
+            return None
+        try:
+            return model.expanduser().resolve()
+        except RuntimeError:
+            raise ValueError(f"{str(model)[:120]!r}: no home directory for its '~'") from None
