@@ -185,16 +185,13 @@ def assign_greedy(
 ) -> np.ndarray:
     """(found,) the track each detection is assigned (-1: none), from the `pairs` gated candidates
     (track, detection, cost): the cheapest pair first, then the cheapest left whose track and
-    detection are both free (global nearest neighbour, greedy; ties to the earlier pair).
-
-    A pair whose track and detection are in no other pair is taken whatever the order (nothing
-    else can take either), so only the contested pairs are sorted: most tracks on a highway have
-    one candidate, which has no other.
-
-    Written by hand because the batch compiles it: scipy's `linear_sum_assignment` cannot run
-    inside numba. Inside the gate vehicles stand a car length apart and detections are metres
-    apart at most, so the nearest pair is almost always the optimal assignment's; the tests check
-    it against scipy's on such scenes."""
+    detection are both free (global nearest neighbour, greedy; ties to the earlier pair). A pair
+    whose track and detection are in no other pair is taken whatever the order, so only the
+    contested pairs are sorted (most tracks on a highway have one uncontested candidate). Written
+    by hand because the batch compiles it: scipy's `linear_sum_assignment` cannot run inside numba.
+    Inside the gate vehicles stand a car length apart and detections are metres apart at most, so
+    the nearest pair is almost always the optimal assignment's; the tests check it against scipy's
+    on such scenes."""
     track_pairs = np.zeros(tracks, dtype=np.int64)
     found_pairs = np.zeros(found, dtype=np.int64)
     for k in range(pairs):
@@ -225,10 +222,9 @@ def assign_greedy(
 
 @register_jitable
 def stable_order(values: np.ndarray, ordered: np.ndarray) -> np.ndarray:
-    """The indices that sort `values` ascending, equal values in their order (as numpy's
-    mergesort), and the sorted values into `ordered`. Insertion sort: a sensor reports the road's
-    vehicles nearly in order along it, a few swaps; past `len(values)` moves, or on a NaN (which
-    numpy sorts last), numpy's mergesort does it instead (the same order)."""
+    """The indices that sort `values` ascending, ties in their order (numpy's mergesort), the sorted
+    values into `ordered`: an insertion sort, as a sensor reports vehicles nearly in order along the
+    road; past `len(values)` moves or on a NaN, numpy's mergesort (the same order)."""
     n = len(values)
     order = np.arange(n)
     moves = 0

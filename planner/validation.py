@@ -33,7 +33,7 @@ class Score:
 
 
 @dataclass(frozen=True)
-class EpisodeScore:
+class ValidationEpisode:
     """One validation episode: the world it drew (`""` without a mix), whether the ego crashed,
     its return, and the ego's speed [m/s] after each decision."""
 
@@ -43,10 +43,10 @@ class EpisodeScore:
     speeds: list[float]
 
 
-def scored(episodes: Sequence[EpisodeScore]) -> Score:
+def scored(episodes: Sequence[ValidationEpisode]) -> Score:
     """The score of validation episodes, in episode order (means over every decision's speed, per
     world for the episodes that name one)."""
-    by_world: dict[str, list[EpisodeScore]] = {}
+    by_world: dict[str, list[ValidationEpisode]] = {}
     for episode in episodes:
         by_world.setdefault(episode.world, []).append(episode)
     worlds = {
@@ -61,7 +61,7 @@ def scored(episodes: Sequence[EpisodeScore]) -> Score:
     return Score(crashes / len(episodes), mean_return, mean_speed_of(episodes), worlds)
 
 
-def mean_speed_of(episodes: Sequence[EpisodeScore]) -> float:
+def mean_speed_of(episodes: Sequence[ValidationEpisode]) -> float:
     """The mean of every decision's speed [m/s] over `episodes` (NaN for none)."""
     speeds = [speed for episode in episodes for speed in episode.speeds]
     return float(np.mean(speeds)) if speeds else float("nan")
@@ -85,7 +85,7 @@ def validate(predict: Callable, env: gym.Env, episodes: int, seed: int) -> Score
             if "speed" in info:
                 speeds.append(info["speed"])
             done = terminated or truncated
-        played.append(EpisodeScore(world, bool(info.get("crashed", False)), total, speeds))
+        played.append(ValidationEpisode(world, bool(info.get("crashed", False)), total, speeds))
     return scored(played)
 
 

@@ -11,7 +11,7 @@ from collections.abc import Callable
 import numpy as np
 from gymnasium.utils import seeding
 
-from planner.validation import EpisodeScore, Score, scored
+from planner.validation import Score, ValidationEpisode, scored
 from records import child_seed
 from stack.runs.batch_episodes import BATCH_WORLDS, batches
 from stack.settings.run import RunConfig, training_worlds
@@ -39,12 +39,12 @@ class BatchedValidation:
 
     def measure(self, predict: Callable, episodes: int, seed: int) -> Score:
         seeds = [child_seed(seed, episode) for episode in range(episodes)]
-        played: list[EpisodeScore] = []
+        played: list[ValidationEpisode] = []
         for part in batches(seeds, 1, self.most):
             played += self.played(predict, part)
         return scored(played)
 
-    def played(self, predict: Callable, seeds: list[int]) -> list[EpisodeScore]:
+    def played(self, predict: Callable, seeds: list[int]) -> list[ValidationEpisode]:
         """The episodes of `seeds` (each as `env.reset(seed=...)` draws it) played to their end
         together, each world's commands from `predict` on its observation alone."""
         if (batch := self.built.get(len(seeds))) is None:
@@ -69,7 +69,7 @@ class BatchedValidation:
             crashed |= decided.terminated
             live &= ~(decided.terminated | decided.truncated)
         return [
-            EpisodeScore(self.world_names[members[k]], bool(crashed[k]), totals[k], speeds[k])
+            ValidationEpisode(self.world_names[members[k]], bool(crashed[k]), totals[k], speeds[k])
             for k in range(worlds)
         ]
 
