@@ -58,31 +58,6 @@ def road_to_leave(
 
 
 @register_jitable
-def passes_before_reached(
-    rel_s: float,
-    closing: float,
-    lengths: float,
-    towards: float,
-    speed: float,
-    heading_to_lane: float,
-    apart: float,
-    extent: float,
-    width: float,
-) -> bool:
-    """Whether the ego's rear passes the front of a vehicle `rel_s` [m] ahead, `closing` [m/s] slower
-    and `lengths` [m] (the two half lengths) long together, before that vehicle, at its `speed`
-    [m/s] and `heading_to_lane` [rad] towards the ego's side (`towards`: +-1), comes within the
-    side margin of the ego: `apart` [m] is its centre's distance to the ego's side less the margin,
-    `extent` [m] its turned footprint across the road, `width` [m] its width. Both keep their
-    speeds. Never while its turned footprint is already that close sideways."""
-    if apart - extent / 2 <= 0:
-        return False
-    return passes_before_it_closes_sideways(
-        rel_s, closing, lengths, towards, speed, heading_to_lane, apart, width
-    )
-
-
-@register_jitable
 def passes_before_it_closes_sideways(
     rel_s: float,
     closing: float,
@@ -93,9 +68,11 @@ def passes_before_it_closes_sideways(
     apart: float,
     width: float,
 ) -> bool:
-    """Whether the ego's rear passes the front of a vehicle (as `passes_before_reached` takes it)
-    before that vehicle, moving sideways towards the ego at its `speed` and `heading_to_lane`, comes
-    within the side margin: always when it does not move towards the ego."""
+    """Whether the ego's rear passes the front of a vehicle `rel_s` [m] ahead, `closing` [m/s] slower
+    and `lengths` [m] (the two half lengths) long together, before that vehicle, at its `speed`
+    [m/s] and `heading_to_lane` [rad] towards the ego's side (`towards`: +-1), comes within the
+    side margin of the ego: `apart` [m] is its centre's distance to the ego's side less the margin,
+    `width` [m] its width. Both keep their speeds; always when it does not move towards the ego."""
     clear_s = (rel_s + lengths) / closing
     lateral = towards * speed * math.sin(heading_to_lane)
     return lateral <= 0 or clear_s < (apart - width / 2) / lateral
@@ -112,10 +89,8 @@ def passes_sooner_than_falls_back(rel_s: float, closing: float, lengths: float) 
     `rel_s` < `lengths`, the two half lengths [m]) and `closing` [m/s] faster, is past it (its rear
     beyond the other's front, at constant speeds) sooner than braking at `FALL_BACK_MPS2` brings
     its front back behind the other's rear. Then braking for it would only hold the two side by
-    side for longer: the judgement `passes_before_reached` makes for a vehicle that may reach the
-    ego's side first, where a few centimetres of its position decide. The leaders take it only for
-    a vehicle that does not close in sideways first (`passes_before_it_closes_sideways`): one
-    turning into the ego's side is followed."""
+    side for longer. The leaders take it only for a vehicle that does not close in sideways first
+    (`passes_before_it_closes_sideways`): one turning into the ego's side is followed."""
     past_its_rear = lengths - rel_s
     if past_its_rear <= 0:
         return False
@@ -139,7 +114,8 @@ def leaders(
     none if nobody, and, while that one is leaving or entering the lane (centre more than
     `LEAVING_M` off the lane's centre), the next one ahead that it no longer hides, and so on: a
     cut-out reveals the car beyond at once. A slower vehicle entering the lane that the ego passes
-    before it reaches the ego's side (`passes_before_reached`), or that the ego is already beside
+    before it reaches the ego's side (`passes_before_it_closes_sideways`; its turned footprint not
+    yet within the side margin), or that the ego is already beside
     and passes sooner than it could fall back behind it (`passes_sooner_than_falls_back`), is not
     followed: braking for it would only keep the two side by side for longer. In `leaving_lane`
     (the lane a lane change is leaving; -1: none) a vehicle farther ahead than `LEAVE_SAFETY` times
@@ -218,15 +194,12 @@ def leaders_in_rows(
                 towards = math.copysign(1.0, d[0] - d[row])
                 apart = abs(d[row] - d[0]) - width[0] / 2 - SIDE_MARGIN_M
                 closing, lengths = speed[0] - speed[row], (length[0] + length[row]) / 2
-                if passes_before_reached(
-                    rel, closing, lengths, towards, speed[row], heading_to_lane[row], apart, extent[row],
-                    width[row],
-                ) or (
-                    passes_sooner_than_falls_back(rel, closing, lengths)
-                    and passes_before_it_closes_sideways(
-                        rel, closing, lengths, towards, speed[row], heading_to_lane[row], apart, width[row]
-                    )
-                ):  # fmt: skip
+                clear = passes_before_it_closes_sideways(
+                    rel, closing, lengths, towards, speed[row], heading_to_lane[row], apart, width[row]
+                )
+                if clear and (
+                    apart - extent[row] / 2 > 0 or passes_sooner_than_falls_back(rel, closing, lengths)
+                ):
                     continue
             position = m
             while position > 0 and s[candidates[position - 1]] - s[0] > rel:
