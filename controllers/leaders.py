@@ -245,7 +245,7 @@ def turning_back_in_rows(
     car weaving at a lane boundary close ahead, moving away, may turn back into the lane the ego
     is about to fill: the cruise keeps its time gap to it (the ego does not accelerate into the gap
     it leaves), but emergency braking waits until it does turn in (`leaders_in_rows` finds it then),
-    so every cut-out close ahead is not a full brake."""
+    so no cut-out close ahead is a full brake."""
     total = found
     close = speed[0] * cut_in_lookahead_s
     for row in range(1, n):
