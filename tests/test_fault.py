@@ -279,3 +279,17 @@ def test_a_contact_is_what_the_simulation_counts_a_crash(heading: float, meets: 
     d, turned = world.d.copy(), world.heading.copy()
     d[1], turned[1] = d[0] + world.width[0] / 2 + world.width[1] / 2 + 0.2, heading
     assert touches(replace(world, d=d, heading=turned), False, DT) == meets
+
+
+@pytest.mark.parametrize(("cutting_in", "at_fault"), [(False, True), (True, False)])
+def test_a_car_crossing_into_the_lane_the_ego_leaves_is_replayed(cutting_in: bool, at_fault: bool) -> None:
+    """The ego drifts out of its lane away from a car alongside in the next lane: when that car cuts
+    into the lane the ego is leaving and meets it, the contact is replayed (a careful driver could
+    not have braked out of it: not at fault); when the ego instead drifts towards a car alongside,
+    its lane change is at fault."""
+    beside = Actor(EGO_START_S, lane_centre(EGO_LANE + (1 if cutting_in else -1)), SPEED)
+    script = Moves((0.5, 0, EGO_LANE)) if cutting_in else Timed()
+    measured = drive([beside], script, steering=-0.002 if cutting_in else -0.03)
+    assert measured.collision_kind == "lane change"
+    assert measured.at_fault_collision == at_fault
+    assert measured.fault_reason == ("own lane change" if at_fault else "cut-in not preventable")

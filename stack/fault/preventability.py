@@ -4,7 +4,9 @@ unless a careful and competent driver in its place could not have avoided it eit
 - The ego's own lane change (the geometric `lane change` contact, or the ego's lane differing
   anywhere in the last `REPLAY_S` seconds, unless the collided vehicle's cut-in began only after
   the ego had settled in its new lane) and leaving the road stay at fault: no replay excuses a
-  maneuver the ego chose.
+  maneuver the ego chose. A vehicle that came at the ego from the side its change moved away from
+  (it crossed into the lane the ego was leaving) is no such maneuver's: that contact is replayed
+  (a side or rear contact as a side swipe: the ego was not keeping its lane).
 - Being hit from behind or standing (`rear`, `ego stopped`) while keeping its lane is the other's:
   the follower's recorded path answered the ego's own braking, so no replay can judge it.
 - Any other contact (front, stopped vehicle, side swipe) is replayed: R157's reference driver in
@@ -48,6 +50,9 @@ BEYOND_S = 8.0
 """How long after the contact's time the replay goes on, the others extrapolated [s]: a contact
 only just avoided at that time may still come (a follower still closing in on a reference driver
 that stands)."""
+TURNING_BACK_S = 1.0
+"""How far back the ego's recent sideways motion is read [s]: an ego that moved away from a vehicle
+over the replayed seconds but turned back towards it since (an aborted change) went to meet it."""
 FROM_BEHIND_KINDS = ("rear", "side swipe", "ego stopped")
 """Contact kinds where the other vehicle came into the ego: the replay counts every vehicle."""
 HIT_FROM_BEHIND_KINDS = ("rear", "ego stopped")
@@ -93,10 +98,13 @@ def judge(kind: str, other: int | None, history: Sequence[WorldState], dt: float
     crash = history[-1]
     situation = _situation(other, history, dt)
     changed = any(world.ego_lane != crash.ego_lane for world in history)
-    if kind == "lane change" or (
+    own_change = kind == "lane change" or (
         changed and not (situation == "cut-in" and _settled_before_cut_in(other, history))
-    ):
-        return Fault(True, "own lane change")
+    )
+    if own_change:
+        if not _came_from_the_side_left(other, history, dt):
+            return Fault(True, "own lane change")
+        kind = "side swipe" if kind in ("lane change", "rear") else kind
     if kind in HIT_FROM_BEHIND_KINDS:
         return Fault(False, f"{kind} not preventable")
     from_behind = kind in FROM_BEHIND_KINDS
@@ -123,6 +131,22 @@ def _settled_before_cut_in(other: int | None, history: Sequence[WorldState]) -> 
     return all(
         world.ego_lane == lane and in_wandering_zone(world, 0, lane) for world in list(history)[cut_from:]
     )
+
+
+def _came_from_the_side_left(other: int | None, history: Sequence[WorldState], dt: float) -> bool:
+    """Whether the vehicle of id `other` came at the ego from the side its lane change moved away
+    from: over `history` the ego's centre moved across the road one way (and did not turn back over
+    its last `TURNING_BACK_S`), and at the contact the other's centre lies the other way. Such a
+    vehicle crossed into the lane the ego was leaving: the ego's maneuver did not take it there, and
+    the contact is judged by the replay, as a side swipe."""
+    crash = history[-1]
+    rows = np.flatnonzero(crash.ids == other)
+    if not rows.size:
+        return False
+    recent = history[-min(len(history), round(TURNING_BACK_S / dt) + 1)]
+    side = float(crash.d[int(rows[0])] - crash.d[0])
+    moved, lately = float(crash.d[0] - history[0].d[0]), float(crash.d[0] - recent.d[0])
+    return moved * side < 0 and lately * side <= 0
 
 
 def _situation(other: int | None, history: Sequence[WorldState], dt: float) -> str:
