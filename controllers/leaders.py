@@ -107,6 +107,7 @@ def leaders(
     cut_in_lookahead_s: float = 0.0,
     leaving_lane: int = -1,
     leaving_within_m: float = math.inf,
+    beyond: int = -1,
 ) -> tuple[Neighbour, ...]:
     """For each lane in `lanes`, the closest vehicle ahead reaching into it, now or within
     `cut_in_lookahead_s` [s] at its present sideways speed (a car cutting in is a leader before it
@@ -123,10 +124,11 @@ def leaders(
     `controllers.reference.road_to_reach`) plus the stop margin is not followed: the ego is out of
     that lane before it gets there, and stopping for it would stall the change beside it (the
     profile's clock stops with the car). Then the cars that may turn back into a lane
-    (`turning_back_in_rows`), marked `may_turn_back`. `leaders_in_rows`, compiled, on the world's
+    (`turning_back_in_rows`) and, during a lane change, those beside the ego in the lane `beyond`
+    its target (`beside_beyond_in_rows`), marked `may_turn_back`. `leaders_in_rows`, compiled, on the world's
     rows."""
     n = world.count
-    found_most = n * (len(lanes) + 1)
+    found_most = n * (len(lanes) + 2)
     gaps, speeds, rows = np.empty(found_most), np.empty(found_most), np.empty(found_most, dtype=np.int64)
     reference = world.lanes[0]
     watched = np.array(lanes, dtype=np.int64)
@@ -140,6 +142,10 @@ def leaders(
     held = _turning_back_in_rows(
         watched, n, world.s, world.d, world.speed, heading_to_lane, world.length, extent,
         world.lane_offsets, world.lane_width, cut_in_lookahead_s, found, gaps, speeds, rows,
+    )  # fmt: skip
+    held = _beside_beyond_in_rows(
+        beyond, n, world.s, world.d, world.speed, world.length, world.lane_offsets, world.lane_width,
+        cut_in_lookahead_s, held, gaps, speeds, rows,
     )  # fmt: skip
     ids = world.ids
     return tuple(
@@ -272,3 +278,53 @@ def turning_back_in_rows(
 
 
 _turning_back_in_rows = njit(cache=True, nogil=True)(turning_back_in_rows)
+
+
+@register_jitable
+def beside_beyond_in_rows(
+    beyond: int,
+    n: int,
+    s: np.ndarray,
+    d: np.ndarray,
+    speed: np.ndarray,
+    length: np.ndarray,
+    offsets: np.ndarray,
+    lane_width: float,
+    cut_in_lookahead_s: float,
+    found: int,
+    gaps: np.ndarray,
+    speeds: np.ndarray,
+    rows: np.ndarray,
+) -> int:
+    """Appends to the `found` leaders (same arrays as `leaders_in_rows`) each vehicle in lane
+    `beyond`, the lane beyond the one a lane change heads for (-1: no change runs), that is ahead
+    of the ego (its centre ahead of the ego's) and beside it or reached within
+    `cut_in_lookahead_s` [s] at their present speeds, unless the ego passes it sooner than it could
+    fall back (`passes_sooner_than_falls_back`); returns the new count. Beside the ego it may take
+    the same lane at the same moment (a driver who does not see the ego turns into its side), so
+    the cruise keeps its time gap to it (the ego does not pace it while it changes lane) and
+    emergency braking waits until it does turn in, as for a car that may turn back."""
+    total = found
+    if beyond < 0:
+        return total
+    for row in range(1, n):
+        rel = s[row] - s[0]
+        if rel <= 0 or abs(d[row] - offsets[beyond]) > lane_width / 2:
+            continue
+        lengths = (length[row] + length[0]) / 2
+        closing = speed[0] - speed[row]
+        gap = rel - lengths
+        if gap >= max(closing, 0.0) * cut_in_lookahead_s:
+            continue
+        if closing > 0 and passes_sooner_than_falls_back(rel, closing, lengths):
+            continue
+        listed = False
+        for k in range(total):
+            listed = listed or rows[k] == row
+        if not listed:
+            gaps[total], speeds[total], rows[total] = gap, speed[row], row
+            total += 1
+    return total
+
+
+_beside_beyond_in_rows = njit(cache=True, nogil=True)(beside_beyond_in_rows)

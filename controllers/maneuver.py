@@ -40,6 +40,14 @@ def lane_change_target(lane: int, shift: int, lanes_count: int, speed: float, mi
 
 
 @register_jitable
+def lane_beyond(lane: int, target: int, lanes_count: int) -> int:
+    """The lane beyond `target` seen from `lane` (a change from `lane` to `target`), -1 when the
+    road has none."""
+    beyond = 2 * target - lane
+    return beyond if 0 <= beyond < lanes_count else -1
+
+
+@register_jitable
 def left_origin(d: float, origin_offset: float, lane_width: float) -> bool:
     """Whether the ego's centre at lateral offset `d` [m] has left the origin lane centred at
     `origin_offset` [m]: past it, a lane change is no longer aborted."""
@@ -134,8 +142,9 @@ class Maneuver:
         self.clock = self.clock.at_rate(world.time, self._rate(float(world.speed[0])))
         lanes = (self.target, *(lane for lane in occupied_lanes(world) if lane != self.target))
         heading_for = self.target if self.clock.profile_time(world.time) >= self.profile.t0 else self.lane
-        leaving_lane, leaving_within = -1, math.inf
+        leaving_lane, leaving_within, beyond = -1, math.inf, -1
         if self.changing_lane:
+            beyond = lane_beyond(self.lane, self.target, world.lanes_count)
             profile = self.profile
             leaving_lane, leaving_within = self.lane, road_to_leave(
                 tuple(profile.coefficients.tolist()), profile.t0, profile.duration, profile.d1,
@@ -143,7 +152,7 @@ class Maneuver:
                 float(world.lane_offsets[self.lane]), world.lane_width, float(world.width[0]),
                 float(world.speed[0]), math.tan(self.max_course),
             )  # fmt: skip
-        found = leaders(world, lanes, self.cut_in_lookahead_s, leaving_lane, leaving_within)
+        found = leaders(world, lanes, self.cut_in_lookahead_s, leaving_lane, leaving_within, beyond)
         return Reference.sampled(self.clock, world.time, self.set_speed, found, target_lane=heading_for)
 
     def _rate(self, speed: float) -> float:

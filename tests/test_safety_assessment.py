@@ -343,3 +343,32 @@ def test_a_car_between_lanes_close_ahead_is_the_cruise_s_leader_but_not_emergenc
     for leader, braked in ((stopped_behind_it, -5.0), (held, 0.0)):
         acted = EmergencyBraking(5.0, 3.0, 1.0).apply(Actuation(0.0, 0.0), 20.0, (leader,), DT)
         assert acted.acceleration == braked
+
+
+@pytest.mark.parametrize(
+    ("ahead_m", "speed", "beyond", "held_gap"),
+    [(3.0, 20.0, 3, LENGTH - 3.0), (3.0, 20.0, -1, None), (30.0, 20.0, 3, None), (4.5, 10.0, 3, None)],
+)
+def test_a_car_beside_the_ego_in_the_lane_beyond_its_target_is_the_cruise_s_leader(
+    ahead_m: float, speed: float, beyond: int, held_gap: float | None
+) -> None:
+    """During a change into lane 2, a car in lane 3 whose centre is `ahead_m` ahead of the ego's at
+    `speed` [m/s] (the ego at 20 m/s): beside the ego it may take lane 2 at the same moment, so the
+    cruise keeps its gap to it (gap negative: the two overlap) and emergency braking does not fire
+    for it; not without a change, not 30 m ahead, not a much slower car the ego is all but past."""
+    road = build(Point("cut-out", (20.0, 60.0, 2.0)), 4, "kinematic", DT)
+    world = road.reset()
+    mover = 1
+    s, d, speeds = world.s.copy(), world.d.copy(), world.speed.copy()
+    s[mover], d[mover], speeds[mover] = s[0] + ahead_m, safety_scenarios.lane_centre(3), speed
+    beside = dataclasses.replace(world, s=s, d=d, speed=speeds)
+    found = [
+        leader for leader in leaders(beside, (2,), 1.0, beyond=beyond) if leader.vehicle == world.ids[mover]
+    ]
+    if held_gap is None:
+        assert not found
+        return
+    (held,) = found
+    assert held.may_turn_back and held.gap == pytest.approx(-held_gap)
+    acted = EmergencyBraking(5.0, 3.0, 1.0).apply(Actuation(0.0, 0.0), 20.0, (held,), DT)
+    assert acted.acceleration == 0.0

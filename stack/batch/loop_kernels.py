@@ -24,8 +24,8 @@ from common.longitudinal import BrakingLimits, gap_acceleration, needs_full_brak
 from common.neighbours import VehicleRows, footprint_across, reaches_lane
 from controllers.emergency import braked_acceleration, holds_braking, leader_braking
 from controllers.lateral import LateralMemory, lateral_steering
-from controllers.leaders import leaders_in_rows, road_to_leave, turning_back_in_rows
-from controllers.maneuver import lane_change_target, left_origin
+from controllers.leaders import beside_beyond_in_rows, leaders_in_rows, road_to_leave, turning_back_in_rows
+from controllers.maneuver import lane_beyond, lane_change_target, left_origin
 from controllers.pid import PIDMemory, pid_output
 from controllers.reference import (
     WarpClock,
@@ -172,9 +172,9 @@ def control(
     lane, target, coef, profile, clock, counts = maneuver
     lateral, speed_pi, seen, seen_speed, seen_slowing, flags = controller
     vehicles, most_lanes = s.shape[1], offsets.shape[1]
-    gaps = np.empty((most_lanes + 1) * vehicles)
-    speeds = np.empty((most_lanes + 1) * vehicles)
-    rows = np.empty((most_lanes + 1) * vehicles, dtype=np.int64)
+    gaps = np.empty((most_lanes + 2) * vehicles)
+    speeds = np.empty((most_lanes + 2) * vehicles)
+    rows = np.empty((most_lanes + 2) * vehicles, dtype=np.int64)
     lanes = np.empty(most_lanes, dtype=np.int64)
     heading_to_lane = np.empty(vehicles)
     reach = (lane_width + extent) / 2
@@ -208,8 +208,9 @@ def control(
         d_ref, d_dot_ref, d_ddot_ref = _sample(w, coef, profile, clock, t)
         for row in range(n):
             heading_to_lane[row] = heading[w, row] - lane_heading[w]
-        leaving_lane, leaving_within = -1, math.inf
+        leaving_lane, leaving_within, beyond = -1, math.inf, -1
         if lane[w] != target[w]:
+            beyond = lane_beyond(lane[w], target[w], lanes_count[w])
             c = coef[w]
             leaving_lane, leaving_within = lane[w], road_to_leave(
                 (c[0], c[1], c[2], c[3], c[4], c[5]), profile[w, 0], profile[w, 1], profile[w, 2],
@@ -224,6 +225,10 @@ def control(
         held = turning_back_in_rows(
             lanes[:used], n, s[w], d[w], speed[w], heading_to_lane, length[w], extent[w], offsets[w],
             lane_width, settings.cut_in_lookahead_s, found, gaps, speeds, rows,
+        )  # fmt: skip
+        held = beside_beyond_in_rows(
+            beyond, n, s[w], d[w], speed[w], length[w], offsets[w], lane_width, settings.cut_in_lookahead_s,
+            held, gaps, speeds, rows,
         )  # fmt: skip
         for k in range(held):
             rows[k] = slots[w, rows[k]]
