@@ -37,9 +37,10 @@ class Neighbour:
     vehicle: int = -1
     """Which vehicle (its id in the world), so a tracker can follow it from tick to tick."""
     may_turn_back: bool = False
-    """A vehicle between lanes close ahead that is moving away from the lane but could turn back
-    into it: the cruise keeps its time gap to it, emergency braking does not fire for it
-    (`controllers.leaders.turning_back_in_rows`)."""
+    """A vehicle that may come into the lane the ego fills but has not yet: one between lanes close
+    ahead, moving away, that could turn back (`controllers.leaders.turning_back_in_rows`), or one
+    beside the ego in the lane beyond the target of its lane change (`beside_beyond_in_rows`). The
+    cruise keeps its time gap to it, emergency braking does not fire for it."""
 
 
 @dataclass(frozen=True)
