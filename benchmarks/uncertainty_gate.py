@@ -13,8 +13,9 @@ to collision with a leader drops below 1.5 s (`TTC_FLOOR_S`), emergency braking 
 collides (what the safety monitor measures on every tick). Not the planner's: the lookahead, on the
 same sensor reading, would take another command (a proxy for the oracle's verdict, which costs a
 search a decision; the lookahead is within about 0.5 m/s of the ddqn on every named scenario).
-The AUROCs are the no-gate arm's (the ensemble decides everything), for the members' standard
-deviation of Q(chosen) (what the gate reads) and for Hoel et al.'s coefficient of variation. Both
+The AUROCs are the no-gate arm's (the ensemble decides everything), for the measure the model
+file's threshold was calibrated for (what the gate reads, `planner.uncertainty.MEASURES`) and for
+Hoel et al.'s coefficient of variation of Q(chosen). Both
 arms run one world at a time (`ClosedLoop`), episode k of a probe with seed `--seed` + k.
 """
 
@@ -32,6 +33,7 @@ from scipy.stats import rankdata
 from planner.agents import decide
 from planner.factory import make_agent
 from planner.learned import LearnedAgent, load_agent
+from planner.uncertainty import gate_measure
 from stack.apps.gate import LoggedGate, calibrate, calibration_table
 from stack.apps.options import TRAIN_CONFIG
 from stack.loop.closed_loop import ClosedLoop
@@ -69,6 +71,8 @@ PROBES: dict[str, tuple[str, dict[str, object]]] = {
     ),
     "aggressive drivers": ("overtaking", {"highway.traffic.drivers": "aggressive"}),
     "mixed drivers": ("overtaking", {"highway.traffic.drivers": "mixed"}),
+    "distracted drivers": ("overtaking", {"highway.traffic.drivers": "distracted"}),
+    "blind drivers": ("overtaking", {"highway.traffic.drivers": "blind"}),
 }
 
 
@@ -100,7 +104,7 @@ def run_arm(
     )
     arm = Arm([], [], [], [], [], [])
     for episode in range(episodes):
-        gate = LoggedGate(learned, fallback, threshold, "lookahead")
+        gate = LoggedGate(learned, fallback, threshold, "lookahead", gate_measure(learned.metadata))
         loop = ClosedLoop(config, kept_adapter(config), grid=learned.grid_config)
         loop.reset(seed + episode)
         starts, marks, lookahead_says = [], [], []
@@ -134,7 +138,7 @@ def run_arm(
 def _badness(loop: ClosedLoop) -> tuple[float, int, bool]:
     """What grows when something bad happens: time below the TTC floor [s], emergency brakings,
     a collision."""
-    return (loop.monitor.time_below_ttc_floor_s, loop.emergency.activations, loop.crashed)
+    return (float(loop.monitor.kept.time_below_ttc_floor_s[0]), loop.emergency.activations, loop.crashed)
 
 
 def auroc(scores: list[float], labels: list[bool]) -> float | None:
@@ -176,15 +180,19 @@ def main() -> None:
     if threshold is None:
         raise SystemExit(f"{args.model}: no uncertainty_threshold; run drivestack gate-calibrate first")
     print(f"threshold {threshold:.4f} ({learned.metadata.uncertainty_calibration})")
+    print(f"measure {gate_measure(learned.metadata)}")
     if args.in_distribution:
-        found = calibrate(load_config(TRAIN_CONFIG), args.model, args.in_distribution, args.seed, 98.5)
+        measure = gate_measure(learned.metadata)
+        found = calibrate(
+            load_config(TRAIN_CONFIG), args.model, args.in_distribution, args.seed, 98.5, measure
+        )
         found.threshold = threshold
         everything = np.concatenate([np.array(values) for values in found.disagreements.values()])
         print(calibration_table(found))
         print(f"handed over: {np.mean(everything > threshold):.1%} of {everything.size} decisions")
         return
     print(
-        "probe | decisions | unsafe % | AUROC std / CV | not the lookahead's % | AUROC std / CV | "
+        "probe | decisions | unsafe % | AUROC measure / CV | not the lookahead's % | AUROC std / CV | "
         "handed over % | speed no gate / gate | crashes | AEB / ep | below TTC 1.5 s / ep"
     )
     rows = {}
