@@ -254,3 +254,11 @@ def test_calibrating_a_single_network_is_refused_in_one_line(tmp_path):
         app, ["gate-calibrate", "--model", str(SHIPPED_MODELS["dqn"]), "--out", str(tmp_path / "x.npz")]
     )
     assert result.exit_code == 2 and "needs an ensemble" in result.output and "Traceback" not in result.output
+
+
+def test_an_unknown_measure_is_refused_in_one_line(tmp_path):
+    result = CliRunner().invoke(
+        app, ["gate-calibrate", "--measure", "votes", "--out", str(tmp_path / "x.npz")]
+    )
+    assert result.exit_code == 2 and "--measure: expected one of advantage_ratio, std_q" in result.output
+    assert "Traceback" not in result.output and not (tmp_path / "x.npz").exists()
