@@ -22,6 +22,7 @@ import re
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -49,7 +50,7 @@ def badness(loop: ClosedLoop) -> np.ndarray:
 
 def record_world(
     config: RunConfig, learned: LearnedAgent, episodes: int, seed: int, horizon: float
-) -> dict[str, np.ndarray]:
+) -> dict[str, Any]:
     """Every decision of `episodes` ungated episodes of `config` (seeds `seed`...)."""
     fallback = make_agent(
         "lookahead", config.highway.lanes_count, grid_config(config), lookahead=lookahead_setup(config)
@@ -82,7 +83,7 @@ def record_world(
             after = next((bad for end, bad in marks if end >= start + horizon), marks[-1][1])
             kept["after"].append(after - before)
     after = np.array(kept.pop("after"))
-    arrays = {name: np.array(values) for name, values in kept.items()}
+    arrays: dict[str, Any] = {name: np.array(values) for name, values in kept.items()}
     arrays["ttc"] = after[:, 0] > 0
     arrays["braking"] = after[:, 1:-1].astype(np.int64)
     arrays["crashed"] = after[:, -1] > 0

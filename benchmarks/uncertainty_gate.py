@@ -26,6 +26,7 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.stats import rankdata
@@ -211,7 +212,7 @@ def main() -> None:
         plain = run_arm(config, learned, float("inf"), args.episodes, args.seed, args.horizon)
         gated = run_arm(config, learned, threshold, args.episodes, args.seed, args.horizon)
         either = [bad or other for bad, other in zip(plain.bad, plain.other, strict=True)]
-        row = {
+        row: dict[str, Any] = {
             "decisions": len(plain.bad),
             "bad_share": float(np.mean(plain.bad)),
             "auroc_std": auroc(plain.spread, plain.bad),
