@@ -111,6 +111,26 @@ def test_the_default_gate_hands_over_where_the_members_split_on_the_choice_not_o
     )[0])  # fmt: skip
 
 
+def test_the_gate_weighs_the_choice_against_the_permitted_commands_alone_batched_or_not():
+    # The members split on RIGHT, refused by the safety layer: STAY against LEFT is not in doubt.
+    metadata = ModelMetadata(
+        kind="mlp", algorithm="ddqn", encoding="observation", observation_size=SIZE + 3, hidden=(8,),
+        grid=GridConfig(), members=3, action_mask=True,
+    )  # fmt: skip
+    members = [[1.0, 5.0, 0.0], [1.0, 5.0, 9.0], [1.0, 5.0, 20.0]]
+    learned = LearnedAgent(MeanQNetwork([Constant(values) for values in members]), metadata)
+    agent = GatedAgent(learned, KeepLaneAgent(), threshold=0.5, fallback_name="keep-lane")
+    refused = np.concatenate([np.zeros(SIZE), [1.0, 1.0, 0.0]])
+    permitted = np.concatenate([np.zeros(SIZE), [1.0, 1.0, 1.0]])
+    kept = agent.gate(refused)
+    assert kept.actions.tolist() == [Command.STAY] and kept.disagreement[0] == 0.0 and not kept.handed.any()
+    handed = agent.gate(permitted)
+    assert handed.actions.tolist() == [Command.RIGHT] and bool(handed.handed[0])
+    both = agent.gate(np.stack([refused, permitted]))
+    assert both.handed.tolist() == [False, True]
+    np.testing.assert_allclose(both.disagreement, [kept.disagreement[0], handed.disagreement[0]])
+
+
 def test_a_threshold_is_read_by_the_measure_it_was_calibrated_for():
     grid = GridConfig()
     plain = ModelMetadata(kind="mlp", grid=grid)
