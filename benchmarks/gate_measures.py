@@ -56,6 +56,9 @@ MEASURES: dict[str, Callable[[Record], np.ndarray]] = {
         dissenting_share(r["q"], r["chosen"], r["permitted"])
         + 1e-3 * advantage_disagreement(r["q"], r["chosen"], r["permitted"])
     ),
+    "advantage ratio x std Q(chosen)": lambda r: (
+        advantage_ratio(r["q"], r["chosen"], r["permitted"]) * disagreement(r["q"], r["chosen"])
+    ),
 }
 
 
