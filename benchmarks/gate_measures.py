@@ -28,6 +28,7 @@ from planner.uncertainty import (  # noqa: E402
     advantage_disagreement,
     advantage_ratio,
     coefficient_of_variation,
+    compared_as_chosen,
     disagreement,
     dissenting_share,
 )
@@ -66,8 +67,7 @@ def load(path: Path) -> Record:
     """One world's recording, its members' Q-values (members, batch, 3) with the MOBIL prior's
     bonus (the same for every member) added, as the ensemble's choice compares them."""
     data = dict(np.load(path))
-    bonus = data["rated"] - data["member_q"].mean(axis=1)
-    data["q"] = np.transpose(data["member_q"], (1, 0, 2)) + bonus[None]
+    data["q"] = compared_as_chosen(np.transpose(data["member_q"], (1, 0, 2)), data["rated"])
     braking = data["braking"]
     data["unsafe"] = data["ttc"] | (braking.sum(axis=1) > 0) | data["crashed"]
     data["unsafe, ours"] = data["ttc"] | (braking[:, OURS].sum(axis=1) > 0) | data["crashed"]

@@ -50,7 +50,7 @@ def advantages(member_q: np.ndarray, chosen: np.ndarray, permitted: np.ndarray |
     """(members, batch) each member's advantage of each row's `chosen` command over the best other
     permitted one [Q-value]: Q(chosen) - max Q(other permitted); NaN where no other is permitted
     (`permitted` (batch, actions), 1 permitted; None: all are)."""
-    members, batch, actions = member_q.shape
+    _, batch, actions = member_q.shape
     rows = np.arange(batch)
     others = np.ones((batch, actions), dtype=bool) if permitted is None else np.asarray(permitted) > 0.5
     others = others.copy()
@@ -109,6 +109,13 @@ def gate_measure(metadata: ModelMetadata) -> str:
     return CALIBRATED_BEFORE_NAMES if metadata.uncertainty_threshold is not None else DEFAULT_MEASURE
 
 
+def compared_as_chosen(member_q: np.ndarray, rated: np.ndarray) -> np.ndarray:
+    """(members, batch, actions) each member's Q-values with the bonus the ensemble's choice added
+    to their mean (`rated` (batch, actions): the MOBIL prior's, the same for every member), so that
+    an advantage is the one the choice weighed."""
+    return member_q + (np.asarray(rated) - member_q.mean(axis=0))[None]
+
+
 def handed_over(spread: np.ndarray, threshold: float) -> np.ndarray:
     """Per decision, whether the fallback decides: its disagreement above `threshold`."""
     return np.asarray(spread, dtype=float) > threshold
@@ -157,7 +164,7 @@ class GatedAgent(Policy):
         permitted = None
         if self.learned.sees_permitted:
             permitted = np.asarray(observation).reshape(len(chosen), -1)[:, -N_ACTIONS:] >= 0.5
-        spread = self.measured(member_q, chosen, permitted)
+        spread = self.measured(compared_as_chosen(member_q, self.learned.last_rated[1]), chosen, permitted)
         return Gated(
             chosen, spread, coefficient_of_variation(member_q, chosen), handed_over(spread, self.threshold)
         )

@@ -24,6 +24,7 @@ from planner.uncertainty import (
     advantage_disagreement,
     advantage_ratio,
     coefficient_of_variation,
+    compared_as_chosen,
     disagreement,
     dissenting_share,
     gate_measure,
@@ -109,6 +110,15 @@ def test_the_default_gate_hands_over_where_the_members_split_on_the_choice_not_o
     assert handed.disagreement[0] == pytest.approx(advantage_ratio(
         np.array([[[10.0, 9.0, 0.0]], [[10.0, 11.0, 0.0]], [[10.0, 12.5, 0.0]]]), np.array([1])
     )[0])  # fmt: skip
+
+
+def test_the_advantage_is_the_one_the_choice_weighed_with_the_priors_bonus():
+    member_q = np.array([[[10.0, 9.0, 0.0]], [[10.0, 11.0, 0.0]], [[10.0, 12.0, 0.0]]])
+    rated = member_q.mean(axis=0) + np.array([[3.0, 0.0, 0.0]])  # a bonus for LEFT
+    compared = compared_as_chosen(member_q, rated)
+    np.testing.assert_allclose(compared, member_q + np.array([3.0, 0.0, 0.0]))
+    assert advantage_ratio(compared, np.array([0]))[0] == pytest.approx(np.std([1.0, -1.0, -2.0]) / (7 / 3))
+    assert disagreement(compared, np.array([0]))[0] == disagreement(member_q, np.array([0]))[0]
 
 
 def test_the_gate_weighs_the_choice_against_the_permitted_commands_alone_batched_or_not():
