@@ -13,9 +13,10 @@ to collision with a leader drops below 1.5 s (`TTC_FLOOR_S`), emergency braking 
 collides (what the safety monitor measures on every tick). Not the planner's: the lookahead, on the
 same sensor reading, would take another command (a proxy for the oracle's verdict, which costs a
 search a decision; the lookahead is within about 0.5 m/s of the ddqn on every named scenario).
-The AUROCs are the no-gate arm's (the ensemble decides everything), for the members' standard
-deviation of Q(chosen) (what the gate reads) and for Hoel et al.'s coefficient of variation. Both
-arms run one world at a time (`ClosedLoop`), episode k of a probe with seed `--seed` + k.
+Either: one or the other (the issue's bad outcome). The AUROCs are the no-gate arm's (the ensemble
+decides everything), for the measure the model file's threshold was calibrated for (what the gate
+reads, `planner.uncertainty.MEASURES`) and for Hoel et al.'s coefficient of variation of
+Q(chosen). Both arms run one world at a time (`ClosedLoop`), episode k of a probe with seed `--seed` + k.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.stats import rankdata
@@ -32,6 +34,7 @@ from scipy.stats import rankdata
 from planner.agents import decide
 from planner.factory import make_agent
 from planner.learned import LearnedAgent, load_agent
+from planner.uncertainty import gate_measure
 from stack.apps.gate import LoggedGate, calibrate, calibration_table
 from stack.apps.options import TRAIN_CONFIG
 from stack.loop.closed_loop import ClosedLoop
@@ -69,6 +72,8 @@ PROBES: dict[str, tuple[str, dict[str, object]]] = {
     ),
     "aggressive drivers": ("overtaking", {"highway.traffic.drivers": "aggressive"}),
     "mixed drivers": ("overtaking", {"highway.traffic.drivers": "mixed"}),
+    "distracted drivers": ("overtaking", {"highway.traffic.drivers": "distracted"}),
+    "blind drivers": ("overtaking", {"highway.traffic.drivers": "blind"}),
 }
 
 
@@ -100,7 +105,7 @@ def run_arm(
     )
     arm = Arm([], [], [], [], [], [])
     for episode in range(episodes):
-        gate = LoggedGate(learned, fallback, threshold, "lookahead")
+        gate = LoggedGate(learned, fallback, threshold, "lookahead", gate_measure(learned.metadata))
         loop = ClosedLoop(config, kept_adapter(config), grid=learned.grid_config)
         loop.reset(seed + episode)
         starts, marks, lookahead_says = [], [], []
@@ -134,7 +139,7 @@ def run_arm(
 def _badness(loop: ClosedLoop) -> tuple[float, int, bool]:
     """What grows when something bad happens: time below the TTC floor [s], emergency brakings,
     a collision."""
-    return (loop.monitor.time_below_ttc_floor_s, loop.emergency.activations, loop.crashed)
+    return (float(loop.monitor.kept.time_below_ttc_floor_s[0]), loop.emergency.activations, loop.crashed)
 
 
 def auroc(scores: list[float], labels: list[bool]) -> float | None:
@@ -150,6 +155,13 @@ def auroc(scores: list[float], labels: list[bool]) -> float | None:
 
 def mean_of(arm: Arm, key: str) -> float:
     return float(np.mean([episode[key] for episode in arm.episodes]))
+
+
+def paired_interval(gated: Arm, plain: Arm, key: str) -> tuple[float, float]:
+    """The 95 % interval (normal, paired by seed) of the gated arm's mean `key` minus the plain one's."""
+    differences = np.array([a[key] - b[key] for a, b in zip(gated.episodes, plain.episodes, strict=True)])
+    half = 1.96 * differences.std(ddof=1) / np.sqrt(differences.size) if differences.size > 1 else np.nan
+    return float(differences.mean() - half), float(differences.mean() + half)
 
 
 def main() -> None:
@@ -176,16 +188,21 @@ def main() -> None:
     if threshold is None:
         raise SystemExit(f"{args.model}: no uncertainty_threshold; run drivestack gate-calibrate first")
     print(f"threshold {threshold:.4f} ({learned.metadata.uncertainty_calibration})")
+    print(f"measure {gate_measure(learned.metadata)}")
     if args.in_distribution:
-        found = calibrate(load_config(TRAIN_CONFIG), args.model, args.in_distribution, args.seed, 98.5)
+        measure = gate_measure(learned.metadata)
+        found = calibrate(
+            load_config(TRAIN_CONFIG), args.model, args.in_distribution, args.seed, 98.5, measure
+        )
         found.threshold = threshold
         everything = np.concatenate([np.array(values) for values in found.disagreements.values()])
         print(calibration_table(found))
         print(f"handed over: {np.mean(everything > threshold):.1%} of {everything.size} decisions")
         return
     print(
-        "probe | decisions | unsafe % | AUROC std / CV | not the lookahead's % | AUROC std / CV | "
-        "handed over % | speed no gate / gate | crashes | AEB / ep | below TTC 1.5 s / ep"
+        "probe | decisions | unsafe % | AUROC measure / CV | not the lookahead's % | AUROC measure / CV | "
+        "either % | AUROC either | handed over % | speed no gate / gate [gate - no gate 95 %] | "
+        "crashes | AEB / ep | below TTC 1.5 s / ep | unsafe % no gate / gate"
     )
     rows = {}
     for name in args.probes.split(","):
@@ -194,7 +211,8 @@ def main() -> None:
         started = time.perf_counter()
         plain = run_arm(config, learned, float("inf"), args.episodes, args.seed, args.horizon)
         gated = run_arm(config, learned, threshold, args.episodes, args.seed, args.horizon)
-        row = {
+        either = [bad or other for bad, other in zip(plain.bad, plain.other, strict=True)]
+        row: dict[str, Any] = {
             "decisions": len(plain.bad),
             "bad_share": float(np.mean(plain.bad)),
             "auroc_std": auroc(plain.spread, plain.bad),
@@ -202,11 +220,14 @@ def main() -> None:
             "other_share": float(np.mean(plain.other)),
             "auroc_other_std": auroc(plain.spread, plain.other),
             "auroc_other_cv": auroc(plain.variation, plain.other),
+            "either_share": float(np.mean(either)),
+            "auroc_either": auroc(plain.spread, either),
             "handed_share": float(np.mean(gated.handed)),
             "would_hand_share": float(np.mean(np.array(plain.spread) > threshold)),
             **{f"{key}_no_gate": mean_of(plain, key) for key in plain.episodes[0]},
             **{f"{key}_gate": mean_of(gated, key) for key in gated.episodes[0]},
             "gate_bad_share": float(np.mean(gated.bad)),
+            "speed_difference_interval": paired_interval(gated, plain, "mean_speed"),
             "seconds": time.perf_counter() - started,
         }
         rows[name] = row
@@ -214,11 +235,14 @@ def main() -> None:
         print(
             f"{name} | {row['decisions']} | {100 * row['bad_share']:.1f} | {shown(row['auroc_std'])} / "
             f"{shown(row['auroc_cv'])} | {100 * row['other_share']:.1f} | {shown(row['auroc_other_std'])} / "
-            f"{shown(row['auroc_other_cv'])} | {100 * row['handed_share']:.1f} | "
-            f"{row['mean_speed_no_gate']:.2f} / {row['mean_speed_gate']:.2f} | "
+            f"{shown(row['auroc_other_cv'])} | {100 * row['either_share']:.1f} | "
+            f"{shown(row['auroc_either'])} | {100 * row['handed_share']:.1f} | "
+            f"{row['mean_speed_no_gate']:.2f} / {row['mean_speed_gate']:.2f} "
+            f"[{row['speed_difference_interval'][0]:+.2f}, {row['speed_difference_interval'][1]:+.2f}] | "
             f"{row['crashed_no_gate'] * args.episodes:.0f} / {row['crashed_gate'] * args.episodes:.0f} | "
             f"{row['emergency_brakings_no_gate']:.2f} / {row['emergency_brakings_gate']:.2f} | "
-            f"{row['below_ttc_floor_s_no_gate']:.2f} / {row['below_ttc_floor_s_gate']:.2f} s",
+            f"{row['below_ttc_floor_s_no_gate']:.2f} / {row['below_ttc_floor_s_gate']:.2f} s | "
+            f"{100 * row['bad_share']:.1f} / {100 * row['gate_bad_share']:.1f}",
             flush=True,
         )
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -13,7 +13,7 @@ from pydantic import ValidationError
 
 from planner.mobil import prior_problem
 from planner.model_file import ModelFileError, load_model
-from planner.model_metadata import MAX_CHANGE_MARGIN, ModelMetadata, whole_number
+from planner.model_metadata import GATE_MEASURES, MAX_CHANGE_MARGIN, ModelMetadata, whole_number
 from planner.networks import MAX_MEMBERS, ensemble_shapes, lane_network_shapes, lane_problem, mlp_shapes
 from records import ENCODINGS, MAX_LANES, N_ACTIONS, SEED_LIMIT, Encoding, GridConfig
 
@@ -100,6 +100,9 @@ def _check_metadata(path: Path | str, metadata: dict) -> None:
     threshold = metadata.get("uncertainty_threshold")
     if problem is None and threshold is not None and not _non_negative(threshold):
         problem = "uncertainty_threshold: expected a number >= 0"
+    measure = metadata.get("uncertainty_measure")
+    if problem is None and measure is not None and measure not in GATE_MEASURES:
+        problem = f"uncertainty_measure: expected one of {', '.join(GATE_MEASURES)}"
     margin = metadata.get("change_margin")
     if problem is None and margin is not None and not (_non_negative(margin) and margin <= MAX_CHANGE_MARGIN):
         problem = f"change_margin: expected a number in [0, {MAX_CHANGE_MARGIN:g}]"

@@ -15,6 +15,8 @@ ModelKind = Literal["mlp", "lane-mlp", "qtable"]
 MAX_CHANGE_MARGIN = 10.0
 """Largest change margin [Q-value] a run config or a model file may set: the shipped ensemble's
 Q-values span about 0-80, and its changes' advantages over STAY rarely exceed a few units."""
+GATE_MEASURES = ("advantage_ratio", "std_q")
+"""The names a model file's `uncertainty_measure` may give (`planner.uncertainty.MEASURES`)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -31,10 +33,11 @@ class ModelMetadata:
     that many Q-networks of these sizes deciding on their mean, `planner.learned.MeanQNetwork`;
     1: not written) are needed to use it (`planner.model_check` checks them), and an ensemble's
     `uncertainty_threshold` (the members' disagreement above which a fallback decides,
-    `planner.uncertainty`; with how it was calibrated, `uncertainty_calibration`: None when never
-    calibrated) to gate it, and its `change_margin` (the Q-value by which a lane change must beat
-    STAY, `planner.learned.LearnedAgent`; with how it was calibrated, `change_margin_calibration`:
-    None when never calibrated, and the agent then decides on its plain argmax) to decide; the rest
+    `planner.uncertainty`, by the measure `uncertainty_measure` names; with how it was calibrated,
+    `uncertainty_calibration`: None when never calibrated) to gate it, and its `change_margin`
+    (the Q-value by which a lane change must beat STAY, `planner.learned.LearnedAgent`; with how it
+    was calibrated, `change_margin_calibration`: None when never calibrated, and the agent then
+    decides on its plain argmax) to decide; the rest
     describes where it came from and is None (`member_seeds`: empty) in a file that does not say."""
 
     kind: ModelKind
@@ -55,6 +58,7 @@ class ModelMetadata:
     member_seeds: tuple[int, ...] = ()
     uncertainty_threshold: float | None = None
     uncertainty_calibration: str | None = None
+    uncertainty_measure: str | None = None
     change_margin: float | None = None
     change_margin_calibration: str | None = None
 
@@ -80,6 +84,7 @@ class ModelMetadata:
             "member_seeds": list(self.member_seeds) or None,
             "uncertainty_threshold": self.uncertainty_threshold,
             "uncertainty_calibration": self.uncertainty_calibration,
+            "uncertainty_measure": self.uncertainty_measure,
             "change_margin": self.change_margin,
             "change_margin_calibration": self.change_margin_calibration,
         }
@@ -109,6 +114,7 @@ class ModelMetadata:
             member_seeds=_member_seeds(data),
             uncertainty_threshold=_number(data.get("uncertainty_threshold")),
             uncertainty_calibration=_typed(data, "uncertainty_calibration", str),
+            uncertainty_measure=_typed(data, "uncertainty_measure", str),
             change_margin=_number(data.get("change_margin")),
             change_margin_calibration=_typed(data, "change_margin_calibration", str),
         )

@@ -227,11 +227,19 @@ def gate_calibrate(
         max=99.99,
         help="The threshold's percentile of in-distribution disagreement.",
     ),
+    measure: str = typer.Option(
+        "advantage_ratio",
+        "--measure",
+        help="The disagreement: advantage_ratio (members' std of the choice's advantage over its "
+        "mean) or std_q (members' std of Q(chosen)).",
+    ),
 ) -> None:
-    """Calibrate the uncertainty gate: the percentile of an ensemble's disagreement (its members'
-    std of Q(chosen)) over the worlds it trained on, written into a copy of its model file as
-    `uncertainty_threshold` (planner.uncertainty_threshold: null reads it)."""
+    """Calibrate the uncertainty gate: the percentile of an ensemble's disagreement (`--measure`)
+    over the worlds it trained on, written into a copy of its model file as
+    `uncertainty_threshold` and `uncertainty_measure` (planner.uncertainty_threshold: null reads
+    them)."""
     from planner.factory import SHIPPED_MODELS
+    from planner.model_metadata import GATE_MEASURES
     from stack.apps.folders import check_destination
     from stack.apps.gate import calibrate, calibration_table, write_threshold
     from stack.settings.run import ConfigError, load_config
@@ -239,7 +247,9 @@ def gate_calibrate(
     source = model or SHIPPED_MODELS["ddqn"]
     try:
         check_destination(out, "--out", "")
-        found = calibrate(load_config(config), source, episodes, seed, percentile)
+        if measure not in GATE_MEASURES:
+            fail(f"--measure: expected one of {', '.join(GATE_MEASURES)}, got {measure!r}")
+        found = calibrate(load_config(config), source, episodes, seed, percentile, measure)
         written = write_threshold(source, out, found)
     except (ValueError, ConfigError) as error:
         fail(str(error))

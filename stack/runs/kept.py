@@ -43,7 +43,8 @@ def build_agent(config: RunConfig, seed: int) -> Agent:
 def with_gate(agent: Agent, config: RunConfig, seed: int) -> Agent:
     """`agent` behind the uncertainty gate (`planner.uncertainty.GatedAgent`) when it is an
     ensemble, `planner.fallback` names an agent and a threshold is known (`planner.
-    uncertainty_threshold`, else the one calibrated into its model file); else `agent` itself."""
+    uncertainty_threshold`, else the one calibrated into its model file), by the measure its model
+    file names (`planner.uncertainty.gate_measure`); else `agent` itself."""
     from planner.learned import LearnedAgent
 
     planner = config.planner
@@ -54,12 +55,12 @@ def with_gate(agent: Agent, config: RunConfig, seed: int) -> Agent:
         threshold = agent.metadata.uncertainty_threshold
     if threshold is None:
         return agent
-    from planner.uncertainty import GatedAgent
+    from planner.uncertainty import GatedAgent, gate_measure
 
     setup = lookahead_setup(config) if planner.fallback == "lookahead" else None
     lanes = config.highway.lanes_count
     fallback = make_agent(planner.fallback, lanes, grid_config(config), seed, lookahead=setup)
-    return GatedAgent(agent, fallback, threshold, planner.fallback)
+    return GatedAgent(agent, fallback, threshold, planner.fallback, gate_measure(agent.metadata))
 
 
 def lookahead_setup(config: RunConfig) -> LookaheadSetup:

@@ -68,8 +68,10 @@ class PlannerConfig(Strict):
         None,
         ge=0,
         le=1e6,
-        description="[Q-value] the members' std above which the fallback decides; null: the one "
-        "calibrated into the model file (drivestack gate-calibrate), else no gate",
+        description="the members' disagreement above which the fallback decides, by the measure of "
+        "the model file's calibration (planner.uncertainty.gate_measure; advantage_ratio for a file "
+        "never calibrated); null: the one calibrated into the model file (drivestack "
+        "gate-calibrate), else no gate",
     )
 
     @field_validator("model")
