@@ -13,6 +13,14 @@ difference a world-frame (15 frames a decision) what tracking costs the batch, d
 so the machine's load hits them alike; figures are medians and ranges of `time.process_time`.
 `--digest`: a SHA-256 of every replayed report (what the tracker reports, bit for bit), to
 compare two versions of the law.
+
+    .venv/bin/python benchmarks/tracker_cost.py --per-world [--agent mobil] [--episodes 2]
+        [--duration 10] [--rounds 5]
+
+`--per-world`: one world at a time (`stack.runs.episodes.run_episode`, the vector backend), the
+same seeded episodes with the tracker on and off alternating, ms a frame of each, and the time
+inside `perception.tracking.Tracker.update` of the episodes on, a frame: the tracker's own share,
+which the machine's load does not blur as it blurs the difference of two whole runs.
 """
 
 from __future__ import annotations
@@ -29,7 +37,7 @@ from typing import Any
 import numpy as np
 from batched_decisions import batch_rate
 
-from perception.tracking import TrackerBatch, lane_velocity
+from perception.tracking import Tracker, TrackerBatch, lane_velocity
 from perception.tracking_kernels import track_worlds
 from perception.tracking_law import MeasuredWorlds
 from records.batch import WorldBatch
@@ -117,8 +125,54 @@ def replay(config: RunConfig, worlds: int, events: list[Event], law_only: bool, 
     return elapsed
 
 
-def _summary(values: list[float]) -> str:
-    return f"{statistics.median(values):.1f} ({min(values):.1f}-{max(values):.1f})"
+def _summary(values: list[float], digits: int = 1) -> str:
+    return f"{statistics.median(values):.{digits}f} ({min(values):.{digits}f} to {max(values):.{digits}f})"
+
+
+def per_world(scenario: str, agent: str, episodes: int, duration: float, rounds: int, seed: int) -> None:
+    """ms a frame of `episodes` seeded episodes run one world at a time with the tracker on and off
+    (alternating, the order reversed every other round), and of `Tracker.update` inside them."""
+    from stack.runs.episodes import run_episode
+
+    configs = {
+        mode: build_config(
+            {"planner": {"agent": agent}, "seed": seed, "perception": {"tracker": {"mode": mode}}},
+            scenario=scenario,
+            highway__duration=duration,
+        )
+        for mode in ("on", "off")
+    }
+    inside = [0.0]
+    update = Tracker.update
+
+    def timed_update(self: Tracker, detected: Any, dt: float) -> Any:
+        start = time.process_time()
+        tracked = update(self, detected, dt)
+        inside[0] += time.process_time() - start
+        return tracked
+
+    for config in configs.values():
+        run_episode(config, 0)  # imports, caches and the process's env warmed up
+    ms: dict[str, list[float]] = {"on": [], "off": [], "tracker": []}
+    Tracker.update = timed_update  # type: ignore[method-assign]
+    try:
+        for round_ in range(rounds):
+            for mode in ("on", "off") if round_ % 2 == 0 else ("off", "on"):
+                inside[0], frames, elapsed = 0.0, 0, 0.0
+                for episode in range(episodes):
+                    start = time.process_time()
+                    frames += run_episode(configs[mode], episode).steps
+                    elapsed += time.process_time() - start
+                ms[mode].append(1e3 * elapsed / frames)
+                if mode == "on":
+                    ms["tracker"].append(1e3 * inside[0] / frames)
+    finally:
+        Tracker.update = update  # type: ignore[method-assign]
+    ratios = [100 * (on / off - 1) for on, off in zip(ms["on"], ms["off"], strict=True)]
+    shares = [100 * inside / on for inside, on in zip(ms["tracker"], ms["on"], strict=True)]
+    print(f"load after {os.getloadavg()[0]:.1f}; ms a frame, median (range) of {rounds} rounds:")
+    print(f"on {_summary(ms['on'], 3)}, off {_summary(ms['off'], 3)}, on/off - 1 {_summary(ratios)} %")
+    print(f"Tracker.update {_summary(ms['tracker'], 4)} ms a frame, {_summary(shares)} % of a frame on")
 
 
 def main() -> None:
@@ -129,7 +183,16 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--seed", type=int, default=1028200)
     parser.add_argument("--digest", action="store_true", help="only the SHA-256 of every replayed report")
+    parser.add_argument("--per-world", action="store_true", help="one world at a time, on against off")
+    parser.add_argument("--agent", default="mobil", help="with --per-world")
+    parser.add_argument("--episodes", type=int, default=2, help="with --per-world")
+    parser.add_argument("--duration", type=float, default=10.0, help="episode length [s] with --per-world")
     args = parser.parse_args()
+    now = datetime.datetime.now(datetime.UTC)
+    if args.per_world:
+        print(f"{now:%Y-%m-%d %H:%M} UTC, load {os.getloadavg()[0]:.1f}, scenario {args.scenario}, one world")
+        per_world(args.scenario, args.agent, args.episodes, args.duration, args.rounds, args.seed)
+        return
     configs = {
         mode: build_config({"perception": {"tracker": {"mode": mode}}}, scenario=args.scenario)
         for mode in ("on", "off")
@@ -143,7 +206,6 @@ def main() -> None:
     frames = world_frames(TrackerBatch(configs["on"].perception.tracker, args.worlds), events)
     config = configs["on"]
     whole_frames = args.worlds * args.decisions * config.decision_ticks
-    now = datetime.datetime.now(datetime.UTC)
     print(
         f"{now:%Y-%m-%d %H:%M} UTC, load {os.getloadavg()[0]:.1f}, scenario {args.scenario}, "
         f"{args.worlds} worlds, {args.decisions} decisions, {frames} tracked world-frames"

@@ -384,8 +384,9 @@ def track_frame(
     pair_cost, at = _take(work_floats, at, room)
     contested_cost, at = _take(work_floats, at, room)
     contested_sorted, at = _take(work_floats, at, room)
-    state, covariance, status = tracks.state, tracks.covariance, tracks.status
+    state, covariance, status, size = tracks.state, tracks.covariance, tracks.status, tracks.size
     s, d, speed, lateral_speed = found.s, found.d, found.speed, found.lateral_speed
+    length, width = found.length, found.width
     live = 0
     for t in range(slots):
         if status[t] != FREE:
@@ -445,7 +446,7 @@ def track_frame(
             state[t, 2], state[t, 3], covariance[t, 3], covariance[t, 4], covariance[t, 5],
             d[j + 1], lateral_speed[j + 1], r, rv,
         )  # fmt: skip
-        tracks.size[t, 0], tracks.size[t, 1] = found.length[j + 1], found.width[j + 1]
+        size[t, 0], size[t, 1] = length[j + 1], width[j + 1]
     window = (1 << law.confirm_frames) - 1
     track_hits, age, misses = tracks.hits, tracks.age, tracks.misses
     for i in range(live):
@@ -484,7 +485,7 @@ def track_frame(
         status[slot] = CONFIRMED if law.confirm_hits <= 1 else TENTATIVE
         tracks.ident[slot] = tracks.next_ident[0]
         tracks.next_ident[0] += 1
-        tracks.size[slot, 0], tracks.size[slot, 1] = found.length[j], found.width[j]
+        size[slot, 0], size[slot, 1] = length[j], width[j]
 
 
 @register_jitable
