@@ -37,6 +37,7 @@ from perception.tracking_law import (
     MeasuredWorlds,
     TrackerLaw,
     Tracks,
+    work_size,
 )
 from records import WorldState
 from records.batch import WorldBatch
@@ -139,6 +140,24 @@ def _floats(values: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(values, dtype=np.float64)
 
 
+class TrackerWork:
+    """The law's work buffers (`perception.tracking_law.work_size`), kept across frames and grown
+    when a frame has more detections than any before, so a frame allocates none."""
+
+    def __init__(self, slots: int) -> None:
+        self.slots, self.detections = slots, -1
+        self.integers, self.floats = np.empty(0, dtype=np.int64), np.empty(0)
+
+    def fit(self, detections: int) -> TrackerWork:
+        """Room for `detections` detections (rows past the ego)."""
+        detections = max(detections, 0)
+        if detections > self.detections:
+            self.detections = detections
+            integers, floats = work_size(self.slots, detections)
+            self.integers, self.floats = np.empty(integers, dtype=np.int64), np.empty(floats)
+        return self
+
+
 class Tracker:
     """One world's tracker: `warm_up(observe)` at an episode's start, then `update(detected, dt)`
     every frame."""
@@ -147,6 +166,7 @@ class Tracker:
         self.config, self.law = config, config.law
         self.position_variance = position_variance(sensor)
         self.tracks = empty_tracks(config.max_tracks)
+        self.work = TrackerWork(config.max_tracks)
         self.columns = config.max_tracks + 1
         """Rows a tracked world can have: the ego and every track."""
 
@@ -166,12 +186,13 @@ class Tracker:
         columns = self.columns
         floats = np.empty(WORLD_FLOATS * columns)
         integers = np.empty(WORLD_INTEGERS * columns, dtype=np.int64)
+        work = self.work.fit(detected.count - 1)
         count = track_world(
             *self.law, *self.tracks,
             detected.count, detected.s, detected.d, along, across, detected.length, detected.width,
             self.position_variance, dt, detected.lane_offsets, detected.lanes_count, float(lane_heading),
             detected.ids, detected.lane, detected.position, detected.velocity, detected.heading,
-            detected.speed, floats, integers,
+            detected.speed, floats, integers, work.integers, work.floats,
         )  # fmt: skip
         rows = count + 1
         pairs = floats[: 4 * columns].reshape(2, columns, 2)
@@ -223,6 +244,7 @@ class TrackerBatch:
         self.lanes = np.zeros((worlds, slots), dtype=np.int64)
         self.rows = np.zeros((worlds, slots, ROW_FIELDS))
         self.counts = np.zeros(worlds, dtype=np.int64)
+        self.work = TrackerWork(slots)
 
     def reset_world(self, world: int, sensor: SensorConfig) -> None:
         """World `world`'s episode seen through `sensor`: its tracks cleared."""
@@ -239,9 +261,11 @@ class TrackerBatch:
         flagged = np.asarray(worlds, dtype=bool) & self.tracked
         along, across = lane_velocity(sensed.speed, sensed.heading, sensed.lane_heading[:, None])
         found = MeasuredWorlds(sensed.count, sensed.s, sensed.d, along, across, sensed.length, sensed.width)
+        work = self.work.fit(sensed.s.shape[1] - 1)
         track_worlds(
             self.law, self.tracks, found, self.position_variance, dt, flagged, sensed.lane_offsets,
             sensed.lanes_count, _floats(sensed.lane_heading), self.slots, self.lanes, self.rows, self.counts,
+            work.integers, work.floats,
         )  # fmt: skip
         return self._report(sensed)
 

@@ -71,13 +71,16 @@ def track_world(
     ego_speed: np.ndarray,
     floats_out: np.ndarray,
     integers_out: np.ndarray,
+    work_integers: np.ndarray,
+    work_floats: np.ndarray,
 ) -> int:  # pragma: no cover - compiled; covered through perception.tracking.Tracker
     """`track_frame` on one world (the fields of `TrackerLaw`, `Tracks` and `Measured`, in order),
     then its tracked world into `floats_out` and `integers_out` (`WORLD_FLOATS` and
     `WORLD_INTEGERS` blocks of `columns` = len(floats_out) // WORLD_FLOATS): row 0 the ego
     (row 0 of `ego_*`, the detected world's ids, lane, position, velocity, heading, speed, and of
     `s`, `d`, `length`, `width`), then the confirmed tracks in slot order (`confirmed_tracks`,
-    `tracked_rows`). Returns how many tracks are confirmed."""
+    `tracked_rows`), the frame's work in `work_integers` and `work_floats` (`work_size`). Returns
+    how many tracks are confirmed."""
     law = TrackerLaw(
         confirm_hits,
         confirm_frames,
@@ -88,7 +91,8 @@ def track_world(
         speed_variance,
     )
     tracks = Tracks(state, covariance, hits, age, misses, status, ident, size, next_ident)
-    track_frame(law, tracks, Measured(rows, s, d, speed, lateral_speed, length, width), position_variance, dt)
+    found = Measured(rows, s, d, speed, lateral_speed, length, width)
+    track_frame(law, tracks, found, position_variance, dt, work_integers, work_floats)
     slots = np.empty(len(status), dtype=np.int64)
     lanes = np.empty(len(status), dtype=np.int64)
     count = confirmed_tracks(tracks, lane_offsets, lanes_count, slots, lanes)
@@ -140,9 +144,12 @@ def track_worlds(
     lane_out: np.ndarray,
     rows_out: np.ndarray,
     counts_out: np.ndarray,
+    work_integers: np.ndarray,
+    work_floats: np.ndarray,
 ) -> None:  # pragma: no cover - compiled; covered through perception.tracking.TrackerBatch
     """`track_world` on each world flagged in `worlds` (its rows of `tracks` and `found`, the
-    arrays' first axis the world's); its confirmed tracks' count into `counts_out`."""
+    arrays' first axis the world's); its confirmed tracks' count into `counts_out`. The worlds
+    share the work buffers (`work_size` for the widest), one after the other."""
     for w in range(len(worlds)):
         if not worlds[w]:
             continue
@@ -166,7 +173,7 @@ def track_worlds(
             found.length[w],
             found.width[w],
         )
-        _track_frame(law, one, measured, position_variance[w], dt)
+        _track_frame(law, one, measured, position_variance[w], dt, work_integers, work_floats)
         counts_out[w] = _confirmed_tracks(one, lane_offsets[w], lanes_count[w], slots_out[w], lane_out[w])
         _tracked_rows(one, slots_out[w], counts_out[w], lane_heading[w], rows_out[w])
 

@@ -8,15 +8,17 @@ Each track is two constant-velocity Kalman filters in the reference lane's frame
 (s [m], ds/dt [m/s]) and across it (d [m], dd/dt [m/s]), each measured by a detection's position
 and its reported velocity in that direction (a radar's range rate, a camera's heading), the
 velocity's noise `speed_variance`. A frame: every live track is predicted `dt` ahead; each
-(track, detection) pair (the detections sorted along the road, so each track checks only those
-within its gate's reach) whose Mahalanobis distance (4 degrees of freedom) is within the gate is a
-candidate; candidates are assigned greedily, nearest first, confirmed tracks before tentative
-ones (`assign_greedy`, `TENTATIVE_RANK`); assigned tracks are updated, the others coast; a track
+(track, detection) pair (the detections sorted along the road and bucketed, so each track finds
+those within its gate's reach in a step or two and checks only them) whose Mahalanobis distance
+(4 degrees of freedom) is within the gate is a candidate; candidates are assigned greedily,
+nearest first, confirmed tracks before tentative ones (`assign_greedy`, `TENTATIVE_RANK`);
+assigned tracks are updated, the others coast; a track
 is confirmed once `confirm_hits` of its last `confirm_frames` frames had a detection, a
 tentative one is dropped once it can no longer reach that, a confirmed one after `coast_frames`
 frames running without one; a track confirmed over another confirmed track's vehicle settles
 which of the two goes (`settle_twin`); detections left over start tentative tracks in the lowest
-free slots."""
+free slots. The frame allocates nothing: its working arrays are slices of two flat buffers the
+caller keeps (`work_size`), so a world costs the same every frame."""
 
 from __future__ import annotations
 
@@ -105,73 +107,58 @@ class Measured(NamedTuple):
 
 
 @register_jitable
-def predict(state: np.ndarray, covariance: np.ndarray, law: TrackerLaw, dt: float) -> None:
-    """One track's state and covariance `dt` [s] ahead under constant velocity, with white-noise
-    acceleration (the discrete Wiener model) in each direction."""
-    state[0] += dt * state[1]
-    state[2] += dt * state[3]
-    _predict_block(covariance, 0, law.longitudinal_acceleration, dt)
-    _predict_block(covariance, 3, law.lateral_acceleration, dt)
-
-
-@register_jitable
-def _predict_block(covariance: np.ndarray, at: int, acceleration: float, dt: float) -> None:
-    """The 2 x 2 block of `covariance` from `at` [position, velocity] `dt` [s] ahead, with white
-    noise `acceleration` [m/s^2] (std)."""
+def predict_block(
+    position: float, velocity: float, pxx: float, pxv: float, pvv: float, acceleration: float, dt: float
+) -> tuple[float, float, float, float]:
+    """One direction of a track `dt` [s] ahead under constant velocity, with white-noise
+    `acceleration` [m/s^2] (std; the discrete Wiener model): its position [m] and its covariance
+    block [[pxx, pxv], [pxv, pvv]] (the velocity is unchanged). The laws take and return numbers,
+    not a track's rows: a row is an array view whose references numba counts, a cost per call."""
     q = acceleration * acceleration
-    pxx, pxv, pvv = covariance[at], covariance[at + 1], covariance[at + 2]
-    covariance[at] = pxx + 2 * dt * pxv + dt * dt * pvv + q * dt * dt * dt * dt / 4
-    covariance[at + 1] = pxv + dt * pvv + q * dt * dt * dt / 2
-    covariance[at + 2] = pvv + q * dt * dt
+    return (
+        position + dt * velocity,
+        pxx + 2 * dt * pxv + dt * dt * pvv + q * dt * dt * dt * dt / 4,
+        pxv + dt * pvv + q * dt * dt * dt / 2,
+        pvv + q * dt * dt,
+    )
 
 
 @register_jitable
-def block_distance(
-    state: np.ndarray, covariance: np.ndarray, at: int, position: float, velocity: float, r: float, rv: float
-) -> float:
-    """Squared Mahalanobis distance in one direction (the state's and covariance's block from
-    `at`) of a measured `position` [m] and `velocity` [m/s], variances `r` [m^2] and `rv` [m^2/s^2]."""
-    a, b, c = covariance[at] + r, covariance[at + 1], covariance[at + 2] + rv
-    yx, yv = position - state[at // 3 * 2], velocity - state[at // 3 * 2 + 1]
-    return (c * yx * yx - 2 * b * yx * yv + a * yv * yv) / (a * c - b * b)
+def block_distance(a: float, b: float, c: float, det: float, yx: float, yv: float) -> float:
+    """Squared Mahalanobis distance in one direction of the position and velocity residuals `yx`
+    [m], `yv` [m/s] under the innovation covariance [[a, b], [b, c]], determinant `det` (a c - b^2,
+    the same for every detection a track is gated against)."""
+    return (c * yx * yx - 2 * b * yx * yv + a * yv * yv) / det
 
 
 @register_jitable
 def block_update(
-    state: np.ndarray, covariance: np.ndarray, at: int, position: float, velocity: float, r: float, rv: float
-) -> None:
-    """One direction's Kalman update (the covariance block from `at`) by a measured `position` [m]
-    and `velocity` [m/s]."""
-    x = at // 3 * 2
-    pxx, pxv, pvv = covariance[at], covariance[at + 1], covariance[at + 2]
+    position: float,
+    velocity: float,
+    pxx: float,
+    pxv: float,
+    pvv: float,
+    measured_position: float,
+    measured_velocity: float,
+    r: float,
+    rv: float,
+) -> tuple[float, float, float, float, float]:
+    """One direction's Kalman update of a track's `position` [m], `velocity` [m/s] and covariance
+    block [[pxx, pxv], [pxv, pvv]] by a measured position and velocity, variances `r` [m^2] and
+    `rv` [m^2/s^2]: the updated position, velocity, pxx, pxv and pvv."""
     a, b, c = pxx + r, pxv, pvv + rv
     det = a * c - b * b
     ia, ib, ic = c / det, -b / det, a / det
     k00, k01 = pxx * ia + pxv * ib, pxx * ib + pxv * ic
     k10, k11 = pxv * ia + pvv * ib, pxv * ib + pvv * ic
-    yx, yv = position - state[x], velocity - state[x + 1]
-    state[x] += k00 * yx + k01 * yv
-    state[x + 1] += k10 * yx + k11 * yv
-    covariance[at] = (1 - k00) * pxx - k01 * pxv
-    covariance[at + 1] = (1 - k00) * pxv - k01 * pvv
-    covariance[at + 2] = -k10 * pxv + (1 - k11) * pvv
-
-
-@register_jitable
-def distance(
-    state: np.ndarray, covariance: np.ndarray, found: Measured, j: int, r: float, rv: float
-) -> float:
-    """Squared Mahalanobis distance of detection `j` of `found` from a track, its positions' variance
-    `r` [m^2], its velocities' `rv` [m^2/s^2]."""
-    along = block_distance(state, covariance, 0, found.s[j], found.speed[j], r, rv)
-    return along + block_distance(state, covariance, 3, found.d[j], found.lateral_speed[j], r, rv)
-
-
-@register_jitable
-def update(state: np.ndarray, covariance: np.ndarray, found: Measured, j: int, r: float, rv: float) -> None:
-    """One track's Kalman update by detection `j` of `found`."""
-    block_update(state, covariance, 0, found.s[j], found.speed[j], r, rv)
-    block_update(state, covariance, 3, found.d[j], found.lateral_speed[j], r, rv)
+    yx, yv = measured_position - position, measured_velocity - velocity
+    return (
+        position + (k00 * yx + k01 * yv),
+        velocity + (k10 * yx + k11 * yv),
+        (1 - k00) * pxx - k01 * pxv,
+        (1 - k00) * pxv - k01 * pvv,
+        -k10 * pxv + (1 - k11) * pvv,
+    )
 
 
 @register_jitable
@@ -184,22 +171,46 @@ def assign_greedy(
     found: int,
 ) -> np.ndarray:
     """(found,) the track each detection is assigned (-1: none), from the `pairs` gated candidates
-    (track, detection, cost): the cheapest pair first, then the cheapest left whose track and
-    detection are both free (global nearest neighbour, greedy; ties to the earlier pair). A pair
-    whose track and detection are in no other pair is taken whatever the order, so only the
-    contested pairs are sorted (most tracks on a highway have one uncontested candidate). Written
-    by hand because the batch compiles it: scipy's `linear_sum_assignment` cannot run inside numba.
-    Inside the gate vehicles stand a car length apart and detections are metres apart at most, so
-    the nearest pair is almost always the optimal assignment's; the tests check it against scipy's
-    on such scenes."""
-    track_pairs = np.zeros(tracks, dtype=np.int64)
-    found_pairs = np.zeros(found, dtype=np.int64)
+    (track, detection, cost): `assign_greedy_into` on fresh buffers."""
+    assigned = np.empty(found, dtype=np.int64)
+    assign_greedy_into(
+        pair_track, pair_found, pair_cost, pairs, np.empty(tracks, dtype=np.int64),
+        np.empty(found, dtype=np.int64), assigned, np.empty(pairs, dtype=np.int64), np.empty(pairs),
+        np.empty(pairs), np.empty(pairs, dtype=np.int64),
+    )  # fmt: skip
+    return assigned
+
+
+@register_jitable
+def assign_greedy_into(
+    pair_track: np.ndarray,
+    pair_found: np.ndarray,
+    pair_cost: np.ndarray,
+    pairs: int,
+    track_pairs: np.ndarray,
+    found_pairs: np.ndarray,
+    assigned: np.ndarray,
+    contested: np.ndarray,
+    contested_cost: np.ndarray,
+    contested_sorted: np.ndarray,
+    contested_order: np.ndarray,
+) -> None:
+    """The track each detection is assigned (-1: none) into `assigned` (one element a detection),
+    from the `pairs` gated candidates (track, detection, cost): the cheapest pair first, then the
+    cheapest left whose track and detection are both free (global nearest neighbour, greedy; ties
+    to the earlier pair). A pair whose track and detection are in no other pair is taken whatever
+    the order, so only the contested pairs are sorted (most tracks on a highway have one
+    uncontested candidate). `track_pairs` (one element a track), `found_pairs` (a detection) and
+    the `contested*` buffers (a pair) are work space. Written by hand because the batch compiles
+    it: scipy's `linear_sum_assignment` cannot run inside numba. Inside the gate vehicles stand a
+    car length apart and detections are metres apart at most, so the nearest pair is almost
+    always the optimal assignment's; the tests check it against scipy's on such scenes."""
+    track_pairs[:] = 0
+    found_pairs[:] = 0
     for k in range(pairs):
         track_pairs[pair_track[k]] += 1
         found_pairs[pair_found[k]] += 1
-    assigned = np.full(found, -1, dtype=np.int64)
-    contested = np.empty(pairs, dtype=np.int64)
-    contested_cost = np.empty(pairs)
+    assigned[:] = -1
     count = 0
     for k in range(pairs):
         t, j = pair_track[k], pair_found[k]
@@ -208,25 +219,26 @@ def assign_greedy(
         else:
             contested[count], contested_cost[count] = k, pair_cost[k]
             count += 1
-    order = np.argsort(contested_cost[:count], kind="mergesort")
-    track_taken = track_pairs == 0
+    order = stable_order(contested_cost[:count], contested_sorted, contested_order)
     for i in order:
         k = contested[i]
         t, j = pair_track[k], pair_found[k]
-        if track_taken[t] or assigned[j] >= 0:
+        if track_pairs[t] < 0 or assigned[j] >= 0:
             continue
-        track_taken[t] = True
+        track_pairs[t] = -1
         assigned[j] = t
-    return assigned
 
 
 @register_jitable
-def stable_order(values: np.ndarray, ordered: np.ndarray) -> np.ndarray:
-    """The indices that sort `values` ascending, ties in their order (numpy's mergesort), the sorted
-    values into `ordered`: an insertion sort, as a sensor reports vehicles nearly in order along the
-    road; past `len(values)` moves or on a NaN, numpy's mergesort (the same order)."""
+def stable_order(values: np.ndarray, ordered: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """The indices that sort `values` ascending, ties in their order (numpy's mergesort), into
+    `order` (returned: its first `len(values)`), the sorted values into `ordered`: an insertion
+    sort, as a sensor reports vehicles nearly in order along the road; past `len(values)` moves or
+    on a NaN, numpy's mergesort (the same order)."""
     n = len(values)
-    order = np.arange(n)
+    order = order[:n]
+    for i in range(n):
+        order[i] = i
     moves = 0
     for i in range(n):
         value, k = values[i], i
@@ -236,7 +248,7 @@ def stable_order(values: np.ndarray, ordered: np.ndarray) -> np.ndarray:
             moves += 1
         ordered[k], order[k] = value, i
         if moves > n or value != value:
-            order = np.argsort(values, kind="mergesort")
+            order[:] = np.argsort(values, kind="mergesort")
             for m in range(n):
                 ordered[m] = values[order[m]]
             return order
@@ -278,88 +290,202 @@ def _popcount(bits: int) -> int:
 
 
 @register_jitable
+def work_size(slots: int, detections: int) -> tuple[int, int]:
+    """Elements of the integer and the float work buffer `track_frame` takes for `slots` track
+    slots and `detections` detections (rows past the ego)."""
+    pairs = slots * detections
+    return 4 * detections + 1 + 3 * slots + 4 * pairs, detections + 3 * pairs
+
+
+@register_jitable
+def _take(buffer: np.ndarray, at: int, size: int) -> tuple[np.ndarray, int]:
+    """`size` elements of `buffer` from `at`, and where the next part starts."""
+    return buffer[at : at + size], at + size
+
+
+@register_jitable
+def bucket(value: float, low: float, high: float, scale: float, buckets: int) -> int:
+    """The bucket of `value` [m] among `buckets` over [`low`, `high`] (`scale` = buckets / (high -
+    low)): the same or a higher one for a higher value, 0 below `low`, the last above `high`."""
+    if not value > low:
+        return 0
+    if not value < high:
+        return buckets - 1
+    return int(min((value - low) * scale, buckets - 1))
+
+
+@register_jitable
+def fill_buckets(ordered: np.ndarray, finite: int, starts: np.ndarray) -> tuple[float, float, float]:
+    """Bucket the first `finite` values of `ordered` (ascending): `finite` buckets over their span,
+    `starts[b]` the first index whose bucket is b or higher (`starts[finite]` = `finite`). Returns
+    (low, high, scale) for `bucket`."""
+    if finite == 0:
+        starts[0] = 0
+        return 0.0, 0.0, 0.0
+    low, high = ordered[0], ordered[finite - 1]
+    scale = finite / (high - low) if high > low else 0.0
+    k = 0
+    for b in range(finite + 1):
+        while k < finite and bucket(ordered[k], low, high, scale, finite) < b:
+            k += 1
+        starts[b] = k
+    return low, high, scale
+
+
+@register_jitable
+def first_at_least(
+    ordered: np.ndarray, finite: int, starts: np.ndarray, low: float, high: float, scale: float, value: float
+) -> int:
+    """The first index of the bucketed `ordered` (`fill_buckets`: `starts`, `low`, `high`,
+    `scale`) whose value is not below `value` (`finite` if none, or if `value` is NaN): numpy's
+    `searchsorted(side="left")` over the first `finite` values, from `value`'s bucket on (every
+    value of a lower bucket is below it)."""
+    if value != value or finite == 0:
+        return finite
+    k = starts[bucket(value, low, high, scale, finite)]
+    while k < finite and ordered[k] < value:
+        k += 1
+    return k
+
+
+@register_jitable
 def track_frame(
-    law: TrackerLaw, tracks: Tracks, found: Measured, position_variance: float, dt: float
+    law: TrackerLaw,
+    tracks: Tracks,
+    found: Measured,
+    position_variance: float,
+    dt: float,
+    work_integers: np.ndarray,
+    work_floats: np.ndarray,
 ) -> None:
     """One frame of one world's tracker (see the module): predict every live track `dt` [s] ahead,
     gate, assign, update or coast, confirm or delete, and start tracks for the detections left,
-    the detections' positions `position_variance` [m^2] noisy."""
+    the detections' positions `position_variance` [m^2] noisy. The work buffers hold at least
+    `work_size` elements (fresh ones are taken if not)."""
     slots = len(tracks.status)
     r, rv = position_variance, law.speed_variance
+    detections = max(found.rows - 1, 0)
+    integers, floats = work_size(slots, detections)
+    if len(work_integers) < integers or len(work_floats) < floats:
+        work_integers, work_floats = np.empty(integers, dtype=np.int64), np.empty(floats)
+    room = slots * detections
+    order, at = _take(work_integers, 0, detections)
+    starts, at = _take(work_integers, at, detections + 1)
+    track_pairs, at = _take(work_integers, at, slots)
+    hit, at = _take(work_integers, at, slots)
+    live_slots, at = _take(work_integers, at, slots)
+    found_pairs, at = _take(work_integers, at, detections)
+    assigned, at = _take(work_integers, at, detections)
+    pair_track, at = _take(work_integers, at, room)
+    pair_found, at = _take(work_integers, at, room)
+    contested, at = _take(work_integers, at, room)
+    contested_order, at = _take(work_integers, at, room)
+    ordered, at = _take(work_floats, 0, detections)
+    pair_cost, at = _take(work_floats, at, room)
+    contested_cost, at = _take(work_floats, at, room)
+    contested_sorted, at = _take(work_floats, at, room)
+    state, covariance, status, size = tracks.state, tracks.covariance, tracks.status, tracks.size
+    s, d, speed, lateral_speed = found.s, found.d, found.speed, found.lateral_speed
+    length, width = found.length, found.width
     live = 0
     for t in range(slots):
-        if tracks.status[t] != FREE:
-            predict(tracks.state[t], tracks.covariance[t], law, dt)
+        if status[t] != FREE:
+            state[t, 0], covariance[t, 0], covariance[t, 1], covariance[t, 2] = predict_block(
+                state[t, 0], state[t, 1], covariance[t, 0], covariance[t, 1], covariance[t, 2],
+                law.longitudinal_acceleration, dt,
+            )  # fmt: skip
+            state[t, 2], covariance[t, 3], covariance[t, 4], covariance[t, 5] = predict_block(
+                state[t, 2], state[t, 3], covariance[t, 3], covariance[t, 4], covariance[t, 5],
+                law.lateral_acceleration, dt,
+            )  # fmt: skip
+            live_slots[live] = t
             live += 1
-    detections = max(found.rows - 1, 0)
-    pair_track = np.empty(live * detections, dtype=np.int64)
-    pair_found = np.empty(live * detections, dtype=np.int64)
-    pair_cost = np.empty(live * detections)
     pairs = 0
-    ordered = np.empty(detections)
-    order = stable_order(found.s[1 : detections + 1], ordered)
-    for t in range(slots):
-        if tracks.status[t] == FREE:
-            continue
-        state, covariance = tracks.state[t], tracks.covariance[t]
-        reach_s = law.gate * (covariance[0] + r)
-        reach_d = law.gate * (covariance[3] + r)
+    order = stable_order(s[1 : detections + 1], ordered, order)
+    finite = detections
+    while finite > 0 and ordered[finite - 1] != ordered[finite - 1]:
+        finite -= 1
+    low, high, scale = fill_buckets(ordered, finite, starts)
+    for i in range(live):
+        t = live_slots[i]
+        a_s, b_s, c_s = covariance[t, 0] + r, covariance[t, 1], covariance[t, 2] + rv
+        a_d, b_d, c_d = covariance[t, 3] + r, covariance[t, 4], covariance[t, 5] + rv
+        det_s, det_d = a_s * c_s - b_s * b_s, a_d * c_d - b_d * b_d
+        reach_s, reach_d = law.gate * a_s, law.gate * a_d
         half = np.sqrt(reach_s) + GATE_WINDOW_MARGIN_M
-        first = np.searchsorted(ordered, state[0] - half, side="left")
-        last = np.searchsorted(ordered, state[0] + half, side="right")
-        for k in range(first, last):
-            j = order[k]
-            ds, dd = found.s[j + 1] - state[0], found.d[j + 1] - state[2]
+        k = first_at_least(ordered, finite, starts, low, high, scale, state[t, 0] - half)
+        end = state[t, 0] + half
+        while k < finite and ordered[k] <= end:
+            j = order[k] + 1
+            k += 1
+            ds, dd = s[j] - state[t, 0], d[j] - state[t, 2]
             if ds * ds > reach_s or dd * dd > reach_d:
                 continue
-            cost = distance(state, covariance, found, j + 1, r, rv)
+            cost = block_distance(a_s, b_s, c_s, det_s, ds, speed[j] - state[t, 1])
+            cost += block_distance(a_d, b_d, c_d, det_d, dd, lateral_speed[j] - state[t, 3])
             if cost <= law.gate:
-                if tracks.status[t] == TENTATIVE:
+                if status[t] == TENTATIVE:
                     cost += law.gate + TENTATIVE_RANK
-                pair_track[pairs], pair_found[pairs], pair_cost[pairs] = t, j, cost
+                pair_track[pairs], pair_found[pairs], pair_cost[pairs] = t, j - 1, cost
                 pairs += 1
-    assigned = assign_greedy(pair_track, pair_found, pair_cost, pairs, slots, detections)
-    hit = np.zeros(slots, dtype=np.bool_)
+    assign_greedy_into(
+        pair_track, pair_found, pair_cost, pairs, track_pairs, found_pairs, assigned, contested,
+        contested_cost, contested_sorted, contested_order,
+    )  # fmt: skip
+    hit[:] = 0
     for j in range(detections):
         t = assigned[j]
-        if t >= 0:
-            hit[t] = True
-            update(tracks.state[t], tracks.covariance[t], found, j + 1, r, rv)
-            tracks.size[t, 0], tracks.size[t, 1] = found.length[j + 1], found.width[j + 1]
+        if t < 0:
+            continue
+        hit[t] = 1
+        state[t, 0], state[t, 1], covariance[t, 0], covariance[t, 1], covariance[t, 2] = block_update(
+            state[t, 0], state[t, 1], covariance[t, 0], covariance[t, 1], covariance[t, 2],
+            s[j + 1], speed[j + 1], r, rv,
+        )  # fmt: skip
+        state[t, 2], state[t, 3], covariance[t, 3], covariance[t, 4], covariance[t, 5] = block_update(
+            state[t, 2], state[t, 3], covariance[t, 3], covariance[t, 4], covariance[t, 5],
+            d[j + 1], lateral_speed[j + 1], r, rv,
+        )  # fmt: skip
+        size[t, 0], size[t, 1] = length[j + 1], width[j + 1]
     window = (1 << law.confirm_frames) - 1
-    for t in range(slots):
-        if tracks.status[t] == FREE:
+    track_hits, age, misses = tracks.hits, tracks.age, tracks.misses
+    for i in range(live):
+        t = live_slots[i]
+        if status[t] == FREE:
             continue
-        tracks.hits[t] = ((tracks.hits[t] << 1) | (1 if hit[t] else 0)) & window
-        tracks.misses[t] = 0 if hit[t] else tracks.misses[t] + 1
-        tracks.age[t] = min(tracks.age[t] + 1, law.confirm_frames)
-        hits = _popcount(tracks.hits[t])
-        if tracks.status[t] == TENTATIVE:
+        track_hits[t] = ((track_hits[t] << 1) | hit[t]) & window
+        misses[t] = 0 if hit[t] else misses[t] + 1
+        age[t] = min(age[t] + 1, law.confirm_frames)
+        hits = _popcount(track_hits[t])
+        if status[t] == TENTATIVE:
             if hits >= law.confirm_hits:
-                tracks.status[t] = CONFIRMED
+                status[t] = CONFIRMED
                 settle_twin(tracks, t, hit)
-            elif hits + law.confirm_frames - tracks.age[t] < law.confirm_hits:
-                tracks.status[t] = FREE
-        elif tracks.misses[t] >= law.coast_frames:
-            tracks.status[t] = FREE
+            elif hits + law.confirm_frames - age[t] < law.confirm_hits:
+                status[t] = FREE
+        elif misses[t] >= law.coast_frames:
+            status[t] = FREE
     slot = 0
-    for j in range(detections):
-        if assigned[j] >= 0:
+    for j in range(1, detections + 1):
+        if assigned[j - 1] >= 0:
             continue
-        while slot < slots and tracks.status[slot] != FREE:
+        while slot < slots and status[slot] != FREE:
             slot += 1
         if slot == slots:
             break
-        tracks.state[slot, 0], tracks.state[slot, 1] = found.s[j + 1], found.speed[j + 1]
-        tracks.state[slot, 2], tracks.state[slot, 3] = found.d[j + 1], found.lateral_speed[j + 1]
-        covariance = tracks.covariance[slot]
-        covariance[0], covariance[1], covariance[2] = r, 0.0, rv
-        covariance[3], covariance[4], covariance[5] = r, 0.0, rv
-        tracks.hits[slot], tracks.age[slot], tracks.misses[slot] = 1, 1, 0
-        tracks.status[slot] = CONFIRMED if law.confirm_hits <= 1 else TENTATIVE
+        state[slot, 0], state[slot, 1], state[slot, 2], state[slot, 3] = (
+            s[j],
+            speed[j],
+            d[j],
+            lateral_speed[j],
+        )
+        covariance[slot, 0], covariance[slot, 1], covariance[slot, 2] = r, 0.0, rv
+        covariance[slot, 3], covariance[slot, 4], covariance[slot, 5] = r, 0.0, rv
+        track_hits[slot], age[slot], misses[slot] = 1, 1, 0
+        status[slot] = CONFIRMED if law.confirm_hits <= 1 else TENTATIVE
         tracks.ident[slot] = tracks.next_ident[0]
         tracks.next_ident[0] += 1
-        tracks.size[slot, 0], tracks.size[slot, 1] = found.length[j + 1], found.width[j + 1]
+        size[slot, 0], size[slot, 1] = length[j], width[j]
 
 
 @register_jitable
@@ -370,12 +496,13 @@ def confirmed_tracks(
     whose centre (`lane_offsets` of `lanes_count` lanes [m]) is nearest each one's d into
     `lane_out` (the lower lane on a tie)."""
     count = 0
-    for t in range(len(tracks.status)):
-        if tracks.status[t] != CONFIRMED:
+    status, state = tracks.status, tracks.state
+    for t in range(len(status)):
+        if status[t] != CONFIRMED:
             continue
         nearest, lane = np.inf, 0
         for k in range(lanes_count):
-            off = abs(tracks.state[t, 2] - lane_offsets[k])
+            off = abs(state[t, 2] - lane_offsets[k])
             if off < nearest:
                 nearest, lane = off, k
         slots_out[count], lane_out[count] = t, lane
@@ -390,11 +517,12 @@ def tracked_rows(
     """The rows (`ROW_FIELDS`) of the `count` tracks in `slots` into `rows_out`: filtered position
     and velocity, speed and heading from the velocity (the lane's heading at the ego
     `lane_heading` [rad] plus the velocity's angle to it), size of the last detection."""
+    state, size = tracks.state, tracks.size
     for k in range(count):
         t = slots[k]
-        along, across = tracks.state[t, 1], tracks.state[t, 3]
-        rows_out[k, 0], rows_out[k, 1] = tracks.state[t, 0], tracks.state[t, 2]
+        along, across = state[t, 1], state[t, 3]
+        rows_out[k, 0], rows_out[k, 1] = state[t, 0], state[t, 2]
         rows_out[k, 2], rows_out[k, 3] = along, across
         rows_out[k, 4] = math.hypot(along, across)
         rows_out[k, 5] = lane_heading + math.atan2(across, along)
-        rows_out[k, 6], rows_out[k, 7] = tracks.size[t, 0], tracks.size[t, 1]
+        rows_out[k, 6], rows_out[k, 7] = size[t, 0], size[t, 1]

@@ -17,6 +17,8 @@ from perception.tracking_law import (
     FREE,
     TENTATIVE,
     assign_greedy,
+    fill_buckets,
+    first_at_least,
     stable_order,
 )
 from records import WorldState
@@ -48,7 +50,8 @@ class OneWorld:
                 *self.law, *self.tracks, len(rows), s, d, speed, across, *sizes, self.variance, dt,
                 LANES, 3, 0.0, ego[0], ego[0], ego[1], ego[1], ego[2], ego[2],
                 np.empty(WORLD_FLOATS * self.columns),
-                np.empty(WORLD_INTEGERS * self.columns, dtype=np.int64),
+                np.empty(WORLD_INTEGERS * self.columns, dtype=np.int64), np.empty(0, dtype=np.int64),
+                np.empty(0),
             )
         )  # fmt: skip
 
@@ -229,10 +232,35 @@ def test_greedy_assignment_taking_uncontested_pairs_first_is_the_greedy_over_eve
 def test_the_detections_order_along_the_road_is_numpy_s_stable_sort(values: np.ndarray) -> None:
     """Nearly sorted (insertion), shuffled or reversed (numpy's mergesort past n moves), ties, NaN."""
     ordered = np.empty(len(values))
-    order = stable_order(values, ordered)
+    order = stable_order(values, ordered, np.empty(len(values), dtype=np.int64))
     expected = np.argsort(values, kind="mergesort")
     np.testing.assert_array_equal(order, expected)
     np.testing.assert_array_equal(ordered, values[expected])
+
+
+@pytest.mark.parametrize("seed", range(1028900, 1028920))
+def test_the_bucketed_gate_window_is_numpy_s_searchsorted(seed: int) -> None:
+    """Each track's window along the road (`first_at_least` over the bucketed detections, the end
+    by stepping on) is the one numpy's `searchsorted` gives, on sorted detections with ties, NaNs
+    at the end, and queries below, inside and above them or infinite."""
+    rng = np.random.default_rng(seed)
+    values = np.sort(np.round(rng.uniform(-50, 400, int(rng.integers(0, 40))), int(rng.integers(0, 3))))
+    if seed % 3 == 0:
+        values = np.concatenate([values, np.full(int(rng.integers(1, 4)), np.nan)])
+    finite = int(np.isfinite(values).sum())
+    starts = np.empty(len(values) + 1, dtype=np.int64)
+    low, high, scale = fill_buckets(values, finite, starts)
+    queries = [*rng.uniform(-80, 450, 200), *values[:finite], -np.inf, np.inf]
+    for start in queries:
+        for half in (0.0, float(rng.uniform(0, 10)), np.inf):
+            first = first_at_least(values, finite, starts, low, high, scale, start - half)
+            last = first
+            while last < finite and values[last] <= start + half:
+                last += 1
+            if np.isnan(start - half) or np.isnan(start + half):
+                continue  # a NaN track: no detection passes its gate either way
+            assert first == np.searchsorted(values, start - half, side="left")
+            assert last == np.searchsorted(values, start + half, side="right")
 
 
 class StraightLane:
