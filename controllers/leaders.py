@@ -5,6 +5,7 @@ and, during a lane change, the target lane (the maneuver hands them to the contr
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -14,6 +15,27 @@ from common.longitudinal import STOP_MARGIN_M
 from common.neighbours import WANDERING_M, lateral_extent, swept_distance
 from controllers.reference import road_to_reach
 from records import Neighbour, WorldState
+
+
+class LeaderRows(NamedTuple):
+    """One world's `vehicles` as the leaders' laws read them, a row each, row 0 the ego: centres `s`
+    and `d` [m] in lane 0's frame, `speed` [m/s], heading to the lane at its position,
+    `heading_to_lane` [rad], `length` and `width` [m], turned footprint across the road, `extent`
+    [m] (`common.neighbours.lateral_extent`; the ego's never read); lane k's centre at
+    `lane_offsets[k]`, each lane `lane_width` [m] wide. Made once a tick, by `leaders` for one world
+    and by the batch's control kernel for each of its worlds."""
+
+    vehicles: int
+    s: np.ndarray
+    d: np.ndarray
+    speed: np.ndarray
+    heading_to_lane: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+    extent: np.ndarray
+    lane_offsets: np.ndarray
+    lane_width: float
+
 
 LEAVING_M = 1.0
 """A leader whose centre is farther than this from the lane's centre is leaving (or entering) the
@@ -125,8 +147,8 @@ def leaders(
     that lane before it gets there, and stopping for it would stall the change beside it (the
     profile's clock stops with the car). Then the cars that may turn back into a lane
     (`turning_back_in_rows`) and, during a lane change, those beside the ego in the lane `beyond`
-    its target (`beside_beyond_in_rows`), marked `may_turn_back`. `leaders_in_rows`, compiled, on the world's
-    rows."""
+    its target (`beside_beyond_in_rows`), marked `may_turn_back`. `leaders_in_rows`, compiled, on
+    the world's `LeaderRows`."""
     n = world.count
     found_most = n * (len(lanes) + 2)
     gaps, speeds, rows = np.empty(found_most), np.empty(found_most), np.empty(found_most, dtype=np.int64)
@@ -134,19 +156,13 @@ def leaders(
     watched = np.array(lanes, dtype=np.int64)
     heading_to_lane = world.heading - np.array([reference.heading_at(s) for s in world.s.tolist()])
     extent = np.concatenate(((0.0,), lateral_extent(world)))
-    found = _leaders_in_rows(
-        watched, n, world.s, world.d, world.speed, heading_to_lane, world.length, world.width, extent,
-        world.lane_offsets, world.lane_width, cut_in_lookahead_s, leaving_lane, leaving_within_m,
-        gaps, speeds, rows,
+    rows_of_world = LeaderRows(
+        n, world.s, world.d, world.speed, heading_to_lane, world.length, world.width, extent,
+        world.lane_offsets, world.lane_width,
     )  # fmt: skip
-    held = _turning_back_in_rows(
-        watched, n, world.s, world.d, world.speed, heading_to_lane, world.length, extent,
-        world.lane_offsets, world.lane_width, cut_in_lookahead_s, found, gaps, speeds, rows,
-    )  # fmt: skip
-    held = _beside_beyond_in_rows(
-        beyond, n, world.s, world.d, world.speed, world.length, world.lane_offsets, world.lane_width,
-        cut_in_lookahead_s, held, gaps, speeds, rows,
-    )  # fmt: skip
+    found, held = _leaders_in_rows(
+        rows_of_world, watched, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, gaps, speeds, rows
+    )
     ids = world.ids
     return tuple(
         Neighbour(gap, speed, int(ids[row]), k >= found)
@@ -158,53 +174,48 @@ def leaders(
 
 @register_jitable
 def leaders_in_rows(
+    world: LeaderRows,
     lanes: np.ndarray,
-    n: int,
-    s: np.ndarray,
-    d: np.ndarray,
-    speed: np.ndarray,
-    heading_to_lane: np.ndarray,
-    length: np.ndarray,
-    width: np.ndarray,
-    extent: np.ndarray,
-    offsets: np.ndarray,
-    lane_width: float,
     cut_in_lookahead_s: float,
     leaving_lane: int,
     leaving_within_m: float,
+    beyond: int,
     gaps: np.ndarray,
     speeds: np.ndarray,
     rows: np.ndarray,
-) -> int:
-    """`leaders(world, lanes)` of one world's `n` vehicles as rows of arrays (row 0 the ego;
-    `heading_to_lane`: each one's heading to the lane at its position [rad]; `extent`: its turned
-    footprint across the road [m]; `cut_in_lookahead_s` [s]: how far ahead its sideways motion,
-    speed times the sine of `heading_to_lane`, counts; `leaving_lane`, `leaving_within_m` as
-    `leaders` takes them): writes each leader's gap [m], speed [m/s] and row in order and returns
-    how many."""
+) -> tuple[int, int]:
+    """`leaders(world, lanes)` of one world's rows (`cut_in_lookahead_s` [s]: how far ahead a
+    vehicle's sideways motion, speed times the sine of its `heading_to_lane`, counts;
+    `leaving_lane`, `leaving_within_m`, `beyond` as `leaders` takes them): writes each leader's gap
+    [m], speed [m/s] and row in order, then those of the cars that may turn back
+    (`turning_back_in_rows`) or are beside the ego in the lane beyond (`beside_beyond_in_rows`), and
+    returns (how many leaders, how many in all): the cruise keeps its gap to all, emergency braking
+    reads the leaders only."""
+    s, d, speed, length, offsets = world.s, world.d, world.speed, world.length, world.lane_offsets
     found = 0
-    candidates = np.empty(n, dtype=np.int64)
+    candidates = np.empty(world.vehicles, dtype=np.int64)
     for lane in lanes:
         m = 0
-        for row in range(1, n):
+        for row in range(1, world.vehicles):
             rel = s[row] - s[0]
             offset = abs(d[row] - offsets[lane])
-            drift = speed[row] * math.sin(heading_to_lane[row]) * cut_in_lookahead_s
+            drift = speed[row] * math.sin(world.heading_to_lane[row]) * cut_in_lookahead_s
             across = swept_distance(d[row], drift, offsets[lane])
-            if not (across < (lane_width + extent[row]) / 2 and rel > 0):
+            if not (across < (world.lane_width + world.extent[row]) / 2 and rel > 0):
                 continue
             gap = rel - (length[row] + length[0]) / 2
             if lane == leaving_lane and gap > LEAVE_SAFETY * leaving_within_m + STOP_MARGIN_M:
                 continue
             if offset > LEAVING_M and speed[row] < speed[0]:
                 towards = math.copysign(1.0, d[0] - d[row])
-                apart = abs(d[row] - d[0]) - width[0] / 2 - SIDE_MARGIN_M
+                apart = abs(d[row] - d[0]) - world.width[0] / 2 - SIDE_MARGIN_M
                 closing, lengths = speed[0] - speed[row], (length[0] + length[row]) / 2
                 clear = passes_before_it_closes_sideways(
-                    rel, closing, lengths, towards, speed[row], heading_to_lane[row], apart, width[row]
-                )
+                    rel, closing, lengths, towards, speed[row], world.heading_to_lane[row], apart,
+                    world.width[row],
+                )  # fmt: skip
                 if clear and (
-                    apart - extent[row] / 2 > 0 or passes_sooner_than_falls_back(rel, closing, lengths)
+                    apart - world.extent[row] / 2 > 0 or passes_sooner_than_falls_back(rel, closing, lengths)
                 ):
                     continue
             position = m
@@ -220,24 +231,14 @@ def leaders_in_rows(
             found += 1
             if abs(d[row] - offsets[lane]) <= LEAVING_M:
                 break
-    return found
-
-
-_leaders_in_rows = njit(cache=True, nogil=True)(leaders_in_rows)
+    held = turning_back_in_rows(world, lanes, cut_in_lookahead_s, found, gaps, speeds, rows)
+    return found, beside_beyond_in_rows(world, beyond, cut_in_lookahead_s, held, gaps, speeds, rows)
 
 
 @register_jitable
 def turning_back_in_rows(
+    world: LeaderRows,
     lanes: np.ndarray,
-    n: int,
-    s: np.ndarray,
-    d: np.ndarray,
-    speed: np.ndarray,
-    heading_to_lane: np.ndarray,
-    length: np.ndarray,
-    extent: np.ndarray,
-    offsets: np.ndarray,
-    lane_width: float,
     cut_in_lookahead_s: float,
     found: int,
     gaps: np.ndarray,
@@ -252,9 +253,10 @@ def turning_back_in_rows(
     is about to fill: the cruise keeps its time gap to it (the ego does not accelerate into the gap
     it leaves), but emergency braking waits until it does turn in (`leaders_in_rows` finds it then),
     so no cut-out close ahead is a full brake."""
+    s, d, speed, length, offsets = world.s, world.d, world.speed, world.length, world.lane_offsets
     total = found
     close = speed[0] * cut_in_lookahead_s
-    for row in range(1, n):
+    for row in range(1, world.vehicles):
         rel = s[row] - s[0]
         lengths = (length[row] + length[0]) / 2
         if not 0 < rel < close + lengths:
@@ -267,29 +269,20 @@ def turning_back_in_rows(
             listed = listed or rows[k] == row
         if nearest <= WANDERING_M or listed:
             continue
-        reach = abs(speed[row] * math.sin(heading_to_lane[row])) * cut_in_lookahead_s
+        reach = abs(speed[row] * math.sin(world.heading_to_lane[row])) * cut_in_lookahead_s
         for lane in lanes:
             back = math.copysign(reach, offsets[lane] - d[row])
-            if swept_distance(d[row], back, offsets[lane]) < (lane_width + extent[row]) / 2:
+            if swept_distance(d[row], back, offsets[lane]) < (world.lane_width + world.extent[row]) / 2:
                 gaps[total], speeds[total], rows[total] = rel - lengths, speed[row], row
                 total += 1
                 break
     return total
 
 
-_turning_back_in_rows = njit(cache=True, nogil=True)(turning_back_in_rows)
-
-
 @register_jitable
 def beside_beyond_in_rows(
+    world: LeaderRows,
     beyond: int,
-    n: int,
-    s: np.ndarray,
-    d: np.ndarray,
-    speed: np.ndarray,
-    length: np.ndarray,
-    offsets: np.ndarray,
-    lane_width: float,
     cut_in_lookahead_s: float,
     found: int,
     gaps: np.ndarray,
@@ -304,12 +297,13 @@ def beside_beyond_in_rows(
     the same lane at the same moment (a driver who does not see the ego turns into its side), so
     the cruise keeps its time gap to it (the ego does not pace it while it changes lane) and
     emergency braking waits until it does turn in, as for a car that may turn back."""
+    s, speed, length = world.s, world.speed, world.length
     total = found
     if beyond < 0:
         return total
-    for row in range(1, n):
+    for row in range(1, world.vehicles):
         rel = s[row] - s[0]
-        if rel <= 0 or abs(d[row] - offsets[beyond]) > lane_width / 2:
+        if rel <= 0 or abs(world.d[row] - world.lane_offsets[beyond]) > world.lane_width / 2:
             continue
         lengths = (length[row] + length[0]) / 2
         closing = speed[0] - speed[row]
@@ -327,4 +321,4 @@ def beside_beyond_in_rows(
     return total
 
 
-_beside_beyond_in_rows = njit(cache=True, nogil=True)(beside_beyond_in_rows)
+_leaders_in_rows = njit(cache=True, nogil=True)(leaders_in_rows)

@@ -53,13 +53,14 @@ def warm(part: str) -> None:
 
 
 def rank_a_stopped_car_ahead() -> None:
-    """The lookahead's ranking of one scene, as its own tests call it (its per-world kernels)."""
+    """The lookahead's ranking of one scene, as its own tests call it (its per-world kernels; a lane
+    on each side counted as an int, as `read_scene` counts it)."""
     from planner.lookahead import LookaheadAgent
     from planner.lookahead_scene import Scene
     from records import GridConfig
 
     lane, one = np.zeros(1, np.int64), np.ones(1)
-    LookaheadAgent(GridConfig()).rank(Scene(25.0, True, True, lane, 120 * one, 5 * one, 0 * one))
+    LookaheadAgent(GridConfig()).rank(Scene(25.0, 1, 1, lane, 120 * one, 5 * one, 0 * one))
 
 
 if __name__ == "__main__":

@@ -433,6 +433,8 @@ def test_a_checkpoint_whose_headers_do_not_fit_the_run_is_refused_from_them(tmp_
     assert rows * size * 4 < checkpoint_bytes(build_config(config)) and len(crafted) < 2**20
     (folder / "checkpoint.npz").write_bytes(crafted)
     arguments = ["train", "--resume", str(folder), "--no-progress"]
+    import torch._dynamo  # noqa: F401  the model's optimizer imports it when first built: traced, ~10x slower
+
     import stack.apps.members  # noqa: F401  the trainer's imports (torch, ...) traced would count ~130 MB
     import stack.training.trainer  # noqa: F401
 

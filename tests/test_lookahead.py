@@ -22,13 +22,15 @@ AGENT = LookaheadAgent(GridConfig())
 
 
 def scene(vehicles=(), speed=25.0, left=True, right=True):
-    """A `Scene` of (lane shift, centre [m], length [m], speed [m/s]) vehicles."""
+    """A `Scene` of (lane shift, centre [m], length [m], speed [m/s]) vehicles, with `left` and
+    `right` lanes beside the ego (a bool: one or none). The counts are ints, as `read_scene` gives
+    them: the compiled ranking then has one signature, the one `tests.kernel_warmup` compiles."""
     lane, centre, length, velocity = (
         (np.array(column, dtype=float) for column in zip(*vehicles, strict=True))
         if vehicles
         else (np.zeros(0),) * 4
     )
-    return Scene(speed, left, right, lane.astype(np.int64), centre, length, velocity)
+    return Scene(speed, int(left), int(right), lane.astype(np.int64), centre, length, velocity)
 
 
 def test_a_stopped_car_ahead_sends_the_ego_into_the_free_left_lane():

@@ -24,7 +24,7 @@ from common.longitudinal import BrakingLimits, gap_acceleration, needs_full_brak
 from common.neighbours import VehicleRows, footprint_across, reaches_lane
 from controllers.emergency import braked_acceleration, holds_braking, leader_braking
 from controllers.lateral import LateralMemory, lateral_steering
-from controllers.leaders import beside_beyond_in_rows, leaders_in_rows, road_to_leave, turning_back_in_rows
+from controllers.leaders import LeaderRows, leaders_in_rows, road_to_leave
 from controllers.maneuver import lane_beyond, lane_change_target, left_origin
 from controllers.pid import PIDMemory, pid_output
 from controllers.reference import (
@@ -217,18 +217,12 @@ def control(
                 warped_time(warp, t), profile[w, 3], offsets[w, lane[w]], lane_width, width[w, 0],
                 speed[w, 0], settings.tan_max_course,
             )  # fmt: skip
-        found = leaders_in_rows(
-            lanes[:used], n, s[w], d[w], speed[w], heading_to_lane, length[w], width[w],
-            extent[w], offsets[w], lane_width, settings.cut_in_lookahead_s, leaving_lane, leaving_within,
+        world = LeaderRows(
+            n, s[w], d[w], speed[w], heading_to_lane, length[w], width[w], extent[w], offsets[w], lane_width
+        )
+        found, held = leaders_in_rows(
+            world, lanes[:used], settings.cut_in_lookahead_s, leaving_lane, leaving_within, beyond,
             gaps, speeds, rows,
-        )  # fmt: skip
-        held = turning_back_in_rows(
-            lanes[:used], n, s[w], d[w], speed[w], heading_to_lane, length[w], extent[w], offsets[w],
-            lane_width, settings.cut_in_lookahead_s, found, gaps, speeds, rows,
-        )  # fmt: skip
-        held = beside_beyond_in_rows(
-            beyond, n, s[w], d[w], speed[w], length[w], offsets[w], lane_width, settings.cut_in_lookahead_s,
-            held, gaps, speeds, rows,
         )  # fmt: skip
         for k in range(held):
             rows[k] = slots[w, rows[k]]
