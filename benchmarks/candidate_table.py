@@ -3,7 +3,7 @@ cell by cell (driver population x world), from `drivestack compare` folders: the
 CANDIDATE/POPULATION/WORLD (agent `ddqn` with `--models ddqn=FILE`), the shipped model's and MOBIL's
 in REFERENCE/POPULATION/WORLD (agents `ddqn,mobil`). Folders WORLD@anything add more seeds to a cell.
 Prints one markdown row a cell: speeds [m/s] with paired 95 % t intervals, lane changes an episode
-and their ratio to MOBIL's, masked commands an episode, collisions at fault / not, road departures.
+and their ratio to MOBIL's, masked commands an episode, each agent's collisions (at fault), road departures.
 
     python benchmarks/candidate_table.py runs/eval/pop runs/eval/base
 """
@@ -63,14 +63,16 @@ def row(candidate: Path, reference: Path, population: str, world: str) -> str | 
     changes = {
         name: float(np.mean(column(episodes, seeds, "lane_changes"))) for name, episodes in agents.items()
     }
-    at_fault = {
-        name: int(sum(column(episodes, seeds, "at_fault_collision"))) for name, episodes in agents.items()
-    }
+
+    def total(name: str) -> dict[str, int]:
+        return {agent: int(sum(column(episodes, seeds, name))) for agent, episodes in agents.items()}
+
+    crashed, at_fault = total("crashed"), total("at_fault_collision")
     mine = agents["candidate"]
-    crashed = int(sum(column(mine, seeds, "crashed")))
     departures = int(sum(column(mine, seeds, "road_departure")))
     masked = float(np.mean(column(mine, seeds, "masked_commands")))
     ratio = f"{changes['candidate'] / changes['mobil']:.2f}x" if changes["mobil"] > 0 else "-"
+    collisions = " / ".join(f"{crashed[agent]} ({at_fault[agent]})" for agent in agents)
     return (
         f"| {population} | `{world}` | {len(seeds)} ({seeds[0]}-{seeds[-1]}) "
         f"| {mean_interval(speed['candidate']).value:.2f} "
@@ -78,8 +80,7 @@ def row(candidate: Path, reference: Path, population: str, world: str) -> str | 
         f"| {signed(paired_difference(speed['candidate'], speed['shipped']))} "
         f"| {signed(paired_difference(speed['shipped'], speed['mobil']))} "
         f"| {changes['candidate']:.2f} / {changes['shipped']:.2f} / {changes['mobil']:.2f} ({ratio}) "
-        f"| {masked:.2f} | {at_fault['candidate']} / {crashed - at_fault['candidate']} "
-        f"(shipped {at_fault['shipped']}, MOBIL {at_fault['mobil']}) | {departures} |"
+        f"| {masked:.2f} | {collisions} | {departures} |"
     )
 
 
@@ -87,7 +88,7 @@ HEADER = (
     "| drivers | world | episodes (seeds) | candidate m/s | candidate - MOBIL m/s [95 %] "
     "| candidate - shipped m/s [95 %] | shipped - MOBIL m/s [95 %] "
     "| lane changes / ep candidate / shipped / MOBIL (candidate / MOBIL) | masked / ep (candidate) "
-    "| collisions at fault / not, candidate (at fault: shipped, MOBIL) | road departures (candidate) |\n"
+    "| collisions (at fault) candidate / shipped / MOBIL | road departures (candidate) |\n"
     "|---|---|---|---|---|---|---|---|---|---|---|"
 )
 
