@@ -236,6 +236,15 @@ def leaders_in_rows(
 
 
 @register_jitable
+def is_listed(rows: np.ndarray, count: int, row: int) -> bool:
+    """Whether `row` is among the first `count` leaders' `rows`."""
+    for k in range(count):
+        if rows[k] == row:
+            return True
+    return False
+
+
+@register_jitable
 def turning_back_in_rows(
     world: LeaderRows,
     lanes: np.ndarray,
@@ -264,10 +273,7 @@ def turning_back_in_rows(
         nearest = math.inf
         for centre in offsets:
             nearest = min(nearest, abs(d[row] - centre))
-        listed = False
-        for k in range(found):
-            listed = listed or rows[k] == row
-        if nearest <= WANDERING_M or listed:
+        if nearest <= WANDERING_M or is_listed(rows, found, row):
             continue
         reach = abs(speed[row] * math.sin(world.heading_to_lane[row])) * cut_in_lookahead_s
         for lane in lanes:
@@ -312,10 +318,7 @@ def beside_beyond_in_rows(
             continue
         if closing > 0 and passes_sooner_than_falls_back(rel, closing, lengths):
             continue
-        listed = False
-        for k in range(total):
-            listed = listed or rows[k] == row
-        if not listed:
+        if not is_listed(rows, total, row):
             gaps[total], speeds[total], rows[total] = gap, speed[row], row
             total += 1
     return total
