@@ -127,6 +127,14 @@ def occupied_lanes(world: WorldState, extent: tuple[float, float] | None = None)
 
 
 @register_jitable
+def lane_beyond(lane: int, target: int, lanes_count: int) -> int:
+    """The lane beyond `target` seen from `lane` (a change from `lane` to `target`), -1 when the
+    road has none."""
+    beyond = 2 * target - lane
+    return beyond if 0 <= beyond < lanes_count else -1
+
+
+@register_jitable
 def reaches_lane(low: float, high: float, centre: float, lane_width: float) -> bool:
     """Whether a footprint spanning [`low`, `high`] across the road [m] reaches into the lane
     centred at `centre` (the batch compiles this same function: `stack.batch.loop_kernels`)."""

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 from numba.extending import register_jitable
 
-from common.neighbours import occupied_lanes
+from common.neighbours import lane_beyond, occupied_lanes
 from controllers.leaders import leaders, road_to_leave
 from controllers.reference import (
     QuinticProfile,
@@ -37,14 +37,6 @@ def lane_change_target(lane: int, shift: int, lanes_count: int, speed: float, mi
     if shift == 0 or not 0 <= target < lanes_count or speed < min_speed:
         return -1
     return target
-
-
-@register_jitable
-def lane_beyond(lane: int, target: int, lanes_count: int) -> int:
-    """The lane beyond `target` seen from `lane` (a change from `lane` to `target`), -1 when the
-    road has none."""
-    beyond = 2 * target - lane
-    return beyond if 0 <= beyond < lanes_count else -1
 
 
 @register_jitable

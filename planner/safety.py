@@ -38,7 +38,14 @@ from numba.extending import register_jitable
 from pydantic import BaseModel, ConfigDict, Field
 
 from common.compiled import Kernel
-from common.neighbours import VehicleRows, lateral_drift, lateral_extents, nearest_in_lane, vehicle_rows
+from common.neighbours import (
+    VehicleRows,
+    lane_beyond,
+    lateral_drift,
+    lateral_extents,
+    nearest_in_lane,
+    vehicle_rows,
+)
 from planner.follower_forecast import ego_braking, follower_keeps_clear
 from records import N_ACTIONS, Command, WorldState
 from records.batch import BatchColumns, WorldBatch
@@ -212,8 +219,8 @@ def change_blockers(
     ahead, behind = unsafe_vehicles(rows, offsets[goal], *strict)
     follower = unspared_follower(rows, offsets, lane, goal, safety) if safety.checks_follower else -1
     far_leader, far_ahead, far_behind = -1, -1, -1
-    beyond = 2 * goal - lane
-    if safety.checks_far_lane and 0 <= beyond < lanes_count:
+    beyond = lane_beyond(lane, goal, lanes_count)
+    if safety.checks_far_lane and beyond >= 0:
         if safety.far_lane_leader:
             far_leader = unsafe_vehicles(rows, offsets[beyond], *strict)[0]
         far_ahead, far_behind = unsafe_vehicles(rows, offsets[beyond], safety.far_lane_gap_m, 0.0, 0.0, 0.0)

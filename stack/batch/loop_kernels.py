@@ -21,11 +21,11 @@ from numba import njit
 
 from common.compiled import Kernel, clip
 from common.longitudinal import BrakingLimits, gap_acceleration, needs_full_braking
-from common.neighbours import VehicleRows, footprint_across, reaches_lane
+from common.neighbours import VehicleRows, footprint_across, lane_beyond, reaches_lane
 from controllers.emergency import braked_acceleration, holds_braking, leader_braking
 from controllers.lateral import LateralMemory, lateral_steering
 from controllers.leaders import LeaderRows, leaders_in_rows, road_to_leave
-from controllers.maneuver import lane_beyond, lane_change_target, left_origin
+from controllers.maneuver import lane_change_target, left_origin
 from controllers.pid import PIDMemory, pid_output
 from controllers.reference import (
     WarpClock,
