@@ -1,13 +1,19 @@
 """The tracker (`perception.tracking`): the filter's physics on one track (a constant-velocity target
-converges, a missed detection coasts, a track dies after its coast), phantoms never confirmed, the
+converges, a missed detection coasts, a track dies after its coast, highway-env's lane change
+and its turn back keep one track), phantoms never confirmed, the
 greedy assignment against scipy's, and whole episodes: deterministic per seed, each batched world
 the world run alone, the tracker off or a perfect sensor as before."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
+from highway_env.road.road import Road, RoadNetwork
+from highway_env.vehicle.controller import ControlledVehicle
 from scipy.optimize import linear_sum_assignment
+from typer.testing import CliRunner
 
 from perception.sensor import SensorConfig
 from perception.tracking import TRACK_ID_BASE, Tracker, TrackerConfig, empty_tracks
@@ -15,6 +21,8 @@ from perception.tracking_kernels import WORLD_FLOATS, WORLD_INTEGERS, track_worl
 from perception.tracking_law import CONFIRMED, FREE, TENTATIVE
 from perception.tracking_search import assign_greedy, fill_buckets, first_at_least, stable_order
 from records import WorldState
+from stack.apps.cli import app
+from stack.results.tracking_quality import TrackingQuality, combined
 from stack.runs.batch_episodes import batch_refusal, run_batched
 from stack.runs.episodes import run_episode
 from stack.settings.run import build_config
@@ -53,8 +61,10 @@ class OneWorld:
 
 
 def test_a_constant_velocity_target_converges_to_its_position_and_speed() -> None:
-    """1 m position noise, 0.5 m/s velocity noise: over the last 2 s of 4 the filter's errors are
-    well below the noise (RMSE)."""
+    """1 m position noise, 0.5 m/s velocity noise: over the last 2 s of 4 the filter's position
+    errors are well below the noise and its velocity errors below it (RMSE; the lateral filter's
+    white-noise acceleration is sized for highway-env's lane changes, so it smooths a steady
+    lateral speed little: 0.43 m/s)."""
     rng = np.random.default_rng(1003001)
     world, errors = OneWorld(), []
     for k in range(60):
@@ -67,7 +77,47 @@ def test_a_constant_velocity_target_converges_to_its_position_and_speed() -> Non
     rmse = np.sqrt(np.mean(np.square(errors), axis=0))
     assert world.status() == CONFIRMED and world.tracks.ident[0] == TRACK_ID_BASE
     assert rmse[0] < 0.6 and rmse[2] < 0.6, "positions"
-    assert rmse[1] < 0.3 and rmse[3] < 0.3, "velocities"
+    assert rmse[1] < 0.35 and rmse[3] < 0.5, "velocities"
+
+
+def highway_env_lane_change(speed: float = 20.0, seconds: float = 6.0) -> np.ndarray:
+    """(frames, 4) s, d [m], velocity along and across the road [m/s] of highway-env's own
+    ControlledVehicle at `speed` [m/s] on a straight road, at 15 Hz: a lane change to the right
+    after 1 s, turned back after 3 s (as its drivers abort a change), `seconds` in all."""
+    road = Road(RoadNetwork.straight_road_network(3, speed_limit=30), np_random=np.random.default_rng(0))
+    start = road.network.get_lane(("0", "1", 0)).position(20.0, 0.0)
+    car = ControlledVehicle(road, start, speed=speed, target_speed=speed)
+    rows = []
+    for frame in range(round(seconds / DT)):
+        command = {15: "LANE_RIGHT", 45: "LANE_LEFT"}.get(frame)
+        if command:
+            car.act(command)
+        car.act()
+        car.step(DT)
+        velocity = car.speed * np.array([np.cos(car.heading), np.sin(car.heading)])
+        rows.append((*car.position, *velocity))
+    return np.array(rows)
+
+
+def test_a_highway_env_lane_change_and_its_turn_back_keep_one_track() -> None:
+    """highway-env's cars change lane at up to ~34 m/s^2 of lateral acceleration (4.6 m/s across
+    the road within half a second): seen at 1 m and 0.5 m/s noise, the car keeps one confirmed
+    track through a change and its turn back (with 1 m/s^2 of lateral white noise it was lost and
+    started again three times, the layers losing its history each time), and the track's lateral
+    speed stays within 0.5 m/s RMSE of the truth (1.35 m/s then)."""
+    truth = highway_env_lane_change()
+    rng = np.random.default_rng(1003002)
+    world, idents, errors = OneWorld(), set(), []
+    for s, d, along, across in truth:
+        noise = rng.normal(0, 1.0, 2), rng.normal(0, 0.5, 2)
+        world.frame([(s + noise[0][0], d + noise[0][1], along + noise[1][0], across + noise[1][1])])
+        confirmed = np.flatnonzero(world.tracks.status == CONFIRMED)
+        idents.update(world.tracks.ident[confirmed].tolist())
+        if len(confirmed) == 1:
+            errors.append(world.tracks.state[confirmed[0]] - (s, along, d, across))
+    assert idents == {TRACK_ID_BASE}
+    assert len(errors) >= len(truth) - CONFIG.confirm_hits
+    assert np.sqrt(np.mean(np.square(errors), axis=0))[3] < 0.5
 
 
 def test_a_track_is_confirmed_after_m_of_n_frames_and_a_missed_detection_coasts() -> None:
@@ -328,3 +378,30 @@ def test_a_tracked_episode_is_deterministic_and_each_batched_world_is_the_world_
     for mine, theirs, repeated in zip(batched, alone, again, strict=True):
         assert mine.outcome_row() == theirs.outcome_row() == repeated.outcome_row()
         assert mine.trace == theirs.trace == repeated.trace
+
+
+def test_an_identity_switch_is_a_true_vehicle_matched_to_another_perceived_id() -> None:
+    """CLEAR-MOT's IDSW: the car at 20 m seen as track A, then as track B (one switch), then as B
+    again (none); a second car that keeps its track counts none."""
+    quality = TrackingQuality()
+    truth = detected_world([0.0, 20.0, 40.0], [0.0, 4.0, 0.0])
+    for first_track in (TRACK_ID_BASE, TRACK_ID_BASE + 5, TRACK_ID_BASE + 5):
+        seen = detected_world([0.0, 20.3, 40.2], [0.0, 4.1, 0.0])
+        seen.ids[1:] = (first_track, TRACK_ID_BASE + 1)
+        quality.record(truth, seen)
+    assert quality.identity_switches == 1
+    assert quality.measures(1.0)["identity_switches_per_min"] == pytest.approx(20.0)
+    assert combined([quality, quality], 1.0)["identity_switches_per_min"] == pytest.approx(20.0)
+
+
+def test_the_tracking_command_writes_its_config_summary_and_measures(tmp_path) -> None:
+    out = tmp_path / "tracking"
+    arguments = ["tracking", "--scenario", "poor-sensor", "--agents", "mobil", "--episodes", "1"]
+    result = CliRunner().invoke(app, [*arguments, "--set", "highway.duration=3", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["drivers"] == "highway-env" and summary["episodes"] == 1
+    measures = summary["agents"]["mobil"]
+    assert measures == json.loads((out / "tracking.json").read_text())["mobil"]
+    assert 0.0 <= measures["identity_switches_per_min"] and 0.9 < measures["recall"] <= 1.0
+    assert "position_noise_m: 1.0" in (out / "config.yaml").read_text()

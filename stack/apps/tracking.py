@@ -1,20 +1,22 @@
 """`drivestack tracking`: how well the world the layers act on follows the simulator's truth, per
 agent, over seeded episodes run one world at a time (`stack.results.tracking_quality`); a table on
-the terminal and `tracking.json` in the results folder."""
+the terminal and, in the results folder, the resolved config, `tracking.json` (the measures by
+agent) and `summary.json` (those with the episodes, the first seed and the drivers)."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import typer
 
 from records import child_seed
+from stack.apps.resume import resolved_config
 from stack.loop.closed_loop import ClosedLoop
 from stack.results.tracking_quality import TrackingQuality, combined
 from stack.runs.alone import run_agent_episode
 from stack.runs.kept import kept_adapter, kept_agent
-from stack.settings.run import RunConfig
+from stack.runtime.files import write_json, write_text
+from stack.settings.run import RunConfig, drivers_of
 
 COLUMNS = (
     ("precision", "precision", "{:.3f}"),
@@ -23,6 +25,7 @@ COLUMNS = (
     ("velocity_rmse_mps", "velocity RMSE m/s", "{:.2f}"),
     ("ospa_m", "OSPA m", "{:.2f}"),
     ("phantom_tracks_per_min", "phantom tracks / min", "{:.2f}"),
+    ("identity_switches_per_min", "id switches / min", "{:.2f}"),
     ("emergency_brakings", "AEB / episode", "{:.2f}"),
 )
 
@@ -45,15 +48,19 @@ def measure(config: RunConfig) -> dict[str, float]:
 
 
 def report(configs: dict[str, RunConfig], folder: Path) -> bool:
-    """Measure each agent's config, print one row each and write `tracking.json` into `folder`;
-    False (`until_interrupted`: nothing cut short)."""
+    """Measure each agent's config, print one row each and write the resolved config,
+    `tracking.json` and `summary.json` into `folder`; False (`until_interrupted`: nothing cut short)."""
+    first = next(iter(configs.values()))
+    folder.mkdir(parents=True, exist_ok=True)
+    write_text(folder / "config.yaml", resolved_config(list(configs.values())))
     rows = {agent: measure(config) for agent, config in configs.items()}
     header = ["agent", *(label for _, label, _ in COLUMNS)]
     typer.echo(" | ".join(header))
     for agent, measures in rows.items():
         cells = [form.format(measures[key]) for key, _, form in COLUMNS]
         typer.echo(" | ".join([agent, *cells]))
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "tracking.json").write_text(json.dumps(rows, indent=2) + "\n")
+    write_json(folder / "tracking.json", rows)
+    summary = {"episodes": first.episodes, "seed": first.seed, "drivers": drivers_of(first.highway)}
+    write_json(folder / "summary.json", {**summary, "agents": rows})
     typer.echo(f"wrote {folder / 'tracking.json'}")
     return False

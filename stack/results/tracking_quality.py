@@ -7,8 +7,11 @@ a true positive. Within `QUALITY_RANGE_M` of the ego (along the road): precision
 positives / perceived vehicles), recall (true positives / true vehicles), position and
 velocity RMSE over the true positives (velocity in the lane frame, from each one's speed and
 heading), and OSPA (cut-off `OSPA_CUTOFF_M`, order 2) averaged over the ticks with a vehicle
-perceived or true. Over the whole road: phantom tracks, the perceived vehicles (by id; a raw
-phantom detection is one a frame) never matched to a true one, a minute of driving."""
+perceived or true; identity switches (CLEAR-MOT's IDSW), the true positives whose perceived
+id differs from the one the same true vehicle was last matched to, a minute of driving (a track
+lost and started again on a vehicle that swerves counts one: the layers then lose its history).
+Over the whole road: phantom tracks, the perceived vehicles (by id; a raw phantom detection is
+one a frame) never matched to a true one, a minute of driving."""
 
 from __future__ import annotations
 
@@ -63,6 +66,8 @@ class TrackingQuality:
     ospa: list[float] = field(default_factory=list)
     seen: set[tuple[int, int]] = field(default_factory=set)
     real: set[tuple[int, int]] = field(default_factory=set)
+    identity_switches: int = 0
+    last_match: dict[int, int] = field(default_factory=dict)
 
     def record(self, truth: WorldState, perceived: WorldState) -> None:
         """One tick: the true world and the world the layers act on."""
@@ -83,6 +88,11 @@ class TrackingQuality:
         self.position_sq += float((distance[hit] ** 2).sum())
         error = true_velocity[near_true][rows[hit]] - seen_velocity[near_seen][columns[hit]]
         self.velocity_sq += float((error**2).sum())
+        true_ids = truth.ids[1:][near_true][rows[hit]]
+        seen_ids = perceived.ids[1:][near_seen][columns[hit]]
+        for true_id, seen_id in zip(true_ids.tolist(), seen_ids.tolist(), strict=True):
+            self.identity_switches += self.last_match.get(true_id, seen_id) != seen_id
+            self.last_match[true_id] = seen_id
         largest = max(int(near_true.sum()), int(near_seen.sum()))
         if largest:
             cut = np.minimum(distance, OSPA_CUTOFF_M) ** 2
@@ -105,6 +115,7 @@ class TrackingQuality:
             "velocity_rmse_mps": math.sqrt(self.velocity_sq / positives),
             "ospa_m": float(np.mean(self.ospa)) if self.ospa else 0.0,
             "phantom_tracks_per_min": len(self.seen - self.real) / minutes if minutes else 0.0,
+            "identity_switches_per_min": self.identity_switches / minutes if minutes else 0.0,
             "minutes": minutes,
         }
 
@@ -124,6 +135,7 @@ def combined(episodes: list[TrackingQuality], dt: float) -> dict[str, float]:
         sum(e.position_sq for e in episodes),
         sum(e.velocity_sq for e in episodes),
         [value for e in episodes for value in e.ospa],
+        identity_switches=sum(e.identity_switches for e in episodes),
     )
     measures = total.measures(dt)
     minutes = measures["minutes"]
