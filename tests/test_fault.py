@@ -85,10 +85,11 @@ def drive(
     steering: float = 0.0,
     seconds: float = 15.0,
     acceleration: float = 0.0,
+    lanes: int = 3,
 ) -> SafetyMeasures:
     """The inattentive ego (`acceleration` [m/s^2], no brake, `steering` [rad]) on the scripted
-    road until it collides: what the safety monitor measured, judging the contact."""
-    road = ScriptedRoad(3, EGO_LANE, SPEED, actors, script, "kinematic", DT, seconds)
+    road of `lanes` lanes until it collides: what the safety monitor measured, judging the contact."""
+    road = ScriptedRoad(lanes, EGO_LANE, SPEED, actors, script, "kinematic", DT, seconds)
     monitor = SafetyMonitor(DT)
     monitor.start(road.reset())
     while not road.done:
@@ -140,12 +141,22 @@ def test_the_reference_drives_as_the_ego_drove_until_it_reacts() -> None:
     assert measured.fault_reason == "cut-in not preventable"
 
 
-@pytest.mark.parametrize(("settled_s", "reason"), [(0.3, "cut-in not preventable"), (1.0, "own lane change")])
-def test_a_cut_in_after_the_ego_s_lane_change_is_judged_by_the_replay(settled_s: float, reason: str) -> None:
+@pytest.mark.parametrize(
+    ("crossed_s", "settled_s", "reason"),
+    [
+        (0.3, 0.3, "cut-in not preventable"),
+        (0.3, 1.0, "cut-in not preventable"),
+        (1.0, 1.0, "own lane change"),
+    ],
+)
+def test_a_cut_in_after_the_ego_entered_its_new_lane_is_judged_by_the_replay(
+    crossed_s: float, settled_s: float, reason: str
+) -> None:
     """The contact of `test_a_car_cutting_in_5_m_ahead_and_braking...` (the cut-in starts at 0.5 s),
-    its frames rewritten as if the ego had come from the next lane and settled at `settled_s`: a
-    cut-in that began after the ego had settled is judged by the replay, one that began while it
-    was still changing lane is its own lane change."""
+    its frames rewritten as if the ego had come from the next lane, its centre crossing into the new
+    lane at `crossed_s` and settling (within the wandering zone) at `settled_s`: a cut-in that began
+    after the ego's centre was in the new lane, settled or not, is judged by the replay; one that
+    began while it was still in the lane it left is its own lane change."""
     road = ScriptedRoad(
         3,
         EGO_LANE,
@@ -172,7 +183,9 @@ def test_a_cut_in_after_the_ego_s_lane_change_is_judged_by_the_replay(settled_s:
         if frame.time >= settled_s:
             return frame
         lane, d = frame.lane.copy(), frame.d.copy()
-        lane[0], d[0] = EGO_LANE - 1, came_from + 0.6 * (d[0] - came_from)
+        crossed = frame.time >= crossed_s
+        lane[0] = EGO_LANE if crossed else EGO_LANE - 1
+        d[0] = came_from + (0.7 if crossed else 0.4) * (d[0] - came_from)
         return replace(frame, lane=lane, d=d)
 
     fault = judge(monitor.collision.kind, monitor.collision.other, [changing(f) for f in frames[-76:]], DT)
@@ -290,6 +303,22 @@ def test_a_car_crossing_into_the_lane_the_ego_leaves_is_replayed(cutting_in: boo
     beside = Actor(EGO_START_S, lane_centre(EGO_LANE + (1 if cutting_in else -1)), SPEED)
     script = Moves((0.5, 0, EGO_LANE)) if cutting_in else Timed()
     measured = drive([beside], script, steering=-0.002 if cutting_in else -0.03)
+    assert measured.collision_kind == "lane change"
+    assert measured.at_fault_collision == at_fault
+    assert measured.fault_reason == ("own lane change" if at_fault else "cut-in not preventable")
+
+
+@pytest.mark.parametrize(("moves_at", "at_fault"), [(3.0, True), (4.5, False)])
+def test_a_car_entering_the_lane_the_ego_has_entered_from_the_far_side_is_replayed(
+    moves_at: float, at_fault: bool
+) -> None:
+    """The ego drifts from lane 1 towards lane 2 of four, its centre crossing into lane 2 after
+    about 4 s; a car alongside in lane 3 heads for lane 2 at 3 m/s sideways at `moves_at`. Both
+    entering lane 2 at once (the car moved first) is the ego's lane change, at fault; the car
+    entering once the ego's centre was in lane 2 cut into a lane the ego was already in: the
+    contact is replayed, and a careful driver could not have braked out of it either."""
+    beside = Actor(EGO_START_S + 2.0, lane_centre(EGO_LANE + 2), SPEED)
+    measured = drive([beside], Moves((moves_at, 0, EGO_LANE + 1)), steering=0.002, lanes=4)
     assert measured.collision_kind == "lane change"
     assert measured.at_fault_collision == at_fault
     assert measured.fault_reason == ("own lane change" if at_fault else "cut-in not preventable")

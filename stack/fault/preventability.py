@@ -3,7 +3,8 @@ unless a careful and competent driver in its place could not have avoided it eit
 
 - The ego's own lane change (the geometric `lane change` contact, or the ego's lane differing
   anywhere in the last `REPLAY_S` seconds, unless the collided vehicle's cut-in began only after
-  the ego had settled in its new lane) and leaving the road stay at fault: no replay excuses a
+  the ego's centre was in its new lane: a driver entering a lane yields to those already in it)
+  and leaving the road stay at fault: no replay excuses a
   maneuver the ego chose. A vehicle that came at the ego from the side its change moved away from
   (it crossed into the lane the ego was leaving) is no such maneuver's: that contact is replayed
   (a side or rear contact as a side swipe: the ego was not keeping its lane).
@@ -97,14 +98,13 @@ def judge(kind: str, other: int | None, history: Sequence[WorldState], dt: float
         return Fault(True, "off road")
     crash = history[-1]
     situation = _situation(other, history, dt)
-    changed = any(world.ego_lane != crash.ego_lane for world in history)
-    own_change = kind == "lane change" or (
-        changed and not (situation == "cut-in" and _settled_before_cut_in(other, history))
-    )
-    if own_change:
+    changed = kind == "lane change" or any(world.ego_lane != crash.ego_lane for world in history)
+    entered_first = situation == "cut-in" and _in_the_lane_before_cut_in(other, history)
+    if changed and not entered_first:
         if not _came_from_the_side_left(other, history, dt):
             return Fault(True, "own lane change")
-        kind = "side swipe" if kind in ("lane change", "rear") else kind
+        kind = "side swipe" if kind == "rear" else kind
+    kind = "side swipe" if kind == "lane change" else kind
     if kind in HIT_FROM_BEHIND_KINDS:
         return Fault(False, f"{kind} not preventable")
     from_behind = kind in FROM_BEHIND_KINDS
@@ -114,11 +114,12 @@ def judge(kind: str, other: int | None, history: Sequence[WorldState], dt: float
     return Fault(avoided, f"{situation} {'preventable' if avoided else 'not preventable'}")
 
 
-def _settled_before_cut_in(other: int | None, history: Sequence[WorldState]) -> bool:
-    """Whether the ego had finished its lane change before the vehicle of id `other` began the cut-in
-    that ended in the contact: after the last frame of `history` in which that vehicle kept a lane
-    other than the one the ego collided in (its centre within the lane's wandering zone), the ego is
-    in the lane it collided in, its centre within the wandering zone."""
+def _in_the_lane_before_cut_in(other: int | None, history: Sequence[WorldState]) -> bool:
+    """Whether the ego was in its new lane before the vehicle of id `other` began the cut-in that
+    ended in the contact: after the last frame of `history` in which that vehicle kept a lane other
+    than the one the ego collided in (its centre within that lane's wandering zone), the ego's
+    centre is in the lane it collided in on every frame. The other then entered a lane the ego was
+    already in (from the far side too, across two lanes), which the ego's choice did not cause."""
     lane = history[-1].ego_lane
     cut_from = None
     for index, world in enumerate(history):
@@ -128,9 +129,7 @@ def _settled_before_cut_in(other: int | None, history: Sequence[WorldState]) -> 
             cut_from = index + 1 if in_wandering_zone(world, row) and its_lane != lane else cut_from
     if cut_from is None:
         return False
-    return all(
-        world.ego_lane == lane and in_wandering_zone(world, 0, lane) for world in list(history)[cut_from:]
-    )
+    return all(world.ego_lane == lane for world in list(history)[cut_from:])
 
 
 def _came_from_the_side_left(other: int | None, history: Sequence[WorldState], dt: float) -> bool:
