@@ -4,10 +4,10 @@ unless a careful and competent driver in its place could not have avoided it eit
 - The ego's own lane change (the geometric `lane change` contact, or the ego's lane differing
   anywhere in the last `REPLAY_S` seconds, unless the collided vehicle's cut-in began only after
   the ego's centre was in its new lane: a driver entering a lane yields to those already in it)
-  and leaving the road stay at fault: no replay excuses a
-  maneuver the ego chose. A vehicle that came at the ego from the side its change moved away from
-  (it crossed into the lane the ego was leaving) is no such maneuver's: that contact is replayed
-  (a side or rear contact as a side swipe: the ego was not keeping its lane).
+  and leaving the road stay at fault: no replay excuses a maneuver the ego chose. A vehicle that
+  came at the ego from the side its change moved away from (it crossed into the lane the ego was
+  leaving) is no such maneuver's: that contact is replayed (a side or rear contact as a side
+  swipe: the ego was not keeping its lane).
 - Being hit from behind or standing (`rear`, `ego stopped`) while keeping its lane is the other's:
   the follower's recorded path answered the ego's own braking, so no replay can judge it.
 - Any other contact (front, stopped vehicle, side swipe) is replayed: R157's reference driver in
