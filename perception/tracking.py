@@ -63,10 +63,10 @@ class TrackerConfig(BaseModel):
         13.3, gt=0, le=1000, description="squared Mahalanobis gate (4 degrees of freedom: 99 %)"
     )
     longitudinal_acceleration_mps2: float = Field(
-        5.0, gt=0, le=100, description="white-noise acceleration along the lane [m/s^2]"
+        3.0, gt=0, le=100, description="white-noise acceleration along the lane [m/s^2]"
     )
     lateral_acceleration_mps2: float = Field(
-        12.0, gt=0, le=100, description="white-noise acceleration across the lane [m/s^2]"
+        1.0, gt=0, le=100, description="white-noise acceleration across the lane [m/s^2]"
     )
     speed_noise_mps: float = Field(
         0.5, gt=0, le=100, description="std of a detection's reported velocity, each direction [m/s]"

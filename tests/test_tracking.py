@@ -1,6 +1,6 @@
 """The tracker (`perception.tracking`): the filter's physics on one track (a constant-velocity target
 converges, a missed detection coasts, a track dies after its coast, highway-env's lane change
-and its turn back keep one track), phantoms never confirmed, the
+and its turn back kept as one track by a manoeuvring model), phantoms never confirmed, the
 greedy assignment against scipy's, and whole episodes: deterministic per seed, each batched world
 the world run alone, the tracker off or a perfect sensor as before."""
 
@@ -29,6 +29,8 @@ from stack.settings.run import build_config
 
 DT = 1 / 15
 CONFIG = TrackerConfig()
+MANOEUVRING = TrackerConfig(lateral_acceleration_mps2=12.0, longitudinal_acceleration_mps2=5.0)
+"""White noise sized for highway-env's lane changes (measured and not the default: docs/perception.md)."""
 LANES = np.array([0.0, 4.0, 8.0])
 
 
@@ -61,10 +63,8 @@ class OneWorld:
 
 
 def test_a_constant_velocity_target_converges_to_its_position_and_speed() -> None:
-    """1 m position noise, 0.5 m/s velocity noise: over the last 2 s of 4 the filter's position
-    errors are well below the noise and its velocity errors below it (RMSE; the lateral filter's
-    white-noise acceleration is sized for highway-env's lane changes, so it smooths a steady
-    lateral speed little: 0.43 m/s)."""
+    """1 m position noise, 0.5 m/s velocity noise: over the last 2 s of 4 the filter's errors are
+    well below the noise (RMSE)."""
     rng = np.random.default_rng(1003001)
     world, errors = OneWorld(), []
     for k in range(60):
@@ -77,7 +77,7 @@ def test_a_constant_velocity_target_converges_to_its_position_and_speed() -> Non
     rmse = np.sqrt(np.mean(np.square(errors), axis=0))
     assert world.status() == CONFIRMED and world.tracks.ident[0] == TRACK_ID_BASE
     assert rmse[0] < 0.6 and rmse[2] < 0.6, "positions"
-    assert rmse[1] < 0.35 and rmse[3] < 0.5, "velocities"
+    assert rmse[1] < 0.3 and rmse[3] < 0.3, "velocities"
 
 
 def highway_env_lane_change(speed: float = 20.0, seconds: float = 6.0) -> np.ndarray:
@@ -99,15 +99,24 @@ def highway_env_lane_change(speed: float = 20.0, seconds: float = 6.0) -> np.nda
     return np.array(rows)
 
 
-def test_a_highway_env_lane_change_and_its_turn_back_keep_one_track() -> None:
+def test_a_highway_env_lane_change_and_its_turn_back_keep_one_track_with_a_manoeuvring_model() -> None:
     """highway-env's cars change lane at up to ~34 m/s^2 of lateral acceleration (4.6 m/s across
-    the road within half a second): seen at 1 m and 0.5 m/s noise, the car keeps one confirmed
-    track through a change and its turn back (with 1 m/s^2 of lateral white noise it was lost and
-    started again three times, the layers losing its history each time), and the track's lateral
-    speed stays within 0.5 m/s RMSE of the truth (1.35 m/s then)."""
+    the road within half a second). Seen at 1 m and 0.5 m/s noise, with 12 m/s^2 of lateral white
+    noise (`MANOEUVRING`) the car keeps one confirmed track through a change and its turn back, its
+    lateral speed within 0.5 m/s RMSE of the truth; with the default 1 m/s^2 it is lost and started
+    again three times (four tracks), the layers losing its history each time (docs/perception.md)."""
     truth = highway_env_lane_change()
+    assert tracks_of_a_lane_change(truth, CONFIG)[0] == 4
+    count, errors = tracks_of_a_lane_change(truth, MANOEUVRING)
+    assert count == 1 and len(errors) >= len(truth) - CONFIG.confirm_hits
+    assert np.sqrt(np.mean(np.square(errors), axis=0))[3] < 0.5
+
+
+def tracks_of_a_lane_change(truth: np.ndarray, config: TrackerConfig) -> tuple[int, list[np.ndarray]]:
+    """The confirmed tracks `config`'s tracker keeps of one car along `truth` (frames, 4) seen at
+    1 m and 0.5 m/s noise (seeded), and the errors of its state while exactly one is confirmed."""
     rng = np.random.default_rng(1003002)
-    world, idents, errors = OneWorld(), set(), []
+    world, idents, errors = OneWorld(config), set(), []
     for s, d, along, across in truth:
         noise = rng.normal(0, 1.0, 2), rng.normal(0, 0.5, 2)
         world.frame([(s + noise[0][0], d + noise[0][1], along + noise[1][0], across + noise[1][1])])
@@ -115,9 +124,7 @@ def test_a_highway_env_lane_change_and_its_turn_back_keep_one_track() -> None:
         idents.update(world.tracks.ident[confirmed].tolist())
         if len(confirmed) == 1:
             errors.append(world.tracks.state[confirmed[0]] - (s, along, d, across))
-    assert idents == {TRACK_ID_BASE}
-    assert len(errors) >= len(truth) - CONFIG.confirm_hits
-    assert np.sqrt(np.mean(np.square(errors), axis=0))[3] < 0.5
+    return len(idents), errors
 
 
 def test_a_track_is_confirmed_after_m_of_n_frames_and_a_missed_detection_coasts() -> None:
