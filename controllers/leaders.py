@@ -37,6 +37,16 @@ class LeaderRows(NamedTuple):
     lane_width: float
 
 
+class FoundLeaders(NamedTuple):
+    """Where `leaders_in_rows` writes the vehicles it finds, in order, one entry each: the gap
+    `gaps` [m] from the ego's front to its rear, its `speeds` [m/s] and its row in `LeaderRows`,
+    `rows`. Room for every row in every watched lane and the two lists the cruise alone keeps."""
+
+    gaps: np.ndarray
+    speeds: np.ndarray
+    rows: np.ndarray
+
+
 LEAVING_M = 1.0
 """A leader whose centre is farther than this from the lane's centre is leaving (or entering) the
 lane, and no longer hides the vehicle ahead of it [m]."""
@@ -151,7 +161,7 @@ def leaders(
     the world's `LeaderRows`."""
     n = world.count
     found_most = n * (len(lanes) + 2)
-    gaps, speeds, rows = np.empty(found_most), np.empty(found_most), np.empty(found_most, dtype=np.int64)
+    out = FoundLeaders(np.empty(found_most), np.empty(found_most), np.empty(found_most, dtype=np.int64))
     reference = world.lanes[0]
     watched = np.array(lanes, dtype=np.int64)
     heading_to_lane = world.heading - np.array([reference.heading_at(s) for s in world.s.tolist()])
@@ -161,13 +171,13 @@ def leaders(
         world.lane_offsets, world.lane_width,
     )  # fmt: skip
     found, held = _leaders_in_rows(
-        rows_of_world, watched, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, gaps, speeds, rows
+        rows_of_world, watched, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, out
     )
     ids = world.ids
     return tuple(
         Neighbour(gap, speed, int(ids[row]), k >= found)
         for k, (gap, speed, row) in enumerate(
-            zip(gaps[:held].tolist(), speeds[:held].tolist(), rows[:held].tolist(), strict=True)
+            zip(out.gaps[:held].tolist(), out.speeds[:held].tolist(), out.rows[:held].tolist(), strict=True)
         )
     )
 
@@ -180,18 +190,17 @@ def leaders_in_rows(
     leaving_lane: int,
     leaving_within_m: float,
     beyond: int,
-    gaps: np.ndarray,
-    speeds: np.ndarray,
-    rows: np.ndarray,
+    out: FoundLeaders,
 ) -> tuple[int, int]:
     """`leaders(world, lanes)` of one world's rows (`cut_in_lookahead_s` [s]: how far ahead a
     vehicle's sideways motion, speed times the sine of its `heading_to_lane`, counts;
-    `leaving_lane`, `leaving_within_m`, `beyond` as `leaders` takes them): writes each leader's gap
-    [m], speed [m/s] and row in order, then those of the cars that may turn back
+    `leaving_lane`, `leaving_within_m`, `beyond` as `leaders` takes them): writes into `out` each
+    leader's gap [m], speed [m/s] and row in order, then those of the cars that may turn back
     (`turning_back_in_rows`) or are beside the ego in the lane beyond (`beside_beyond_in_rows`), and
     returns (how many leaders, how many in all): the cruise keeps its gap to all, emergency braking
     reads the leaders only."""
     s, d, speed, length, offsets = world.s, world.d, world.speed, world.length, world.lane_offsets
+    gaps, speeds, rows = out
     found = 0
     candidates = np.empty(world.vehicles, dtype=np.int64)
     for lane in lanes:
@@ -231,8 +240,8 @@ def leaders_in_rows(
             found += 1
             if abs(d[row] - offsets[lane]) <= LEAVING_M:
                 break
-    held = turning_back_in_rows(world, lanes, cut_in_lookahead_s, found, gaps, speeds, rows)
-    return found, beside_beyond_in_rows(world, beyond, cut_in_lookahead_s, held, gaps, speeds, rows)
+    held = turning_back_in_rows(world, lanes, cut_in_lookahead_s, found, out)
+    return found, beside_beyond_in_rows(world, beyond, cut_in_lookahead_s, held, out)
 
 
 @register_jitable
@@ -250,11 +259,9 @@ def turning_back_in_rows(
     lanes: np.ndarray,
     cut_in_lookahead_s: float,
     found: int,
-    gaps: np.ndarray,
-    speeds: np.ndarray,
-    rows: np.ndarray,
+    out: FoundLeaders,
 ) -> int:
-    """Appends to the `found` leaders of `leaders_in_rows` (same arrays) each vehicle that is between
+    """Appends to the `found` leaders in `out` (`leaders_in_rows`) each vehicle that is between
     lanes (its centre farther than R157's wandering zone, `WANDERING_M`, from every lane centre)
     within the road the ego covers in `cut_in_lookahead_s` [s], and that would reach into a lane of
     `lanes` in that time if it turned back at its present sideways speed; returns the new count. A
@@ -263,6 +270,7 @@ def turning_back_in_rows(
     it leaves), but emergency braking waits until it does turn in (`leaders_in_rows` finds it then),
     so no cut-out close ahead is a full brake."""
     s, d, speed, length, offsets = world.s, world.d, world.speed, world.length, world.lane_offsets
+    gaps, speeds, rows = out
     total = found
     close = speed[0] * cut_in_lookahead_s
     for row in range(1, world.vehicles):
@@ -291,11 +299,9 @@ def beside_beyond_in_rows(
     beyond: int,
     cut_in_lookahead_s: float,
     found: int,
-    gaps: np.ndarray,
-    speeds: np.ndarray,
-    rows: np.ndarray,
+    out: FoundLeaders,
 ) -> int:
-    """Appends to the `found` leaders (same arrays as `leaders_in_rows`) each vehicle in lane
+    """Appends to the `found` leaders in `out` (`leaders_in_rows`) each vehicle in lane
     `beyond`, the lane beyond the one a lane change heads for (-1: no change runs), that is ahead
     of the ego (its centre ahead of the ego's) and beside it or reached within
     `cut_in_lookahead_s` [s] at their present speeds, unless the ego passes it sooner than it could
@@ -304,6 +310,7 @@ def beside_beyond_in_rows(
     the cruise keeps its time gap to it (the ego does not pace it while it changes lane) and
     emergency braking waits until it does turn in, as for a car that may turn back."""
     s, speed, length = world.s, world.speed, world.length
+    gaps, speeds, rows = out
     total = found
     if beyond < 0:
         return total

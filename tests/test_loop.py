@@ -64,7 +64,11 @@ def test_keep_lane_agent_never_leaves_its_lane(tiny_config):
     assert np.ptp(d) < 1e-6
 
 
+@pytest.mark.slow
 def test_parallel_episodes_give_the_same_results_as_serial(tiny_config):
+    """Slow: two spawned processes (~10 CPU-s of start-up); the default suite's
+    `test_batched_episodes.py::test_a_run_is_the_same_in_batches_and_over_processes` asserts the
+    same on the same path (batched worlds over `jobs=2`)."""
     config = tiny_config.model_copy(update={"episodes": 3})
     serial = run(config, progress=False, jobs=1)
     parallel = run(config, progress=False, jobs=2)

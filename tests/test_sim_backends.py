@@ -94,7 +94,8 @@ def traffic_lane_changes(states: list[np.ndarray]) -> int:
 @pytest.mark.parametrize(
     ("seed", "density", "vehicles", "frames"),
     [
-        (0, 1.0, 50, 200),
+        # seed 0, slow: seed 1 here and seed 9 (the crash and lane-change run below) drive the same road
+        pytest.param(0, 1.0, 50, 200, marks=pytest.mark.slow),
         (1, 1.0, 50, 200),
         # dense traffic, slow: the `dense` scenario below drives dense traffic in the default suite
         pytest.param(2, 2.0, 100, 120, marks=pytest.mark.slow),

@@ -24,7 +24,7 @@ from common.longitudinal import BrakingLimits, gap_acceleration, needs_full_brak
 from common.neighbours import VehicleRows, footprint_across, lane_beyond, reaches_lane
 from controllers.emergency import braked_acceleration, holds_braking, leader_braking
 from controllers.lateral import LateralMemory, lateral_steering
-from controllers.leaders import LeaderRows, leaders_in_rows, road_to_leave
+from controllers.leaders import FoundLeaders, LeaderRows, leaders_in_rows, road_to_leave
 from controllers.maneuver import lane_change_target, left_origin
 from controllers.pid import PIDMemory, pid_output
 from controllers.reference import (
@@ -175,6 +175,7 @@ def control(
     gaps = np.empty((most_lanes + 2) * vehicles)
     speeds = np.empty((most_lanes + 2) * vehicles)
     rows = np.empty((most_lanes + 2) * vehicles, dtype=np.int64)
+    found_leaders = FoundLeaders(gaps, speeds, rows)
     lanes = np.empty(most_lanes, dtype=np.int64)
     heading_to_lane = np.empty(vehicles)
     reach = (lane_width + extent) / 2
@@ -222,7 +223,7 @@ def control(
         )
         found, held = leaders_in_rows(
             world, lanes[:used], settings.cut_in_lookahead_s, leaving_lane, leaving_within, beyond,
-            gaps, speeds, rows,
+            found_leaders,
         )  # fmt: skip
         for k in range(held):
             rows[k] = slots[w, rows[k]]

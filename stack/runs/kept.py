@@ -4,6 +4,7 @@ config's road and the learned agents of unchanged model files (`KEPT_PER_PROCESS
 from __future__ import annotations
 
 import math
+import sys
 from collections import OrderedDict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -44,11 +45,14 @@ def with_gate(agent: Agent, config: RunConfig, seed: int) -> Agent:
     """`agent` behind the uncertainty gate (`planner.uncertainty.GatedAgent`) when it is an
     ensemble, `planner.fallback` names an agent and a threshold is known (`planner.
     uncertainty_threshold`, else the one calibrated into its model file), by the measure its model
-    file names (`planner.uncertainty.gate_measure`); else `agent` itself."""
-    from planner.learned import LearnedAgent
-
+    file names (`planner.uncertainty.gate_measure`); else `agent` itself. An agent is only a
+    `planner.learned.LearnedAgent` once that module is imported: a run of another agent does not
+    import it (and torch) to find out, ~1.3 CPU-s of every such process's start."""
+    learned = sys.modules.get("planner.learned")
     planner = config.planner
-    if not isinstance(agent, LearnedAgent) or agent.metadata.members < 2 or planner.fallback == "none":
+    if learned is None or not isinstance(agent, learned.LearnedAgent):
+        return agent
+    if agent.metadata.members < 2 or planner.fallback == "none":
         return agent
     threshold = planner.uncertainty_threshold
     if threshold is None:
