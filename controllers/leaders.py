@@ -133,6 +133,26 @@ def passes_sooner_than_falls_back(rel_s: float, closing: float, lengths: float) 
     return passing_s < falling_back_s
 
 
+@register_jitable
+def passes_it(world: LeaderRows, row: int, rel: float) -> bool:
+    """Whether the ego, faster than the vehicle in `row` `rel` [m] ahead, passes it rather than
+    following it: it is past before the vehicle closes in sideways
+    (`passes_before_it_closes_sideways`), and either keeps clear of its side or is beside it and
+    past sooner than braking would bring it back (`passes_sooner_than_falls_back`). The cut-in
+    rule lets such a vehicle go, and so does the rule for cars that may turn back."""
+    d, speed, length = world.d, world.speed, world.length
+    if speed[row] >= speed[0]:
+        return False
+    towards = math.copysign(1.0, d[0] - d[row])
+    apart = abs(d[row] - d[0]) - world.width[0] / 2 - SIDE_MARGIN_M
+    closing, lengths = speed[0] - speed[row], (length[0] + length[row]) / 2
+    clear = passes_before_it_closes_sideways(
+        rel, closing, lengths, towards, speed[row], world.heading_to_lane[row], apart, world.width[row]
+    )
+    beside_past = passes_sooner_than_falls_back(rel, closing, lengths)
+    return clear and (apart - world.extent[row] / 2 > 0 or beside_past)
+
+
 def leaders(
     world: WorldState,
     lanes: tuple[int, ...],
@@ -215,18 +235,8 @@ def leaders_in_rows(
             gap = rel - (length[row] + length[0]) / 2
             if lane == leaving_lane and gap > LEAVE_SAFETY * leaving_within_m + STOP_MARGIN_M:
                 continue
-            if offset > LEAVING_M and speed[row] < speed[0]:
-                towards = math.copysign(1.0, d[0] - d[row])
-                apart = abs(d[row] - d[0]) - world.width[0] / 2 - SIDE_MARGIN_M
-                closing, lengths = speed[0] - speed[row], (length[0] + length[row]) / 2
-                clear = passes_before_it_closes_sideways(
-                    rel, closing, lengths, towards, speed[row], world.heading_to_lane[row], apart,
-                    world.width[row],
-                )  # fmt: skip
-                if clear and (
-                    apart - world.extent[row] / 2 > 0 or passes_sooner_than_falls_back(rel, closing, lengths)
-                ):
-                    continue
+            if offset > LEAVING_M and passes_it(world, row, rel):
+                continue
             position = m
             while position > 0 and s[candidates[position - 1]] - s[0] > rel:
                 candidates[position] = candidates[position - 1]
@@ -264,7 +274,9 @@ def turning_back_in_rows(
     """Appends to the `found` leaders in `out` (`leaders_in_rows`) each vehicle that is between
     lanes (its centre farther than R157's wandering zone, `WANDERING_M`, from every lane centre)
     within the road the ego covers in `cut_in_lookahead_s` [s], and that would reach into a lane of
-    `lanes` in that time if it turned back at its present sideways speed; returns the new count. A
+    `lanes` in that time if it turned back at its present sideways speed (one moving towards that
+    lane and that the ego passes, `passes_it`, is let go as the cut-in rule lets it go: held, the
+    cruise fell back beside it into its path); returns the new count. A
     car weaving at a lane boundary close ahead, moving away, may turn back into the lane the ego
     is about to fill: the cruise keeps its time gap to it (the ego does not accelerate into the gap
     it leaves), but emergency braking waits until it does turn in (`leaders_in_rows` finds it then),
@@ -283,8 +295,11 @@ def turning_back_in_rows(
             nearest = min(nearest, abs(d[row] - centre))
         if nearest <= WANDERING_M or is_listed(rows, found, row):
             continue
-        reach = abs(speed[row] * math.sin(world.heading_to_lane[row])) * cut_in_lookahead_s
+        sideways = speed[row] * math.sin(world.heading_to_lane[row])
+        reach = abs(sideways) * cut_in_lookahead_s
         for lane in lanes:
+            if sideways * (offsets[lane] - d[row]) > 0 and passes_it(world, row, rel):
+                continue
             back = math.copysign(reach, offsets[lane] - d[row])
             if swept_distance(d[row], back, offsets[lane]) < (world.lane_width + world.extent[row]) / 2:
                 gaps[total], speeds[total], rows[total] = rel - lengths, speed[row], row
