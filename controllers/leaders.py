@@ -274,13 +274,13 @@ def turning_back_in_rows(
     """Appends to the `found` leaders in `out` (`leaders_in_rows`) each vehicle that is between
     lanes (its centre farther than R157's wandering zone, `WANDERING_M`, from every lane centre)
     within the road the ego covers in `cut_in_lookahead_s` [s], and that would reach into a lane of
-    `lanes` in that time if it turned back at its present sideways speed (one moving towards that
-    lane and that the ego passes, `passes_it`, is let go as the cut-in rule lets it go: held, the
-    cruise fell back beside it into its path); returns the new count. A
+    `lanes` in that time if it turned back at its present sideways speed; returns the new count. A
     car weaving at a lane boundary close ahead, moving away, may turn back into the lane the ego
     is about to fill: the cruise keeps its time gap to it (the ego does not accelerate into the gap
     it leaves), but emergency braking waits until it does turn in (`leaders_in_rows` finds it then),
-    so no cut-out close ahead is a full brake."""
+    so no cut-out close ahead is a full brake. One moving towards a lane that the ego passes
+    (`passes_it`) is let go there, as the cut-in rule lets it go: held, the cruise fell back beside
+    it into its path."""
     s, d, speed, length, offsets = world.s, world.d, world.speed, world.length, world.lane_offsets
     gaps, speeds, rows = out
     total = found
