@@ -110,8 +110,10 @@ def replay(config: RunConfig, worlds: int, events: list[Event], law_only: bool, 
                 digest.update(tracked.slot.tobytes())
             continue
         sensed = first
-        along, across = lane_velocity(sensed.speed, sensed.heading, sensed.lane_heading[:, None])
-        found = MeasuredWorlds(sensed.count, sensed.s, sensed.d, along, across, sensed.length, sensed.width)
+        along, across, relative = lane_velocity(sensed.speed, sensed.heading, sensed.lane_heading[:, None])
+        found = MeasuredWorlds(
+            sensed.count, sensed.s, sensed.d, along, across, sensed.length, sensed.width, relative
+        )
         flagged = second & tracker.tracked
         heading = np.ascontiguousarray(sensed.lane_heading, dtype=np.float64)
         work = tracker.work.fit(sensed.s.shape[1] - 1)

@@ -117,29 +117,30 @@ emergency braking's default."""
 
 @register_jitable
 def passes_sooner_than_falls_back(rel_s: float, closing: float, lengths: float) -> bool:
-    """Whether the ego, already beside a vehicle `rel_s` [m] ahead (its front past the other's rear:
-    `rel_s` < `lengths`, the two half lengths [m]) and `closing` [m/s] faster, is past it (its rear
-    beyond the other's front, at constant speeds) sooner than braking at `FALL_BACK_MPS2` brings
-    its front back behind the other's rear. Then braking for it would only hold the two side by
-    side for longer. The leaders take it only for a vehicle that does not close in sideways first
-    (`passes_before_it_closes_sideways`): one turning into the ego's side is followed."""
+    """Whether the ego, `closing` [m/s] faster than a vehicle `rel_s` [m] ahead (centres; `lengths`
+    the two half lengths [m]), will be beside it whatever it does (its front already past the
+    other's rear, or braking at `FALL_BACK_MPS2` cannot stop it short of that rear) and is past
+    it (its rear beyond the other's front, at constant speeds) sooner than braking brings its front
+    back behind the other's rear. Then braking for it would only hold the two side by side for
+    longer."""
     past_its_rear = lengths - rel_s
-    if past_its_rear <= 0:
+    reach = closing * closing + 2 * FALL_BACK_MPS2 * past_its_rear
+    if reach < 0:
         return False
     passing_s = (rel_s + lengths) / closing
-    falling_back_s = (
-        closing + math.sqrt(closing * closing + 2 * FALL_BACK_MPS2 * past_its_rear)
-    ) / FALL_BACK_MPS2
+    falling_back_s = (closing + math.sqrt(reach)) / FALL_BACK_MPS2
     return passing_s < falling_back_s
 
 
 @register_jitable
 def passes_it(world: LeaderRows, row: int, rel: float) -> bool:
     """Whether the ego, faster than the vehicle in `row` `rel` [m] ahead, passes it rather than
-    following it: it is past before the vehicle closes in sideways
-    (`passes_before_it_closes_sideways`), and either keeps clear of its side or is beside it and
-    past sooner than braking would bring it back (`passes_sooner_than_falls_back`). The cut-in
-    rule lets such a vehicle go, and so does the rule for cars that may turn back."""
+    following it: two of three hold. It is past before the vehicle closes in sideways
+    (`passes_before_it_closes_sideways`); the vehicle's turned footprint keeps clear of the ego's
+    side margin now; the ego will be beside it anyway and passing ends that sooner than braking
+    (`passes_sooner_than_falls_back`). The last settles a pass that a few centimetres of the
+    vehicle's drift would otherwise turn into a full braking beside it, held there longer. The
+    cut-in rule lets such a vehicle go, and so does the rule for cars that may turn back."""
     d, speed, length = world.d, world.speed, world.length
     if speed[row] >= speed[0]:
         return False
@@ -149,8 +150,10 @@ def passes_it(world: LeaderRows, row: int, rel: float) -> bool:
     clear = passes_before_it_closes_sideways(
         rel, closing, lengths, towards, speed[row], world.heading_to_lane[row], apart, world.width[row]
     )
-    beside_past = passes_sooner_than_falls_back(rel, closing, lengths)
-    return clear and (apart - world.extent[row] / 2 > 0 or beside_past)
+    outside = apart - world.extent[row] / 2 > 0
+    return (clear and outside) or (
+        passes_sooner_than_falls_back(rel, closing, lengths) and (clear or outside)
+    )
 
 
 def leaders(

@@ -1,10 +1,11 @@
 """Perception that tracks: a sensor's detections become tracks before the grid, the safety layer or
 emergency braking see them. `Tracker.update(detected, dt)` turns one frame's detections
 (`perception.sensor`) into the world of the confirmed tracks: row 0 the ego as detected, then each
-confirmed track in slot order at its filtered s and d, its speed and heading from its filtered
-velocity (so relative speeds and times to collision come from the filter), its size from its last
-detection, its id `TRACK_ID_BASE` + a counter. One frame's phantom is never confirmed; a missed
-detection coasts the track (`perception.tracking_law`, the per-frame law).
+confirmed track in slot order at its filtered s and d, its heading its last detection's, its
+speed the filtered velocity's component along that heading (so relative speeds and times to
+collision come from the filter), its size from its last detection, its id `TRACK_ID_BASE` + a
+counter. One frame's phantom is never confirmed; a missed detection coasts the track
+(`perception.tracking_law`, the per-frame law).
 
 One law, two paths: `Tracker` calls `track_world` compiled on its world; `TrackerBatch` calls
 `track_worlds` on the worlds of a batch, then makes every world's tracked rows in numpy over the
@@ -121,19 +122,19 @@ def empty_tracks(slots: int, worlds: tuple[int, ...] = ()) -> Tracks:
         np.zeros((*worlds, slots), dtype=np.int64),
         np.zeros((*worlds, slots), dtype=np.int64),
         np.zeros((*worlds, slots), dtype=np.int64),
-        np.zeros((*worlds, slots, 2)),
+        np.zeros((*worlds, slots, 3)),
         np.full((*worlds, 1), TRACK_ID_BASE, dtype=np.int64),
     )
 
 
 def lane_velocity(
     speed: np.ndarray, heading: np.ndarray, lane_heading: np.ndarray | float
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Detections' reported velocity along and across the lane heading at the ego `lane_heading`
-    [rad], from their `speed` [m/s] and `heading` [rad] (numpy's cosine and sine: one element's
-    bits on any array)."""
-    relative = heading - lane_heading
-    return np.asarray(speed * np.cos(relative)), np.asarray(speed * np.sin(relative))
+    [rad], from their `speed` [m/s] and `heading` [rad], and their heading to the lane [rad]
+    (numpy's cosine and sine: one element's bits on any array)."""
+    relative = np.asarray(heading - lane_heading)
+    return np.asarray(speed * np.cos(relative)), np.asarray(speed * np.sin(relative)), relative
 
 
 def _floats(values: np.ndarray) -> np.ndarray:
@@ -182,14 +183,14 @@ class Tracker:
         `track_world` writes it into two fresh buffers, each field a slice of them (built
         directly: `dataclasses.replace` costs twice as much; the other fields are `detected`'s)."""
         lane_heading = detected.lanes[0].heading_at(float(detected.s[0]))
-        along, across = lane_velocity(detected.speed, detected.heading, lane_heading)
+        along, across, relative = lane_velocity(detected.speed, detected.heading, lane_heading)
         columns = self.columns
         floats = np.empty(WORLD_FLOATS * columns)
         integers = np.empty(WORLD_INTEGERS * columns, dtype=np.int64)
         work = self.work.fit(detected.count - 1)
         count = track_world(
             *self.law, *self.tracks,
-            detected.count, detected.s, detected.d, along, across, detected.length, detected.width,
+            detected.count, detected.s, detected.d, along, across, detected.length, detected.width, relative,
             self.position_variance, dt, detected.lane_offsets, detected.lanes_count, float(lane_heading),
             detected.ids, detected.lane, detected.position, detected.velocity, detected.heading,
             detected.speed, floats, integers, work.integers, work.floats,
@@ -259,8 +260,10 @@ class TrackerBatch:
         """Every world as its tracker reports it after the frame `sensed`, `dt` [s] after the last,
         tracking the detections of the tracked worlds flagged in `worlds`."""
         flagged = np.asarray(worlds, dtype=bool) & self.tracked
-        along, across = lane_velocity(sensed.speed, sensed.heading, sensed.lane_heading[:, None])
-        found = MeasuredWorlds(sensed.count, sensed.s, sensed.d, along, across, sensed.length, sensed.width)
+        along, across, relative = lane_velocity(sensed.speed, sensed.heading, sensed.lane_heading[:, None])
+        found = MeasuredWorlds(
+            sensed.count, sensed.s, sensed.d, along, across, sensed.length, sensed.width, relative
+        )
         work = self.work.fit(sensed.s.shape[1] - 1)
         track_worlds(
             self.law, self.tracks, found, self.position_variance, dt, flagged, sensed.lane_offsets,

@@ -49,7 +49,7 @@ def track_world(
     misses: np.ndarray,
     status: np.ndarray,
     ident: np.ndarray,
-    size: np.ndarray,
+    box: np.ndarray,
     next_ident: np.ndarray,
     rows: int,
     s: np.ndarray,
@@ -58,6 +58,7 @@ def track_world(
     lateral_speed: np.ndarray,
     length: np.ndarray,
     width: np.ndarray,
+    heading: np.ndarray,
     position_variance: float,
     dt: float,
     lane_offsets: np.ndarray,
@@ -90,8 +91,8 @@ def track_world(
         lateral_acceleration,
         speed_variance,
     )
-    tracks = Tracks(state, covariance, hits, age, misses, status, ident, size, next_ident)
-    found = Measured(rows, s, d, speed, lateral_speed, length, width)
+    tracks = Tracks(state, covariance, hits, age, misses, status, ident, box, next_ident)
+    found = Measured(rows, s, d, speed, lateral_speed, length, width, heading)
     track_frame(law, tracks, found, position_variance, dt, work_integers, work_floats)
     slots = np.empty(len(status), dtype=np.int64)
     lanes = np.empty(len(status), dtype=np.int64)
@@ -161,7 +162,7 @@ def track_worlds(
             tracks.misses[w],
             tracks.status[w],
             tracks.ident[w],
-            tracks.size[w],
+            tracks.box[w],
             tracks.next_ident[w],
         )
         measured = Measured(
@@ -172,6 +173,7 @@ def track_worlds(
             found.lateral_speed[w],
             found.length[w],
             found.width[w],
+            found.heading[w],
         )
         _track_frame(law, one, measured, position_variance[w], dt, work_integers, work_floats)
         counts_out[w] = _confirmed_tracks(one, lane_offsets[w], lanes_count[w], slots_out[w], lane_out[w])

@@ -68,8 +68,8 @@ class Tracks(NamedTuple):
     """One world's tracks, a slot each: `state` (slots, 4) [s, ds/dt, d, dd/dt], `covariance`
     (slots, 6), `hits` the last frames' detections as bits (newest lowest), `age` frames since
     birth, `misses` frames running without a detection, `status` (`FREE`, `TENTATIVE`,
-    `CONFIRMED`), `ident` each track's id, `size` (slots, 2) length and width [m] of its last
-    detection, and `next_ident` (1,) the id the next track gets."""
+    `CONFIRMED`), `ident` each track's id, `box` (slots, 3) its last detection's length, width [m]
+    and heading to the lane [rad], and `next_ident` (1,) the id the next track gets."""
 
     state: np.ndarray
     covariance: np.ndarray
@@ -78,7 +78,7 @@ class Tracks(NamedTuple):
     misses: np.ndarray
     status: np.ndarray
     ident: np.ndarray
-    size: np.ndarray
+    box: np.ndarray
     next_ident: np.ndarray
 
 
@@ -92,12 +92,13 @@ class MeasuredWorlds(NamedTuple):
     lateral_speed: np.ndarray
     length: np.ndarray
     width: np.ndarray
+    heading: np.ndarray
 
 
 class Measured(NamedTuple):
     """One frame's detections, rows 1 to `rows` - 1 (row 0 is the ego, never tracked): `s`, `d`
     [m] in the reference lane's frame, `speed` along the lane and `lateral_speed` across it [m/s],
-    `length`, `width` [m]."""
+    `length`, `width` [m], `heading` to the lane [rad]."""
 
     rows: int
     s: np.ndarray
@@ -106,6 +107,7 @@ class Measured(NamedTuple):
     lateral_speed: np.ndarray
     length: np.ndarray
     width: np.ndarray
+    heading: np.ndarray
 
 
 @register_jitable
@@ -167,8 +169,8 @@ def block_update(
 def overlap(tracks: Tracks, t: int, u: int) -> bool:
     """Whether tracks `t` and `u` overlap: their footprints (each one's last detected length and
     width about its filtered s and d) intersect, which two vehicles cannot."""
-    reach_s = (tracks.size[t, 0] + tracks.size[u, 0]) / 2
-    reach_d = (tracks.size[t, 1] + tracks.size[u, 1]) / 2
+    reach_s = (tracks.box[t, 0] + tracks.box[u, 0]) / 2
+    reach_d = (tracks.box[t, 1] + tracks.box[u, 1]) / 2
     ds, dd = tracks.state[t, 0] - tracks.state[u, 0], tracks.state[t, 2] - tracks.state[u, 2]
     return abs(ds) < reach_s and abs(dd) < reach_d
 
@@ -247,9 +249,9 @@ def track_frame(
     pair_cost, at = _take(work_floats, at, room)
     contested_cost, at = _take(work_floats, at, room)
     contested_sorted, at = _take(work_floats, at, room)
-    state, covariance, status, size = tracks.state, tracks.covariance, tracks.status, tracks.size
+    state, covariance, status, box = tracks.state, tracks.covariance, tracks.status, tracks.box
     s, d, speed, lateral_speed = found.s, found.d, found.speed, found.lateral_speed
-    length, width = found.length, found.width
+    length, width, heading = found.length, found.width, found.heading
     live = 0
     for t in range(slots):
         if status[t] != FREE:
@@ -309,7 +311,7 @@ def track_frame(
             state[t, 2], state[t, 3], covariance[t, 3], covariance[t, 4], covariance[t, 5],
             d[j + 1], lateral_speed[j + 1], r, rv,
         )  # fmt: skip
-        size[t, 0], size[t, 1] = length[j + 1], width[j + 1]
+        box[t, 0], box[t, 1], box[t, 2] = length[j + 1], width[j + 1], heading[j + 1]
     window = (1 << law.confirm_frames) - 1
     track_hits, age, misses = tracks.hits, tracks.age, tracks.misses
     for i in range(live):
@@ -348,7 +350,7 @@ def track_frame(
         status[slot] = CONFIRMED if law.confirm_hits <= 1 else TENTATIVE
         tracks.ident[slot] = tracks.next_ident[0]
         tracks.next_ident[0] += 1
-        size[slot, 0], size[slot, 1] = length[j], width[j]
+        box[slot, 0], box[slot, 1], box[slot, 2] = length[j], width[j], heading[j]
 
 
 @register_jitable
@@ -377,15 +379,19 @@ def confirmed_tracks(
 def tracked_rows(
     tracks: Tracks, slots: np.ndarray, count: int, lane_heading: float, rows_out: np.ndarray
 ) -> None:
-    """The rows (`ROW_FIELDS`) of the `count` tracks in `slots` into `rows_out`: filtered position
-    and velocity, speed and heading from the velocity (the lane's heading at the ego
-    `lane_heading` [rad] plus the velocity's angle to it), size of the last detection."""
-    state, size = tracks.state, tracks.size
+    """The rows (`ROW_FIELDS`) of the `count` tracks in `slots` into `rows_out`: filtered position;
+    the heading of the last detection's box (the lane's heading at the ego `lane_heading` [rad]
+    plus the box's angle to it) and the speed along it, the filtered velocity's component in that
+    direction (at least 0 [m/s]: a car moves where it points), so the velocity is that speed along
+    the box; size of the last detection. The box, not the filtered velocity, gives the direction:
+    a stopped car's filtered velocity is the noise of its positions, pointing anywhere."""
+    state, box = tracks.state, tracks.box
     for k in range(count):
         t = slots[k]
-        along, across = state[t, 1], state[t, 3]
+        cosine, sine = math.cos(box[t, 2]), math.sin(box[t, 2])
+        speed = max(state[t, 1] * cosine + state[t, 3] * sine, 0.0)
         rows_out[k, 0], rows_out[k, 1] = state[t, 0], state[t, 2]
-        rows_out[k, 2], rows_out[k, 3] = along, across
-        rows_out[k, 4] = math.hypot(along, across)
-        rows_out[k, 5] = lane_heading + math.atan2(across, along)
-        rows_out[k, 6], rows_out[k, 7] = size[t, 0], size[t, 1]
+        rows_out[k, 2], rows_out[k, 3] = speed * cosine, speed * sine
+        rows_out[k, 4] = speed
+        rows_out[k, 5] = lane_heading + box[t, 2]
+        rows_out[k, 6], rows_out[k, 7] = box[t, 0], box[t, 1]

@@ -208,12 +208,13 @@ def test_a_stopped_car_in_the_lane_being_left_is_passed_when_the_change_leaves_i
 
 @pytest.mark.parametrize(
     ("rel_s", "closing", "passes"),
-    [(3.6, 6.0, True), (3.6, 0.5, False), (6.0, 6.0, False)],
+    [(3.6, 6.0, True), (3.6, 0.5, False), (6.0, 6.0, True), (15.0, 6.0, False)],
 )
 def test_a_slower_car_alongside_is_passed_when_passing_is_sooner_than_falling_back(rel_s, closing, passes):
     """Two 5 m cars, the other's centre `rel_s` ahead: 1.4 m beside it at 6 m/s faster the ego is
     past it in 1.43 s, behind it braking at 5 m/s^2 only after 2.6 s; at 0.5 m/s faster it falls
-    back in 0.85 s; a car wholly ahead (no overlap) is always followed."""
+    back in 0.85 s; 1 m behind it at 6 m/s faster it cannot stop short of it (3.6 m needed) and is
+    past in 1.83 s, behind it again after 2.22 s; 10 m behind, braking keeps it behind."""
     assert passes_sooner_than_falls_back(rel_s, closing, 5.0) == passes
 
 

@@ -46,11 +46,11 @@ class OneWorld:
         """One frame of detections (s, d, speed along the lane[, across it])."""
         rows = [(0.0, 0.0, 0.0, 0.0), *((*row, 0.0)[:4] for row in detections)]
         s, d, speed, across = (np.array(column, dtype=float) for column in zip(*rows, strict=True))
-        sizes = np.full(len(rows), 5.0), np.full(len(rows), 2.0)
+        box = np.full(len(rows), 5.0), np.full(len(rows), 2.0), np.arctan2(across, speed)
         ego = np.zeros(len(rows), dtype=np.int64), np.zeros((len(rows), 2)), np.zeros(len(rows))
         return int(
             track_world(
-                *self.law, *self.tracks, len(rows), s, d, speed, across, *sizes, self.variance, dt,
+                *self.law, *self.tracks, len(rows), s, d, speed, across, *box, self.variance, dt,
                 LANES, 3, 0.0, ego[0], ego[0], ego[1], ego[1], ego[2], ego[2],
                 np.empty(WORLD_FLOATS * self.columns),
                 np.empty(WORLD_INTEGERS * self.columns, dtype=np.int64), np.empty(0, dtype=np.int64),
