@@ -149,6 +149,26 @@ def test_failures_found_on_the_way_stay_avoided(case):
     assert not assessed.reference.collided and not assessed.stack.collided
 
 
+POOR_SENSOR = {"position_noise_m": 1.0, "miss_probability": 0.1, "false_positives": 0.5}
+"""The sensor of the grids' poor-sensor runs (tracked)."""
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "speed=25,relative_speed=6,gap=10,lateral_speed=0.5",
+        "speed=25,relative_speed=4,gap=3,lateral_speed=0.5",
+    ],
+)
+def test_slow_cut_ins_seen_through_a_poor_sensor_stay_avoided(text):
+    """Failures of the full cut-in grid through a poor sensor: a pass that 4 cm of tracked position
+    turned into braking beside the car, and a slow cut-in 3 m ahead whose tracked direction
+    flickered with the filtered velocity's noise."""
+    config = build_config({"planner": {"agent": "ddqn"}, "perception": {"sensor": POOR_SENSOR}})
+    assessed = assess((config, parse_point("cut-in", text)))
+    assert not assessed.reference.collided and not assessed.stack.collided
+
+
 def test_braking_leader_triggers_emergency_braking_before_the_constant_speed_prediction():
     brake = EmergencyBraking(5.0, 3.0, 1.0)
     cruise = Actuation(-3.0, 0.0)

@@ -48,15 +48,19 @@ class OneWorld:
         s, d, speed, across = (np.array(column, dtype=float) for column in zip(*rows, strict=True))
         box = np.full(len(rows), 5.0), np.full(len(rows), 2.0), np.arctan2(across, speed)
         ego = np.zeros(len(rows), dtype=np.int64), np.zeros((len(rows), 2)), np.zeros(len(rows))
+        self.floats = np.empty(WORLD_FLOATS * self.columns)
         return int(
             track_world(
                 *self.law, *self.tracks, len(rows), s, d, speed, across, *box, self.variance, dt,
-                LANES, 3, 0.0, ego[0], ego[0], ego[1], ego[1], ego[2], ego[2],
-                np.empty(WORLD_FLOATS * self.columns),
+                LANES, 3, 0.0, ego[0], ego[0], ego[1], ego[1], ego[2], ego[2], self.floats,
                 np.empty(WORLD_INTEGERS * self.columns, dtype=np.int64), np.empty(0, dtype=np.int64),
                 np.empty(0),
             )
         )  # fmt: skip
+
+    def reported(self, row: int = 1) -> tuple[float, float]:
+        """The heading [rad] and speed [m/s] the last frame reported of tracked row `row`."""
+        return float(self.floats[4 * self.columns + row]), float(self.floats[5 * self.columns + row])
 
     def status(self, slot: int = 0) -> int:
         return int(self.tracks.status[slot])
@@ -78,6 +82,30 @@ def test_a_constant_velocity_target_converges_to_its_position_and_speed() -> Non
     assert world.status() == CONFIRMED and world.tracks.ident[0] == TRACK_ID_BASE
     assert rmse[0] < 0.6 and rmse[2] < 0.6, "positions"
     assert rmse[1] < 0.3 and rmse[3] < 0.3, "velocities"
+
+
+def test_a_stopped_car_reports_its_box_s_heading_not_its_filtered_velocity_s_angle() -> None:
+    """A car stopped in the next lane seen through 1 m of noise: its filtered velocity is the noise
+    of its positions, pointing anywhere, but it reports its box's heading (along the lane) and a
+    speed of at most a few dm/s on every frame, so no layer turns its footprint across the ego's
+    lane; a car drifting across reports its box's heading too."""
+    rng = np.random.default_rng(1040900)
+    world, reported, angles = OneWorld(), [], []
+    for _ in range(90):
+        world.frame([(30.0 + rng.normal(0, 1.0), 4.0 + rng.normal(0, 1.0), 0.0)])
+        if world.status() == CONFIRMED:
+            reported.append(world.reported())
+            angles.append(np.arctan2(world.tracks.state[0, 3], world.tracks.state[0, 1]))
+    headings, speeds = np.array(reported).T
+    assert len(headings) > 60 and np.all(headings == 0.0) and np.all((speeds >= 0) & (speeds < 0.5))
+    assert np.ptp(angles) > 1.0, "the filtered velocity's angle is noise"
+    drifting = OneWorld()
+    for k in range(30):
+        drifting.frame([(30.0 + 19.0 * k * DT, 8.0 - 0.5 * k * DT, 19.0, -0.5)])
+    heading, speed = drifting.reported()
+    assert heading == pytest.approx(np.arctan2(-0.5, 19.0)) and speed == pytest.approx(
+        np.hypot(19.0, 0.5), abs=0.05
+    )
 
 
 def highway_env_lane_change(speed: float = 20.0, seconds: float = 6.0) -> np.ndarray:
