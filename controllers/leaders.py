@@ -135,24 +135,32 @@ def passes_sooner_than_falls_back(rel_s: float, closing: float, lengths: float) 
 @register_jitable
 def passes_it(world: LeaderRows, row: int, rel: float) -> bool:
     """Whether the ego, faster than the vehicle in `row` `rel` [m] ahead, passes it rather than
-    following it: two of three hold. It is past before the vehicle closes in sideways
-    (`passes_before_it_closes_sideways`); the vehicle's turned footprint keeps clear of the ego's
-    side margin now; the ego will be beside it anyway and passing ends that sooner than braking
-    (`passes_sooner_than_falls_back`). The last settles a pass that a few centimetres of the
-    vehicle's drift would otherwise turn into a full braking beside it, held there longer. The
-    cut-in rule lets such a vehicle go, and so does the rule for cars that may turn back."""
+    following it: the vehicle's turned footprint keeps clear of the ego's side margin now and the
+    ego is past before the vehicle comes within it (`passes_before_it_closes_sideways`); or the ego
+    will be beside it whatever it does and passing ends that sooner than braking
+    (`passes_sooner_than_falls_back`), and the vehicle, not touching the ego's side now, does not
+    touch it before the ego is past (the same test without the margin). The second settles a pass
+    that a few centimetres of the vehicle's drift would otherwise turn into a full braking beside
+    it, held there longer. The cut-in rule lets such a vehicle go, and so does the rule for cars
+    that may turn back."""
     d, speed, length = world.d, world.speed, world.length
     if speed[row] >= speed[0]:
         return False
     towards = math.copysign(1.0, d[0] - d[row])
-    apart = abs(d[row] - d[0]) - world.width[0] / 2 - SIDE_MARGIN_M
+    to_side = abs(d[row] - d[0]) - world.width[0] / 2
     closing, lengths = speed[0] - speed[row], (length[0] + length[row]) / 2
-    clear = passes_before_it_closes_sideways(
-        rel, closing, lengths, towards, speed[row], world.heading_to_lane[row], apart, world.width[row]
-    )
-    outside = apart - world.extent[row] / 2 > 0
-    return (clear and outside) or (
-        passes_sooner_than_falls_back(rel, closing, lengths) and (clear or outside)
+    heading, width, extent = world.heading_to_lane[row], world.width[row], world.extent[row]
+    apart = to_side - SIDE_MARGIN_M
+    if apart - extent / 2 > 0 and passes_before_it_closes_sideways(
+        rel, closing, lengths, towards, speed[row], heading, apart, width
+    ):
+        return True
+    return (
+        to_side - extent / 2 > 0
+        and passes_sooner_than_falls_back(rel, closing, lengths)
+        and passes_before_it_closes_sideways(
+            rel, closing, lengths, towards, speed[row], heading, to_side, width
+        )
     )
 
 
@@ -170,10 +178,9 @@ def leaders(
     none if nobody, and, while that one is leaving or entering the lane (centre more than
     `LEAVING_M` off the lane's centre), the next one ahead that it no longer hides, and so on: a
     cut-out reveals the car beyond at once. A slower vehicle entering the lane that the ego passes
-    before it reaches the ego's side (`passes_before_it_closes_sideways`; its turned footprint not
-    yet within the side margin), or that the ego is already beside
-    and passes sooner than it could fall back behind it (`passes_sooner_than_falls_back`), is not
-    followed: braking for it would only keep the two side by side for longer. In `leaving_lane`
+    (`passes_it`: past before it comes within the ego's side margin, or beside it anyway and past
+    sooner than braking would bring it back, before it touches the ego's side) is not followed:
+    braking for it would only keep the two side by side for longer. In `leaving_lane`
     (the lane a lane change is leaving; -1: none) a vehicle farther ahead than `LEAVE_SAFETY` times
     `leaving_within_m` [m] (the road the change still needs to leave it,
     `controllers.reference.road_to_reach`) plus the stop margin is not followed: the ego is out of

@@ -156,13 +156,13 @@ class SensorModel:
 def _with_phantoms(
     fields: dict[str, np.ndarray], world: WorldState, s: np.ndarray, lanes: np.ndarray
 ) -> dict[str, np.ndarray]:
-    """Append phantom vehicles at `s` [m] on the centres of `lanes`, at the ego's speed."""
+    """Append phantom vehicles at `s` [m] on the centres of `lanes`, at the ego's speed and heading."""
     count = len(s)
     d = world.lane_offsets[lanes]
     phantom = {
         "ids": PHANTOM_ID_BASE + np.arange(count),
         "position": np.stack([s, d], axis=1),
-        "heading": np.zeros(count),
+        "heading": np.full(count, world.heading[0]),
         "speed": np.full(count, world.speed[0]),
         "velocity": np.tile(world.velocity[0], (count, 1)),
         "lane": lanes,
@@ -260,7 +260,7 @@ class SensorBatch:
             s=np.where(phantom, self.phantom_s[:, :rows], s),
             d=np.where(phantom, phantom_d, d),
             speed=np.where(phantom, truth.speed[:, :1], speed),
-            heading=heading,
+            heading=np.where(phantom, truth.heading[:, :1], heading),
             length=np.where(phantom, truth.length[:, :1], length),
             width=np.where(phantom, truth.width[:, :1], width),
             lane=np.where(phantom, lanes, lane),

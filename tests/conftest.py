@@ -72,3 +72,13 @@ def own_handlers():
     interrupts.catch_signals()
     for sig, handler in saved.items():
         signal.signal(sig, handler)
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    """One local 2-CPU Ray instance for the module (shut down after it, so no later test meets a
+    running instance); `--ray local` reuses it."""
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield
+    ray.shutdown()

@@ -40,14 +40,6 @@ PLANTED_BEST = 20.0
 seconds survived, so 20 beats 1, 1.5 and 2 on any episode that lasts a decision."""
 
 
-@pytest.fixture(scope="module")
-def local_ray():
-    """One local 2-CPU Ray instance for the module; `--ray local` reuses it."""
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-    yield
-    ray.shutdown()
-
-
 def invoke(*arguments: str):
     return CliRunner().invoke(app, list(arguments))
 

@@ -28,14 +28,6 @@ SHARDED = {**WORLDS, "train": {**WORLDS["train"], "envs": 2}}
 
 
 @pytest.fixture(scope="module")
-def local_ray():
-    """One local 2-CPU Ray instance for the module; `--ray local` reuses it."""
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-    yield
-    ray.shutdown()
-
-
-@pytest.fixture(scope="module")
 def on_processes(tmp_path_factory):
     """The run of `SHARDED` on two shard processes (`--envs 2`): the folder of its files."""
     out = tmp_path_factory.mktemp("processes")

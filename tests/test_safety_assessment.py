@@ -238,6 +238,26 @@ def test_a_slower_car_alongside_is_passed_when_passing_is_sooner_than_falling_ba
     assert passes_sooner_than_falls_back(rel_s, closing, 5.0) == passes
 
 
+@pytest.mark.parametrize(
+    ("d", "speed", "heading", "rel_s", "followed"),
+    [(5.5, 0.0, 0.0, 65.0, True), (7.4, 15.0, -0.1, 13.0, True), (7.13, 19.0, -0.026, 5.06, False)],
+)
+def test_a_car_the_ego_cannot_stop_short_of_is_passed_only_if_it_does_not_touch_it_first(
+    d, speed, heading, rel_s, followed
+):
+    """The ego at 25 m/s in the lane centred at d = 4 m, a 5 m car `rel_s` ahead (centres) that
+    braking at 5 m/s^2 cannot keep it behind: a stopped car reaching 0.5 m into the ego's path is
+    followed; one drifting in at 1.5 m/s 8 m ahead reaches the ego's side before the ego is past
+    (0.93 s against 1.8 s) and is followed; one drifting in at 0.5 m/s alongside the ego's front,
+    which touches only after the ego is past (2.26 s against 1.68 s) though it comes within the
+    side margin before (1.66 s), is passed: braking would hold the ego beside it for 2.4 s."""
+    car = Actor(EGO_START_S + rel_s, d, speed)
+    world = ScriptedRoad(4, 1, 25.0, [car], Stationary(), "kinematic", DT, 5.0).reset()
+    world = dataclasses.replace(world, heading=world.heading.copy())
+    world.heading[1] = heading
+    assert len(leaders(world, (1,), 1.0)) == followed
+
+
 def test_reference_driver_on_a_lead_braking_point_it_cannot_avoid():
     config = build_config({})
     assert drive_reference(config, Point("lead-braking", (36.11, 0.8, 8.0))).collided
