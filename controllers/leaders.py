@@ -133,16 +133,17 @@ def passes_sooner_than_falls_back(rel_s: float, closing: float, lengths: float) 
 
 
 @register_jitable
-def passes_it(world: LeaderRows, row: int, rel: float) -> bool:
+def passes_it(world: LeaderRows, row: int, rel: float, lookahead_s: float) -> bool:
     """Whether the ego, faster than the vehicle in `row` `rel` [m] ahead, passes it rather than
     following it: the vehicle's turned footprint keeps clear of the ego's side margin now and the
     ego is past before the vehicle comes within it (`passes_before_it_closes_sideways`); or the ego
-    will be beside it whatever it does and passing ends that sooner than braking
-    (`passes_sooner_than_falls_back`), and the vehicle, not touching the ego's side now, does not
-    touch it before the ego is past (the same test without the margin). The second settles a pass
-    that a few centimetres of the vehicle's drift would otherwise turn into a full braking beside
-    it, held there longer. The cut-in rule lets such a vehicle go, and so does the rule for cars
-    that may turn back."""
+    reaches the vehicle's rear within `lookahead_s` [s] at their present speeds (as far ahead as a
+    sideways motion counts), will be beside it whatever it does, and passing ends that sooner
+    than braking (`passes_sooner_than_falls_back`), and the vehicle, not touching the ego's side
+    now, does not touch it before the ego is past (the same test without the margin). The second
+    settles a pass that a few centimetres of the vehicle's drift would otherwise turn into a full
+    braking beside it, held there longer. The cut-in rule lets such a vehicle go, and so does the
+    rule for cars that may turn back."""
     d, speed, length = world.d, world.speed, world.length
     if speed[row] >= speed[0]:
         return False
@@ -156,7 +157,8 @@ def passes_it(world: LeaderRows, row: int, rel: float) -> bool:
     ):
         return True
     return (
-        to_side - extent / 2 > 0
+        rel - lengths < closing * lookahead_s
+        and to_side - extent / 2 > 0
         and passes_sooner_than_falls_back(rel, closing, lengths)
         and passes_before_it_closes_sideways(
             rel, closing, lengths, towards, speed[row], heading, to_side, width
@@ -245,7 +247,7 @@ def leaders_in_rows(
             gap = rel - (length[row] + length[0]) / 2
             if lane == leaving_lane and gap > LEAVE_SAFETY * leaving_within_m + STOP_MARGIN_M:
                 continue
-            if offset > LEAVING_M and passes_it(world, row, rel):
+            if offset > LEAVING_M and passes_it(world, row, rel, cut_in_lookahead_s):
                 continue
             position = m
             while position > 0 and s[candidates[position - 1]] - s[0] > rel:
@@ -308,7 +310,7 @@ def turning_back_in_rows(
         sideways = speed[row] * math.sin(world.heading_to_lane[row])
         reach = abs(sideways) * cut_in_lookahead_s
         for lane in lanes:
-            if sideways * (offsets[lane] - d[row]) > 0 and passes_it(world, row, rel):
+            if sideways * (offsets[lane] - d[row]) > 0 and passes_it(world, row, rel, cut_in_lookahead_s):
                 continue
             back = math.copysign(reach, offsets[lane] - d[row])
             if swept_distance(d[row], back, offsets[lane]) < (world.lane_width + world.extent[row]) / 2:

@@ -240,7 +240,12 @@ def test_a_slower_car_alongside_is_passed_when_passing_is_sooner_than_falling_ba
 
 @pytest.mark.parametrize(
     ("d", "speed", "heading", "rel_s", "followed"),
-    [(5.5, 0.0, 0.0, 65.0, True), (7.4, 15.0, -0.1, 13.0, True), (7.13, 19.0, -0.026, 5.06, False)],
+    [
+        (5.5, 0.0, 0.0, 65.0, True),
+        (7.4, 15.0, -0.1, 13.0, True),
+        (7.0, 3.5, -0.13, 31.0, True),
+        (7.13, 19.0, -0.026, 5.06, False),
+    ],
 )
 def test_a_car_the_ego_cannot_stop_short_of_is_passed_only_if_it_does_not_touch_it_first(
     d, speed, heading, rel_s, followed
@@ -248,7 +253,9 @@ def test_a_car_the_ego_cannot_stop_short_of_is_passed_only_if_it_does_not_touch_
     """The ego at 25 m/s in the lane centred at d = 4 m, a 5 m car `rel_s` ahead (centres) that
     braking at 5 m/s^2 cannot keep it behind: a stopped car reaching 0.5 m into the ego's path is
     followed; one drifting in at 1.5 m/s 8 m ahead reaches the ego's side before the ego is past
-    (0.93 s against 1.8 s) and is followed; one drifting in at 0.5 m/s alongside the ego's front,
+    (0.93 s against 1.8 s) and is followed; a slow one turning in 26 m ahead, which the ego reaches
+    only after 1.2 s (beyond the 1-s cut-in lookahead, as far as a sideways motion is trusted), is
+    followed though it would touch only after the ego is past; one drifting in at 0.5 m/s alongside the ego's front,
     which touches only after the ego is past (2.26 s against 1.68 s) though it comes within the
     side margin before (1.66 s), is passed: braking would hold the ego beside it for 2.4 s."""
     car = Actor(EGO_START_S + rel_s, d, speed)
