@@ -255,9 +255,10 @@ def test_a_car_the_ego_cannot_stop_short_of_is_passed_only_if_it_does_not_touch_
     followed; one drifting in at 1.5 m/s 8 m ahead reaches the ego's side before the ego is past
     (0.93 s against 1.8 s) and is followed; a slow one turning in 26 m ahead, which the ego reaches
     only after 1.2 s (beyond the 1-s cut-in lookahead, as far as a sideways motion is trusted), is
-    followed though it would touch only after the ego is past; one drifting in at 0.5 m/s alongside the ego's front,
-    which touches only after the ego is past (2.26 s against 1.68 s) though it comes within the
-    side margin before (1.66 s), is passed: braking would hold the ego beside it for 2.4 s."""
+    followed though it would touch only after the ego is past; one drifting in at 0.5 m/s
+    alongside the ego's front, which touches only after the ego is past (2.26 s against 1.68 s)
+    though it comes within the side margin before (1.66 s), is passed: braking would hold the ego
+    beside it for 2.4 s."""
     car = Actor(EGO_START_S + rel_s, d, speed)
     world = ScriptedRoad(4, 1, 25.0, [car], Stationary(), "kinematic", DT, 5.0).reset()
     world = dataclasses.replace(world, heading=world.heading.copy())
