@@ -309,8 +309,9 @@ def turning_back_in_rows(
             continue
         sideways = speed[row] * math.sin(world.heading_to_lane[row])
         reach = abs(sideways) * cut_in_lookahead_s
+        passed = passes_it(world, row, rel, cut_in_lookahead_s)
         for lane in lanes:
-            if sideways * (offsets[lane] - d[row]) > 0 and passes_it(world, row, rel, cut_in_lookahead_s):
+            if passed and sideways * (offsets[lane] - d[row]) > 0:
                 continue
             back = math.copysign(reach, offsets[lane] - d[row])
             if swept_distance(d[row], back, offsets[lane]) < (world.lane_width + world.extent[row]) / 2:
