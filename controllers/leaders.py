@@ -133,9 +133,12 @@ def passes_sooner_than_falls_back(rel_s: float, closing: float, lengths: float) 
 
 
 @register_jitable
-def passes_it(world: LeaderRows, row: int, rel: float, lookahead_s: float) -> bool:
+def passes_it(world: LeaderRows, row: int, rel: float, lookahead_s: float, heading_for: float) -> bool:
     """Whether the ego, faster than the vehicle in `row` `rel` [m] ahead, passes it rather than
-    following it: the vehicle's turned footprint keeps clear of the ego's side margin now and the
+    following it, on its way across to `heading_for` [m] (the centre of the lane it keeps or heads
+    for; the ego's side is where that way comes closest to the vehicle: a car reaching into the
+    target lane is judged from that lane's centre, not from where the ego is now): the vehicle's
+    turned footprint keeps clear of the ego's side margin and the
     ego is past before the vehicle comes within it (`passes_before_it_closes_sideways`); or the ego
     reaches the vehicle's rear within `lookahead_s` [s] at their present speeds (as far ahead as a
     sideways motion counts), will be beside it whatever it does, and passing ends that sooner
@@ -147,8 +150,9 @@ def passes_it(world: LeaderRows, row: int, rel: float, lookahead_s: float) -> bo
     d, speed, length = world.d, world.speed, world.length
     if speed[row] >= speed[0]:
         return False
-    towards = math.copysign(1.0, d[0] - d[row])
-    to_side = abs(d[row] - d[0]) - world.width[0] / 2
+    closest = min(max(d[row], min(d[0], heading_for)), max(d[0], heading_for))
+    towards = math.copysign(1.0, closest - d[row])
+    to_side = abs(d[row] - closest) - world.width[0] / 2
     closing, lengths = speed[0] - speed[row], (length[0] + length[row]) / 2
     heading, width, extent = world.heading_to_lane[row], world.width[row], world.extent[row]
     apart = to_side - SIDE_MARGIN_M
@@ -247,7 +251,7 @@ def leaders_in_rows(
             gap = rel - (length[row] + length[0]) / 2
             if lane == leaving_lane and gap > LEAVE_SAFETY * leaving_within_m + STOP_MARGIN_M:
                 continue
-            if offset > LEAVING_M and passes_it(world, row, rel, cut_in_lookahead_s):
+            if offset > LEAVING_M and passes_it(world, row, rel, cut_in_lookahead_s, offsets[lanes[0]]):
                 continue
             position = m
             while position > 0 and s[candidates[position - 1]] - s[0] > rel:
@@ -309,7 +313,7 @@ def turning_back_in_rows(
             continue
         sideways = speed[row] * math.sin(world.heading_to_lane[row])
         reach = abs(sideways) * cut_in_lookahead_s
-        passed = passes_it(world, row, rel, cut_in_lookahead_s)
+        passed = passes_it(world, row, rel, cut_in_lookahead_s, offsets[lanes[0]])
         for lane in lanes:
             if passed and sideways * (offsets[lane] - d[row]) > 0:
                 continue

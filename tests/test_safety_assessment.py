@@ -266,6 +266,20 @@ def test_a_car_the_ego_cannot_stop_short_of_is_passed_only_if_it_does_not_touch_
     assert len(leaders(world, (1,), 1.0)) == followed
 
 
+@pytest.mark.parametrize(("ego_d", "lanes", "followed"), [(3.5, (1, 0), True), (3.5, (0, 1), False)])
+def test_a_wreck_reaching_into_the_target_lane_is_judged_from_that_lane_s_centre(ego_d, lanes, followed):
+    """A wreck stopped 20 m ahead, its centre at d = 6.61 m turned 0.35 rad towards the lane
+    centred at 4 m (its footprint reaches down to 4.87 m): the ego at 25 m/s at d = 3.5 m clears it
+    by 0.07 m more than the side margin where it is now, but heading for that lane's centre its
+    side comes to 5 m, into the wreck, so it follows it; heading back to the lane centred at 0 m it
+    passes it (a development episode: the ego settling into the lane drove into the wreck)."""
+    wreck = Actor(EGO_START_S + 20.0, 6.61, 0.0)
+    world = ScriptedRoad(4, 1, 25.0, [wreck], Stationary(), "kinematic", DT, 5.0).reset()
+    world = dataclasses.replace(world, heading=world.heading.copy(), d=world.d.copy())
+    world.heading[1], world.d[0] = -0.348, ego_d
+    assert sum(not leader.may_turn_back for leader in leaders(world, lanes, 1.0)) == followed
+
+
 def test_reference_driver_on_a_lead_braking_point_it_cannot_avoid():
     config = build_config({})
     assert drive_reference(config, Point("lead-braking", (36.11, 0.8, 8.0))).collided
