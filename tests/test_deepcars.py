@@ -3,6 +3,7 @@ default, the quick one with -m slow)."""
 
 import functools
 import json
+import tempfile
 
 import gymnasium as gym
 import numpy as np
@@ -145,8 +146,12 @@ TINY = Budget(
 """Enough for a few gradient steps (DQN learns from step 1000) and both validation periods."""
 
 
-def test_tiny_reproduction_runs_every_kind_of_row_end_to_end(tmp_path, one_torch_thread):
+def test_tiny_reproduction_runs_every_kind_of_row_end_to_end(tmp_path, monkeypatch, one_torch_thread):
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
     rows = reproduce(tmp_path, budget=TINY, networks=("16",))
+    assert list(temp.glob("SB3-*")) == []
     agents = [(r.agent, r.network, r.training_steps) for r in rows]
     assert agents == [
         ("tabular", "-", 300),

@@ -19,6 +19,7 @@ import numpy as np
 import torch as th
 from stable_baselines3 import DQN
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.logger import Logger
 
 from planner.ddqn import DoubleDQN
 from planner.networks import NET_ARCHS
@@ -163,7 +164,9 @@ def deep(
     algorithm: str, network: str, budget: Budget, seed: int, rules: Rules = PAPER_RULES
 ) -> tuple[Row, list[float]]:
     """DQN or Double DQN (`algorithm`) with the `network` of `NET_ARCHS`, the best validated model
-    evaluated; also the training episodes' returns (for the training curves)."""
+    evaluated; also the training episodes' returns (for the training curves). Its logger writes
+    nowhere: left to SB3, each model made an empty `SB3-<time>` folder in the system's temp
+    directory."""
     start = time.perf_counter()
     sight = rules.line_of_sight
     vec = DeepCarsVecEnv(DeepCarsBatch(8, line_of_sight=sight, encoding="binary", seed=seed))
@@ -184,6 +187,7 @@ def deep(
         seed=seed,
         device="cpu",
     )
+    model.set_logger(Logger(folder=None, output_formats=[]))
     best: dict = {}
     validation = RealTimeValidation(
         DeepCarsEnv(line_of_sight=sight, encoding="binary"),
