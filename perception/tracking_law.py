@@ -176,17 +176,33 @@ def overlap(tracks: Tracks, t: int, u: int) -> bool:
 
 
 @register_jitable
+def centre_inside(tracks: Tracks, t: int, u: int) -> bool:
+    """Whether one of tracks `t` and `u` has its centre (filtered s and d) inside the other's
+    footprint (its last detected length and width): detections scattered over one vehicle, not
+    two vehicles touching end to end (wrecks locked together overlap by a crumple's depth)."""
+    ds = abs(tracks.state[t, 0] - tracks.state[u, 0])
+    dd = abs(tracks.state[t, 2] - tracks.state[u, 2])
+    reach_s = max(tracks.box[t, 0], tracks.box[u, 0]) / 2
+    reach_d = max(tracks.box[t, 1], tracks.box[u, 1]) / 2
+    return ds < reach_s and dd < reach_d
+
+
+@register_jitable
 def settle_twin(tracks: Tracks, t: int, hit: np.ndarray) -> None:
     """Track `t`, confirmed this frame, against the confirmed tracks it overlaps (one vehicle's two
     tracks): one that had no detection this frame has lost its vehicle to `t` (a manoeuvre took
     the detections out of its gate) and is deleted; one that had is the vehicle's own, and `t`
-    (fed by phantoms or noise beside it) is deleted instead."""
+    (fed by phantoms or noise beside it) is deleted instead, when one's centre lies inside the
+    other's footprint (`centre_inside`); two detected vehicles that only overlap at their ends
+    both stay."""
     for u in range(len(tracks.status)):
         if u == t or tracks.status[u] != CONFIRMED or not overlap(tracks, t, u):
             continue
         if hit[u]:
-            tracks.status[t] = FREE
-            return
+            if centre_inside(tracks, t, u):
+                tracks.status[t] = FREE
+                return
+            continue
         tracks.status[u] = FREE
 
 

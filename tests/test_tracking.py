@@ -228,6 +228,18 @@ def test_a_track_confirmed_over_a_vehicle_that_keeps_its_detections_goes() -> No
     assert world.status(0) == CONFIRMED and world.tracks.misses[0] == 0
 
 
+def test_two_vehicles_touching_end_to_end_are_two_tracks() -> None:
+    """Wrecks locked together: two 5 m vehicles 4.6 m apart (their footprints overlap by 0.4 m),
+    both detected every frame. Neither centre lies inside the other's footprint, so the second is
+    tracked beside the first rather than taken for its twin and deleted each time it is confirmed
+    (a development episode: the ego crept into the untracked one of two crashed trucks)."""
+    world = OneWorld(noise_m=0.1)
+    confirmed_at(world, 20.0)
+    for _ in range(3 * CONFIG.confirm_frames):
+        tracked = world.frame([(20.0, 0.0, 0.0), (24.6, 0.0, 0.0)])
+    assert tracked == 2 and world.status(0) == CONFIRMED and world.status(1) == CONFIRMED
+
+
 def test_a_tentative_track_beside_a_vehicle_never_takes_its_detections() -> None:
     """Assignment serves confirmed tracks first: a tentative track started on a tracked vehicle
     (here placed 0.5 m from it) is starved and deleted, even with the detections nearer it, rather
