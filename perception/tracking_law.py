@@ -10,7 +10,11 @@ and its reported velocity in that direction (a radar's range rate, a camera's he
 velocity's noise `speed_variance`. A frame: every live track is predicted `dt` ahead; each
 (track, detection) pair (the detections sorted along the road and bucketed, so each track finds
 those within its gate's reach in a step or two and checks only them) whose Mahalanobis distance
-(4 degrees of freedom) is within the gate is a candidate; candidates are assigned greedily,
+(4 degrees of freedom) is within the gate is a candidate, and so is a confirmed track's pair with
+a detection outside it but inside its footprint and within the gate along the lane, its vehicle
+changing lane faster than the lateral noise allows (`is_lane_change`: the track's lateral
+covariance is then scaled until the detection is on the gate's edge before the update,
+`manoeuvre_scale`); candidates are assigned greedily,
 nearest first, confirmed tracks before tentative ones (`perception.tracking_search`, `TENTATIVE_RANK`);
 assigned tracks are updated, the others coast; a track
 is confirmed once `confirm_hits` of its last `confirm_frames` frames had a detection, a
@@ -39,6 +43,10 @@ TENTATIVE_RANK = 1.0
 every confirmed track before any tentative one (a cascade): a tentative track started beside a
 vehicle (by a phantom, or by a detection noisier than the gate) never takes the detections of
 that vehicle's confirmed track and dies, rather than sharing them and living as a second track."""
+MANOEUVRE_RANK = 0.5
+"""Added to the gate as the cost of a confirmed track's pair with a detection outside its gate but
+inside its footprint (`inside_footprint`): such pairs come after every gated pair of confirmed
+tracks and before any tentative track's (`TENTATIVE_RANK`)."""
 STATE_SIZE = 4
 """A track's state: s [m], ds/dt [m/s], d [m], dd/dt [m/s]."""
 ROW_FIELDS = 8
@@ -188,6 +196,16 @@ def centre_inside(tracks: Tracks, t: int, u: int) -> bool:
 
 
 @register_jitable
+def inside_footprint(tracks: Tracks, t: int, ds: float, dd: float) -> float:
+    """How far inside track `t`'s predicted footprint (its last detected length and width about its
+    predicted s and d) a detection `ds`, `dd` [m] from its centre lies, as the larger of the two
+    normalised offsets: below 1 inside. A detection there is that vehicle's (no other vehicle's
+    centre fits inside it), however far outside the gate a manoeuvre the motion model did not
+    allow took it."""
+    return max(abs(ds) / (tracks.box[t, 0] / 2), abs(dd) / (tracks.box[t, 1] / 2))
+
+
+@register_jitable
 def settle_twin(tracks: Tracks, t: int, hit: np.ndarray) -> None:
     """Track `t`, confirmed this frame, against the confirmed tracks it overlaps (one vehicle's two
     tracks): one that had no detection this frame has lost its vehicle to `t` (a manoeuvre took
@@ -204,6 +222,78 @@ def settle_twin(tracks: Tracks, t: int, hit: np.ndarray) -> None:
                 return
             continue
         tracks.status[u] = FREE
+
+
+@register_jitable
+def _start_from(tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float) -> None:
+    """Track `t`'s state, covariance (the detections' position variance `r` [m^2] and velocity
+    variance `rv` [m^2/s^2]) and box from detection row `j` of `found` alone."""
+    tracks.state[t, 0], tracks.state[t, 1] = found.s[j], found.speed[j]
+    tracks.state[t, 2], tracks.state[t, 3] = found.d[j], found.lateral_speed[j]
+    covariance = tracks.covariance
+    covariance[t, 0], covariance[t, 1], covariance[t, 2] = r, 0.0, rv
+    covariance[t, 3], covariance[t, 4], covariance[t, 5] = r, 0.0, rv
+    tracks.box[t, 0], tracks.box[t, 1], tracks.box[t, 2] = found.length[j], found.width[j], found.heading[j]
+
+
+@register_jitable
+def pair_distances(
+    tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float, lateral_scale: float
+) -> tuple[float, float]:
+    """Squared Mahalanobis distances, along the lane and across it, of detection row `j` of `found`
+    from track `t` (predicted, not yet updated), the track's lateral covariance block taken
+    `lateral_scale` times."""
+    state, covariance = tracks.state, tracks.covariance
+    a_s, b_s, c_s = covariance[t, 0] + r, covariance[t, 1], covariance[t, 2] + rv
+    k = lateral_scale
+    a_d, b_d, c_d = k * covariance[t, 3] + r, k * covariance[t, 4], k * covariance[t, 5] + rv
+    ds, dd = found.s[j] - state[t, 0], found.d[j] - state[t, 2]
+    along = block_distance(a_s, b_s, c_s, a_s * c_s - b_s * b_s, ds, found.speed[j] - state[t, 1])
+    across = block_distance(a_d, b_d, c_d, a_d * c_d - b_d * b_d, dd, found.lateral_speed[j] - state[t, 3])
+    return along, across
+
+
+MANOEUVRE_SCALE_STEPS = 40
+"""Bisection steps of `manoeuvre_scale` (on the logarithm, from 1 to 1e12: the scale within 2 %)."""
+
+
+@register_jitable
+def manoeuvre_scale(
+    law: TrackerLaw, tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float
+) -> float:
+    """How many times its lateral covariance block track `t` takes before its update by a
+    detection (row `j` of `found`): 1 within the gate; for a confirmed track's detection outside
+    it and inside its footprint, consistent along the lane (`is_lane_change`), the least scale
+    that puts it on the gate's edge. The update then follows the lane change as far as it went, no
+    further: a detection just outside the gate by noise moves the track as an ordinary one, one a
+    sharp lane change took a metre across moves it almost to the detection (a fading-memory
+    filter's scaling, across the lane only)."""
+    along, across = pair_distances(tracks, t, found, j, r, rv, 1.0)
+    if along + across <= law.gate:
+        return 1.0
+    low, high = 0.0, 12.0 * math.log(10.0)
+    for _ in range(MANOEUVRE_SCALE_STEPS):
+        middle = (low + high) / 2
+        if along + pair_distances(tracks, t, found, j, r, rv, math.exp(middle))[1] > law.gate:
+            low = middle
+        else:
+            high = middle
+    return math.exp(high)
+
+
+@register_jitable
+def is_lane_change(
+    law: TrackerLaw, tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float
+) -> bool:
+    """Whether detection row `j` of `found`, outside confirmed track `t`'s gate, is its vehicle
+    changing lane: inside its footprint (`inside_footprint`) and within the gate along the lane
+    (highway vehicles swerve across the road far beyond the motion model's lateral noise, but
+    brake and speed up within its longitudinal one). A phantom, which moves at the ego's speed,
+    on a car more than about 2 m/s slower or faster is none."""
+    ds, dd = found.s[j] - tracks.state[t, 0], found.d[j] - tracks.state[t, 2]
+    if inside_footprint(tracks, t, ds, dd) >= 1.0:
+        return False
+    return pair_distances(tracks, t, found, j, r, rv, 1.0)[0] <= law.gate
 
 
 @register_jitable
@@ -293,18 +383,23 @@ def track_frame(
         a_d, b_d, c_d = covariance[t, 3] + r, covariance[t, 4], covariance[t, 5] + rv
         det_s, det_d = a_s * c_s - b_s * b_s, a_d * c_d - b_d * b_d
         reach_s, reach_d = law.gate * a_s, law.gate * a_d
-        half = np.sqrt(reach_s) + GATE_WINDOW_MARGIN_M
+        confirmed = status[t] == CONFIRMED
+        half = max(np.sqrt(reach_s), box[t, 0] / 2 if confirmed else 0.0) + GATE_WINDOW_MARGIN_M
         k = first_at_least(ordered, finite, starts, low, high, scale, state[t, 0] - half)
         end = state[t, 0] + half
         while k < finite and ordered[k] <= end:
             j = order[k] + 1
             k += 1
             ds, dd = s[j] - state[t, 0], d[j] - state[t, 2]
-            if ds * ds > reach_s or dd * dd > reach_d:
-                continue
-            cost = block_distance(a_s, b_s, c_s, det_s, ds, speed[j] - state[t, 1])
-            cost += block_distance(a_d, b_d, c_d, det_d, dd, lateral_speed[j] - state[t, 3])
-            if cost <= law.gate:
+            cost = math.inf
+            if ds * ds <= reach_s and dd * dd <= reach_d:
+                cost = block_distance(a_s, b_s, c_s, det_s, ds, speed[j] - state[t, 1])
+                cost += block_distance(a_d, b_d, c_d, det_d, dd, lateral_speed[j] - state[t, 3])
+            gated = cost <= law.gate
+            if not gated and confirmed and is_lane_change(law, tracks, t, found, j, r, rv):
+                gated = True
+                cost = law.gate + MANOEUVRE_RANK * (1.0 + inside_footprint(tracks, t, ds, dd)) / 2
+            if gated:
                 if status[t] == TENTATIVE:
                     cost += law.gate + TENTATIVE_RANK
                 pair_track[pairs], pair_found[pairs], pair_cost[pairs] = t, j - 1, cost
@@ -319,6 +414,8 @@ def track_frame(
         if t < 0:
             continue
         hit[t] = 1
+        if status[t] == CONFIRMED:
+            covariance[t, 3:] *= manoeuvre_scale(law, tracks, t, found, j + 1, r, rv)
         state[t, 0], state[t, 1], covariance[t, 0], covariance[t, 1], covariance[t, 2] = block_update(
             state[t, 0], state[t, 1], covariance[t, 0], covariance[t, 1], covariance[t, 2],
             s[j + 1], speed[j + 1], r, rv,
@@ -354,19 +451,11 @@ def track_frame(
             slot += 1
         if slot == slots:
             break
-        state[slot, 0], state[slot, 1], state[slot, 2], state[slot, 3] = (
-            s[j],
-            speed[j],
-            d[j],
-            lateral_speed[j],
-        )
-        covariance[slot, 0], covariance[slot, 1], covariance[slot, 2] = r, 0.0, rv
-        covariance[slot, 3], covariance[slot, 4], covariance[slot, 5] = r, 0.0, rv
+        _start_from(tracks, slot, found, j, r, rv)
         track_hits[slot], age[slot], misses[slot] = 1, 1, 0
         status[slot] = CONFIRMED if law.confirm_hits <= 1 else TENTATIVE
         tracks.ident[slot] = tracks.next_ident[0]
         tracks.next_ident[0] += 1
-        box[slot, 0], box[slot, 1], box[slot, 2] = length[j], width[j], heading[j]
 
 
 @register_jitable

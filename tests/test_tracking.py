@@ -127,17 +127,20 @@ def highway_env_lane_change(speed: float = 20.0, seconds: float = 6.0) -> np.nda
     return np.array(rows)
 
 
-def test_a_highway_env_lane_change_and_its_turn_back_keep_one_track_with_a_manoeuvring_model() -> None:
-    """highway-env's cars change lane at up to ~34 m/s^2 of lateral acceleration (4.6 m/s across
-    the road within half a second). Seen at 1 m and 0.5 m/s noise, with 12 m/s^2 of lateral white
-    noise (`MANOEUVRING`) the car keeps one confirmed track through a change and its turn back, its
-    lateral speed within 0.5 m/s RMSE of the truth; with the default 1 m/s^2 it is lost and started
-    again three times (four tracks), the layers losing its history each time (docs/perception.md)."""
+def test_a_highway_env_lane_change_and_its_turn_back_keep_one_track() -> None:
+    """highway-env's cars change lane at up to ~34 m/s^2 of lateral acceleration (4.6 m/s across the
+    road within half a second). Seen at 1 m and 0.5 m/s noise, the car keeps one confirmed track
+    through a change and its turn back: with the default 1 m/s^2 of lateral white noise the
+    detections leave the gate, but not the car's footprint, and the track follows them, its
+    covariance scaled until each is on the gate's edge (it was lost and started again three times
+    before, four tracks, the layers losing its history each time); with 12 m/s^2 (`MANOEUVRING`)
+    they stay in the gate and its lateral speed is within 0.5 m/s RMSE of the truth (0.80 with the
+    default)."""
     truth = highway_env_lane_change()
-    assert tracks_of_a_lane_change(truth, CONFIG)[0] == 4
-    count, errors = tracks_of_a_lane_change(truth, MANOEUVRING)
-    assert count == 1 and len(errors) >= len(truth) - CONFIG.confirm_hits
-    assert np.sqrt(np.mean(np.square(errors), axis=0))[3] < 0.5
+    for config, lateral_speed_rmse in ((CONFIG, 0.85), (MANOEUVRING, 0.5)):
+        count, errors = tracks_of_a_lane_change(truth, config)
+        assert count == 1 and len(errors) >= len(truth) - CONFIG.confirm_hits
+        assert np.sqrt(np.mean(np.square(errors), axis=0))[3] < lateral_speed_rmse
 
 
 def tracks_of_a_lane_change(truth: np.ndarray, config: TrackerConfig) -> tuple[int, list[np.ndarray]]:
@@ -238,6 +241,20 @@ def test_two_vehicles_touching_end_to_end_are_two_tracks() -> None:
     for _ in range(3 * CONFIG.confirm_frames):
         tracked = world.frame([(20.0, 0.0, 0.0), (24.6, 0.0, 0.0)])
     assert tracked == 2 and world.status(0) == CONFIRMED and world.status(1) == CONFIRMED
+
+
+def test_a_detection_out_of_the_gate_but_inside_the_footprint_moves_the_track_to_it() -> None:
+    """A car tracked at 0.1 m noise turns sharply: its next detection is 0.86 m across and 3.5 m/s
+    sideways, far outside the gate, but inside its footprint. The track takes it, its covariance
+    scaled until the detection is on the gate's edge, and follows it most of the way, keeping its
+    identity (no coasting at the old place while a new track is confirmed: 0.3 s in which the ego
+    did not see a blind driver cutting in)."""
+    world = OneWorld(noise_m=0.1)
+    confirmed_at(world, 20.0)
+    ident = int(world.tracks.ident[0])
+    assert world.frame([(20.0, -0.86, 0.0, -3.5)]) == 1
+    assert world.status(0) == CONFIRMED and int(world.tracks.ident[0]) == ident and world.status(1) == FREE
+    assert world.tracks.state[0, 2] < -0.8 and world.tracks.state[0, 3] < -2.5
 
 
 def test_a_tentative_track_beside_a_vehicle_never_takes_its_detections() -> None:
