@@ -21,11 +21,12 @@ from controllers.reference import (
 )
 from records import Command, Reference, WorldState
 
-AbortRule = Callable[[WorldState, int], bool]
-"""(world, target lane) -> True when a lane change towards that lane must be given up."""
+AbortRule = Callable[[WorldState, int, int], bool]
+"""(world, origin lane, target lane) -> True when a lane change from the one towards the other
+must be given up."""
 
 
-def never_abort(world: WorldState, target: int) -> bool:
+def never_abort(world: WorldState, lane: int, target: int) -> bool:
     return False
 
 
@@ -129,7 +130,11 @@ class Maneuver:
         the ego's footprint reaches into: the origin lane until the footprint has left it (a
         stopped car there no longer holds a change that is past it), the abandoned lane while an
         aborted change returns."""
-        if self.changing_lane and not self._crossed(world) and self.should_abort(world, self.target):
+        if (
+            self.changing_lane
+            and not self._crossed(world)
+            and self.should_abort(world, self.lane, self.target)
+        ):
             self._abort(world)
         self.clock = self.clock.at_rate(world.time, self._rate(float(world.speed[0])))
         lanes = (self.target, *(lane for lane in occupied_lanes(world) if lane != self.target))

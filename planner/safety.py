@@ -188,6 +188,21 @@ def lane_is_safe(
 
 
 @register_jitable
+def turning_back_is_safer(
+    rows: VehicleRows, origin: float, target: float, min_gap: float, min_ttc: float
+) -> bool:
+    """Whether a lane change from the lane centred at `origin` [m] towards the one at `target` [m]
+    is to be given up: the target lane is unsafe (`lane_is_safe` at the abort's `min_gap` [m] and
+    `min_ttc` [s], each vehicle where its drift takes it) and the origin lane is not. A car that
+    crosses the origin lane on its way into the target lane (a blind driver cutting across two
+    lanes beside the ego) makes both unsafe, and the ego goes on out of its way rather than turn
+    back into it."""
+    return not lane_is_safe(rows, target, min_gap, min_ttc, 0.0, 0.0) and lane_is_safe(
+        rows, origin, min_gap, min_ttc, 0.0, 0.0
+    )
+
+
+@register_jitable
 def unspared_follower(
     rows: VehicleRows, offsets: np.ndarray, lane: int, goal: int, safety: SafetySettings
 ) -> int:
@@ -242,6 +257,7 @@ change_is_safe_compiled = Kernel(change_is_safe)
 """`change_is_safe` compiled, for Python callers: the per-world layer and the lookahead."""
 _unsafe_vehicles = Kernel(unsafe_vehicles)
 _change_blockers = Kernel(change_blockers)
+_turning_back_is_safer = Kernel(turning_back_is_safer)
 
 
 @dataclass(frozen=True)
@@ -299,19 +315,23 @@ class SafetyLayer:
         )
         return tuple(dict.fromkeys(int(world.ids[row]) for row in found if row >= 0))
 
-    def should_abort(self, world: WorldState, target: int) -> bool:
-        """True when the gap in `target` has closed below the abort margins, counting the vehicles
-        that move into `target` within the abort's lookahead."""
+    def should_abort(self, world: WorldState, lane: int, target: int) -> bool:
+        """True when a change from `lane` to `target` is to be given up (`turning_back_is_safer`):
+        the gap in `target` has closed below the abort margins, counting the vehicles that move
+        into it within the abort's lookahead, and `lane` has not."""
         config = self.config
         if not config.enabled:
             return False
         drift = np.concatenate(([0.0], lateral_drift(world, config.abort_lookahead_s)))
         rows = vehicle_rows(world)._replace(drift=drift)
-        unsafe = self._unsafe(world, target, config.abort_gap_m, config.abort_ttc_s, 0.0, 0.0, rows)
-        if unsafe:
-            self.aborted += 1
-            self.reacted_to = unsafe
-        return bool(unsafe)
+        offsets = world.lane_offsets
+        if not _turning_back_is_safer(
+            rows, float(offsets[lane]), float(offsets[target]), config.abort_gap_m, config.abort_ttc_s
+        ):
+            return False
+        self.aborted += 1
+        self.reacted_to = self._unsafe(world, target, config.abort_gap_m, config.abort_ttc_s, 0.0, 0.0, rows)
+        return True
 
     @staticmethod
     def _unsafe(

@@ -3,10 +3,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from common.neighbours import lateral_extent, neighbours
+from common.neighbours import lateral_drift, lateral_extent, neighbours, vehicle_rows
 from controllers.maneuver import Maneuver
 from planner.follower_forecast import follower_keeps_clear
-from planner.safety import SafetyConfig, SafetyLayer
+from planner.safety import SafetyConfig, SafetyLayer, lane_is_safe
 from records import Command, WorldState
 from tests.helpers import cutting_in, scene
 
@@ -100,10 +100,10 @@ def test_time_gap_and_ttc_to_the_vehicles_ahead_and_behind():
 def test_abort_when_the_gap_closes_and_switch_off_for_ablation():
     closing = scene(2, (0.0, 1), [(-8.0, 0.0)], speed=20.0, other_speed=30.0)
     safety = layer()
-    assert safety.should_abort(closing, target=0)
+    assert safety.should_abort(closing, lane=1, target=0)
     assert safety.aborted == 1
     off = layer(enabled=False)
-    assert not off.should_abort(closing, target=0)
+    assert not off.should_abort(closing, lane=1, target=0)
     assert off.filter(Command.LEFT, closing, 1) is Command.LEFT
     assert off.masked == 0
 
@@ -129,10 +129,24 @@ def test_a_car_nosing_into_the_lane_is_seen_there_by_its_turned_footprint():
 def test_an_abort_sees_a_car_cutting_into_the_target_lane_before_it_arrives():
     cut_in = cutting_in(-0.3)
     assert neighbours(cut_in, 1)[0] is None
-    assert layer().should_abort(cut_in, target=1)
-    assert not layer(abort_lookahead_s=0.0).should_abort(cut_in, target=1)
-    assert not layer().should_abort(cutting_in(0.3), target=1), "a car turning away is no threat"
-    assert not layer(abort_lookahead_s=0.2).should_abort(cut_in, target=1), "0.9 m/s x 0.2 s: not yet"
+    assert layer().should_abort(cut_in, lane=0, target=1)
+    assert not layer(abort_lookahead_s=0.0).should_abort(cut_in, lane=0, target=1)
+    assert not layer().should_abort(cutting_in(0.3), lane=0, target=1), "a car turning away is no threat"
+    assert not layer(abort_lookahead_s=0.2).should_abort(cut_in, lane=0, target=1), "0.9 m/s x 0.2 s: not yet"
+
+
+def test_a_change_goes_on_when_the_car_closing_its_gap_crosses_the_origin_lane_on_its_way():
+    """The ego, 18 m/s, half way from lane 1 towards lane 0 (centre at 2.5 m); a car 1.3 m ahead
+    (centres) at 20.7 m/s, cutting across from lane 2, is in lane 1 at 5.7 m turned 0.19 rad towards
+    lane 0 (3.9 m/s sideways, a blind driver): within the abort's 1-s lookahead it reaches lane 0,
+    which is then unsafe, but it is in lane 1 now, so turning back is no safer, and the change goes
+    on (a development episode: the ego turned back into the car's side). With the origin lane free
+    the change is given up (`test_an_abort_sees_a_car_cutting_into_the_target_lane_before_it_arrives`)."""
+    world = scene(3, (0.0, 1), [(1.3, 5.7)], speed=18.0, other_speed=20.7)
+    world = type(world)(**{**world.__dict__, "heading": np.array([0.0, -0.19]), "d": np.array([2.5, 5.7])})
+    rows = vehicle_rows(world)._replace(drift=np.concatenate(([0.0], lateral_drift(world, 1.0))))
+    assert not lane_is_safe(rows, 0.0, 2.0, 1.5, 0.0, 0.0) and not lane_is_safe(rows, 4.0, 2.0, 1.5, 0.0, 0.0)
+    assert not layer().should_abort(world, lane=1, target=0)
 
 
 def test_after_an_abort_the_cruise_follows_the_abandoned_lane_until_the_ego_is_out_of_it():

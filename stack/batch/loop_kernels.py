@@ -37,7 +37,7 @@ from controllers.reference import (
     warped_sample,
     warped_time,
 )
-from planner.safety import SafetySettings, change_is_safe, lane_is_safe
+from planner.safety import SafetySettings, change_is_safe, turning_back_is_safer
 from records.batch import BatchColumns
 from stack.batch.ego_records import ControllerArrays, EgoLaws, ManeuverArrays, ManeuverSettings
 from stack.loop.safety_metrics import departs
@@ -154,8 +154,9 @@ def control(
     actuation: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
     """`ClosedLoop.tick` up to the plant in each `live` world: the maneuver's reference (a lane
-    change whose gap closed is aborted first, at the abort gap [m] and TTC [s] of `safety`, each
-    vehicle counted where it reaches within its lateral `drift` [m] over the abort's lookahead), the
+    change whose gap closed, its origin lane's not, is aborted first, at the abort gap [m] and TTC
+    [s] of `safety` (`turning_back_is_safer`), each vehicle counted where it reaches within its
+    lateral `drift` [m] over the abort's lookahead), the
     leaders (of the lane it heads for, then of every other lane the ego's footprint reaches), the
     lateral PID, the adaptive cruise and emergency braking, each the per-world law on the world's
     row; writes (acceleration [m/s^2], steering [rad]) to `actuation` (W, 2). `settings`: nominal
@@ -185,9 +186,9 @@ def control(
         t, n = time[w], count[w]
         if lane[w] != target[w]:
             crossed = left_origin(d[w, 0], offsets[w, lane[w]], lane_width)
-            if not crossed and safety.enabled and not lane_is_safe(
-                VehicleRows(n, s[w], d[w], speed[w], length[w], reach[w], drift[w]), offsets[w, target[w]],
-                safety.abort_gap_m, safety.abort_ttc_s, 0.0, 0.0,
+            if not crossed and safety.enabled and turning_back_is_safer(
+                VehicleRows(n, s[w], d[w], speed[w], length[w], reach[w], drift[w]), offsets[w, lane[w]],
+                offsets[w, target[w]], safety.abort_gap_m, safety.abort_ttc_s,
             ):  # fmt: skip
                 counts[w, 2] += 1
                 _, d_dot, d_ddot = _sample(w, coef, profile, clock, t)
