@@ -135,15 +135,15 @@ def passes_sooner_than_falls_back(rel_s: float, closing: float, lengths: float) 
 @register_jitable
 def passes_it(world: LeaderRows, row: int, rel: float, lookahead_s: float, heading_for: float) -> bool:
     """Whether the ego, faster than the vehicle in `row` `rel` [m] ahead, passes it rather than
-    following it, on its way across to `heading_for` [m] (the centre of the lane it keeps or heads
-    for; the ego's side is where that way comes closest to the vehicle: a car reaching into the
-    target lane is judged from that lane's centre, not from where the ego is now): the vehicle's
-    turned footprint keeps clear of the ego's side margin and the
+    following it, on its way across to `heading_for` [m] (the centre of the lane it keeps or is to
+    head for, the first the leaders watch; the ego's side is where that way comes closest to the
+    vehicle: a car reaching into the target lane is judged from that lane's centre, not from where
+    the ego is now): the vehicle's turned footprint keeps clear of the ego's side margin and the
     ego is past before the vehicle comes within it (`passes_before_it_closes_sideways`); or the ego
     reaches the vehicle's rear within `lookahead_s` [s] at their present speeds (as far ahead as a
     sideways motion counts), will be beside it whatever it does, and passing ends that sooner
-    than braking (`passes_sooner_than_falls_back`), and the vehicle, not touching the ego's side
-    now, does not touch it before the ego is past (the same test without the margin). The second
+    than braking (`passes_sooner_than_falls_back`), and the vehicle, not touching the ego's side,
+    does not touch it before the ego is past (the same test without the margin). The second
     settles a pass that a few centimetres of the vehicle's drift would otherwise turn into a full
     braking beside it, held there longer. The cut-in rule lets such a vehicle go, and so does the
     rule for cars that may turn back."""
@@ -239,6 +239,7 @@ def leaders_in_rows(
     gaps, speeds, rows = out
     found = 0
     candidates = np.empty(world.vehicles, dtype=np.int64)
+    heading_for = offsets[lanes[0]] if len(lanes) > 0 else d[0]
     for lane in lanes:
         m = 0
         for row in range(1, world.vehicles):
@@ -251,7 +252,7 @@ def leaders_in_rows(
             gap = rel - (length[row] + length[0]) / 2
             if lane == leaving_lane and gap > LEAVE_SAFETY * leaving_within_m + STOP_MARGIN_M:
                 continue
-            if offset > LEAVING_M and passes_it(world, row, rel, cut_in_lookahead_s, offsets[lanes[0]]):
+            if offset > LEAVING_M and passes_it(world, row, rel, cut_in_lookahead_s, heading_for):
                 continue
             position = m
             while position > 0 and s[candidates[position - 1]] - s[0] > rel:
@@ -266,7 +267,7 @@ def leaders_in_rows(
             found += 1
             if abs(d[row] - offsets[lane]) <= LEAVING_M:
                 break
-    held = turning_back_in_rows(world, lanes, cut_in_lookahead_s, found, out)
+    held = turning_back_in_rows(world, lanes, cut_in_lookahead_s, heading_for, found, out)
     return found, beside_beyond_in_rows(world, beyond, cut_in_lookahead_s, held, out)
 
 
@@ -284,6 +285,7 @@ def turning_back_in_rows(
     world: LeaderRows,
     lanes: np.ndarray,
     cut_in_lookahead_s: float,
+    heading_for: float,
     found: int,
     out: FoundLeaders,
 ) -> int:
@@ -295,8 +297,8 @@ def turning_back_in_rows(
     is about to fill: the cruise keeps its time gap to it (the ego does not accelerate into the gap
     it leaves), but emergency braking waits until it does turn in (`leaders_in_rows` finds it then),
     so no cut-out close ahead is a full brake. One moving towards a lane that the ego passes
-    (`passes_it`) is let go there, as the cut-in rule lets it go: held, the cruise fell back beside
-    it into its path."""
+    (`passes_it`, on the ego's way to `heading_for` [m]) is let go there, as the cut-in rule lets
+    it go: held, the cruise fell back beside it into its path."""
     s, d, speed, length, offsets = world.s, world.d, world.speed, world.length, world.lane_offsets
     gaps, speeds, rows = out
     total = found
@@ -313,7 +315,7 @@ def turning_back_in_rows(
             continue
         sideways = speed[row] * math.sin(world.heading_to_lane[row])
         reach = abs(sideways) * cut_in_lookahead_s
-        passed = passes_it(world, row, rel, cut_in_lookahead_s, offsets[lanes[0]])
+        passed = passes_it(world, row, rel, cut_in_lookahead_s, heading_for)
         for lane in lanes:
             if passed and sideways * (offsets[lane] - d[row]) > 0:
                 continue

@@ -125,7 +125,8 @@ class Maneuver:
         return True
 
     def reference(self, world: WorldState) -> Reference:
-        """This tick's reference: aborts a lane change first when its gap has closed, then samples
+        """This tick's reference: aborts a lane change first when its gap has closed and its
+        origin lane can be returned to (the abort rule handed in, `should_abort`), then samples
         the lateral profile and lists the leaders of the lane it heads for and of every other lane
         the ego's footprint reaches into: the origin lane until the footprint has left it (a
         stopped car there no longer holds a change that is past it), the abandoned lane while an

@@ -11,8 +11,9 @@ velocity's noise `speed_variance`. A frame: every live track is predicted `dt` a
 (track, detection) pair (the detections sorted along the road and bucketed, so each track finds
 those within its gate's reach in a step or two and checks only them) whose Mahalanobis distance
 (4 degrees of freedom) is within the gate is a candidate, and so is a confirmed track's pair with
-a detection outside it but inside its footprint and within the gate along the lane, its vehicle
-changing lane faster than the lateral noise allows (`is_lane_change`: the track's lateral
+a detection outside it but inside its footprint, displaced the way its lateral speed changed and
+within the gate along the lane, its vehicle changing lane faster than the lateral noise allows
+(`is_lane_change`: the track's lateral
 covariance is then scaled until the detection is on the gate's edge before the update,
 `manoeuvre_scale`); candidates are assigned greedily,
 nearest first, confirmed tracks before tentative ones (`perception.tracking_search`, `TENTATIVE_RANK`);
@@ -20,7 +21,7 @@ assigned tracks are updated, the others coast; a track
 is confirmed once `confirm_hits` of its last `confirm_frames` frames had a detection, a
 tentative one is dropped once it can no longer reach that, a confirmed one after `coast_frames`
 frames running without one; a track confirmed over another confirmed track's vehicle settles
-which of the two goes (`settle_twin`); detections left over start tentative tracks in the lowest
+which of the two goes, if either (`settle_twin`); detections left over start tentative tracks in the lowest
 free slots. The frame allocates nothing: its working arrays are slices of two flat buffers the
 caller keeps (`work_size`), so a world costs the same every frame."""
 
@@ -44,9 +45,10 @@ every confirmed track before any tentative one (a cascade): a tentative track st
 vehicle (by a phantom, or by a detection noisier than the gate) never takes the detections of
 that vehicle's confirmed track and dies, rather than sharing them and living as a second track."""
 MANOEUVRE_RANK = 0.5
-"""Added to the gate as the cost of a confirmed track's pair with a detection outside its gate but
-inside its footprint (`inside_footprint`): such pairs come after every gated pair of confirmed
-tracks and before any tentative track's (`TENTATIVE_RANK`)."""
+"""A confirmed track's pair with a detection outside its gate but its vehicle changing lane
+(`is_lane_change`) costs the gate plus this times 0.5-1 (nearer its centre across the lane,
+less): after every gated pair of confirmed tracks, before any tentative track's
+(`TENTATIVE_RANK`)."""
 STATE_SIZE = 4
 """A track's state: s [m], ds/dt [m/s], d [m], dd/dt [m/s]."""
 ROW_FIELDS = 8
@@ -190,19 +192,17 @@ def centre_inside(tracks: Tracks, t: int, u: int) -> bool:
     two vehicles touching end to end (wrecks locked together overlap by a crumple's depth)."""
     ds = abs(tracks.state[t, 0] - tracks.state[u, 0])
     dd = abs(tracks.state[t, 2] - tracks.state[u, 2])
-    reach_s = max(tracks.box[t, 0], tracks.box[u, 0]) / 2
-    reach_d = max(tracks.box[t, 1], tracks.box[u, 1]) / 2
-    return ds < reach_s and dd < reach_d
+    box = tracks.box
+    return (ds < box[u, 0] / 2 and dd < box[u, 1] / 2) or (ds < box[t, 0] / 2 and dd < box[t, 1] / 2)
 
 
 @register_jitable
-def inside_footprint(tracks: Tracks, t: int, ds: float, dd: float) -> float:
-    """How far inside track `t`'s predicted footprint (its last detected length and width about its
-    predicted s and d) a detection `ds`, `dd` [m] from its centre lies, as the larger of the two
-    normalised offsets: below 1 inside. A detection there is that vehicle's (no other vehicle's
-    centre fits inside it), however far outside the gate a manoeuvre the motion model did not
-    allow took it."""
-    return max(abs(ds) / (tracks.box[t, 0] / 2), abs(dd) / (tracks.box[t, 1] / 2))
+def inside_footprint(tracks: Tracks, t: int, ds: float, dd: float) -> bool:
+    """Whether a detection `ds`, `dd` [m] from track `t`'s predicted centre lies inside its
+    footprint (its last detected length and width about that centre): it is that vehicle's (no
+    other vehicle's centre fits inside it), however far outside the gate a manoeuvre the motion
+    model did not allow took it. False for a NaN offset."""
+    return abs(ds) < tracks.box[t, 0] / 2 and abs(dd) < tracks.box[t, 1] / 2
 
 
 @register_jitable
@@ -253,8 +253,8 @@ def pair_distances(
     return along, across
 
 
-MANOEUVRE_SCALE_STEPS = 40
-"""Bisection steps of `manoeuvre_scale` (on the logarithm, from 1 to 1e12: the scale within 2 %)."""
+MANOEUVRE_SCALE_STEPS = 12
+"""Bisection steps of `manoeuvre_scale` (on the logarithm, from 1 to 1e12: the scale within 1 %)."""
 
 
 @register_jitable
@@ -286,12 +286,15 @@ def is_lane_change(
     law: TrackerLaw, tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float
 ) -> bool:
     """Whether detection row `j` of `found`, outside confirmed track `t`'s gate, is its vehicle
-    changing lane: inside its footprint (`inside_footprint`) and within the gate along the lane
-    (highway vehicles swerve across the road far beyond the motion model's lateral noise, but
-    brake and speed up within its longitudinal one). A phantom, which moves at the ego's speed,
-    on a car more than about 2 m/s slower or faster is none."""
+    changing lane: inside its footprint (`inside_footprint`), displaced across the lane the way
+    its reported lateral speed changed (a car swerving is seen both where and how fast it moves),
+    and within the gate along the lane (highway vehicles swerve across the road far beyond the
+    motion model's lateral noise, but brake and speed up within its longitudinal one). A phantom,
+    on a lane's centre at the ego's speed, on a car keeping its lane or more than about 2 m/s
+    slower or faster than the ego is none."""
     ds, dd = found.s[j] - tracks.state[t, 0], found.d[j] - tracks.state[t, 2]
-    if inside_footprint(tracks, t, ds, dd) >= 1.0:
+    swerve = (found.lateral_speed[j] - tracks.state[t, 3]) * dd
+    if not (inside_footprint(tracks, t, ds, dd) and swerve > 0):
         return False
     return pair_distances(tracks, t, found, j, r, rv, 1.0)[0] <= law.gate
 
@@ -384,21 +387,23 @@ def track_frame(
         det_s, det_d = a_s * c_s - b_s * b_s, a_d * c_d - b_d * b_d
         reach_s, reach_d = law.gate * a_s, law.gate * a_d
         confirmed = status[t] == CONFIRMED
-        half = max(np.sqrt(reach_s), box[t, 0] / 2 if confirmed else 0.0) + GATE_WINDOW_MARGIN_M
+        half = np.sqrt(reach_s) + GATE_WINDOW_MARGIN_M
         k = first_at_least(ordered, finite, starts, low, high, scale, state[t, 0] - half)
         end = state[t, 0] + half
         while k < finite and ordered[k] <= end:
             j = order[k] + 1
             k += 1
             ds, dd = s[j] - state[t, 0], d[j] - state[t, 2]
+            if ds * ds > reach_s:
+                continue
             cost = math.inf
-            if ds * ds <= reach_s and dd * dd <= reach_d:
+            if dd * dd <= reach_d:
                 cost = block_distance(a_s, b_s, c_s, det_s, ds, speed[j] - state[t, 1])
                 cost += block_distance(a_d, b_d, c_d, det_d, dd, lateral_speed[j] - state[t, 3])
             gated = cost <= law.gate
             if not gated and confirmed and is_lane_change(law, tracks, t, found, j, r, rv):
                 gated = True
-                cost = law.gate + MANOEUVRE_RANK * (1.0 + inside_footprint(tracks, t, ds, dd)) / 2
+                cost = law.gate + MANOEUVRE_RANK * (abs(dd) / box[t, 1] + 0.5)
             if gated:
                 if status[t] == TENTATIVE:
                     cost += law.gate + TENTATIVE_RANK

@@ -7,7 +7,9 @@ vehicle behind is at least max(min_gap, rear_time_gap * v_rear) away and would n
 within min_ttc. An abort uses the looser abort_gap / abort_ttc, so a change is not abandoned for
 the margin that made it start; it counts in the target lane every vehicle whose present sideways
 motion carries it there within abort_lookahead (a car cutting in from the far lane is met before
-it arrives, while the ego can still turn back). No change starts while a vehicle in the lane beyond
+it arrives, while the ego can still turn back), and it turns back only into an origin lane the ego
+can return to: nobody within abort_gap ahead in it or behind, nor behind within abort_ttc
+(`turning_back_is_safer`). No change starts while a vehicle in the lane beyond
 the target is within far_lane_gap of the ego, bumper to bumper: alongside, it may take the same
 gap at the same moment, and a change under way cannot get out of its way (at 4 m/s an abort needs
 seconds to turn back); nor, with `far_lane_leader`, while the nearest vehicle ahead in that lane
@@ -193,13 +195,17 @@ def turning_back_is_safer(
 ) -> bool:
     """Whether a lane change from the lane centred at `origin` [m] towards the one at `target` [m]
     is to be given up: the target lane is unsafe (`lane_is_safe` at the abort's `min_gap` [m] and
-    `min_ttc` [s], each vehicle where its drift takes it) and the origin lane is not. A car that
-    crosses the origin lane on its way into the target lane (a blind driver cutting across two
-    lanes beside the ego) makes both unsafe, and the ego goes on out of its way rather than turn
-    back into it."""
-    return not lane_is_safe(rows, target, min_gap, min_ttc, 0.0, 0.0) and lane_is_safe(
-        rows, origin, min_gap, min_ttc, 0.0, 0.0
-    )
+    `min_ttc` [s], each vehicle where its drift takes it) and the ego can return to the origin
+    lane: nobody in it within `min_gap` ahead or behind, nor behind within `min_ttc`. A leader
+    there that the ego closes on does not hold it in the target lane (the ego brakes for it, as it
+    would have had it never left); a car alongside does: one crossing the origin lane on its way
+    into the target lane (a blind driver cutting across two lanes beside the ego) makes both
+    unsafe, and the ego goes on out of its way rather than turn back into it."""
+    if lane_is_safe(rows, target, min_gap, min_ttc, 0.0, 0.0):
+        return False
+    ahead = unsafe_vehicles(rows, origin, min_gap, 0.0, 0.0, 0.0)[0]
+    behind = unsafe_vehicles(rows, origin, min_gap, min_ttc, 0.0, 0.0)[1]
+    return ahead < 0 and behind < 0
 
 
 @register_jitable

@@ -149,6 +149,17 @@ def test_a_change_goes_on_when_the_car_closing_its_gap_crosses_the_origin_lane_o
     assert not layer().should_abort(world, lane=1, target=0)
 
 
+def test_a_change_is_given_up_though_the_origin_lane_s_leader_is_closing():
+    """Around a stopped car 11 m ahead (gap 6 m) at 5 m/s (TTC 1.2 s, under the abort's 1.5 s),
+    half way to lane 0, where a car 8 m behind closes at 10 m/s: the ego turns back and brakes for
+    the stopped car, as it would have had it never left; only a car within the abort gap there, or
+    closing from behind, holds it in the target lane."""
+    world = scene(2, (0.0, 1), [(11.0, 4.0), (-8.0, 0.0)], speed=5.0, other_speed=0.0)
+    speed = np.array([5.0, 0.0, 15.0])
+    world = type(world)(**{**world.__dict__, "speed": speed, "d": np.array([2.5, 4.0, 0.0])})
+    assert layer().should_abort(world, lane=1, target=0)
+
+
 def test_after_an_abort_the_cruise_follows_the_abandoned_lane_until_the_ego_is_out_of_it():
     world = scene(2, (0.0, 1), [(-8.0, 0.0), (12.0, 0.0)], speed=20.0, other_speed=30.0)
     maneuver = Maneuver(world, 4.0, 30.0, should_abort=layer().should_abort)

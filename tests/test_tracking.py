@@ -7,6 +7,7 @@ the world run alone, the tracker off or a perfect sensor as before."""
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -255,6 +256,15 @@ def test_a_detection_out_of_the_gate_but_inside_the_footprint_moves_the_track_to
     assert world.frame([(20.0, -0.86, 0.0, -3.5)]) == 1
     assert world.status(0) == CONFIRMED and int(world.tracks.ident[0]) == ident and world.status(1) == FREE
     assert world.tracks.state[0, 2] < -0.8 and world.tracks.state[0, 3] < -2.5
+
+
+def test_a_detection_with_no_lateral_position_never_moves_a_track() -> None:
+    """A detection across the lane at NaN (a broken sensor row) beside a tracked car is no lane
+    change of it: the track coasts, its state finite."""
+    world = OneWorld(noise_m=0.1)
+    confirmed_at(world, 20.0)
+    world.frame([(20.0, math.nan, 0.0, -3.5)])
+    assert np.isfinite(world.tracks.state[0]).all() and world.tracks.misses[0] == 1
 
 
 def test_a_tentative_track_beside_a_vehicle_never_takes_its_detections() -> None:
