@@ -11,9 +11,8 @@ velocity's noise `speed_variance`. A frame: every live track is predicted `dt` a
 (track, detection) pair (the detections sorted along the road and bucketed, so each track finds
 those within its gate's reach in a step or two and checks only them) whose Mahalanobis distance
 (4 degrees of freedom) is within the gate is a candidate, and so is a confirmed track's pair with
-a detection outside it but inside its footprint, displaced the way its lateral speed changed and
-within the gate along the lane, its vehicle changing lane faster than the lateral noise allows
-(`is_lane_change`: the track's lateral
+a detection outside it but inside its footprint and within the gate along the lane, its vehicle
+changing lane faster than the lateral noise allows (`is_lane_change`: the track's lateral
 covariance is then scaled until the detection is on the gate's edge before the update,
 `manoeuvre_scale`); candidates are assigned greedily,
 nearest first, confirmed tracks before tentative ones (`perception.tracking_search`, `TENTATIVE_RANK`);
@@ -286,15 +285,13 @@ def is_lane_change(
     law: TrackerLaw, tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float
 ) -> bool:
     """Whether detection row `j` of `found`, outside confirmed track `t`'s gate, is its vehicle
-    changing lane: inside its footprint (`inside_footprint`), displaced across the lane the way
-    its reported lateral speed changed (a car swerving is seen both where and how fast it moves),
-    and within the gate along the lane (highway vehicles swerve across the road far beyond the
-    motion model's lateral noise, but brake and speed up within its longitudinal one). A phantom,
-    on a lane's centre at the ego's speed, on a car keeping its lane or more than about 2 m/s
-    slower or faster than the ego is none."""
+    changing lane: inside its footprint (`inside_footprint`) and within the gate along the lane
+    (highway vehicles swerve across the road far beyond the motion model's lateral noise, but
+    brake and speed up within its longitudinal one), its lateral speed a number. A phantom, which
+    moves at the ego's speed, on a car more than about 2 m/s slower or faster is none."""
     ds, dd = found.s[j] - tracks.state[t, 0], found.d[j] - tracks.state[t, 2]
-    swerve = (found.lateral_speed[j] - tracks.state[t, 3]) * dd
-    if not (inside_footprint(tracks, t, ds, dd) and swerve > 0):
+    lateral_speed = found.lateral_speed[j]
+    if not (inside_footprint(tracks, t, ds, dd) and lateral_speed == lateral_speed):
         return False
     return pair_distances(tracks, t, found, j, r, rv, 1.0)[0] <= law.gate
 
