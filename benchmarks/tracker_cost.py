@@ -37,9 +37,9 @@ from typing import Any
 import numpy as np
 from batched_decisions import batch_rate
 
+from perception.track_records import MeasuredWorlds
 from perception.tracking import Tracker, TrackerBatch, lane_velocity
 from perception.tracking_kernels import track_worlds
-from perception.tracking_law import MeasuredWorlds
 from records.batch import WorldBatch
 from stack.settings.run import RunConfig, build_config
 

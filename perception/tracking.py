@@ -24,6 +24,14 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from perception.sensor import SensorConfig
+from perception.track_records import (
+    COVARIANCE_SIZE,
+    ROW_FIELDS,
+    STATE_SIZE,
+    MeasuredWorlds,
+    TrackerLaw,
+    Tracks,
+)
 from perception.tracking_kernels import (
     WORLD_FLOATS,
     WORLD_INTEGERS,
@@ -31,15 +39,7 @@ from perception.tracking_kernels import (
     track_world,
     track_worlds,
 )
-from perception.tracking_law import (
-    COVARIANCE_SIZE,
-    ROW_FIELDS,
-    STATE_SIZE,
-    MeasuredWorlds,
-    TrackerLaw,
-    Tracks,
-    work_size,
-)
+from perception.tracking_law import work_size
 from records import WorldState
 from records.batch import WorldBatch
 

@@ -14,16 +14,8 @@ from numba import njit
 from numba.extending import register_jitable
 
 from common.compiled import Kernel
-from perception.tracking_law import (
-    ROW_FIELDS,
-    Measured,
-    MeasuredWorlds,
-    TrackerLaw,
-    Tracks,
-    confirmed_tracks,
-    track_frame,
-    tracked_rows,
-)
+from perception.track_records import ROW_FIELDS, Measured, MeasuredWorlds, TrackerLaw, Tracks
+from perception.tracking_law import confirmed_tracks, track_frame, tracked_rows
 
 WORLD_FLOATS = 10
 """Float columns a tracked world row takes in `track_world`'s `floats_out`: position (2), velocity

@@ -27,15 +27,20 @@ caller keeps (`work_size`), so a world costs the same every frame."""
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 from numba.extending import register_jitable
 
+from perception.track_records import CONFIRMED, FREE, TENTATIVE, Measured, TrackerLaw, Tracks
+from perception.tracking_pairs import (
+    MANOEUVRE_RANK,
+    block_distance,
+    is_lane_change,
+    manoeuvre_scale,
+    settle_twin,
+)
 from perception.tracking_search import assign_greedy_into, fill_buckets, first_at_least, stable_order
 
-FREE, TENTATIVE, CONFIRMED = 0, 1, 2
-"""A track slot's status."""
 GATE_WINDOW_MARGIN_M = 1e-6
 """How far past a track's gate along the road detections are still checked [m] (rounding)."""
 TENTATIVE_RANK = 1.0
@@ -43,80 +48,6 @@ TENTATIVE_RANK = 1.0
 every confirmed track before any tentative one (a cascade): a tentative track started beside a
 vehicle (by a phantom, or by a detection noisier than the gate) never takes the detections of
 that vehicle's confirmed track and dies, rather than sharing them and living as a second track."""
-MANOEUVRE_RANK = 0.5
-"""A confirmed track's pair with a detection outside its gate but its vehicle changing lane
-(`is_lane_change`) costs the gate plus this times 0.5-1 (nearer its centre across the lane,
-less): after every gated pair of confirmed tracks, before any tentative track's
-(`TENTATIVE_RANK`)."""
-STATE_SIZE = 4
-"""A track's state: s [m], ds/dt [m/s], d [m], dd/dt [m/s]."""
-ROW_FIELDS = 8
-"""A reported track's row (`tracked_rows`): s, d [m], velocity along and across the lane, speed
-[m/s], heading [rad], length, width [m]."""
-COVARIANCE_SIZE = 6
-"""A track's covariance, two symmetric 2 x 2 blocks: [P_ss, P_sv, P_vv, P_dd, P_dw, P_ww]."""
-
-
-class TrackerLaw(NamedTuple):
-    """The tracker's settings as `track_frame` reads them: confirmation `confirm_hits` of the last
-    `confirm_frames` frames (at most 62), deletion after `coast_frames` missed frames running,
-    the gate (squared Mahalanobis distance, 4 degrees of freedom), the white-noise accelerations
-    [m/s^2] of the longitudinal and lateral filters, and the variance of a reported velocity
-    component [m^2/s^2]."""
-
-    confirm_hits: int
-    confirm_frames: int
-    coast_frames: int
-    gate: float
-    longitudinal_acceleration: float
-    lateral_acceleration: float
-    speed_variance: float
-
-
-class Tracks(NamedTuple):
-    """One world's tracks, a slot each: `state` (slots, 4) [s, ds/dt, d, dd/dt], `covariance`
-    (slots, 6), `hits` the last frames' detections as bits (newest lowest), `age` frames since
-    birth, `misses` frames running without a detection, `status` (`FREE`, `TENTATIVE`,
-    `CONFIRMED`), `ident` each track's id, `box` (slots, 3) its last detection's length, width [m]
-    and heading to the lane [rad], and `next_ident` (1,) the id the next track gets."""
-
-    state: np.ndarray
-    covariance: np.ndarray
-    hits: np.ndarray
-    age: np.ndarray
-    misses: np.ndarray
-    status: np.ndarray
-    ident: np.ndarray
-    box: np.ndarray
-    next_ident: np.ndarray
-
-
-class MeasuredWorlds(NamedTuple):
-    """Many worlds' detections: `Measured`'s fields with a first axis of worlds."""
-
-    rows: np.ndarray
-    s: np.ndarray
-    d: np.ndarray
-    speed: np.ndarray
-    lateral_speed: np.ndarray
-    length: np.ndarray
-    width: np.ndarray
-    heading: np.ndarray
-
-
-class Measured(NamedTuple):
-    """One frame's detections, rows 1 to `rows` - 1 (row 0 is the ego, never tracked): `s`, `d`
-    [m] in the reference lane's frame, `speed` along the lane and `lateral_speed` across it [m/s],
-    `length`, `width` [m], `heading` to the lane [rad]."""
-
-    rows: int
-    s: np.ndarray
-    d: np.ndarray
-    speed: np.ndarray
-    lateral_speed: np.ndarray
-    length: np.ndarray
-    width: np.ndarray
-    heading: np.ndarray
 
 
 @register_jitable
@@ -134,14 +65,6 @@ def predict_block(
         pxv + dt * pvv + q * dt * dt * dt / 2,
         pvv + q * dt * dt,
     )
-
-
-@register_jitable
-def block_distance(a: float, b: float, c: float, det: float, yx: float, yv: float) -> float:
-    """Squared Mahalanobis distance in one direction of the position and velocity residuals `yx`
-    [m], `yv` [m/s] under the innovation covariance [[a, b], [b, c]], determinant `det` (a c - b^2,
-    the same for every detection a track is gated against)."""
-    return (c * yx * yx - 2 * b * yx * yv + a * yv * yv) / det
 
 
 @register_jitable
@@ -172,128 +95,6 @@ def block_update(
         (1 - k00) * pxv - k01 * pvv,
         -k10 * pxv + (1 - k11) * pvv,
     )
-
-
-@register_jitable
-def overlap(tracks: Tracks, t: int, u: int) -> bool:
-    """Whether tracks `t` and `u` overlap: their footprints (each one's last detected length and
-    width about its filtered s and d) intersect, which two vehicles cannot."""
-    reach_s = (tracks.box[t, 0] + tracks.box[u, 0]) / 2
-    reach_d = (tracks.box[t, 1] + tracks.box[u, 1]) / 2
-    ds, dd = tracks.state[t, 0] - tracks.state[u, 0], tracks.state[t, 2] - tracks.state[u, 2]
-    return abs(ds) < reach_s and abs(dd) < reach_d
-
-
-@register_jitable
-def centre_inside(tracks: Tracks, t: int, u: int) -> bool:
-    """Whether one of tracks `t` and `u` has its centre (filtered s and d) inside the other's
-    footprint (its last detected length and width): detections scattered over one vehicle, not
-    two vehicles touching end to end (wrecks locked together overlap by a crumple's depth)."""
-    ds = abs(tracks.state[t, 0] - tracks.state[u, 0])
-    dd = abs(tracks.state[t, 2] - tracks.state[u, 2])
-    box = tracks.box
-    return (ds < box[u, 0] / 2 and dd < box[u, 1] / 2) or (ds < box[t, 0] / 2 and dd < box[t, 1] / 2)
-
-
-@register_jitable
-def inside_footprint(tracks: Tracks, t: int, ds: float, dd: float) -> bool:
-    """Whether a detection `ds`, `dd` [m] from track `t`'s predicted centre lies inside its
-    footprint (its last detected length and width about that centre): it is that vehicle's (no
-    other vehicle's centre fits inside it), however far outside the gate a manoeuvre the motion
-    model did not allow took it. False for a NaN offset."""
-    return abs(ds) < tracks.box[t, 0] / 2 and abs(dd) < tracks.box[t, 1] / 2
-
-
-@register_jitable
-def settle_twin(tracks: Tracks, t: int, hit: np.ndarray) -> None:
-    """Track `t`, confirmed this frame, against the confirmed tracks it overlaps (one vehicle's two
-    tracks): one that had no detection this frame has lost its vehicle to `t` (a manoeuvre took
-    the detections out of its gate) and is deleted; one that had is the vehicle's own, and `t`
-    (fed by phantoms or noise beside it) is deleted instead, when one's centre lies inside the
-    other's footprint (`centre_inside`); two detected vehicles that only overlap at their ends
-    both stay."""
-    for u in range(len(tracks.status)):
-        if u == t or tracks.status[u] != CONFIRMED or not overlap(tracks, t, u):
-            continue
-        if hit[u]:
-            if centre_inside(tracks, t, u):
-                tracks.status[t] = FREE
-                return
-            continue
-        tracks.status[u] = FREE
-
-
-@register_jitable
-def _start_from(tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float) -> None:
-    """Track `t`'s state, covariance (the detections' position variance `r` [m^2] and velocity
-    variance `rv` [m^2/s^2]) and box from detection row `j` of `found` alone."""
-    tracks.state[t, 0], tracks.state[t, 1] = found.s[j], found.speed[j]
-    tracks.state[t, 2], tracks.state[t, 3] = found.d[j], found.lateral_speed[j]
-    covariance = tracks.covariance
-    covariance[t, 0], covariance[t, 1], covariance[t, 2] = r, 0.0, rv
-    covariance[t, 3], covariance[t, 4], covariance[t, 5] = r, 0.0, rv
-    tracks.box[t, 0], tracks.box[t, 1], tracks.box[t, 2] = found.length[j], found.width[j], found.heading[j]
-
-
-@register_jitable
-def pair_distances(
-    tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float, lateral_scale: float
-) -> tuple[float, float]:
-    """Squared Mahalanobis distances, along the lane and across it, of detection row `j` of `found`
-    from track `t` (predicted, not yet updated), the track's lateral covariance block taken
-    `lateral_scale` times."""
-    state, covariance = tracks.state, tracks.covariance
-    a_s, b_s, c_s = covariance[t, 0] + r, covariance[t, 1], covariance[t, 2] + rv
-    k = lateral_scale
-    a_d, b_d, c_d = k * covariance[t, 3] + r, k * covariance[t, 4], k * covariance[t, 5] + rv
-    ds, dd = found.s[j] - state[t, 0], found.d[j] - state[t, 2]
-    along = block_distance(a_s, b_s, c_s, a_s * c_s - b_s * b_s, ds, found.speed[j] - state[t, 1])
-    across = block_distance(a_d, b_d, c_d, a_d * c_d - b_d * b_d, dd, found.lateral_speed[j] - state[t, 3])
-    return along, across
-
-
-MANOEUVRE_SCALE_STEPS = 12
-"""Bisection steps of `manoeuvre_scale` (on the logarithm, from 1 to 1e12: the scale within 1 %)."""
-
-
-@register_jitable
-def manoeuvre_scale(
-    law: TrackerLaw, tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float
-) -> float:
-    """How many times its lateral covariance block track `t` takes before its update by a
-    detection (row `j` of `found`): 1 within the gate; for a confirmed track's detection outside
-    it and inside its footprint, consistent along the lane (`is_lane_change`), the least scale
-    that puts it on the gate's edge. The update then follows the lane change as far as it went, no
-    further: a detection just outside the gate by noise moves the track as an ordinary one, one a
-    sharp lane change took a metre across moves it almost to the detection (a fading-memory
-    filter's scaling, across the lane only)."""
-    along, across = pair_distances(tracks, t, found, j, r, rv, 1.0)
-    if along + across <= law.gate:
-        return 1.0
-    low, high = 0.0, 12.0 * math.log(10.0)
-    for _ in range(MANOEUVRE_SCALE_STEPS):
-        middle = (low + high) / 2
-        if along + pair_distances(tracks, t, found, j, r, rv, math.exp(middle))[1] > law.gate:
-            low = middle
-        else:
-            high = middle
-    return math.exp(high)
-
-
-@register_jitable
-def is_lane_change(
-    law: TrackerLaw, tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float
-) -> bool:
-    """Whether detection row `j` of `found`, outside confirmed track `t`'s gate, is its vehicle
-    changing lane: inside its footprint (`inside_footprint`) and within the gate along the lane
-    (highway vehicles swerve across the road far beyond the motion model's lateral noise, but
-    brake and speed up within its longitudinal one), its lateral speed a number. A phantom, which
-    moves at the ego's speed, on a car more than about 2 m/s slower or faster is none."""
-    ds, dd = found.s[j] - tracks.state[t, 0], found.d[j] - tracks.state[t, 2]
-    lateral_speed = found.lateral_speed[j]
-    if not (inside_footprint(tracks, t, ds, dd) and lateral_speed == lateral_speed):
-        return False
-    return pair_distances(tracks, t, found, j, r, rv, 1.0)[0] <= law.gate
 
 
 @register_jitable
@@ -453,7 +254,15 @@ def track_frame(
             slot += 1
         if slot == slots:
             break
-        _start_from(tracks, slot, found, j, r, rv)
+        state[slot, 0], state[slot, 1], state[slot, 2], state[slot, 3] = (
+            s[j],
+            speed[j],
+            d[j],
+            lateral_speed[j],
+        )
+        covariance[slot, 0], covariance[slot, 1], covariance[slot, 2] = r, 0.0, rv
+        covariance[slot, 3], covariance[slot, 4], covariance[slot, 5] = r, 0.0, rv
+        box[slot, 0], box[slot, 1], box[slot, 2] = length[j], width[j], heading[j]
         track_hits[slot], age[slot], misses[slot] = 1, 1, 0
         status[slot] = CONFIRMED if law.confirm_hits <= 1 else TENTATIVE
         tracks.ident[slot] = tracks.next_ident[0]

@@ -1,11 +1,13 @@
 """The forecast behind the safety layer's lane-change criterion for the follower (UN R157's: the
 approaching vehicle in the target lane not forced to brake harder than 3 m/s^2): how hard the ego
-will brake for its leaders during the change (`ego_braking`), and whether a follower that reacts
-and then brakes at most that hard stays clear of it (`follower_keeps_clear`). Plain functions that
-numba compiles into `planner.safety.change_is_safe`, for one world or many."""
+will brake for its leaders during the change (`ego_braking`), whether a follower that reacts
+and then brakes at most that hard stays clear of it (`follower_keeps_clear`), and which follower
+does not (`unspared_follower`). Plain functions that numba compiles into
+`planner.safety.change_is_safe`, for one world or many."""
 
 from __future__ import annotations
 
+import numpy as np
 from numba.extending import register_jitable
 
 from common.longitudinal import STOP_MARGIN_M
@@ -64,3 +66,29 @@ def follower_keeps_clear(
         if t > reaction and follower_speed <= ego_speed and ego_speed <= ego_floor:
             return True
     return True
+
+
+@register_jitable
+def unspared_follower(
+    rows: VehicleRows,
+    offsets: np.ndarray,
+    lane: int,
+    goal: int,
+    follower_braking_mps2: float,
+    follower_reaction_s: float,
+    min_gap_m: float,
+) -> int:
+    """The row of the follower in lane `goal` (-1: none) when, reacting after
+    `follower_reaction_s` [s], it would need harder braking than `follower_braking_mps2` [m/s^2]
+    to stay `min_gap_m` [m] behind the ego changing into it from `lane`, while the ego brakes as
+    its leaders in both lanes ask (`ego_braking`, `follower_keeps_clear`)."""
+    behind = nearest_in_lane(rows, offsets[goal])[1]
+    if behind < 0:
+        return -1
+    gap = abs(rows.s[behind] - rows.s[0]) - (rows.length[behind] + rows.length[0]) / 2
+    deceleration, floor = ego_braking(rows, (offsets[lane], offsets[goal]))
+    spared = follower_keeps_clear(
+        gap, rows.speed[behind], rows.speed[0], deceleration, floor,
+        follower_braking_mps2, follower_reaction_s, min_gap_m,
+    )  # fmt: skip
+    return -1 if spared else behind

@@ -48,7 +48,7 @@ from common.neighbours import (
     nearest_in_lane,
     vehicle_rows,
 )
-from planner.follower_forecast import ego_braking, follower_keeps_clear
+from planner.follower_forecast import unspared_follower
 from records import N_ACTIONS, Command, WorldState
 from records.batch import BatchColumns, WorldBatch
 
@@ -209,25 +209,6 @@ def turning_back_is_safer(
 
 
 @register_jitable
-def unspared_follower(
-    rows: VehicleRows, offsets: np.ndarray, lane: int, goal: int, safety: SafetySettings
-) -> int:
-    """The row of the follower in lane `goal` (-1: none) when it would need harder braking than
-    `follower_braking_mps2` to stay `min_gap_m` behind the ego changing into it from `lane`, while
-    the ego brakes as its leaders in both lanes ask (`ego_braking`, `follower_keeps_clear`)."""
-    behind = nearest_in_lane(rows, offsets[goal])[1]
-    if behind < 0:
-        return -1
-    gap = abs(rows.s[behind] - rows.s[0]) - (rows.length[behind] + rows.length[0]) / 2
-    deceleration, floor = ego_braking(rows, (offsets[lane], offsets[goal]))
-    spared = follower_keeps_clear(
-        gap, rows.speed[behind], rows.speed[0], deceleration, floor,
-        safety.follower_braking_mps2, safety.follower_reaction_s, safety.min_gap_m,
-    )  # fmt: skip
-    return -1 if spared else behind
-
-
-@register_jitable
 def change_blockers(
     rows: VehicleRows, offsets: np.ndarray, lanes_count: int, lane: int, goal: int, safety: SafetySettings
 ) -> tuple[int, int, int, int, int, int]:
@@ -238,7 +219,8 @@ def change_blockers(
     car ahead (with `far_lane_leader`) and those nearer than the far-lane gap bumper to bumper."""
     strict = (safety.min_gap_m, safety.min_ttc_s, safety.front_time_gap_s, safety.rear_time_gap_s)
     ahead, behind = unsafe_vehicles(rows, offsets[goal], *strict)
-    follower = unspared_follower(rows, offsets, lane, goal, safety) if safety.checks_follower else -1
+    follower_rule = (safety.follower_braking_mps2, safety.follower_reaction_s, safety.min_gap_m)
+    follower = unspared_follower(rows, offsets, lane, goal, *follower_rule) if safety.checks_follower else -1
     far_leader, far_ahead, far_behind = -1, -1, -1
     beyond = lane_beyond(lane, goal, lanes_count)
     if safety.checks_far_lane and beyond >= 0:

@@ -17,9 +17,9 @@ from scipy.optimize import linear_sum_assignment
 from typer.testing import CliRunner
 
 from perception.sensor import SensorConfig
+from perception.track_records import CONFIRMED, FREE, TENTATIVE
 from perception.tracking import TRACK_ID_BASE, Tracker, TrackerConfig, empty_tracks
 from perception.tracking_kernels import WORLD_FLOATS, WORLD_INTEGERS, track_world
-from perception.tracking_law import CONFIRMED, FREE, TENTATIVE
 from perception.tracking_search import assign_greedy, fill_buckets, first_at_least, stable_order
 from records import WorldState
 from stack.apps.cli import app

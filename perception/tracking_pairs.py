@@ -1,0 +1,144 @@
+"""Which track a detection, or another track, belongs to beyond the plain gate: part of the
+tracker's per-frame law (`perception.tracking_law.track_frame`). A pair's Mahalanobis distance in
+each direction (`block_distance`, `pair_distances`); a detection a lane change took out of its
+track's gate, still inside its footprint and within the gate along the lane (`is_lane_change`),
+taken after the track's lateral covariance is scaled to put it on the gate's edge
+(`manoeuvre_scale`); and whether two confirmed tracks are one vehicle's (`overlap`,
+`centre_inside`), and which of two such goes, if either (`settle_twin`). Plain functions numba
+compiles into the law."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from numba.extending import register_jitable
+
+from perception.track_records import CONFIRMED, FREE, Measured, TrackerLaw, Tracks
+
+if TYPE_CHECKING:
+    import numpy as np
+
+MANOEUVRE_RANK = 0.5
+"""A confirmed track's pair with a detection outside its gate but its vehicle changing lane
+(`is_lane_change`) costs the gate plus this times 0.5-1 (nearer its centre across the lane,
+less): after every gated pair of confirmed tracks, before any tentative track's
+(`TENTATIVE_RANK`)."""
+
+
+@register_jitable
+def block_distance(a: float, b: float, c: float, det: float, yx: float, yv: float) -> float:
+    """Squared Mahalanobis distance in one direction of the position and velocity residuals `yx`
+    [m], `yv` [m/s] under the innovation covariance [[a, b], [b, c]], determinant `det` (a c - b^2,
+    the same for every detection a track is gated against)."""
+    return (c * yx * yx - 2 * b * yx * yv + a * yv * yv) / det
+
+
+@register_jitable
+def overlap(tracks: Tracks, t: int, u: int) -> bool:
+    """Whether tracks `t` and `u` overlap: their footprints (each one's last detected length and
+    width about its filtered s and d) intersect, which two vehicles cannot."""
+    reach_s = (tracks.box[t, 0] + tracks.box[u, 0]) / 2
+    reach_d = (tracks.box[t, 1] + tracks.box[u, 1]) / 2
+    ds, dd = tracks.state[t, 0] - tracks.state[u, 0], tracks.state[t, 2] - tracks.state[u, 2]
+    return abs(ds) < reach_s and abs(dd) < reach_d
+
+
+@register_jitable
+def centre_inside(tracks: Tracks, t: int, u: int) -> bool:
+    """Whether one of tracks `t` and `u` has its centre (filtered s and d) inside the other's
+    footprint (its last detected length and width): detections scattered over one vehicle, not
+    two vehicles touching end to end (wrecks locked together overlap by a crumple's depth)."""
+    ds = abs(tracks.state[t, 0] - tracks.state[u, 0])
+    dd = abs(tracks.state[t, 2] - tracks.state[u, 2])
+    box = tracks.box
+    return (ds < box[u, 0] / 2 and dd < box[u, 1] / 2) or (ds < box[t, 0] / 2 and dd < box[t, 1] / 2)
+
+
+@register_jitable
+def inside_footprint(tracks: Tracks, t: int, ds: float, dd: float) -> bool:
+    """Whether a detection `ds`, `dd` [m] from track `t`'s predicted centre lies inside its
+    footprint (its last detected length and width about that centre): it is that vehicle's (no
+    other vehicle's centre fits inside it), however far outside the gate a manoeuvre the motion
+    model did not allow took it. False for a NaN offset."""
+    return abs(ds) < tracks.box[t, 0] / 2 and abs(dd) < tracks.box[t, 1] / 2
+
+
+@register_jitable
+def pair_distances(
+    tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float, lateral_scale: float
+) -> tuple[float, float]:
+    """Squared Mahalanobis distances, along the lane and across it, of detection row `j` of `found`
+    from track `t` (predicted, not yet updated), the track's lateral covariance block taken
+    `lateral_scale` times."""
+    state, covariance = tracks.state, tracks.covariance
+    a_s, b_s, c_s = covariance[t, 0] + r, covariance[t, 1], covariance[t, 2] + rv
+    k = lateral_scale
+    a_d, b_d, c_d = k * covariance[t, 3] + r, k * covariance[t, 4], k * covariance[t, 5] + rv
+    ds, dd = found.s[j] - state[t, 0], found.d[j] - state[t, 2]
+    along = block_distance(a_s, b_s, c_s, a_s * c_s - b_s * b_s, ds, found.speed[j] - state[t, 1])
+    across = block_distance(a_d, b_d, c_d, a_d * c_d - b_d * b_d, dd, found.lateral_speed[j] - state[t, 3])
+    return along, across
+
+
+MANOEUVRE_SCALE_STEPS = 12
+"""Bisection steps of `manoeuvre_scale` (on the logarithm, from 1 to 1e12: the scale within 1 %)."""
+
+
+@register_jitable
+def manoeuvre_scale(
+    law: TrackerLaw, tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float
+) -> float:
+    """How many times its lateral covariance block track `t` takes before its update by a
+    detection (row `j` of `found`): 1 within the gate; for a confirmed track's detection outside
+    it and inside its footprint, consistent along the lane (`is_lane_change`), the least scale
+    that puts it on the gate's edge. The update then follows the lane change as far as it went, no
+    further: a detection just outside the gate by noise moves the track as an ordinary one, one a
+    sharp lane change took a metre across moves it almost to the detection (a fading-memory
+    filter's scaling, across the lane only)."""
+    along, across = pair_distances(tracks, t, found, j, r, rv, 1.0)
+    if along + across <= law.gate:
+        return 1.0
+    low, high = 0.0, 12.0 * math.log(10.0)
+    for _ in range(MANOEUVRE_SCALE_STEPS):
+        middle = (low + high) / 2
+        if along + pair_distances(tracks, t, found, j, r, rv, math.exp(middle))[1] > law.gate:
+            low = middle
+        else:
+            high = middle
+    return math.exp(high)
+
+
+@register_jitable
+def is_lane_change(
+    law: TrackerLaw, tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float
+) -> bool:
+    """Whether detection row `j` of `found`, outside confirmed track `t`'s gate, is its vehicle
+    changing lane: inside its footprint (`inside_footprint`) and within the gate along the lane
+    (highway vehicles swerve across the road far beyond the motion model's lateral noise, but
+    brake and speed up within its longitudinal one), its lateral speed a number. A phantom, which
+    moves at the ego's speed, on a car more than about 2 m/s slower or faster is none."""
+    ds, dd = found.s[j] - tracks.state[t, 0], found.d[j] - tracks.state[t, 2]
+    lateral_speed = found.lateral_speed[j]
+    if not (inside_footprint(tracks, t, ds, dd) and lateral_speed == lateral_speed):
+        return False
+    return pair_distances(tracks, t, found, j, r, rv, 1.0)[0] <= law.gate
+
+
+@register_jitable
+def settle_twin(tracks: Tracks, t: int, hit: np.ndarray) -> None:
+    """Track `t`, confirmed this frame, against the confirmed tracks it overlaps (one vehicle's two
+    tracks): one that had no detection this frame has lost its vehicle to `t` (a manoeuvre took
+    the detections out of its gate) and is deleted; one that had is the vehicle's own, and `t`
+    (fed by phantoms or noise beside it) is deleted instead, when one's centre lies inside the
+    other's footprint (`centre_inside`); two detected vehicles that only overlap at their ends
+    both stay."""
+    for u in range(len(tracks.status)):
+        if u == t or tracks.status[u] != CONFIRMED or not overlap(tracks, t, u):
+            continue
+        if hit[u]:
+            if centre_inside(tracks, t, u):
+                tracks.status[t] = FREE
+                return
+            continue
+        tracks.status[u] = FREE
