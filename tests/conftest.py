@@ -54,6 +54,13 @@ def pytest_sessionstart(session: pytest.Session) -> None:
         WARM_STAMP.write_text(f"{time.perf_counter() - started:.1f} s\n")
 
 
+@pytest.fixture(autouse=True, scope="session")
+def sb3_logs_in_the_session_s_temp(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Models a test builds without a log folder log into the session's temporary folder: left to
+    SB3, each made an empty `SB3-<time>` folder in the system's temp directory."""
+    os.environ.setdefault("SB3_LOGDIR", str(tmp_path_factory.mktemp("sb3")))
+
+
 @pytest.fixture
 def tiny_config():
     """A short, sparse run: 8 s episodes with 15 vehicles."""
