@@ -5,7 +5,6 @@ and, during a lane change, the target lane (the maneuver hands them to the contr
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -13,47 +12,22 @@ from numba.extending import register_jitable
 
 from common.longitudinal import STOP_MARGIN_M
 from common.neighbours import WANDERING_M, lateral_extent, swept_distance
+from controllers.passing import (
+    FoundLeaders,
+    LeaderRows,
+    is_listed,
+    passes_it,
+    passes_sooner_than_falls_back,
+)
 from controllers.reference import road_to_reach
+from controllers.weaving import WeaveMemory, weavers_in_rows
 from records import Neighbour, WorldState
-
-
-class LeaderRows(NamedTuple):
-    """One world's `vehicles` as the leaders' laws read them, a row each, row 0 the ego: centres `s`
-    and `d` [m] in lane 0's frame, `speed` [m/s], heading to the lane at its position,
-    `heading_to_lane` [rad], `length` and `width` [m], turned footprint across the road, `extent`
-    [m] (`common.neighbours.lateral_extent`; the ego's never read); lane k's centre at
-    `lane_offsets[k]`, each lane `lane_width` [m] wide. Made once a tick, by `leaders` for one world
-    and by the batch's control kernel for each of its worlds."""
-
-    vehicles: int
-    s: np.ndarray
-    d: np.ndarray
-    speed: np.ndarray
-    heading_to_lane: np.ndarray
-    length: np.ndarray
-    width: np.ndarray
-    extent: np.ndarray
-    lane_offsets: np.ndarray
-    lane_width: float
-
-
-class FoundLeaders(NamedTuple):
-    """Where `leaders_in_rows` writes the vehicles it finds, in order, one entry each: the gap
-    `gaps` [m] from the ego's front to its rear, its `speeds` [m/s] and its row in `LeaderRows`,
-    `rows`. Room for every row in every watched lane and the two lists the cruise alone keeps."""
-
-    gaps: np.ndarray
-    speeds: np.ndarray
-    rows: np.ndarray
-
 
 LEAVING_M = 1.0
 """A leader whose centre is farther than this from the lane's centre is leaving (or entering) the
 lane, and no longer hides the vehicle ahead of it [m]."""
 
 
-SIDE_MARGIN_M = 0.3
-"""Lateral room a passed vehicle must still have to the ego's side when the ego is by [m]."""
 LEAVE_MARGIN_M = 0.3
 """How far past the origin lane's edge the ego's centre must be, beyond half its width, before its
 turned footprint has left the lane [m] (a 5 m car at 3 deg reaches 0.26 m further across)."""
@@ -89,87 +63,6 @@ def road_to_leave(
     )  # fmt: skip
 
 
-@register_jitable
-def passes_before_it_closes_sideways(
-    rel_s: float,
-    closing: float,
-    lengths: float,
-    towards: float,
-    speed: float,
-    heading_to_lane: float,
-    apart: float,
-    width: float,
-) -> bool:
-    """Whether the ego's rear passes the front of a vehicle `rel_s` [m] ahead, `closing` [m/s] slower
-    and `lengths` [m] (the two half lengths) long together, before that vehicle, at its `speed`
-    [m/s] and `heading_to_lane` [rad] towards the ego's side (`towards`: +-1), comes within the
-    side margin of the ego: `apart` [m] is its centre's distance to the ego's side less the margin,
-    `width` [m] its width. Both keep their speeds; always when it does not move towards the ego."""
-    clear_s = (rel_s + lengths) / closing
-    lateral = towards * speed * math.sin(heading_to_lane)
-    return lateral <= 0 or clear_s < (apart - width / 2) / lateral
-
-
-FALL_BACK_MPS2 = 5.0
-"""The braking a fall back behind a vehicle alongside is reckoned at [m/s^2]: the plant's authority,
-emergency braking's default."""
-
-
-@register_jitable
-def passes_sooner_than_falls_back(rel_s: float, closing: float, lengths: float) -> bool:
-    """Whether the ego, `closing` [m/s] faster than a vehicle `rel_s` [m] ahead (centres; `lengths`
-    the two half lengths [m]), will be beside it whatever it does (its front already past the
-    other's rear, or braking at `FALL_BACK_MPS2` cannot stop it short of that rear) and is past
-    it (its rear beyond the other's front, at constant speeds) sooner than braking brings its front
-    back behind the other's rear. Then braking for it would only hold the two side by side for
-    longer."""
-    past_its_rear = lengths - rel_s
-    reach = closing * closing + 2 * FALL_BACK_MPS2 * past_its_rear
-    if reach < 0:
-        return False
-    passing_s = (rel_s + lengths) / closing
-    falling_back_s = (closing + math.sqrt(reach)) / FALL_BACK_MPS2
-    return passing_s < falling_back_s
-
-
-@register_jitable
-def passes_it(world: LeaderRows, row: int, rel: float, lookahead_s: float, heading_for: float) -> bool:
-    """Whether the ego, faster than the vehicle in `row` `rel` [m] ahead, passes it rather than
-    following it, on its way across to `heading_for` [m] (the centre of the lane it keeps or is to
-    head for, the first the leaders watch; the ego's side is where that way comes closest to the
-    vehicle: a car reaching into the target lane is judged from that lane's centre, not from where
-    the ego is now): the vehicle's turned footprint keeps clear of the ego's side margin and the
-    ego is past before the vehicle comes within it (`passes_before_it_closes_sideways`); or the ego
-    reaches the vehicle's rear within `lookahead_s` [s] at their present speeds (as far ahead as a
-    sideways motion counts), will be beside it whatever it does, and passing ends that sooner
-    than braking (`passes_sooner_than_falls_back`), and the vehicle, not touching the ego's side,
-    does not touch it before the ego is past (the same test without the margin). The second
-    settles a pass that a few centimetres of the vehicle's drift would otherwise turn into a full
-    braking beside it, held there longer. The cut-in rule lets such a vehicle go, and so does the
-    rule for cars that may turn back."""
-    d, speed, length = world.d, world.speed, world.length
-    if speed[row] >= speed[0]:
-        return False
-    closest = min(max(d[row], min(d[0], heading_for)), max(d[0], heading_for))
-    towards = math.copysign(1.0, closest - d[row])
-    to_side = abs(d[row] - closest) - world.width[0] / 2
-    closing, lengths = speed[0] - speed[row], (length[0] + length[row]) / 2
-    heading, width, extent = world.heading_to_lane[row], world.width[row], world.extent[row]
-    apart = to_side - SIDE_MARGIN_M
-    if apart - extent / 2 > 0 and passes_before_it_closes_sideways(
-        rel, closing, lengths, towards, speed[row], heading, apart, width
-    ):
-        return True
-    return (
-        rel - lengths < closing * lookahead_s
-        and to_side - extent / 2 > 0
-        and passes_sooner_than_falls_back(rel, closing, lengths)
-        and passes_before_it_closes_sideways(
-            rel, closing, lengths, towards, speed[row], heading, to_side, width
-        )
-    )
-
-
 def leaders(
     world: WorldState,
     lanes: tuple[int, ...],
@@ -177,6 +70,7 @@ def leaders(
     leaving_lane: int = -1,
     leaving_within_m: float = math.inf,
     beyond: int = -1,
+    weaves: WeaveMemory | None = None,
 ) -> tuple[Neighbour, ...]:
     """For each lane in `lanes`, the closest vehicle ahead reaching into it, now or within
     `cut_in_lookahead_s` [s] at its present sideways speed (a car cutting in is a leader before it
@@ -193,10 +87,12 @@ def leaders(
     that lane before it gets there, and stopping for it would stall the change beside it (the
     profile's clock stops with the car). Then the cars that may turn back into a lane
     (`turning_back_in_rows`) and, during a lane change, those beside the ego in the lane `beyond`
-    its target (`beside_beyond_in_rows`), marked `may_turn_back`. `leaders_in_rows`, compiled, on
-    the world's `LeaderRows`."""
+    its target (`beside_beyond_in_rows`) and the cars that weaved lately next to the lane the ego
+    keeps or heads for (`controllers.weaving.weavers_in_rows`, from `weaves`, the world's memory,
+    noted here once a tick; none without it), marked `may_turn_back`. `leaders_in_rows`, compiled,
+    on the world's `LeaderRows`."""
     n = world.count
-    found_most = n * (len(lanes) + 2)
+    found_most = n * (len(lanes) + 3)
     out = FoundLeaders(np.empty(found_most), np.empty(found_most), np.empty(found_most, dtype=np.int64))
     reference = world.lanes[0]
     watched = np.array(lanes, dtype=np.int64)
@@ -204,8 +100,10 @@ def leaders(
     extent = np.concatenate(((0.0,), lateral_extent(world)))
     rows_of_world = LeaderRows(
         n, world.s, world.d, world.speed, heading_to_lane, world.length, world.width, extent,
-        world.lane_offsets, world.lane_width,
+        world.lane_offsets, world.lane_width, np.full(n, math.inf),
     )  # fmt: skip
+    if weaves is not None:
+        weaves.note(rows_of_world, world.time, world.ids)
     found, held = _leaders_in_rows(
         rows_of_world, watched, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, out
     )
@@ -232,9 +130,9 @@ def leaders_in_rows(
     vehicle's sideways motion, speed times the sine of its `heading_to_lane`, counts;
     `leaving_lane`, `leaving_within_m`, `beyond` as `leaders` takes them): writes into `out` each
     leader's gap [m], speed [m/s] and row in order, then those of the cars that may turn back
-    (`turning_back_in_rows`) or are beside the ego in the lane beyond (`beside_beyond_in_rows`), and
-    returns (how many leaders, how many in all): the cruise keeps its gap to all, emergency braking
-    reads the leaders only."""
+    (`turning_back_in_rows`), are beside the ego in the lane beyond (`beside_beyond_in_rows`) or
+    weaved lately (`controllers.weaving.weavers_in_rows`), and returns (how many leaders, how many
+    in all): the cruise keeps its gap to all, emergency braking reads the leaders only."""
     s, d, speed, length, offsets = world.s, world.d, world.speed, world.length, world.lane_offsets
     gaps, speeds, rows = out
     found = 0
@@ -268,16 +166,8 @@ def leaders_in_rows(
             if abs(d[row] - offsets[lane]) <= LEAVING_M:
                 break
     held = turning_back_in_rows(world, lanes, cut_in_lookahead_s, heading_for, found, out)
-    return found, beside_beyond_in_rows(world, beyond, cut_in_lookahead_s, held, out)
-
-
-@register_jitable
-def is_listed(rows: np.ndarray, count: int, row: int) -> bool:
-    """Whether `row` is among the first `count` leaders' `rows`."""
-    for k in range(count):
-        if rows[k] == row:
-            return True
-    return False
+    held = beside_beyond_in_rows(world, beyond, cut_in_lookahead_s, held, out)
+    return found, weavers_in_rows(world, heading_for, held, out)
 
 
 @register_jitable

@@ -19,6 +19,7 @@ from controllers.reference import (
     lane_change,
     lane_keeping,
 )
+from controllers.weaving import WeaveMemory
 from records import Command, Reference, WorldState
 
 AbortRule = Callable[[WorldState, int, int], bool]
@@ -87,6 +88,7 @@ class Maneuver:
         self.profile = lane_keeping(float(world.lane_offsets[self.lane]), world.time)
         self.clock = WarpedProfile(self.profile)
         self.lane_changes = 0
+        self.weaves = WeaveMemory()
 
     @property
     def changing_lane(self) -> bool:
@@ -150,7 +152,9 @@ class Maneuver:
                 float(world.lane_offsets[self.lane]), world.lane_width, float(world.width[0]),
                 float(world.speed[0]), math.tan(self.max_course),
             )  # fmt: skip
-        found = leaders(world, lanes, self.cut_in_lookahead_s, leaving_lane, leaving_within, beyond)
+        found = leaders(
+            world, lanes, self.cut_in_lookahead_s, leaving_lane, leaving_within, beyond, self.weaves
+        )
         return Reference.sampled(self.clock, world.time, self.set_speed, found, target_lane=heading_for)
 
     def _rate(self, speed: float) -> float:

@@ -26,7 +26,7 @@ from perception.tracking import TrackerBatch
 from planner.safety import permitted_batch, safety_settings
 from records import WorldState
 from records.batch import WorldBatch
-from stack.batch.ego_records import ActedBatch
+from stack.batch.ego_records import MEMORY_COLUMNS, ActedBatch
 from stack.batch.loop_kernels import (
     ControllerArrays,
     EgoLaws,
@@ -97,16 +97,9 @@ class ClosedLoopBatch:
         self.abort_lookahead_s = safety.abort_lookahead_s
         tracker = make_controller(control_config, self.dt)
         assert isinstance(tracker, PIDTracker) and isinstance(tracker.lateral, LateralPID)
-        self.laws = EgoLaws(
-            tracker.lateral.limits,
-            tracker.cruise.speed_pid.terms,
-            tracker.cruise.law,
-            EmergencyBraking(
-                control_config.emergency_decel_mps2,
-                control_config.comfort_decel_mps2,
-                control_config.emergency_ttc_s,
-            ).limits,
-        )
+        lateral, cruise, c = tracker.lateral, tracker.cruise, control_config
+        braking = EmergencyBraking(c.emergency_decel_mps2, c.comfort_decel_mps2, c.emergency_ttc_s)
+        self.laws = EgoLaws(lateral.limits, cruise.speed_pid.terms, cruise.law, braking.limits)
         self.lane = np.zeros(worlds, dtype=np.int64)
         self.target = np.zeros(worlds, dtype=np.int64)
         self.coef, self.profile = np.zeros((worlds, 6)), np.zeros((worlds, 4))
@@ -116,8 +109,8 @@ class ClosedLoopBatch:
         self.flags = np.zeros((worlds, 3), dtype=np.int64)
         self.seen = np.zeros((worlds, 0), dtype=np.int64)
         self.seen_speed, self.seen_slowing = np.zeros((worlds, 0)), np.zeros((worlds, 0))
-        self.departed = np.zeros(worlds, dtype=bool)
-        self.crashed = np.zeros(worlds, dtype=bool)
+        self.moving, self.weaved_at = np.zeros((worlds, 0)), np.zeros((worlds, 0))
+        self.departed, self.crashed = np.zeros(worlds, dtype=bool), np.zeros(worlds, dtype=bool)
         self.truncated = np.zeros(worlds, dtype=bool)
         self.batch: WorldBatch | None = None
         self.perceived: WorldBatch | None = None
@@ -135,26 +128,25 @@ class ClosedLoopBatch:
 
     def _memory(self, vehicles: int, phantoms: int = 0) -> None:
         """Emergency braking's per-vehicle memory (`seen`, `seen_speed`, `seen_slowing`: what it
-        kept of each vehicle, `stack.batch.loop_kernels.emergency_acceleration`), grown to room
-        for `vehicles` a world (a column per snapshot row), then `phantoms` (a column per false
-        positive's id)."""
+        kept of each vehicle, `stack.batch.loop_kernels.emergency_acceleration`) and the weave
+        memory (`moving`, `weaved_at`: `controllers.weaving`), grown to room for `vehicles` a world
+        (a column per snapshot row), then `phantoms` (a column per false positive's id)."""
         more = vehicles - self.vehicle_room
         if more > 0:
             at = [self.vehicle_room] * more
-            self.seen = np.insert(self.seen, at, 0, axis=1)
-            self.seen_speed = np.insert(self.seen_speed, at, 0.0, axis=1)
-            self.seen_slowing = np.insert(self.seen_slowing, at, 0.0, axis=1)
+            for name, empty in MEMORY_COLUMNS:
+                setattr(self, name, np.insert(getattr(self, name), at, empty, axis=1))
             self.vehicle_room = vehicles
         more = self.vehicle_room + phantoms - self.seen.shape[1]
         if more > 0:
-            self.seen = np.pad(self.seen, ((0, 0), (0, more)))
-            self.seen_speed = np.pad(self.seen_speed, ((0, 0), (0, more)))
-            self.seen_slowing = np.pad(self.seen_slowing, ((0, 0), (0, more)))
+            for name, empty in MEMORY_COLUMNS:
+                setattr(self, name, np.pad(getattr(self, name), ((0, 0), (0, more)), constant_values=empty))
 
     def _sense(self, worlds: np.ndarray, warm_up: bool = False) -> None:
         """`perceived` and the memory `slots` of its rows after a frame: the worlds flagged observed
         anew through their sensors (the truth itself without a sensor model), tracked in the worlds
-        that track (`perception.tracking.TrackerBatch`; memory column 1 + the track's slot), with no
+        that track (`perception.tracking.TrackerBatch`; memory column 1 + the track's slot, its weave
+        memory emptied for a track born there, as one world's keys it by the new track's id), with no
         time passed since the last frame when `warm_up` (the tracker's start, as `Tracker.warm_up`)."""
         batch = self.batch
         assert batch is not None
@@ -172,7 +164,10 @@ class ClosedLoopBatch:
             return
         self._memory(self.traffic.arrays.vehicles, max(phantoms, 1 + self.tracker.config.max_tracks))
         self.detected = sensed.batch
+        idents = self.tracker.tracks.ident.copy()
         tracked = self.tracker.update(sensed.batch, worlds, 0.0 if warm_up else self.dt)
+        born_world, born_slot = np.nonzero(self.tracker.tracks.ident != idents)
+        self.moving[born_world, 1 + born_slot], self.weaved_at[born_world, 1 + born_slot] = 0.0, -np.inf
         self.perceived = tracked.batch
         rows = tracked.slot.shape[1]
         detected_slots = np.zeros((self.worlds, rows), dtype=np.int64)
@@ -245,7 +240,8 @@ class ClosedLoopBatch:
             self.clock[world] = (0.0, 0.0, 1.0)
             self.counts[world] = self.flags[world] = 0
             self.lateral[world] = self.speed_pi[world] = 0.0
-            self.seen[world], self.seen_speed[world], self.seen_slowing[world] = 0, 0.0, 0.0
+            for name, empty in MEMORY_COLUMNS:
+                getattr(self, name)[world] = empty
             self.departed[world] = self.crashed[world] = self.truncated[world] = False
         if self.causes is not None:
             self.causes.reset(reset, self.batch, self.traffic.time, self.dt)
@@ -319,8 +315,9 @@ class ClosedLoopBatch:
         assert perceived is not None and truth is not None
         actuation = np.zeros((self.worlds, 2))
         controller = ControllerArrays(
-            self.lateral, self.speed_pi, self.seen, self.seen_speed, self.seen_slowing, self.flags
-        )
+            self.lateral, self.speed_pi, self.seen, self.seen_speed, self.seen_slowing, self.flags,
+            self.moving, self.weaved_at,
+        )  # fmt: skip
         activations = self.flags[:, 1].copy()
         started = time.perf_counter()
         control(

@@ -45,7 +45,9 @@ class ControllerArrays(NamedTuple):
     """Each world's controller state (one row a world): the lateral PID [integral, output, has
     output, last steering], the speed PI [integral, output, has output], emergency braking's
     per-vehicle memory (`seen`, `seen_speed`, `seen_slowing`) and its [active, activations, the memory
-    slot of the vehicle the latest activation braked for]."""
+    slot of the vehicle the latest activation braked for]; the weave memory of each memory slot's
+    vehicle (`controllers.weaving.WeaveMemory`: the way it moved across, the time it last turned
+    back [s])."""
 
     lateral: np.ndarray
     speed_pi: np.ndarray
@@ -53,6 +55,18 @@ class ControllerArrays(NamedTuple):
     seen_speed: np.ndarray
     seen_slowing: np.ndarray
     flags: np.ndarray
+    moving: np.ndarray
+    weaved_at: np.ndarray
+
+
+MEMORY_COLUMNS = (
+    ("seen", 0),
+    ("seen_speed", 0.0),
+    ("seen_slowing", 0.0),
+    ("moving", 0.0),
+    ("weaved_at", -np.inf),
+)
+"""The per-vehicle memories of `ControllerArrays`, a column per memory slot, each with its empty value."""
 
 
 class EgoLaws(NamedTuple):

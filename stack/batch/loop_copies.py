@@ -2,7 +2,8 @@
 `vector` backend, as it stands mid-episode, into worlds of a `ClosedLoopBatch`, each then the loop's
 future as `ClosedLoop.fork` plays it, bit for bit (the batch steps what the vector backend steps alone,
 `stack.batch.closed_loop_batch`): the road's vehicles and lanes, the episode's time, the maneuver, the
-lateral PID's and the speed PI's memory, emergency braking's memory of its leaders, and the end flags.
+lateral PID's and the speed PI's memory, emergency braking's memory of its leaders, the weave
+memory, and the end flags.
 
 What a batch world cannot hold refuses the copy (`copy_refusal`): a sensor model or tracker (their
 noise streams and tracks are per world), a road the arrays cannot hold, a driver acting on a delayed
@@ -64,6 +65,11 @@ def copy_loop(batch: ClosedLoopBatch, worlds: Sequence[int], loop: ClosedLoop) -
     for vehicle, slowing in emergency.slowing.items():
         seen[slot[vehicle]], seen_slowing[slot[vehicle]] = 2, slowing
     cause = 0 if emergency.cause is None else slot[emergency.cause]
+    weaves = maneuver.weaves
+    moving, weaved_at = np.zeros(seen.shape), np.full(seen.shape, -np.inf)
+    for vehicle, column in weaves.columns.items():
+        if vehicle in slot:
+            moving[slot[vehicle]], weaved_at[slot[vehicle]] = weaves.moving[column], weaves.weaved_at[column]
     rows = list(worlds)
     batch.lane[rows], batch.target[rows] = maneuver.lane, maneuver.target
     batch.coef[rows] = profile.coefficients
@@ -79,6 +85,7 @@ def copy_loop(batch: ClosedLoopBatch, worlds: Sequence[int], loop: ClosedLoop) -
     batch.speed_pi[rows] = (speed_pi.integral, speed_pi.output, float(speed_pi.has_output))
     batch.seen[rows], batch.seen_speed[rows], batch.seen_slowing[rows] = seen, seen_speed, seen_slowing
     batch.flags[rows] = (int(emergency.active), emergency.activations, cause)
+    batch.moving[rows], batch.weaved_at[rows] = moving, weaved_at
     batch.departed[rows] = loop.monitor.road_departure
     batch.crashed[rows] = plant.terminated
     batch.truncated[rows] = plant.truncated

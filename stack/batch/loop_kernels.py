@@ -37,6 +37,7 @@ from controllers.reference import (
     warped_sample,
     warped_time,
 )
+from controllers.weaving import note_weaves
 from planner.safety import SafetySettings, change_is_safe, turning_back_is_safer
 from records.batch import BatchColumns
 from stack.batch.ego_records import ControllerArrays, EgoLaws, ManeuverArrays, ManeuverSettings
@@ -161,8 +162,8 @@ def control(
     lateral PID, the adaptive cruise and emergency braking, each the per-world law on the world's
     row; writes (acceleration [m/s^2], steering [rad]) to `actuation` (W, 2). `settings`: nominal
     duration [s], minimum speed [m/s], tan of the largest course, set speed [m/s]; `slots` (W,
-    rows): the column of emergency braking's memory each row's vehicle keeps (its id, as the
-    per-world memory keys it)."""
+    rows): the column of emergency braking's memory and of the weave memory each row's vehicle keeps
+    (its id, as the per-world memories key it)."""
     count, s, d, speed = columns.vehicles, columns.s, columns.d, columns.speed
     length, width, lanes_count, offsets = (
         columns.length,
@@ -171,11 +172,12 @@ def control(
         columns.lane_offsets,
     )
     lane, target, coef, profile, clock, counts = maneuver
-    lateral, speed_pi, seen, seen_speed, seen_slowing, flags = controller
+    lateral, speed_pi, seen, seen_speed, seen_slowing, flags, moving, weaved_at = controller
     vehicles, most_lanes = s.shape[1], offsets.shape[1]
-    gaps = np.empty((most_lanes + 2) * vehicles)
-    speeds = np.empty((most_lanes + 2) * vehicles)
-    rows = np.empty((most_lanes + 2) * vehicles, dtype=np.int64)
+    gaps = np.empty((most_lanes + 3) * vehicles)
+    speeds = np.empty((most_lanes + 3) * vehicles)
+    rows = np.empty((most_lanes + 3) * vehicles, dtype=np.int64)
+    weaved_s = np.empty(vehicles)
     found_leaders = FoundLeaders(gaps, speeds, rows)
     lanes = np.empty(most_lanes, dtype=np.int64)
     heading_to_lane = np.empty(vehicles)
@@ -220,8 +222,10 @@ def control(
                 speed[w, 0], settings.tan_max_course,
             )  # fmt: skip
         world = LeaderRows(
-            n, s[w], d[w], speed[w], heading_to_lane, length[w], width[w], extent[w], offsets[w], lane_width
-        )
+            n, s[w], d[w], speed[w], heading_to_lane, length[w], width[w], extent[w], offsets[w], lane_width,
+            weaved_s,
+        )  # fmt: skip
+        note_weaves(world, t, slots[w], moving[w], weaved_at[w])
         found, held = leaders_in_rows(
             world, lanes[:used], settings.cut_in_lookahead_s, leaving_lane, leaving_within, beyond,
             found_leaders,

@@ -1,0 +1,111 @@
+"""Drivers who weave: a vehicle that turned back in the middle of a lane change (its sideways motion
+reversed while it was between lanes: a cut-in given up, a lane tried and left) may try again, and a
+driver who does not see the ego tries again into its side. A careful driver does not close up
+beside such a car: for `WARY_S` after its last weave the cruise keeps its time gap to it while it is
+ahead in a lane next to the one the ego keeps or heads for (`weavers_in_rows`), unless the ego
+passes it sooner than it could fall back behind it; emergency braking waits until it does turn in,
+as for a car that may turn back (`controllers.leaders.turning_back_in_rows`).
+
+What is remembered of each vehicle is one law (`turned_back`), kept for one world by the maneuver
+(`WeaveMemory`, keyed by vehicle id) and for many by the batch (a column per memory slot), both
+through `note_weaves`."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numba.extending import register_jitable
+
+from common.neighbours import WANDERING_M
+from controllers.passing import FoundLeaders, LeaderRows, is_listed, passes_sooner_than_falls_back
+
+WEAVE_MPS = 0.3
+"""Sideways speed below which a vehicle between lanes is not seen moving either way [m/s]."""
+WARY_S = 10.0
+"""How long after its last weave a vehicle is kept a time gap to [s]."""
+
+
+@register_jitable
+def turned_back(from_centre: float, sideways: float, moving: float) -> tuple[float, bool]:
+    """One vehicle's weave memory over one tick: `from_centre` [m], its centre's distance to the
+    nearest lane centre; `sideways` [m/s], its speed across the road; `moving`, the way it was
+    moving across while between lanes (+1, -1; 0: not between lanes, or not seen moving). Returns
+    the way to remember and whether it turned back now: it moves against `moving` while between
+    lanes (farther than `WANDERING_M` from every lane centre)."""
+    if from_centre <= WANDERING_M:
+        return 0.0, False
+    if abs(sideways) < WEAVE_MPS:
+        return moving, False
+    way = math.copysign(1.0, sideways)
+    return way, moving == -way
+
+
+@register_jitable
+def note_weaves(
+    world: LeaderRows, time: float, columns: np.ndarray, moving: np.ndarray, weaved_at: np.ndarray
+) -> None:
+    """One tick of the weave memory of `world`'s vehicles at `time` [s]: row r's vehicle keeps its
+    way across in `moving[columns[r]]` and the time it last turned back in `weaved_at[columns[r]]`
+    [s] (`turned_back`); writes how long ago that was into `world.weaved_s` (row 0, the ego: inf)."""
+    offsets = world.lane_offsets
+    world.weaved_s[0] = math.inf
+    for row in range(1, world.vehicles):
+        from_centre = math.inf
+        for centre in offsets:
+            from_centre = min(from_centre, abs(world.d[row] - centre))
+        sideways = world.speed[row] * math.sin(world.heading_to_lane[row])
+        column = columns[row]
+        moving[column], back = turned_back(from_centre, sideways, moving[column])
+        if back:
+            weaved_at[column] = time
+        world.weaved_s[row] = time - weaved_at[column]
+
+
+_note_weaves = njit(cache=True, nogil=True)(note_weaves)
+
+
+class WeaveMemory:
+    """One world's weave memory (`note_weaves`), a column per vehicle id seen: what the batch keeps
+    per memory slot."""
+
+    def __init__(self) -> None:
+        self.columns: dict[int, int] = {}
+        self.moving = np.zeros(0)
+        self.weaved_at = np.zeros(0)
+
+    def note(self, world: LeaderRows, time: float, ids: np.ndarray) -> None:
+        """One tick of `note_weaves` for the rows of `world`, row r's vehicle of id `ids[r]`."""
+        for vehicle in ids.tolist():
+            self.columns.setdefault(int(vehicle), len(self.columns))
+        more = len(self.columns) - self.moving.size
+        if more > 0:
+            self.moving = np.concatenate((self.moving, np.zeros(more)))
+            self.weaved_at = np.concatenate((self.weaved_at, np.full(more, -math.inf)))
+        columns = np.array([self.columns[int(vehicle)] for vehicle in ids.tolist()], dtype=np.int64)
+        _note_weaves(world, time, columns, self.moving, self.weaved_at)
+
+
+@register_jitable
+def weavers_in_rows(world: LeaderRows, heading_for: float, found: int, out: FoundLeaders) -> int:
+    """Appends to the `found` leaders in `out` (`controllers.leaders.leaders_in_rows`) each vehicle
+    that turned back within `WARY_S` (`world.weaved_s`), ahead of the ego (its centre ahead of the
+    ego's) with its centre in a lane next to the one centred at `heading_for` [m] (the lane the ego
+    keeps or heads for), unless the ego, faster, passes it sooner than it could fall back behind it
+    (`passes_sooner_than_falls_back`); returns the new count."""
+    s, d, speed, length, width = world.s, world.d, world.speed, world.length, world.lane_width
+    total = found
+    for row in range(1, world.vehicles):
+        rel = s[row] - s[0]
+        if rel <= 0 or world.weaved_s[row] > WARY_S or is_listed(out.rows, total, row):
+            continue
+        if abs(abs(d[row] - heading_for) - width) > width / 2:
+            continue
+        lengths = (length[row] + length[0]) / 2
+        closing = speed[0] - speed[row]
+        if closing > 0 and passes_sooner_than_falls_back(rel, closing, lengths):
+            continue
+        out.gaps[total], out.speeds[total], out.rows[total] = rel - lengths, speed[row], row
+        total += 1
+    return total

@@ -1,0 +1,82 @@
+"""A driver who turned back in the middle of a lane change is kept a time gap to, not closed up on
+beside (`controllers.weaving`)."""
+
+import dataclasses
+import math
+
+import pytest
+
+from common.neighbours import WANDERING_M
+from controllers.emergency import EmergencyBraking
+from controllers.leaders import leaders
+from controllers.weaving import WARY_S, WEAVE_MPS, WeaveMemory, turned_back
+from records import Actuation, WorldState
+from stack.sim.safety_scenarios import LENGTH, Point, build, lane_centre
+
+DT = 1 / 15
+MOVER = 1
+
+
+def test_a_vehicle_turned_back_only_when_it_reverses_between_lanes():
+    between, settled, slow = WANDERING_M + 0.5, WANDERING_M / 2, WEAVE_MPS / 2
+    assert turned_back(between, 1.0, 0.0) == (1.0, False)
+    assert turned_back(between, 1.0, 1.0) == (1.0, False)
+    assert turned_back(between, slow, 1.0) == (1.0, False)
+    assert turned_back(between, -1.0, 1.0) == (-1.0, True)
+    assert turned_back(settled, -1.0, 1.0) == (0.0, False)
+    assert turned_back(between, -1.0, 0.0) == (-1.0, False)
+
+
+def placed(world: WorldState, ahead_m: float, d: float, heading: float, speed: float, time: float) -> WorldState:
+    """`world` at `time` [s] with the mover `ahead_m` [m] ahead of the ego (centres) at lateral
+    position `d` [m], `heading` [rad] to the lane and `speed` [m/s]; the ego at 20 m/s in lane 1."""
+    s, ds, headings, speeds = world.s.copy(), world.d.copy(), world.heading.copy(), world.speed.copy()
+    s[MOVER], ds[MOVER], headings[MOVER], speeds[MOVER] = s[0] + ahead_m, d, heading, speed
+    speeds[0] = 20.0
+    return dataclasses.replace(world, s=s, d=ds, heading=headings, speed=speeds, time=time)
+
+
+def weave(world: WorldState, memory: WeaveMemory, ahead_m: float, speed: float) -> WorldState:
+    """The mover, in lane 2 next to the ego's lane 1, starts into the ego's lane and turns back to
+    its lane's centre, seen by `memory` a tick at a time; returns the world once it is back."""
+    centre, towards_ego = lane_centre(2), -0.1
+    frames = [(centre - 0.6, towards_ego), (centre - 1.2, towards_ego), (centre - 1.0, -towards_ego)]
+    frames.append((centre, 0.0))
+    for tick, (d, heading) in enumerate(frames):
+        world = placed(world, ahead_m, d, heading, speed, tick * DT)
+        leaders(world, (1,), 1.0, weaves=memory)
+    return world
+
+
+@pytest.mark.parametrize(("ahead_m", "speed", "held"), [(15.0, 17.0, True), (5.5, 5.0, False)])
+def test_a_driver_who_turned_back_is_kept_a_gap_to_unless_the_ego_is_past_sooner(
+    ahead_m: float, speed: float, held: bool
+) -> None:
+    """A car in the next lane `ahead_m` ahead at `speed` (the ego at 20 m/s) that turned back from
+    the ego's lane: the cruise keeps its gap to it for `WARY_S` (emergency braking waits), unless the
+    ego, much faster and all but past, is by sooner than it could fall back."""
+    road = build(Point("cut-out", (20.0, 60.0, 2.0)), 4, "kinematic", DT)
+    world = road.reset()
+    memory = WeaveMemory()
+    back = weave(world, memory, ahead_m, speed)
+    mover = int(world.ids[MOVER])
+    found = [leader for leader in leaders(back, (1,), 1.0, weaves=memory) if leader.vehicle == mover]
+    assert not [leader for leader in leaders(back, (1,), 1.0, weaves=WeaveMemory()) if leader.vehicle == mover]
+    if not held:
+        assert not found
+        return
+    (leader,) = found
+    assert leader.may_turn_back and leader.gap == pytest.approx(ahead_m - LENGTH)
+    assert EmergencyBraking(5.0, 3.0, 1.0).apply(Actuation(0.0, 0.0), 20.0, (leader,), DT).acceleration == 0.0
+    later = dataclasses.replace(back, time=back.time + WARY_S + DT)
+    assert not [leader for leader in leaders(later, (1,), 1.0, weaves=memory) if leader.vehicle == mover]
+
+
+def test_a_lane_change_carried_through_is_no_weave():
+    road = build(Point("cut-out", (20.0, 60.0, 2.0)), 4, "kinematic", DT)
+    world = road.reset()
+    memory = WeaveMemory()
+    for tick, d in enumerate((lane_centre(2) - 0.6, lane_centre(2) - 2.0, lane_centre(1) + 0.6, lane_centre(1))):
+        world = placed(world, 15.0, d, -0.1 if tick < 3 else 0.0, 17.0, tick * DT)
+        leaders(world, (0,), 1.0, weaves=memory)
+    assert math.isinf(memory.weaved_at[memory.columns[int(world.ids[MOVER])]])
