@@ -4,20 +4,26 @@ beside (`controllers.weaving`)."""
 import dataclasses
 import math
 
+import numpy as np
 import pytest
 
 from common.neighbours import WANDERING_M
 from controllers.emergency import EmergencyBraking
 from controllers.leaders import leaders
 from controllers.weaving import WARY_S, WEAVE_MPS, WeaveMemory, turned_back
-from records import Actuation, WorldState
+from records import Actuation, Neighbour, WorldState
+from stack.batch.closed_loop_batch import ClosedLoopBatch
+from stack.batch.loop_copies import copy_loop
+from stack.loop.closed_loop import ClosedLoop
+from stack.settings.run import build_config
+from stack.sim.highway import HighwayAdapter
 from stack.sim.safety_scenarios import LENGTH, Point, build, lane_centre
 
 DT = 1 / 15
 MOVER = 1
 
 
-def test_a_vehicle_turned_back_only_when_it_reverses_between_lanes():
+def test_a_vehicle_turned_back_only_when_it_reverses_between_lanes() -> None:
     between, settled, slow = WANDERING_M + 0.5, WANDERING_M / 2, WEAVE_MPS / 2
     assert turned_back(between, 1.0, 0.0) == (1.0, False)
     assert turned_back(between, 1.0, 1.0) == (1.0, False)
@@ -27,7 +33,9 @@ def test_a_vehicle_turned_back_only_when_it_reverses_between_lanes():
     assert turned_back(between, -1.0, 0.0) == (-1.0, False)
 
 
-def placed(world: WorldState, ahead_m: float, d: float, heading: float, speed: float, time: float) -> WorldState:
+def placed(
+    world: WorldState, ahead_m: float, d: float, heading: float, speed: float, time: float
+) -> WorldState:
     """`world` at `time` [s] with the mover `ahead_m` [m] ahead of the ego (centres) at lateral
     position `d` [m], `heading` [rad] to the lane and `speed` [m/s]; the ego at 20 m/s in lane 1."""
     s, ds, headings, speeds = world.s.copy(), world.d.copy(), world.heading.copy(), world.speed.copy()
@@ -48,6 +56,11 @@ def weave(world: WorldState, memory: WeaveMemory, ahead_m: float, speed: float) 
     return world
 
 
+def held_of(world: WorldState, memory: WeaveMemory, mover: int) -> list[Neighbour]:
+    """The leaders of the ego's lane 1 that are the vehicle of id `mover`."""
+    return [leader for leader in leaders(world, (1,), 1.0, weaves=memory) if leader.vehicle == mover]
+
+
 @pytest.mark.parametrize(("ahead_m", "speed", "held"), [(15.0, 17.0, True), (5.5, 5.0, False)])
 def test_a_driver_who_turned_back_is_kept_a_gap_to_unless_the_ego_is_past_sooner(
     ahead_m: float, speed: float, held: bool
@@ -61,7 +74,9 @@ def test_a_driver_who_turned_back_is_kept_a_gap_to_unless_the_ego_is_past_sooner
     back = weave(world, memory, ahead_m, speed)
     mover = int(world.ids[MOVER])
     found = [leader for leader in leaders(back, (1,), 1.0, weaves=memory) if leader.vehicle == mover]
-    assert not [leader for leader in leaders(back, (1,), 1.0, weaves=WeaveMemory()) if leader.vehicle == mover]
+    assert not [
+        leader for leader in leaders(back, (1,), 1.0, weaves=WeaveMemory()) if leader.vehicle == mover
+    ]
     if not held:
         assert not found
         return
@@ -69,14 +84,35 @@ def test_a_driver_who_turned_back_is_kept_a_gap_to_unless_the_ego_is_past_sooner
     assert leader.may_turn_back and leader.gap == pytest.approx(ahead_m - LENGTH)
     assert EmergencyBraking(5.0, 3.0, 1.0).apply(Actuation(0.0, 0.0), 20.0, (leader,), DT).acceleration == 0.0
     later = dataclasses.replace(back, time=back.time + WARY_S + DT)
-    assert not [leader for leader in leaders(later, (1,), 1.0, weaves=memory) if leader.vehicle == mover]
+    assert not held_of(later, memory, mover)
 
 
-def test_a_lane_change_carried_through_is_no_weave():
+def test_a_lane_change_carried_through_is_no_weave() -> None:
     road = build(Point("cut-out", (20.0, 60.0, 2.0)), 4, "kinematic", DT)
     world = road.reset()
     memory = WeaveMemory()
-    for tick, d in enumerate((lane_centre(2) - 0.6, lane_centre(2) - 2.0, lane_centre(1) + 0.6, lane_centre(1))):
+    for tick, d in enumerate(
+        (lane_centre(2) - 0.6, lane_centre(2) - 2.0, lane_centre(1) + 0.6, lane_centre(1))
+    ):
         world = placed(world, 15.0, d, -0.1 if tick < 3 else 0.0, 17.0, tick * DT)
         leaders(world, (0,), 1.0, weaves=memory)
     assert math.isinf(memory.weaved_at[memory.columns[int(world.ids[MOVER])]])
+
+
+def test_a_loop_copied_into_a_batch_keeps_what_it_remembers_of_weavers() -> None:
+    """The oracle's batched search starts from a copy of the loop (`copy_loop`): each vehicle's weave
+    memory is the batch's memory in that vehicle's slot."""
+    config = build_config({"episodes": 1, "seed": 3, "highway": {"duration": 4}}, scenario="overtaking")
+    with HighwayAdapter(config.highway, config.sim.backend) as adapter:
+        loop = ClosedLoop(config, adapter)
+        loop.reset(3)
+        for _ in range(3):
+            loop.tick()
+        weaves, ids = loop.maneuver.weaves, loop.world.ids.tolist()
+        weaves.moving[weaves.columns[ids[2]]], weaves.weaved_at[weaves.columns[ids[2]]] = -1.0, 0.1
+        batch = ClosedLoopBatch(config, 2)
+        copy_loop(batch, [1], loop)
+        assert batch.moving[1, 2] == -1.0 and batch.weaved_at[1, 2] == 0.1
+        others = [row for row in range(1, len(ids)) if row != 2]
+        assert not batch.moving[1, others].any() and np.isneginf(batch.weaved_at[1, others]).all()
+        batch.close()
