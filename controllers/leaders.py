@@ -20,7 +20,7 @@ from controllers.passing import (
     passes_sooner_than_falls_back,
 )
 from controllers.reference import road_to_reach
-from controllers.weaving import WeaveMemory, weavers_in_rows
+from controllers.weaving import WeaveMemory, note_weaves_by_id, weavers_in_rows
 from records import Neighbour, WorldState
 
 LEAVING_M = 1.0
@@ -102,11 +102,16 @@ def leaders(
         n, world.s, world.d, world.speed, heading_to_lane, world.length, world.width, extent,
         world.lane_offsets, world.lane_width, np.full(n, math.inf),
     )  # fmt: skip
-    if weaves is not None:
-        weaves.note(rows_of_world, world.time, world.ids)
-    found, held = _leaders_in_rows(
-        rows_of_world, watched, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, out
-    )
+    if weaves is None:
+        found, held = _leaders_in_rows(
+            rows_of_world, watched, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, out
+        )
+    else:
+        weaves.room(n)
+        found, held = _noted_leaders_in_rows(
+            rows_of_world, world.time, world.ids, weaves.keys, weaves.moving, weaves.weaved_at,
+            watched, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, out,
+        )  # fmt: skip
     ids = world.ids
     return tuple(
         Neighbour(gap, speed, int(ids[row]), k >= found)
@@ -256,3 +261,24 @@ def beside_beyond_in_rows(
 
 
 _leaders_in_rows = njit(cache=True, nogil=True)(leaders_in_rows)
+
+
+@njit(cache=True, nogil=True)
+def _noted_leaders_in_rows(
+    world: LeaderRows,
+    time: float,
+    ids: np.ndarray,
+    keys: np.ndarray,
+    moving: np.ndarray,
+    weaved_at: np.ndarray,
+    lanes: np.ndarray,
+    cut_in_lookahead_s: float,
+    leaving_lane: int,
+    leaving_within_m: float,
+    beyond: int,
+    out: FoundLeaders,
+) -> tuple[int, int]:  # pragma: no cover - compiled
+    """One world's tick of its weave memory (`note_weaves_by_id`, the vehicles' `ids`, the memory's
+    `keys`, `moving`, `weaved_at`) and then `leaders_in_rows`, in one compiled call."""
+    note_weaves_by_id(world, time, ids, keys, moving, weaved_at)
+    return leaders_in_rows(world, lanes, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, out)

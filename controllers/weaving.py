@@ -7,7 +7,7 @@ passes it sooner than it could fall back behind it; emergency braking waits unti
 as for a car that may turn back (`controllers.leaders.turning_back_in_rows`).
 
 What is remembered of each vehicle is one law (`turned_back`), kept for one world by the maneuver
-(`WeaveMemory`, keyed by vehicle id) and for many by the batch (a column per memory slot), both
+(`WeaveMemory`, a column per vehicle id) and for many by the batch (a column per memory slot), both
 through `note_weaves`."""
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 from numba.extending import register_jitable
 
 from common.neighbours import WANDERING_M
@@ -63,28 +62,61 @@ def note_weaves(
         world.weaved_s[row] = time - weaved_at[column]
 
 
-_note_weaves = njit(cache=True, nogil=True)(note_weaves)
+@register_jitable
+def column_of(keys: np.ndarray, vehicle: int) -> int:
+    """The column of the vehicle of id `vehicle` (>= 0) in the open-addressed table `keys` (-1: a
+    free column), taken now if the vehicle is new; the table must have a free column."""
+    column = vehicle % keys.size
+    while keys[column] != vehicle and keys[column] != -1:
+        column = (column + 1) % keys.size
+    keys[column] = vehicle
+    return column
+
+
+@register_jitable
+def note_weaves_by_id(
+    world: LeaderRows,
+    time: float,
+    ids: np.ndarray,
+    keys: np.ndarray,
+    moving: np.ndarray,
+    weaved_at: np.ndarray,
+) -> None:
+    """`note_weaves` with row r's memory in the column of its vehicle's id `ids[r]` (`column_of`)."""
+    columns = np.empty(world.vehicles, dtype=np.int64)
+    for row in range(world.vehicles):
+        columns[row] = column_of(keys, ids[row])
+    note_weaves(world, time, columns, moving, weaved_at)
 
 
 class WeaveMemory:
-    """One world's weave memory (`note_weaves`), a column per vehicle id seen: what the batch keeps
-    per memory slot."""
+    """One world's weave memory (`note_weaves`), a column per vehicle id seen (`column_of`): what
+    the batch keeps per memory slot."""
 
-    def __init__(self) -> None:
-        self.columns: dict[int, int] = {}
-        self.moving = np.zeros(0)
-        self.weaved_at = np.zeros(0)
+    def __init__(self, columns: int = 256) -> None:
+        self.keys = np.full(columns, -1, dtype=np.int64)
+        self.moving = np.zeros(columns)
+        self.weaved_at = np.full(columns, -math.inf)
 
-    def note(self, world: LeaderRows, time: float, ids: np.ndarray) -> None:
-        """One tick of `note_weaves` for the rows of `world`, row r's vehicle of id `ids[r]`."""
-        for vehicle in ids.tolist():
-            self.columns.setdefault(int(vehicle), len(self.columns))
-        more = len(self.columns) - self.moving.size
-        if more > 0:
-            self.moving = np.concatenate((self.moving, np.zeros(more)))
-            self.weaved_at = np.concatenate((self.weaved_at, np.full(more, -math.inf)))
-        columns = np.array([self.columns[int(vehicle)] for vehicle in ids.tolist()], dtype=np.int64)
-        _note_weaves(world, time, columns, self.moving, self.weaved_at)
+    def column(self, vehicle: int) -> int | None:
+        """The column of the vehicle of id `vehicle`, None if it was never seen."""
+        found = np.flatnonzero(self.keys == vehicle)
+        return int(found[0]) if found.size else None
+
+    def room(self, vehicles: int) -> None:
+        """At least `vehicles` free columns, and the table at most half full after they are taken."""
+        used = self.keys >= 0
+        size = self.keys.size
+        while 2 * (int(used.sum()) + vehicles) > size:
+            size *= 2
+        if size == self.keys.size:
+            return
+        keys, moving, weaved_at = self.keys[used], self.moving[used], self.weaved_at[used]
+        self.keys = np.full(size, -1, dtype=np.int64)
+        self.moving, self.weaved_at = np.zeros(size), np.full(size, -math.inf)
+        for vehicle, way, at in zip(keys.tolist(), moving.tolist(), weaved_at.tolist(), strict=True):
+            column = column_of(self.keys, vehicle)
+            self.moving[column], self.weaved_at[column] = way, at
 
 
 @register_jitable

@@ -96,7 +96,8 @@ def test_a_lane_change_carried_through_is_no_weave() -> None:
     ):
         world = placed(world, 15.0, d, -0.1 if tick < 3 else 0.0, 17.0, tick * DT)
         leaders(world, (0,), 1.0, weaves=memory)
-    assert math.isinf(memory.weaved_at[memory.columns[int(world.ids[MOVER])]])
+    column = memory.column(int(world.ids[MOVER]))
+    assert column is not None and math.isinf(memory.weaved_at[column])
 
 
 def test_a_loop_copied_into_a_batch_keeps_what_it_remembers_of_weavers() -> None:
@@ -109,7 +110,9 @@ def test_a_loop_copied_into_a_batch_keeps_what_it_remembers_of_weavers() -> None
         for _ in range(3):
             loop.tick()
         weaves, ids = loop.maneuver.weaves, loop.world.ids.tolist()
-        weaves.moving[weaves.columns[ids[2]]], weaves.weaved_at[weaves.columns[ids[2]]] = -1.0, 0.1
+        column = weaves.column(ids[2])
+        assert column is not None
+        weaves.moving[column], weaves.weaved_at[column] = -1.0, 0.1
         batch = ClosedLoopBatch(config, 2)
         copy_loop(batch, [1], loop)
         assert batch.moving[1, 2] == -1.0 and batch.weaved_at[1, 2] == 0.1

@@ -67,7 +67,8 @@ def copy_loop(batch: ClosedLoopBatch, worlds: Sequence[int], loop: ClosedLoop) -
     cause = 0 if emergency.cause is None else slot[emergency.cause]
     weaves = maneuver.weaves
     moving, weaved_at = np.zeros(seen.shape), np.full(seen.shape, -np.inf)
-    for vehicle, column in weaves.columns.items():
+    for column in np.flatnonzero(weaves.keys >= 0).tolist():
+        vehicle = int(weaves.keys[column])
         if vehicle in slot:
             moving[slot[vehicle]], weaved_at[slot[vehicle]] = weaves.moving[column], weaves.weaved_at[column]
     rows = list(worlds)
