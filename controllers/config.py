@@ -9,6 +9,7 @@ from typing import Annotated, Literal, get_args
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from common.plugins import CONTROLLER_GROUP, plugin_name
+from controllers.weaving import WARY_S
 from records import CONTROLLER_NAMES, one_of
 
 MPCSolver = Literal["rti", "sqp", "ipopt"]
@@ -177,6 +178,13 @@ class ControllerConfig(_Settings):
         le=3,
         description="a vehicle whose sideways motion carries it into a lane within this time is "
         "that lane's leader for the cruise and emergency braking [s]; 0: only once it is in",
+    )
+    weaver_wary_s: float = Field(
+        WARY_S,
+        ge=0,
+        le=60,
+        description="a vehicle that turned back in the middle of a lane change is the cruise's leader "
+        "for this long after, while ahead in a lane next to the ego's [s]; 0: never",
     )
 
     @model_validator(mode="after")

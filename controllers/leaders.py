@@ -71,6 +71,7 @@ def leaders(
     leaving_within_m: float = math.inf,
     beyond: int = -1,
     weaves: WeaveMemory | None = None,
+    weaver_wary_s: float = 0.0,
 ) -> tuple[Neighbour, ...]:
     """For each lane in `lanes`, the closest vehicle ahead reaching into it, now or within
     `cut_in_lookahead_s` [s] at its present sideways speed (a car cutting in is a leader before it
@@ -87,10 +88,10 @@ def leaders(
     that lane before it gets there, and stopping for it would stall the change beside it (the
     profile's clock stops with the car). Then the cars that may turn back into a lane
     (`turning_back_in_rows`) and, during a lane change, those beside the ego in the lane `beyond`
-    its target (`beside_beyond_in_rows`) and the cars that weaved lately next to the lane the ego
-    keeps or heads for (`controllers.weaving.weavers_in_rows`, from `weaves`, the world's memory,
-    noted here once a tick; none without it), marked `may_turn_back`. `leaders_in_rows`, compiled,
-    on the world's `LeaderRows`."""
+    its target (`beside_beyond_in_rows`) and the cars that weaved less than `weaver_wary_s` [s] ago
+    next to the lane the ego keeps or heads for (`controllers.weaving.weavers_in_rows`, from
+    `weaves`, the world's memory, noted here once a tick; none without it), marked `may_turn_back`.
+    `leaders_in_rows`, compiled, on the world's `LeaderRows`."""
     n = world.count
     found_most = n * (len(lanes) + 3)
     out = FoundLeaders(np.empty(found_most), np.empty(found_most), np.empty(found_most, dtype=np.int64))
@@ -104,13 +105,13 @@ def leaders(
     )  # fmt: skip
     if weaves is None:
         found, held = _leaders_in_rows(
-            rows_of_world, watched, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, out
+            rows_of_world, watched, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, 0.0, out
         )
     else:
         weaves.room(n)
         found, held = _noted_leaders_in_rows(
             rows_of_world, world.time, world.ids, weaves.keys, weaves.moving, weaves.weaved_at,
-            watched, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, out,
+            watched, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, weaver_wary_s, out,
         )  # fmt: skip
     ids = world.ids
     return tuple(
@@ -129,15 +130,17 @@ def leaders_in_rows(
     leaving_lane: int,
     leaving_within_m: float,
     beyond: int,
+    weaver_wary_s: float,
     out: FoundLeaders,
 ) -> tuple[int, int]:
     """`leaders(world, lanes)` of one world's rows (`cut_in_lookahead_s` [s]: how far ahead a
     vehicle's sideways motion, speed times the sine of its `heading_to_lane`, counts;
-    `leaving_lane`, `leaving_within_m`, `beyond` as `leaders` takes them): writes into `out` each
-    leader's gap [m], speed [m/s] and row in order, then those of the cars that may turn back
-    (`turning_back_in_rows`), are beside the ego in the lane beyond (`beside_beyond_in_rows`) or
-    weaved lately (`controllers.weaving.weavers_in_rows`), and returns (how many leaders, how many
-    in all): the cruise keeps its gap to all, emergency braking reads the leaders only."""
+    `leaving_lane`, `leaving_within_m`, `beyond`, `weaver_wary_s` as `leaders` takes them): writes
+    into `out` each leader's gap [m], speed [m/s] and row in order, then those of the cars that may
+    turn back (`turning_back_in_rows`), are beside the ego in the lane beyond
+    (`beside_beyond_in_rows`) or weaved lately (`controllers.weaving.weavers_in_rows`), and returns
+    (how many leaders, how many in all): the cruise keeps its gap to all, emergency braking reads
+    the leaders only."""
     s, d, speed, length, offsets = world.s, world.d, world.speed, world.length, world.lane_offsets
     gaps, speeds, rows = out
     found = 0
@@ -172,7 +175,7 @@ def leaders_in_rows(
                 break
     held = turning_back_in_rows(world, lanes, cut_in_lookahead_s, heading_for, found, out)
     held = beside_beyond_in_rows(world, beyond, cut_in_lookahead_s, held, out)
-    return found, weavers_in_rows(world, heading_for, held, out)
+    return found, weavers_in_rows(world, heading_for, weaver_wary_s, held, out)
 
 
 @register_jitable
@@ -276,9 +279,12 @@ def _noted_leaders_in_rows(
     leaving_lane: int,
     leaving_within_m: float,
     beyond: int,
+    weaver_wary_s: float,
     out: FoundLeaders,
 ) -> tuple[int, int]:  # pragma: no cover - compiled
     """One world's tick of its weave memory (`note_weaves_by_id`, the vehicles' `ids`, the memory's
     `keys`, `moving`, `weaved_at`) and then `leaders_in_rows`, in one compiled call."""
     note_weaves_by_id(world, time, ids, keys, moving, weaved_at)
-    return leaders_in_rows(world, lanes, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, out)
+    return leaders_in_rows(
+        world, lanes, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, weaver_wary_s, out
+    )

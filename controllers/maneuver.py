@@ -76,9 +76,11 @@ class Maneuver:
         min_speed: float = 0.0,
         max_course: float = math.radians(12.0),
         cut_in_lookahead_s: float = 0.0,
+        weaver_wary_s: float = 0.0,
     ) -> None:
         self.duration = duration
         self.cut_in_lookahead_s = cut_in_lookahead_s
+        self.weaver_wary_s = weaver_wary_s
         self.set_speed = set_speed
         self.should_abort = should_abort
         self.min_speed = min_speed
@@ -153,8 +155,9 @@ class Maneuver:
                 float(world.speed[0]), math.tan(self.max_course),
             )  # fmt: skip
         found = leaders(
-            world, lanes, self.cut_in_lookahead_s, leaving_lane, leaving_within, beyond, self.weaves
-        )
+            world, lanes, self.cut_in_lookahead_s, leaving_lane, leaving_within, beyond, self.weaves,
+            self.weaver_wary_s,
+        )  # fmt: skip
         return Reference.sampled(self.clock, world.time, self.set_speed, found, target_lane=heading_for)
 
     def _rate(self, speed: float) -> float:

@@ -1,10 +1,11 @@
 """Drivers who weave: a vehicle that turned back in the middle of a lane change (its sideways motion
 reversed while it was between lanes: a cut-in given up, a lane tried and left) may try again, and a
 driver who does not see the ego tries again into its side. A careful driver does not close up
-beside such a car: for `WARY_S` after its last weave the cruise keeps its time gap to it while it is
-ahead in a lane next to the one the ego keeps or heads for (`weavers_in_rows`), unless the ego
-passes it sooner than it could fall back behind it; emergency braking waits until it does turn in,
-as for a car that may turn back (`controllers.leaders.turning_back_in_rows`).
+beside such a car: for `controller.weaver_wary_s` (`WARY_S`, 10 s) after its last weave the
+cruise keeps its time gap to it while it is ahead in a lane next to the one the ego keeps or heads
+for (`weavers_in_rows`), unless the ego passes it sooner than it could fall back behind it;
+emergency braking waits until it does turn in, as for a car that may turn back
+(`controllers.leaders.turning_back_in_rows`).
 
 What is remembered of each vehicle is one law (`turned_back`), kept for one world by the maneuver
 (`WeaveMemory`, a column per vehicle id) and for many by the batch (a column per memory slot), both
@@ -23,7 +24,8 @@ from controllers.passing import FoundLeaders, LeaderRows, is_listed, passes_soon
 WEAVE_MPS = 0.3
 """Sideways speed below which a vehicle between lanes is not seen moving either way [m/s]."""
 WARY_S = 10.0
-"""How long after its last weave a vehicle is kept a time gap to [s]."""
+"""How long after its last weave a vehicle is kept a time gap to [s]: `controller.weaver_wary_s`'s
+default."""
 
 
 @register_jitable
@@ -120,9 +122,11 @@ class WeaveMemory:
 
 
 @register_jitable
-def weavers_in_rows(world: LeaderRows, heading_for: float, found: int, out: FoundLeaders) -> int:
+def weavers_in_rows(
+    world: LeaderRows, heading_for: float, wary_s: float, found: int, out: FoundLeaders
+) -> int:
     """Appends to the `found` leaders in `out` (`controllers.leaders.leaders_in_rows`) each vehicle
-    that turned back within `WARY_S` (`world.weaved_s`), ahead of the ego (its centre ahead of the
+    that turned back less than `wary_s` [s] ago (`world.weaved_s`), ahead of the ego (its centre ahead of the
     ego's) with its centre in a lane next to the one centred at `heading_for` [m] (the lane the ego
     keeps or heads for), unless the ego, faster, passes it sooner than it could fall back behind it
     (`passes_sooner_than_falls_back`); returns the new count."""
@@ -130,7 +134,7 @@ def weavers_in_rows(world: LeaderRows, heading_for: float, found: int, out: Foun
     total = found
     for row in range(1, world.vehicles):
         rel = s[row] - s[0]
-        if rel <= 0 or world.weaved_s[row] > WARY_S or is_listed(out.rows, total, row):
+        if rel <= 0 or world.weaved_s[row] >= wary_s or is_listed(out.rows, total, row):
             continue
         if abs(abs(d[row] - heading_for) - width) > width / 2:
             continue

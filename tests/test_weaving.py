@@ -58,7 +58,8 @@ def weave(world: WorldState, memory: WeaveMemory, ahead_m: float, speed: float) 
 
 def held_of(world: WorldState, memory: WeaveMemory, mover: int) -> list[Neighbour]:
     """The leaders of the ego's lane 1 that are the vehicle of id `mover`."""
-    return [leader for leader in leaders(world, (1,), 1.0, weaves=memory) if leader.vehicle == mover]
+    found = leaders(world, (1,), 1.0, weaves=memory, weaver_wary_s=WARY_S)
+    return [leader for leader in found if leader.vehicle == mover]
 
 
 @pytest.mark.parametrize(("ahead_m", "speed", "held"), [(15.0, 17.0, True), (5.5, 5.0, False)])
@@ -73,10 +74,8 @@ def test_a_driver_who_turned_back_is_kept_a_gap_to_unless_the_ego_is_past_sooner
     memory = WeaveMemory()
     back = weave(world, memory, ahead_m, speed)
     mover = int(world.ids[MOVER])
-    found = [leader for leader in leaders(back, (1,), 1.0, weaves=memory) if leader.vehicle == mover]
-    assert not [
-        leader for leader in leaders(back, (1,), 1.0, weaves=WeaveMemory()) if leader.vehicle == mover
-    ]
+    found = held_of(back, memory, mover)
+    assert not held_of(back, WeaveMemory(), mover)
     if not held:
         assert not found
         return
@@ -119,3 +118,13 @@ def test_a_loop_copied_into_a_batch_keeps_what_it_remembers_of_weavers() -> None
         others = [row for row in range(1, len(ids)) if row != 2]
         assert not batch.moving[1, others].any() and np.isneginf(batch.weaved_at[1, others]).all()
         batch.close()
+
+
+def test_a_config_written_before_the_weave_memory_existed_reads_it_off() -> None:
+    """A folder's resolved config.yaml without `controller.weaver_wary_s` ran without the rule: it
+    reads the key as 0 (with 0 the runs are those of the code before the rule); new configs hold
+    `WARY_S`."""
+    written = build_config({}).model_dump(mode="json")
+    written["controller"].pop("weaver_wary_s")
+    assert build_config(written).controller.weaver_wary_s == 0.0
+    assert build_config({}).controller.weaver_wary_s == WARY_S

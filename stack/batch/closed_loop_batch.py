@@ -92,6 +92,7 @@ class ClosedLoopBatch:
             math.tan(max_course),
             control_config.set_speed_mps,
             control_config.cut_in_lookahead_s,
+            control_config.weaver_wary_s,
         )
         self.safety = safety_settings(safety)
         self.abort_lookahead_s = safety.abort_lookahead_s

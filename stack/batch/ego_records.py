@@ -26,6 +26,8 @@ class ManeuverSettings(NamedTuple):
     """The cruise's set speed [m/s]."""
     cut_in_lookahead_s: float
     """How far ahead a vehicle's sideways motion makes it a lane's leader [s] (`leaders_in_rows`)."""
+    weaver_wary_s: float
+    """How long a vehicle that turned back mid lane change is the cruise's leader [s]."""
 
 
 class ManeuverArrays(NamedTuple):

@@ -228,7 +228,7 @@ def control(
         note_weaves(world, t, slots[w], moving[w], weaved_at[w])
         found, held = leaders_in_rows(
             world, lanes[:used], settings.cut_in_lookahead_s, leaving_lane, leaving_within, beyond,
-            found_leaders,
+            settings.weaver_wary_s, found_leaders,
         )  # fmt: skip
         for k in range(held):
             rows[k] = slots[w, rows[k]]

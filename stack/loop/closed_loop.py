@@ -135,6 +135,7 @@ class ClosedLoop:
             min_speed=control.min_lane_change_speed_mps,
             max_course=math.radians(control.lane_change_max_course_deg),
             cut_in_lookahead_s=control.cut_in_lookahead_s,
+            weaver_wary_s=control.weaver_wary_s,
         )
         self.emergency = EmergencyBraking(
             control.emergency_decel_mps2, control.comfort_decel_mps2, control.emergency_ttc_s

@@ -21,7 +21,7 @@ ADDED_LATER: dict[str, dict[str, Any]] = {
         "follower_reaction_s": 0.4,
     },
     "planner": {"change_margin": 0.0},
-    "controller": {"cut_in_lookahead_s": 0.0},
+    "controller": {"cut_in_lookahead_s": 0.0, "weaver_wary_s": 0.0},
 }
 """Config keys (by dotted section) added after folders were written, with the value the runs of
 those folders had: a resolved config written before the key existed (its section holds every
