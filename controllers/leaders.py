@@ -14,13 +14,14 @@ from common.longitudinal import STOP_MARGIN_M
 from common.neighbours import WANDERING_M, lateral_extent, swept_distance
 from controllers.passing import (
     FoundLeaders,
+    LeaderQuery,
     LeaderRows,
     is_listed,
     passes_it,
     passes_sooner_than_falls_back,
 )
 from controllers.reference import road_to_reach
-from controllers.weaving import WeaveMemory, note_weaves_by_id, weavers_in_rows
+from controllers.weaving import WeaveMemory, WeaveTable, note_weaves_by_id, weavers_in_rows
 from records import Neighbour, WorldState
 
 LEAVING_M = 1.0
@@ -103,16 +104,12 @@ def leaders(
         n, world.s, world.d, world.speed, heading_to_lane, world.length, world.width, extent,
         world.lane_offsets, world.lane_width, np.full(n, math.inf),
     )  # fmt: skip
+    query = LeaderQuery(watched, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, weaver_wary_s)
     if weaves is None:
-        found, held = _leaders_in_rows(
-            rows_of_world, watched, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, 0.0, out
-        )
+        found, held = _leaders_in_rows(rows_of_world, query, out)
     else:
         weaves.room(n)
-        found, held = _noted_leaders_in_rows(
-            rows_of_world, world.time, world.ids, weaves.keys, weaves.moving, weaves.weaved_at,
-            watched, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, weaver_wary_s, out,
-        )  # fmt: skip
+        found, held = _noted_leaders_in_rows(rows_of_world, world.time, world.ids, weaves.table, query, out)
     ids = world.ids
     return tuple(
         Neighbour(gap, speed, int(ids[row]), k >= found)
@@ -123,25 +120,15 @@ def leaders(
 
 
 @register_jitable
-def leaders_in_rows(
-    world: LeaderRows,
-    lanes: np.ndarray,
-    cut_in_lookahead_s: float,
-    leaving_lane: int,
-    leaving_within_m: float,
-    beyond: int,
-    weaver_wary_s: float,
-    out: FoundLeaders,
-) -> tuple[int, int]:
-    """`leaders(world, lanes)` of one world's rows (`cut_in_lookahead_s` [s]: how far ahead a
-    vehicle's sideways motion, speed times the sine of its `heading_to_lane`, counts;
-    `leaving_lane`, `leaving_within_m`, `beyond`, `weaver_wary_s` as `leaders` takes them): writes
-    into `out` each leader's gap [m], speed [m/s] and row in order, then those of the cars that may
-    turn back (`turning_back_in_rows`), are beside the ego in the lane beyond
-    (`beside_beyond_in_rows`) or weaved lately (`controllers.weaving.weavers_in_rows`), and returns
-    (how many leaders, how many in all): the cruise keeps its gap to all, emergency braking reads
-    the leaders only."""
+def leaders_in_rows(world: LeaderRows, query: LeaderQuery, out: FoundLeaders) -> tuple[int, int]:
+    """`leaders(world, lanes)` of one world's rows, as `query` asks (a vehicle's sideways motion is
+    its speed times the sine of its `heading_to_lane`): writes into `out` each leader's gap [m],
+    speed [m/s] and row in order, then those of the cars that may turn back
+    (`turning_back_in_rows`), are beside the ego in the lane beyond (`beside_beyond_in_rows`) or
+    weaved lately (`controllers.weaving.weavers_in_rows`), and returns (how many leaders, how many
+    in all): the cruise keeps its gap to all, emergency braking reads the leaders only."""
     s, d, speed, length, offsets = world.s, world.d, world.speed, world.length, world.lane_offsets
+    lanes, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, weaver_wary_s = query
     gaps, speeds, rows = out
     found = 0
     candidates = np.empty(world.vehicles, dtype=np.int64)
@@ -268,23 +255,9 @@ _leaders_in_rows = njit(cache=True, nogil=True)(leaders_in_rows)
 
 @njit(cache=True, nogil=True)
 def _noted_leaders_in_rows(
-    world: LeaderRows,
-    time: float,
-    ids: np.ndarray,
-    keys: np.ndarray,
-    moving: np.ndarray,
-    weaved_at: np.ndarray,
-    lanes: np.ndarray,
-    cut_in_lookahead_s: float,
-    leaving_lane: int,
-    leaving_within_m: float,
-    beyond: int,
-    weaver_wary_s: float,
-    out: FoundLeaders,
+    world: LeaderRows, time: float, ids: np.ndarray, table: WeaveTable, query: LeaderQuery, out: FoundLeaders
 ) -> tuple[int, int]:  # pragma: no cover - compiled
-    """One world's tick of its weave memory (`note_weaves_by_id`, the vehicles' `ids`, the memory's
-    `keys`, `moving`, `weaved_at`) and then `leaders_in_rows`, in one compiled call."""
-    note_weaves_by_id(world, time, ids, keys, moving, weaved_at)
-    return leaders_in_rows(
-        world, lanes, cut_in_lookahead_s, leaving_lane, leaving_within_m, beyond, weaver_wary_s, out
-    )
+    """One world's tick of its weave memory (`note_weaves_by_id`: the vehicles' `ids`, the memory's
+    `table`) and then `leaders_in_rows`, in one compiled call."""
+    note_weaves_by_id(world, time, ids, table)
+    return leaders_in_rows(world, query, out)

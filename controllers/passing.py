@@ -35,6 +35,22 @@ class LeaderRows(NamedTuple):
     weaved_s: np.ndarray
 
 
+class LeaderQuery(NamedTuple):
+    """What `controllers.leaders.leaders_in_rows` looks for in one world this tick: the `lanes` it
+    watches (the one the ego keeps or heads for first), how far ahead a vehicle's sideways motion
+    counts, `cut_in_lookahead_s` [s], the lane a lane change is leaving, `leaving_lane` (-1: none),
+    and the road it still needs to leave it, `leaving_within_m` [m], the lane `beyond` the change's
+    target (-1: none), and how long a vehicle that weaved stays the cruise's leader,
+    `weaver_wary_s` [s] (0: not at all)."""
+
+    lanes: np.ndarray
+    cut_in_lookahead_s: float
+    leaving_lane: int
+    leaving_within_m: float
+    beyond: int
+    weaver_wary_s: float
+
+
 class FoundLeaders(NamedTuple):
     """Where `leaders_in_rows` writes the vehicles it finds, in order, one entry each: the gap
     `gaps` [m] from the ego's front to its rear, its `speeds` [m/s] and its row in `LeaderRows`,

@@ -14,6 +14,7 @@ through `note_weaves`."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba.extending import register_jitable
@@ -75,20 +76,22 @@ def column_of(keys: np.ndarray, vehicle: int) -> int:
     return column
 
 
+class WeaveTable(NamedTuple):
+    """One world's weave memory, a column per vehicle id (`column_of`): the ids, `keys` (-1: a free
+    column), each one's way across, `moving`, and the time it last turned back, `weaved_at` [s]."""
+
+    keys: np.ndarray
+    moving: np.ndarray
+    weaved_at: np.ndarray
+
+
 @register_jitable
-def note_weaves_by_id(
-    world: LeaderRows,
-    time: float,
-    ids: np.ndarray,
-    keys: np.ndarray,
-    moving: np.ndarray,
-    weaved_at: np.ndarray,
-) -> None:
-    """`note_weaves` with row r's memory in the column of its vehicle's id `ids[r]` (`column_of`)."""
+def note_weaves_by_id(world: LeaderRows, time: float, ids: np.ndarray, table: WeaveTable) -> None:
+    """`note_weaves` with row r's memory in the column of `table` of its vehicle's id `ids[r]`."""
     columns = np.empty(world.vehicles, dtype=np.int64)
     for row in range(world.vehicles):
-        columns[row] = column_of(keys, ids[row])
-    note_weaves(world, time, columns, moving, weaved_at)
+        columns[row] = column_of(table.keys, ids[row])
+    note_weaves(world, time, columns, table.moving, table.weaved_at)
 
 
 class WeaveMemory:
@@ -99,6 +102,10 @@ class WeaveMemory:
         self.keys = np.full(columns, -1, dtype=np.int64)
         self.moving = np.zeros(columns)
         self.weaved_at = np.full(columns, -math.inf)
+
+    @property
+    def table(self) -> WeaveTable:
+        return WeaveTable(self.keys, self.moving, self.weaved_at)
 
     def column(self, vehicle: int) -> int | None:
         """The column of the vehicle of id `vehicle`, None if it was never seen."""

@@ -24,7 +24,7 @@ from common.longitudinal import BrakingLimits, gap_acceleration, needs_full_brak
 from common.neighbours import VehicleRows, footprint_across, lane_beyond, reaches_lane
 from controllers.emergency import braked_acceleration, holds_braking, leader_braking
 from controllers.lateral import LateralMemory, lateral_steering
-from controllers.leaders import FoundLeaders, LeaderRows, leaders_in_rows, road_to_leave
+from controllers.leaders import FoundLeaders, LeaderQuery, LeaderRows, leaders_in_rows, road_to_leave
 from controllers.maneuver import lane_change_target, left_origin
 from controllers.pid import PIDMemory, pid_output
 from controllers.reference import (
@@ -226,10 +226,15 @@ def control(
             weaved_s,
         )  # fmt: skip
         note_weaves(world, t, slots[w], moving[w], weaved_at[w])
-        found, held = leaders_in_rows(
-            world, lanes[:used], settings.cut_in_lookahead_s, leaving_lane, leaving_within, beyond,
-            settings.weaver_wary_s, found_leaders,
-        )  # fmt: skip
+        query = LeaderQuery(
+            lanes[:used],
+            settings.cut_in_lookahead_s,
+            leaving_lane,
+            leaving_within,
+            beyond,
+            settings.weaver_wary_s,
+        )
+        found, held = leaders_in_rows(world, query, found_leaders)
         for k in range(held):
             rows[k] = slots[w, rows[k]]
         ego_speed = speed[w, 0]
