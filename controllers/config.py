@@ -184,7 +184,8 @@ class ControllerConfig(_Settings):
         ge=0,
         le=60,
         description="a vehicle that turned back in the middle of a lane change is the cruise's leader "
-        "for this long after, while ahead in a lane next to the ego's [s]; 0: never",
+        "for this long after, while ahead in a lane next to the one the ego keeps or heads for [s]; "
+        "0: never",
     )
 
     @model_validator(mode="after")

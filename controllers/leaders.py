@@ -108,7 +108,7 @@ def leaders(
     if weaves is None:
         found, held = _leaders_in_rows(rows_of_world, query, out)
     else:
-        weaves.room(n)
+        weaves.room(world.ids)
         found, held = _noted_leaders_in_rows(rows_of_world, world.time, world.ids, weaves.table, query, out)
     ids = world.ids
     return tuple(

@@ -112,8 +112,12 @@ class WeaveMemory:
         found = np.flatnonzero(self.keys == vehicle)
         return int(found[0]) if found.size else None
 
-    def room(self, vehicles: int) -> None:
-        """At least `vehicles` free columns, and the table at most half full after they are taken."""
+    def room(self, ids: np.ndarray) -> None:
+        """Free columns for the vehicles of `ids` (ids >= 0: -1 marks a free column), the table at
+        most half full after they are taken."""
+        if ids.size and int(ids.min()) < 0:
+            raise ValueError(f"the weave memory keys vehicles by id >= 0: got {int(ids.min())}")
+        vehicles = ids.size
         used = self.keys >= 0
         size = self.keys.size
         while 2 * (int(used.sum()) + vehicles) > size:
@@ -132,10 +136,11 @@ class WeaveMemory:
 def weavers_in_rows(
     world: LeaderRows, heading_for: float, wary_s: float, found: int, out: FoundLeaders
 ) -> int:
-    """Appends to the `found` leaders in `out` (`controllers.leaders.leaders_in_rows`) each vehicle
-    that turned back less than `wary_s` [s] ago (`world.weaved_s`), ahead of the ego (its centre ahead of the
-    ego's) with its centre in a lane next to the one centred at `heading_for` [m] (the lane the ego
-    keeps or heads for), unless the ego, faster, passes it sooner than it could fall back behind it
+    """Appends to the `found` vehicles already in `out` (the leaders and the cars the cruise alone
+    keeps, `controllers.leaders.leaders_in_rows`; none twice) each vehicle that turned back less
+    than `wary_s` [s] ago (`world.weaved_s`), ahead of the ego (its centre ahead of the ego's) with
+    its centre in a lane next to the one centred at `heading_for` [m] (the lane the ego keeps or
+    heads for), unless the ego, faster, passes it sooner than it could fall back behind it
     (`passes_sooner_than_falls_back`); returns the new count."""
     s, d, speed, length, width = world.s, world.d, world.speed, world.length, world.lane_width
     total = found

@@ -128,3 +128,20 @@ def test_a_config_written_before_the_weave_memory_existed_reads_it_off() -> None
     written["controller"].pop("weaver_wary_s")
     assert build_config(written).controller.weaver_wary_s == 0.0
     assert build_config({}).controller.weaver_wary_s == WARY_S
+
+
+def test_a_tracked_world_s_memory_stays_with_its_tracks_when_another_world_grows_the_room() -> None:
+    """A tracked world keeps each track's memory past the truth's columns (`vehicle_room` + 1 + the
+    track's slot): when a world that resets with more vehicles grows the room, the columns move
+    with it, so the track keeps what it had, as one world keeps it by the track's id."""
+    config = build_config({"episodes": 1, "seed": 3, "highway": {"duration": 4}}, scenario="noisy")
+    batch = ClosedLoopBatch(config, 1)
+    batch.reset([3])
+    assert batch.tracker is not None and bool(batch.tracker.tracked[0])
+    room = batch.vehicle_room
+    assert (batch.slots[0, 1:] > room).all()
+    batch.moving[0, room + 1 + 3], batch.weaved_at[0, room + 1 + 3] = -1.0, 0.5
+    batch._memory(room + 4)
+    assert batch.moving[0, batch.vehicle_room + 1 + 3] == -1.0
+    assert batch.weaved_at[0, batch.vehicle_room + 1 + 3] == 0.5
+    batch.close()

@@ -146,8 +146,9 @@ class ClosedLoopBatch:
     def _sense(self, worlds: np.ndarray, warm_up: bool = False) -> None:
         """`perceived` and the memory `slots` of its rows after a frame: the worlds flagged observed
         anew through their sensors (the truth itself without a sensor model), tracked in the worlds
-        that track (`perception.tracking.TrackerBatch`; memory column 1 + the track's slot, its weave
-        memory emptied for a track born there, as one world's keys it by the new track's id), with no
+        that track (`perception.tracking.TrackerBatch`; memory column `vehicle_room` + 1 + the track's
+        slot, past the truth's columns, so another world's growth moves it with them; its weave memory
+        emptied for a track born there, as one world's keys it by the new track's id), with no
         time passed since the last frame when `warm_up` (the tracker's start, as `Tracker.warm_up`)."""
         batch = self.batch
         assert batch is not None
@@ -168,13 +169,15 @@ class ClosedLoopBatch:
         idents = self.tracker.tracks.ident.copy()
         tracked = self.tracker.update(sensed.batch, worlds, 0.0 if warm_up else self.dt)
         born_world, born_slot = np.nonzero(self.tracker.tracks.ident != idents)
-        self.moving[born_world, 1 + born_slot], self.weaved_at[born_world, 1 + born_slot] = 0.0, -np.inf
+        born = self.vehicle_room + 1 + born_slot
+        self.moving[born_world, born], self.weaved_at[born_world, born] = 0.0, -np.inf
         self.perceived = tracked.batch
         rows = tracked.slot.shape[1]
         detected_slots = np.zeros((self.worlds, rows), dtype=np.int64)
         source = np.where(sensed.phantom >= 0, self.vehicle_room + sensed.phantom, sensed.source)
         detected_slots[:, : source.shape[1]] = source
-        self.slots = np.where(self.tracker.tracked[:, None], 1 + np.maximum(tracked.slot, -1), detected_slots)
+        track_slots = self.vehicle_room + 1 + np.maximum(tracked.slot, -1)
+        self.slots = np.where(self.tracker.tracked[:, None], track_slots, detected_slots)
 
     @property
     def done(self) -> np.ndarray:
