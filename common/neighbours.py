@@ -221,6 +221,16 @@ def _headings_to_the_lane(batch: WorldBatch) -> np.ndarray:
 
 
 @register_jitable
+def between_lanes(d: float, offsets: np.ndarray) -> bool:
+    """Whether a centre at `d` [m] is farther than R157's wandering zone (`WANDERING_M`) from every
+    lane centre of `offsets` [m]: the vehicle is crossing from one lane to another."""
+    nearest = math.inf
+    for centre in offsets:
+        nearest = min(nearest, abs(d - centre))
+    return nearest > WANDERING_M
+
+
+@register_jitable
 def swept_distance(d: float, drift: float, centre: float) -> float:
     """How far across the road [m] a centre moving from `d` to `d + drift` [m] comes to `centre`
     [m] on its way (0 when it crosses it)."""

@@ -11,7 +11,7 @@ from numba import njit
 from numba.extending import register_jitable
 
 from common.longitudinal import STOP_MARGIN_M
-from common.neighbours import WANDERING_M, lateral_extent, swept_distance
+from common.neighbours import between_lanes, lateral_extent, swept_distance
 from controllers.passing import (
     FoundLeaders,
     LeaderQuery,
@@ -193,10 +193,7 @@ def turning_back_in_rows(
         lengths = (length[row] + length[0]) / 2
         if not 0 < rel < close + lengths:
             continue
-        nearest = math.inf
-        for centre in offsets:
-            nearest = min(nearest, abs(d[row] - centre))
-        if nearest <= WANDERING_M or is_listed(rows, found, row):
+        if not between_lanes(d[row], offsets) or is_listed(rows, found, row):
             continue
         sideways = speed[row] * math.sin(world.heading_to_lane[row])
         reach = abs(sideways) * cut_in_lookahead_s

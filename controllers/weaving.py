@@ -19,7 +19,7 @@ from typing import NamedTuple
 import numpy as np
 from numba.extending import register_jitable
 
-from common.neighbours import WANDERING_M
+from common.neighbours import between_lanes
 from controllers.passing import FoundLeaders, LeaderRows, is_listed, passes_sooner_than_falls_back
 
 WEAVE_MPS = 0.3
@@ -30,13 +30,13 @@ default."""
 
 
 @register_jitable
-def turned_back(from_centre: float, sideways: float, moving: float) -> tuple[float, bool]:
-    """One vehicle's weave memory over one tick: `from_centre` [m], its centre's distance to the
-    nearest lane centre; `sideways` [m/s], its speed across the road; `moving`, the way it was
-    moving across while between lanes (+1, -1; 0: not between lanes, or not seen moving). Returns
-    the way to remember and whether it turned back now: it moves against `moving` while between
-    lanes (farther than `WANDERING_M` from every lane centre)."""
-    if from_centre <= WANDERING_M:
+def turned_back(between: bool, sideways: float, moving: float) -> tuple[float, bool]:
+    """One vehicle's weave memory over one tick: `between`, whether it is between lanes (farther
+    than `WANDERING_M` from every lane centre, `common.neighbours.between_lanes`); `sideways`
+    [m/s], its speed across the road; `moving`, the way it was moving across while between lanes
+    (+1, -1; 0: not between lanes, or not seen moving). Returns the way to remember and whether it
+    turned back now: it moves against `moving` while between lanes."""
+    if not between:
         return 0.0, False
     if abs(sideways) < WEAVE_MPS:
         return moving, False
@@ -51,15 +51,12 @@ def note_weaves(
     """One tick of the weave memory of `world`'s vehicles at `time` [s]: row r's vehicle keeps its
     way across in `moving[columns[r]]` and the time it last turned back in `weaved_at[columns[r]]`
     [s] (`turned_back`); writes how long ago that was into `world.weaved_s` (row 0, the ego: inf)."""
-    offsets = world.lane_offsets
     world.weaved_s[0] = math.inf
     for row in range(1, world.vehicles):
-        from_centre = math.inf
-        for centre in offsets:
-            from_centre = min(from_centre, abs(world.d[row] - centre))
+        between = between_lanes(world.d[row], world.lane_offsets)
         sideways = world.speed[row] * math.sin(world.heading_to_lane[row])
         column = columns[row]
-        moving[column], back = turned_back(from_centre, sideways, moving[column])
+        moving[column], back = turned_back(between, sideways, moving[column])
         if back:
             weaved_at[column] = time
         world.weaved_s[row] = time - weaved_at[column]

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from common.neighbours import WANDERING_M
+from common.neighbours import WANDERING_M, between_lanes
 from controllers.emergency import EmergencyBraking
 from controllers.leaders import leaders
 from controllers.weaving import WARY_S, WEAVE_MPS, WeaveMemory, turned_back
@@ -24,13 +24,16 @@ MOVER = 1
 
 
 def test_a_vehicle_turned_back_only_when_it_reverses_between_lanes() -> None:
-    between, settled, slow = WANDERING_M + 0.5, WANDERING_M / 2, WEAVE_MPS / 2
-    assert turned_back(between, 1.0, 0.0) == (1.0, False)
-    assert turned_back(between, 1.0, 1.0) == (1.0, False)
-    assert turned_back(between, slow, 1.0) == (1.0, False)
-    assert turned_back(between, -1.0, 1.0) == (-1.0, True)
-    assert turned_back(settled, -1.0, 1.0) == (0.0, False)
-    assert turned_back(between, -1.0, 0.0) == (-1.0, False)
+    offsets = np.array([0.0, 4.0, 8.0])
+    assert between_lanes(4.0 + WANDERING_M + 0.5, offsets)
+    assert not between_lanes(4.0 - WANDERING_M / 2, offsets)
+    slow = WEAVE_MPS / 2
+    assert turned_back(True, 1.0, 0.0) == (1.0, False)
+    assert turned_back(True, 1.0, 1.0) == (1.0, False)
+    assert turned_back(True, slow, 1.0) == (1.0, False)
+    assert turned_back(True, -1.0, 1.0) == (-1.0, True)
+    assert turned_back(False, -1.0, 1.0) == (0.0, False)
+    assert turned_back(True, -1.0, 0.0) == (-1.0, False)
 
 
 def placed(
