@@ -159,24 +159,23 @@ class ClosedLoopBatch:
             return
         sensed = self.sensor.sense(batch, worlds)
         phantoms = int(sensed.phantom.max(initial=-1)) + 1
-        if self.tracker is None:
-            self._memory(self.traffic.arrays.vehicles, phantoms)
-            self.perceived = self.detected = sensed.batch
-            self.slots = np.where(sensed.phantom >= 0, self.vehicle_room + sensed.phantom, sensed.source)
-            return
-        self._memory(self.traffic.arrays.vehicles, max(phantoms, 1 + self.tracker.config.max_tracks))
+        tracks = 0 if self.tracker is None else 1 + self.tracker.config.max_tracks
+        self._memory(self.traffic.arrays.vehicles, max(phantoms, tracks))
+        source = np.where(sensed.phantom >= 0, self.vehicle_room + sensed.phantom, sensed.source)
         self.detected = sensed.batch
+        if self.tracker is None:
+            self.perceived, self.slots = sensed.batch, source
+            return
         idents = self.tracker.tracks.ident.copy()
         tracked = self.tracker.update(sensed.batch, worlds, 0.0 if warm_up else self.dt)
+        tracks_from = self.vehicle_room + 1
         born_world, born_slot = np.nonzero(self.tracker.tracks.ident != idents)
-        born = self.vehicle_room + 1 + born_slot
+        born = tracks_from + born_slot
         self.moving[born_world, born], self.weaved_at[born_world, born] = 0.0, -np.inf
         self.perceived = tracked.batch
-        rows = tracked.slot.shape[1]
-        detected_slots = np.zeros((self.worlds, rows), dtype=np.int64)
-        source = np.where(sensed.phantom >= 0, self.vehicle_room + sensed.phantom, sensed.source)
+        detected_slots = np.zeros((self.worlds, tracked.slot.shape[1]), dtype=np.int64)
         detected_slots[:, : source.shape[1]] = source
-        track_slots = self.vehicle_room + 1 + np.maximum(tracked.slot, -1)
+        track_slots = tracks_from + np.maximum(tracked.slot, -1)
         self.slots = np.where(self.tracker.tracked[:, None], track_slots, detected_slots)
 
     @property
