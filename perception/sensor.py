@@ -5,9 +5,10 @@ limited range, missed detections, position noise, false positives. The ego (row 
 touched: it knows where it is.
 
 One law, two paths: `detect` is one observation's draws from one world's generator; `SensorModel`
-calls it on its world and `SensorBatch` on each world of a batch it observes anew (one generator
-draws for one world only, so that is one short Python step per world), then makes every world's
-report from the draws in numpy over the batch, to the bits `SensorModel.observe` reports.
+calls it on each world of a batch it observes anew whose sensor is enabled (one generator draws for
+one world only, so that is one short Python step per world), then makes every world's report from
+the draws in one compiled pass over the batch (`report_sensed`), to the bits `SensorModel.observe`
+reports.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from typing import NamedTuple
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from common.compiled import Kernel
 from records import WorldState
 from records.batch import WorldBatch
 
@@ -192,6 +194,7 @@ class SensorBatch:
 
     def __init__(self, worlds: int) -> None:
         self.models: list[SensorModel | None] = [None] * worlds
+        self.enabled = np.zeros(worlds, dtype=bool)
         self.kept = np.zeros(worlds, dtype=np.int64)
         self.total = np.zeros(worlds, dtype=np.int64)
         self.source = np.zeros((worlds, 1), dtype=np.int64)
@@ -203,6 +206,7 @@ class SensorBatch:
     def reset_world(self, world: int, model: SensorModel) -> None:
         """World `world`'s episode seen through `model` (its generator as the episode seeded it)."""
         self.models[world] = model
+        self.enabled[world] = model.config.enabled
 
     def _room(self, rows: int) -> None:
         more = rows - self.source.shape[1]
@@ -213,14 +217,11 @@ class SensorBatch:
             self.phantom_s, self.phantom_lane = np.pad(self.phantom_s, pad), np.pad(self.phantom_lane, pad)
 
     def _draw(self, world: int, truth: WorldBatch) -> None:
-        """World `world`'s draws (`detect`), as its `SensorModel.observe` draws them."""
+        """World `world`'s draws (`detect`), as its `SensorModel.observe` draws them (a world whose
+        sensor is enabled)."""
         model = self.models[world]
+        assert model is not None
         n = int(truth.count[world])
-        if model is None or not model.config.enabled:
-            self.kept[world] = self.total[world] = n
-            self.source[world, :n] = np.arange(n)
-            self.noised[world] = False
-            return
         found = detect(model.config.law, model.rng, truth.s[world, :n], int(truth.lanes_count[world]))
         kept, phantoms = len(found.rows), len(found.phantom_s)
         if kept + phantoms > self.source.shape[1]:
@@ -237,32 +238,70 @@ class SensorBatch:
     def sense(self, truth: WorldBatch, worlds: np.ndarray) -> Sensed:
         """Every world as its sensor reports it, observing the worlds flagged in `worlds` anew."""
         self._room(truth.s.shape[1])
-        for world in np.flatnonzero(worlds).tolist():
+        flagged = np.asarray(worlds, dtype=bool)
+        whole = flagged & ~self.enabled
+        self.kept[whole] = self.total[whole] = truth.count[whole]
+        self.source[whole] = np.arange(self.source.shape[1])
+        self.noised[whole] = False
+        for world in np.flatnonzero(flagged & self.enabled).tolist():
             self._draw(world, truth)
         rows = int(self.total.max())
-        column = np.arange(rows)[None, :]
-        real = column < self.kept[:, None]
-        phantom = (column >= self.kept[:, None]) & (column < self.total[:, None])
-        source = np.where(real, self.source[:, :rows], 0)
-        floats = np.stack([truth.s, truth.d, truth.speed, truth.heading, truth.length, truth.width])
-        s, d, speed, heading, length, width = np.where(
-            real, np.take_along_axis(floats, source[None], axis=2), 0.0
-        )
-        noised = self.noised[:, None] & real
-        s = np.where(noised, s + self.noise[0, :, :rows], s)
-        d = np.where(noised, d + self.noise[1, :, :rows], d)
-        lanes = self.phantom_lane[:, :rows]
-        phantom_d = np.take_along_axis(truth.lane_offsets, np.where(phantom, lanes, 0), axis=1)
-        lane = np.where(real, np.take_along_axis(truth.lane, source, axis=1), 0)
+        floats = np.empty((6, len(self.total), rows))
+        lane = np.empty((len(self.total), rows), dtype=np.result_type(truth.lane, self.phantom_lane))
+        source = np.empty((len(self.total), rows), dtype=np.int64)
+        phantom = np.empty_like(source)
+        report_sensed(
+            self.kept, self.total, self.source, self.noised, self.noise, self.phantom_s, self.phantom_lane,
+            (truth.s, truth.d, truth.speed, truth.heading, truth.length, truth.width), truth.lane,
+            truth.lane_offsets, floats, lane, source, phantom,
+        )  # fmt: skip
+        s, d, speed, heading, length, width = floats
         batch = dataclasses.replace(
-            truth,
-            count=self.total.copy(),
-            s=np.where(phantom, self.phantom_s[:, :rows], s),
-            d=np.where(phantom, phantom_d, d),
-            speed=np.where(phantom, truth.speed[:, :1], speed),
-            heading=np.where(phantom, truth.heading[:, :1], heading),
-            length=np.where(phantom, truth.length[:, :1], length),
-            width=np.where(phantom, truth.width[:, :1], width),
-            lane=np.where(phantom, lanes, lane),
-        )
-        return Sensed(batch, source, np.where(phantom, column - self.kept[:, None], -1))
+            truth, count=self.total.copy(), s=s, d=d, speed=speed, heading=heading, length=length,
+            width=width, lane=lane,
+        )  # fmt: skip
+        return Sensed(batch, source, phantom)
+
+
+@Kernel
+def report_sensed(
+    kept: np.ndarray,
+    total: np.ndarray,
+    rows: np.ndarray,
+    noised: np.ndarray,
+    noise: np.ndarray,
+    phantom_s: np.ndarray,
+    phantom_lane: np.ndarray,
+    truth: tuple[np.ndarray, ...],
+    truth_lane: np.ndarray,
+    lane_offsets: np.ndarray,
+    floats_out: np.ndarray,
+    lane_out: np.ndarray,
+    source_out: np.ndarray,
+    phantom_out: np.ndarray,
+) -> None:  # pragma: no cover - compiled; covered through SensorBatch.sense
+    """Each world's report from its draws (`SensorBatch`): its `kept[w]` detected truth `rows`
+    (s and d plus `noise` when `noised[w]`), then its false positives to `total[w]` (at
+    `phantom_s`, on the centre of `phantom_lane`, with the ego's speed, heading and size), zeros
+    past them. `truth` is (s, d, speed, heading, length, width); `floats_out` (6, worlds, columns)
+    those of the report, `lane_out` its lanes, `source_out` each row's truth row (0 past the
+    detected), `phantom_out` each false positive's index (-1 for the others)."""
+    for w in range(floats_out.shape[1]):
+        for c in range(floats_out.shape[2]):
+            real = c < kept[w]
+            fake = not real and c < total[w]
+            source = rows[w, c] if real else 0
+            source_out[w, c] = source
+            phantom_out[w, c] = c - kept[w] if fake else -1
+            for f in range(6):
+                floats_out[f, w, c] = truth[f][w, source] if real else 0.0
+            lane_out[w, c] = truth_lane[w, source] if real else 0
+            if real and noised[w]:
+                floats_out[0, w, c] += noise[0, w, c]
+                floats_out[1, w, c] += noise[1, w, c]
+            if fake:
+                floats_out[0, w, c] = phantom_s[w, c]
+                floats_out[1, w, c] = lane_offsets[w, phantom_lane[w, c]]
+                for f in range(2, 6):
+                    floats_out[f, w, c] = truth[f][w, 0]
+                lane_out[w, c] = phantom_lane[w, c]
