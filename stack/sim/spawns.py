@@ -12,30 +12,24 @@ from highway_env.vehicle.kinematics import Vehicle
 from common.r157 import start_room
 
 
-def along_lane(lane: AbstractLane, positions: list[np.ndarray]) -> np.ndarray:
-    """Each position's longitudinal coordinate [m] on `lane`, as `lane.local_coordinates` gives it
-    (the same bits): on a straight lane along a coordinate axis every product is by 0 or +-1, so
-    the sum over the whole array is exact; on any other lane, one call per position."""
+def lane_coordinates(lane: AbstractLane, positions: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Each position's longitudinal and lateral coordinate [m] on `lane`, as `lane.local_coordinates`
+    gives them (the same bits): on a straight lane along a coordinate axis every product is by 0 or
+    +-1, so the sums over the whole array are exact; on any other lane, one call per position."""
     direction = getattr(lane, "direction", None)
     if type(lane) is StraightLane and direction is not None and set(np.abs(direction).tolist()) <= {0.0, 1.0}:
         delta = np.asarray(positions, dtype=float).reshape(-1, 2) - lane.start
-        return delta[:, 0] * direction[0] + delta[:, 1] * direction[1]
-    return np.array([lane.local_coordinates(position)[0] for position in positions], dtype=float)
+        lateral = lane.direction_lateral
+        along = delta[:, 0] * direction[0] + delta[:, 1] * direction[1]
+        return along, delta[:, 0] * lateral[0] + delta[:, 1] * lateral[1]
+    local = np.array([lane.local_coordinates(position) for position in positions], dtype=float)
+    return local[:, 0], local[:, 1]
 
 
 def heading_for(vehicle: Vehicle) -> float:
     """The speed [m/s] `vehicle` is at or slowing to at spawn: an IDM driver above its target speed
     brakes towards it from the first frame."""
     return min(vehicle.speed, float(getattr(vehicle, "target_speed", vehicle.speed)))
-
-
-def across_lane(lane: AbstractLane, positions: list[np.ndarray]) -> np.ndarray:
-    """Each position's lateral coordinate [m] on `lane`, as `lane.local_coordinates` gives it."""
-    lateral = getattr(lane, "direction_lateral", None)
-    if type(lane) is StraightLane and lateral is not None:
-        delta = np.asarray(positions, dtype=float).reshape(-1, 2) - lane.start
-        return delta[:, 0] * lateral[0] + delta[:, 1] * lateral[1]
-    return np.array([lane.local_coordinates(position)[1] for position in positions], dtype=float)
 
 
 def make_room(env: AbstractEnv, vehicle: Vehicle) -> None:
@@ -51,18 +45,25 @@ def make_room(env: AbstractEnv, vehicle: Vehicle) -> None:
     if not others:
         return
     positions = [other.position for other in others]
-    along = along_lane(lane, positions).tolist()
-    across = np.abs(across_lane(lane, positions)).tolist()
+    along, across = lane_coordinates(lane, positions)
+    across = np.abs(across)
     width = lane.width_at(s_new)
-    behind = [(s, d, other) for s, d, other in zip(along, across, others, strict=True) if s <= s_new]
-    in_lane = [(s, other) for s, d, other in behind if d < width / 2]
-    ego = env.vehicle
-    constraints = [max(in_lane, key=lambda pair: pair[0])] if in_lane else []
-    constraints += [(s, other) for s, d, other in behind if other is ego and width / 2 <= d < 1.5 * width]
+    behind = along <= s_new
+    constraints = []
+    in_lane = np.flatnonzero(behind & (across < width / 2))
+    if len(in_lane):
+        constraints.append(int(in_lane[np.argmax(along[in_lane])]))
+    ego_vehicle = env.vehicle
+    ego = next((k for k, other in enumerate(others) if other is ego_vehicle), None)
+    if ego is not None and behind[ego] and width / 2 <= across[ego] < 1.5 * width:
+        constraints.append(ego)
     least = max(
         (
-            s + start_room(other.speed, vehicle.speed, other.LENGTH, vehicle.LENGTH, heading_for(vehicle))
-            for s, other in constraints
+            float(along[k])
+            + start_room(
+                others[k].speed, vehicle.speed, others[k].LENGTH, vehicle.LENGTH, heading_for(vehicle)
+            )
+            for k in constraints
         ),
         default=s_new,
     )

@@ -36,7 +36,7 @@ from highway_env.vehicle.kinematics import Vehicle
 from common.r157 import start_room
 from stack.settings.world import EGO_LENGTH_M, EGO_SPAWN_SPEED_MPS
 from stack.sim.drivers import assign_drivers
-from stack.sim.spawns import along_lane, make_room
+from stack.sim.spawns import lane_coordinates, make_room
 
 IDM_JAM_CLEARANCE = 5.0
 """highway-env's IDM jam distance is 5 m + the vehicle's length (centre to centre); scaled with each
@@ -71,12 +71,12 @@ class TrafficVehicle(IDMVehicle):
     ) -> TrafficVehicle:
         """highway-env's `Vehicle.create_random`: the same draws in the same order and the same
         vehicle, with the start behind the last vehicle read from every position at once
-        (`along_lane`) instead of one `local_coordinates` call per vehicle (a road of n vehicles
+        (`lane_coordinates`) instead of one `local_coordinates` call per vehicle (a road of n vehicles
         spawns in n^2 of them)."""
         rng = road.np_random
-        _from = lane_from or rng.choice(list(road.network.graph.keys()))
-        _to = lane_to or rng.choice(list(road.network.graph[_from].keys()))
-        _id = lane_id if lane_id is not None else rng.choice(len(road.network.graph[_from][_to]))
+        _from = lane_from or uniform_choice(rng, list(road.network.graph.keys()))
+        _to = lane_to or uniform_choice(rng, list(road.network.graph[_from].keys()))
+        _id = lane_id if lane_id is not None else int(rng.integers(len(road.network.graph[_from][_to])))
         lane = road.network.get_lane((_from, _to, _id))
         if speed is None:
             if lane.speed_limit is not None:
@@ -86,7 +86,7 @@ class TrafficVehicle(IDMVehicle):
         default_spacing = 12 + 1.0 * speed
         offset = spacing * default_spacing * np.exp(-5 / 40 * len(road.network.graph[_from][_to]))
         positions = [v.position for v in road.vehicles]
-        x0 = np.max(along_lane(lane, positions)) if len(road.vehicles) else 3 * offset
+        x0 = np.max(lane_coordinates(lane, positions)[0]) if len(road.vehicles) else 3 * offset
         x0 += offset * rng.uniform(0.9, 1.1)
         return cls(road, lane.position(x0, 0), lane.heading_at(x0), speed)
 
@@ -103,24 +103,33 @@ def vehicle_class(path: str) -> type[Vehicle]:
     return utils.class_from_path(path)
 
 
+def uniform_choice(rng: np.random.Generator, items: list[Any]) -> Any:
+    """`rng.choice(items)`: the same draw (`integers(0, len(items))`) without the list's copy to
+    an array, and the item itself."""
+    return items[int(rng.integers(len(items)))]
+
+
 def class_odds(classes: list[dict[str, Any]]) -> np.ndarray:
-    """Each vehicle class's probability: its share over their sum."""
+    """Each vehicle class's cumulative probability (its share over their sum), as
+    `Generator.choice(p=...)` makes it of the probabilities: the classes' cumulative sum over its
+    last value."""
     shares = np.array([c["share"] for c in classes])
-    odds: np.ndarray = shares / shares.sum()
+    odds: np.ndarray = (shares / shares.sum()).cumsum()
+    odds /= odds[-1]
     return odds
 
 
 def _spawn_other(
     env: HighwayEnv, classes: list[dict[str, Any]], odds: np.ndarray, spawn_speed: float | None
 ) -> None:
-    """One traffic vehicle of a class drawn by its odds (`class_odds`), behind-the-last rule of
-    highway-env."""
+    """One traffic vehicle of a class drawn by its cumulative odds (`class_odds`: the draw of
+    `rng.choice(len(classes), p=...)`), behind-the-last rule of highway-env."""
     rng = env.np_random
-    kind = classes[int(rng.choice(len(classes), p=odds))]
+    kind = classes[int(np.searchsorted(odds, rng.random(), side="right"))]
     desired = float(rng.uniform(*kind["speed_mps"]))
     length = float(rng.uniform(*kind["length_m"]))
     vehicle_type = vehicle_class(env.config["other_vehicles_type"])
-    lane = int(rng.choice(kind["lanes"])) if kind.get("lanes") else None
+    lane = int(uniform_choice(rng, kind["lanes"])) if kind.get("lanes") else None
     vehicle = vehicle_type.create_random(
         env.road, speed=spawn_speed or desired, lane_id=lane, spacing=1 / env.config["vehicles_density"]
     )
@@ -227,11 +236,12 @@ def lengthen_for_episode(road: Road, duration: float) -> None:
     there), so long episodes ended in collisions. A road already long enough is left as it is."""
     if not road.vehicles:
         return
+    positions = [vehicle.position for vehicle in road.vehicles]
     for lanes in (lanes for ends in road.network.graph.values() for lanes in ends.values()):
         for lane in lanes:
             if type(lane) is not StraightLane:
                 continue
-            front = max(float(lane.local_coordinates(vehicle.position)[0]) for vehicle in road.vehicles)
+            front = float(np.max(lane_coordinates(lane, positions)[0]))
             needed = front + Vehicle.MAX_SPEED * duration + ROAD_MARGIN_M
             if needed > lane.length:
                 lane.end = lane.start + lane.direction * needed
