@@ -48,6 +48,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/deepcars_speed.py
 	$(BIN)/python benchmarks/deepcars_ceiling.py
 	$(BIN)/python benchmarks/train_rate.py
+	$(BIN)/python benchmarks/training_worlds.py
 	$(BIN)/drivestack track --out runs/bench-track --no-progress
 	$(BIN)/python benchmarks/tracking_table.py runs/bench-track
 	$(BIN)/python benchmarks/mpc_solve.py

@@ -2,13 +2,16 @@
 sitting, with a check that both drive the same episode.
 
     .venv/bin/python benchmarks/oracle_cost.py [--seeds 0,1] [--scenario overtaking] [--backends fast,vector]
-        [--profile]
+        [--profile] [--forks]
 
 CPU seconds (process time) of whole 40-s episodes of `--agent oracle`, the backends alternating
 seed by seed, after a 2-s episode in the same process (imports and compiled kernels loaded); the
 episode summaries must be identical, since both backends are bit-identical to stock. With one
 backend (`--backends vector`), its cost per episode alone, and a digest of each episode's record
-(to compare two trees: run this file with each tree on the `PYTHONPATH`).
+(to compare two trees: run this file with each tree on the `PYTHONPATH`). With `--forks`, the search
+plays its rollouts on forks of the loop one at a time, as for a loop that cannot be copied into a
+batch (`stack.agents.oracle_search.search_refusal`), rather than as one batch of worlds: run it with
+and without to compare the two in one tree (the same digests: the same decisions).
 With `--profile`, the first seed's episode on `vector` alone, after a 2-s episode in the same process
 (imports and compiled kernels loaded), its CPU time split between the search's parts.
 """
@@ -25,6 +28,7 @@ import time
 
 from loop_profile import instrument
 
+from stack.agents import oracle
 from stack.results.episode_result import TIMING_FIELDS
 from stack.runs.episodes import run_episode
 from stack.settings.run import build_config
@@ -64,7 +68,10 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=40.0, help="episode length [s]")
     parser.add_argument("--backends", default="fast,vector", help="comma-separated: fast, vector")
     parser.add_argument("--profile", action="store_true", help="the first seed's episode by part")
+    parser.add_argument("--forks", action="store_true", help="the search's rollouts on forks, not a batch")
     args = parser.parse_args()
+    if args.forks:
+        oracle.search_refusal = lambda loop, base: "rollouts on forks (--forks)"
     seeds = [int(s) for s in args.seeds.split(",")]
     if args.profile:
         profile(args.scenario, seeds[0], args.duration)

@@ -180,3 +180,18 @@ def test_batched_sensor_reports_what_each_world_s_sensor_model_reports(worlds, s
     sensed = together.sense(truth, odd).batch
     assert_reported(sensed, reported)
     assert (sensed.count != truth.count).any() == sensor.enabled
+
+
+def test_batched_sensor_reports_worlds_with_and_without_a_sensor_model_side_by_side(worlds):
+    configs = [SENSORS["poor, short range"] if k % 2 else SENSORS["perfect"] for k in range(len(worlds))]
+    alone = [SensorModel(config, seed) for seed, config in enumerate(configs)]
+    together = SensorBatch(len(worlds))
+    for seed, config in enumerate(configs):
+        together.reset_world(seed, SensorModel(config, seed))
+    truth = WorldBatch.of(worlds)
+    for _ in range(3):
+        reported = [model.observe(world) for model, world in zip(alone, worlds, strict=True)]
+        sensed = together.sense(truth, np.ones(len(worlds), dtype=bool)).batch
+        assert_reported(sensed, reported)
+    np.testing.assert_array_equal(sensed.count[::2], truth.count[::2])
+    assert (sensed.count[1::2] != truth.count[1::2]).any()

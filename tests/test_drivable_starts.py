@@ -10,8 +10,10 @@ from typer.testing import CliRunner
 
 from common.r157 import (
     LEADER_BRAKING_MPS2,
+    R157_TIME_GAP,
     START_BRAKING_MPS2,
     r157_min_following_distance,
+    r157_min_following_distances,
     start_gap,
     start_room,
 )
@@ -22,7 +24,7 @@ from stack.settings.world import EGO_LENGTH_M
 from stack.sim import envs
 from stack.sim.batch.traffic import TrafficBatch
 from stack.sim.highway import HighwayAdapter
-from stack.sim.traffic import INCIDENT_LENGTH_M, random_traffic
+from stack.sim.traffic import INCIDENT_LENGTH_M, class_odds, random_traffic, uniform_choice
 from stack.worlds.scenarios import names
 
 FIRST_SEED = 990_000
@@ -183,3 +185,29 @@ def test_an_incident_too_close_for_a_drivable_start_is_refused_in_one_line(tmp_p
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and "incident.ahead_m" in lines[0] and "spawn_speed_mps" in lines[0], lines
     assert not (tmp_path / "out").exists()
+
+
+def test_r157_distance_in_plain_floats_is_numpys_interp_to_the_bit():
+    table_points = np.array([kmh for kmh, _ in R157_TIME_GAP]) / 3.6
+    speeds = np.concatenate(
+        [
+            np.random.default_rng(FIRST_SEED).uniform(-1.0, 60.0, 20_000),
+            table_points,
+            np.nextafter(table_points, 0.0),
+            np.nextafter(table_points, 100.0),
+        ]
+    )
+    for speed in speeds.tolist():
+        assert r157_min_following_distance(speed) == float(r157_min_following_distances(np.float64(speed)))
+    assert np.isnan(r157_min_following_distance(float("nan")))
+
+
+def test_spawning_draws_what_numpys_choice_draws():
+    classes = [{"share": 0.7}, {"share": 0.2}, {"share": 0.1}]
+    for seed in range(FIRST_SEED, FIRST_SEED + 200):
+        ours, numpys = np.random.default_rng(seed), np.random.default_rng(seed)
+        for items in (["0"], [0, 1], [3, 4, 5, 6, 7]):
+            assert uniform_choice(ours, items) == numpys.choice(items)
+        drawn = int(np.searchsorted(class_odds(classes), ours.random(), side="right"))
+        assert drawn == numpys.choice(3, p=np.array([0.7, 0.2, 0.1]))
+        assert ours.random() == numpys.random()

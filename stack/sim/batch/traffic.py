@@ -33,17 +33,17 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from highway_env import utils
 from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.envs.common.action import ContinuousAction
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.kinematics import Vehicle
 
+from common.compiled import Kernel
 from records import RoadName
 from stack.settings.world import HighwayConfig
 from stack.sim.batch.arrays import BatchArrays
 from stack.sim.batch.through_road import read_through_road
-from stack.sim.batch.traffic_frame import act, move
+from stack.sim.batch.traffic_frame import act, in_worlds, move
 from stack.sim.batch.world_reading import UnsupportedRoad, read_world, road_of
 from stack.sim.fast_road import FastExitEnv, FastRoadNetwork
 from stack.sim.highway import MAX_ACCELERATION, MAX_STEERING, env_config
@@ -72,6 +72,41 @@ class Ended:
 
     terminated: np.ndarray
     truncated: np.ndarray
+
+
+def _linear_map(low: float, high: float) -> tuple[float, float, float, float]:
+    """highway-env's `utils.lmap(v, [-1, 1], [low, high])` as its operands: x0, y0, the range's
+    span y1 - y0 and the domain's x1 - x0, each as `lmap` computes it."""
+    x = [-1, 1]
+    return float(x[0]), float(low), float(high - low), float(x[1] - x[0])
+
+
+ACTUATION_MAPS = (
+    _linear_map(*ContinuousAction.ACCELERATION_RANGE),
+    _linear_map(*ContinuousAction.STEERING_RANGE),
+)
+"""`ContinuousAction`'s maps from [-1, 1] to acceleration and to steering (`_linear_map`)."""
+
+
+@Kernel
+def drive_egos(
+    actuation_out: tuple[np.ndarray, np.ndarray],
+    rows: np.ndarray,
+    actuation: tuple[np.ndarray, np.ndarray],
+    limits: tuple[float, float],
+    maps: tuple[tuple[float, float, float, float], tuple[float, float, float, float]],
+) -> None:  # pragma: no cover - compiled
+    """The egos' acceleration and steering [m/s^2, rad] (`actuation`, one each a row of `rows`)
+    into the flat arrays `actuation_out` at `rows`: each normalised to [-1, 1] by its `limits`
+    (`stack.sim.highway.to_env_action`), clipped again and mapped back (`ContinuousAction`,
+    highway-env's `lmap`: y0 + (v - x0) * span / domain, `maps`), in numpy's operations and order:
+    the same bits as the env's step."""
+    for k in range(len(rows)):
+        for c in range(2):
+            x0, y0, span, domain = maps[c]
+            v = np.minimum(np.maximum(actuation[c][k] / limits[c], -1.0), 1.0)
+            v = np.minimum(np.maximum(v, -1.0), 1.0)
+            actuation_out[c][rows[k]] = y0 + (v - x0) * span / domain
 
 
 class TrafficBatch:
@@ -196,8 +231,9 @@ class TrafficBatch:
         self.time[stepping] += self._time_step
         ego_rows = worlds * arrays.vehicles + arrays.ego
         self._drive_egos(ego_rows[stepping], accelerations[stepping], steerings[stepping])
-        act(arrays, active)
-        move(arrays, active, self.dt)
+        in_world = in_worlds(arrays, active)
+        act(arrays, active, in_world)
+        move(arrays, active, in_world, self.dt)
         ego_crashed = arrays.crashed.reshape(-1)[ego_rows]
         terminated = stepping & ego_crashed
         truncated = stepping & (self.time >= self._duration)
@@ -214,15 +250,10 @@ class TrafficBatch:
 
     def _drive_egos(self, rows: np.ndarray, acceleration: np.ndarray, steering: np.ndarray) -> None:
         """`HighwayAdapter.step`'s actuation on the egos: normalised by `to_env_action`, then mapped
-        back by `ContinuousAction` (the same float operations)."""
-        normalised_acceleration = np.minimum(np.maximum(acceleration / MAX_ACCELERATION, -1.0), 1.0)
-        normalised_steering = np.minimum(np.maximum(steering / MAX_STEERING, -1.0), 1.0)
-        self.arrays.acceleration.reshape(-1)[rows] = utils.lmap(
-            np.clip(normalised_acceleration, -1, 1), [-1, 1], ContinuousAction.ACCELERATION_RANGE
-        )
-        self.arrays.steering.reshape(-1)[rows] = utils.lmap(
-            np.clip(normalised_steering, -1, 1), [-1, 1], ContinuousAction.STEERING_RANGE
-        )
+        back by `ContinuousAction` (the same float operations, `drive_egos`)."""
+        actuation_out = (self.arrays.acceleration.reshape(-1), self.arrays.steering.reshape(-1))
+        limits = (float(MAX_ACCELERATION), float(MAX_STEERING))
+        drive_egos(actuation_out, rows, (acceleration, steering), limits, ACTUATION_MAPS)
 
     def road(self, world: int) -> tuple[list[Vehicle], Vehicle]:
         """highway-env objects of world `world` as it stands: its vehicles on a new `Road` of its

@@ -6,6 +6,8 @@ only the worlds with vehicles in `active` (a count per world, 0 for a world left
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 from highway_env.road.lane import StraightLane
 from highway_env.vehicle.behavior import IDMVehicle
@@ -57,27 +59,41 @@ def lane_frame(
     )
 
 
-def act(arrays: BatchArrays, active: np.ndarray) -> None:
-    """`Road.act()` of every active world: the IDM drivers' decisions, steering and acceleration."""
+def in_worlds(arrays: BatchArrays, active: np.ndarray) -> np.ndarray:
+    """(W * V,) bool: each row of the flat arrays holds a vehicle of an active world (the first
+    `active[w]` rows of world w)."""
+    in_world: np.ndarray = (np.arange(arrays.vehicles)[None, :] < active[:, None]).reshape(-1)
+    return in_world
+
+
+@cache
+def _world_rows(worlds: int, vehicles: int) -> tuple[np.ndarray, np.ndarray]:
+    """The world of each row of flat arrays of `worlds` x `vehicles`, and an all-true flag a row
+    (never written: shared by every frame of that shape)."""
+    return np.repeat(np.arange(worlds), vehicles), np.ones(worlds * vehicles, dtype=bool)
+
+
+def act(arrays: BatchArrays, active: np.ndarray, in_world: np.ndarray) -> None:
+    """`Road.act()` of every active world (`in_world`, `in_worlds`): the IDM drivers' decisions,
+    steering and acceleration."""
     flat = arrays.flat
     lanes = arrays.lane_columns
     lane_count = lanes["lane_count"]
     arrays.acts[active > 0] += 1
     s, r, on, on_count = lane_frame(arrays, active)
-    in_world = np.arange(arrays.vehicles)[None, :] < active[:, None]
     kind, crashed = flat["kind"], flat["crashed"]
-    drivers = np.flatnonzero(in_world.reshape(-1) & (kind != PLAIN) & ~crashed)
+    drivers = np.flatnonzero(in_world & (kind != PLAIN) & ~crashed)
     if len(drivers) == 0:
         return
     if arrays.seen is not None:
         acting = np.flatnonzero(active > 0)
         arrays.seen.push(acting, s, arrays.speed)
-    world_of = np.repeat(np.arange(arrays.worlds), arrays.vehicles)
+    world_of, is_vehicle = _world_rows(arrays.worlds, arrays.vehicles)
     heading, speed = flat["heading"], flat["speed"]
     direction_of = np.empty((len(heading), 2))
     direction_of[:, 0], direction_of[:, 1] = np.cos(heading), np.sin(heading)
     kinematics = IdmRows(
-        is_vehicle=np.ones(len(speed), dtype=bool),
+        is_vehicle=is_vehicle,
         speed=speed,
         target_speed=flat["target_speed"],
         speed_limit=lanes["speed_limit"][world_of, flat["lane"]],
@@ -272,11 +288,11 @@ def _yield(
         )
 
 
-def move(arrays: BatchArrays, active: np.ndarray, dt: float) -> None:
-    """`Road.step(dt)` of every active world: the vehicles' steps, then the collisions."""
+def move(arrays: BatchArrays, active: np.ndarray, in_world: np.ndarray, dt: float) -> None:
+    """`Road.step(dt)` of every active world (`in_world`, `in_worlds`): the vehicles' steps, then
+    the collisions."""
     flat = arrays.flat
-    in_world = np.arange(arrays.vehicles)[None, :] < active[:, None]
-    rows = np.flatnonzero(in_world.reshape(-1))
+    rows = np.flatnonzero(in_world)
     if len(rows) == 0:
         return
     speed, crashed = flat["speed"][rows], flat["crashed"][rows]
