@@ -24,7 +24,7 @@ from stack.settings.world import EGO_LENGTH_M
 from stack.sim import envs
 from stack.sim.batch.traffic import TrafficBatch
 from stack.sim.highway import HighwayAdapter
-from stack.sim.traffic import INCIDENT_LENGTH_M, class_odds, random_traffic, uniform_choice
+from stack.sim.traffic import INCIDENT_LENGTH_M, cumulative_class_odds, random_traffic, uniform_choice
 from stack.worlds.scenarios import names
 
 FIRST_SEED = 990_000
@@ -208,6 +208,6 @@ def test_spawning_draws_what_numpys_choice_draws():
         ours, numpys = np.random.default_rng(seed), np.random.default_rng(seed)
         for items in (["0"], [0, 1], [3, 4, 5, 6, 7]):
             assert uniform_choice(ours, items) == numpys.choice(items)
-        drawn = int(np.searchsorted(class_odds(classes), ours.random(), side="right"))
+        drawn = int(np.searchsorted(cumulative_class_odds(classes), ours.random(), side="right"))
         assert drawn == numpys.choice(3, p=np.array([0.7, 0.2, 0.1]))
         assert ours.random() == numpys.random()

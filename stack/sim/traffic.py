@@ -109,7 +109,7 @@ def uniform_choice(rng: np.random.Generator, items: list[Any]) -> Any:
     return items[int(rng.integers(len(items)))]
 
 
-def class_odds(classes: list[dict[str, Any]]) -> np.ndarray:
+def cumulative_class_odds(classes: list[dict[str, Any]]) -> np.ndarray:
     """Each vehicle class's cumulative probability (its share over their sum), as
     `Generator.choice(p=...)` makes it of the probabilities: the classes' cumulative sum over its
     last value."""
@@ -122,7 +122,7 @@ def class_odds(classes: list[dict[str, Any]]) -> np.ndarray:
 def _spawn_other(
     env: HighwayEnv, classes: list[dict[str, Any]], odds: np.ndarray, spawn_speed: float | None
 ) -> None:
-    """One traffic vehicle of a class drawn by its cumulative odds (`class_odds`: the draw of
+    """One traffic vehicle of a class drawn by its cumulative odds (`cumulative_class_odds`: the draw of
     `rng.choice(len(classes), p=...)`), behind-the-last rule of highway-env."""
     rng = env.np_random
     kind = classes[int(np.searchsorted(odds, rng.random(), side="right"))]
@@ -309,7 +309,7 @@ class ScenarioTraffic(HighwayEnv):
             self._create_highway_env_vehicles()
             return
         classes = list(traffic["classes"])
-        odds = class_odds(classes)
+        odds = cumulative_class_odds(classes)
         spawn_speed = traffic.get("spawn_speed_mps")
         count = self.config["vehicles_count"]
         behind = round(traffic["ego_position"] * count)
