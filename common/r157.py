@@ -7,8 +7,6 @@ behind the one ahead in its lane (`start_gap`), so that no episode begins with a
 
 from __future__ import annotations
 
-import bisect
-
 import numpy as np
 
 R157_TIME_GAP = ((7.2, 1.0), (10.0, 1.1), (20.0, 1.2), (30.0, 1.3), (40.0, 1.4), (50.0, 1.5), (60.0, 1.6))
@@ -17,7 +15,6 @@ R157_MIN_SPEED_MPS = 7.2 / 3.6
 """The table starts at 7.2 km/h [m/s]."""
 R157_KMH, R157_GAP = (np.array(column, dtype=float) for column in zip(*R157_TIME_GAP, strict=True))
 """The table's columns: speed [km/h] and t_front [s]."""
-_KMH, _GAP = R157_KMH.tolist(), R157_GAP.tolist()
 
 START_CLEARANCE_M = 5.0
 """Gap at spawn beyond the rest [m]: highway-env's IDM jam distance, and the margin a follower that
@@ -34,19 +31,8 @@ leader spawned above its desired speed may brake towards it from its first frame
 
 
 def r157_min_following_distance(speed: float) -> float:
-    """d_min = v * t_front(v) [m] at `speed` [m/s]; 0 below 7.2 km/h, where R157 sets none. In
-    plain floats, to the bits of `r157_min_following_distances` (numpy's `interp` for one value:
-    the slope of the table's segment, times the way into it, plus its start)."""
-    if speed < R157_MIN_SPEED_MPS:
-        return 0.0
-    kmh = speed * 3.6
-    if kmh >= _KMH[-1]:
-        return speed * _GAP[-1]
-    if not kmh > _KMH[0]:
-        return speed * _GAP[0]
-    j = bisect.bisect_right(_KMH, kmh) - 1
-    slope = (_GAP[j + 1] - _GAP[j]) / (_KMH[j + 1] - _KMH[j])
-    return speed * (slope * (kmh - _KMH[j]) + _GAP[j])
+    """d_min = v * t_front(v) [m] at `speed` [m/s]; 0 below 7.2 km/h, where R157 sets none."""
+    return float(r157_min_following_distances(np.float64(speed)))
 
 
 def r157_min_following_distances(speed: np.ndarray | np.float64) -> np.ndarray:

@@ -187,7 +187,7 @@ def test_an_incident_too_close_for_a_drivable_start_is_refused_in_one_line(tmp_p
     assert not (tmp_path / "out").exists()
 
 
-def test_r157_distance_in_plain_floats_is_numpys_interp_to_the_bit():
+def test_r157_distance_of_one_speed_is_the_tables_to_the_bit():
     table_points = np.array([kmh for kmh, _ in R157_TIME_GAP]) / 3.6
     speeds = np.concatenate(
         [

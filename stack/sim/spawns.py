@@ -22,7 +22,7 @@ def lane_coordinates(lane: AbstractLane, positions: list[np.ndarray]) -> tuple[n
         lateral = lane.direction_lateral
         along = delta[:, 0] * direction[0] + delta[:, 1] * direction[1]
         return along, delta[:, 0] * lateral[0] + delta[:, 1] * lateral[1]
-    local = np.array([lane.local_coordinates(position) for position in positions], dtype=float)
+    local = np.array([lane.local_coordinates(position) for position in positions], dtype=float).reshape(-1, 2)
     return local[:, 0], local[:, 1]
 
 
