@@ -4,11 +4,11 @@ All effects are off by default and seeded. Applied to a `WorldState` before grid
 limited range, missed detections, position noise, false positives. The ego (row 0) is never
 touched: it knows where it is.
 
-One law, two paths: `detect` is one observation's draws from one world's generator; `SensorModel`
-calls it on each world of a batch it observes anew whose sensor is enabled (one generator draws for
-one world only, so that is one short Python step per world), then makes every world's report from
-the draws in one compiled pass over the batch (`report_sensed`), to the bits `SensorModel.observe`
-reports.
+One law, one source: `detect` is one observation's draws from one world's generator, and
+`report_sensed` makes reports from draws in one compiled pass. `SensorModel.observe` calls both on
+its one world; `SensorBatch` calls `detect` on each world it observes anew whose sensor is enabled
+(one generator draws for one world only, so that is one short Python step per world), then
+`report_sensed` once over the batch.
 """
 
 from __future__ import annotations
@@ -131,50 +131,31 @@ class SensorModel:
         if not self.config.enabled:
             return world
         found = detect(self.config.law, self.rng, world.s, world.lanes_count)
-        fields = {
-            name: getattr(world, name)[found.rows]
-            for name in (
-                "ids",
-                "position",
-                "heading",
-                "speed",
-                "velocity",
-                "lane",
-                "length",
-                "width",
-                "s",
-                "d",
-                "crashed",
-            )
-        }
+        kept, phantoms = len(found.rows), len(found.phantom_s)
+        total = kept + phantoms
+        noise = np.zeros((2, 1, total))
         if found.noised:
-            fields["s"] = fields["s"] + found.noise[0]
-            fields["d"] = fields["d"] + found.noise[1]
-        if len(found.phantom_s):
-            fields = _with_phantoms(fields, world, found.phantom_s, found.phantom_lane)
-        return dataclasses.replace(world, **fields)
-
-
-def _with_phantoms(
-    fields: dict[str, np.ndarray], world: WorldState, s: np.ndarray, lanes: np.ndarray
-) -> dict[str, np.ndarray]:
-    """Append phantom vehicles at `s` [m] on the centres of `lanes`, at the ego's speed and heading."""
-    count = len(s)
-    d = world.lane_offsets[lanes]
-    phantom = {
-        "ids": PHANTOM_ID_BASE + np.arange(count),
-        "position": np.stack([s, d], axis=1),
-        "heading": np.full(count, world.heading[0]),
-        "speed": np.full(count, world.speed[0]),
-        "velocity": np.tile(world.velocity[0], (count, 1)),
-        "lane": lanes,
-        "length": np.full(count, world.length[0]),
-        "width": np.full(count, world.width[0]),
-        "s": s,
-        "d": d,
-        "crashed": np.zeros(count, dtype=bool),
-    }
-    return {name: np.concatenate([fields[name], phantom[name]]) for name in fields}
+            noise[:, 0, :kept] = found.noise
+        phantom_s, phantom_lane = np.zeros((1, total)), np.zeros((1, total), dtype=np.int64)
+        phantom_s[0, kept:], phantom_lane[0, kept:] = found.phantom_s, found.phantom_lane
+        floats = np.empty((6, 1, total))
+        lane = np.empty((1, total), dtype=np.result_type(world.lane, phantom_lane))
+        source, phantom = np.empty((1, total), dtype=np.int64), np.empty((1, total), dtype=np.int64)
+        report_sensed(
+            np.array([kept]), np.array([total]), found.rows[None], np.array([found.noised]), noise, phantom_s,
+            phantom_lane, tuple(v[None] for v in (world.s, world.d, world.speed, world.heading, world.length,
+            world.width)), world.lane[None], world.lane_offsets[None], floats, lane, source, phantom,
+        )  # fmt: skip
+        s, d, speed, heading, length, width = floats[:, 0]
+        rows, fake = source[0], phantom[0] >= 0
+        return dataclasses.replace(
+            world,
+            ids=np.where(fake, PHANTOM_ID_BASE + phantom[0], world.ids[rows]),
+            position=np.where(fake[:, None], np.stack([s, d], axis=1), world.position[rows]),
+            velocity=np.where(fake[:, None], world.velocity[0], world.velocity[rows]),
+            crashed=world.crashed[rows] & ~fake,
+            s=s, d=d, speed=speed, heading=heading, length=length, width=width, lane=lane[0],
+        )  # fmt: skip
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

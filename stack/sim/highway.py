@@ -24,6 +24,7 @@ from highway_env.road.lane import AbstractLane, StraightLane
 from highway_env.road.road import Road
 from highway_env.vehicle.dynamics import BicycleVehicle
 from highway_env.vehicle.kinematics import Vehicle
+from numba.extending import register_jitable
 
 from records import BACKENDS, Actuation, Backend, PlantName, RoadName, WorldState, unknown_name
 from stack.settings.world import HighwayConfig
@@ -62,14 +63,15 @@ def env_config(highway: HighwayConfig, plant: PlantName = "kinematic") -> dict:
 
 def to_env_action(actuation: Actuation) -> np.ndarray:
     """Physical [acceleration m/s^2, steering rad] -> ContinuousAction's normalised [-1, 1]^2."""
-    return np.array(
-        [_unit(actuation.acceleration / MAX_ACCELERATION), _unit(actuation.steering / MAX_STEERING)]
-    )
+    acceleration = unit_command(actuation.acceleration, MAX_ACCELERATION)
+    return np.array([acceleration, unit_command(actuation.steering, MAX_STEERING)])
 
 
-def _unit(x: float) -> float:
-    """`x` clipped to [-1, 1] as `np.clip` clips it (NaN stays NaN)."""
-    return min(max(x, -1.0), 1.0)
+@register_jitable
+def unit_command(value: float, limit: float) -> float:
+    """A command `value` over its `limit` (same units), clipped to [-1, 1] as `np.clip` clips it
+    (NaN stays NaN): `to_env_action`'s law, which the batch's ego actuation compiles too."""
+    return min(max(value / limit, -1.0), 1.0)
 
 
 class HighwayAdapter:

@@ -46,7 +46,7 @@ from stack.sim.batch.through_road import read_through_road
 from stack.sim.batch.traffic_frame import act, in_worlds, move
 from stack.sim.batch.world_reading import UnsupportedRoad, read_world, road_of
 from stack.sim.fast_road import FastExitEnv, FastRoadNetwork
-from stack.sim.highway import MAX_ACCELERATION, MAX_STEERING, env_config
+from stack.sim.highway import MAX_ACCELERATION, MAX_STEERING, env_config, unit_command
 from stack.sim.traffic import ScenarioTraffic
 from stack.sim.vector.lanes import LaneTable
 
@@ -98,13 +98,13 @@ def drive_egos(
 ) -> None:  # pragma: no cover - compiled
     """The egos' acceleration and steering [m/s^2, rad] (`actuation`, one each a row of `rows`)
     into the flat arrays `actuation_out` at `rows`: each normalised to [-1, 1] by its `limits`
-    (`stack.sim.highway.to_env_action`), clipped again and mapped back (`ContinuousAction`,
-    highway-env's `lmap`: y0 + (v - x0) * span / domain, `maps`), in numpy's operations and order:
-    the same bits as the env's step."""
+    (`stack.sim.highway.unit_command`, `to_env_action`'s law), clipped again and mapped back
+    (`ContinuousAction`, highway-env's `lmap`: y0 + (v - x0) * span / domain, `maps`), in numpy's
+    operations and order: the same bits as the env's step."""
     for k in range(len(rows)):
         for c in range(2):
             x0, y0, span, domain = maps[c]
-            v = np.minimum(np.maximum(actuation[c][k] / limits[c], -1.0), 1.0)
+            v = unit_command(actuation[c][k], limits[c])
             v = np.minimum(np.maximum(v, -1.0), 1.0)
             actuation_out[c][rows[k]] = y0 + (v - x0) * span / domain
 
