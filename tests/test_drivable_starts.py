@@ -10,10 +10,8 @@ from typer.testing import CliRunner
 
 from common.r157 import (
     LEADER_BRAKING_MPS2,
-    R157_TIME_GAP,
     START_BRAKING_MPS2,
     r157_min_following_distance,
-    r157_min_following_distances,
     start_gap,
     start_room,
 )
@@ -185,21 +183,6 @@ def test_an_incident_too_close_for_a_drivable_start_is_refused_in_one_line(tmp_p
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and "incident.ahead_m" in lines[0] and "spawn_speed_mps" in lines[0], lines
     assert not (tmp_path / "out").exists()
-
-
-def test_r157_distance_of_one_speed_is_the_tables_to_the_bit():
-    table_points = np.array([kmh for kmh, _ in R157_TIME_GAP]) / 3.6
-    speeds = np.concatenate(
-        [
-            np.random.default_rng(FIRST_SEED).uniform(-1.0, 60.0, 20_000),
-            table_points,
-            np.nextafter(table_points, 0.0),
-            np.nextafter(table_points, 100.0),
-        ]
-    )
-    for speed in speeds.tolist():
-        assert r157_min_following_distance(speed) == float(r157_min_following_distances(np.float64(speed)))
-    assert np.isnan(r157_min_following_distance(float("nan")))
 
 
 def test_spawning_draws_what_numpys_choice_draws():

@@ -134,6 +134,7 @@ def test_r157_minimum_following_distance_follows_its_table():
     assert r157_min_following_distance(60 / 3.6) == pytest.approx(60 / 3.6 * 1.6)
     assert r157_min_following_distance(36.0) == pytest.approx(36.0 * 1.6)
     assert r157_min_following_distance(25 / 3.6) == pytest.approx(25 / 3.6 * 1.25)
+    assert math.isnan(r157_min_following_distance(float("nan")))
 
 
 def crash(world, other=1, ego_speed=None):
