@@ -120,6 +120,29 @@ def detect(law: SensorLaw, rng: np.random.Generator, s: np.ndarray, lanes_count:
     return Detections(rows, noised, noise, phantom_s, phantom_lane)
 
 
+def place_draws(
+    found: Detections,
+    world: int,
+    rows: np.ndarray,
+    noised: np.ndarray,
+    noise: np.ndarray,
+    phantom_s: np.ndarray,
+    phantom_lane: np.ndarray,
+) -> int:
+    """Write one observation's draws as `report_sensed` reads them, into world `world`'s row of
+    each array (room for them all): the detected truth `rows` first, their `noise` (2, worlds,
+    columns) [m] when `noised`, then the false positives' `phantom_s` [m] and `phantom_lane` in the
+    columns after them; returns how many were detected."""
+    kept, total = len(found.rows), len(found.rows) + len(found.phantom_s)
+    rows[world, :kept] = found.rows
+    noised[world] = found.noised
+    if found.noised:
+        noise[:, world, :kept] = found.noise
+    phantom_s[world, kept:total] = found.phantom_s
+    phantom_lane[world, kept:total] = found.phantom_lane
+    return kept
+
+
 class SensorModel:
     """`observe(world)`: a seeded, imperfect copy of `world`."""
 
@@ -131,29 +154,27 @@ class SensorModel:
         if not self.config.enabled:
             return world
         found = detect(self.config.law, self.rng, world.s, world.lanes_count)
-        kept, phantoms = len(found.rows), len(found.phantom_s)
-        total = kept + phantoms
-        noise = np.zeros((2, 1, total))
-        if found.noised:
-            noise[:, 0, :kept] = found.noise
-        phantom_s, phantom_lane = np.zeros((1, total)), np.zeros((1, total), dtype=np.int64)
-        phantom_s[0, kept:], phantom_lane[0, kept:] = found.phantom_s, found.phantom_lane
+        total = len(found.rows) + len(found.phantom_s)
+        rows, noised = np.zeros((1, total), dtype=np.int64), np.zeros(1, dtype=bool)
+        noise, phantom_s = np.zeros((2, 1, total)), np.zeros((1, total))
+        phantom_lane = np.zeros((1, total), dtype=np.int64)
+        kept = place_draws(found, 0, rows, noised, noise, phantom_s, phantom_lane)
         floats = np.empty((6, 1, total))
         lane = np.empty((1, total), dtype=np.result_type(world.lane, phantom_lane))
         source, phantom = np.empty((1, total), dtype=np.int64), np.empty((1, total), dtype=np.int64)
         report_sensed(
-            np.array([kept]), np.array([total]), found.rows[None], np.array([found.noised]), noise, phantom_s,
+            np.array([kept]), np.array([total]), rows, noised, noise, phantom_s,
             phantom_lane, tuple(v[None] for v in (world.s, world.d, world.speed, world.heading, world.length,
             world.width)), world.lane[None], world.lane_offsets[None], floats, lane, source, phantom,
         )  # fmt: skip
         s, d, speed, heading, length, width = floats[:, 0]
-        rows, fake = source[0], phantom[0] >= 0
+        truth_rows, fake = source[0], phantom[0] >= 0
         return dataclasses.replace(
             world,
-            ids=np.where(fake, PHANTOM_ID_BASE + phantom[0], world.ids[rows]),
-            position=np.where(fake[:, None], np.stack([s, d], axis=1), world.position[rows]),
-            velocity=np.where(fake[:, None], world.velocity[0], world.velocity[rows]),
-            crashed=world.crashed[rows] & ~fake,
+            ids=np.where(fake, PHANTOM_ID_BASE + phantom[0], world.ids[truth_rows]),
+            position=np.where(fake[:, None], np.stack([s, d], axis=1), world.position[truth_rows]),
+            velocity=np.where(fake[:, None], world.velocity[0], world.velocity[truth_rows]),
+            crashed=world.crashed[truth_rows] & ~fake,
             s=s, d=d, speed=speed, heading=heading, length=length, width=width, lane=lane[0],
         )  # fmt: skip
 
@@ -204,17 +225,13 @@ class SensorBatch:
         assert model is not None
         n = int(truth.count[world])
         found = detect(model.config.law, model.rng, truth.s[world, :n], int(truth.lanes_count[world]))
-        kept, phantoms = len(found.rows), len(found.phantom_s)
-        if kept + phantoms > self.source.shape[1]:
-            self._room(kept + phantoms)
-        self.source[world, :kept] = found.rows
-        self.noised[world] = found.noised
-        if found.noised:
-            self.noise[:, world, :kept] = found.noise
-        added = slice(kept, kept + phantoms)
-        self.phantom_s[world, added] = found.phantom_s
-        self.phantom_lane[world, added] = found.phantom_lane
-        self.kept[world], self.total[world] = kept, kept + phantoms
+        total = len(found.rows) + len(found.phantom_s)
+        if total > self.source.shape[1]:
+            self._room(total)
+        self.kept[world] = place_draws(
+            found, world, self.source, self.noised, self.noise, self.phantom_s, self.phantom_lane
+        )
+        self.total[world] = total
 
     def sense(self, truth: WorldBatch, worlds: np.ndarray) -> Sensed:
         """Every world as its sensor reports it, observing the worlds flagged in `worlds` anew."""
