@@ -6,7 +6,14 @@ from __future__ import annotations
 
 from numba.extending import register_jitable
 
-from common.longitudinal import BRAKING_SEEN_MPS2, STOP_MARGIN_M, BrakingLimits, needs_full_braking
+from common.longitudinal import (
+    BRAKING_SEEN_MPS2,
+    STOP_MARGIN_M,
+    BrakingLimits,
+    anticipated,
+    needs_full_braking,
+    stopping_deceleration,
+)
 from records import Actuation, Neighbour
 
 
@@ -31,6 +38,18 @@ def holds_braking(speed: float, gap: float, leader_speed: float) -> bool:
 
 
 @register_jitable
+def braked_before(
+    limits: BrakingLimits, acceleration: float, speed: float, gap: float, leader_speed: float, braking: float
+) -> float:
+    """`acceleration` [m/s^2], and no more than minus the braking `anticipated` gives for the steady
+    deceleration that stops the ego at `speed` [m/s] behind where a leader `gap` [m] ahead at
+    `leader_speed` [m/s], braking at `braking` [m/s^2], stops (up to the comfort deceleration):
+    the partial braking that keeps a braking leader from becoming an emergency."""
+    braked = anticipated(stopping_deceleration(speed, gap, leader_speed, braking))
+    return min(acceleration, -min(braked, limits.comfort_deceleration)) if braked > 0 else acceleration
+
+
+@register_jitable
 def braked_acceleration(
     limits: BrakingLimits, active: bool, acceleration: float, speed: float, dt: float
 ) -> float:
@@ -44,7 +63,9 @@ class EmergencyBraking:
     """Full braking while a leader is closing in and stopping behind it needs more than the comfort
     deceleration (constant-speed prediction: closing^2 / 2 (gap - margin)) or its time to collision
     is below `trigger_ttc_s`; released once no leader closes in or is within the stop margin
-    (`holds_braking`). Counts activations (rising edges).
+    (`holds_braking`). Counts activations (rising edges). Before that, a leader seen braking is
+    braked for once stopping behind where it stops needs more than `ANTICIPATION_ONSET_MPS2`
+    (`braked_before`: partial braking, not counted).
 
     The plant's braking authority is highway-env's ContinuousAction range, +-5 m/s^2 by default:
     the plant is left as highway-env defines it, so `max_deceleration` cannot exceed it."""
@@ -107,7 +128,12 @@ class EmergencyBraking:
         elif self.needed(speed, leaders, braking):
             self.active = True
             self.activations += 1
-        acceleration = braked_acceleration(self.limits, self.active, actuation.acceleration, speed, dt)
+        acceleration = actuation.acceleration
+        for leader in leaders:
+            acceleration = braked_before(
+                self.limits, acceleration, speed, leader.gap, leader.speed, braking.get(leader.vehicle, 0.0)
+            )
+        acceleration = braked_acceleration(self.limits, self.active, acceleration, speed, dt)
         if acceleration == actuation.acceleration:
             return actuation
         return Actuation(acceleration=acceleration, steering=actuation.steering)

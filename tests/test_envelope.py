@@ -6,6 +6,13 @@ import math
 import numpy as np
 import pytest
 
+from common.longitudinal import (
+    ANTICIPATED_MPS2,
+    ANTICIPATION_ONSET_MPS2,
+    GapKeeping,
+    anticipated,
+    gap_acceleration,
+)
 from controllers.config import ControllerConfig, PIDGains
 from controllers.cruise import AdaptiveCruise
 from controllers.emergency import EmergencyBraking
@@ -126,6 +133,35 @@ def test_emergency_braking_avoids_a_leader_braking_hard():
     gaps, speeds, activations = drive_behind(lambda t: max(0.0, 20.0 - 6.0 * t), 25.0, gap=28.0)
     assert gaps.min() > 0.0 and speeds[-1] < 0.05
     assert activations >= 1
+
+
+def test_a_stopped_car_far_ahead_is_braked_for_early_and_never_needs_emergency_braking():
+    gaps, speeds, activations = drive_behind(lambda t: 0.0, 40.0, ego_speed=30.0, gap=250.0)
+    decelerations = -np.diff(speeds) / DT
+    assert activations == 0 and speeds[-1] < 0.05 and gaps.min() > 7.0
+    assert decelerations.max() <= 3.0 + 1e-9
+    assert speeds[round(2 / DT)] < 30.0
+
+
+def test_a_leader_braking_to_a_stop_far_ahead_is_braked_for_without_emergency_braking():
+    braking = lambda t: max(0.0, 19.0 - 2.5 * t)  # noqa: E731
+    gaps, speeds, activations = drive_behind(braking, 40.0, ego_speed=30.0, gap=120.0)
+    assert activations == 0 and speeds[-1] < 0.05 and gaps.min() > 7.0
+
+
+@pytest.mark.parametrize("needed", [0.0, 0.5, ANTICIPATION_ONSET_MPS2])
+def test_a_small_need_is_left_to_the_time_gap_law(needed):
+    assert anticipated(needed) == 0.0
+    law = GapKeeping(1.5, 8.0)
+    assert gap_acceleration(law, 25.0, 60.0, 24.0) == pytest.approx(0.25 * (60.0 - 45.5) - 0.8 * 1.0)
+
+
+def test_anticipation_rises_continuously_and_meets_the_need_where_it_settles():
+    assert anticipated(ANTICIPATED_MPS2) == pytest.approx(ANTICIPATED_MPS2)
+    assert anticipated(ANTICIPATION_ONSET_MPS2 + 1e-9) < 1e-8
+    steps = np.diff([anticipated(x) for x in np.linspace(0.0, 3.0, 301)])
+    slope = ANTICIPATED_MPS2 / (ANTICIPATED_MPS2 - ANTICIPATION_ONSET_MPS2)
+    assert steps.min() >= 0.0 and steps.max() <= 0.01 * slope + 1e-12
 
 
 def test_r157_minimum_following_distance_follows_its_table():

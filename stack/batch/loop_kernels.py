@@ -22,7 +22,7 @@ from numba import njit
 from common.compiled import Kernel, clip
 from common.longitudinal import BrakingLimits, gap_acceleration, needs_full_braking
 from common.neighbours import VehicleRows, footprint_across, lane_beyond, reaches_lane
-from controllers.emergency import braked_acceleration, holds_braking, leader_braking
+from controllers.emergency import braked_acceleration, braked_before, holds_braking, leader_braking
 from controllers.lateral import LateralMemory, lateral_steering
 from controllers.leaders import FoundLeaders, LeaderQuery, LeaderRows, leaders_in_rows, road_to_leave
 from controllers.maneuver import lane_change_target, left_origin
@@ -331,6 +331,8 @@ def emergency_acceleration(
                 flags[1] += 1
                 flags[2] = rows[k]
                 break
+    for k in range(leaders):
+        acceleration = braked_before(limits, acceleration, speed, gaps[k], speeds[k], braking[k])
     return braked_acceleration(limits, flags[0] != 0, acceleration, speed, dt)
 
 
