@@ -41,7 +41,8 @@ class GapKeeping(NamedTuple):
 def gap_acceleration(law: GapKeeping, speed: float, gap: float, leader_speed: float) -> float:
     """The acceleration [m/s^2] that keeps the time gap to one leader `gap` [m] ahead at
     `leader_speed` [m/s] from the ego's `speed` [m/s]: KP_GAP on the gap error, KP_CLOSING on the
-    closing speed."""
+    closing speed, and no less braking than `anticipated` gives for the steady need
+    (`approach_deceleration`) of a slower leader far ahead."""
     desired_gap = law.standstill_gap + law.time_gap * speed
     closing = speed - leader_speed
     keeping = KP_GAP * (gap - desired_gap) - KP_CLOSING * closing

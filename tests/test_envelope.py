@@ -11,6 +11,7 @@ from common.longitudinal import (
     ANTICIPATION_ONSET_MPS2,
     GapKeeping,
     anticipated,
+    approach_deceleration,
     gap_acceleration,
 )
 from controllers.config import ControllerConfig, PIDGains
@@ -149,10 +150,10 @@ def test_a_leader_braking_to_a_stop_far_ahead_is_braked_for_without_emergency_br
     assert activations == 0 and speeds[-1] < 0.05 and gaps.min() > 7.0
 
 
-@pytest.mark.parametrize("needed", [0.0, 0.5, ANTICIPATION_ONSET_MPS2])
-def test_a_small_need_is_left_to_the_time_gap_law(needed):
-    assert anticipated(needed) == 0.0
+def test_a_small_need_is_left_to_the_time_gap_law():
+    assert [anticipated(x) for x in (0.0, 0.5, ANTICIPATION_ONSET_MPS2)] == [0.0, 0.0, 0.0]
     law = GapKeeping(1.5, 8.0)
+    assert approach_deceleration(law, 60.0, 1.0, 24.0) < ANTICIPATION_ONSET_MPS2
     assert gap_acceleration(law, 25.0, 60.0, 24.0) == pytest.approx(0.25 * (60.0 - 45.5) - 0.8 * 1.0)
 
 
