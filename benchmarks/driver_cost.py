@@ -7,6 +7,14 @@ worst case (every cautious driver behind the ego in that lane evaluates IDM behi
 
     .venv/bin/python benchmarks/driver_cost.py [--scenario highway-v0] [--runs 3] [--frames 150]
         [--intent 1] [--populations highway-env,calibrated,...]
+    .venv/bin/python benchmarks/driver_cost.py --closed-loop [--agent mobil] [--episodes 4]
+        [--scenario highway-v0] [--runs 3] [--populations ...]
+
+With `--closed-loop`: what a run costs a frame, the whole stack with its traffic (perception,
+`--agent`, control, metrics, the fault judge), per world (`run_episode` over `--episodes` seeded
+episodes, one world at a time) and in a batch (`run_batched` of `BATCH_WORLDS` episodes), frames
+per CPU-second; the episodes differ between populations (their drivers do), so each is its own
+frames over its own CPU time.
 
 The populations alternate run by run, after one warm-up run each; the figures are medians. A
 population changes the traffic too (aggressive drivers change lane more often), so its cost is
@@ -19,10 +27,13 @@ import argparse
 import datetime
 import platform
 import statistics
+import time
 
 from batched_traffic import batch_rate, vector_rate
 
-from stack.settings.run import build_config
+from stack.runs.alone import run_episode
+from stack.runs.batch_episodes import run_batched
+from stack.settings.run import RunConfig, build_config
 from stack.worlds import drivers
 
 SAME_AS_HIGHWAY_ENV = "highway-env-drawn"
@@ -54,6 +65,17 @@ POPULATIONS = (
 BATCH_WORLDS = 64
 
 
+def closed_loop_rates(config: RunConfig, episodes: int) -> tuple[float, float]:
+    """(per world, batch) closed-loop frames per CPU-second of `config`'s first episodes: `episodes`
+    run one at a time, `BATCH_WORLDS` stepped as one batch."""
+    start = time.process_time()
+    alone = sum(run_episode(config, episode).steps for episode in range(episodes))
+    alone_rate = alone / (time.process_time() - start)
+    start = time.process_time()
+    together = sum(result.steps for result in run_batched(config, range(BATCH_WORLDS)))
+    return alone_rate, together / (time.process_time() - start)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--scenario", default="highway-v0")
@@ -61,24 +83,43 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=150)
     parser.add_argument("--intent", type=int, default=1, help="the lane the ego shows it changes into")
     parser.add_argument("--populations", default=",".join(POPULATIONS), help="comma-separated")
+    parser.add_argument("--closed-loop", action="store_true", help="the whole stack's frames")
+    parser.add_argument("--agent", default="mobil", help="with --closed-loop: the agent deciding")
+    parser.add_argument("--episodes", type=int, default=4, help="with --closed-loop: episodes run alone")
     args = parser.parse_args()
     populations = args.populations.split(",")
     if populations[0] != "highway-env":
         populations.insert(0, "highway-env")
-    highways = {name: build_config({}, scenario=args.scenario, traffic=name).highway for name in populations}
-    intent = args.intent
-    for highway in highways.values():
-        vector_rate(highway, 0, 10, intent), batch_rate(highway, 4, 10, intent)
     alone: dict[str, list[float]] = {name: [] for name in populations}
     batched: dict[str, list[float]] = {name: [] for name in populations}
-    for _ in range(args.runs):
-        for name, highway in highways.items():
-            alone[name].append(
-                statistics.mean(vector_rate(highway, w, args.frames, intent) for w in range(3))
-            )
-            batched[name].append(batch_rate(highway, BATCH_WORLDS, args.frames, intent))
+    if args.closed_loop:
+        configs = {
+            name: build_config({}, scenario=args.scenario, traffic=name, planner__agent=args.agent, seed=0)
+            for name in populations
+        }
+        for config in configs.values():
+            run_episode(config, 0)
+        for _ in range(args.runs):
+            for name, config in configs.items():
+                per_world, batch_of = closed_loop_rates(config, args.episodes)
+                alone[name].append(per_world)
+                batched[name].append(batch_of)
+        what = f"closed loop, {args.agent}, {args.episodes} episodes alone"
+    else:
+        highways = {
+            name: build_config({}, scenario=args.scenario, traffic=name).highway for name in populations
+        }
+        for highway in highways.values():
+            vector_rate(highway, 0, 10, args.intent), batch_rate(highway, 4, 10, args.intent)
+        for _ in range(args.runs):
+            for name, highway in highways.items():
+                alone[name].append(
+                    statistics.mean(vector_rate(highway, w, args.frames, args.intent) for w in range(3))
+                )
+                batched[name].append(batch_rate(highway, BATCH_WORLDS, args.frames, args.intent))
+        what = f"traffic alone, intent lane {args.intent}"
     machine = platform.processor() or platform.machine()
-    print(f"{datetime.date.today()} {machine}, {args.scenario}, {args.runs} runs, intent lane {intent}")
+    print(f"{datetime.date.today()} {machine}, {args.scenario}, {args.runs} runs, {what}")
     batch = f"batch of {BATCH_WORLDS} world-frames/CPU-s"
     print(f"| drivers | per world frames/CPU-s | vs highway-env | {batch} | vs highway-env |")
     print("|---|---|---|---|---|")

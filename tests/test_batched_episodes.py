@@ -6,13 +6,17 @@ lane counts; the configs a batch does not run are refused in one line and run on
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
+from stack.fault.truth_ring import TruthRing
 from stack.results.episode_result import EpisodeResult
 from stack.runs.batch_episodes import BATCH_WORLDS, batch_refusal, batches, run_batched
 from stack.runs.episodes import run, run_episode
 from stack.settings.run import build_config
+from stack.sim.batch.traffic import TrafficBatch
 from stack.worlds.scenarios import names as scenario_names
+from tests.helpers import straight_lanes
 
 
 def assert_same_episodes(batched: list[EpisodeResult], alone: list[EpisodeResult]) -> None:
@@ -68,6 +72,43 @@ def test_collisions_are_classified_as_one_world_classifies_them() -> None:
     kinds = [e.collision_kind for e in batched if e.crashed]
     assert kinds and all(kind for kind in kinds)
     assert sum(e.at_fault_collision for e in batched) == sum(e.at_fault_collision for e in alone) > 0
+
+
+def test_a_batch_judges_each_collision_s_fault_from_its_own_truth_as_one_world_does(monkeypatch) -> None:
+    """Blind drivers cut in on MOBIL (episodes of seed 0 that collide): the batch replays R157's
+    reference driver over the truth it kept (`stack.fault.truth_ring`), never running an episode
+    again, and judges as the episode run alone does."""
+    config = build_config({}, "test", scenario="highway-v0", traffic="blind", planner__agent="mobil", seed=0)
+    alone = [run_episode(config, episode) for episode in (6, 33)]
+
+    def run_again(*_: object) -> None:
+        raise AssertionError("the batch ran an episode again to judge it")
+
+    monkeypatch.setattr("stack.runs.batch_episodes.run_episode", run_again)
+    batched = run_batched(config, [6, 33])
+    assert all(e.crashed and e.fault_reason for e in batched)
+    assert_same_episodes(batched, alone)
+
+
+def test_the_truth_ring_says_nothing_of_a_world_it_did_not_see_on_every_tick() -> None:
+    """A world left out of a tick has no history here (its fault is judged by running it again);
+    the others' hold every tick since their reset, the reset frame first, at most 5 s and a frame."""
+    batch = TrafficBatch(build_config({}, "test", scenario="highway-v0").highway, 2)
+    batch.reset([0, 1])
+    ring = TruthRing(2, batch.dt)
+    ring.reset([0, 1], batch.arrays.world_batch(), batch.arrays, batch.time)
+    for tick in range(80):
+        stepped = np.array([True, tick != 70])
+        batch.step(np.zeros(2), np.zeros(2), stepped)
+        ring.record(stepped, batch.arrays.world_batch(), batch.arrays, batch.time)
+    lanes = straight_lanes(4)
+    assert ring.history(1, lanes) is None
+    history = ring.history(0, lanes)
+    assert history is not None and len(history) == round(5.0 / batch.dt) + 1
+    assert history[-1].time == pytest.approx(float(batch.time[0]))
+    ring.reset([1], batch.arrays.world_batch(), batch.arrays, batch.time)
+    (restarted,) = ring.history(1, lanes) or ()
+    assert restarted.time == pytest.approx(float(batch.time[1])) and restarted.ids[0] == batch.arrays.ego[1]
 
 
 def test_a_run_is_the_same_in_batches_and_over_processes() -> None:

@@ -249,7 +249,7 @@ class ClosedLoopBatch:
         if self.causes is not None:
             self.causes.reset(reset, self.batch, self.traffic.time, self.dt)
         if self.metrics is not None:
-            self.metrics.reset(worlds, self.batch, self.traffic.time)
+            self.metrics.reset(worlds, self.batch, self.traffic.arrays, self.traffic.time)
 
     def loaded(self) -> None:
         """What the layers read, anew after worlds were written in place (`stack.batch.loop_copies`)."""
@@ -352,10 +352,11 @@ class ClosedLoopBatch:
         self.crashed |= ended.terminated
         self.truncated |= ended.truncated
         if self.metrics is not None:
-            for world in self.metrics.record(live, batch, traffic.time, self.crashed, control_s):
-                self.metrics.collided(
-                    world, classify_collision(self.world_state(world), bool(changing[world]))
-                )
+            for world in self.metrics.record(
+                live, batch, traffic.arrays, traffic.time, self.crashed, control_s
+            ):
+                crash = self.world_state(world)
+                self.metrics.collided(world, classify_collision(crash, bool(changing[world])), crash.lanes)
         return changing & ~self.changing
 
     def result(self, world: int, episode: int, seed: int) -> EpisodeResult:

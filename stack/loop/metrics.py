@@ -22,8 +22,10 @@ from numba.extending import register_jitable
 
 from common.compiled import Kernel
 from common.neighbours import lateral_extents
-from records import WorldState
+from records import Lane, WorldState
 from records.batch import WorldBatch
+from stack.fault.preventability import Fault
+from stack.fault.truth_ring import TruthRing
 from stack.loop.loop_records import Tick
 from stack.loop.safety_metrics import (
     Collision,
@@ -34,6 +36,7 @@ from stack.loop.safety_metrics import (
     restart,
 )
 from stack.results.episode_measures import EpisodeSamples, lateral_comfort
+from stack.sim.batch.arrays import BatchArrays
 
 
 @dataclass(frozen=True)
@@ -200,12 +203,14 @@ class EpisodeMetricsBatch:
 
     def __init__(self, worlds: int, dt: float) -> None:
         self.worlds, self.dt = worlds, dt
+        self.truth = TruthRing(worlds, dt)
         self.ticks = np.zeros(worlds, dtype=np.int64)
         self.series = {name: np.zeros((worlds, 0)) for name in SERIES}
         self.was_ahead = np.zeros((worlds, 0), dtype=bool)
         self.passed = np.zeros((worlds, 0), dtype=bool)
         self.kept = monitor_measures(worlds)
         self.collision: list[Collision | None] = [None] * worlds
+        self.fault: list[Fault | None] = [None] * worlds
 
     def _room(self, ticks: int, vehicles: int) -> None:
         """Series rows of at least `ticks` samples and passing flags for `vehicles` rows a world."""
@@ -218,26 +223,35 @@ class EpisodeMetricsBatch:
             self.was_ahead = np.pad(self.was_ahead, ((0, 0), (0, more)))
             self.passed = np.pad(self.passed, ((0, 0), (0, more)))
 
-    def reset(self, worlds: Sequence[int], batch: WorldBatch, time: np.ndarray) -> None:
-        """The worlds `worlds` begin an episode at `batch` (the truth) and `time` [s]."""
+    def reset(self, worlds: Sequence[int], batch: WorldBatch, arrays: BatchArrays, time: np.ndarray) -> None:
+        """The worlds `worlds` begin an episode at `batch` (the truth; the traffic's `arrays`) and
+        `time` [s]."""
         rows = np.asarray(worlds, dtype=np.int64)
         self.ticks[rows] = 0
         self.passed[rows] = False
         self.was_ahead[rows] = False
         restart(self.kept, rows)
         for world in rows.tolist():
-            self.collision[world] = None
+            self.collision[world] = self.fault[world] = None
         flags = np.zeros(self.worlds, dtype=bool)
         flags[rows] = True
         self._record_world(flags, batch, time, 0.0)
+        self.truth.reset(worlds, batch, arrays, time)
 
     def record(
-        self, stepped: np.ndarray, batch: WorldBatch, time: np.ndarray, crashed: np.ndarray, control_s: float
+        self,
+        stepped: np.ndarray,
+        batch: WorldBatch,
+        arrays: BatchArrays,
+        time: np.ndarray,
+        crashed: np.ndarray,
+        control_s: float,
     ) -> list[int]:
-        """One tick of the worlds flagged `stepped`, at `batch` (the truth) and `time` [s], whose
-        control step took `control_s` seconds of wall-clock time for them all; the worlds whose ego
-        `crashed` on it for the first time: classify each (`collided`)."""
+        """One tick of the worlds flagged `stepped`, at `batch` (the truth; the traffic's `arrays`)
+        and `time` [s], whose control step took `control_s` seconds of wall-clock time for them
+        all; the worlds whose ego `crashed` on it for the first time: classify each (`collided`)."""
         self._record_world(stepped, batch, time, control_s / max(int(stepped.sum()), 1))
+        self.truth.record(stepped, batch, arrays, time)
         reach = (batch.lane_width + lateral_extents(batch)) / 2
         leaders_ahead_batch(
             stepped, batch.columns(), batch.heading, batch.lane_heading, reach, batch.lane_width,
@@ -245,9 +259,12 @@ class EpisodeMetricsBatch:
         )  # fmt: skip
         return [w for w in np.flatnonzero(stepped & crashed).tolist() if self.collision[w] is None]
 
-    def collided(self, world: int, collision: Collision) -> None:
-        """World `world`'s ego collided: `collision` (`classify_collision` of its crash frame)."""
+    def collided(self, world: int, collision: Collision, lanes: tuple[Lane, ...]) -> None:
+        """World `world`'s ego collided: `collision` (`classify_collision` of its crash frame on the
+        road of `lanes`), judged as one world judges it over the truth kept (`TruthRing.judged`;
+        not judged where none is)."""
         self.collision[world] = collision
+        self.fault[world] = self.truth.judged(world, collision.kind, collision.other, lanes)
 
     def _record_world(self, flags: np.ndarray, batch: WorldBatch, time: np.ndarray, control_s: float) -> None:
         """The worlds flagged in `flags`, one sample more: the recorder's series and passed cars."""
@@ -287,6 +304,6 @@ class EpisodeMetricsBatch:
 
     def measured(self, world: int, departed: bool) -> SafetyMeasures:
         """`SafetyMonitor.measured` of world `world`'s episode so far, which `departed` the road or
-        not (`ClosedLoopBatch.departed`), its collision's fault by the contact's geometry alone
-        (the batch keeps no history to replay: `stack.runs.batch_episodes` judges it)."""
-        return SafetyMeasures.of(departed, self.collision[world], None)
+        not (`ClosedLoopBatch.departed`), its collision's fault as judged (by the contact's geometry
+        alone where it was not: `stack.runs.batch_episodes` judges it then)."""
+        return SafetyMeasures.of(departed, self.collision[world], self.fault[world])

@@ -1,6 +1,6 @@
 """One seeded episode driven alone, on the per-world loop: `run_episode` and its parts. What a run
 does episode by episode (`stack.runs.episodes`) and what a batch runs again alone to judge a
-collision (`stack.runs.batch_episodes`)."""
+collision it has no history of (`stack.runs.batch_episodes`)."""
 
 from __future__ import annotations
 

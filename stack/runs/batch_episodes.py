@@ -129,11 +129,11 @@ def run_batched(
 
 
 def _judged(config: RunConfig, result: EpisodeResult) -> EpisodeResult:
-    """`result` with its collision's fault judged as the per-world loop judges it: that loop
-    replays R157's reference driver over the last seconds of the truth it keeps
-    (`stack.fault.preventability`); the batch keeps no such history (memory and a per-tick cost for every
-    world, for a rare event), so the episode is run again alone, which reproduces it exactly."""
-    if not result.crashed:
+    """`result` with its collision's fault judged as the per-world loop judges it: the batch judges
+    it from the truth it keeps (`stack.fault.truth_ring`); where it could not (`fault_reason`
+    empty: a world not stepped on a tick it kept), the episode is run again alone, which
+    reproduces it exactly."""
+    if not result.crashed or result.fault_reason:
         return result
     alone = run_episode(config, result.episode)
     return replace(result, at_fault_collision=alone.at_fault_collision, fault_reason=alone.fault_reason)

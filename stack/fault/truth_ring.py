@@ -1,0 +1,117 @@
+"""The truth of the last `REPLAY_S` seconds of a batch of worlds, so a collision's fault is judged
+in the batch as one world judges it (`stack.fault.preventability.judge` over `WorldHistory`),
+without running the episode again: one entry a tick, the batch's truth (`records.WorldBatch`, made
+anew each tick and never changed) and what a `WorldState` has beyond it (positions, crashed flags,
+the ego's row in road order, its steering, each world's clock). Bounded memory: 76 ticks of a batch
+of 64 worlds of 60 vehicles, about 30 MB."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from records import Lane, WorldState
+from records.batch import WorldBatch
+from stack.fault.preventability import REPLAY_S, Fault, judge
+from stack.sim.batch.arrays import BatchArrays
+
+
+@dataclass(frozen=True)
+class _Tick:
+    """One tick of the batch as the ring keeps it: which worlds it stepped (or reset)."""
+
+    stepped: np.ndarray
+    batch: WorldBatch
+    x: np.ndarray
+    y: np.ndarray
+    crashed: np.ndarray
+    ego: np.ndarray
+    steering: np.ndarray
+    time: np.ndarray
+
+
+class TruthRing:
+    """The last `REPLAY_S` seconds (plus the frame now) of the batch's truth: `reset` at worlds'
+    reset, `record` after every tick, `history(world, lanes)` as the per-world `WorldHistory` holds
+    it, or None where this ring cannot say (the world was not stepped on a tick it kept since its
+    reset: the caller judges such a world otherwise)."""
+
+    def __init__(self, worlds: int, dt: float) -> None:
+        self.dt = dt
+        self.ticks: deque[_Tick] = deque(maxlen=round(REPLAY_S / dt) + 1)
+        self.started = np.zeros(worlds, dtype=np.int64)
+        self.recorded = 0
+        """Ticks recorded since the ring was made; `started[w]`: how many when world w was reset."""
+
+    def reset(self, worlds: Sequence[int], batch: WorldBatch, arrays: BatchArrays, time: np.ndarray) -> None:
+        """The worlds `worlds` begin an episode at `batch`: their history restarts with it."""
+        flags = np.zeros(len(self.started), dtype=bool)
+        flags[list(worlds)] = True
+        self.started[flags] = self.recorded
+        self.record(flags, batch, arrays, time)
+
+    def record(self, stepped: np.ndarray, batch: WorldBatch, arrays: BatchArrays, time: np.ndarray) -> None:
+        """One tick of the worlds flagged `stepped`, at `batch` (the truth) and `time` [s]."""
+        worlds = np.arange(len(stepped))
+        self.ticks.append(
+            _Tick(
+                stepped.copy(),
+                batch,
+                arrays.x.copy(),
+                arrays.y.copy(),
+                arrays.crashed.copy(),
+                arrays.ego.copy(),
+                arrays.steering[worlds, arrays.ego],
+                time.copy(),
+            )  # fmt: skip
+        )
+        self.recorded += 1
+
+    def judged(self, world: int, kind: str, other: int | None, lanes: tuple[Lane, ...]) -> Fault | None:
+        """World `world`'s collision of `kind` with the vehicle of id `other` at its last tick,
+        judged as the per-world loop judges it (`judge` over its `history`); None without one."""
+        history = self.history(world, lanes)
+        return None if history is None else judge(kind, other, history, self.dt)
+
+    def history(self, world: int, lanes: tuple[Lane, ...]) -> list[WorldState] | None:
+        """World `world`'s ticks kept since its reset, oldest first, as the per-world loop's
+        snapshots (`stack.sim.highway.snapshot`) on the road of `lanes` (its segment's lanes)."""
+        first = self.recorded - len(self.ticks)
+        kept = [tick for index, tick in enumerate(self.ticks) if first + index >= self.started[world]]
+        if not all(tick.stepped[world] for tick in kept):
+            return None
+        return [_world_state(tick, world, lanes) for tick in kept]
+
+
+def _world_state(tick: _Tick, world: int, lanes: tuple[Lane, ...]) -> WorldState:
+    """World `world` at `tick` as `stack.sim.highway.snapshot` writes it: row 0 the ego, then the
+    others in road order, ids their places in the road."""
+    batch = tick.batch
+    n, ego = int(batch.count[world]), int(tick.ego[world])
+    ids = np.array([ego, *range(ego), *range(ego + 1, n)])
+    speed, heading = batch.speed[world, :n].copy(), batch.heading[world, :n].copy()
+    velocity = np.stack([speed * np.cos(heading), speed * np.sin(heading)], axis=1)
+    beta = math.atan(0.5 * math.tan(float(tick.steering[world])))
+    lateral = float(speed[0] * math.sin(beta))
+    return WorldState(
+        time=float(tick.time[world]),
+        ids=ids,
+        position=np.stack([tick.x[world, ids], tick.y[world, ids]], axis=1),
+        heading=heading,
+        speed=speed,
+        velocity=velocity,
+        lane=batch.lane[world, :n].astype(int),
+        length=batch.length[world, :n].copy(),
+        width=batch.width[world, :n].copy(),
+        s=batch.s[world, :n].copy(),
+        d=batch.d[world, :n].copy(),
+        crashed=tick.crashed[world, ids].astype(bool),
+        lanes=lanes,
+        lane_offsets=batch.lane_offsets[world, : int(batch.lanes_count[world])].copy(),
+        ego_lateral_speed=lateral,
+        ego_yaw_rate=lateral / (float(batch.length[world, 0]) / 2),
+    )
