@@ -67,7 +67,7 @@ class TruthRing:
                 arrays.ego.copy(),
                 arrays.steering[worlds, arrays.ego],
                 time.copy(),
-            )  # fmt: skip
+            )
         )
         self.recorded += 1
 
