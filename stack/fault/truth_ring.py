@@ -2,8 +2,8 @@
 in the batch as one world judges it (`stack.fault.preventability.judge` over `WorldHistory`),
 without running the episode again: one entry a tick, the batch's truth (`records.WorldBatch`, made
 anew each tick and never changed) and what a `WorldState` has beyond it (positions, crashed flags,
-the ego's row in road order, its steering, each world's clock). Bounded memory: 76 ticks of a batch
-of 64 worlds of 60 vehicles, about 30 MB."""
+the ego's row in road order, its steering, each world's clock). Bounded memory: 76 ticks, measured
+18.5 MB for 64 `highway-v0` worlds (51 vehicles a world), 43 MB for 64 `random` ones (120)."""
 
 from __future__ import annotations
 
