@@ -6,7 +6,7 @@ only the worlds with vehicles in `active` (a count per world, 0 for a world left
 
 from __future__ import annotations
 
-from functools import cache
+from functools import cache, lru_cache
 
 import numpy as np
 from highway_env.road.lane import StraightLane
@@ -345,22 +345,13 @@ def collide(arrays: BatchArrays, active: np.ndarray, dt: float) -> None:
     """highway-env's collision test on the candidate pairs, in stock's order (world by world,
     i < j): impacts for the next step, crash flags now."""
     candidates = collision_candidates(
-        active,
-        arrays.x,
-        arrays.y,
-        arrays.heading,
-        arrays.speed,
-        arrays.length,
-        arrays.width,
-        arrays.diagonal,
-        arrays.lane_columns["direction"],
-        dt,
-        BROAD_PHASE_MARGIN,
-        SEPARATION_MARGIN,
-    )
+        active, arrays.x, arrays.y, arrays.heading, arrays.speed, arrays.length, arrays.width,
+        arrays.diagonal, arrays.lane_columns["direction"], dt, BROAD_PHASE_MARGIN, SEPARATION_MARGIN,
+    )  # fmt: skip
     for world, i, j in candidates.tolist():
-        first, second = _body(arrays, world, i), _body(arrays, world, j)
-        intersecting, will_intersect, transition = first._is_colliding(second, dt)
+        intersecting, will_intersect, transition = _tested(
+            _footprint(arrays, world, i), _footprint(arrays, world, j), dt
+        )
         if will_intersect:
             _set_impact(arrays, world, i, transition / 2)
             _set_impact(arrays, world, j, -transition / 2)
@@ -368,16 +359,22 @@ def collide(arrays: BatchArrays, active: np.ndarray, dt: float) -> None:
             arrays.crashed[world, i] = arrays.crashed[world, j] = True
 
 
-def _body(arrays: BatchArrays, world: int, row: int) -> Body:
-    columns = arrays.columns
-    return Body(
-        np.array([columns["x"][world, row], columns["y"][world, row]]),
-        float(columns["heading"][world, row]),
-        float(columns["speed"][world, row]),
-        float(columns["length"][world, row]),
-        float(columns["width"][world, row]),
-        float(columns["diagonal"][world, row]),
+def _footprint(arrays: BatchArrays, world: int, row: int) -> tuple[float, ...]:
+    """What highway-env's collision test reads of the vehicle in `row` of `world`: x, y [m],
+    heading [rad], speed [m/s], length, width and diagonal [m]."""
+    return tuple(
+        float(arrays.columns[name][world, row])
+        for name in ("x", "y", "heading", "speed", "length", "width", "diagonal")
     )
+
+
+@lru_cache(maxsize=4096)
+def _tested(first: tuple[float, ...], second: tuple[float, ...], dt: float) -> tuple[bool, bool, np.ndarray]:
+    """`RoadObject._is_colliding` of two `_footprint`s over `dt` [s], remembered: a function of
+    them alone, and wrecks that stand touching are tested with the same values frame after frame
+    (the test in Python is most of what a population whose drivers crash costs a batch)."""
+    body, other = (Body(np.array(f[:2]), *f[2:]) for f in (first, second))
+    return body._is_colliding(other, dt)
 
 
 def _set_impact(arrays: BatchArrays, world: int, row: int, impact: np.ndarray) -> None:
