@@ -7,7 +7,6 @@ the ego's row in road order, its steering, each world's clock). Bounded memory: 
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -18,6 +17,7 @@ from records import Lane, WorldState
 from records.batch import WorldBatch
 from stack.fault.preventability import REPLAY_S, Fault, judge
 from stack.sim.batch.arrays import BatchArrays
+from stack.sim.highway import kinematic_body_rates
 
 
 @dataclass(frozen=True)
@@ -95,8 +95,9 @@ def _world_state(tick: _Tick, world: int, lanes: tuple[Lane, ...]) -> WorldState
     ids = np.array([ego, *range(ego), *range(ego + 1, n)])
     speed, heading = batch.speed[world, :n].copy(), batch.heading[world, :n].copy()
     velocity = np.stack([speed * np.cos(heading), speed * np.sin(heading)], axis=1)
-    beta = math.atan(0.5 * math.tan(float(tick.steering[world])))
-    lateral = float(speed[0] * math.sin(beta))
+    lateral, yaw_rate = kinematic_body_rates(
+        speed[0], float(tick.steering[world]), float(batch.length[world, 0])
+    )
     return WorldState(
         time=float(tick.time[world]),
         ids=ids,
@@ -113,5 +114,5 @@ def _world_state(tick: _Tick, world: int, lanes: tuple[Lane, ...]) -> WorldState
         lanes=lanes,
         lane_offsets=batch.lane_offsets[world, : int(batch.lanes_count[world])].copy(),
         ego_lateral_speed=lateral,
-        ego_yaw_rate=lateral / (float(batch.length[world, 0]) / 2),
+        ego_yaw_rate=yaw_rate,
     )

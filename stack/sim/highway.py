@@ -270,12 +270,19 @@ def _on_axes(lane: StraightLane) -> bool:
 
 def _body_rates(vehicle: Vehicle) -> tuple[float, float]:
     """(lateral speed [m/s], yaw rate [rad/s]) in the body frame: the dynamic bicycle's states, or
-    the kinematic bicycle's v sin(beta) and v sin(beta) / (L/2) for its last steering."""
+    the kinematic bicycle's (`kinematic_body_rates`) for its last steering."""
     if isinstance(vehicle, BicycleVehicle):
         return float(vehicle.lateral_speed), float(vehicle.yaw_rate)
-    beta = np.arctan(0.5 * np.tan(float(vehicle.action.get("steering", 0.0))))
-    lateral = float(vehicle.speed * np.sin(beta))
-    return lateral, lateral / (vehicle.LENGTH / 2)
+    return kinematic_body_rates(vehicle.speed, float(vehicle.action.get("steering", 0.0)), vehicle.LENGTH)
+
+
+def kinematic_body_rates(speed: float, steering: float, length: float) -> tuple[float, float]:
+    """The kinematic bicycle's (lateral speed [m/s], yaw rate [rad/s]) in the body frame at `speed`
+    [m/s] and `steering` [rad], `length` [m] long: v sin(beta) and v sin(beta) / (L/2), beta the
+    slip angle arctan(tan(steering) / 2)."""
+    beta = np.arctan(0.5 * np.tan(steering))
+    lateral = float(speed * np.sin(beta))
+    return lateral, lateral / (length / 2)
 
 
 def _lane_frame(lane: AbstractLane, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
