@@ -31,12 +31,27 @@ def never_abort(world: WorldState, lane: int, target: int) -> bool:
     return False
 
 
+SETTLED_OFFSET = 0.05
+"""How close [m] to its lane's centre the reference must be for a lane change to start from it."""
+
+
 @register_jitable
-def lane_change_target(lane: int, shift: int, lanes_count: int, speed: float, min_speed: float) -> int:
+def settled(d_reference: float, lane_centre: float) -> bool:
+    """Whether the reference's lateral offset `d_reference` [m] has settled on `lane_centre` [m]:
+    not so while an aborted change is still returning, when a new one would start from between
+    lanes with its car possibly still pointing at the lane it gave up."""
+    return abs(d_reference - lane_centre) <= SETTLED_OFFSET
+
+
+@register_jitable
+def lane_change_target(
+    lane: int, shift: int, lanes_count: int, speed: float, min_speed: float, at_centre: bool
+) -> int:
     """The lane a lane change `shift` lanes (-1 left, +1 right, 0 none) from `lane` heads for, or -1
-    when none starts: no shift, off the road, or the ego slower than `min_speed` [m/s]."""
+    when none starts: no shift, off the road, the ego slower than `min_speed` [m/s], or the reference
+    not yet `at_centre` of `lane` (`settled`)."""
     target = lane + shift
-    if shift == 0 or not 0 <= target < lanes_count or speed < min_speed:
+    if shift == 0 or not 0 <= target < lanes_count or speed < min_speed or not at_centre:
         return -1
     return target
 
@@ -105,14 +120,18 @@ class Maneuver:
         (the reference holds the lane until then, so a controller with preview sees it coming),
         from where the reference is now (its offset and lateral speed), so the reference stays
         smooth whatever the car's own tracking error; False when it is STAY, off the road, the
-        ego is slower than `min_speed`, a lane change runs already or `start_time` is past."""
+        ego is slower than `min_speed`, an aborted change is still returning, a lane change runs
+        already or `start_time` is past."""
         speed = float(world.speed[0])
-        target = lane_change_target(self.lane, command.lane_shift, world.lanes_count, speed, self.min_speed)
+        d, d_dot, _ = self.clock.sample(world.time)
+        at_centre = settled(d, float(world.lane_offsets[self.lane]))
+        target = lane_change_target(
+            self.lane, command.lane_shift, world.lanes_count, speed, self.min_speed, at_centre
+        )
         if target < 0:
             return False
         if self.changing_lane or (start_time is not None and start_time < world.time):
             return False
-        d, d_dot, _ = self.clock.sample(world.time)
         distance = float(world.lane_offsets[target]) - d
         self.profile = lane_change(
             world.lane_offsets,

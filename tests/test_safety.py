@@ -172,6 +172,24 @@ def test_after_an_abort_the_cruise_follows_the_abandoned_lane_until_the_ego_is_o
     assert maneuver.reference(home).leaders == ()
 
 
+def test_no_new_change_starts_until_an_aborted_one_has_returned_to_the_lane_centre():
+    """Seed 1063029 of `incident` (MOBIL): a change given up half way was followed a tick later by
+    one to the other side, across the origin lane, from between lanes with the car still pointing
+    at the lane it gave up; braking for a stopped car there, it stood across the lane line and was
+    hit from behind. A new change starts only once the reference is back at the lane centre."""
+    world = scene(2, (0.0, 1), [(-8.0, 0.0), (12.0, 0.0)], speed=20.0, other_speed=30.0)
+    maneuver = Maneuver(world, 4.0, 30.0, should_abort=layer().should_abort)
+    assert maneuver.command(Command.LEFT, world)
+    at = lambda t: type(world)(**{**world.__dict__, "d": np.array([2.5, 0.0, 0.0]), "time": t})  # noqa: E731
+    maneuver.reference(at(1.0))
+    assert not maneuver.changing_lane
+    maneuver.reference(at(1.5))
+    assert not maneuver.command(Command.LEFT, at(1.5)), "still returning: refused"
+    maneuver.reference(at(3.1))
+    assert maneuver.command(Command.LEFT, at(3.1)), "back at the centre 2 s after the abort"
+    assert maneuver.lane_changes == 2
+
+
 def test_a_change_whose_footprint_has_left_the_origin_lane_no_longer_follows_that_lane():
     """A car stopped 15 m ahead in the origin lane holds the cruise while the ego still reaches
     into that lane, and no longer once its footprint has left it (else the braking slows the

@@ -25,7 +25,7 @@ from common.neighbours import VehicleRows, footprint_across, lane_beyond, reache
 from controllers.emergency import braked_acceleration, braked_before, holds_braking, leader_braking
 from controllers.lateral import LateralMemory, lateral_steering
 from controllers.leaders import FoundLeaders, LeaderQuery, LeaderRows, leaders_in_rows, road_to_leave
-from controllers.maneuver import lane_change_target, left_origin
+from controllers.maneuver import lane_change_target, left_origin, settled
 from controllers.pid import PIDMemory, pid_output
 from controllers.reference import (
     WarpClock,
@@ -121,11 +121,14 @@ def decide(
             outcome[w, 1] = 1
             continue
         ego_speed = speed[w, 0]
-        goal = lane_change_target(lane[w], command - 1, lanes_count[w], ego_speed, settings.min_speed)
+        d0, d_dot, _ = _sample(w, coef, profile, clock, time[w])
+        at_centre = settled(d0, offsets[w, lane[w]])
+        goal = lane_change_target(
+            lane[w], command - 1, lanes_count[w], ego_speed, settings.min_speed, at_centre
+        )
         if goal < 0:
             outcome[w, 2] = 1 if command != STAY else 0
             continue
-        d0, d_dot, _ = _sample(w, coef, profile, clock, time[w])
         distance = offsets[w, goal] - d0
         duration = stretched_duration(
             distance, max(ego_speed, settings.min_speed, 1e-3), settings.duration, settings.tan_max_course
