@@ -54,7 +54,7 @@ def test_every_benchmark_script_runs_on_a_tiny_budget(tmp_path):
     assert "| validation episodes |" in parts and "| **total** |" in parts
     assert "bit for bit: True" in run("batched_validation.py", "--episodes", "2")
     assert "| batch 4 |" in run("batched_decisions.py", "--runs", "1", "--duration", "2", "--sizes", "1,4")
-    assert "of them between floors of stack: 0\n" in run("config_path.py")
+    assert "(beyond the readers of the scenarios and the YAML: 0)\n" in run("config_path.py")
     timed = run(
         "benchmark_time.py", *("--agents", "keep-lane", "--episodes", "1", "--duration", "2", "--jobs", "1")
     )

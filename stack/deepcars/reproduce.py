@@ -17,10 +17,9 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from planner.networks import NET_ARCHS
 from stack.deepcars.report import plot_curves, write_tables
 from stack.deepcars.rows import baselines, deep, lookahead, tabular
-from stack.deepcars.spec import FULL, QUICK, RULES, Budget, Row
+from stack.deepcars.spec import FULL, PAPER_NETWORKS, QUICK, RULES, Budget, Row
 from stack.runtime.interrupts import deferred
 
 __all__ = ["FULL", "QUICK", "Budget", "Row", "lookahead", "reproduce"]
@@ -33,14 +32,14 @@ def reproduce(
     progress: Callable[[str], None] | None = None,
     *,
     budget: Budget | None = None,
-    networks: Sequence[str] = tuple(NET_ARCHS),
+    networks: Sequence[str] = PAPER_NETWORKS,
     variants: Sequence[str] = ("paper",),
 ) -> list[Row]:
     """Train and evaluate every row into `out` (summary.json, results.md, the figures), under each
     rule set of `variants` in turn. Each finished row is written at once (summary `state`
     running); Ctrl-C keeps the rows finished (`state` interrupted), none raises KeyboardInterrupt.
 
-    `budget` defaults to `QUICK` or `FULL` by `quick`; `networks` (all of `NET_ARCHS` by default)
+    `budget` defaults to `QUICK` or `FULL` by `quick`; `networks` (`PAPER_NETWORKS` by default)
     narrows the DQN/DDQN rows, for smoke tests."""
     out.mkdir(parents=True, exist_ok=True)
     budget = budget or (QUICK if quick else FULL)

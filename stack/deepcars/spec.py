@@ -57,6 +57,10 @@ PAPER = {
 }
 """The paper's accuracies [%] (Moghadam & Elkaim 2019, section 4)."""
 
+PAPER_NETWORKS = ("shallow", "medium", "deep", "16", "16x16")
+"""The MLPs of the DQN and DDQN rows (`planner.networks.NET_ARCHS`): the paper's sizes and the two
+small ones, not the highway grid's lane network, which reads lanes DeepCars' grid does not have."""
+
 
 @dataclass(frozen=True)
 class Budget:

@@ -24,7 +24,9 @@ SECTIONS = ("highway", "perception")
 """Config sections a scenario may set (perception: only `sensor`)."""
 
 
+@cache
 def names() -> tuple[str, ...]:
+    """The shipped scenarios' names (listed once: validators ask for every name they check)."""
     return tuple(sorted(path.stem for path in FOLDER.glob("*.yaml")))
 
 
