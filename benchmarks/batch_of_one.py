@@ -30,6 +30,7 @@ from stack.runs.kept import kept_agent
 from stack.settings.run import RunConfig, build_config
 from stack.settings.world import HighwayConfig
 from stack.sim.batch.traffic import TrafficBatch
+from stack.sim.batch.world_reading import world_state_of_rows
 from stack.sim.highway import HighwayAdapter, snapshot
 
 
@@ -77,35 +78,16 @@ class BatchOfOne:
 
 def world_of_arrays(batch: TrafficBatch, lanes_count: int) -> WorldState:
     """World 0 of `batch` as the loop reads it, straight from the arrays (`BatchArrays.world_batch`,
-    compiled), on a road of straight lanes (highway-v0's): what `snapshot` makes of the objects."""
+    compiled; `world_state_of_rows`), on a road of straight lanes (highway-v0's): what `snapshot`
+    makes of the objects."""
     arrays = batch.arrays
-    rows = arrays.world_batch()
-    n, ego = int(arrays.count[0]), int(arrays.ego[0])
-    ids = np.array([ego, *range(ego), *range(ego + 1, n)])
-    heading, speed = rows.heading[0, :n], rows.speed[0, :n]
-    velocity = np.stack([speed * np.cos(heading), speed * np.sin(heading)], axis=1)
     table = batch._lane_tables[0]
     assert table is not None
-    beta = np.arctan(0.5 * np.tan(float(arrays.steering[0, ego])))
-    lateral = float(speed[0] * np.sin(beta))
-    return WorldState(
-        time=float(batch.time[0]),
-        ids=ids,
-        position=np.stack([arrays.x[0, ids], arrays.y[0, ids]], axis=1),
-        heading=heading,
-        speed=speed,
-        velocity=velocity,
-        lane=rows.lane[0, :n],
-        length=rows.length[0, :n],
-        width=rows.width[0, :n],
-        s=rows.s[0, :n],
-        d=rows.d[0, :n],
-        crashed=arrays.crashed[0, ids].astype(bool),
-        lanes=tuple(table.lanes[:lanes_count]),
-        lane_offsets=rows.lane_offsets[0, :lanes_count],
-        ego_lateral_speed=lateral,
-        ego_yaw_rate=lateral / (float(rows.length[0, 0]) / 2),
-    )
+    ego = int(arrays.ego[0])
+    return world_state_of_rows(
+        arrays.world_batch(), 0, arrays.x, arrays.y, arrays.crashed, ego, float(arrays.steering[0, ego]),
+        float(batch.time[0]), tuple(table.lanes[:lanes_count]),
+    )  # fmt: skip
 
 
 def episodes_cpu(config: RunConfig, plants: dict[str, object], seeds: list[int]) -> tuple[dict, int, bool]:

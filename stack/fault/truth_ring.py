@@ -17,7 +17,7 @@ from records import Lane, WorldState
 from records.batch import WorldBatch
 from stack.fault.preventability import REPLAY_S, Fault, judge
 from stack.sim.batch.arrays import BatchArrays
-from stack.sim.highway import kinematic_body_rates
+from stack.sim.batch.world_reading import world_state_of_rows
 
 
 @dataclass(frozen=True)
@@ -79,7 +79,7 @@ class TruthRing:
 
     def history(self, world: int, lanes: tuple[Lane, ...]) -> list[WorldState] | None:
         """World `world`'s ticks kept since its reset, oldest first, as the per-world loop's
-        snapshots (`stack.sim.highway.snapshot`) on the road of `lanes` (its segment's lanes)."""
+        snapshots (`world_state_of_rows`) on the road of `lanes` (its segment's lanes)."""
         first = self.recorded - len(self.ticks)
         kept = [tick for index, tick in enumerate(self.ticks) if first + index >= self.started[world]]
         if not all(tick.stepped[world] for tick in kept):
@@ -88,31 +88,6 @@ class TruthRing:
 
 
 def _world_state(tick: _Tick, world: int, lanes: tuple[Lane, ...]) -> WorldState:
-    """World `world` at `tick` as `stack.sim.highway.snapshot` writes it: row 0 the ego, then the
-    others in road order, ids their places in the road."""
-    batch = tick.batch
-    n, ego = int(batch.count[world]), int(tick.ego[world])
-    ids = np.array([ego, *range(ego), *range(ego + 1, n)])
-    speed, heading = batch.speed[world, :n].copy(), batch.heading[world, :n].copy()
-    velocity = np.stack([speed * np.cos(heading), speed * np.sin(heading)], axis=1)
-    lateral, yaw_rate = kinematic_body_rates(
-        speed[0], float(tick.steering[world]), float(batch.length[world, 0])
-    )
-    return WorldState(
-        time=float(tick.time[world]),
-        ids=ids,
-        position=np.stack([tick.x[world, ids], tick.y[world, ids]], axis=1),
-        heading=heading,
-        speed=speed,
-        velocity=velocity,
-        lane=batch.lane[world, :n].astype(int),
-        length=batch.length[world, :n].copy(),
-        width=batch.width[world, :n].copy(),
-        s=batch.s[world, :n].copy(),
-        d=batch.d[world, :n].copy(),
-        crashed=tick.crashed[world, ids].astype(bool),
-        lanes=lanes,
-        lane_offsets=batch.lane_offsets[world, : int(batch.lanes_count[world])].copy(),
-        ego_lateral_speed=lateral,
-        ego_yaw_rate=yaw_rate,
-    )
+    """World `world` at `tick` as the per-world loop's snapshot (`world_state_of_rows`)."""
+    ego, steering, time = int(tick.ego[world]), float(tick.steering[world]), float(tick.time[world])
+    return world_state_of_rows(tick.batch, world, tick.x, tick.y, tick.crashed, ego, steering, time, lanes)

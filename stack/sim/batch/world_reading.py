@@ -1,6 +1,7 @@
 """One world's highway-env objects as the batch's rows and back: `read_world` reads a spawned road
 of one segment (`stack.sim.batch.through_road` a road of several) into the columns
-`BatchArrays.load` takes, `road_of` builds the objects again from a world's columns."""
+`BatchArrays.load` takes, `road_of` builds the objects again from a world's columns, and
+`world_state_of_rows` makes the loop's `WorldState` of a world straight from the rows."""
 
 from __future__ import annotations
 
@@ -12,6 +13,8 @@ from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
+from records import Lane, WorldState
+from records.batch import WorldBatch
 from stack.sim.batch.arrays import (
     CLASSES,
     DRIVER_LAWS,
@@ -25,6 +28,7 @@ from stack.sim.batch.arrays import (
 )
 from stack.sim.drivers import NO_HABITS, DriverHabits, habits_of
 from stack.sim.fast_road import LaneIndex
+from stack.sim.highway import kinematic_body_rates
 from stack.sim.vector.lanes import LaneTable
 
 
@@ -145,3 +149,43 @@ def road_of(
         vehicle.impact = np.array([value["impact_x"], value["impact_y"]]) if value["impacted"] else None
         road.vehicles.append(vehicle)
     return road.vehicles
+
+
+def world_state_of_rows(
+    batch: WorldBatch,
+    world: int,
+    x: np.ndarray,
+    y: np.ndarray,
+    crashed: np.ndarray,
+    ego: int,
+    steering: float,
+    time: float,
+    lanes: tuple[Lane, ...],
+) -> WorldState:
+    """World `world` of the truth `batch` (road order, the ego at its row `ego`), with the traffic's
+    positions `x`, `y` [m] and `crashed` flags (worlds x rows), the ego's `steering` [rad] and the
+    world's `time` [s], on the road of `lanes`, as `stack.sim.highway.snapshot` writes it from the
+    objects: row 0 the ego, then the others in road order, ids their places in the road."""
+    n = int(batch.count[world])
+    ids = np.array([ego, *range(ego), *range(ego + 1, n)])
+    speed, heading = batch.speed[world, :n].copy(), batch.heading[world, :n].copy()
+    velocity = np.stack([speed * np.cos(heading), speed * np.sin(heading)], axis=1)
+    lateral, yaw_rate = kinematic_body_rates(speed[0], steering, float(batch.length[world, 0]))
+    return WorldState(
+        time=time,
+        ids=ids,
+        position=np.stack([x[world, ids], y[world, ids]], axis=1),
+        heading=heading,
+        speed=speed,
+        velocity=velocity,
+        lane=batch.lane[world, :n].astype(int),
+        length=batch.length[world, :n].copy(),
+        width=batch.width[world, :n].copy(),
+        s=batch.s[world, :n].copy(),
+        d=batch.d[world, :n].copy(),
+        crashed=crashed[world, ids].astype(bool),
+        lanes=lanes,
+        lane_offsets=batch.lane_offsets[world, : int(batch.lanes_count[world])].copy(),
+        ego_lateral_speed=lateral,
+        ego_yaw_rate=yaw_rate,
+    )
