@@ -12,9 +12,9 @@ velocity's noise `speed_variance`. A frame: every live track is predicted `dt` a
 those within its gate's reach in a step or two and checks only them) whose Mahalanobis distance
 (4 degrees of freedom) is within the gate is a candidate, and so is a confirmed track's pair with
 a detection outside it but inside its footprint and within the gate along the lane, its vehicle
-changing lane faster than the lateral noise allows (`is_lane_change`: the track's lateral
-covariance is then scaled until the detection is on the gate's edge before the update,
-`manoeuvre_scale`); candidates are assigned greedily,
+changing lane faster than the lateral noise allows (`is_lane_change`), or braking as hard as a crash
+brakes (`is_hard_braking`): the track's lateral or longitudinal covariance is then scaled until
+the detection is on the gate's edge before the update (`manoeuvre_scales`); candidates are assigned greedily,
 nearest first, confirmed tracks before tentative ones (`perception.tracking_search`, `TENTATIVE_RANK`);
 assigned tracks are updated, the others coast; a track
 is confirmed once `confirm_hits` of its last `confirm_frames` frames had a detection, a
@@ -35,8 +35,9 @@ from perception.track_records import CONFIRMED, FREE, TENTATIVE, Measured, Track
 from perception.tracking_pairs import (
     MANOEUVRE_RANK,
     block_distance,
+    is_hard_braking,
     is_lane_change,
-    manoeuvre_scale,
+    manoeuvre_scales,
     settle_twin,
 )
 from perception.tracking_search import assign_greedy_into, fill_buckets, first_at_least, stable_order
@@ -199,7 +200,14 @@ def track_frame(
                 cost = block_distance(a_s, b_s, c_s, det_s, ds, speed[j] - state[t, 1])
                 cost += block_distance(a_d, b_d, c_d, det_d, dd, lateral_speed[j] - state[t, 3])
             gated = cost <= law.gate
-            if not gated and confirmed and is_lane_change(law, tracks, t, found, j, r, rv):
+            if (
+                not gated
+                and confirmed
+                and (
+                    is_lane_change(law, tracks, t, found, j, r, rv)
+                    or is_hard_braking(law, tracks, t, found, j, r, rv, dt)
+                )
+            ):
                 gated = True
                 cost = law.gate + MANOEUVRE_RANK * (abs(dd) / box[t, 1] + 0.5)
             if gated:
@@ -218,7 +226,9 @@ def track_frame(
             continue
         hit[t] = 1
         if status[t] == CONFIRMED:
-            covariance[t, 3:] *= manoeuvre_scale(law, tracks, t, found, j + 1, r, rv)
+            along_scale, across_scale = manoeuvre_scales(law, tracks, t, found, j + 1, r, rv)
+            covariance[t, :3] *= along_scale
+            covariance[t, 3:] *= across_scale
         state[t, 0], state[t, 1], covariance[t, 0], covariance[t, 1], covariance[t, 2] = block_update(
             state[t, 0], state[t, 1], covariance[t, 0], covariance[t, 1], covariance[t, 2],
             s[j + 1], speed[j + 1], r, rv,

@@ -2,10 +2,10 @@
 tracker's per-frame law (`perception.tracking_law.track_frame`). A pair's Mahalanobis distance in
 each direction (`block_distance`, `pair_distances`); a detection a lane change took out of its
 track's gate, still inside its footprint and within the gate along the lane (`is_lane_change`),
-taken after the track's lateral covariance is scaled to put it on the gate's edge
-(`manoeuvre_scale`); and whether two confirmed tracks are one vehicle's (`overlap`,
-`centre_inside`), and which of two such goes, if either (`settle_twin`). Plain functions numba
-compiles into the law."""
+or one a crash's braking took out of it (`is_hard_braking`), taken after the track's lateral or
+longitudinal covariance is scaled to put it on the gate's edge (`manoeuvre_scales`); and whether
+two confirmed tracks are one vehicle's (`overlap`, `centre_inside`), and which of two such goes,
+if either (`settle_twin`). Plain functions numba compiles into the law."""
 
 from __future__ import annotations
 
@@ -20,10 +20,10 @@ if TYPE_CHECKING:
     import numpy as np
 
 MANOEUVRE_RANK = 0.5
-"""A confirmed track's pair with a detection outside its gate but its vehicle changing lane
-(`is_lane_change`) costs the gate plus this times 0.5-1 (nearer its centre across the lane,
-less): after every gated pair of confirmed tracks, before any tentative track's
-(`TENTATIVE_RANK`)."""
+"""A confirmed track's pair with a detection outside its gate but its vehicle changing lane or
+braking hard (`is_lane_change`, `is_hard_braking`) costs the gate plus this times 0.5-1 (nearer
+its centre across the lane, less): after every gated pair of confirmed tracks, before any
+tentative track's (`TENTATIVE_RANK`)."""
 
 
 @register_jitable
@@ -66,13 +66,21 @@ def inside_footprint(tracks: Tracks, t: int, ds: float, dd: float) -> bool:
 
 @register_jitable
 def pair_distances(
-    tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float, lateral_scale: float
+    tracks: Tracks,
+    t: int,
+    found: Measured,
+    j: int,
+    r: float,
+    rv: float,
+    lateral_scale: float,
+    longitudinal_scale: float = 1.0,
 ) -> tuple[float, float]:
     """Squared Mahalanobis distances, along the lane and across it, of detection row `j` of `found`
-    from track `t` (predicted, not yet updated), the track's lateral covariance block taken
-    `lateral_scale` times."""
+    from track `t` (predicted, not yet updated), the track's covariance blocks taken
+    `longitudinal_scale` and `lateral_scale` times."""
     state, covariance = tracks.state, tracks.covariance
-    a_s, b_s, c_s = covariance[t, 0] + r, covariance[t, 1], covariance[t, 2] + rv
+    h = longitudinal_scale
+    a_s, b_s, c_s = h * covariance[t, 0] + r, h * covariance[t, 1], h * covariance[t, 2] + rv
     k = lateral_scale
     a_d, b_d, c_d = k * covariance[t, 3] + r, k * covariance[t, 4], k * covariance[t, 5] + rv
     ds, dd = found.s[j] - state[t, 0], found.d[j] - state[t, 2]
@@ -82,31 +90,41 @@ def pair_distances(
 
 
 MANOEUVRE_SCALE_STEPS = 12
-"""Bisection steps of `manoeuvre_scale` (on the logarithm, from 1 to 1e12: the scale within 1 %)."""
+"""Bisection steps of `manoeuvre_scales` (on the logarithm, from 1 to 1e12: the scale within 1 %)."""
 
 
 @register_jitable
-def manoeuvre_scale(
+def manoeuvre_scales(
     law: TrackerLaw, tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float
-) -> float:
-    """How many times its lateral covariance block track `t` takes before its update by a
-    detection (row `j` of `found`): 1 within the gate; for a confirmed track's detection outside
-    it and inside its footprint, consistent along the lane (`is_lane_change`), the least scale
-    that puts it on the gate's edge. The update then follows the lane change as far as it went, no
-    further: a detection just outside the gate by noise moves the track as an ordinary one, one a
-    sharp lane change took a metre across moves it almost to the detection (a fading-memory
-    filter's scaling, across the lane only)."""
+) -> tuple[float, float]:
+    """How many times its longitudinal and its lateral covariance block track `t` takes before its
+    update by a detection (row `j` of `found`): 1 and 1 within the gate; for a confirmed track's
+    detection outside it and inside its footprint, the least scale of the one block the manoeuvre
+    took it out by that puts it on the gate's edge: the lateral block for a lane change (within
+    the gate along the lane, `is_lane_change`), the longitudinal one for a braking harder than the
+    motion model allows (`is_hard_braking`). The update then follows the manoeuvre as far as it
+    went, no further: a detection just outside the gate by noise moves the track as an ordinary
+    one, one a sharp lane change took a metre across moves it almost to the detection, one a crash
+    took 1.5 m/s slower in a frame moves its speed almost to the detection's (a fading-memory
+    filter's scaling, in one direction)."""
     along, across = pair_distances(tracks, t, found, j, r, rv, 1.0)
     if along + across <= law.gate:
-        return 1.0
+        return 1.0, 1.0
+    longitudinal = along > law.gate
     low, high = 0.0, 12.0 * math.log(10.0)
     for _ in range(MANOEUVRE_SCALE_STEPS):
         middle = (low + high) / 2
-        if along + pair_distances(tracks, t, found, j, r, rv, math.exp(middle))[1] > law.gate:
+        scale = math.exp(middle)
+        if longitudinal:
+            scaled_along, scaled_across = pair_distances(tracks, t, found, j, r, rv, 1.0, scale)
+        else:
+            scaled_along, scaled_across = along, pair_distances(tracks, t, found, j, r, rv, scale)[1]
+        if scaled_along + scaled_across > law.gate:
             low = middle
         else:
             high = middle
-    return math.exp(high)
+    scale = math.exp(high)
+    return (scale, 1.0) if longitudinal else (1.0, scale)
 
 
 @register_jitable
@@ -123,6 +141,32 @@ def is_lane_change(
     if not (inside_footprint(tracks, t, ds, dd) and lateral_speed == lateral_speed):
         return False
     return pair_distances(tracks, t, found, j, r, rv, 1.0)[0] <= law.gate
+
+
+CRASH_DECELERATION_PER_S = 1.0
+"""The hardest braking a tracked vehicle is taken to do, as a share of its speed a second [1/s]:
+a crashed car stops within about a second (highway-env brakes a wreck at its speed per second,
+22 m/s^2 at 22 m/s, seven times the filter's white noise)."""
+
+
+@register_jitable
+def is_hard_braking(
+    law: TrackerLaw, tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float, dt: float
+) -> bool:
+    """Whether detection row `j` of `found`, outside confirmed track `t`'s gate, is its vehicle
+    braking harder than the motion model allows (a crash): inside its footprint, within the gate
+    across the lane, and slower than the track's predicted speed by at most a crash's braking over
+    `dt` [s] (`CRASH_DECELERATION_PER_S`) plus three standard deviations of the speed's innovation.
+    A track that coasts while its wreck stops is seen braking only through new tracks, each
+    confirmed a few frames late and each lagging again (traced: 0.4 s of braking lost, an at-fault
+    collision with a pile-up)."""
+    ds, dd = found.s[j] - tracks.state[t, 0], found.d[j] - tracks.state[t, 2]
+    if not inside_footprint(tracks, t, ds, dd):
+        return False
+    predicted = tracks.state[t, 1]
+    drop = predicted - found.speed[j]
+    bound = CRASH_DECELERATION_PER_S * abs(predicted) * dt + 3 * math.sqrt(tracks.covariance[t, 2] + rv)
+    return 0 < drop <= bound and pair_distances(tracks, t, found, j, r, rv, 1.0)[1] <= law.gate
 
 
 @register_jitable

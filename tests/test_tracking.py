@@ -258,6 +258,51 @@ def test_a_detection_out_of_the_gate_but_inside_the_footprint_moves_the_track_to
     assert world.tracks.state[0, 2] < -0.8 and world.tracks.state[0, 3] < -2.5
 
 
+def crash_braking(speed: float = 22.0, seconds: float = 1.5) -> list[tuple[float, float]]:
+    """(s [m], speed [m/s]) a frame of a car at `speed` from s = 50 m, braking from the first frame
+    as highway-env brakes a wreck (at its speed per second: 22 m/s^2 at 22 m/s), `seconds` long."""
+    rows, s = [], 50.0
+    for _ in range(round(seconds / DT)):
+        speed -= speed * DT
+        s += speed * DT
+        rows.append((s, speed))
+    return rows
+
+
+def moving_confirmed(world: OneWorld, speed: float, s_end: float, frames: int = 20) -> None:
+    """A vehicle on lane 0 at `speed` [m/s], seen `frames` frames up to `s_end` [m]: confirmed in slot 0."""
+    for k in range(frames, 0, -1):
+        world.frame([(s_end - speed * k * DT, 0.0, speed)])
+    assert world.status(0) == CONFIRMED
+
+
+def test_a_crashing_car_keeps_one_track_that_follows_its_braking() -> None:
+    """A car at 22 m/s crashes and brakes at 22 m/s^2 (seven times the filter's white noise), seen
+    at 0.5 m and exact speeds: each detection leaves the gate along the lane but not the car's
+    footprint, and the track takes it, its longitudinal covariance scaled until the detection is
+    on the gate's edge. It keeps its identity and follows the speed within 1.5 m/s (before, it
+    coasted at 21.8 m/s while new tracks, each confirmed a few frames late and lagging again,
+    took the detections: the ego saw the braking 0.4 s late and ran into the wreck)."""
+    world = OneWorld(noise_m=0.5)
+    moving_confirmed(world, 22.0, 50.0)
+    ident = int(world.tracks.ident[0])
+    for s, speed in crash_braking():
+        assert world.frame([(s, 0.0, speed)]) == 1
+        assert world.status(0) == CONFIRMED and int(world.tracks.ident[0]) == ident
+        assert world.tracks.misses[0] == 0 and abs(world.tracks.state[0, 1] - speed) < 1.5
+
+
+def test_a_detection_faster_or_slower_than_a_crash_allows_is_no_braking_of_the_track() -> None:
+    """Inside a tracked car's footprint, a detection 3 m/s faster (no car speeds up so) or 6 m/s
+    slower (no crash brakes so in a frame: a phantom at a slower ego's speed) is not the car's:
+    the track coasts at its speed."""
+    for offset in (3.0, -6.0):
+        world = OneWorld(noise_m=0.5)
+        moving_confirmed(world, 22.0, 50.0)
+        world.frame([(50.0 + 22.0 * DT, 0.0, 22.0 + offset)])
+        assert world.tracks.misses[0] == 1 and world.tracks.state[0, 1] == pytest.approx(22.0, abs=0.1)
+
+
 def test_a_detection_with_no_lateral_position_never_moves_a_track() -> None:
     """A detection across the lane at NaN (a broken sensor row) beside a tracked car is no lane
     change of it: the track coasts, its state finite."""
