@@ -227,8 +227,9 @@ def track_frame(
         hit[t] = 1
         if status[t] == CONFIRMED:
             along_scale, across_scale = manoeuvre_scales(law, tracks, t, found, j + 1, r, rv)
-            covariance[t, :3] *= along_scale
-            covariance[t, 3:] *= across_scale
+            for c in range(3):
+                covariance[t, c] *= along_scale
+                covariance[t, 3 + c] *= across_scale
         state[t, 0], state[t, 1], covariance[t, 0], covariance[t, 1], covariance[t, 2] = block_update(
             state[t, 0], state[t, 1], covariance[t, 0], covariance[t, 1], covariance[t, 2],
             s[j + 1], speed[j + 1], r, rv,
