@@ -158,7 +158,7 @@ def is_hard_braking(
     across the lane, and slower than the track's predicted speed by at most a crash's braking over
     `dt` [s] (`CRASH_DECELERATION_PER_S`) plus three standard deviations of the speed's innovation.
     A track that coasts while its wreck stops is seen braking only through new tracks, each
-    confirmed a few frames late and each lagging again (traced: 0.4 s of braking lost, an at-fault
+    confirmed a few frames late and each lagging again (traced: 0.6 s of braking lost, an at-fault
     collision with a pile-up)."""
     ds, dd = found.s[j] - tracks.state[t, 0], found.d[j] - tracks.state[t, 2]
     if not inside_footprint(tracks, t, ds, dd):
