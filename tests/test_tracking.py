@@ -277,12 +277,12 @@ def moving_confirmed(world: OneWorld, speed: float, s_end: float, frames: int = 
 
 
 def test_a_crashing_car_keeps_one_track_that_follows_its_braking() -> None:
-    """A car at 22 m/s crashes and brakes at 22 m/s^2 (seven times the filter's white noise), seen
-    at 0.5 m and exact speeds: each detection leaves the gate along the lane but not the car's
+    """A car at 22 m/s crashes and brakes at 22 m/s^2 (seven times the filter's white noise),
+    tracked assuming 0.5 m of position noise: each detection leaves the gate along the lane but not the car's
     footprint, and the track takes it, its longitudinal covariance scaled until the detection is
     on the gate's edge. It keeps its identity and follows the speed within 1.5 m/s (before, it
     coasted at 21.8 m/s while new tracks, each confirmed a few frames late and lagging again,
-    took the detections: the ego saw the braking 0.4 s late and ran into the wreck)."""
+    took the detections: the ego saw the braking 0.6 s late and ran into the wreck)."""
     world = OneWorld(noise_m=0.5)
     moving_confirmed(world, 22.0, 50.0)
     ident = int(world.tracks.ident[0])
