@@ -11,17 +11,17 @@ velocity's noise `speed_variance`. A frame: every live track is predicted `dt` a
 (track, detection) pair (the detections sorted along the road and bucketed, so each track finds
 those within its gate's reach in a step or two and checks only them) whose Mahalanobis distance
 (4 degrees of freedom) is within the gate is a candidate, and so is a confirmed track's pair with
-a detection outside it but inside its footprint and within the gate along the lane, its vehicle
-changing lane faster than the lateral noise allows (`is_lane_change`), or braking as hard as a crash
-brakes (`is_hard_braking`): the track's lateral or longitudinal covariance is then scaled until
-the detection is on the gate's edge before the update (`manoeuvre_scales`); candidates are assigned greedily,
-nearest first, confirmed tracks before tentative ones (`perception.tracking_search`, `TENTATIVE_RANK`);
-assigned tracks are updated, the others coast; a track
-is confirmed once `confirm_hits` of its last `confirm_frames` frames had a detection, a
-tentative one is dropped once it can no longer reach that, a confirmed one after `coast_frames`
-frames running without one; a track confirmed over another confirmed track's vehicle settles
-which of the two goes, if either (`settle_twin`); detections left over start tentative tracks in the lowest
-free slots. The frame allocates nothing: its working arrays are slices of two flat buffers the
+a detection outside it but inside its footprint, its vehicle changing lane faster than the
+lateral noise allows (within the gate along the lane) or braking as hard as a crash brakes
+(`is_manoeuvre`): the track's lateral or longitudinal covariance is then scaled until the
+detection is on the gate's edge before the update (`manoeuvre_scales`); candidates are assigned
+greedily, nearest first, confirmed tracks before tentative ones (`perception.tracking_search`,
+`TENTATIVE_RANK`); assigned tracks are updated, the others coast; a track is confirmed once
+`confirm_hits` of its last `confirm_frames` frames had a detection, a tentative one is dropped
+once it can no longer reach that, a confirmed one after `coast_frames` frames running without
+one; a track confirmed over another confirmed track's vehicle settles which of the two goes, if
+either (`settle_twin`); detections left over start tentative tracks in the lowest free slots. The
+frame allocates nothing: its working arrays are slices of two flat buffers the
 caller keeps (`work_size`), so a world costs the same every frame."""
 
 from __future__ import annotations
@@ -35,8 +35,7 @@ from perception.track_records import CONFIRMED, FREE, TENTATIVE, Measured, Track
 from perception.tracking_pairs import (
     MANOEUVRE_RANK,
     block_distance,
-    is_hard_braking,
-    is_lane_change,
+    is_manoeuvre,
     manoeuvre_scales,
     settle_twin,
 )
@@ -200,14 +199,7 @@ def track_frame(
                 cost = block_distance(a_s, b_s, c_s, det_s, ds, speed[j] - state[t, 1])
                 cost += block_distance(a_d, b_d, c_d, det_d, dd, lateral_speed[j] - state[t, 3])
             gated = cost <= law.gate
-            if (
-                not gated
-                and confirmed
-                and (
-                    is_lane_change(law, tracks, t, found, j, r, rv)
-                    or is_hard_braking(law, tracks, t, found, j, r, rv, dt)
-                )
-            ):
+            if not gated and confirmed and is_manoeuvre(law, tracks, t, found, j, r, rv, dt):
                 gated = True
                 cost = law.gate + MANOEUVRE_RANK * (abs(dd) / box[t, 1] + 0.5)
             if gated:

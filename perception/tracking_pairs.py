@@ -1,11 +1,11 @@
 """Which track a detection, or another track, belongs to beyond the plain gate: part of the
 tracker's per-frame law (`perception.tracking_law.track_frame`). A pair's Mahalanobis distance in
-each direction (`block_distance`, `pair_distances`); a detection a lane change took out of its
-track's gate, still inside its footprint and within the gate along the lane (`is_lane_change`),
-or one a crash's braking took out of it (`is_hard_braking`), taken after the track's lateral or
-longitudinal covariance is scaled to put it on the gate's edge (`manoeuvre_scales`); and whether
-two confirmed tracks are one vehicle's (`overlap`, `centre_inside`), and which of two such goes,
-if either (`settle_twin`). Plain functions numba compiles into the law."""
+each direction (`block_distance`, `pair_distances`); a detection a lane change or a crash's
+braking took out of its track's gate, still inside its footprint (`is_manoeuvre`), taken after
+the track's lateral or longitudinal covariance is scaled to put it on the gate's edge
+(`manoeuvre_scales`); and whether two confirmed tracks are one vehicle's (`overlap`,
+`centre_inside`), and which of two such goes, if either (`settle_twin`). Plain functions numba
+compiles into the law."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 
 MANOEUVRE_RANK = 0.5
 """A confirmed track's pair with a detection outside its gate but its vehicle changing lane or
-braking hard (`is_lane_change`, `is_hard_braking`) costs the gate plus this times 0.5-1 (nearer
+braking hard (`is_manoeuvre`) costs the gate plus this times 0.5-1 (nearer
 its centre across the lane, less): after every gated pair of confirmed tracks, before any
 tentative track's (`TENTATIVE_RANK`)."""
 
@@ -100,9 +100,9 @@ def manoeuvre_scales(
     """How many times its longitudinal and its lateral covariance block track `t` takes before its
     update by a detection (row `j` of `found`): 1 and 1 within the gate; for a confirmed track's
     detection outside it and inside its footprint, the least scale of the one block the manoeuvre
-    took it out by that puts it on the gate's edge: the lateral block for a lane change (within
-    the gate along the lane, `is_lane_change`), the longitudinal one for a braking harder than the
-    motion model allows (`is_hard_braking`). The update then follows the manoeuvre as far as it
+    took it out by that puts it on the gate's edge (`is_manoeuvre`): the lateral block for a lane
+    change (within the gate along the lane), the longitudinal one for a braking harder than the
+    motion model allows. The update then follows the manoeuvre as far as it
     went, no further: a detection just outside the gate by noise moves the track as an ordinary
     one, one a sharp lane change took a metre across moves it almost to the detection, one a crash
     took 1.5 m/s slower in a frame moves its speed almost to the detection's (a fading-memory
@@ -127,22 +127,6 @@ def manoeuvre_scales(
     return (scale, 1.0) if longitudinal else (1.0, scale)
 
 
-@register_jitable
-def is_lane_change(
-    law: TrackerLaw, tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float
-) -> bool:
-    """Whether detection row `j` of `found`, outside confirmed track `t`'s gate, is its vehicle
-    changing lane: inside its footprint (`inside_footprint`) and within the gate along the lane
-    (highway vehicles swerve across the road far beyond the motion model's lateral noise, but
-    brake and speed up within its longitudinal one), its lateral speed a number. A phantom, which
-    moves at the ego's speed, on a car more than about 2 m/s slower or faster is none."""
-    ds, dd = found.s[j] - tracks.state[t, 0], found.d[j] - tracks.state[t, 2]
-    lateral_speed = found.lateral_speed[j]
-    if not (inside_footprint(tracks, t, ds, dd) and lateral_speed == lateral_speed):
-        return False
-    return pair_distances(tracks, t, found, j, r, rv, 1.0)[0] <= law.gate
-
-
 CRASH_DECELERATION_PER_S = 1.0
 """The hardest braking a tracked vehicle is taken to do, as a share of its speed a second [1/s]:
 a crashed car stops within about a second (highway-env brakes a wreck at its speed per second,
@@ -150,23 +134,30 @@ a crashed car stops within about a second (highway-env brakes a wreck at its spe
 
 
 @register_jitable
-def is_hard_braking(
+def is_manoeuvre(
     law: TrackerLaw, tracks: Tracks, t: int, found: Measured, j: int, r: float, rv: float, dt: float
 ) -> bool:
-    """Whether detection row `j` of `found`, outside confirmed track `t`'s gate, is its vehicle
-    braking harder than the motion model allows (a crash): inside its footprint, within the gate
-    across the lane, and slower than the track's predicted speed by at most a crash's braking over
-    `dt` [s] (`CRASH_DECELERATION_PER_S`) plus three standard deviations of the speed's innovation.
-    A track that coasts while its wreck stops is seen braking only through new tracks, each
-    confirmed a few frames late and each lagging again (traced: 0.6 s of braking lost, an at-fault
-    collision with a pile-up)."""
+    """Whether detection row `j` of `found`, outside confirmed track `t`'s gate but inside its
+    footprint (`inside_footprint`), is its vehicle manoeuvring beyond the motion model:
+    - changing lane: within the gate along the lane, its lateral speed a number (highway vehicles
+      swerve across the road far beyond the model's lateral noise; a phantom, which moves at the
+      ego's speed, on a car more than about 2 m/s slower or faster is none);
+    - or braking as a crash brakes: within the gate across the lane, and slower than the track's
+      predicted speed by at most a crash's braking over `dt` [s] (`CRASH_DECELERATION_PER_S`) plus
+      three standard deviations of the speed's innovation (a track that coasts while its wreck
+      stops is seen braking only through new tracks, each confirmed a few frames late and each
+      lagging again: traced, 0.6 s of braking lost, an at-fault collision with a pile-up).
+    `manoeuvre_scales` tells the two apart the same way (within the gate along the lane or not)."""
     ds, dd = found.s[j] - tracks.state[t, 0], found.d[j] - tracks.state[t, 2]
     if not inside_footprint(tracks, t, ds, dd):
         return False
+    along, across = pair_distances(tracks, t, found, j, r, rv, 1.0)
+    if along <= law.gate:
+        return found.lateral_speed[j] == found.lateral_speed[j]
     predicted = tracks.state[t, 1]
     drop = predicted - found.speed[j]
     bound = CRASH_DECELERATION_PER_S * abs(predicted) * dt + 3 * math.sqrt(tracks.covariance[t, 2] + rv)
-    return 0 < drop <= bound and pair_distances(tracks, t, found, j, r, rv, 1.0)[1] <= law.gate
+    return 0 < drop <= bound and across <= law.gate
 
 
 @register_jitable
