@@ -1,6 +1,7 @@
 # Two entry points: `make run` (closed loop, default agent) and `make test`; `make test-slow` runs the
 # tests marked slow (pyproject's addopts deselect them by default; a later -m replaces that).
 # Both create or refresh .venv themselves; the stamp re-installs when the package metadata changes.
+# The install resumes a dropped download and tries three times: rerun-sdk alone is a 170 MB wheel.
 # `make test` installs the ray and viz extras too: the suite tests --ray and sweep on a local Ray instance,
 # and --record / drivestack view with rerun.
 PYTHON ?= python3
@@ -18,7 +19,11 @@ PYTEST_WORKERS ?= -n 2 --dist loadfile
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[dev,ray,viz]'
+	for attempt in 1 2 3; do \
+	  $(BIN)/python -m pip install --quiet --resume-retries 20 -c constraints.txt -e '.[dev,ray,viz]' && break; \
+	  test $$attempt -lt 3 || exit 1; \
+	  echo "pip install failed (attempt $$attempt of 3, a dropped download?); retrying in 30 s" >&2; sleep 30; \
+	done
 	touch $(STAMP)
 
 run: $(STAMP)
