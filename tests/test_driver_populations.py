@@ -16,11 +16,12 @@ from stack.apps.cli import app
 from stack.runs.batch_episodes import batch_refusal, run_batched
 from stack.runs.episodes import run, run_episode
 from stack.settings.run import ConfigError, build_config, drivers_of, in_scenario
-from stack.sim.drivers import draw_driver, draws_nothing
+from stack.sim.drivers import KEY_LIMIT, draw_driver, draws_nothing
 from stack.sim.envs import VECTOR_HIGHWAY
 from stack.sim.highway import env_config
 from stack.worlds.drivers import (
     DRIVER_PARAMETERS,
+    HABIT_PARAMETERS,
     POPULATION_RANGES,
     POPULATIONS,
     LogNormal,
@@ -101,7 +102,8 @@ def test_the_calibrated_drivers_are_log_normal_around_the_sources_medians():
 
 def test_the_calibrated_draw_is_the_same_per_seed_and_the_other_populations_draw_as_before():
     """One uniform draw per parameter, whatever the distribution: the same seed, the same drivers;
-    a population of uniform ranges draws exactly `rng.uniform(lows, highs)`."""
+    a population of uniform ranges draws exactly `rng.uniform(lows, highs)` (then its habits' and
+    its key), and leaves the generator where those calls leave it."""
     one = [draw_driver(np.random.default_rng(1015001), ["calibrated"], np.ones(1)) for _ in range(2)]
     assert one[0] == one[1]
     rng, again = np.random.default_rng(1015002), np.random.default_rng(1015002)
@@ -109,6 +111,14 @@ def test_the_calibrated_draw_is_the_same_per_seed_and_the_other_populations_draw
     lows, highs = zip(*(limits(getattr(aggressive, name)) for name in DRIVER_PARAMETERS), strict=True)
     expected = again.uniform(lows, highs).tolist()
     assert list(draw_driver(rng, ["aggressive"], np.ones(1)).values.values()) == expected
+    assert rng.random() == again.random(), "the draw takes as much of the stream as rng.uniform"
+    distracted = POPULATION_RANGES["distracted"]
+    drawn = draw_driver(rng, ["distracted"], np.ones(1))
+    again.random(len(DRIVER_PARAMETERS))
+    habit_lows, habit_highs = zip(*(getattr(distracted, name) for name in HABIT_PARAMETERS), strict=True)
+    expected = again.uniform(habit_lows, habit_highs).tolist()
+    assert [drawn.values[name] for name in HABIT_PARAMETERS] == expected
+    assert drawn.key == int(again.integers(0, KEY_LIMIT)) and rng.random() == again.random()
 
 
 def test_the_aggressive_drivers_are_the_issues():
