@@ -1,6 +1,6 @@
-"""Emergency braking: the plant's full braking authority when comfort braking can no longer avoid a
-collision, applied after whichever controller runs (PID, MPC, a plug-in), and a brake that holds
-the car at standstill instead of reversing it."""
+"""Emergency braking: up to the plant's full braking authority when comfort braking can no longer
+avoid a collision, applied after whichever controller runs (PID, MPC, a plug-in), and a brake that
+holds the car at standstill instead of reversing it."""
 
 from __future__ import annotations
 
@@ -49,21 +49,51 @@ def braked_before(
     return min(acceleration, -min(braked, limits.comfort_deceleration)) if braked > 0 else acceleration
 
 
+EMERGENCY_GRADE = 1.25
+"""How much harder than the steady need a running emergency braking brakes (`emergency_deceleration`)."""
+
+
+@register_jitable
+def emergency_deceleration(
+    limits: BrakingLimits, speed: float, gap: float, leader_speed: float, braking: float
+) -> float:
+    """The deceleration [m/s^2] a running emergency braking applies for a leader `gap` [m] ahead at
+    `leader_speed` [m/s], braking at `braking` [m/s^2], with the ego at `speed` [m/s]: full braking
+    within the stop margin or the trigger TTC; else `EMERGENCY_GRADE` times the steady deceleration
+    that meets it `STOP_MARGIN_M` behind (the constant-speed closing^2 / 2 (gap - margin), or, seen
+    braking, where it stops: `stopping_deceleration`), at most full braking; 0 when it does not
+    close in. Braking harder than the need for seconds only hands the ego's follower the emergency."""
+    if gap < STOP_MARGIN_M and speed > 0:
+        return limits.max_deceleration
+    closing = speed - leader_speed
+    if closing <= 0:
+        return 0.0
+    if gap / closing < limits.trigger_ttc_s:
+        return limits.max_deceleration
+    room = max(gap - STOP_MARGIN_M, 0.01)
+    need = max(closing * closing / (2 * room), stopping_deceleration(speed, gap, leader_speed, braking))
+    return min(EMERGENCY_GRADE * need, limits.max_deceleration)
+
+
 @register_jitable
 def braked_acceleration(
-    limits: BrakingLimits, active: bool, acceleration: float, speed: float, dt: float
+    active: bool, deceleration: float, acceleration: float, speed: float, dt: float
 ) -> float:
-    """`acceleration` [m/s^2], full braking while an emergency is `active`, and never a deceleration
-    that would reverse the car within one tick of `dt` [s]."""
-    commanded = -limits.max_deceleration if active else acceleration
+    """`acceleration` [m/s^2], no more than minus `deceleration` [m/s^2] while an emergency is
+    `active`, and never a deceleration that would reverse the car within one tick of `dt` [s]."""
+    commanded = min(acceleration, -deceleration) if active else acceleration
     return max(commanded, -max(speed, 0.0) / dt)
 
 
 class EmergencyBraking:
-    """Full braking while a leader is closing in and stopping behind it needs more than the comfort
-    deceleration (constant-speed prediction: closing^2 / 2 (gap - margin)) or its time to collision
-    is below `trigger_ttc_s`; released once no leader closes in or is within the stop margin
-    (`holds_braking`). Counts activations (rising edges). Before that, a leader seen braking is
+    """Emergency braking, started when a leader is closing in and stopping behind it needs more than
+    the comfort deceleration (constant-speed prediction: closing^2 / 2 (gap - margin), or where a
+    leader seen braking stops) or its time to collision is below `trigger_ttc_s`; released once no
+    leader closes in or is within the stop margin (`holds_braking`). While it runs it brakes as
+    hard as the hardest leader asks (`emergency_deceleration`: full braking within the trigger TTC
+    or the stop margin, else `EMERGENCY_GRADE` times the steady need, re-read every tick), so a
+    leader braking to a stop 50 m ahead is not met with seconds of full braking in front of the
+    ego's own follower. Counts activations (rising edges). Before that, a leader seen braking is
     braked for once stopping behind where it stops needs more than `ANTICIPATION_ONSET_MPS2`
     (`braked_before`: partial braking, not counted).
 
@@ -133,7 +163,16 @@ class EmergencyBraking:
             acceleration = braked_before(
                 self.limits, acceleration, speed, leader.gap, leader.speed, braking.get(leader.vehicle, 0.0)
             )
-        acceleration = braked_acceleration(self.limits, self.active, acceleration, speed, dt)
+        deceleration = 0.0
+        if self.active:
+            for leader in leaders:
+                deceleration = max(
+                    deceleration,
+                    emergency_deceleration(
+                        self.limits, speed, leader.gap, leader.speed, braking.get(leader.vehicle, 0.0)
+                    ),
+                )
+        acceleration = braked_acceleration(self.active, deceleration, acceleration, speed, dt)
         if acceleration == actuation.acceleration:
             return actuation
         return Actuation(acceleration=acceleration, steering=actuation.steering)

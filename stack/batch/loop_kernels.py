@@ -22,7 +22,13 @@ from numba import njit
 from common.compiled import Kernel, clip
 from common.longitudinal import BrakingLimits, gap_acceleration, needs_full_braking
 from common.neighbours import VehicleRows, footprint_across, lane_beyond, reaches_lane
-from controllers.emergency import braked_acceleration, braked_before, holds_braking, leader_braking
+from controllers.emergency import (
+    braked_acceleration,
+    braked_before,
+    emergency_deceleration,
+    holds_braking,
+    leader_braking,
+)
 from controllers.lateral import LateralMemory, lateral_steering
 from controllers.leaders import FoundLeaders, LeaderQuery, LeaderRows, leaders_in_rows, road_to_leave
 from controllers.maneuver import lane_change_target, left_origin, settled
@@ -334,9 +340,14 @@ def emergency_acceleration(
                 flags[1] += 1
                 flags[2] = rows[k]
                 break
+    deceleration = 0.0
     for k in range(leaders):
         acceleration = braked_before(limits, acceleration, speed, gaps[k], speeds[k], braking[k])
-    return braked_acceleration(limits, flags[0] != 0, acceleration, speed, dt)
+        if flags[0] != 0:
+            deceleration = max(
+                deceleration, emergency_deceleration(limits, speed, gaps[k], speeds[k], braking[k])
+            )
+    return braked_acceleration(flags[0] != 0, deceleration, acceleration, speed, dt)
 
 
 @Kernel
