@@ -28,13 +28,19 @@ def leader_braking(
     return slowing, min(slowing, previous_slowing)
 
 
+RELEASE_FRACTION = 0.5
+"""A running emergency braking is released once it would brake at most this share of the comfort
+deceleration (`holds_braking`): comfort braking then has the need well in hand."""
+
+
 @register_jitable
-def holds_braking(speed: float, gap: float, leader_speed: float) -> bool:
-    """Whether an emergency braking goes on for a leader `gap` [m] ahead at `leader_speed` [m/s]
-    with the ego at `speed` [m/s]: while the ego closes in on it, or is within the stop margin of it
-    (a car cutting in across the ego's front, a little faster than the ego, still reaches it
-    sideways: released at once, the ego would fall back at only the cruise's braking)."""
-    return speed > leader_speed or (gap < STOP_MARGIN_M and speed > 0)
+def holds_braking(limits: BrakingLimits, deceleration: float) -> bool:
+    """Whether an emergency braking goes on when the hardest leader asks `deceleration` [m/s^2] of
+    it (`emergency_deceleration`): while that is more than `RELEASE_FRACTION` of the comfort
+    deceleration. A car cutting in across the ego's front within the stop margin, a little faster
+    than the ego, still asks full braking (it reaches the ego sideways: released at once, the ego
+    fell back at only the cruise's braking)."""
+    return deceleration > RELEASE_FRACTION * limits.comfort_deceleration
 
 
 @register_jitable
@@ -88,14 +94,14 @@ def braked_acceleration(
 class EmergencyBraking:
     """Emergency braking, started when a leader is closing in and stopping behind it needs more than
     the comfort deceleration (constant-speed prediction: closing^2 / 2 (gap - margin), or where a
-    leader seen braking stops) or its time to collision is below `trigger_ttc_s`; released once no
-    leader closes in or is within the stop margin (`holds_braking`). While it runs it brakes as
-    hard as the hardest leader asks (`emergency_deceleration`: full braking within the trigger TTC
-    or the stop margin, else `EMERGENCY_GRADE` times the steady need, re-read every tick), so a
-    leader braking to a stop 50 m ahead is not met with seconds of full braking in front of the
-    ego's own follower. Counts activations (rising edges). Before that, a leader seen braking is
-    braked for once stopping behind where it stops needs more than `ANTICIPATION_ONSET_MPS2`
-    (`braked_before`: partial braking, not counted).
+    leader seen braking stops) or its time to collision is below `trigger_ttc_s`. While it runs it
+    brakes as hard as the hardest leader asks (`emergency_deceleration`: full braking within the
+    trigger TTC or the stop margin, else `EMERGENCY_GRADE` times the steady need, re-read every
+    tick), so a leader braking to a stop 50 m ahead is not met with seconds of full braking in
+    front of the ego's own follower; it is released once that asks at most `RELEASE_FRACTION` of
+    the comfort deceleration (`holds_braking`). Counts activations (rising edges). Before that, a
+    leader seen braking is braked for once stopping behind where it stops needs more than
+    `ANTICIPATION_ONSET_MPS2` (`braked_before`: partial braking, not counted).
 
     The plant's braking authority is highway-env's ContinuousAction range, +-5 m/s^2 by default:
     the plant is left as highway-env defines it, so `max_deceleration` cannot exceed it."""
@@ -131,9 +137,15 @@ class EmergencyBraking:
                 return True
         return False
 
-    def holds(self, speed: float, leaders: tuple[Neighbour, ...]) -> bool:
-        """Whether a running emergency braking goes on (`holds_braking` for some leader)."""
-        return any(holds_braking(speed, leader.gap, leader.speed) for leader in leaders)
+    def deceleration(self, speed: float, leaders: tuple[Neighbour, ...], braking: dict[int, float]) -> float:
+        """The deceleration [m/s^2] the hardest of `leaders` asks of a running emergency braking
+        (`emergency_deceleration`; `braking[vehicle]`: a leader's braking seen [m/s^2])."""
+        limits = self.limits
+        asked = (
+            emergency_deceleration(limits, speed, leader.gap, leader.speed, braking.get(leader.vehicle, 0.0))
+            for leader in leaders
+        )
+        return max(asked, default=0.0)
 
     def apply(
         self, actuation: Actuation, speed: float, leaders: tuple[Neighbour, ...], dt: float
@@ -152,26 +164,20 @@ class EmergencyBraking:
         braking = {vehicle: rates[1] for vehicle, rates in seen.items()}
         self.speeds = {leader.vehicle: leader.speed for leader in leaders}
         self.slowing = {vehicle: rates[0] for vehicle, rates in seen.items()}
+        deceleration = 0.0
         if self.active:
-            self.active = self.holds(speed, leaders)
+            deceleration = self.deceleration(speed, leaders, braking)
+            self.active = holds_braking(self.limits, deceleration)
             self.cause = self.cause if self.active else None
         elif self.needed(speed, leaders, braking):
             self.active = True
             self.activations += 1
+            deceleration = self.deceleration(speed, leaders, braking)
         acceleration = actuation.acceleration
         for leader in leaders:
             acceleration = braked_before(
                 self.limits, acceleration, speed, leader.gap, leader.speed, braking.get(leader.vehicle, 0.0)
             )
-        deceleration = 0.0
-        if self.active:
-            for leader in leaders:
-                deceleration = max(
-                    deceleration,
-                    emergency_deceleration(
-                        self.limits, speed, leader.gap, leader.speed, braking.get(leader.vehicle, 0.0)
-                    ),
-                )
         acceleration = braked_acceleration(self.active, deceleration, acceleration, speed, dt)
         if acceleration == actuation.acceleration:
             return actuation

@@ -328,12 +328,8 @@ def emergency_acceleration(
         if rated[k]:
             seen_slowing[rows[k]] = rates[k]
             seen[rows[k]] = 2
-    if flags[0] != 0:
-        holds = False
-        for k in range(leaders):
-            holds = holds or holds_braking(speed, gaps[k], speeds[k])
-        flags[0] = 1 if holds else 0
-    else:
+    running = flags[0] != 0
+    if not running:
         for k in range(leaders):
             if needs_full_braking(limits, speed, gaps[k], speeds[k], braking[k]):
                 flags[0] = 1
@@ -347,6 +343,8 @@ def emergency_acceleration(
             deceleration = max(
                 deceleration, emergency_deceleration(limits, speed, gaps[k], speeds[k], braking[k])
             )
+    if running:
+        flags[0] = 1 if holds_braking(limits, deceleration) else 0
     return braked_acceleration(flags[0] != 0, deceleration, acceleration, speed, dt)
 
 
