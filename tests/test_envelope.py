@@ -153,6 +153,18 @@ def test_a_running_emergency_braking_brakes_as_hard_as_the_leader_asks():
     assert emergency_deceleration(limits, 22.4, 47.5, 16.0, 4.5) == pytest.approx(EMERGENCY_GRADE * stopping)
 
 
+def test_an_emergency_braking_is_released_once_comfort_braking_has_the_need_in_hand():
+    """Started for a car 5 m ahead closing at 6 m/s (full braking), it goes on while the need is
+    more than half the comfort braking, and is released once the ego barely closes in: the cruise's
+    own command passes again (a braking held at a hundredth of a m/s^2 kept it from accelerating)."""
+    brake = EmergencyBraking(max_deceleration=5.0, comfort_deceleration=3.0, trigger_ttc_s=1.0)
+    cruise = Actuation(acceleration=1.0, steering=0.0)
+    assert brake.apply(cruise, 26.0, (Neighbour(gap=5.0, speed=20.0),), DT).acceleration == -5.0
+    assert brake.apply(cruise, 25.0, (Neighbour(gap=6.0, speed=20.0),), DT).acceleration < -1.5
+    released = brake.apply(cruise, 20.2, (Neighbour(gap=8.0, speed=20.0),), DT)
+    assert released is cruise and not brake.active and brake.activations == 1
+
+
 def test_a_leader_braking_to_a_stop_50_m_ahead_is_met_with_less_than_full_braking():
     """A leader at 16 m/s braking at 4.5 m/s^2 to a stop 47.5 m ahead of the ego at 22.4 m/s: a
     little more than comfort braking stops the ego behind it, and seconds of full braking would
