@@ -9,6 +9,11 @@ worst case (every cautious driver behind the ego in that lane evaluates IDM behi
         [--intent 1] [--populations highway-env,calibrated,...]
     .venv/bin/python benchmarks/driver_cost.py --closed-loop [--agent mobil] [--episodes 4]
         [--scenario highway-v0] [--runs 3] [--populations ...]
+    .venv/bin/python benchmarks/driver_cost.py --draws [--runs 3] [--populations ...]
+
+With `--draws`: what drawing one driver at spawn costs (`draw_driver` then `apply_driver` on a
+vehicle, microseconds, the median of `--runs` runs of 2,000 drivers): a population's per-episode
+cost, which a batch of short episodes pays every reset.
 
 With `--closed-loop`: what a run costs a frame, the whole stack with its traffic (perception,
 `--agent`, control, metrics, the fault judge), per world (`run_episode` over `--episodes` seeded
@@ -29,12 +34,15 @@ import platform
 import statistics
 import time
 
+import numpy as np
 from batched_traffic import batch_rate, vector_rate
 
 from stack.runs.alone import run_episode
 from stack.runs.batch_episodes import run_batched
 from stack.settings.run import RunConfig, build_config
+from stack.sim.drivers import apply_driver, draw_driver
 from stack.worlds import drivers
+from stack.worlds.drivers import population_shares
 
 SAME_AS_HIGHWAY_ENV = "highway-env-drawn"
 """A population that draws highway-env's own values (jam clearance 5 m beyond the length, no speed
@@ -65,6 +73,21 @@ POPULATIONS = (
 BATCH_WORLDS = 64
 
 
+def draw_cost(name: str, drivers: int = 2000) -> float:
+    """Microseconds to draw and set one driver of population `name` (`draw_driver`, `apply_driver`)."""
+
+    class Vehicle:
+        target_speed, LENGTH = 25.0, 5.0
+
+    shares = population_shares(name)
+    names, odds = list(shares), np.array(list(shares.values()))
+    rng, vehicle = np.random.default_rng(0), Vehicle()
+    start = time.perf_counter()
+    for _ in range(drivers):
+        apply_driver(vehicle, draw_driver(rng, names, odds / odds.sum()), 15.0)
+    return 1e6 * (time.perf_counter() - start) / drivers
+
+
 def closed_loop_rates(config: RunConfig, episodes: int) -> tuple[float, float]:
     """(per world, batch) closed-loop frames per CPU-second of `config`'s first episodes: `episodes`
     run one at a time, `BATCH_WORLDS` stepped as one batch."""
@@ -84,10 +107,16 @@ def main() -> None:
     parser.add_argument("--intent", type=int, default=1, help="the lane the ego shows it changes into")
     parser.add_argument("--populations", default=",".join(POPULATIONS), help="comma-separated")
     parser.add_argument("--closed-loop", action="store_true", help="the whole stack's frames")
+    parser.add_argument("--draws", action="store_true", help="the cost of drawing one driver")
     parser.add_argument("--agent", default="mobil", help="with --closed-loop: the agent deciding")
     parser.add_argument("--episodes", type=int, default=4, help="with --closed-loop: episodes run alone")
     args = parser.parse_args()
     populations = args.populations.split(",")
+    if args.draws:
+        print(f"{datetime.date.today()} {platform.processor() or platform.machine()}, us a driver drawn")
+        for name in (name for name in populations if name != "highway-env"):
+            print(f"| {name} | {statistics.median(draw_cost(name) for _ in range(args.runs)):.1f} |")
+        return
     if populations[0] != "highway-env":
         populations.insert(0, "highway-env")
     alone: dict[str, list[float]] = {name: [] for name in populations}
