@@ -1,6 +1,6 @@
-"""Emergency braking: up to the plant's full braking authority when comfort braking can no longer
-avoid a collision, applied after whichever controller runs (PID, MPC, a plug-in), and a brake that
-holds the car at standstill instead of reversing it."""
+"""Emergency braking: the plant's full braking authority when comfort braking can no longer avoid a
+collision, applied after whichever controller runs (PID, MPC, a plug-in), and a brake that holds
+the car at standstill instead of reversing it."""
 
 from __future__ import annotations
 
@@ -28,19 +28,13 @@ def leader_braking(
     return slowing, min(slowing, previous_slowing)
 
 
-RELEASE_FRACTION = 0.5
-"""A running emergency braking is released once it would brake at most this share of the comfort
-deceleration (`holds_braking`): comfort braking then has the need well in hand."""
-
-
 @register_jitable
-def holds_braking(limits: BrakingLimits, deceleration: float) -> bool:
-    """Whether an emergency braking goes on when the hardest leader asks `deceleration` [m/s^2] of
-    it (`emergency_deceleration`): while that is more than `RELEASE_FRACTION` of the comfort
-    deceleration. A car cutting in across the ego's front within the stop margin, a little faster
-    than the ego, still asks full braking (it reaches the ego sideways: released at once, the ego
-    fell back at only the cruise's braking)."""
-    return deceleration > RELEASE_FRACTION * limits.comfort_deceleration
+def holds_braking(speed: float, gap: float, leader_speed: float) -> bool:
+    """Whether an emergency braking goes on for a leader `gap` [m] ahead at `leader_speed` [m/s]
+    with the ego at `speed` [m/s]: while the ego closes in on it, or is within the stop margin of it
+    (a car cutting in across the ego's front, a little faster than the ego, still reaches it
+    sideways: released at once, the ego would fall back at only the cruise's braking)."""
+    return speed > leader_speed or (gap < STOP_MARGIN_M and speed > 0)
 
 
 @register_jitable
@@ -55,53 +49,23 @@ def braked_before(
     return min(acceleration, -min(braked, limits.comfort_deceleration)) if braked > 0 else acceleration
 
 
-EMERGENCY_GRADE = 1.25
-"""How much harder than the steady need a running emergency braking brakes (`emergency_deceleration`)."""
-
-
-@register_jitable
-def emergency_deceleration(
-    limits: BrakingLimits, speed: float, gap: float, leader_speed: float, braking: float
-) -> float:
-    """The deceleration [m/s^2] a running emergency braking applies for a leader `gap` [m] ahead at
-    `leader_speed` [m/s], braking at `braking` [m/s^2], with the ego at `speed` [m/s]: full braking
-    within the stop margin or the trigger TTC; else `EMERGENCY_GRADE` times the steady deceleration
-    that meets it `STOP_MARGIN_M` behind (the constant-speed closing^2 / 2 (gap - margin), or, seen
-    braking, where it stops: `stopping_deceleration`), at most full braking; 0 when it does not
-    close in. Braking harder than the need for seconds only hands the ego's follower the emergency."""
-    if gap < STOP_MARGIN_M and speed > 0:
-        return limits.max_deceleration
-    closing = speed - leader_speed
-    if closing <= 0:
-        return 0.0
-    if gap / closing < limits.trigger_ttc_s:
-        return limits.max_deceleration
-    room = max(gap - STOP_MARGIN_M, 0.01)
-    need = max(closing * closing / (2 * room), stopping_deceleration(speed, gap, leader_speed, braking))
-    return min(EMERGENCY_GRADE * need, limits.max_deceleration)
-
-
 @register_jitable
 def braked_acceleration(
-    active: bool, deceleration: float, acceleration: float, speed: float, dt: float
+    limits: BrakingLimits, active: bool, acceleration: float, speed: float, dt: float
 ) -> float:
-    """`acceleration` [m/s^2], no more than minus `deceleration` [m/s^2] while an emergency is
-    `active`, and never a deceleration that would reverse the car within one tick of `dt` [s]."""
-    commanded = min(acceleration, -deceleration) if active else acceleration
+    """`acceleration` [m/s^2], full braking while an emergency is `active`, and never a deceleration
+    that would reverse the car within one tick of `dt` [s]."""
+    commanded = -limits.max_deceleration if active else acceleration
     return max(commanded, -max(speed, 0.0) / dt)
 
 
 class EmergencyBraking:
-    """Emergency braking, started when a leader is closing in and stopping behind it needs more than
-    the comfort deceleration (constant-speed prediction: closing^2 / 2 (gap - margin), or where a
-    leader seen braking stops) or its time to collision is below `trigger_ttc_s`. While it runs it
-    brakes as hard as the hardest leader asks (`emergency_deceleration`: full braking within the
-    trigger TTC or the stop margin, else `EMERGENCY_GRADE` times the steady need, re-read every
-    tick), so a leader braking to a stop 50 m ahead is not met with seconds of full braking in
-    front of the ego's own follower; it is released once that asks at most `RELEASE_FRACTION` of
-    the comfort deceleration (`holds_braking`). Counts activations (rising edges). Before that, a
-    leader seen braking is braked for once stopping behind where it stops needs more than
-    `ANTICIPATION_ONSET_MPS2` (`braked_before`: partial braking, not counted).
+    """Full braking while a leader is closing in and stopping behind it needs more than the comfort
+    deceleration (constant-speed prediction: closing^2 / 2 (gap - margin)) or its time to collision
+    is below `trigger_ttc_s`; released once no leader closes in or is within the stop margin
+    (`holds_braking`). Counts activations (rising edges). Before that, a leader seen braking is
+    braked for once stopping behind where it stops needs more than `ANTICIPATION_ONSET_MPS2`
+    (`braked_before`: partial braking, not counted).
 
     The plant's braking authority is highway-env's ContinuousAction range, +-5 m/s^2 by default:
     the plant is left as highway-env defines it, so `max_deceleration` cannot exceed it."""
@@ -137,15 +101,9 @@ class EmergencyBraking:
                 return True
         return False
 
-    def deceleration(self, speed: float, leaders: tuple[Neighbour, ...], braking: dict[int, float]) -> float:
-        """The deceleration [m/s^2] the hardest of `leaders` asks of a running emergency braking
-        (`emergency_deceleration`; `braking[vehicle]`: a leader's braking seen [m/s^2])."""
-        limits = self.limits
-        asked = (
-            emergency_deceleration(limits, speed, leader.gap, leader.speed, braking.get(leader.vehicle, 0.0))
-            for leader in leaders
-        )
-        return max(asked, default=0.0)
+    def holds(self, speed: float, leaders: tuple[Neighbour, ...]) -> bool:
+        """Whether a running emergency braking goes on (`holds_braking` for some leader)."""
+        return any(holds_braking(speed, leader.gap, leader.speed) for leader in leaders)
 
     def apply(
         self, actuation: Actuation, speed: float, leaders: tuple[Neighbour, ...], dt: float
@@ -164,21 +122,18 @@ class EmergencyBraking:
         braking = {vehicle: rates[1] for vehicle, rates in seen.items()}
         self.speeds = {leader.vehicle: leader.speed for leader in leaders}
         self.slowing = {vehicle: rates[0] for vehicle, rates in seen.items()}
-        deceleration = 0.0
         if self.active:
-            deceleration = self.deceleration(speed, leaders, braking)
-            self.active = holds_braking(self.limits, deceleration)
+            self.active = self.holds(speed, leaders)
             self.cause = self.cause if self.active else None
         elif self.needed(speed, leaders, braking):
             self.active = True
             self.activations += 1
-            deceleration = self.deceleration(speed, leaders, braking)
         acceleration = actuation.acceleration
         for leader in leaders:
             acceleration = braked_before(
                 self.limits, acceleration, speed, leader.gap, leader.speed, braking.get(leader.vehicle, 0.0)
             )
-        acceleration = braked_acceleration(self.active, deceleration, acceleration, speed, dt)
+        acceleration = braked_acceleration(self.limits, self.active, acceleration, speed, dt)
         if acceleration == actuation.acceleration:
             return actuation
         return Actuation(acceleration=acceleration, steering=actuation.steering)

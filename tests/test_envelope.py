@@ -9,17 +9,14 @@ import pytest
 from common.longitudinal import (
     ANTICIPATED_MPS2,
     ANTICIPATION_ONSET_MPS2,
-    STOP_MARGIN_M,
-    BrakingLimits,
     GapKeeping,
     anticipated,
     approach_deceleration,
     gap_acceleration,
-    stopping_deceleration,
 )
 from controllers.config import ControllerConfig, PIDGains
 from controllers.cruise import AdaptiveCruise
-from controllers.emergency import EMERGENCY_GRADE, EmergencyBraking, emergency_deceleration
+from controllers.emergency import EmergencyBraking
 from controllers.lateral import MAX_COURSE, LateralPID
 from controllers.maneuver import Maneuver
 from controllers.reference import QuinticProfile, WarpedProfile, drivable_duration
@@ -137,45 +134,6 @@ def test_emergency_braking_avoids_a_leader_braking_hard():
     gaps, speeds, activations = drive_behind(lambda t: max(0.0, 20.0 - 6.0 * t), 25.0, gap=28.0)
     assert gaps.min() > 0.0 and speeds[-1] < 0.05
     assert activations >= 1
-
-
-def test_a_running_emergency_braking_brakes_as_hard_as_the_leader_asks():
-    """Full braking within the trigger TTC or the stop margin; else the grade times the steady need
-    (constant speed, or where a braking leader stops); nothing for a leader that does not close in."""
-    limits = BrakingLimits(max_deceleration=5.0, comfort_deceleration=3.0, trigger_ttc_s=1.0)
-    assert emergency_deceleration(limits, 30.0, 12.0, 10.0, 0.0) == 5.0
-    assert emergency_deceleration(limits, 10.0, 0.5, 11.0, 0.0) == 5.0
-    assert emergency_deceleration(limits, 20.0, 30.0, 21.0, 0.0) == 0.0
-    steady = 10.0**2 / (2 * (41.0 - STOP_MARGIN_M))
-    assert emergency_deceleration(limits, 20.0, 41.0, 10.0, 0.0) == pytest.approx(EMERGENCY_GRADE * steady)
-    stopping = stopping_deceleration(22.4, 47.5, 16.0, 4.5)
-    assert 3.0 < EMERGENCY_GRADE * stopping < 5.0
-    assert emergency_deceleration(limits, 22.4, 47.5, 16.0, 4.5) == pytest.approx(EMERGENCY_GRADE * stopping)
-
-
-def test_an_emergency_braking_is_released_once_comfort_braking_has_the_need_in_hand():
-    """Started for a car 5 m ahead closing at 6 m/s (full braking), it goes on while the need is
-    more than half the comfort braking, and is released once the ego barely closes in: the cruise's
-    own command passes again (a braking held at a hundredth of a m/s^2 kept it from accelerating)."""
-    brake = EmergencyBraking(max_deceleration=5.0, comfort_deceleration=3.0, trigger_ttc_s=1.0)
-    cruise = Actuation(acceleration=1.0, steering=0.0)
-    assert brake.apply(cruise, 26.0, (Neighbour(gap=5.0, speed=20.0),), DT).acceleration == -5.0
-    assert brake.apply(cruise, 25.0, (Neighbour(gap=6.0, speed=20.0),), DT).acceleration < -1.5
-    released = brake.apply(cruise, 20.2, (Neighbour(gap=8.0, speed=20.0),), DT)
-    assert released is cruise and not brake.active and brake.activations == 1
-
-
-def test_a_leader_braking_to_a_stop_50_m_ahead_is_met_with_less_than_full_braking():
-    """A leader at 16 m/s braking at 4.5 m/s^2 to a stop 47.5 m ahead of the ego at 22.4 m/s: a
-    little more than comfort braking stops the ego behind it, and seconds of full braking would
-    only hand the ego's own follower the emergency. One activation, never full braking, stopped
-    behind it."""
-    braking = lambda t: max(0.0, 16.0 - 4.5 * t)  # noqa: E731
-    gaps, speeds, activations = drive_behind(braking, 25.0, ego_speed=22.4, gap=47.5)
-    decelerations = -np.diff(speeds) / DT
-    assert activations == 1 and speeds[-1] < 0.05
-    assert 3.0 < decelerations.max() < 5.0
-    assert gaps.min() > 2 * STOP_MARGIN_M
 
 
 def test_a_stopped_car_far_ahead_is_braked_for_early_and_never_needs_emergency_braking():

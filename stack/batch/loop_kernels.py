@@ -22,13 +22,7 @@ from numba import njit
 from common.compiled import Kernel, clip
 from common.longitudinal import BrakingLimits, gap_acceleration, needs_full_braking
 from common.neighbours import VehicleRows, footprint_across, lane_beyond, reaches_lane
-from controllers.emergency import (
-    braked_acceleration,
-    braked_before,
-    emergency_deceleration,
-    holds_braking,
-    leader_braking,
-)
+from controllers.emergency import braked_acceleration, braked_before, holds_braking, leader_braking
 from controllers.lateral import LateralMemory, lateral_steering
 from controllers.leaders import FoundLeaders, LeaderQuery, LeaderRows, leaders_in_rows, road_to_leave
 from controllers.maneuver import lane_change_target, left_origin, settled
@@ -328,24 +322,21 @@ def emergency_acceleration(
         if rated[k]:
             seen_slowing[rows[k]] = rates[k]
             seen[rows[k]] = 2
-    running = flags[0] != 0
-    if not running:
+    if flags[0] != 0:
+        holds = False
+        for k in range(leaders):
+            holds = holds or holds_braking(speed, gaps[k], speeds[k])
+        flags[0] = 1 if holds else 0
+    else:
         for k in range(leaders):
             if needs_full_braking(limits, speed, gaps[k], speeds[k], braking[k]):
                 flags[0] = 1
                 flags[1] += 1
                 flags[2] = rows[k]
                 break
-    deceleration = 0.0
     for k in range(leaders):
         acceleration = braked_before(limits, acceleration, speed, gaps[k], speeds[k], braking[k])
-        if flags[0] != 0:
-            deceleration = max(
-                deceleration, emergency_deceleration(limits, speed, gaps[k], speeds[k], braking[k])
-            )
-    if running:
-        flags[0] = 1 if holds_braking(limits, deceleration) else 0
-    return braked_acceleration(flags[0] != 0, deceleration, acceleration, speed, dt)
+    return braked_acceleration(limits, flags[0] != 0, acceleration, speed, dt)
 
 
 @Kernel
