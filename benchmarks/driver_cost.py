@@ -12,7 +12,7 @@ worst case (every cautious driver behind the ego in that lane evaluates IDM behi
     .venv/bin/python benchmarks/driver_cost.py --draws [--runs 3] [--populations ...]
 
 With `--draws`: what drawing one driver at spawn costs (`draw_driver` then `apply_driver` on a
-vehicle, microseconds, the median of `--runs` runs of 2,000 drivers): a population's per-episode
+vehicle, wall-clock microseconds, the median of `--runs` runs of 2,000 drivers): a population's per-episode
 cost, which a batch of short episodes pays every reset.
 
 With `--closed-loop`: what a run costs a frame, the whole stack with its traffic (perception,
@@ -74,7 +74,7 @@ BATCH_WORLDS = 64
 
 
 def draw_cost(name: str, drivers: int = 2000) -> float:
-    """Microseconds to draw and set one driver of population `name` (`draw_driver`, `apply_driver`)."""
+    """Wall-clock microseconds to draw and set one driver of `name` (`draw_driver`, `apply_driver`)."""
 
     class Vehicle:
         target_speed, LENGTH = 25.0, 5.0
