@@ -11,9 +11,9 @@ worst case (every cautious driver behind the ego in that lane evaluates IDM behi
         [--scenario highway-v0] [--runs 3] [--populations ...]
     .venv/bin/python benchmarks/driver_cost.py --draws [--runs 3] [--populations ...]
 
-With `--draws`: what drawing one driver at spawn costs (`draw_driver` then `apply_driver` on a
-vehicle, wall-clock microseconds, the median of `--runs` runs of 2,000 drivers): a population's per-episode
-cost, which a batch of short episodes pays every reset.
+With `--draws`: what drawing one driver at spawn costs (`assign_drivers`, as a reset draws them;
+wall-clock microseconds, the median of `--runs` runs of 2,000 drivers): a population's
+per-episode cost, which a batch of short episodes pays every reset.
 
 With `--closed-loop`: what a run costs a frame, the whole stack with its traffic (perception,
 `--agent`, control, metrics, the fault judge), per world (`run_episode` over `--episodes` seeded
@@ -40,9 +40,8 @@ from batched_traffic import batch_rate, vector_rate
 from stack.runs.alone import run_episode
 from stack.runs.batch_episodes import run_batched
 from stack.settings.run import RunConfig, build_config
-from stack.sim.drivers import apply_driver, draw_driver
+from stack.sim.drivers import assign_drivers
 from stack.worlds import drivers
-from stack.worlds.drivers import population_shares
 
 SAME_AS_HIGHWAY_ENV = "highway-env-drawn"
 """A population that draws highway-env's own values (jam clearance 5 m beyond the length, no speed
@@ -74,17 +73,15 @@ BATCH_WORLDS = 64
 
 
 def draw_cost(name: str, drivers: int = 2000) -> float:
-    """Wall-clock microseconds to draw and set one driver of `name` (`draw_driver`, `apply_driver`)."""
+    """Wall-clock microseconds to draw and set one driver of `name`, as a reset does it
+    (`assign_drivers` over `drivers` vehicles)."""
 
     class Vehicle:
         target_speed, LENGTH = 25.0, 5.0
 
-    shares = population_shares(name)
-    names, odds = list(shares), np.array(list(shares.values()))
-    rng, vehicle = np.random.default_rng(0), Vehicle()
+    vehicles = [Vehicle() for _ in range(drivers)]
     start = time.perf_counter()
-    for _ in range(drivers):
-        apply_driver(vehicle, draw_driver(rng, names, odds / odds.sum()), 15.0)
+    assign_drivers(vehicles, name, np.random.default_rng(0), (Vehicle,), 15.0)
     return 1e6 * (time.perf_counter() - start) / drivers
 
 
