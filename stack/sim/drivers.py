@@ -87,13 +87,12 @@ class DrawPlan(NamedTuple):
     """How one population's drivers are drawn, worked out once (`draw_plan`): the bounds of the one
     uniform draw per parameter in `DRIVER_PARAMETERS` order (`low`, and `span` = high - low; a
     `LogNormal`'s truncation as quantiles of the standard normal), the `LogNormal`s by index, and
-    the habits' bounds likewise (None: a population without habits)."""
+    the habits' (low, span) likewise (None: a population without habits)."""
 
     low: np.ndarray
     span: np.ndarray
     log_normals: tuple[tuple[int, LogNormal], ...]
-    habit_low: np.ndarray | None
-    habit_span: np.ndarray | None
+    habit_bounds: tuple[np.ndarray, np.ndarray] | None
 
 
 @cache
@@ -110,12 +109,11 @@ def draw_plan(ranges: DriverRanges) -> DrawPlan:
             lows.append(spread[0])
             highs.append(spread[1])
     low = np.array(lows)
-    if ranges.perception_delay_s is None:
-        return DrawPlan(low, np.array(highs) - low, tuple(log_normals), None, None)
-    habit_ranges = np.array([getattr(ranges, name) for name in HABIT_PARAMETERS], dtype=float)
-    habit_low = habit_ranges[:, 0]
-    habit_span = habit_ranges[:, 1] - habit_low
-    return DrawPlan(low, np.array(highs) - low, tuple(log_normals), habit_low, habit_span)
+    habit_bounds = None
+    if ranges.perception_delay_s is not None:
+        habit_ranges = np.array([getattr(ranges, name) for name in HABIT_PARAMETERS], dtype=float)
+        habit_bounds = (habit_ranges[:, 0], habit_ranges[:, 1] - habit_ranges[:, 0])
+    return DrawPlan(low, np.array(highs) - low, tuple(log_normals), habit_bounds)
 
 
 def uniform(rng: np.random.Generator, low: np.ndarray, span: np.ndarray) -> np.ndarray:
@@ -153,9 +151,9 @@ def draw_driver(rng: np.random.Generator, names: list[str], odds: np.ndarray) ->
         return DrawnDriver(population, {})
     plan = draw_plan(POPULATION_RANGES[population])
     values = dict(zip(DRIVER_PARAMETERS, from_uniform(plan, uniform(rng, plan.low, plan.span)), strict=True))
-    if plan.habit_low is None or plan.habit_span is None:
+    if plan.habit_bounds is None:
         return DrawnDriver(population, values)
-    habits = uniform(rng, plan.habit_low, plan.habit_span)
+    habits = uniform(rng, *plan.habit_bounds)
     values |= dict(zip(HABIT_PARAMETERS, habits.tolist(), strict=True))
     return DrawnDriver(population, values, int(rng.integers(0, KEY_LIMIT)))
 
